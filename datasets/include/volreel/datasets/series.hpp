@@ -1,0 +1,107 @@
+// series.hpp: time series of volumes on disk — the raw series format written by `volreel gen`,
+// single raw files, and HDF5 files — behind one reader interface.
+//
+// Raw series format (a directory):
+//   series.json        {"format":"volreel-raw-series","version":1,"dims":[x,y,z],"dtype":"f32",
+//                       "spacing":[sx,sy,sz],"variable":"pressure","timestamps":[t0,...],
+//                       "frames":["000000.f32",...],"generator":{...how it was made...}}
+//   000000.f32 ...     one little-endian float32 volume per frame, x fastest, no header.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "volreel/datasets/volume.hpp"
+
+namespace volreel::datasets {
+
+enum class Dtype { f32, f64, u8, u16 };
+/// "f32" | "f64" | "u8" | "u16" (also "float32", "float64", "uint8", "uint16").
+Dtype parse_dtype(const std::string& text);
+std::string to_string(Dtype dtype);
+std::size_t dtype_size(Dtype dtype);
+
+/// What every reader knows about its series.
+struct SeriesInfo {
+  Dims dims;
+  std::size_t frames = 0;
+  std::array<double, 3> spacing{1.0, 1.0, 1.0};
+  std::vector<double> timestamps;   ///< one per frame
+  std::string variable;             ///< e.g. "pressure"
+  std::string source;               ///< human-readable description of where it came from
+  nlohmann::json generator;         ///< how it was made (raw series only; may be null)
+};
+
+/// How to open a series whose file does not describe itself.
+struct OpenOptions {
+  std::optional<Dims> dims;                ///< raw file: required
+  std::optional<Dtype> dtype;              ///< raw file: default f32
+  std::optional<std::size_t> frames;       ///< raw file: frames stored back to back (default 1)
+  std::string dataset;                     ///< HDF5: a 4D dataset name, or a pattern with one
+                                           ///< run of '#' (e.g. "Pressure_####") or '*'
+  std::optional<float> replace_nan;        ///< substitute NaN/Inf with this value instead of failing
+};
+
+/// Reads frames of a series. Implementations are safe to call from several threads at once.
+class SeriesReader {
+ public:
+  virtual ~SeriesReader() = default;
+  const SeriesInfo& info() const { return info_; }
+
+  /// Read frame t (0-based) into out (size dims.voxels()), converting to float32.
+  /// Throws InputError naming the file on a missing frame, a short file, an I/O error, or a
+  /// NaN/Inf value (unless OpenOptions::replace_nan is set).
+  virtual void read_frame(std::size_t t, std::span<float> out) const = 0;
+  Volume read_frame(std::size_t t) const;
+
+ protected:
+  SeriesInfo info_;
+};
+
+/// Open a series: a raw series directory (or its series.json), an HDF5 file (.h5, .hdf5, .hdf),
+/// or a single raw file (needs options.dims). Throws InputError with a clear message.
+std::unique_ptr<SeriesReader> open_series(const std::filesystem::path& path,
+                                          const OpenOptions& options = {});
+
+/// Writes a raw series directory. Each frame goes to a temporary name and is renamed when
+/// complete; series.json is written last by finish(), so an interrupted run leaves no series.json
+/// that claims frames which are not there.
+class RawSeriesWriter {
+ public:
+  /// Creates dir (and parents). Throws InputError if dir exists and holds a series.json unless
+  /// overwrite is set.
+  RawSeriesWriter(std::filesystem::path dir, Dims dims, std::string variable,
+                  bool overwrite = false);
+
+  const std::filesystem::path& directory() const { return dir_; }
+  Dims dims() const { return dims_; }
+
+  /// Write frame t with simulated time `timestamp`. Frames may arrive in any order.
+  void write_frame(std::size_t t, double timestamp, std::span<const float> data);
+  /// Extra description stored under "generator" in series.json.
+  void set_generator(nlohmann::json generator) { generator_ = std::move(generator); }
+  void set_spacing(std::array<double, 3> spacing) { spacing_ = spacing; }
+  /// Write series.json; every frame 0..n-1 must have been written.
+  void finish();
+
+ private:
+  std::filesystem::path dir_;
+  Dims dims_;
+  std::string variable_;
+  std::array<double, 3> spacing_{1.0, 1.0, 1.0};
+  std::vector<std::optional<double>> timestamps_;
+  nlohmann::json generator_;
+};
+
+/// Name of frame t's file inside a raw series directory: "000017.f32".
+std::string raw_frame_name(std::size_t t);
+
+}  // namespace volreel::datasets

@@ -1,0 +1,78 @@
+// metrics.hpp: error metrics between an original and a reconstructed volume, sequence or image.
+//
+// Definitions (DESIGN.md "Metrics"):
+//   PSNR      = 10·log10((max − min)² / MSE), max/min of the ORIGINAL (the MTV-Player paper's);
+//   PSNR(zfp) = 20·log10((max − min) / (2·RMSE)), what zfp and TTHRESH print: 6.02 dB lower;
+//   SSIM      = Wang et al. 2004 with a Gaussian window (σ = 1.5, truncated at 3.5σ: 11 taps),
+//               constants K1 = 0.01, K2 = 0.03, population covariances, mirror ('reflect')
+//               boundaries, mean over the voxels at least the window radius from every border —
+//               scikit-image's structural_similarity(gaussian_weights=True) in 1, 2 or 3 D.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <vector>
+
+#include "volreel/datasets/volume.hpp"
+
+namespace volreel::psnr {
+
+struct ErrorStats {
+  std::size_t count = 0;     ///< values compared
+  double original_min = 0, original_max = 0;
+  double mse = 0, rmse = 0, max_abs_error = 0;
+  double psnr = 0;           ///< MTV definition, dB; +inf when MSE = 0
+  double psnr_zfp = 0;       ///< zfp's definition, dB
+  double range() const { return original_max - original_min; }
+};
+
+/// Accumulates squared errors over any number of frames; the range is that of all originals seen.
+class ErrorAccumulator {
+ public:
+  /// original and decoded must have equal size; non-finite values throw InputError.
+  void add(std::span<const float> original, std::span<const float> decoded);
+  ErrorStats result() const;
+
+ private:
+  std::size_t count_ = 0;
+  double sum_squared_ = 0, max_abs_ = 0;
+  double min_ = 0, max_ = 0;
+};
+
+ErrorStats compare(std::span<const float> original, std::span<const float> decoded);
+
+struct SsimOptions {
+  double sigma = 1.5;
+  double truncate = 3.5;     ///< window radius = int(truncate·sigma + 0.5)
+  double k1 = 0.01, k2 = 0.03;
+  double data_range = 0;     ///< L in C1 = (K1·L)²; 0 means max − min of the original
+};
+
+/// SSIM of two arrays of shape dims (x fastest). Axes of extent 1 are neither filtered nor
+/// cropped, so a Dims{w, h, 1} is a 2D image. Throws InputError if an axis of extent > 1 is
+/// shorter than the window. OpenMP-parallel.
+double ssim(Dims dims, std::span<const float> original, std::span<const float> decoded,
+            const SsimOptions& options = {});
+
+/// An 8-bit image: channels 1 (gray), 2 (gray+alpha), 3 (RGB) or 4 (RGBA), rows top to bottom.
+struct Image {
+  int width = 0, height = 0, channels = 0;
+  std::vector<std::uint8_t> pixels;  ///< width·height·channels, interleaved
+};
+/// Read a PNG of any bit depth/colour type, converted to 8 bits per channel (palette → RGB,
+/// 16-bit → 8-bit). Throws InputError naming the file on any failure.
+Image read_png(const std::filesystem::path& path);
+/// Write an 8-bit PNG, to a temporary name renamed when complete. Throws on I/O failure.
+void write_png(const std::filesystem::path& path, const Image& image);
+
+struct ImageComparison {
+  double psnr = 0;   ///< 10·log10(255² / MSE) over all channels (8-bit data range)
+  double ssim = 0;   ///< grayscale SSIM of each channel with data range 255, averaged
+  double mse = 0;
+};
+/// Images must have equal width, height and channels (InputError otherwise).
+ImageComparison compare_images(const Image& original, const Image& decoded);
+
+}  // namespace volreel::psnr
