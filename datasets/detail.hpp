@@ -1,0 +1,30 @@
+// detail.hpp: helpers shared by the series readers; not part of the public interface.
+#pragma once
+
+#include <cstddef>
+#include <filesystem>
+#include <optional>
+#include <span>
+#include <string>
+
+#include "volreel/datasets/series.hpp"
+
+namespace volreel::datasets::detail {
+
+/// Throw InputError naming `what` and the first non-finite voxel, or replace every non-finite
+/// value when `replacement` is set.
+void check_finite(std::span<float> values, Dims dims, const std::string& what,
+                  std::optional<float> replacement);
+
+/// Convert `count` little-endian values of `dtype` from `bytes` to float32.
+void convert_to_float(const unsigned char* bytes, Dtype dtype, std::span<float> out);
+
+/// Read exactly out.size_bytes() bytes at `offset` of `file`; InputError naming the file,
+/// the offset and how many bytes were expected and found.
+void read_exact(const std::filesystem::path& file, std::uint64_t offset, std::span<unsigned char> out);
+
+std::unique_ptr<SeriesReader> open_raw_series(const std::filesystem::path& dir, const OpenOptions& options);
+std::unique_ptr<SeriesReader> open_raw_file(const std::filesystem::path& file, const OpenOptions& options);
+std::unique_ptr<SeriesReader> open_hdf5(const std::filesystem::path& file, const OpenOptions& options);
+
+}  // namespace volreel::datasets::detail

@@ -1,0 +1,199 @@
+// series.cpp: dtype names, the open_series dispatcher and the raw series writer.
+#include "volreel/datasets/series.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cctype>
+#include <cstring>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <limits>
+
+#include "detail.hpp"
+
+namespace volreel::datasets {
+
+namespace fs = std::filesystem;
+
+Dtype parse_dtype(const std::string& text) {
+  if (text == "f32" || text == "float32" || text == "float") return Dtype::f32;
+  if (text == "f64" || text == "float64" || text == "double") return Dtype::f64;
+  if (text == "u8" || text == "uint8") return Dtype::u8;
+  if (text == "u16" || text == "uint16") return Dtype::u16;
+  throw InputError("unknown dtype '" + text + "': expected f32, f64, u8 or u16");
+}
+
+std::string to_string(Dtype dtype) {
+  switch (dtype) {
+    case Dtype::f32: return "f32";
+    case Dtype::f64: return "f64";
+    case Dtype::u8: return "u8";
+    case Dtype::u16: return "u16";
+  }
+  return "?";
+}
+
+std::size_t dtype_size(Dtype dtype) {
+  switch (dtype) {
+    case Dtype::f32: return 4;
+    case Dtype::f64: return 8;
+    case Dtype::u8: return 1;
+    case Dtype::u16: return 2;
+  }
+  return 0;
+}
+
+std::string raw_frame_name(std::size_t t) {
+  char name[32];
+  std::snprintf(name, sizeof name, "%06zu.f32", t);
+  return name;
+}
+
+Volume SeriesReader::read_frame(std::size_t t) const {
+  Volume volume(info_.dims);
+  read_frame(t, volume.data);
+  return volume;
+}
+
+std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOptions& options) {
+  std::error_code ec;
+  if (!fs::exists(path, ec))
+    throw InputError("'" + path.string() + "' does not exist");
+  if (fs::is_directory(path, ec)) return detail::open_raw_series(path, options);
+  if (path.filename() == "series.json") return detail::open_raw_series(path.parent_path(), options);
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (ext == ".h5" || ext == ".hdf5" || ext == ".hdf" || ext == ".he5")
+    return detail::open_hdf5(path, options);
+  return detail::open_raw_file(path, options);
+}
+
+namespace detail {
+
+void check_finite(std::span<float> values, Dims dims, const std::string& what,
+                  std::optional<float> replacement) {
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    if (std::isfinite(values[i])) continue;
+    if (replacement) {
+      values[i] = *replacement;
+      continue;
+    }
+    const auto x = static_cast<std::int64_t>(i) % dims.x;
+    const auto y = static_cast<std::int64_t>(i) / dims.x % dims.y;
+    const auto z = static_cast<std::int64_t>(i) / (dims.x * dims.y);
+    throw InputError(what + ": value " + std::to_string(values[i]) + " at voxel (" +
+                     std::to_string(x) + ", " + std::to_string(y) + ", " + std::to_string(z) +
+                     ") is not finite; use --replace-nan V to substitute a value");
+  }
+}
+
+void read_exact(const fs::path& file, std::uint64_t offset, std::span<unsigned char> out) {
+  std::FILE* f = std::fopen(file.c_str(), "rb");
+  if (!f) throw InputError("cannot open '" + file.string() + "' for reading");
+  std::size_t got = 0;
+  if (std::fseek(f, static_cast<long>(offset), SEEK_SET) == 0)
+    got = std::fread(out.data(), 1, out.size(), f);
+  const bool failed = std::ferror(f) != 0;
+  std::fclose(f);
+  if (got != out.size())
+    throw InputError("'" + file.string() + "': expected " + std::to_string(out.size()) +
+                     " bytes at offset " + std::to_string(offset) + ", " +
+                     (failed ? "read error after " : "file ends after ") + std::to_string(got));
+}
+
+void convert_to_float(const unsigned char* bytes, Dtype dtype, std::span<float> out) {
+  static_assert(std::endian::native == std::endian::little, "volreel assumes a little-endian host");
+  const std::size_t n = out.size();
+  switch (dtype) {
+    case Dtype::f32:
+      std::memcpy(out.data(), bytes, n * 4);
+      break;
+    case Dtype::f64:
+      for (std::size_t i = 0; i < n; ++i) {
+        double v;
+        std::memcpy(&v, bytes + 8 * i, 8);
+        out[i] = static_cast<float>(v);
+      }
+      break;
+    case Dtype::u8:
+      for (std::size_t i = 0; i < n; ++i) out[i] = bytes[i];
+      break;
+    case Dtype::u16:
+      for (std::size_t i = 0; i < n; ++i) {
+        std::uint16_t v;
+        std::memcpy(&v, bytes + 2 * i, 2);
+        out[i] = v;
+      }
+      break;
+  }
+}
+
+}  // namespace detail
+
+RawSeriesWriter::RawSeriesWriter(fs::path dir, Dims dims, std::string variable, bool overwrite)
+    : dir_(std::move(dir)), dims_(dims), variable_(std::move(variable)) {
+  if (dims_.voxels() == 0) throw InputError("cannot write a series with empty dimensions");
+  std::error_code ec;
+  if (fs::exists(dir_ / "series.json", ec) && !overwrite)
+    throw InputError("'" + dir_.string() +
+                     "' already holds a series; choose another --out or pass --overwrite");
+  fs::create_directories(dir_, ec);
+  if (ec) throw InputError("cannot create directory '" + dir_.string() + "': " + ec.message());
+  if (overwrite) fs::remove(dir_ / "series.json", ec);
+}
+
+namespace {
+
+/// Write bytes to path via "path.tmp" + rename, so a reader never sees a half-written file.
+void write_atomically(const fs::path& path, const void* data, std::size_t size) {
+  const fs::path tmp = path.string() + ".tmp";
+  std::FILE* f = std::fopen(tmp.c_str(), "wb");
+  if (!f) throw InputError("cannot create '" + tmp.string() + "'");
+  const std::size_t put = std::fwrite(data, 1, size, f);
+  const bool ok = put == size && std::fflush(f) == 0;
+  std::fclose(f);
+  std::error_code ec;
+  if (!ok) {
+    fs::remove(tmp, ec);
+    throw InputError("writing '" + tmp.string() + "' failed after " + std::to_string(put) + " of " +
+                     std::to_string(size) + " bytes (disk full?)");
+  }
+  fs::rename(tmp, path, ec);
+  if (ec) throw InputError("cannot rename '" + tmp.string() + "' to '" + path.string() + "': " + ec.message());
+}
+
+}  // namespace
+
+void RawSeriesWriter::write_frame(std::size_t t, double timestamp, std::span<const float> data) {
+  if (data.size() != dims_.voxels())
+    throw InputError("frame " + std::to_string(t) + " has " + std::to_string(data.size()) +
+                     " values, expected " + std::to_string(dims_.voxels()));
+  write_atomically(dir_ / raw_frame_name(t), data.data(), data.size_bytes());
+  if (timestamps_.size() <= t) timestamps_.resize(t + 1);
+  timestamps_[t] = timestamp;
+}
+
+void RawSeriesWriter::finish() {
+  nlohmann::json j;
+  j["format"] = "volreel-raw-series";
+  j["version"] = 1;
+  j["dims"] = {dims_.x, dims_.y, dims_.z};
+  j["dtype"] = "f32";
+  j["spacing"] = spacing_;
+  j["variable"] = variable_;
+  nlohmann::json times = nlohmann::json::array(), names = nlohmann::json::array();
+  for (std::size_t t = 0; t < timestamps_.size(); ++t) {
+    if (!timestamps_[t]) throw InputError("series '" + dir_.string() + "': frame " + std::to_string(t) + " was never written");
+    times.push_back(*timestamps_[t]);
+    names.push_back(raw_frame_name(t));
+  }
+  if (timestamps_.empty()) throw InputError("series '" + dir_.string() + "': no frames were written");
+  j["timestamps"] = times;
+  j["frames"] = names;
+  if (!generator_.is_null()) j["generator"] = generator_;
+  const std::string text = j.dump(2) + "\n";
+  write_atomically(dir_ / "series.json", text.data(), text.size());
+}
+
+}  // namespace volreel::datasets

@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# cli_test.sh: the volreel program end to end — generate, compare, benchmark — and its error
+# messages for bad input. Usage: cli_test.sh PATH/TO/volreel
+set -euo pipefail
+volreel=$1
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+fail() { echo "FAIL: $*" >&2; exit 1; }
+json() { /usr/bin/python3 -c "import json,sys; d=json.load(sys.stdin); print($1)"; }
+
+"$volreel" --help | grep -q "gen" || fail "--help does not list gen"
+"$volreel" --help | grep -q "compare" || fail "--help does not list compare"
+"$volreel" --help | grep -q "bench" || fail "--help does not list bench"
+
+# Generate two analytic series and a tiny turbulence run.
+"$volreel" gen analytic --field blobs --dims 24x20x16 --frames 4 --out "$work/a" 2>/dev/null
+"$volreel" gen analytic --field blobs --dims 24x20x16 --frames 4 --seed 2 --out "$work/b" 2>/dev/null
+"$volreel" gen turbulence --size 16 --frames 2 --spinup 0.2 --interval 0.05 --out "$work/turb" > "$work/turb.txt" 2>/dev/null
+grep -q "energy balance" "$work/turb.txt" || fail "gen turbulence printed no energy balance"
+[ "$(ls "$work/turb" | grep -c '\.f32$')" = 2 ] || fail "gen turbulence did not write 2 frames"
+
+# Identical series: perfect PSNR (null in JSON), SSIM 1.
+out=$("$volreel" compare "$work/a" "$work/a" --json 2>/dev/null)
+[ "$(echo "$out" | json 'd["sequence"]["psnr"]')" = None ] || fail "identical series should have infinite PSNR"
+[ "$(echo "$out" | json 'round(d["sequence"]["ssim"], 6)')" = 1.0 ] || fail "identical series should have SSIM 1"
+# Different series: finite PSNR, 4 frames.
+out=$("$volreel" compare "$work/a" "$work/b" --json 2>/dev/null)
+[ "$(echo "$out" | json 'len(d["frames"])')" = 4 ] || fail "expected 4 frames"
+echo "$out" | json '1 if 0 < d["sequence"]["psnr"] < 60 else exit(1)' > /dev/null || fail "PSNR of different series out of range"
+"$volreel" compare "$work/a" "$work/b" --csv 2>/dev/null | grep -q '^all,' || fail "CSV lacks the sequence row"
+"$volreel" compare "$work/a" "$work/b" 2>/dev/null | grep -q 'PSNR' || fail "table lacks PSNR"
+
+# A raw file read with --dims compares equal to the series frame it was copied from.
+cp "$work/a/000002.f32" "$work/frame.raw"
+out=$("$volreel" compare "$work/frame.raw" "$work/frame.raw" --dims 24x20x16 --json 2>/dev/null)
+[ "$(echo "$out" | json 'd["frames"][0]["psnr"]')" = None ] || fail "raw self-compare"
+
+# Bad input gives exit code 1 and a message that names the problem.
+expect_error() {
+  local pattern=$1; shift
+  local msg
+  if msg=$("$@" 2>&1 >/dev/null); then fail "expected failure: $*"; fi
+  echo "$msg" | grep -q "$pattern" || fail "message for '$*' lacks '$pattern': $msg"
+}
+expect_error "does not exist" "$volreel" compare "$work/a" "$work/nowhere"
+expect_error "--dims" "$volreel" compare "$work/frame.raw" "$work/frame.raw"
+expect_error "needs 30720" "$volreel" compare "$work/frame.raw" "$work/frame.raw" --dims 24x20x32
+"$volreel" gen analytic --dims 24x20x8 --frames 4 --out "$work/c" 2>/dev/null
+expect_error "24x20x16.*24x20x8" "$volreel" compare "$work/a" "$work/c"
+rm "$work/b/000003.f32"
+expect_error "000003.f32.*missing" "$volreel" compare "$work/a" "$work/b"
+expect_error "already holds a series" "$volreel" gen analytic --frames 2 --out "$work/a"
+expect_error "unknown analytic field" "$volreel" gen analytic --field nope --out "$work/d"
+expect_error "not a PNG\|cannot\|PNG" "$volreel" compare "$work/frame.raw" "$work/frame.png"
+
+# Rate-distortion benchmark on a small series: table, CSV and plot.
+"$volreel" bench rd "$work/a" --out "$work/rd" --ssim-frames 1 > "$work/rd.txt" 2>/dev/null
+grep -q "zfp fixed-accuracy" "$work/rd.txt" || fail "bench rd table lacks zfp fixed-accuracy"
+grep -q "machine:" "$work/rd.txt" || fail "bench rd does not print the machine"
+[ "$(wc -l < "$work/rd/rd.csv")" = 15 ] || fail "rd.csv should have a header and 14 rows"
+head -c 4 "$work/rd/rd.png" | grep -q PNG || fail "rd.png is not a PNG"
+
+echo "cli_end_to_end: all checks passed"

@@ -1,0 +1,148 @@
+// rate_distortion_test.cpp: the zfp codec honours its modes and the harness's bps, PSNR, CSV
+// and plot are right for codecs whose output is known exactly.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include "test_util.hpp"
+#include "volreel/datasets/analytic.hpp"
+#include "volreel/psnr/metrics.hpp"
+#include "volreel/psnr/rate_distortion.hpp"
+
+namespace vp = volreel::psnr;
+namespace vd = volreel::datasets;
+using volreel::Dims;
+
+namespace {
+
+/// Frames of an analytic field, held in memory.
+class MemorySeries final : public vd::SeriesReader {
+ public:
+  MemorySeries(Dims dims, std::size_t frames) {
+    info_.dims = dims;
+    info_.frames = frames;
+    info_.variable = "test";
+    params_.field = vd::AnalyticField::blobs;
+    params_.dims = dims;
+    params_.frames = frames;
+  }
+  void read_frame(std::size_t t, std::span<float> out) const override { vd::analytic_frame(params_, t, out); }
+
+ private:
+  vd::AnalyticParams params_;
+};
+
+/// Stores every value as float32 (32 bps) but halves the amplitude: error known exactly.
+class HalvingCodec final : public vp::FrameCodec {
+ public:
+  std::string family() const override { return "halving"; }
+  std::string setting() const override { return "x0.5"; }
+  void compress(Dims, std::span<const float> frame, std::vector<std::uint8_t>& stream) override {
+    stream.resize(frame.size_bytes());
+    std::memcpy(stream.data(), frame.data(), stream.size());
+  }
+  void decompress(Dims, std::span<const std::uint8_t> stream, std::span<float> out) override {
+    std::memcpy(out.data(), stream.data(), stream.size());
+    for (float& v : out) v *= 0.5f;
+  }
+  std::size_t shared_bytes() const override { return 1000; }
+};
+
+}  // namespace
+
+TEST(ZfpCodec, FixedAccuracyMeetsTolerance) {
+  const Dims d{20, 18, 16};
+  MemorySeries series(d, 1);
+  const auto frame = series.read_frame(0);
+  for (double tol : {1e-1, 1e-3, 1e-5}) {
+    auto codec = vp::make_zfp_accuracy(tol);
+    std::vector<std::uint8_t> stream;
+    std::vector<float> out(d.voxels());
+    codec->compress(d, frame.data, stream);
+    codec->decompress(d, stream, out);
+    const auto e = vp::compare(frame.data, out);
+    EXPECT_LE(e.max_abs_error, tol) << codec->setting();
+    EXPECT_GT(e.max_abs_error, 0.0) << "lossy mode should lose something at " << tol;
+  }
+}
+
+TEST(ZfpCodec, FixedRateGivesExactSize) {
+  const Dims d{16, 16, 16};  // a whole number of 4^3 blocks
+  MemorySeries series(d, 1);
+  const auto frame = series.read_frame(0);
+  for (double rate : {1.0, 4.0}) {
+    auto codec = vp::make_zfp_rate(rate);
+    std::vector<std::uint8_t> stream;
+    codec->compress(d, frame.data, stream);
+    EXPECT_EQ(stream.size(), static_cast<std::size_t>(rate * static_cast<double>(d.voxels()) / 8)) << codec->setting();
+  }
+}
+
+TEST(RateDistortion, HarnessFiguresAreExactForAKnownCodec) {
+  const Dims d{16, 16, 12};
+  MemorySeries series(d, 3);
+  std::vector<std::unique_ptr<vp::FrameCodec>> codecs;
+  codecs.push_back(std::make_unique<HalvingCodec>());
+  codecs.push_back(vp::make_zfp_rate(2.0));
+  vp::RdOptions options;
+  options.ssim_frames = 2;
+  const auto points = vp::run_rate_distortion(series, codecs, options);
+  ASSERT_EQ(points.size(), 2u);
+  const vp::RdPoint& halving = points[0].family == "halving" ? points[0] : points[1];
+  const vp::RdPoint& zfp = points[0].family == "halving" ? points[1] : points[0];
+
+  // Expected: every frame decoded at half amplitude, range over all three frames.
+  vp::ErrorAccumulator expected;
+  for (std::size_t t = 0; t < 3; ++t) {
+    auto f = series.read_frame(t);
+    auto half = f.data;
+    for (float& v : half) v *= 0.5f;
+    expected.add(f.data, half);
+  }
+  const double voxels = static_cast<double>(d.voxels()) * 3;
+  EXPECT_EQ(halving.bytes, 3 * d.voxels() * 4 + 1000);
+  EXPECT_DOUBLE_EQ(halving.bps, 8.0 * (3.0 * static_cast<double>(d.voxels()) * 4 + 1000) / voxels);
+  EXPECT_NEAR(halving.psnr, expected.result().psnr, 1e-9);
+  EXPECT_NEAR(halving.psnr - halving.psnr_zfp, 20 * std::log10(2.0), 1e-9);
+  EXPECT_EQ(halving.ssim_frames, 2u);
+  EXPECT_LT(halving.ssim, 1.0);
+  EXPECT_GT(halving.ssim, 0.0);
+  EXPECT_DOUBLE_EQ(zfp.bps, 2.0);
+  EXPECT_GT(zfp.psnr, 20.0);
+  EXPECT_GT(zfp.compress_mvoxels_per_s, 0.0);
+}
+
+TEST(RateDistortion, CsvAndPlotAreWritten) {
+  volreel::test::TempDir dir("rd");
+  MemorySeries series(Dims{12, 12, 12}, 2);
+  const auto codecs = vp::make_zfp_sweep(2.0);
+  EXPECT_EQ(codecs.size(), 14u);
+  vp::RdOptions options;
+  options.ssim_frames = 0;
+  const auto points = vp::run_rate_distortion(series, codecs, options);
+  vp::write_rd_csv(dir / "rd.csv", points);
+  std::ifstream csv(dir / "rd.csv");
+  std::string line;
+  int rows = 0;
+  std::getline(csv, line);
+  EXPECT_EQ(line.rfind("codec,setting,frames,bytes,bps,psnr_db", 0), 0u);
+  while (std::getline(csv, line)) ++rows;
+  EXPECT_EQ(rows, 14);
+  std::ostringstream table;
+  vp::print_rd_table(table, points);
+  EXPECT_NE(table.str().find("zfp fixed-rate"), std::string::npos);
+
+  // PSNR rises with rate within each family.
+  for (std::size_t i = 1; i < points.size(); ++i)
+    if (points[i].family == points[i - 1].family) EXPECT_GT(points[i].psnr, points[i - 1].psnr - 1e-9) << points[i].setting;
+
+  vp::write_rd_plot(dir / "rd.png", points, "test");
+  std::ifstream png(dir / "rd.png", std::ios::binary);
+  char magic[8] = {};
+  png.read(magic, 8);
+  EXPECT_EQ(std::memcmp(magic, "\x89PNG\r\n\x1a\n", 8), 0) << "rd.png is not a PNG";
+  EXPECT_FALSE(std::filesystem::exists(dir / "rd.png.gp"));
+}

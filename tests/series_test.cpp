@@ -1,0 +1,265 @@
+// series_test.cpp: the raw series format, raw files and HDF5 files read back what was written,
+// and bad input of every kind gives an InputError that says what was wrong.
+#include <gtest/gtest.h>
+#include <hdf5.h>
+
+#include <cmath>
+#include <fstream>
+#include <limits>
+
+#include "test_util.hpp"
+#include "volreel/datasets/series.hpp"
+
+namespace vd = volreel::datasets;
+namespace fs = std::filesystem;
+using volreel::Dims;
+using volreel::InputError;
+using volreel::test::TempDir;
+
+namespace {
+
+std::vector<float> ramp(Dims d, float offset) {
+  std::vector<float> v(d.voxels());
+  for (std::size_t i = 0; i < v.size(); ++i) v[i] = offset + 0.5f * static_cast<float>(i);
+  return v;
+}
+
+/// Runs f, expects an InputError whose message contains every one of `needles`.
+template <typename F>
+void expect_error(F&& f, std::initializer_list<std::string> needles) {
+  try {
+    f();
+    ADD_FAILURE() << "expected an InputError";
+  } catch (const InputError& e) {
+    for (const auto& needle : needles) EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << "message: " << e.what() << "\nlacks: " << needle;
+  }
+}
+
+void write_bytes(const fs::path& path, const void* data, std::size_t size) {
+  std::ofstream f(path, std::ios::binary);
+  f.write(static_cast<const char*>(data), static_cast<std::streamsize>(size));
+}
+
+fs::path write_series(const TempDir& dir, Dims d, int frames) {
+  const fs::path path = dir / "series";
+  vd::RawSeriesWriter w(path, d, "pressure");
+  for (int t = frames - 1; t >= 0; --t) w.write_frame(static_cast<std::size_t>(t), 0.25 * t, ramp(d, static_cast<float>(t)));
+  w.set_generator({{"method", "test"}});
+  w.finish();
+  return path;
+}
+
+}  // namespace
+
+TEST(Dims, ParsesAndRejects) {
+  EXPECT_EQ(volreel::parse_dims("256x256x128"), (Dims{256, 256, 128}));
+  EXPECT_EQ(volreel::to_string(Dims{3, 4, 5}), "3x4x5");
+  for (const char* bad : {"", "256x256", "0x1x1", "1x1x-1", "axbxc", "1x2x3x", "1x2x3 "}) expect_error([&] { volreel::parse_dims(bad); }, {"dimensions"});
+}
+
+TEST(Dtype, ParsesAndRejects) {
+  EXPECT_EQ(vd::parse_dtype("u16"), vd::Dtype::u16);
+  EXPECT_EQ(vd::dtype_size(vd::Dtype::f64), 8u);
+  expect_error([] { vd::parse_dtype("f16"); }, {"unknown dtype 'f16'", "f32"});
+}
+
+TEST(RawSeries, RoundTrip) {
+  TempDir dir("series-roundtrip");
+  const Dims d{5, 4, 3};
+  const fs::path path = write_series(dir, d, 3);
+  EXPECT_FALSE(fs::exists(path / "000000.f32.tmp"));
+  for (const fs::path& p : {path, path / "series.json"}) {
+    const auto s = vd::open_series(p);
+    EXPECT_EQ(s->info().dims, d);
+    ASSERT_EQ(s->info().frames, 3u);
+    EXPECT_EQ(s->info().timestamps, (std::vector<double>{0.0, 0.25, 0.5}));
+    EXPECT_EQ(s->info().variable, "pressure");
+    EXPECT_EQ(s->info().generator.at("method"), "test");
+    EXPECT_EQ(s->read_frame(2).data, ramp(d, 2.0f));
+  }
+}
+
+TEST(RawSeries, WriterRefusesToOverwriteAndToFinishWithGaps) {
+  TempDir dir("series-writer");
+  const Dims d{2, 2, 2};
+  write_series(dir, d, 1);
+  expect_error([&] { vd::RawSeriesWriter w(dir / "series", d, "p"); }, {"already holds a series", "--overwrite"});
+  vd::RawSeriesWriter w(dir / "gaps", d, "p");
+  w.write_frame(1, 0.0, ramp(d, 0));
+  expect_error([&] { w.finish(); }, {"frame 0 was never written"});
+  EXPECT_FALSE(fs::exists(dir / "gaps" / "series.json"));
+  expect_error([&] { w.write_frame(0, 0.0, std::vector<float>(3)); }, {"has 3 values, expected 8"});
+}
+
+TEST(RawSeries, MissingAndShortFramesAreNamed) {
+  TempDir dir("series-bad");
+  const Dims d{4, 4, 4};
+  const fs::path path = write_series(dir, d, 3);
+  fs::remove(path / "000001.f32");
+  expect_error([&] { vd::open_series(path); }, {"frame 1", "000001.f32", "missing"});
+  write_bytes(path / "000001.f32", ramp(d, 0).data(), 100);
+  expect_error([&] { vd::open_series(path); }, {"frame 1", "is 100 bytes, expected 256"});
+}
+
+TEST(RawSeries, MalformedManifestsAreRejected) {
+  TempDir dir("series-manifest");
+  const fs::path path = write_series(dir, Dims{2, 2, 2}, 2);
+  const auto put = [&](const std::string& text) { write_bytes(path / "series.json", text.data(), text.size()); };
+  put("{ not json");
+  expect_error([&] { vd::open_series(path); }, {"series.json", "not valid JSON"});
+  put(R"({"format":"volreel-raw-series","version":1,"dims":[2,2],"frames":["000000.f32"],"timestamps":[0]})");
+  expect_error([&] { vd::open_series(path); }, {"\"dims\""});
+  put(R"({"format":"volreel-raw-series","version":1,"dims":[2,2,2],"frames":["000000.f32","000001.f32"],"timestamps":[0]})");
+  expect_error([&] { vd::open_series(path); }, {"\"timestamps\" has 1 entries but \"frames\" has 2"});
+  put(R"({"format":"volreel-raw-series","version":7,"dims":[2,2,2],"frames":["000000.f32"],"timestamps":[0]})");
+  expect_error([&] { vd::open_series(path); }, {"version"});
+  put(R"({"format":"volreel-raw-series","version":1,"dims":[2,2,2],"frames":"x","timestamps":[0]})");
+  expect_error([&] { vd::open_series(path); }, {"malformed"});
+  expect_error([&] { vd::open_series(dir / "nowhere"); }, {"does not exist"});
+}
+
+TEST(RawSeries, NonFiniteValuesRefusedOrReplaced) {
+  TempDir dir("series-nan");
+  const Dims d{3, 2, 2};
+  auto data = ramp(d, 0);
+  data[d.index(1, 1, 1)] = std::numeric_limits<float>::quiet_NaN();
+  data[d.index(2, 0, 0)] = std::numeric_limits<float>::infinity();
+  vd::RawSeriesWriter w(dir / "s", d, "p");
+  w.write_frame(0, 0, data);
+  w.finish();
+  expect_error([&] { vd::open_series(dir / "s")->read_frame(0); }, {"000000.f32", "voxel (2, 0, 0)", "not finite", "--replace-nan"});
+  vd::OpenOptions o;
+  o.replace_nan = -1.0f;
+  const auto v = vd::open_series(dir / "s", o)->read_frame(0);
+  EXPECT_EQ(v.at(1, 1, 1), -1.0f);
+  EXPECT_EQ(v.at(2, 0, 0), -1.0f);
+  EXPECT_EQ(v.at(0, 1, 1), data[d.index(0, 1, 1)]);
+}
+
+TEST(RawFile, AllDtypesConvert) {
+  TempDir dir("rawfile");
+  const Dims d{3, 2, 2};
+  vd::OpenOptions o;
+  o.dims = d;
+  {
+    std::vector<std::uint8_t> v(d.voxels());
+    for (std::size_t i = 0; i < v.size(); ++i) v[i] = static_cast<std::uint8_t>(250 + i % 6);
+    write_bytes(dir / "u8.raw", v.data(), v.size());
+    o.dtype = vd::Dtype::u8;
+    EXPECT_EQ(vd::open_series(dir / "u8.raw", o)->read_frame(0).data[5], 255.0f);
+  }
+  {
+    std::vector<std::uint16_t> v(2 * d.voxels());
+    for (std::size_t i = 0; i < v.size(); ++i) v[i] = static_cast<std::uint16_t>(1000 * i);
+    write_bytes(dir / "u16.raw", v.data(), v.size() * 2);
+    o.dtype = vd::Dtype::u16;
+    o.frames = 2;
+    const auto s = vd::open_series(dir / "u16.raw", o);
+    EXPECT_EQ(s->info().frames, 2u);
+    EXPECT_EQ(s->read_frame(1).data[1], 13000.0f);
+    o.frames.reset();
+    expect_error([&] { vd::open_series(dir / "u16.raw", o); }, {"u16.raw", "is 48 bytes", "needs 24", "holds 2 such frames"});
+  }
+  {
+    std::vector<double> v(d.voxels(), 0.125);
+    v[7] = 1e300;  // becomes +inf in float32
+    write_bytes(dir / "f64.raw", v.data(), v.size() * 8);
+    o.dtype = vd::Dtype::f64;
+    expect_error([&] { vd::open_series(dir / "f64.raw", o)->read_frame(0); }, {"f64.raw", "not finite"});
+  }
+  vd::OpenOptions no_dims;
+  expect_error([&] { vd::open_series(dir / "u8.raw", no_dims); }, {"--dims"});
+}
+
+namespace {
+
+void h5_write(hid_t file, const std::string& name, const std::vector<hsize_t>& shape, const std::vector<double>& data) {
+  const hid_t space = H5Screate_simple(static_cast<int>(shape.size()), shape.data(), nullptr);
+  const hid_t ds = H5Dcreate2(file, name.c_str(), H5T_IEEE_F64LE, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  H5Dwrite(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data());
+  H5Dclose(ds);
+  H5Sclose(space);
+}
+
+std::vector<double> counting(std::size_t n, double start) {
+  std::vector<double> v(n);
+  for (std::size_t i = 0; i < n; ++i) v[i] = start + static_cast<double>(i);
+  return v;
+}
+
+}  // namespace
+
+TEST(Hdf5, PatternOfThreeDimensionalDatasets) {
+  TempDir dir("hdf5");
+  const fs::path path = dir / "cutout.h5";
+  const hid_t f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  // JHTDB cutout style: [z][y][x][1], numbered 1..3, written out of order; plus an unrelated one.
+  for (int t : {3, 1, 2}) {
+    char name[32];
+    std::snprintf(name, sizeof name, "Pressure_%04d", t);
+    h5_write(f, name, {2, 3, 4, 1}, counting(24, 100.0 * t));
+  }
+  h5_write(f, "xcoor", {4}, counting(4, 0));
+  H5Fclose(f);
+
+  vd::OpenOptions o;
+  o.dataset = "Pressure_####";
+  const auto s = vd::open_series(path, o);
+  EXPECT_EQ(s->info().dims, (Dims{4, 3, 2}));
+  ASSERT_EQ(s->info().frames, 3u);
+  EXPECT_EQ(s->info().timestamps, (std::vector<double>{1, 2, 3}));
+  const auto v = s->read_frame(1);
+  EXPECT_EQ(v.at(3, 2, 1), 223.0f);  // frame "0002": 200 + index of (x3, y2, z1) = 23
+  o.dataset = "Pressure_*";
+  EXPECT_EQ(vd::open_series(path, o)->info().frames, 3u);
+  o.dataset = "Velocity_####";
+  expect_error([&] { vd::open_series(path, o); }, {"no dataset matches 'Velocity_####'"});
+  o.dataset.clear();
+  expect_error([&] { vd::open_series(path, o); }, {"holds 4 datasets", "--dataset"});
+  o.dataset = "xcoor";
+  expect_error([&] { vd::open_series(path, o); }, {"rank 1"});
+}
+
+TEST(Hdf5, FourDimensionalDatasetAndMismatches) {
+  TempDir dir("hdf5-4d");
+  const fs::path path = dir / "series.h5";
+  const hid_t f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  h5_write(f, "p", {5, 2, 3, 4}, counting(120, 0));
+  h5_write(f, "a_1", {2, 2, 2}, counting(8, 0));
+  h5_write(f, "a_2", {2, 2, 3}, counting(12, 0));
+  H5Fclose(f);
+  vd::OpenOptions o;
+  o.dataset = "p";
+  const auto s = vd::open_series(path, o);
+  EXPECT_EQ(s->info().dims, (Dims{4, 3, 2}));
+  ASSERT_EQ(s->info().frames, 5u);
+  EXPECT_EQ(s->read_frame(4).data.front(), 96.0f);
+  EXPECT_EQ(s->read_frame(4).data.back(), 119.0f);
+  o.dataset = "a_*";
+  expect_error([&] { vd::open_series(path, o); }, {"a_2", "3x2x2 but earlier frames are 2x2x2"});
+}
+
+TEST(Hdf5, CorruptFilesAreRejected) {
+  TempDir dir("hdf5-bad");
+  const fs::path path = dir / "bad.h5";
+  const std::string junk = "this is not an HDF5 file at all";
+  write_bytes(path, junk.data(), junk.size());
+  expect_error([&] { vd::open_series(path); }, {"bad.h5", "cannot be opened as an HDF5 file"});
+
+  // A real file cut in half.
+  const fs::path good = dir / "good.h5";
+  const hid_t f = H5Fcreate(good.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  h5_write(f, "p", {4, 16, 16, 16}, counting(16384, 0));
+  H5Fclose(f);
+  const auto size = fs::file_size(good);
+  fs::resize_file(good, size / 2);
+  vd::OpenOptions o;
+  o.dataset = "p";
+  try {
+    const auto s = vd::open_series(good, o);
+    s->read_frame(3);
+    ADD_FAILURE() << "a truncated HDF5 file was read without error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("good.h5"), std::string::npos) << e.what();
+  }
+}

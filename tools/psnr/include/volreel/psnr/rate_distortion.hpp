@@ -1,0 +1,77 @@
+// rate_distortion.hpp: the rate-distortion harness. Every codec — zfp now, volreel's own codecs
+// later — implements FrameCodec and lands in the same table, CSV and plot. Comparisons are read
+// at equal bps, never at equal tolerance (DESIGN.md "Metrics").
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <iosfwd>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "volreel/datasets/series.hpp"
+
+namespace volreel::psnr {
+
+/// One codec at one setting (e.g. zfp fixed accuracy at tolerance 1e-3).
+class FrameCodec {
+ public:
+  virtual ~FrameCodec() = default;
+  /// Family shown in the table and the plot legend, e.g. "zfp fixed-accuracy".
+  virtual std::string family() const = 0;
+  /// The setting within the family, e.g. "tol=1.2e-03".
+  virtual std::string setting() const = 0;
+  /// Compress one frame into stream (replacing its contents).
+  virtual void compress(Dims dims, std::span<const float> frame, std::vector<std::uint8_t>& stream) = 0;
+  /// Reconstruct the frame from stream into out (dims.voxels() values).
+  virtual void decompress(Dims dims, std::span<const std::uint8_t> stream, std::span<float> out) = 0;
+  /// Bytes stored once for the whole sequence (e.g. a dictionary); counted in bps.
+  virtual std::size_t shared_bytes() const { return 0; }
+};
+
+/// Builds the codecs of a sweep once the series' value range is known.
+using CodecFactory = std::vector<std::unique_ptr<FrameCodec>> (*)(double value_range);
+
+struct RdPoint {
+  std::string family, setting;
+  std::size_t frames = 0;
+  std::uint64_t bytes = 0;            ///< all frame streams + shared bytes
+  double bps = 0;                     ///< 8·bytes / (voxels per frame · frames)
+  double psnr = 0, psnr_zfp = 0;      ///< over the whole sequence (range of all original frames)
+  double rmse = 0, max_abs_error = 0;
+  double ssim = 0;                    ///< mean 3D SSIM over the sampled frames
+  std::size_t ssim_frames = 0;
+  double compress_mvoxels_per_s = 0;  ///< per thread
+  double decompress_mvoxels_per_s = 0;
+};
+
+struct RdOptions {
+  std::size_t max_frames = 0;     ///< 0: every frame; else the first max_frames
+  std::size_t ssim_frames = 4;    ///< SSIM on this many evenly spaced frames (0: none)
+};
+
+/// Value range (min, max) of the frames the harness will use; reads every such frame once.
+std::pair<double, double> series_range(const datasets::SeriesReader& series, const RdOptions& options,
+                                       const Progress& progress = {});
+
+/// Run every codec on every frame (frames read once; codecs in parallel, each on one thread).
+std::vector<RdPoint> run_rate_distortion(const datasets::SeriesReader& series,
+                                         std::span<const std::unique_ptr<FrameCodec>> codecs,
+                                         const RdOptions& options, const Progress& progress = {});
+
+/// zfp fixed-accuracy at tolerances range·2^-k, k = 3, 5, …, 17, and fixed-rate at
+/// 0.25, 0.5, 1, 2, 4, 8 bits per value.
+std::vector<std::unique_ptr<FrameCodec>> make_zfp_sweep(double value_range);
+std::unique_ptr<FrameCodec> make_zfp_accuracy(double tolerance);
+std::unique_ptr<FrameCodec> make_zfp_rate(double bits_per_value);
+
+void print_rd_table(std::ostream& out, std::span<const RdPoint> points);
+void write_rd_csv(const std::filesystem::path& path, std::span<const RdPoint> points);
+/// PSNR vs bps, one line per family, via gnuplot (pngcairo). Throws InputError with an
+/// installation hint when gnuplot is not on PATH.
+void write_rd_plot(const std::filesystem::path& png, std::span<const RdPoint> points, const std::string& title);
+
+}  // namespace volreel::psnr

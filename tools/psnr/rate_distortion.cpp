@@ -1,0 +1,237 @@
+// rate_distortion.cpp: runs codecs over a series and reports bps, PSNR, SSIM and speed, as a
+// table, a CSV and a PSNR-vs-bps plot.
+#include "volreel/psnr/rate_distortion.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <ostream>
+#include <sstream>
+
+#include "volreel/psnr/metrics.hpp"
+
+namespace volreel::psnr {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::size_t frames_used(const datasets::SeriesReader& series, const RdOptions& options) {
+  const std::size_t n = series.info().frames;
+  return options.max_frames ? std::min(n, options.max_frames) : n;
+}
+
+/// Indices of `count` evenly spaced frames out of n (first and last included when count ≥ 2).
+std::vector<std::size_t> spread(std::size_t n, std::size_t count) {
+  std::vector<std::size_t> picks;
+  count = std::min(count, n);
+  for (std::size_t i = 0; i < count; ++i)
+    picks.push_back(count == 1 ? n / 2 : i * (n - 1) / (count - 1));
+  return picks;
+}
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace
+
+std::pair<double, double> series_range(const datasets::SeriesReader& series, const RdOptions& options,
+                                       const Progress& progress) {
+  const std::size_t frames = frames_used(series, options);
+  std::vector<float> frame(series.info().dims.voxels());
+  double lo = INFINITY, hi = -INFINITY;
+  for (std::size_t t = 0; t < frames; ++t) {
+    series.read_frame(t, frame);
+    const auto [mn, mx] = std::minmax_element(frame.begin(), frame.end());
+    lo = std::min(lo, static_cast<double>(*mn));
+    hi = std::max(hi, static_cast<double>(*mx));
+    progress.report(static_cast<double>(t + 1), static_cast<double>(frames), "value range");
+  }
+  return {lo, hi};
+}
+
+std::vector<RdPoint> run_rate_distortion(const datasets::SeriesReader& series,
+                                         std::span<const std::unique_ptr<FrameCodec>> codecs,
+                                         const RdOptions& options, const Progress& progress) {
+  const Dims dims = series.info().dims;
+  const std::size_t frames = frames_used(series, options);
+  const std::vector<std::size_t> ssim_picks = spread(frames, options.ssim_frames);
+
+  struct State {
+    ErrorAccumulator errors;
+    std::uint64_t bytes = 0;
+    double ssim_sum = 0, compress_s = 0, decompress_s = 0;
+    std::vector<std::uint8_t> stream;
+    std::vector<float> decoded;
+  };
+  std::vector<State> states(codecs.size());
+  for (auto& s : states) s.decoded.resize(dims.voxels());
+
+  std::vector<float> frame(dims.voxels());
+  for (std::size_t t = 0; t < frames; ++t) {
+    series.read_frame(t, frame);
+    const bool with_ssim = std::find(ssim_picks.begin(), ssim_picks.end(), t) != ssim_picks.end();
+    const auto n = static_cast<std::ptrdiff_t>(codecs.size());
+    // One codec per thread, so each speed figure is that of a single core.
+#pragma omp parallel for schedule(dynamic, 1)
+    for (std::ptrdiff_t c = 0; c < n; ++c) {
+      State& s = states[static_cast<std::size_t>(c)];
+      FrameCodec& codec = *codecs[static_cast<std::size_t>(c)];
+      auto start = std::chrono::steady_clock::now();
+      codec.compress(dims, frame, s.stream);
+      s.compress_s += seconds_since(start);
+      start = std::chrono::steady_clock::now();
+      codec.decompress(dims, s.stream, s.decoded);
+      s.decompress_s += seconds_since(start);
+      s.bytes += s.stream.size();
+      s.errors.add(frame, s.decoded);
+      if (with_ssim) s.ssim_sum += ssim(dims, frame, s.decoded);
+    }
+    progress.report(static_cast<double>(t + 1), static_cast<double>(frames), "frame " + std::to_string(t + 1));
+  }
+
+  std::vector<RdPoint> points;
+  const double voxels = static_cast<double>(dims.voxels()) * static_cast<double>(frames);
+  for (std::size_t c = 0; c < codecs.size(); ++c) {
+    const State& s = states[c];
+    const ErrorStats e = s.errors.result();
+    RdPoint p;
+    p.family = codecs[c]->family();
+    p.setting = codecs[c]->setting();
+    p.frames = frames;
+    p.bytes = s.bytes + codecs[c]->shared_bytes();
+    p.bps = 8.0 * static_cast<double>(p.bytes) / voxels;
+    p.psnr = e.psnr;
+    p.psnr_zfp = e.psnr_zfp;
+    p.rmse = e.rmse;
+    p.max_abs_error = e.max_abs_error;
+    p.ssim_frames = ssim_picks.size();
+    p.ssim = ssim_picks.empty() ? std::nan("") : s.ssim_sum / static_cast<double>(ssim_picks.size());
+    p.compress_mvoxels_per_s = voxels / 1e6 / std::max(s.compress_s, 1e-9);
+    p.decompress_mvoxels_per_s = voxels / 1e6 / std::max(s.decompress_s, 1e-9);
+    points.push_back(std::move(p));
+  }
+  std::stable_sort(points.begin(), points.end(), [](const RdPoint& a, const RdPoint& b) {
+    return a.family != b.family ? a.family < b.family : a.bps < b.bps;
+  });
+  return points;
+}
+
+void print_rd_table(std::ostream& out, std::span<const RdPoint> points) {
+  char line[256];
+  std::snprintf(line, sizeof line, "%-20s %-14s %9s %9s %10s %8s %10s %10s %9s %9s\n", "codec", "setting", "bps",
+                "PSNR dB", "PSNRzfp dB", "SSIM", "RMSE", "max err", "enc MV/s", "dec MV/s");
+  out << line;
+  for (const RdPoint& p : points) {
+    std::snprintf(line, sizeof line, "%-20s %-14s %9.4f %9.2f %10.2f %8.5f %10.3e %10.3e %9.1f %9.1f\n",
+                  p.family.c_str(), p.setting.c_str(), p.bps, p.psnr, p.psnr_zfp, p.ssim, p.rmse, p.max_abs_error,
+                  p.compress_mvoxels_per_s, p.decompress_mvoxels_per_s);
+    out << line;
+  }
+  if (!points.empty())
+    out << "PSNR = 10·log10(range²/MSE) over all " << points.front().frames
+        << " frames (MTV-Player); PSNRzfp = 20·log10(range/(2·RMSE)) (zfp's, 6.02 dB lower); SSIM = mean 3D SSIM of "
+        << points.front().ssim_frames << " evenly spaced frames; MV/s = MVoxel/s on one core.\n";
+}
+
+void write_rd_csv(const fs::path& path, std::span<const RdPoint> points) {
+  std::ostringstream s;
+  s << "codec,setting,frames,bytes,bps,psnr_db,psnr_zfp_db,ssim,rmse,max_abs_error,encode_mvoxel_s,decode_mvoxel_s\n";
+  s.precision(9);
+  for (const RdPoint& p : points)
+    s << '"' << p.family << "\"," << '"' << p.setting << "\"," << p.frames << ',' << p.bytes << ',' << p.bps << ','
+      << p.psnr << ',' << p.psnr_zfp << ',' << p.ssim << ',' << p.rmse << ',' << p.max_abs_error << ','
+      << p.compress_mvoxels_per_s << ',' << p.decompress_mvoxels_per_s << '\n';
+  const fs::path tmp = path.string() + ".tmp";
+  {
+    std::ofstream f(tmp);
+    f << s.str();
+    if (!f.flush()) throw InputError("cannot write '" + tmp.string() + "'");
+  }
+  fs::rename(tmp, path);
+}
+
+namespace {
+
+bool on_path(const std::string& program) {
+  const char* path = std::getenv("PATH");
+  if (!path) return false;
+  std::stringstream dirs(path);
+  std::string dir;
+  while (std::getline(dirs, dir, ':')) {
+    std::error_code ec;
+    if (!dir.empty() && fs::exists(fs::path(dir) / program, ec)) return true;
+  }
+  return false;
+}
+
+std::string shell_quote(const std::string& text) {
+  std::string q = "'";
+  for (char c : text) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+std::string gnuplot_quote(const std::string& text) {
+  std::string q = "'";
+  for (char c : text) q += c == '\'' ? std::string("''") : std::string(1, c);
+  return q + "'";
+}
+
+}  // namespace
+
+void write_rd_plot(const fs::path& png, std::span<const RdPoint> points, const std::string& title) {
+  if (!on_path("gnuplot"))
+    throw InputError("gnuplot is not installed, so no plot was drawn (the CSV has the numbers): "
+                     "apt-get install gnuplot-nox");
+  std::map<std::string, std::vector<const RdPoint*>> families;
+  for (const RdPoint& p : points)
+    if (std::isfinite(p.psnr)) families[p.family].push_back(&p);
+  const fs::path data = png.string() + ".dat", script = png.string() + ".gp", tmp = png.string() + ".tmp.png";
+  {
+    std::ofstream d(data);
+    for (const auto& [family, list] : families) {
+      d << "# " << family << '\n';
+      for (const RdPoint* p : list) d << p->bps << ' ' << p->psnr << '\n';
+      d << "\n\n";
+    }
+    std::ofstream g(script);
+    g << "set terminal pngcairo size 960,640 enhanced font 'DejaVu Sans,11'\n"
+      << "set output " << gnuplot_quote(tmp.string()) << "\n"
+      << "set title " << gnuplot_quote(title) << "\n"
+      << "set xlabel 'bits per voxel (bps), all bytes counted'\nset ylabel 'PSNR (dB) = 10 log_{10}(range^2/MSE)'\n"
+      << "set logscale x 2\nset grid\nset key bottom right noenhanced\n";
+    g << "plot ";
+    int index = 0;
+    for (const auto& [family, list] : families) {
+      g << (index ? ", \\\n     " : "") << gnuplot_quote(data.string()) << " index " << index
+        << " using 1:2 with linespoints lw 2 pt 7 title " << gnuplot_quote(family);
+      ++index;
+    }
+    g << '\n';
+  }
+  const std::string command = "gnuplot " + shell_quote(script.string()) + " 2>&1";
+  std::FILE* pipe = popen(command.c_str(), "r");
+  std::string output;
+  if (pipe) {
+    char buffer[256];
+    while (std::fgets(buffer, sizeof buffer, pipe)) output += buffer;
+  }
+  const int status = pipe ? pclose(pipe) : -1;
+  std::error_code ec;
+  fs::remove(script, ec);
+  fs::remove(data, ec);
+  if (status != 0 || !fs::exists(tmp, ec)) {
+    fs::remove(tmp, ec);
+    throw InputError("gnuplot failed to draw '" + png.string() + "': " + output);
+  }
+  fs::rename(tmp, png);
+}
+
+}  // namespace volreel::psnr

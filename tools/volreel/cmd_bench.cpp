@@ -1,0 +1,82 @@
+// cmd_bench.cpp: `volreel bench ...` — benchmark programs that print measured figures.
+//   bench rd SERIES   rate-distortion of every codec (zfp fixed accuracy and fixed rate so far)
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+
+#include "commands.hpp"
+#include "progress.hpp"
+#include "volreel/psnr/rate_distortion.hpp"
+
+namespace volreel::cli {
+
+namespace {
+
+struct RdCommandOptions {
+  std::string series;
+  std::string out = "rd";
+  ReaderOptions reader;
+  psnr::RdOptions rd;
+  bool no_plot = false;
+};
+
+void run_rd(const RdCommandOptions& o) {
+  const auto series = datasets::open_series(o.series, o.reader.to_open_options());
+  const auto& info = series->info();
+  const std::size_t frames = o.rd.max_frames ? std::min(o.rd.max_frames, info.frames) : info.frames;
+  std::printf("volreel bench rd\nmachine: %s\ninput:   %s, %s, %zu of %zu frames, variable '%s'\n", describe_machine().c_str(),
+              info.source.c_str(), to_string(info.dims).c_str(), frames, info.frames, info.variable.c_str());
+  std::pair<double, double> range;
+  {
+    ProgressBar bar("reading", "frames");
+    range = psnr::series_range(*series, o.rd, bar.progress());
+    bar.finish();
+  }
+  std::printf("value range [%.6g, %.6g]\n", range.first, range.second);
+  const auto codecs = psnr::make_zfp_sweep(range.second - range.first);
+  std::vector<psnr::RdPoint> points;
+  {
+    ProgressBar bar("compressing", "frames");
+    points = psnr::run_rate_distortion(*series, codecs, o.rd, bar.progress());
+    bar.finish();
+  }
+  std::cout << '\n';
+  psnr::print_rd_table(std::cout, points);
+  std::filesystem::create_directories(o.out);
+  const std::filesystem::path csv = std::filesystem::path(o.out) / "rd.csv";
+  psnr::write_rd_csv(csv, points);
+  std::printf("\nwrote %s\n", csv.c_str());
+  if (!o.no_plot) {
+    const std::filesystem::path png = std::filesystem::path(o.out) / "rd.png";
+    try {
+      psnr::write_rd_plot(png, points, "Rate-distortion: " + info.variable + " " + to_string(info.dims) + " x " + std::to_string(frames) + " frames");
+      std::printf("wrote %s\n", png.c_str());
+    } catch (const InputError& e) {
+      std::fprintf(stderr, "volreel: warning: %s\n", e.what());
+    }
+  }
+}
+
+}  // namespace
+
+void add_bench_command(CLI::App& app) {
+  CLI::App* bench = app.add_subcommand("bench", "Benchmarks: print measured figures with the machine, build and input");
+  bench->require_subcommand(1);
+
+  auto o = std::make_shared<RdCommandOptions>();
+  CLI::App* rd = bench->add_subcommand(
+      "rd",
+      "Rate-distortion of the codecs on a series: zfp fixed-accuracy (tolerances range*2^-k, k=3,5,...,17) and\n"
+      "fixed-rate (0.25 to 8 bits/value). Prints bps, PSNR, SSIM, compression and decompression MVoxel/s per\n"
+      "setting; writes OUT/rd.csv and OUT/rd.png (PSNR vs bps, via gnuplot).");
+  rd->add_option("SERIES", o->series, "Raw series directory, HDF5 file or raw file")->required();
+  rd->add_option("--out", o->out, "Directory for rd.csv and rd.png")->capture_default_str();
+  rd->add_option("--max-frames", o->rd.max_frames, "Use only the first N frames (0: all)")->capture_default_str();
+  rd->add_option("--ssim-frames", o->rd.ssim_frames, "3D SSIM on this many evenly spaced frames (0: none)")->capture_default_str();
+  rd->add_flag("--no-plot", o->no_plot, "Write the CSV only");
+  o->reader.add_to(*rd);
+  rd->callback([o] { run_rd(*o); });
+}
+
+}  // namespace volreel::cli

@@ -1,0 +1,28 @@
+// commands.hpp: the subcommands of the volreel program.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include "volreel/datasets/series.hpp"
+
+namespace volreel::cli {
+
+void add_gen_command(CLI::App& app);
+void add_compare_command(CLI::App& app);
+void add_bench_command(CLI::App& app);
+
+/// Options that say how to read a series whose file does not describe itself; shared by every
+/// command that reads one.
+struct ReaderOptions {
+  std::string dims, dtype, dataset;
+  std::size_t frames = 0;
+  double replace_nan = 0;
+  bool replace_nan_set = false;
+  void add_to(CLI::App& command);
+  datasets::OpenOptions to_open_options() const;
+};
+
+/// "CPU model, N cores; build type; volreel version" for benchmark headers.
+std::string describe_machine();
+
+}  // namespace volreel::cli

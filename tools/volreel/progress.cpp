@@ -1,0 +1,74 @@
+// progress.cpp: the terminal progress bar.
+#include "progress.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+namespace volreel::cli {
+
+std::string format_duration(double seconds) {
+  if (!std::isfinite(seconds) || seconds < 0) return "?";
+  const auto s = static_cast<long>(seconds + 0.5);
+  char text[32];
+  if (s >= 3600)
+    std::snprintf(text, sizeof text, "%ldh%02ldm", s / 3600, s / 60 % 60);
+  else if (s >= 60)
+    std::snprintf(text, sizeof text, "%ldm%02lds", s / 60, s % 60);
+  else
+    std::snprintf(text, sizeof text, "%lds", s);
+  return text;
+}
+
+ProgressBar::ProgressBar(std::string label, std::string unit)
+    : label_(std::move(label)), unit_(std::move(unit)), terminal_(isatty(STDERR_FILENO) != 0),
+      start_(std::chrono::steady_clock::now()), last_draw_(start_) {}
+
+ProgressBar::~ProgressBar() {
+  if (!finished_ && terminal_ && last_.total > 0) std::fputc('\n', stderr);
+}
+
+Progress ProgressBar::progress() {
+  return Progress{[](const ProgressUpdate& u, void* self) { static_cast<ProgressBar*>(self)->update(u); }, this};
+}
+
+void ProgressBar::update(const ProgressUpdate& update) {
+  last_ = update;
+  const auto now = std::chrono::steady_clock::now();
+  const double fraction = update.total > 0 ? update.done / update.total : 0;
+  if (terminal_) {
+    if (now - last_draw_ < std::chrono::milliseconds(100) && fraction < 1) return;
+  } else {
+    if (fraction >= 1) return;  // finish() prints the last line
+    const bool step = fraction >= last_logged_fraction_ + 0.1;
+    if (!step && now - last_draw_ < std::chrono::seconds(10)) return;
+    last_logged_fraction_ = std::floor(fraction * 10) / 10;
+  }
+  last_draw_ = now;
+  draw(false);
+}
+
+void ProgressBar::finish() {
+  if (finished_) return;
+  draw(true);
+  finished_ = true;
+}
+
+void ProgressBar::draw(bool final) {
+  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  const double fraction = last_.total > 0 ? std::clamp(last_.done / last_.total, 0.0, 1.0) : 0.0;
+  const double eta = fraction > 0 ? elapsed * (1 - fraction) / fraction : std::nan("");
+  constexpr int width = 28;
+  std::string bar(width, ' ');
+  for (int i = 0; i < static_cast<int>(fraction * width + 0.5); ++i) bar[static_cast<std::size_t>(i)] = '#';
+  char counts[64];
+  std::snprintf(counts, sizeof counts, "%.0f/%.0f %s", last_.done, last_.total, unit_.c_str());
+  const std::string timing = final ? "in " + format_duration(elapsed) : "ETA " + format_duration(eta);
+  std::fprintf(stderr, "%s%s [%s] %3.0f%% %s  %s  %s%s", terminal_ ? "\r\033[K" : "", label_.c_str(), bar.c_str(),
+               fraction * 100, counts, last_.status.c_str(), timing.c_str(), terminal_ && !final ? "" : "\n");
+  std::fflush(stderr);
+}
+
+}  // namespace volreel::cli
