@@ -23,12 +23,13 @@ struct ErrorStats {
   std::size_t count = 0;     ///< values compared
   double original_min = 0, original_max = 0;
   double mse = 0, rmse = 0, max_abs_error = 0;
-  double psnr = 0;           ///< MTV definition, dB; +inf when MSE = 0
+  double psnr = 0;           ///< MTV definition, dB; +inf when MSE = 0, −inf when range = 0 < MSE
   double psnr_zfp = 0;       ///< zfp's definition, dB
   double range() const { return original_max - original_min; }
 };
 
 /// Accumulates squared errors over any number of frames; the range is that of all originals seen.
+/// An accumulator with nothing added reports count 0, MSE 0 and PSNR +inf.
 class ErrorAccumulator {
  public:
   /// original and decoded must have equal size; non-finite values throw InputError.
@@ -47,12 +48,13 @@ struct SsimOptions {
   double sigma = 1.5;
   double truncate = 3.5;     ///< window radius = int(truncate·sigma + 0.5)
   double k1 = 0.01, k2 = 0.03;
-  double data_range = 0;     ///< L in C1 = (K1·L)²; 0 means max − min of the original
+  double data_range = 0;     ///< L in C1 = (K1·L)²; 0 means max − min of the original (1 if 0)
 };
 
 /// SSIM of two arrays of shape dims (x fastest). Axes of extent 1 are neither filtered nor
 /// cropped, so a Dims{w, h, 1} is a 2D image. Throws InputError if an axis of extent > 1 is
-/// shorter than the window. OpenMP-parallel.
+/// shorter than the window, if a size does not match dims or a value is not finite.
+/// Computed in double; the result does not depend on the thread count. OpenMP-parallel.
 double ssim(Dims dims, std::span<const float> original, std::span<const float> decoded,
             const SsimOptions& options = {});
 
