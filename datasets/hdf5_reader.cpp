@@ -55,9 +55,9 @@ bool matches(const std::string& pattern, const std::string& name, long long& num
   number = -1;
   if (hash == std::string::npos && star == std::string::npos) return pattern == name;
   const auto pos = hash != std::string::npos ? hash : star;
-  const auto run_end = hash != std::string::npos ? pattern.find_first_not_of('#', hash) : star + 1;
+  const auto run_end = hash != std::string::npos ? std::min(pattern.find_first_not_of('#', hash), pattern.size()) : star + 1;
   const std::string prefix = pattern.substr(0, pos);
-  const std::string suffix = run_end == std::string::npos ? "" : pattern.substr(run_end);
+  const std::string suffix = pattern.substr(run_end);
   if (name.size() < prefix.size() + suffix.size()) return false;
   if (name.compare(0, prefix.size(), prefix) != 0) return false;
   if (name.compare(name.size() - suffix.size(), suffix.size(), suffix) != 0) return false;

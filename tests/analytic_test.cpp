@@ -27,8 +27,8 @@ TEST_P(AnalyticFields, DeterministicBoundedAndMoving) {
   for (std::size_t i = 0; i < a.size(); ++i) {
     ASSERT_TRUE(std::isfinite(a[i]));
     ASSERT_LT(std::abs(a[i]), 2.0f);
-    change += std::abs(a[i] - c[i]);
-    energy += std::abs(a[i]);
+    change += std::abs(static_cast<double>(a[i] - c[i]));
+    energy += std::abs(static_cast<double>(a[i]));
   }
   EXPECT_GT(energy / static_cast<double>(a.size()), 0.01) << "field is nearly zero";
   EXPECT_GT(change, 0.01 * energy) << "consecutive frames should differ";
@@ -39,7 +39,7 @@ TEST_P(AnalyticFields, DeterministicBoundedAndMoving) {
 
 INSTANTIATE_TEST_SUITE_P(All, AnalyticFields,
                          ::testing::Values(vd::AnalyticField::blobs, vd::AnalyticField::rotating, vd::AnalyticField::noise),
-                         [](const auto& info) { return vd::to_string(info.param); });
+                         [](const auto& param_info) { return vd::to_string(param_info.param); });
 
 TEST(Analytic, GenerateWritesAReadableSeries) {
   volreel::test::TempDir dir("analytic");

@@ -40,11 +40,11 @@ expect_error() {
   local pattern=$1; shift
   local msg
   if msg=$("$@" 2>&1 >/dev/null); then fail "expected failure: $*"; fi
-  echo "$msg" | grep -q "$pattern" || fail "message for '$*' lacks '$pattern': $msg"
+  echo "$msg" | grep -q -e "$pattern" || fail "message for '$*' lacks '$pattern': $msg"
 }
 expect_error "does not exist" "$volreel" compare "$work/a" "$work/nowhere"
 expect_error "--dims" "$volreel" compare "$work/frame.raw" "$work/frame.raw"
-expect_error "needs 30720" "$volreel" compare "$work/frame.raw" "$work/frame.raw" --dims 24x20x32
+expect_error "is 30720 bytes.*needs 61440" "$volreel" compare "$work/frame.raw" "$work/frame.raw" --dims 24x20x32
 "$volreel" gen analytic --dims 24x20x8 --frames 4 --out "$work/c" 2>/dev/null
 expect_error "24x20x16.*24x20x8" "$volreel" compare "$work/a" "$work/c"
 rm "$work/b/000003.f32"

@@ -29,6 +29,7 @@ class MemorySeries final : public vd::SeriesReader {
     params_.dims = dims;
     params_.frames = frames;
   }
+  using vd::SeriesReader::read_frame;
   void read_frame(std::size_t t, std::span<float> out) const override { vd::analytic_frame(params_, t, out); }
 
  private:
@@ -136,8 +137,11 @@ TEST(RateDistortion, CsvAndPlotAreWritten) {
   EXPECT_NE(table.str().find("zfp fixed-rate"), std::string::npos);
 
   // PSNR rises with rate within each family.
-  for (std::size_t i = 1; i < points.size(); ++i)
-    if (points[i].family == points[i - 1].family) EXPECT_GT(points[i].psnr, points[i - 1].psnr - 1e-9) << points[i].setting;
+  for (std::size_t i = 1; i < points.size(); ++i) {
+    if (points[i].family == points[i - 1].family) {
+      EXPECT_GT(points[i].psnr, points[i - 1].psnr - 1e-9) << points[i].setting;
+    }
+  }
 
   vp::write_rd_plot(dir / "rd.png", points, "test");
   std::ifstream png(dir / "rd.png", std::ios::binary);
