@@ -57,7 +57,7 @@ expect_error "not a PNG\|cannot\|PNG" "$volreel" compare "$work/frame.raw" "$wor
 "$volreel" bench rd "$work/a" --out "$work/rd" --ssim-frames 1 > "$work/rd.txt" 2>/dev/null
 grep -q "zfp fixed-accuracy" "$work/rd.txt" || fail "bench rd table lacks zfp fixed-accuracy"
 grep -q "machine:" "$work/rd.txt" || fail "bench rd does not print the machine"
-[ "$(wc -l < "$work/rd/rd.csv")" = 15 ] || fail "rd.csv should have a header and 14 rows"
+[ "$(wc -l < "$work/rd/rd.csv")" = 21 ] || fail "rd.csv should have a header and 20 rows"
 head -c 4 "$work/rd/rd.png" | grep -q PNG || fail "rd.png is not a PNG"
 
 echo "cli_end_to_end: all checks passed"

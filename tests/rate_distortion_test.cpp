@@ -120,7 +120,7 @@ TEST(RateDistortion, CsvAndPlotAreWritten) {
   volreel::test::TempDir dir("rd");
   MemorySeries series(Dims{12, 12, 12}, 2);
   const auto codecs = vp::make_zfp_sweep(2.0);
-  EXPECT_EQ(codecs.size(), 14u);
+  EXPECT_EQ(codecs.size(), 20u);
   vp::RdOptions options;
   options.ssim_frames = 0;
   const auto points = vp::run_rate_distortion(series, codecs, options);
@@ -131,7 +131,7 @@ TEST(RateDistortion, CsvAndPlotAreWritten) {
   std::getline(csv, line);
   EXPECT_EQ(line.rfind("codec,setting,frames,bytes,bps,psnr_db", 0), 0u);
   while (std::getline(csv, line)) ++rows;
-  EXPECT_EQ(rows, 14);
+  EXPECT_EQ(rows, 20);
   std::ostringstream table;
   vp::print_rd_table(table, points);
   EXPECT_NE(table.str().find("zfp fixed-rate"), std::string::npos);

@@ -67,8 +67,8 @@ void add_bench_command(CLI::App& app) {
   auto o = std::make_shared<RdCommandOptions>();
   CLI::App* rd = bench->add_subcommand(
       "rd",
-      "Rate-distortion of the codecs on a series: zfp fixed-accuracy (tolerances range*2^-k, k=3,5,...,17) and\n"
-      "fixed-rate (0.25 to 8 bits/value). Prints bps, PSNR, SSIM, compression and decompression MVoxel/s per\n"
+      "Rate-distortion of the codecs on a series: zfp fixed-accuracy (tolerances range*2^-k, k=0,1,...,12) and\n"
+      "fixed-rate (0.125 to 8 bits/value). Prints bps, PSNR, SSIM, compression and decompression MVoxel/s per\n"
       "setting; writes OUT/rd.csv and OUT/rd.png (PSNR vs bps, via gnuplot).");
   rd->add_option("SERIES", o->series, "Raw series directory, HDF5 file or raw file")->required();
   rd->add_option("--out", o->out, "Directory for rd.csv and rd.png")->capture_default_str();
@@ -77,6 +77,7 @@ void add_bench_command(CLI::App& app) {
   rd->add_flag("--no-plot", o->no_plot, "Write the CSV only");
   o->reader.add_to(*rd);
   rd->callback([o] { run_rd(*o); });
+  add_bench_train_command(*bench);
 }
 
 }  // namespace volreel::cli

@@ -10,6 +10,9 @@ namespace volreel::cli {
 void add_gen_command(CLI::App& app);
 void add_compare_command(CLI::App& app);
 void add_bench_command(CLI::App& app);
+void add_train_command(CLI::App& app);
+/// `bench train`, registered by add_bench_command under `bench`.
+void add_bench_train_command(CLI::App& bench);
 
 /// Options that say how to read a series whose file does not describe itself; shared by every
 /// command that reads one.

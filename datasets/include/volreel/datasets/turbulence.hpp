@@ -36,7 +36,8 @@ struct TurbulenceParams {
   std::uint64_t seed = 1;          ///< seed of the random-phase initial field
 };
 
-/// One running simulation. Not copyable (owns FFTW plans and large arrays).
+/// One running simulation. Not copyable (owns FFTW plans and large arrays). Not safe to use from
+/// several threads at once: the const members share the simulation's scratch arrays too.
 class TurbulenceSimulation {
  public:
   explicit TurbulenceSimulation(const TurbulenceParams& params);

@@ -62,8 +62,8 @@ std::vector<RdPoint> run_rate_distortion(const datasets::SeriesReader& series,
                                          std::span<const std::unique_ptr<FrameCodec>> codecs,
                                          const RdOptions& options, const Progress& progress = {});
 
-/// zfp fixed-accuracy at tolerances range·2^-k, k = 3, 5, …, 17, and fixed-rate at
-/// 0.25, 0.5, 1, 2, 4, 8 bits per value.
+/// zfp fixed-accuracy at tolerances range·2^-k, k = 0, 1, …, 12, and fixed-rate at
+/// 0.125, 0.25, 0.5, 1, 2, 4, 8 bits per value: 20 settings spanning about 0.1 to 10 bps.
 std::vector<std::unique_ptr<FrameCodec>> make_zfp_sweep(double value_range);
 std::unique_ptr<FrameCodec> make_zfp_accuracy(double tolerance);
 std::unique_ptr<FrameCodec> make_zfp_rate(double bits_per_value);

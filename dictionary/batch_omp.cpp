@@ -1,0 +1,252 @@
+// batch_omp.cpp: batch-OMP with progressive Cholesky updates (Rubinstein, Zibulevsky, Elad 2008,
+// algorithm 5), and the plain reference OMP.
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include <Eigen/QR>
+
+#include "volreel/dictionary/omp.hpp"
+
+namespace volreel::dictionary {
+
+double tolerance_for_psnr(double psnr_db, double value_range) { return value_range * std::pow(10.0, -psnr_db / 20.0); }
+
+double psnr_for_tolerance(double tolerance, double value_range) { return 20.0 * std::log10(value_range / tolerance); }
+
+void SparseCodes::resize(std::size_t blocks, int slots) {
+  max_atoms = slots;
+  const std::size_t total = blocks * static_cast<std::size_t>(slots);
+  count.assign(blocks, 0);
+  atom.assign(total, 0);
+  coefficient.assign(total, 0.0f);
+  residual_energy.assign(blocks, 0.0f);
+}
+
+namespace {
+
+void check_options(const SparseCodingOptions& options, Eigen::Index block_length) {
+  if (!(options.tolerance >= 0) || !std::isfinite(options.tolerance))
+    throw std::invalid_argument("sparse coding tolerance must be a finite value >= 0, not " +
+                                std::to_string(options.tolerance));
+  if (options.max_atoms < 1 || options.max_atoms > 255 || options.max_atoms > block_length)
+    throw std::invalid_argument("maximum atoms per block must be in 1.." +
+                                std::to_string(std::min<Eigen::Index>(255, block_length)) + ", not " +
+                                std::to_string(options.max_atoms));
+}
+
+/// Correlations are updated and searched in chunks of this many values, held in registers.
+constexpr Eigen::Index chunk = 64;
+using Chunk = Eigen::Matrix<float, chunk, 1>;
+
+/// Scratch space of one thread, sized once.
+struct OmpWorkspace {
+  Eigen::VectorXf alpha;     // K: Dᵀr, the residual's correlations
+  Eigen::MatrixXf lower;     // S × S: Cholesky factor L of G_II (lower triangle)
+  Eigen::VectorXf w, z, gamma, alpha0_support;
+  std::vector<int> support;
+  std::vector<const float*> columns;  // G's columns of the support
+  std::vector<float> chunk_max;       // largest |α| per chunk of α
+
+  OmpWorkspace(Eigen::Index atoms, int slots)
+      : alpha(atoms), lower(slots, slots), w(slots), z(slots), gamma(slots), alpha0_support(slots),
+        support(static_cast<std::size_t>(slots)), columns(static_cast<std::size_t>(slots)),
+        chunk_max(static_cast<std::size_t>(atoms / chunk + 1)) {}
+};
+
+/// The hot loop of batch-OMP (Σ_s s·K multiply-adds per block), fused with the search for the next
+/// atom: α = α⁰ − Σ_j γ_j·G_{:,I_j} (s = 0: α = α⁰), then α_I = 0, and returns argmax_k |α_k|
+/// (the first on ties). Each chunk of α is accumulated over all support columns before it is
+/// stored, and its largest |α| is kept, so that the search scans a single chunk.
+Eigen::Index update_correlations(float* alpha, const float* alpha0, const float* const* columns, const float* gamma,
+                                 const int* support, int s, Eigen::Index K, float* chunk_max) {
+  const Eigen::Index full = K / chunk;
+  for (Eigen::Index c = 0; c < full; ++c) {
+    const Eigen::Index at = c * chunk;
+    Chunk acc = Eigen::Map<const Chunk>(alpha0 + at);
+    for (int j = 0; j < s; ++j) acc.noalias() -= gamma[j] * Eigen::Map<const Chunk>(columns[j] + at);
+    Eigen::Map<Chunk>(alpha + at) = acc;
+    chunk_max[c] = acc.cwiseAbs().maxCoeff();
+  }
+  const Eigen::Index chunks = full + (K > full * chunk ? 1 : 0);
+  if (chunks > full) {  // the tail, shorter than a chunk
+    float m = 0;
+    for (Eigen::Index i = full * chunk; i < K; ++i) {
+      float a = alpha0[i];
+      for (int j = 0; j < s; ++j) a -= gamma[j] * columns[j][i];
+      alpha[i] = a;
+      m = std::max(m, std::abs(a));
+    }
+    chunk_max[full] = m;
+  }
+  // Chosen atoms are orthogonal to the residual: zero their α (rounding leaves it tiny, not 0)
+  // and refresh the maxima of their chunks.
+  for (int j = 0; j < s; ++j) alpha[support[j]] = 0;
+  for (int j = 0; j < s; ++j) {
+    const Eigen::Index c = support[j] / chunk;
+    const Eigen::Index n = std::min(chunk, K - c * chunk);
+    chunk_max[c] = Eigen::Map<const Eigen::VectorXf>(alpha + c * chunk, n).cwiseAbs().maxCoeff();
+  }
+  Eigen::Index best_chunk = 0;
+  for (Eigen::Index c = 1; c < chunks; ++c)
+    if (chunk_max[c] > chunk_max[best_chunk]) best_chunk = c;
+  const float best = chunk_max[best_chunk];
+  const Eigen::Index end = std::min(K, (best_chunk + 1) * chunk);
+  for (Eigen::Index i = best_chunk * chunk; i < end; ++i)
+    if (std::abs(alpha[i]) == best) return i;
+  return best_chunk * chunk;
+}
+
+/// Error-constrained OMP-Cholesky for one block, from α⁰ = Dᵀy and ‖y‖² (RZE08, algorithm 5).
+/// Writes the support, coefficients and ‖r‖²; returns the number of atoms.
+int code_one_block(const float* alpha0, double energy, const Eigen::MatrixXf& gram, int max_atoms, double target,
+                   OmpWorkspace& ws, std::int32_t* atoms_out, float* coefficients_out, float* residual_out) {
+  const Eigen::Index K = gram.rows();
+  float* alpha = ws.alpha.data();
+  auto& L = ws.lower;
+  double residual = energy;
+  int s = 0;
+  // 1. The atom most correlated with the residual, k = argmax |α|, starting from α = α⁰.
+  Eigen::Index k = update_correlations(alpha, alpha0, ws.columns.data(), ws.gamma.data(), ws.support.data(), 0, K,
+                                       ws.chunk_max.data());
+  while (residual > target && s < max_atoms) {
+    if (!(std::abs(alpha[k]) > 0)) break;  // the residual is orthogonal to every atom
+
+    // 2. Progressive Cholesky: L ← [L 0; wᵀ sqrt(G_kk − wᵀw)] with L w = G_{I,k}.
+    const float* g_k = gram.col(k).data();
+    if (s == 0) {
+      L(0, 0) = std::sqrt(g_k[k]);
+    } else {
+      float ww = 0;
+      for (int r = 0; r < s; ++r) {
+        float v = g_k[ws.support[static_cast<std::size_t>(r)]];
+        for (int c = 0; c < r; ++c) v -= L(r, c) * ws.w[c];
+        ws.w[r] = v / L(r, r);
+        ww += ws.w[r] * ws.w[r];
+      }
+      const float pivot = g_k[k] - ww;
+      if (!(pivot > 1e-5f)) break;  // atom k is (numerically) in the span of the support
+      for (int c = 0; c < s; ++c) L(s, c) = ws.w[c];
+      L(s, s) = std::sqrt(pivot);
+    }
+    ws.support[static_cast<std::size_t>(s)] = static_cast<int>(k);
+    ws.alpha0_support[s] = alpha0[k];
+    ++s;
+
+    // 3. γ_I = (L Lᵀ)⁻¹ α⁰_I by forward and back substitution.
+    for (int r = 0; r < s; ++r) {
+      float v = ws.alpha0_support[r];
+      for (int c = 0; c < r; ++c) v -= L(r, c) * ws.z[c];
+      ws.z[r] = v / L(r, r);
+    }
+    for (int r = s - 1; r >= 0; --r) {
+      float v = ws.z[r];
+      for (int c = r + 1; c < s; ++c) v -= L(c, r) * ws.gamma[c];
+      ws.gamma[r] = v / L(r, r);
+    }
+
+    // 4. α = α⁰ − G_I γ_I (β = G_I γ_I), and ‖r‖² = ‖y‖² − γ_Iᵀ α⁰_I (RZE08's ε_n − δ_n + δ_{n−1}
+    //    telescoped: δ_n = γ_Iᵀ β_I = γ_Iᵀ α⁰_I because G_II γ_I = α⁰_I).
+    //    Then step 1 for the next round: k = argmax |α|.
+    ws.columns[static_cast<std::size_t>(s - 1)] = g_k;
+    k = update_correlations(alpha, alpha0, ws.columns.data(), ws.gamma.data(), ws.support.data(), s, K,
+                            ws.chunk_max.data());
+    double delta = 0;
+    for (int j = 0; j < s; ++j) delta += static_cast<double>(ws.gamma[j]) * static_cast<double>(ws.alpha0_support[j]);
+    residual = std::max(energy - delta, 0.0);
+  }
+  for (int j = 0; j < s; ++j) {
+    atoms_out[j] = ws.support[static_cast<std::size_t>(j)];
+    coefficients_out[j] = ws.gamma[j];
+  }
+  *residual_out = static_cast<float>(residual);
+  return s;
+}
+
+}  // namespace
+
+BatchOmp::BatchOmp(const Eigen::MatrixXf& atoms, SparseCodingOptions options)
+    : atoms_(atoms), options_(options) {
+  check_options(options, atoms.rows());
+  if (atoms.cols() < 1) throw std::invalid_argument("a dictionary needs at least one atom");
+  gram_.noalias() = atoms_.transpose() * atoms_;
+  target_energy_ = static_cast<double>(atoms.rows()) * options.tolerance * options.tolerance;
+}
+
+void BatchOmp::encode(const Eigen::Ref<const Eigen::MatrixXf>& blocks, SparseCodes& codes) const {
+  if (blocks.rows() != atoms_.rows())
+    throw std::invalid_argument("blocks have " + std::to_string(blocks.rows()) + " values, atoms " +
+                                std::to_string(atoms_.rows()));
+  const auto n = static_cast<std::size_t>(blocks.cols());
+  const int S = options_.max_atoms;
+  codes.resize(n, S);
+  // Batches of columns: one GEMM Dᵀ·Y per batch gives every α⁰ of the batch.
+  constexpr Eigen::Index batch = 64;
+  const auto batches = static_cast<std::int64_t>((blocks.cols() + batch - 1) / batch);
+#pragma omp parallel
+  {
+    Eigen::MatrixXf correlations(atoms_.cols(), batch);
+    OmpWorkspace ws(atoms_.cols(), S);
+#pragma omp for schedule(dynamic, 1)
+    for (std::int64_t b = 0; b < batches; ++b) {
+      const Eigen::Index first = b * batch;
+      const Eigen::Index cols = std::min(batch, blocks.cols() - first);
+      correlations.leftCols(cols).noalias() = atoms_.transpose() * blocks.middleCols(first, cols);
+      for (Eigen::Index j = 0; j < cols; ++j) {
+        const auto i = static_cast<std::size_t>(first + j);
+        const auto column = blocks.col(first + j);
+        const double energy = column.cast<double>().squaredNorm();
+        const std::size_t slot = i * static_cast<std::size_t>(S);
+        codes.count[i] = static_cast<std::uint8_t>(code_one_block(correlations.col(j).data(), energy, gram_, S,
+                                                                  target_energy_, ws, codes.atom.data() + slot,
+                                                                  codes.coefficient.data() + slot,
+                                                                  codes.residual_energy.data() + i));
+      }
+    }
+  }
+}
+
+ReferenceCode reference_omp(const Eigen::MatrixXf& atoms, const Eigen::VectorXf& block, SparseCodingOptions options) {
+  check_options(options, atoms.rows());
+  const Eigen::MatrixXd D = atoms.cast<double>();
+  const Eigen::VectorXd y = block.cast<double>();
+  const double target = static_cast<double>(atoms.rows()) * options.tolerance * options.tolerance;
+  ReferenceCode code;
+  code.min_selection_margin = std::numeric_limits<double>::infinity();
+  Eigen::VectorXd r = y;
+  Eigen::VectorXd gamma;
+  while (r.squaredNorm() > target && static_cast<int>(code.atoms.size()) < options.max_atoms) {
+    // 1. Correlate the explicit residual with every atom not yet chosen.
+    Eigen::VectorXd c = (D.transpose() * r).cwiseAbs();
+    for (int k : code.atoms) c[k] = -1;
+    Eigen::Index k = 0;
+    const double best = c.maxCoeff(&k);
+    if (!(best > 0)) break;
+    c[k] = -1;
+    const double second = c.size() > 1 ? c.maxCoeff() : 0.0;
+    code.min_selection_margin = std::min(code.min_selection_margin, (best - second) / best);
+    code.atoms.push_back(static_cast<int>(k));
+    // 2. Least squares on the support, from scratch.
+    Eigen::MatrixXd DI(D.rows(), static_cast<Eigen::Index>(code.atoms.size()));
+    for (std::size_t j = 0; j < code.atoms.size(); ++j) DI.col(static_cast<Eigen::Index>(j)) = D.col(code.atoms[j]);
+    gamma = DI.colPivHouseholderQr().solve(y);
+    r = y - DI * gamma;
+  }
+  code.coefficients.assign(gamma.data(), gamma.data() + gamma.size());
+  code.residual_energy = r.squaredNorm();
+  return code;
+}
+
+void reconstruct_block(const Eigen::MatrixXf& atoms, const SparseCodes& codes, std::size_t i, float* out) {
+  Eigen::Map<Eigen::VectorXf> result(out, atoms.rows());
+  result.setZero();
+  const std::int32_t* a = codes.atoms_of(i);
+  const float* c = codes.coefficients_of(i);
+  for (int j = 0; j < codes.count[i]; ++j) result.noalias() += c[j] * atoms.col(a[j]);
+}
+
+}  // namespace volreel::dictionary

@@ -1,0 +1,179 @@
+// dictionary_file.cpp: writing and checking dictionary files (format/SPEC.md, "Dictionary file").
+#include "volreel/format/dictionary_file.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+
+#include "file_io.hpp"
+#include "volreel/format/crc32c.hpp"
+#include "volreel/format/error.hpp"
+
+namespace volreel::format {
+
+namespace {
+
+std::string hex32(std::uint32_t value) {
+  char text[16];
+  std::snprintf(text, sizeof text, "0x%08X", value);
+  return text;
+}
+
+std::string quoted_bytes(const char* bytes, std::size_t n) {
+  std::string text = "\"";
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto c = static_cast<unsigned char>(bytes[i]);
+    if (c >= 32 && c < 127) {
+      text += static_cast<char>(c);
+    } else {
+      char esc[8];
+      std::snprintf(esc, sizeof esc, "\\x%02X", c);
+      text += esc;
+    }
+  }
+  return text + "\"";
+}
+
+}  // namespace
+
+std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& d) {
+  const std::filesystem::path memory = "<memory>";
+  const std::uint64_t m = std::uint64_t{d.block_size} * d.block_size * d.block_size;
+  if (d.block_size == 0 || d.block_size > dictionary_max_block_size)
+    throw FormatError(memory, "block size " + std::to_string(d.block_size) + " is outside 1.." +
+                                  std::to_string(dictionary_max_block_size));
+  if (d.atom_count == 0 || d.atom_count > dictionary_max_atoms)
+    throw FormatError(memory, "atom count " + std::to_string(d.atom_count) + " is outside 1.." +
+                                  std::to_string(dictionary_max_atoms));
+  if (d.atoms.size() != d.atom_count * m)
+    throw FormatError(memory, std::to_string(d.atoms.size()) + " atom values for " + std::to_string(d.atom_count) +
+                                  " atoms of " + std::to_string(m) + " values");
+  if (d.program_version.size() > 15)
+    throw FormatError(memory, "program version '" + d.program_version + "' is longer than 15 characters");
+
+  DictionaryFileHeader h{};
+  std::memcpy(h.magic, dictionary_magic.data(), sizeof h.magic);
+  h.format_version = dictionary_format_version;
+  h.header_bytes = sizeof(DictionaryFileHeader);
+  h.atom_count = d.atom_count;
+  h.block_size = d.block_size;
+  h.atom_length = static_cast<std::uint32_t>(m);
+  h.max_sparsity = d.training.max_sparsity;
+  h.tolerance = d.training.tolerance;
+  h.value_min = d.training.value_min;
+  h.value_max = d.training.value_max;
+  h.coreset_voxels = d.training.coreset_voxels;
+  h.coreset_levels = d.training.coreset_levels;
+  h.iterations = d.training.iterations;
+  h.seed = d.training.seed;
+  h.flags = d.training.flat ? dictionary_flag_flat : 0u;
+  h.training_frames = d.training.training_frames;
+  h.rms_error = d.training.rms_error;
+  h.mean_sparsity = d.training.mean_sparsity;
+  std::memcpy(h.program_version, d.program_version.data(), d.program_version.size());
+
+  std::vector<std::byte> bytes(dictionary_file_size(d.atom_count, m));
+  std::memcpy(bytes.data(), &h, sizeof h);
+  std::memcpy(bytes.data() + sizeof h, d.atoms.data(), d.atoms.size() * sizeof(float));
+  const std::size_t crc_offset = bytes.size() - sizeof(std::uint32_t);
+  const std::uint32_t crc = crc32c(std::span(bytes.data(), crc_offset));
+  std::memcpy(bytes.data() + crc_offset, &crc, sizeof crc);
+  return bytes;
+}
+
+DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes, const std::filesystem::path& name) {
+  // 1. The header must be there before any field is looked at.
+  const std::uint64_t minimum = dictionary_file_size(1, 1);
+  if (bytes.size() < sizeof(DictionaryFileHeader))
+    throw FormatError(name, bytes.size(), "a dictionary file of at least " + std::to_string(minimum) + " bytes",
+                      "end of file (truncated: " + std::to_string(bytes.size()) + " bytes)");
+  DictionaryFileHeader h;
+  std::memcpy(&h, bytes.data(), sizeof h);
+
+  // 2. Identity and version.
+  if (std::memcmp(h.magic, dictionary_magic.data(), sizeof h.magic) != 0)
+    throw FormatError(name, 0, "magic " + quoted_bytes(dictionary_magic.data(), 8) + " (a volreel dictionary file)",
+                      quoted_bytes(h.magic, 8));
+  if (h.format_version != dictionary_format_version)
+    throw FormatError(name, offsetof(DictionaryFileHeader, format_version),
+                      "dictionary format version " + std::to_string(dictionary_format_version),
+                      "version " + std::to_string(h.format_version));
+  if (h.header_bytes != sizeof(DictionaryFileHeader))
+    throw FormatError(name, offsetof(DictionaryFileHeader, header_bytes),
+                      "header size " + std::to_string(sizeof(DictionaryFileHeader)), std::to_string(h.header_bytes));
+
+  // 3. Header consistency, before sizes derived from it are trusted.
+  if (h.atom_count == 0 || h.atom_count > dictionary_max_atoms)
+    throw FormatError(name, offsetof(DictionaryFileHeader, atom_count),
+                      "atom count in 1.." + std::to_string(dictionary_max_atoms), std::to_string(h.atom_count));
+  if (h.block_size == 0 || h.block_size > dictionary_max_block_size)
+    throw FormatError(name, offsetof(DictionaryFileHeader, block_size),
+                      "block size in 1.." + std::to_string(dictionary_max_block_size), std::to_string(h.block_size));
+  const std::uint64_t m = std::uint64_t{h.block_size} * h.block_size * h.block_size;
+  if (h.atom_length != m)
+    throw FormatError(name, offsetof(DictionaryFileHeader, atom_length),
+                      "atom length " + std::to_string(m) + " (block size " + std::to_string(h.block_size) + " cubed)",
+                      std::to_string(h.atom_length));
+  if ((h.flags & ~dictionary_flag_flat) != 0)
+    throw FormatError(name, offsetof(DictionaryFileHeader, flags), "flags with only bit 0 defined",
+                      hex32(h.flags));
+
+  // 4. Size: header + atoms + CRC, exactly.
+  const std::uint64_t expected = dictionary_file_size(h.atom_count, m);
+  if (bytes.size() < expected)
+    throw FormatError(name, bytes.size(),
+                      std::to_string(expected) + " bytes (128-byte header, " + std::to_string(h.atom_count) + " atoms of " +
+                          std::to_string(m) + " float32, 4-byte CRC)",
+                      "end of file (truncated: " + std::to_string(bytes.size()) + " bytes)");
+  if (bytes.size() > expected)
+    throw FormatError(name, expected, "end of file after " + std::to_string(expected) + " bytes",
+                      std::to_string(bytes.size() - expected) + " extra bytes");
+
+  // 5. Checksum over everything before it.
+  const std::size_t crc_offset = static_cast<std::size_t>(expected) - sizeof(std::uint32_t);
+  std::uint32_t stored;
+  std::memcpy(&stored, bytes.data() + crc_offset, sizeof stored);
+  const std::uint32_t computed = crc32c(bytes.first(crc_offset));
+  if (stored != computed)
+    throw FormatError(name, crc_offset, "CRC-32C " + hex32(computed) + " of bytes 0.." + std::to_string(crc_offset - 1),
+                      "stored " + hex32(stored) + " (the file is corrupt)");
+
+  // 6. Atoms, which must be finite (a CRC does not catch a writer that wrote NaN).
+  DictionaryFile d;
+  d.block_size = h.block_size;
+  d.atom_count = h.atom_count;
+  d.atoms.resize(static_cast<std::size_t>(h.atom_count * m));
+  std::memcpy(d.atoms.data(), bytes.data() + sizeof h, d.atoms.size() * sizeof(float));
+  for (std::size_t i = 0; i < d.atoms.size(); ++i)
+    if (!std::isfinite(d.atoms[i]))
+      throw FormatError(name, sizeof h + i * sizeof(float),
+                        "a finite float32 (atom " + std::to_string(i / m) + ", value " + std::to_string(i % m) + ")",
+                        std::to_string(d.atoms[i]));
+
+  d.training.tolerance = h.tolerance;
+  d.training.value_min = h.value_min;
+  d.training.value_max = h.value_max;
+  d.training.max_sparsity = h.max_sparsity;
+  d.training.coreset_voxels = h.coreset_voxels;
+  d.training.coreset_levels = h.coreset_levels;
+  d.training.iterations = h.iterations;
+  d.training.seed = h.seed;
+  d.training.flat = (h.flags & dictionary_flag_flat) != 0;
+  d.training.training_frames = h.training_frames;
+  d.training.rms_error = h.rms_error;
+  d.training.mean_sparsity = h.mean_sparsity;
+  d.program_version.assign(h.program_version, strnlen(h.program_version, sizeof h.program_version));
+  return d;
+}
+
+void write_dictionary_file(const std::filesystem::path& path, const DictionaryFile& dictionary) {
+  const auto bytes = serialize_dictionary_file(dictionary);
+  detail::write_file_atomically(path, bytes);
+}
+
+DictionaryFile read_dictionary_file(const std::filesystem::path& path) {
+  const auto bytes = detail::read_whole_file(path);
+  return parse_dictionary_file(bytes, path);
+}
+
+}  // namespace volreel::format

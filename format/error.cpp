@@ -1,0 +1,16 @@
+// error.cpp: FormatError messages.
+#include "volreel/format/error.hpp"
+
+namespace volreel::format {
+
+FormatError::FormatError(const std::filesystem::path& file, std::uint64_t offset, const std::string& expected,
+                         const std::string& found)
+    : std::runtime_error(file.string() + (offset == no_offset ? std::string() : ": offset " + std::to_string(offset)) +
+                         ": expected " + expected + ", found " + found),
+      file_(file),
+      offset_(offset) {}
+
+FormatError::FormatError(const std::filesystem::path& file, const std::string& what)
+    : std::runtime_error(file.string() + ": " + what), file_(file) {}
+
+}  // namespace volreel::format

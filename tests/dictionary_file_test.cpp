@@ -1,0 +1,206 @@
+// dictionary_file_test.cpp: the dictionary file round-trips, is little-endian with the layout of
+// format/SPEC.md, and every truncation, flipped byte or bad field gives a FormatError that names
+// the file and the offset, never a crash.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <limits>
+
+#include "test_util.hpp"
+#include "volreel/datasets/prng.hpp"
+#include "volreel/dictionary/dictionary.hpp"
+#include "volreel/format/crc32c.hpp"
+#include "volreel/format/dictionary_file.hpp"
+#include "volreel/format/error.hpp"
+
+namespace {
+
+using namespace volreel::format;
+
+DictionaryFile small_dictionary(std::uint32_t M = 2, std::uint32_t K = 3) {
+  DictionaryFile d;
+  d.block_size = M;
+  d.atom_count = K;
+  volreel::SplitMix64 rng(11);
+  d.atoms.resize(std::size_t{K} * M * M * M);
+  for (float& v : d.atoms) v = static_cast<float>(rng.normal());
+  d.training.tolerance = 0.125;
+  d.training.value_min = -3.5;
+  d.training.value_max = 7.25;
+  d.training.max_sparsity = 15;
+  d.training.coreset_voxels = 1234567;
+  d.training.coreset_levels = 6;
+  d.training.iterations = 8;
+  d.training.seed = 0x0123456789ABCDEFull;
+  d.training.flat = true;
+  d.training.training_frames = 16;
+  d.training.rms_error = 0.01;
+  d.training.mean_sparsity = 3.5;
+  d.program_version = "0.1.0";
+  return d;
+}
+
+std::uint32_t u32_at(const std::vector<std::byte>& b, std::size_t offset) {
+  return std::to_integer<std::uint32_t>(b[offset]) | std::to_integer<std::uint32_t>(b[offset + 1]) << 8 |
+         std::to_integer<std::uint32_t>(b[offset + 2]) << 16 | std::to_integer<std::uint32_t>(b[offset + 3]) << 24;
+}
+
+/// Expects parse to throw a FormatError whose message contains `fragment`; returns the error's offset.
+std::uint64_t expect_error(const std::vector<std::byte>& bytes, const std::string& fragment) {
+  try {
+    parse_dictionary_file(bytes, "test.bin");
+  } catch (const FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("test.bin"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
+    return e.offset();
+  }
+  ADD_FAILURE() << "no error; expected one mentioning '" << fragment << "'";
+  return 0;
+}
+
+/// Rewrites the CRC so that a deliberately bad field is what the reader sees first.
+void fix_crc(std::vector<std::byte>& bytes) {
+  const std::size_t at = bytes.size() - 4;
+  const std::uint32_t crc = crc32c(std::span(bytes.data(), at));
+  std::memcpy(bytes.data() + at, &crc, 4);
+}
+
+TEST(DictionaryFile, RoundTripsThroughAFile) {
+  volreel::test::TempDir dir("dictfile");
+  const DictionaryFile d = small_dictionary();
+  write_dictionary_file(dir / "dictionary.bin", d);
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / ("dictionary.bin.tmp-" + std::to_string(getpid()))));
+  const DictionaryFile r = read_dictionary_file(dir / "dictionary.bin");
+  EXPECT_EQ(r.block_size, d.block_size);
+  EXPECT_EQ(r.atom_count, d.atom_count);
+  EXPECT_EQ(r.atoms, d.atoms);
+  EXPECT_EQ(r.training.tolerance, d.training.tolerance);
+  EXPECT_EQ(r.training.value_min, d.training.value_min);
+  EXPECT_EQ(r.training.value_max, d.training.value_max);
+  EXPECT_EQ(r.training.max_sparsity, d.training.max_sparsity);
+  EXPECT_EQ(r.training.coreset_voxels, d.training.coreset_voxels);
+  EXPECT_EQ(r.training.coreset_levels, d.training.coreset_levels);
+  EXPECT_EQ(r.training.iterations, d.training.iterations);
+  EXPECT_EQ(r.training.seed, d.training.seed);
+  EXPECT_EQ(r.training.flat, d.training.flat);
+  EXPECT_EQ(r.training.training_frames, d.training.training_frames);
+  EXPECT_EQ(r.training.rms_error, d.training.rms_error);
+  EXPECT_EQ(r.training.mean_sparsity, d.training.mean_sparsity);
+  EXPECT_EQ(r.program_version, d.program_version);
+  EXPECT_EQ(std::filesystem::file_size(dir / "dictionary.bin"), dictionary_file_size(3, 8));
+}
+
+TEST(DictionaryFile, IsLittleEndianWithTheSpecifiedLayout) {
+  const DictionaryFile d = small_dictionary(2, 3);
+  const auto b = serialize_dictionary_file(d);
+  ASSERT_EQ(b.size(), 128u + 3 * 8 * 4 + 4);
+  EXPECT_EQ(std::memcmp(b.data(), "VREELDIC", 8), 0);
+  EXPECT_EQ(u32_at(b, 8), 1u);     // format version
+  EXPECT_EQ(u32_at(b, 12), 128u);  // header bytes
+  EXPECT_EQ(u32_at(b, 16), 3u);    // K
+  EXPECT_EQ(u32_at(b, 20), 2u);    // M
+  EXPECT_EQ(u32_at(b, 24), 8u);    // m
+  EXPECT_EQ(u32_at(b, 28), 15u);   // Smax
+  EXPECT_EQ(u32_at(b, 72), 0x89ABCDEFu);  // seed, low word first
+  EXPECT_EQ(u32_at(b, 76), 0x01234567u);
+  EXPECT_EQ(u32_at(b, 80), 1u);    // flags: flat
+  EXPECT_EQ(std::to_integer<char>(b[104]), '0');  // program version
+  std::uint32_t first_atom_bits;
+  std::memcpy(&first_atom_bits, &d.atoms[0], 4);
+  EXPECT_EQ(u32_at(b, 128), first_atom_bits);
+  EXPECT_EQ(u32_at(b, b.size() - 4), crc32c(std::span(b.data(), b.size() - 4)));
+}
+
+TEST(DictionaryFile, EveryTruncationIsAClearError) {
+  const auto good = serialize_dictionary_file(small_dictionary());
+  for (std::size_t n = 0; n < good.size(); ++n) {
+    const std::vector<std::byte> cut(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(n));
+    if (n < 8) {
+      expect_error(cut, "truncated");
+      continue;
+    }
+    // Past the magic the error may be the header check or the size check, but always an error.
+    try {
+      parse_dictionary_file(cut, "test.bin");
+      ADD_FAILURE() << "a file cut to " << n << " bytes was accepted";
+    } catch (const FormatError& e) {
+      EXPECT_NE(std::string(e.what()).find("test.bin"), std::string::npos);
+    }
+  }
+  expect_error(std::vector<std::byte>(good.begin(), good.end() - 1), "truncated");
+}
+
+TEST(DictionaryFile, EveryFlippedByteIsDetected) {
+  const auto good = serialize_dictionary_file(small_dictionary());
+  for (std::size_t i = 0; i < good.size(); ++i) {
+    auto bad = good;
+    bad[i] ^= std::byte{0x40};
+    EXPECT_THROW(parse_dictionary_file(bad, "test.bin"), FormatError) << "byte " << i;
+  }
+  auto bad = good;
+  bad[200] ^= std::byte{1};  // inside the atoms: only the CRC can tell
+  EXPECT_EQ(expect_error(bad, "CRC-32C"), good.size() - 4);
+}
+
+TEST(DictionaryFile, BadFieldsNameTheirOffset) {
+  const auto good = serialize_dictionary_file(small_dictionary());
+  auto bad = good;
+  std::memcpy(bad.data(), "NOTADICT", 8);
+  EXPECT_EQ(expect_error(bad, "magic"), 0u);
+
+  bad = good;
+  const std::uint32_t version = 99;
+  std::memcpy(bad.data() + 8, &version, 4);
+  fix_crc(bad);
+  EXPECT_EQ(expect_error(bad, "version 99"), 8u);
+
+  bad = good;
+  const std::uint32_t atom_length = 9;
+  std::memcpy(bad.data() + 24, &atom_length, 4);
+  fix_crc(bad);
+  EXPECT_EQ(expect_error(bad, "atom length"), 24u);
+
+  bad = good;
+  const std::uint32_t huge = 0xFFFFFFFFu;
+  std::memcpy(bad.data() + 16, &huge, 4);
+  EXPECT_EQ(expect_error(bad, "atom count"), 16u);
+
+  bad = good;
+  bad.push_back(std::byte{0});
+  expect_error(bad, "extra bytes");
+
+  bad = good;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  std::memcpy(bad.data() + 128 + 4 * 5, &nan, 4);
+  fix_crc(bad);
+  EXPECT_EQ(expect_error(bad, "finite"), 128u + 20u);
+}
+
+TEST(DictionaryFile, MissingFileAndBadWritesAreErrors) {
+  volreel::test::TempDir dir("dictfile-missing");
+  EXPECT_THROW(read_dictionary_file(dir / "nope.bin"), FormatError);
+  EXPECT_THROW(write_dictionary_file(dir / "no-such-dir" / "d.bin", small_dictionary()), FormatError);
+  DictionaryFile inconsistent = small_dictionary();
+  inconsistent.atoms.pop_back();
+  EXPECT_THROW(serialize_dictionary_file(inconsistent), FormatError);
+}
+
+TEST(DictionaryFile, DictionaryRoundTrip) {
+  volreel::test::TempDir dir("dictfile-eigen");
+  volreel::dictionary::Dictionary d;
+  d.block_size = 3;
+  d.atoms = Eigen::MatrixXf::Random(27, 40);
+  volreel::dictionary::normalize_atoms(d.atoms);
+  for (Eigen::Index k = 0; k < d.atoms.cols(); ++k) {
+    EXPECT_NEAR(d.atoms.col(k).norm(), 1.0f, 1e-5f);
+    EXPECT_NEAR(d.atoms.col(k).mean(), 0.0f, 1e-6f);
+  }
+  volreel::dictionary::save_dictionary(dir / "d.bin", d, {});
+  const auto r = volreel::dictionary::load_dictionary(dir / "d.bin");
+  EXPECT_EQ(r.block_size, 3);
+  EXPECT_EQ(r.atoms, d.atoms);
+}
+
+}  // namespace

@@ -1,0 +1,68 @@
+// dictionary_test_data.hpp: synthetic volumes for the dictionary tests, made with our own PRNG.
+#pragma once
+
+#include <cmath>
+#include <numbers>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "volreel/datasets/prng.hpp"
+#include "volreel/datasets/volume.hpp"
+#include "volreel/dictionary/blocks.hpp"
+#include "volreel/dictionary/dictionary.hpp"
+
+namespace volreel::test {
+
+/// A smooth multi-scale field (a few random plane waves) with some noise; no two frames alike.
+inline Volume wavy_volume(Dims dims, std::uint64_t seed) {
+  SplitMix64 rng(seed);
+  struct Wave { double kx, ky, kz, phase, amplitude; };
+  std::vector<Wave> waves;
+  for (int w = 0; w < 12; ++w) {
+    const double scale = 0.05 + 0.5 * rng.uniform();
+    waves.push_back({scale * rng.normal(), scale * rng.normal(), scale * rng.normal(),
+                     2 * std::numbers::pi * rng.uniform(), 1.0 / (1.0 + 4 * scale)});
+  }
+  Volume v(dims);
+  for (std::int64_t k = 0; k < dims.z; ++k)
+    for (std::int64_t j = 0; j < dims.y; ++j)
+      for (std::int64_t i = 0; i < dims.x; ++i) {
+        double value = 0.02 * rng.normal();
+        for (const Wave& w : waves)
+          value += w.amplitude * std::sin(w.kx * static_cast<double>(i) + w.ky * static_cast<double>(j) +
+                                          w.kz * static_cast<double>(k) + w.phase);
+        v.at(i, j, k) = static_cast<float>(value);
+      }
+  return v;
+}
+
+/// K random zero-mean unit-norm atoms of m values.
+inline Eigen::MatrixXf planted_atoms(Eigen::Index m, Eigen::Index K, std::uint64_t seed) {
+  SplitMix64 rng(seed);
+  Eigen::MatrixXf D(m, K);
+  for (Eigen::Index i = 0; i < D.size(); ++i) D.data()[i] = static_cast<float>(rng.normal());
+  dictionary::normalize_atoms(D);
+  return D;
+}
+
+/// A volume whose every M³ block is mean + Σ (sparsity atoms of D) · coefficient + noise.
+inline Volume planted_volume(Dims dims, int block_size, const Eigen::MatrixXf& atoms, int sparsity, double noise,
+                             std::uint64_t seed) {
+  SplitMix64 rng(seed);
+  const dictionary::BlockGrid grid(dims, block_size);
+  Volume v(dims);
+  Eigen::VectorXf block(atoms.rows());
+  for (std::size_t b = 0; b < grid.block_count(); ++b) {
+    block.setZero();
+    for (int s = 0; s < sparsity; ++s) {
+      const auto k = static_cast<Eigen::Index>(rng.below(static_cast<std::uint64_t>(atoms.cols())));
+      block += static_cast<float>((rng.uniform() < 0.5 ? -1 : 1) * rng.uniform(1.0, 3.0)) * atoms.col(k);
+    }
+    for (Eigen::Index i = 0; i < block.size(); ++i) block[i] += static_cast<float>(noise * rng.normal());
+    grid.store(v.data, b, static_cast<float>(rng.uniform(-5, 5)), block.data());
+  }
+  return v;
+}
+
+}  // namespace volreel::test
