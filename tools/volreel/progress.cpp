@@ -64,7 +64,10 @@ void ProgressBar::draw(bool final) {
   std::string bar(width, ' ');
   for (int i = 0; i < static_cast<int>(fraction * width + 0.5); ++i) bar[static_cast<std::size_t>(i)] = '#';
   char counts[64];
-  std::snprintf(counts, sizeof counts, "%.0f/%.0f %s", last_.done, last_.total, unit_.c_str());
+  if (last_.total == std::floor(last_.total))
+    std::snprintf(counts, sizeof counts, "%.0f/%.0f %s", last_.done, last_.total, unit_.c_str());
+  else
+    std::snprintf(counts, sizeof counts, "%.2f/%.2f %s", last_.done, last_.total, unit_.c_str());
   const std::string timing = final ? "in " + format_duration(elapsed) : "ETA " + format_duration(eta);
   std::fprintf(stderr, "%s%s [%s] %3.0f%% %s  %s  %s%s", terminal_ ? "\r\033[K" : "", label_.c_str(), bar.c_str(),
                fraction * 100, counts, last_.status.c_str(), timing.c_str(), terminal_ && !final ? "" : "\n");

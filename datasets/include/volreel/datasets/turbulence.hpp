@@ -84,7 +84,8 @@ struct TurbulenceRun {
   TurbulenceParams params;
   int frames = 64;                 ///< time steps to record
   double frame_interval = 0.05;    ///< simulated time between records, in eddy-turnover times
-  double spinup = 3.0;             ///< simulated time before the first record, in eddy-turnover times
+  double spinup = 7.0;             ///< simulated time before the first record, in eddy-turnover times
+                                   ///< (the start-up transient of ε settles after about 7)
   TurbulenceVariable variable = TurbulenceVariable::pressure;
 };
 
