@@ -83,6 +83,7 @@ class StreamingSampler {
         continue;
       }
       const double log_fail = std::log1p(-q);
+      if (!(log_fail < 0)) continue;  // q below double precision: no slot takes the block
       double position = -1;
       for (;;) {
         const double skip = std::floor(std::log1p(-rng_.uniform()) / log_fail);

@@ -96,8 +96,7 @@ KsvdIterationStats ksvd_iteration(Eigen::MatrixXf& atoms, const Eigen::MatrixXf&
   std::iota(order.begin(), order.end(), Eigen::Index{0});
   for (std::size_t i = order.size(); i > 1; --i) std::swap(order[i - 1], order[rng.below(i)]);
   Eigen::MatrixXf E(m, static_cast<Eigen::Index>(most_users));
-  Eigen::VectorXf g(static_cast<Eigen::Index>(most_users)), wg(static_cast<Eigen::Index>(most_users)),
-      wu(static_cast<Eigen::Index>(most_users));
+  Eigen::VectorXf g(static_cast<Eigen::Index>(most_users)), wg(static_cast<Eigen::Index>(most_users));
   Eigen::VectorXf d(m);
   std::vector<bool> used(static_cast<std::size_t>(K), false);
   for (const Eigen::Index k : order) {
@@ -111,8 +110,7 @@ KsvdIterationStats ksvd_iteration(Eigen::MatrixXf& atoms, const Eigen::MatrixXf&
       const std::size_t slot = users[first + static_cast<std::size_t>(j)];
       const auto i = static_cast<Eigen::Index>(slot / S);
       g[j] = codes.coefficient[slot];
-      wu[j] = weights[static_cast<std::size_t>(i)];
-      wg[j] = g[j] * wu[j];
+      wg[j] = g[j] * weights[static_cast<std::size_t>(i)];
       Ek.col(j) = residual.col(i) + g[j] * atoms.col(k);
     }
     // 2b. d = E W g, zero-mean (it already is, up to rounding), unit norm.
@@ -121,15 +119,6 @@ KsvdIterationStats ksvd_iteration(Eigen::MatrixXf& atoms, const Eigen::MatrixXf&
     const float norm = d.norm();
     if (!(norm > 1e-30f)) continue;  // users' weighted contribution vanishes: keep the atom as it is
     d /= norm;
-    for (int p = 1; p < options.power_iterations; ++p) {  // d ← E W Eᵀ d, normalized
-      g.head(count).noalias() = Ek.transpose() * d;
-      wg.head(count) = g.head(count).cwiseProduct(wu.head(count));
-      d.noalias() = Ek * wg.head(count);
-      d.array() -= d.mean();
-      const float pnorm = d.norm();
-      if (!(pnorm > 1e-30f)) break;
-      d /= pnorm;
-    }
     // 2c. g = Eᵀd; residuals become E − d gᵀ.
     g.head(count).noalias() = Ek.transpose() * d;
     for (Eigen::Index j = 0; j < count; ++j) {

@@ -76,18 +76,21 @@ TrainingResult train_dictionary(const CoresetHierarchy& coresets, const Training
     return p;
   };
   // Algorithm 1, lines 4–12: for each level, N iterations of (batch-OMP, dictionary update).
-  // Stages: hierarchical, one per level; flat, one per N iterations on the largest level.
+  // Stages: hierarchical, one per level; flat, equal shares of the iterations on the largest level,
+  // counted from the end so that the last iterations always run at ε.
   const int stages = level_count;
-  const int flat_per_stage = std::max(1, iterations / stages);
   int t = 0;  // iteration counted over the whole run
   for (int level = first_level; level < level_count; ++level) {
     const Coreset& c = coresets.levels[static_cast<std::size_t>(level)];
     if (c.blocks.cols() == 0) continue;
     for (int it = 0; it < iterations; ++it, ++t) {
-      const int stage = options.flat ? std::min(stages - 1, t / flat_per_stage) : level;
+      const int stage = options.flat ? stages - 1 - (iterations - 1 - t) * stages / iterations : level;
       const double coarse = stages > 1 ? static_cast<double>(stages - 1 - stage) / (stages - 1) : 0.0;
       ksvd.coding.tolerance = options.coding.tolerance * std::pow(options.coarse_tolerance_factor, coarse);
-      ksvd.coding.max_atoms = options.sparsity_ramp ? std::min(options.coding.max_atoms, t + 1) : options.coding.max_atoms;
+      // The ramp never holds back the last stage, however few iterations came before it.
+      const bool last_stage = stage == stages - 1;
+      ksvd.coding.max_atoms = options.sparsity_ramp && !last_stage ? std::min(options.coding.max_atoms, t + 1)
+                                                                   : options.coding.max_atoms;
       const KsvdIterationStats s = ksvd_iteration(atoms, c.blocks, c.weights, ksvd, rng);
       ++result.total_iterations;
       if (callback) {

@@ -7,7 +7,9 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
+#include "volreel/format/dictionary_file.hpp"
 #include "volreel/psnr/rate_distortion.hpp"
+#include "volreel_codecs.hpp"
 
 namespace volreel::cli {
 
@@ -19,6 +21,10 @@ struct RdCommandOptions {
   ReaderOptions reader;
   psnr::RdOptions rd;
   bool no_plot = false;
+  std::string dictionary;                   ///< volreel's codecs need one; without it only zfp runs
+  std::vector<double> tolerances = {1.0 / 64, 1.0 / 128, 1.0 / 256, 1.0 / 512, 1.0 / 1024, 1.0 / 2048};
+  std::vector<int> sparsities = {1, 2, 3, 4, 5, 6, 7, 8};
+  std::vector<double> zfp_bricks;           ///< zfp inside the container, accuracy / range (default none)
 };
 
 void run_rd(const RdCommandOptions& o) {
@@ -34,7 +40,16 @@ void run_rd(const RdCommandOptions& o) {
     bar.finish();
   }
   std::printf("value range [%.6g, %.6g]\n", range.first, range.second);
-  const auto codecs = psnr::make_zfp_sweep(range.second - range.first);
+  auto codecs = psnr::make_zfp_sweep(range.second - range.first);
+  if (!o.dictionary.empty()) {
+    auto dict = std::make_shared<const dictionary::Dictionary>(dictionary::load_dictionary(o.dictionary));
+    const auto bytes = static_cast<std::size_t>(std::filesystem::file_size(o.dictionary));
+    std::printf("volreel codecs: dictionary %s (K = %d, %zu bytes, counted once in bps)\n", o.dictionary.c_str(), dict->atom_count(), bytes);
+    for (auto& c : make_volreel_sweep(dict, bytes, range.first, range.second, {o.tolerances, o.sparsities, {}})) codecs.push_back(std::move(c));
+  }
+  if (!o.zfp_bricks.empty())
+    for (auto& c : make_volreel_sweep(nullptr, 0, range.first, range.second, {{}, {}, o.zfp_bricks})) codecs.push_back(std::move(c));
+  if (o.dictionary.empty()) std::printf("no --dictionary: volreel's sparse codecs are skipped (zfp only)\n");
   std::vector<psnr::RdPoint> points;
   {
     ProgressBar bar("compressing", "frames");
@@ -75,6 +90,12 @@ void add_bench_command(CLI::App& app) {
   rd->add_option("--max-frames", o->rd.max_frames, "Use only the first N frames (0: all)")->capture_default_str();
   rd->add_option("--ssim-frames", o->rd.ssim_frames, "3D SSIM on this many evenly spaced frames (0: none)")->capture_default_str();
   rd->add_flag("--no-plot", o->no_plot, "Write the CSV only");
+  rd->add_option("--dictionary", o->dictionary,
+                 "Dictionary (volreel train): adds volreel variable rate (--tolerances) and fixed rate (--sparsities), each\n"
+                 "frame encoded into a frame file in memory and decoded by the CPU decoder; the dictionary counts in bps");
+  rd->add_option("--tolerances", o->tolerances, "Variable rate: eps as fractions of the value range")->capture_default_str();
+  rd->add_option("--sparsities", o->sparsities, "Fixed rate: atoms per block")->capture_default_str();
+  rd->add_option("--zfp-bricks", o->zfp_bricks, "Also zfp per brick inside the container, accuracy as fractions of the range");
   o->reader.add_to(*rd);
   rd->callback([o] { run_rd(*o); });
   add_bench_train_command(*bench);

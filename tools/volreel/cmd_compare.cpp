@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.hpp"
+#include "container_series.hpp"
 #include "progress.hpp"
 #include "volreel/psnr/metrics.hpp"
 
@@ -49,12 +50,27 @@ void compare_images(const CompareOptions& o) {
 void compare_series(const CompareOptions& o) {
   const datasets::OpenOptions open = o.reader.to_open_options();
   const auto a = datasets::open_series(o.a, open);
-  const auto b = datasets::open_series(o.b, open);
+  // B may be a NAME.vreel container: its frames are decoded at full resolution (CPU decoder).
+  const ContainerSeries* container = nullptr;
+  std::unique_ptr<datasets::SeriesReader> b;
+  if (is_container(o.b)) {
+    auto c = std::make_unique<ContainerSeries>(o.b);
+    container = c.get();
+    b = std::move(c);
+  } else {
+    b = datasets::open_series(o.b, open);
+  }
   const auto& ia = a->info();
   const auto& ib = b->info();
+  // bps of a container: all its bytes over the voxels of all its frames (DESIGN.md "Metrics").
+  const double bps = container ? 8.0 * static_cast<double>(container->container().total_bytes()) /
+                                     (static_cast<double>(ia.dims.voxels()) * static_cast<double>(container->info().frames))
+                               : std::nan("");
   if (ia.dims != ib.dims)
     throw InputError("'" + o.a + "' is " + to_string(ia.dims) + " but '" + o.b + "' is " + to_string(ib.dims));
-  if (ia.frames != ib.frames)
+  // A container encoded from the first frames of A (encode --max-frames) compares with those.
+  const std::size_t frames = container ? std::min(ia.frames, ib.frames) : ia.frames;
+  if (!container && ia.frames != ib.frames)
     throw InputError("'" + o.a + "' has " + std::to_string(ia.frames) + " frames but '" + o.b + "' has " + std::to_string(ib.frames));
 
   struct Row {
@@ -66,7 +82,7 @@ void compare_series(const CompareOptions& o) {
   double ssim_sum = 0;
   Volume va(ia.dims), vb(ia.dims);
   ProgressBar bar("comparing", "frames");
-  for (std::size_t t = 0; t < ia.frames; ++t) {
+  for (std::size_t t = 0; t < frames; ++t) {
     a->read_frame(t, va.data);
     b->read_frame(t, vb.data);
     sequence.add(va.data, vb.data);
@@ -76,22 +92,23 @@ void compare_series(const CompareOptions& o) {
       ssim_sum += row.ssim;
     }
     rows.push_back(row);
-    if (ia.frames > 1) bar.update({static_cast<double>(t + 1), static_cast<double>(ia.frames), {}});
+    if (frames > 1) bar.update({static_cast<double>(t + 1), static_cast<double>(frames), {}});
   }
-  if (ia.frames > 1) bar.finish();
+  if (frames > 1) bar.finish();
   const psnr::ErrorStats total = sequence.result();
-  const double mean_ssim = o.no_ssim ? std::nan("") : ssim_sum / static_cast<double>(ia.frames);
+  const double mean_ssim = o.no_ssim ? std::nan("") : ssim_sum / static_cast<double>(frames);
 
   if (o.json) {
-    nlohmann::json frames = nlohmann::json::array();
+    nlohmann::json frame_rows = nlohmann::json::array();
     for (std::size_t t = 0; t < rows.size(); ++t) {
       const auto& e = rows[t].e;
-      frames.push_back({{"frame", t}, {"psnr", number(e.psnr)}, {"psnr_zfp", number(e.psnr_zfp)}, {"rmse", e.rmse},
+      frame_rows.push_back({{"frame", t}, {"psnr", number(e.psnr)}, {"psnr_zfp", number(e.psnr_zfp)}, {"rmse", e.rmse},
                         {"max_abs_error", e.max_abs_error}, {"ssim", number(rows[t].ssim)}, {"range", e.range()}});
     }
-    nlohmann::json j{{"a", o.a}, {"b", o.b}, {"dims", {ia.dims.x, ia.dims.y, ia.dims.z}}, {"frames", frames},
+    nlohmann::json j{{"a", o.a}, {"b", o.b}, {"dims", {ia.dims.x, ia.dims.y, ia.dims.z}}, {"frames", frame_rows},
                      {"sequence", {{"psnr", number(total.psnr)}, {"psnr_zfp", number(total.psnr_zfp)}, {"rmse", total.rmse},
                                    {"max_abs_error", total.max_abs_error}, {"ssim", number(mean_ssim)}, {"range", total.range()}}},
+                     {"bps", number(bps)},
                      {"definitions", {{"psnr", "10*log10(range^2/MSE), range of the first input (MTV-Player)"},
                                       {"psnr_zfp", "20*log10(range/(2*RMSE)) (zfp's definition)"},
                                       {"ssim", "3D Gaussian-window SSIM (sigma 1.5), data range of the first input"}}}};
@@ -103,13 +120,16 @@ void compare_series(const CompareOptions& o) {
     for (std::size_t t = 0; t < rows.size(); ++t)
       std::printf("%zu,%.6f,%.6f,%.6e,%.6e,%.6f\n", t, rows[t].e.psnr, rows[t].e.psnr_zfp, rows[t].e.rmse, rows[t].e.max_abs_error, rows[t].ssim);
     std::printf("all,%.6f,%.6f,%.6e,%.6e,%.6f\n", total.psnr, total.psnr_zfp, total.rmse, total.max_abs_error, mean_ssim);
+    if (container) std::printf("# bps,%.6f\n", bps);
     return;
   }
-  std::printf("A: %s\nB: %s\n%s, %zu frame(s)\n", ia.source.c_str(), ib.source.c_str(), to_string(ia.dims).c_str(), ia.frames);
+  std::printf("A: %s\nB: %s\n%s, %zu frame(s)\n", ia.source.c_str(), ib.source.c_str(), to_string(ia.dims).c_str(), frames);
   std::printf("%7s %10s %12s %12s %12s %9s\n", "frame", "PSNR dB", "PSNRzfp dB", "RMSE", "max err", "SSIM");
   for (std::size_t t = 0; t < rows.size(); ++t)
     std::printf("%7zu %10.3f %12.3f %12.4e %12.4e %9.5f\n", t, rows[t].e.psnr, rows[t].e.psnr_zfp, rows[t].e.rmse, rows[t].e.max_abs_error, rows[t].ssim);
   std::printf("%7s %10.3f %12.3f %12.4e %12.4e %9.5f\n", "all", total.psnr, total.psnr_zfp, total.rmse, total.max_abs_error, mean_ssim);
+  if (container)
+    std::printf("B is a volreel container: %.4f bps (8 * all its bytes / (voxels per frame * frames))\n", bps);
   std::printf("PSNR = 10*log10(range^2/MSE), range = max-min of A (per frame; 'all' uses the whole sequence).\n"
               "PSNRzfp = 20*log10(range/(2*RMSE)), zfp's definition (6.02 dB lower). SSIM: 3D, Gaussian window sigma 1.5.\n");
 }

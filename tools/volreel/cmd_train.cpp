@@ -29,8 +29,10 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
-// Defaults, measured on the default dataset (128³ × 64 frames of turbulence pressure) on 2 cores.
-constexpr double default_psnr = 55.0;
+// Defaults, measured on the default dataset (128³ × 64 frames of turbulence pressure) on 2 cores:
+// training takes about 10–15 s. At 50 dB held-out frames need about 4 atoms per block (97 % of
+// blocks meet ε); at 55 dB about 7 (90 %), at 60 dB about 11 (68 %: Smax = 15 is too few there).
+constexpr double default_psnr = 50.0;
 constexpr const char* default_coreset = "16M";
 constexpr int default_iterations = 8;
 
@@ -228,6 +230,8 @@ struct BenchTrainOptions {
   TrainingCli training;
   int eval_frames = 4;
   std::vector<int> flat_iterations;
+  std::vector<int> plain_iterations;
+  bool no_plain = false;
 };
 
 struct Evaluation {
@@ -325,23 +329,35 @@ void run_bench_train(const BenchTrainOptions& o) {
 
   // 2. Train hierarchically, then flat with the same number of iterations and with more, all at
   //    the same ε on the same coreset.
+  //    "plain": without volreel's tolerance and sparsity schedules, i.e. K-SVD at ε on one coreset
+  //    as in the non-hierarchical training the paper compares with.
   struct Run {
     std::string name;
     bool flat;
     int flat_iterations;
+    bool plain;
     dictionary::TrainingResult result;
     Evaluation eval;
   };
   const int same_count = o.training.iterations * (o.training.levels + 1);
-  std::vector<Run> runs{{"hierarchical", false, 0, {}, {}}};
+  std::vector<Run> runs{{"hierarchical", false, 0, false, {}, {}}};
   std::vector<int> flat_counts = o.flat_iterations;
-  if (flat_counts.empty()) flat_counts = {same_count, 2 * same_count};
-  for (int n : flat_counts) runs.push_back({"flat " + std::to_string(n), true, n, {}, {}});
+  if (flat_counts.empty()) flat_counts = {same_count};
+  for (int n : flat_counts) runs.push_back({"flat " + std::to_string(n), true, n, false, {}, {}});
+  std::vector<int> plain_counts = o.plain_iterations;
+  if (plain_counts.empty()) plain_counts = {same_count, 2 * same_count};
+  if (!o.no_plain)
+    for (int n : plain_counts) runs.push_back({"plain " + std::to_string(n), true, n, true, {}, {}});
   for (Run& r : runs) {
     auto options = o.training.training_options(eps, r.flat);
     options.flat_iterations = r.flat_iterations;
+    if (r.plain) {
+      options.coarse_tolerance_factor = 1;
+      options.sparsity_ramp = false;
+    }
     if (r.flat)
-      std::printf("training flat: %d iterations on the largest coreset\n", r.flat_iterations);
+      std::printf("training flat: %d iterations on the largest coreset%s\n", r.flat_iterations,
+                  r.plain ? ", at eps and Smax throughout (no schedules)" : "");
     else
       std::printf("training hierarchical: %d iterations on each of %d levels\n", o.training.iterations, o.training.levels + 1);
     r.result = dictionary::train_dictionary(h, options, [&](const dictionary::TrainingProgress& p) { print_progress(p, range, false); });
@@ -369,7 +385,7 @@ void run_bench_train(const BenchTrainOptions& o) {
                 100 * r.eval.fraction_met);
   std::printf("\n");
   for (std::size_t i = 1; i < runs.size(); ++i)
-    std::printf("hierarchical vs %-9s: %5.2fx faster, PSNR %+.2f dB, atoms/block %+.3f (targets: >= 4x, |dPSNR| <= 0.2 dB)\n",
+    std::printf("hierarchical vs %-10s: %5.2fx faster, PSNR %+.2f dB, atoms/block %+.3f (targets: >= 4x, |dPSNR| <= 0.2 dB)\n",
                 runs[i].name.c_str(), runs[i].result.seconds / runs[0].result.seconds, runs[0].eval.psnr - runs[i].eval.psnr,
                 runs[0].eval.atoms_per_block - runs[i].eval.atoms_per_block);
   const auto& e = runs[0].eval;
@@ -403,8 +419,10 @@ void add_bench_train_command(CLI::App& bench) {
   auto o = std::make_shared<BenchTrainOptions>();
   CLI::App* cmd = bench.add_subcommand(
       "train",
-      "Dictionary training benchmark: trains hierarchically (Algorithm 1) and flat (the same number of iterations, and\n"
-      "twice that) at the same eps on the same coreset, then codes frames held out of training with each dictionary\n"
+      "Dictionary training benchmark: trains hierarchically (Algorithm 1), flat (the largest coreset only, the same\n"
+      "number of iterations) and plain (flat without volreel's tolerance and sparsity schedules, i.e. K-SVD at eps as in\n"
+      "the paper's baseline; the same number of iterations and twice that), all at the same eps on the same coreset, then\n"
+      "codes frames held out of training with each dictionary\n"
       "(unquantized) and prints training time, PSNR, atoms per block, blocks meeting eps, and batch-OMP throughput in\n"
       "blocks/s and MVoxel/s on all threads and on one.");
   o->training.add_to(*cmd);
@@ -412,7 +430,11 @@ void add_bench_train_command(CLI::App& bench) {
       ->capture_default_str();
   cmd->add_option("--flat-iterations", o->flat_iterations,
                   "Iteration counts of the flat runs to compare with (default: the hierarchical run's count,\n"
-                  "iterations x (levels+1), and twice that)");
+                  "iterations x (levels+1))");
+  cmd->add_option("--plain-iterations", o->plain_iterations,
+                  "Iteration counts of the plain flat runs (default: the hierarchical run's count and twice that)");
+  cmd->add_flag("--no-plain", o->no_plain,
+                "Skip the flat run without tolerance and sparsity schedules (plain K-SVD at eps, as in the paper's baseline)");
   cmd->callback([o] { run_bench_train(*o); });
 }
 

@@ -11,6 +11,8 @@ void add_gen_command(CLI::App& app);
 void add_compare_command(CLI::App& app);
 void add_bench_command(CLI::App& app);
 void add_train_command(CLI::App& app);
+/// `encode`, `info`, `verify` and `decode` (cmd_encode.cpp).
+void add_encode_command(CLI::App& app);
 /// `bench train`, registered by add_bench_command under `bench`.
 void add_bench_train_command(CLI::App& bench);
 

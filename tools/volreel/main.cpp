@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
   volreel::cli::add_compare_command(app);
   volreel::cli::add_bench_command(app);
   volreel::cli::add_train_command(app);
+  volreel::cli::add_encode_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -32,7 +32,6 @@ struct KsvdOptions {
   SparseCodingOptions coding;
   double duplicate_threshold = 0.99;  ///< |d_iᵀd_j| above which the later atom is replaced
   bool replace_atoms = true;          ///< step 3 on or off
-  int power_iterations = 1;           ///< 1: RZE08's approximate K-SVD; more: closer to the exact rank-1 SVD
 };
 
 /// Sparse coding statistics, weighted (Σ over samples of w_i times the quantity).

@@ -8,7 +8,8 @@
 //    on the largest level) codes with ε_s = ε · F^((L−s)/L), F = coarse_tolerance_factor, so the
 //    smallest coresets learn the dominant structure and the last stage runs at ε itself.
 //  - Sparsity ramp: iteration t (counted from 0 over the whole run) codes with at most
-//    min(Smax, t + 1) atoms per block, so training starts as gain-shape vector quantization.
+//    min(Smax, t + 1) atoms per block, so training starts as gain-shape vector quantization; the
+//    last stage always codes with Smax.
 // Error-constrained K-SVD started from data samples otherwise settles in poor local minima where
 // blocks use many weak atoms: on volumes built from 48 planted atoms (3 per block) and Smax = 15,
 // plain Algorithm 1 recovered 1 atom with 13.6 atoms per block; with the schedules, 45 atoms with

@@ -1,0 +1,324 @@
+// container.cpp: manifest.json, the container reader and verify.
+#include "volreel/format/container.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <string>
+
+#include "file_io.hpp"
+#include "volreel/format/crc32c.hpp"
+#include "volreel/format/error.hpp"
+
+namespace volreel::format {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+std::uint32_t manifest_crc(std::span<const std::byte> file_bytes) {
+  return file_bytes.size() < 4 ? 0 : crc32c(file_bytes.first(file_bytes.size() - 4));
+}
+
+std::string frame_file_name(std::size_t t) {
+  char name[32];
+  std::snprintf(name, sizeof name, "frames/%06zu.vrf", t);
+  return name;
+}
+
+json manifest_to_json(const Manifest& m) {
+  json frames = json::array();
+  for (const auto& f : m.frames)
+    frames.push_back(f ? json{{"file", f->file}, {"bytes", f->bytes}, {"crc32c", f->crc32c}}
+                       : json(nullptr));
+  json j{{"format", "volreel-container"},
+         {"format_version", m.format_version},
+         {"program_version", m.program_version},
+         {"dims", m.dims},
+         {"spacing", m.spacing},
+         {"variable", m.variable},
+         {"source", m.source},
+         {"frame_count", m.frames.size()},
+         {"timestamps", m.timestamps},
+         {"brick_size", m.brick_size},
+         {"brick_apron", m.brick_apron},
+         {"block_size", m.block_size},
+         {"levels", m.levels},
+         {"codec", m.codec == Codec::ksvd ? "ksvd" : "zfp"},
+         {"tolerance", m.tolerance},
+         {"fixed_sparsity", m.fixed_sparsity},
+         {"zfp_accuracy", m.zfp_accuracy},
+         {"value_range", {m.value_min, m.value_max}},
+         {"dictionary", m.dictionary ? json{{"file", m.dictionary->file},
+                                            {"bytes", m.dictionary->bytes},
+                                            {"crc32c", m.dictionary->crc32c},
+                                            {"atom_count", m.dictionary->atom_count}}
+                                     : json(nullptr)},
+         {"frames", frames},
+         {"complete", m.complete},
+         {"encoder", m.encoder}};
+  return j;
+}
+
+Manifest manifest_from_json(const std::string& text, const fs::path& name) {
+  json j;
+  try {
+    j = json::parse(text);
+  } catch (const json::exception& e) {
+    throw FormatError(name, "not valid JSON: " + std::string(e.what()));
+  }
+  const auto fail = [&](const std::string& field, const std::string& expected, const json& found) {
+    throw FormatError(name, FormatError::no_offset, "\"" + field + "\": " + expected,
+                      found.is_null() ? "nothing" : found.dump());
+  };
+  if (!j.is_object()) fail("(top level)", "an object", j);
+  const auto get = [&](const char* field) -> const json& {
+    static const json null;
+    auto it = j.find(field);
+    return it == j.end() ? null : *it;
+  };
+  const auto uint_field = [&](const char* field, std::uint64_t lo, std::uint64_t hi) {
+    const json& v = get(field);
+    if (!v.is_number_unsigned() || v.get<std::uint64_t>() < lo || v.get<std::uint64_t>() > hi)
+      fail(field, "an integer in " + std::to_string(lo) + ".." + std::to_string(hi), v);
+    return v.get<std::uint64_t>();
+  };
+  const auto number_field = [&](const char* field) {
+    const json& v = get(field);
+    if (!v.is_number() || !std::isfinite(v.get<double>())) fail(field, "a finite number", v);
+    return v.get<double>();
+  };
+  const auto string_field = [&](const char* field) {
+    const json& v = get(field);
+    if (!v.is_string()) fail(field, "a string", v);
+    return v.get<std::string>();
+  };
+  Manifest m;
+  if (get("format") != "volreel-container") fail("format", "\"volreel-container\"", get("format"));
+  m.format_version = static_cast<std::uint32_t>(uint_field("format_version", 1, 1000000));
+  if (m.format_version != container_format_version)
+    fail("format_version", "1", get("format_version"));
+  m.program_version = string_field("program_version");
+  const json& dims = get("dims");
+  if (!dims.is_array() || dims.size() != 3) fail("dims", "[x, y, z]", dims);
+  for (std::size_t a = 0; a < 3; ++a) {
+    if (!dims[a].is_number_unsigned() || dims[a].get<std::uint64_t>() == 0 ||
+        dims[a].get<std::uint64_t>() > (1u << 24))
+      fail("dims", "three integers in 1..16777216", dims);
+    m.dims[a] = dims[a].get<std::uint32_t>();
+  }
+  const json& spacing = get("spacing");
+  if (!spacing.is_array() || spacing.size() != 3) fail("spacing", "[sx, sy, sz]", spacing);
+  for (std::size_t a = 0; a < 3; ++a) {
+    if (!spacing[a].is_number() || !(spacing[a].get<double>() > 0))
+      fail("spacing", "three positive numbers", spacing);
+    m.spacing[a] = spacing[a].get<double>();
+  }
+  m.variable = string_field("variable");
+  m.source = string_field("source");
+  const std::size_t frame_count = uint_field("frame_count", 1, 100000000);
+  const json& timestamps = get("timestamps");
+  if (!timestamps.is_array() || timestamps.size() != frame_count)
+    fail("timestamps", "an array of frame_count = " + std::to_string(frame_count) + " numbers",
+         timestamps.is_array() ? json(timestamps.size()) : timestamps);
+  for (const json& t : timestamps) {
+    if (!t.is_number()) fail("timestamps", "numbers", t);
+    m.timestamps.push_back(t.get<double>());
+  }
+  m.brick_size = static_cast<std::uint32_t>(uint_field("brick_size", brick_size, brick_size));
+  m.brick_apron = static_cast<std::uint32_t>(uint_field("brick_apron", brick_apron, brick_apron));
+  m.levels = static_cast<std::uint32_t>(uint_field("levels", 1, max_levels));
+  if (m.levels != level_geometry(m.dims).size())
+    fail("levels", std::to_string(level_geometry(m.dims).size()) + " for these dims",
+         get("levels"));
+  const std::string codec = string_field("codec");
+  if (codec == "ksvd")
+    m.codec = Codec::ksvd;
+  else if (codec == "zfp")
+    m.codec = Codec::zfp;
+  else
+    fail("codec", "\"ksvd\" or \"zfp\"", get("codec"));
+  m.block_size = static_cast<std::uint32_t>(uint_field("block_size", 0, 64));
+  m.tolerance = number_field("tolerance");
+  m.fixed_sparsity = static_cast<std::uint32_t>(uint_field("fixed_sparsity", 0, 15));
+  m.zfp_accuracy = number_field("zfp_accuracy");
+  const json& range = get("value_range");
+  if (!range.is_array() || range.size() != 2 || !range[0].is_number() || !range[1].is_number() ||
+      !(range[0].get<double>() <= range[1].get<double>()))
+    fail("value_range", "[min, max] with min <= max", range);
+  m.value_min = range[0].get<double>();
+  m.value_max = range[1].get<double>();
+  const json& dict = get("dictionary");
+  if (m.codec == Codec::ksvd) {
+    if (!dict.is_object()) fail("dictionary", "an object (ksvd codec)", dict);
+    ManifestDictionary d;
+    if (!dict.contains("file") || dict["file"] != "dictionary.bin")
+      fail("dictionary.file", "\"dictionary.bin\"", dict.value("file", json()));
+    if (!dict.contains("bytes") || !dict["bytes"].is_number_unsigned())
+      fail("dictionary.bytes", "an integer", dict.value("bytes", json()));
+    if (!dict.contains("crc32c") || !dict["crc32c"].is_number_unsigned() ||
+        dict["crc32c"].get<std::uint64_t>() > 0xFFFFFFFFu)
+      fail("dictionary.crc32c", "a 32-bit integer", dict.value("crc32c", json()));
+    if (!dict.contains("atom_count") || !dict["atom_count"].is_number_unsigned() ||
+        dict["atom_count"].get<std::uint64_t>() == 0 ||
+        dict["atom_count"].get<std::uint64_t>() > 1024)
+      fail("dictionary.atom_count", "an integer in 1..1024", dict.value("atom_count", json()));
+    d.bytes = dict["bytes"].get<std::uint64_t>();
+    d.crc32c = dict["crc32c"].get<std::uint32_t>();
+    d.atom_count = dict["atom_count"].get<std::uint32_t>();
+    m.dictionary = d;
+  } else if (!dict.is_null()) {
+    fail("dictionary", "null (zfp codec)", dict);
+  }
+  const json& frames = get("frames");
+  if (!frames.is_array() || frames.size() != frame_count)
+    fail("frames", "an array of frame_count = " + std::to_string(frame_count) + " entries",
+         frames.is_array() ? json(frames.size()) : frames);
+  for (std::size_t t = 0; t < frame_count; ++t) {
+    const json& f = frames[t];
+    const std::string field = "frames[" + std::to_string(t) + "]";
+    if (f.is_null()) {
+      m.frames.emplace_back();
+      continue;
+    }
+    if (!f.is_object() || f.value("file", json()) != frame_file_name(t))
+      fail(field + ".file", "\"" + frame_file_name(t) + "\"",
+           f.is_object() ? f.value("file", json()) : f);
+    if (!f.contains("bytes") || !f["bytes"].is_number_unsigned())
+      fail(field + ".bytes", "an integer", f.value("bytes", json()));
+    if (!f.contains("crc32c") || !f["crc32c"].is_number_unsigned() ||
+        f["crc32c"].get<std::uint64_t>() > 0xFFFFFFFFu)
+      fail(field + ".crc32c", "a 32-bit integer", f.value("crc32c", json()));
+    m.frames.push_back(ManifestFrame{frame_file_name(t), f["bytes"].get<std::uint64_t>(),
+                                     f["crc32c"].get<std::uint32_t>()});
+  }
+  const json& complete = get("complete");
+  if (!complete.is_boolean()) fail("complete", "true or false", complete);
+  m.complete = complete.get<bool>();
+  m.encoder = get("encoder");
+  return m;
+}
+
+void write_container_file(const fs::path& dir, const std::string& relative,
+                          std::span<const std::byte> bytes) {
+  const fs::path path = dir / relative;
+  std::error_code ec;
+  fs::create_directories(path.parent_path(), ec);
+  if (ec) throw FormatError(path.parent_path(), "cannot create directory: " + ec.message());
+  detail::write_file_atomically(path, bytes);
+}
+
+void write_manifest(const fs::path& dir, const Manifest& manifest) {
+  const std::string text = manifest_to_json(manifest).dump(1) + "\n";
+  write_container_file(dir, "manifest.json", std::as_bytes(std::span(text.data(), text.size())));
+}
+
+Container::Container(fs::path dir, bool allow_incomplete) : dir_(std::move(dir)) {
+  const fs::path manifest_path = dir_ / "manifest.json";
+  if (!fs::is_directory(dir_))
+    throw FormatError(dir_, "not a volreel container (no such directory)");
+  const auto bytes = detail::read_whole_file(manifest_path);
+  manifest_ = manifest_from_json(
+      std::string(reinterpret_cast<const char*>(bytes.data()), bytes.size()), manifest_path);
+  if (!manifest_.complete && !allow_incomplete)
+    throw FormatError(
+        manifest_path,
+        "the encode is not complete (\"complete\": false); resume it with volreel encode --resume");
+  if (manifest_.dictionary) {
+    const fs::path dict_path = dir_ / manifest_.dictionary->file;
+    const DictionaryFile d = read_dictionary_file(dict_path);
+    if (d.block_size != 6)
+      throw FormatError(dict_path, 20, "block size 6", std::to_string(d.block_size));
+    if (d.atom_count != manifest_.dictionary->atom_count)
+      throw FormatError(dict_path, 16,
+                        std::to_string(manifest_.dictionary->atom_count) + " atoms (manifest.json)",
+                        std::to_string(d.atom_count));
+    atoms_ = d.atoms;
+    atom_count_ = d.atom_count;
+  }
+}
+
+FrameFile Container::open_frame(std::size_t t) const {
+  if (t >= manifest_.frames.size())
+    throw FormatError(dir_, "no frame " + std::to_string(t) + " (the container has " +
+                                std::to_string(manifest_.frames.size()) + ")");
+  if (!manifest_.frames[t])
+    throw FormatError(dir_ / "manifest.json",
+                      "frame " + std::to_string(t) + " has not been written");
+  const fs::path path = dir_ / manifest_.frames[t]->file;
+  FrameFile file(path);
+  const FrameHeader& h = file.view().header();
+  if (file.view().bytes().size() != manifest_.frames[t]->bytes)
+    throw FormatError(path, FormatError::no_offset,
+                      std::to_string(manifest_.frames[t]->bytes) + " bytes (manifest.json)",
+                      std::to_string(file.view().bytes().size()));
+  if (h.frame_index != t)
+    throw FormatError(path, offsetof(FrameHeader, frame_index), "frame index " + std::to_string(t),
+                      std::to_string(h.frame_index));
+  if (h.dims[0] != manifest_.dims[0] || h.dims[1] != manifest_.dims[1] ||
+      h.dims[2] != manifest_.dims[2])
+    throw FormatError(path, offsetof(FrameHeader, dims), "the manifest's dims", "other dims");
+  if (static_cast<Codec>(h.codec) != manifest_.codec)
+    throw FormatError(path, offsetof(FrameHeader, codec), "the manifest's codec", "another");
+  if (manifest_.codec == Codec::ksvd && h.atom_count != atom_count_)
+    throw FormatError(path, offsetof(FrameHeader, atom_count),
+                      std::to_string(atom_count_) + " atoms (the dictionary's)",
+                      std::to_string(h.atom_count));
+  return file;
+}
+
+std::uint64_t Container::total_bytes() const {
+  std::uint64_t total = fs::file_size(dir_ / "manifest.json");
+  if (manifest_.dictionary) total += manifest_.dictionary->bytes;
+  for (const auto& f : manifest_.frames)
+    if (f) total += f->bytes;
+  return total;
+}
+
+std::vector<std::string> verify_container(const fs::path& dir,
+                                          void (*progress)(std::size_t, std::size_t, void*),
+                                          void* user) {
+  std::vector<std::string> problems;
+  std::optional<Container> container;
+  try {
+    container.emplace(dir, true);
+  } catch (const FormatError& e) {
+    problems.push_back(e.what());
+    return problems;
+  }
+  const Manifest& m = container->manifest();
+  if (!m.complete)
+    problems.push_back((dir / "manifest.json").string() + ": the encode is not complete");
+  if (m.dictionary) {
+    const fs::path p = dir / m.dictionary->file;
+    try {
+      const auto bytes = detail::read_whole_file(p);
+      if (bytes.size() != m.dictionary->bytes)
+        problems.push_back(p.string() + ": expected " + std::to_string(m.dictionary->bytes) +
+                           " bytes (manifest.json), found " + std::to_string(bytes.size()));
+      else if (manifest_crc(bytes) != m.dictionary->crc32c)
+        problems.push_back(p.string() + ": expected CRC-32C " +
+                           std::to_string(m.dictionary->crc32c) + " (manifest.json), found " +
+                           std::to_string(manifest_crc(bytes)));
+    } catch (const FormatError& e) {
+      problems.push_back(e.what());
+    }
+  }
+  for (std::size_t t = 0; t < m.frames.size(); ++t) {
+    try {
+      const FrameFile f = container->open_frame(t);
+      f.view().check_payload_crc();
+      const std::uint32_t crc = manifest_crc(f.view().bytes());
+      if (crc != m.frames[t]->crc32c)
+        problems.push_back(f.view().name().string() + ": expected CRC-32C " +
+                           std::to_string(m.frames[t]->crc32c) + " (manifest.json), found " +
+                           std::to_string(crc));
+      validate_payloads(f.view(), container->atoms());
+    } catch (const FormatError& e) {
+      problems.push_back(e.what());
+    }
+    if (progress) progress(t + 1, m.frames.size(), user);
+  }
+  return problems;
+}
+
+}  // namespace volreel::format

@@ -1,0 +1,224 @@
+// decoder.cpp: the CPU reference decoder (see decoder.hpp).
+#include "volreel/format/decoder.hpp"
+
+#include <zfp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <exception>
+#include <string>
+
+#include "volreel/format/brick_decode.h"
+#include "volreel/format/error.hpp"
+
+namespace volreel::format {
+
+namespace {
+
+std::string str(std::uint64_t v) {
+  return std::to_string(v);
+}
+
+/// block[v] += c·atom[v] for the 216 values of a block (kept out of line so that the compiler
+/// vectorizes it instead of interchanging it with the loop over codes).
+[[gnu::noinline]] void add_scaled(float* __restrict block, const float* __restrict atom, float c) {
+#pragma omp simd
+  for (vr_uint v = 0; v < VR_BLOCK_LENGTH; ++v) block[v] += c * atom[v];
+}
+
+void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::span<float> out,
+                 const std::filesystem::path& name, std::uint64_t at) {
+  const auto fail = [&](std::uint64_t offset, const std::string& expected,
+                        const std::string& found) {
+    throw FormatError(name, offset, "brick payload " + expected, found);
+  };
+  // 1. Header and block entries present.
+  const std::size_t words = bytes.size() / 4;
+  if (bytes.size() < vr_payload_bytes(0))
+    fail(at, "a payload of at least " + str(vr_payload_bytes(0)) + " bytes",
+         str(bytes.size()) + " bytes");
+  // Payloads are 4-byte aligned inside the file and the map is page-aligned, but copy to be safe
+  // for in-memory views of arbitrary alignment.
+  std::vector<vr_uint> payload_words(words);
+  std::memcpy(payload_words.data(), bytes.data(), words * 4);
+  const vr_uint* payload = payload_words.data();
+  for (vr_uint w = 0; w < VR_HEADER_WORDS; ++w)
+    if (!std::isfinite(vr_as_float(payload[w])))
+      fail(at + 4 * w, "finite dequantization value", "NaN or infinity");
+  // 2. Prefix sum of sparsities = first code of each block; total fits the payload.
+  vr_uint first_code[VR_BLOCKS_PER_BRICK + 1];
+  first_code[0] = 0;
+  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+    first_code[b + 1] = first_code[b] + vr_entry_sparsity(vr_block_entry(payload, b));
+  const vr_uint codes = first_code[VR_BLOCKS_PER_BRICK];
+  const std::uint64_t need = vr_payload_bytes(codes);
+  if (bytes.size() < need || bytes.size() >= need + 4)
+    fail(at, str(need) + " payload bytes for " + str(codes) + " codes (+ padding to 4)",
+         str(bytes.size()) + " bytes");
+  // 3. Atom indices.
+  for (vr_uint k = 0; k < codes; ++k) {
+    const vr_uint a = vr_code_atom(vr_load_u16(payload, vr_code_unit(k)));
+    if (a >= atoms.count)
+      fail(at + 2u * vr_code_unit(k), "atom index < " + str(atoms.count), str(a));
+  }
+  if (atoms.values.size() < std::size_t{atoms.count} * VR_BLOCK_LENGTH)
+    throw FormatError(
+        name, "dictionary holds fewer than the " + str(atoms.count) + " atoms the frame needs");
+  // 4. Decode every value of every block (brick_decode.h's arithmetic, vectorized over the block:
+  //    the codes are unpacked first, then each atom is added to all 216 values at once).
+  const float* atom_values = atoms.values.data();
+  const float mean_bias = vr_as_float(payload[0]), mean_scale = vr_as_float(payload[1]);
+  const float coef_bias = vr_as_float(payload[2]), coef_scale = vr_as_float(payload[3]);
+  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    const vr_uint entry = vr_block_entry(payload, b);
+    const vr_uint s = vr_entry_sparsity(entry);
+    const float mean = mean_bias + mean_scale * static_cast<float>(vr_entry_mean(entry));
+    alignas(64) float block[VR_BLOCK_LENGTH];
+    for (vr_uint v = 0; v < VR_BLOCK_LENGTH; ++v) block[v] = mean;
+    float coefficient[VR_MAX_SPARSITY];
+    const float* atom_of[VR_MAX_SPARSITY];
+    for (vr_uint k = 0; k < s; ++k) {
+      const vr_uint code16 = vr_load_u16(payload, vr_code_unit(first_code[b] + k));
+      coefficient[k] = coef_bias + coef_scale * static_cast<float>(vr_code_value(code16));
+      atom_of[k] = atom_values + std::size_t{vr_code_atom(code16)} * VR_BLOCK_LENGTH;
+    }
+    for (vr_uint k = 0; k < s; ++k) add_scaled(block, atom_of[k], coefficient[k]);
+    // Scatter the block into the brick, row by row.
+    const vr_uint bx = b % 6, by = (b / 6) % 6, bz = b / 36;
+    for (vr_uint z = 0; z < 6; ++z)
+      for (vr_uint y = 0; y < 6; ++y)
+        std::memcpy(
+            out.data() + ((bz * 6 + z) * VR_BRICK_SIZE + by * 6 + y) * VR_BRICK_SIZE + bx * 6,
+            block + (z * 6 + y) * 6, 6 * sizeof(float));
+  }
+}
+
+void decode_zfp(std::span<const std::byte> bytes, double accuracy, std::span<float> out,
+                const std::filesystem::path& name, std::uint64_t at) {
+  zfp_stream* zfp = zfp_stream_open(nullptr);
+  zfp_stream_set_accuracy(zfp, accuracy);
+  zfp_field* field = zfp_field_3d(out.data(), zfp_type_float, brick_size, brick_size, brick_size);
+  // zfp reads without bounds checks: give it a zero-padded copy as long as the longest stream.
+  std::vector<std::byte> padded(
+      std::max<std::size_t>(zfp_stream_maximum_size(zfp, field), bytes.size()) + 64);
+  std::memcpy(padded.data(), bytes.data(), bytes.size());
+  bitstream* bits = stream_open(padded.data(), padded.size());
+  zfp_stream_set_bit_stream(zfp, bits);
+  zfp_stream_rewind(zfp);
+  const std::size_t used = zfp_decompress(zfp, field);
+  stream_close(bits);
+  zfp_field_free(field);
+  zfp_stream_close(zfp);
+  if (used == 0 || used > bytes.size() + 8)
+    throw FormatError(name, at, "brick payload: a zfp stream of " + str(bytes.size()) + " bytes",
+                      "a stream that needs " + str(used) + " bytes");
+  for (std::size_t i = 0; i < out.size(); ++i)
+    if (!std::isfinite(out[i]))
+      throw FormatError(name, at, "brick payload: finite decoded values", "NaN or infinity");
+}
+
+}  // namespace
+
+void decode_payload(std::span<const std::byte> bytes, Codec codec, double zfp_accuracy,
+                    const AtomTable& atoms, std::span<float> out, const std::filesystem::path& name,
+                    std::uint64_t offset) {
+  if (out.size() != brick_voxels)
+    throw FormatError(name, "decode_payload needs an output of 36^3 values");
+  // A 4-byte payload is a constant brick (either codec).
+  if (bytes.size() == 4) {
+    float v;
+    std::memcpy(&v, bytes.data(), 4);
+    if (!std::isfinite(v))
+      throw FormatError(name, offset, "brick payload: a finite constant", "NaN or infinity");
+    std::fill(out.begin(), out.end(), v);
+    return;
+  }
+  if (codec == Codec::ksvd)
+    decode_ksvd(bytes, atoms, out, name, offset);
+  else
+    decode_zfp(bytes, zfp_accuracy, out, name, offset);
+}
+
+void decode_brick(const FrameView& frame, std::uint32_t brick, const AtomTable& atoms,
+                  std::span<float> out) {
+  if (brick >= frame.brick_count())
+    throw FormatError(frame.name(),
+                      "no brick " + str(brick) + " (frame has " + str(frame.brick_count()) + ")");
+  decode_payload(frame.brick_bytes(brick), frame.codec(), frame.header().codec_parameter, atoms,
+                 out, frame.name(), frame.brick_offset(brick));
+}
+
+void decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& atoms,
+                  std::span<float> out) {
+  if (level >= frame.level_count())
+    throw FormatError(frame.name(), "no level " + str(level) + " (frame has " +
+                                        str(frame.level_count()) + " levels)");
+  const LevelEntry& target = frame.level(level);
+  const std::size_t nx = target.dims[0], ny = target.dims[1], nz = target.dims[2];
+  if (out.size() != nx * ny * nz)
+    throw FormatError(frame.name(), "decode_level: output of the wrong size");
+  // 1. Nodes of this level and empty nodes above it, in one list.
+  std::vector<std::uint32_t> work;
+  for (std::uint32_t l = 0; l <= level; ++l) {
+    const LevelEntry& e = frame.level(l);
+    for (std::uint32_t i = e.first_node; i < e.first_node + e.node_count; ++i)
+      if (l == level || frame.node(i).type() == NodeType::empty) work.push_back(i);
+  }
+  // 2. Decode each brick and copy its interior (or its constant region) into the volume.
+  std::exception_ptr error;
+  const auto n = static_cast<std::ptrdiff_t>(work.size());
+#pragma omp parallel
+  {
+    std::vector<float> brick(brick_voxels);
+#pragma omp for schedule(dynamic, 4)
+    for (std::ptrdiff_t w = 0; w < n; ++w) {
+      const std::uint32_t i = work[static_cast<std::size_t>(w)];
+      try {
+        decode_brick(frame, i, atoms, brick);
+      } catch (const FormatError&) {
+#pragma omp critical(volreel_decode_error)
+        if (!error) error = std::current_exception();
+        continue;
+      }
+      const NodePosition& p = frame.position(i);
+      const std::size_t scale =
+          std::size_t{1} << (level - p.level);  // a node voxel covers scale³ voxels of `level`
+      const std::size_t span_voxels = brick_interior * scale;
+      const std::size_t x0 = p.x * span_voxels, y0 = p.y * span_voxels, z0 = p.z * span_voxels;
+      const std::size_t x1 = std::min(nx, x0 + span_voxels), y1 = std::min(ny, y0 + span_voxels),
+                        z1 = std::min(nz, z0 + span_voxels);
+      for (std::size_t z = z0; z < z1; ++z)
+        for (std::size_t y = y0; y < y1; ++y) {
+          float* row = out.data() + (z * ny + y) * nx;
+          if (p.level == level) {
+            const float* src =
+                brick.data() + ((z - z0 + 1) * brick_size + (y - y0 + 1)) * brick_size + 1;
+            std::memcpy(row + x0, src, (x1 - x0) * sizeof(float));
+          } else {
+            std::fill(row + x0, row + x1, brick[0]);
+          }
+        }
+    }
+  }
+  if (error) std::rethrow_exception(error);
+}
+
+LevelVolume decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& atoms) {
+  if (level >= frame.level_count())
+    throw FormatError(frame.name(), "no level " + str(level) + " (frame has " +
+                                        str(frame.level_count()) + " levels)");
+  LevelVolume v;
+  const LevelEntry& e = frame.level(level);
+  v.dims = {e.dims[0], e.dims[1], e.dims[2]};
+  v.data.resize(std::size_t{e.dims[0]} * e.dims[1] * e.dims[2]);
+  decode_level(frame, level, atoms, v.data);
+  return v;
+}
+
+void validate_payloads(const FrameView& frame, const AtomTable& atoms) {
+  std::vector<float> brick(brick_voxels);
+  for (std::uint32_t b = 0; b < frame.brick_count(); ++b) decode_brick(frame, b, atoms, brick);
+}
+
+}  // namespace volreel::format

@@ -1,0 +1,373 @@
+// frame_file.cpp: writing and validating frame files, and the memory map behind the reader.
+#include "volreel/format/frame_file.hpp"
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#include "volreel/format/crc32c.hpp"
+#include "volreel/format/error.hpp"
+
+namespace volreel::format {
+
+namespace fs = std::filesystem;
+
+std::vector<LevelGeometry> level_geometry(std::array<std::uint32_t, 3> dims) {
+  std::vector<LevelGeometry> levels;
+  LevelGeometry g;
+  g.dims = dims;
+  for (;;) {
+    for (std::size_t a = 0; a < 3; ++a)
+      g.grid[a] = (g.dims[a] + brick_interior - 1) / brick_interior;
+    levels.push_back(g);
+    if (g.grid[0] <= 1 && g.grid[1] <= 1 && g.grid[2] <= 1) break;
+    for (std::size_t a = 0; a < 3; ++a) g.dims[a] = (g.dims[a] + 1) / 2;
+  }
+  std::reverse(levels.begin(), levels.end());
+  return levels;
+}
+
+std::uint64_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
+  std::uint64_t code = 0;
+  for (int bit = 0; bit < 21; ++bit) {
+    code |= static_cast<std::uint64_t>((x >> bit) & 1u) << (3 * bit);
+    code |= static_cast<std::uint64_t>((y >> bit) & 1u) << (3 * bit + 1);
+    code |= static_cast<std::uint64_t>((z >> bit) & 1u) << (3 * bit + 2);
+  }
+  return code;
+}
+
+std::uint32_t histogram_bin(float v, float lo, float hi) {
+  if (!(hi > lo)) return 0;
+  const float t = (v - lo) / (hi - lo) * static_cast<float>(histogram_bins);
+  if (!(t > 0)) return 0;  // also NaN
+  if (t >= static_cast<float>(histogram_bins - 1)) return histogram_bins - 1;
+  return static_cast<std::uint32_t>(t);
+}
+
+namespace {
+
+template <class T>
+void append(std::vector<std::byte>& out, const T& value) {
+  const std::size_t at = out.size();
+  out.resize(at + sizeof(T));
+  std::memcpy(out.data() + at, &value, sizeof(T));
+}
+
+template <class T>
+T load(std::span<const std::byte> bytes, std::uint64_t offset) {
+  T value;
+  std::memcpy(&value, bytes.data() + offset, sizeof(T));
+  return value;
+}
+
+std::string str(std::uint64_t v) {
+  return std::to_string(v);
+}
+
+}  // namespace
+
+std::vector<std::byte> serialize_frame(const FrameContents& frame) {
+  FrameHeader h = frame.header;
+  std::memcpy(h.magic, frame_magic.data(), 8);
+  h.format_version = frame_format_version;
+  h.header_bytes = sizeof(FrameHeader);
+  h.brick_size = brick_size;
+  h.brick_apron = brick_apron;
+  h.level_count = static_cast<std::uint32_t>(frame.levels.size());
+  h.node_count = static_cast<std::uint32_t>(frame.nodes.size());
+  h.brick_count = static_cast<std::uint32_t>(frame.payloads.size());
+  h.level_table_offset = sizeof(FrameHeader);
+  h.node_table_offset = h.level_table_offset + sizeof(LevelEntry) * frame.levels.size();
+  h.brick_offsets_offset = h.node_table_offset + sizeof(Node) * frame.nodes.size();
+  h.payload_offset = h.brick_offsets_offset + sizeof(std::uint64_t) * (frame.payloads.size() + 1);
+  std::uint64_t payload_bytes = 0;
+  for (const auto& p : frame.payloads) {
+    if (p.size() % 4 != 0)
+      throw FormatError("<memory>",
+                        "brick payload of " + str(p.size()) + " bytes is not a multiple of 4");
+    payload_bytes += p.size();
+  }
+  h.payload_bytes = payload_bytes;
+  const auto geometry = level_geometry({h.dims[0], h.dims[1], h.dims[2]});
+  if (geometry.size() != frame.levels.size())
+    throw FormatError("<memory>", "frame has " + str(frame.levels.size()) +
+                                      " levels, its dims need " + str(geometry.size()));
+
+  std::vector<std::byte> out;
+  out.reserve(h.payload_offset + payload_bytes + 4);
+  append(out, h);
+  for (std::size_t l = 0; l < frame.levels.size(); ++l) {
+    LevelEntry e = frame.levels[l];
+    for (int a = 0; a < 3; ++a) {
+      e.dims[a] = geometry[l].dims[static_cast<std::size_t>(a)];
+      e.grid[a] = geometry[l].grid[static_cast<std::size_t>(a)];
+    }
+    append(out, e);
+  }
+  for (const Node& n : frame.nodes) append(out, n);
+  std::uint64_t offset = 0;
+  append(out, offset);
+  for (const auto& p : frame.payloads) {
+    offset += p.size();
+    append(out, offset);
+  }
+  const std::uint32_t index_crc = crc32c(std::span<const std::byte>(out).subspan(
+      h.level_table_offset, h.payload_offset - h.level_table_offset));
+  std::memcpy(out.data() + offsetof(FrameHeader, index_crc), &index_crc, 4);
+  for (const auto& p : frame.payloads) {
+    const std::size_t at = out.size();
+    out.resize(at + p.size());
+    if (!p.empty()) std::memcpy(out.data() + at, p.data(), p.size());
+  }
+  const std::uint32_t crc = crc32c(out);
+  append(out, crc);
+  return out;
+}
+
+FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
+    : bytes_(bytes), name_(std::move(name)) {
+  const auto fail = [&](std::uint64_t offset, const std::string& expected,
+                        const std::string& found) {
+    throw FormatError(name_, offset, expected, found);
+  };
+  // 1. Header.
+  if (bytes.size() < sizeof(FrameHeader))
+    fail(0, "a frame file of at least 128 bytes", str(bytes.size()) + " bytes (truncated)");
+  header_ = load<FrameHeader>(bytes, 0);
+  const FrameHeader& h = header_;
+  if (std::memcmp(h.magic, frame_magic.data(), 8) != 0)
+    fail(0, "magic \"VREELFRM\"", "other bytes (not a volreel frame file)");
+  if (h.format_version != frame_format_version)
+    fail(offsetof(FrameHeader, format_version), "format version 1", str(h.format_version));
+  if (h.header_bytes != sizeof(FrameHeader))
+    fail(offsetof(FrameHeader, header_bytes), "header size 128", str(h.header_bytes));
+  if (h.codec > 1) fail(offsetof(FrameHeader, codec), "codec 0 (ksvd) or 1 (zfp)", str(h.codec));
+  for (int a = 0; a < 3; ++a)
+    if (h.dims[a] == 0 || h.dims[a] > (1u << 24))
+      fail(offsetof(FrameHeader, dims) + 4u * static_cast<unsigned>(a), "dimension in 1..16777216",
+           str(h.dims[a]));
+  if (h.brick_size != brick_size)
+    fail(offsetof(FrameHeader, brick_size), "brick size 36", str(h.brick_size));
+  if (h.brick_apron != brick_apron)
+    fail(offsetof(FrameHeader, brick_apron), "apron 1", str(h.brick_apron));
+  const bool ksvd = h.codec == static_cast<std::uint32_t>(Codec::ksvd);
+  if (ksvd && h.block_size != 6)
+    fail(offsetof(FrameHeader, block_size), "block size 6", str(h.block_size));
+  if (ksvd && (h.atom_count == 0 || h.atom_count > 1024))
+    fail(offsetof(FrameHeader, atom_count), "atom count in 1..1024", str(h.atom_count));
+  if (h.fixed_sparsity > 15)
+    fail(offsetof(FrameHeader, fixed_sparsity), "fixed sparsity 0..15", str(h.fixed_sparsity));
+  if (!std::isfinite(h.value_min) || !std::isfinite(h.value_max) || h.value_min > h.value_max)
+    fail(offsetof(FrameHeader, value_min), "a finite value range min <= max",
+         "[" + std::to_string(h.value_min) + ", " + std::to_string(h.value_max) + "]");
+  const auto geometry = level_geometry({h.dims[0], h.dims[1], h.dims[2]});
+  if (h.level_count != geometry.size())
+    fail(offsetof(FrameHeader, level_count), str(geometry.size()) + " levels for these dims",
+         str(h.level_count));
+  std::uint64_t max_nodes = 0;
+  for (const auto& g : geometry) max_nodes += std::uint64_t{g.grid[0]} * g.grid[1] * g.grid[2];
+  if (h.node_count == 0 || h.node_count > max_nodes)
+    fail(offsetof(FrameHeader, node_count), "node count in 1.." + str(max_nodes),
+         str(h.node_count));
+  if (h.brick_count != h.node_count)
+    fail(offsetof(FrameHeader, brick_count), "brick count = node count " + str(h.node_count),
+         str(h.brick_count));
+  // 2. Section offsets: exactly back to back.
+  const std::uint64_t levels_at = sizeof(FrameHeader);
+  const std::uint64_t nodes_at = levels_at + sizeof(LevelEntry) * std::uint64_t{h.level_count};
+  const std::uint64_t offsets_at = nodes_at + sizeof(Node) * std::uint64_t{h.node_count};
+  const std::uint64_t payload_at = offsets_at + 8 * (std::uint64_t{h.brick_count} + 1);
+  if (h.level_table_offset != levels_at)
+    fail(offsetof(FrameHeader, level_table_offset), "level table at " + str(levels_at),
+         str(h.level_table_offset));
+  if (h.node_table_offset != nodes_at)
+    fail(offsetof(FrameHeader, node_table_offset), "node table at " + str(nodes_at),
+         str(h.node_table_offset));
+  if (h.brick_offsets_offset != offsets_at)
+    fail(offsetof(FrameHeader, brick_offsets_offset), "brick offsets at " + str(offsets_at),
+         str(h.brick_offsets_offset));
+  if (h.payload_offset != payload_at)
+    fail(offsetof(FrameHeader, payload_offset), "payloads at " + str(payload_at),
+         str(h.payload_offset));
+  if (bytes.size() < payload_at)
+    fail(bytes.size(), "index sections up to offset " + str(payload_at), "end of file (truncated)");
+  if (h.payload_bytes > bytes.size() || bytes.size() != payload_at + h.payload_bytes + 4)
+    fail(offsetof(FrameHeader, payload_bytes),
+         "file size " + str(payload_at) +
+             " + payload bytes + 4 = " + str(payload_at + h.payload_bytes + 4),
+         str(bytes.size()) + " bytes (payload bytes " + str(h.payload_bytes) + ")");
+  const std::uint32_t index_crc = crc32c(bytes.subspan(levels_at, payload_at - levels_at));
+  if (index_crc != h.index_crc)
+    fail(offsetof(FrameHeader, index_crc),
+         "index CRC-32C " + str(index_crc) + " of bytes [" + str(levels_at) + ", " +
+             str(payload_at) + ")",
+         str(h.index_crc) + " (index corrupt)");
+  // 3. Level table: geometry and contiguous node ranges.
+  levels_.resize(h.level_count);
+  std::uint32_t next_node = 0;
+  for (std::uint32_t l = 0; l < h.level_count; ++l) {
+    const std::uint64_t at = levels_at + sizeof(LevelEntry) * l;
+    const LevelEntry e = load<LevelEntry>(bytes, at);
+    const auto& g = geometry[l];
+    for (std::size_t a = 0; a < 3; ++a) {
+      if (e.dims[a] != g.dims[a])
+        fail(at + 8 + 4 * a, "level " + str(l) + " size " + str(g.dims[a]), str(e.dims[a]));
+      if (e.grid[a] != g.grid[a])
+        fail(at + 20 + 4 * a, "level " + str(l) + " grid " + str(g.grid[a]), str(e.grid[a]));
+    }
+    if (e.first_node != next_node)
+      fail(at, "level " + str(l) + " first node " + str(next_node), str(e.first_node));
+    const std::uint64_t cells = std::uint64_t{g.grid[0]} * g.grid[1] * g.grid[2];
+    if (e.node_count > cells || (l == 0 && e.node_count != 1))
+      fail(at + 4,
+           "level " + str(l) + " node count in " +
+               (l == 0 ? std::string("1..1") : "0.." + str(cells)),
+           str(e.node_count));
+    next_node += e.node_count;
+    if (next_node > h.node_count)
+      fail(at + 4, "level node counts summing to " + str(h.node_count), "more");
+    levels_[l] = e;
+  }
+  if (next_node != h.node_count)
+    fail(levels_at, "level node counts summing to " + str(h.node_count), str(next_node));
+  // 4. Nodes: types, bricks, and child links that tile each level in order; positions follow.
+  positions_.assign(h.node_count, {});
+  for (std::uint32_t l = 0; l < h.level_count; ++l) {
+    const LevelEntry& e = levels_[l];
+    std::uint32_t expected_child = l + 1 < h.level_count ? levels_[l + 1].first_node : 0;
+    for (std::uint32_t i = e.first_node; i < e.first_node + e.node_count; ++i) {
+      const std::uint64_t at = nodes_at + sizeof(Node) * i;
+      const Node n = load<Node>(bytes, at);
+      if (n.brick != i) fail(at, "node " + str(i) + " brick index " + str(i), str(n.brick));
+      const auto type = static_cast<std::uint32_t>(n.type());
+      if (type > 2) fail(at + 4, "node " + str(i) + " type 0..2", str(type));
+      const bool finest = l + 1 == h.level_count;
+      if (n.type() == NodeType::leaf && !finest)
+        fail(at + 4, "node " + str(i) + " of level " + str(l) + ": inner or empty", "leaf");
+      if (n.type() == NodeType::inner && finest)
+        fail(at + 4, "node " + str(i) + " of the finest level: leaf or empty", "inner");
+      if (n.type() != NodeType::inner) {
+        if (n.first_child() != 0)
+          fail(at + 4, "node " + str(i) + " first child 0", str(n.first_child()));
+        continue;
+      }
+      if (n.first_child() != expected_child)
+        fail(at + 4, "node " + str(i) + " first child " + str(expected_child),
+             str(n.first_child()));
+      const NodePosition& p = positions_[i];
+      const auto& child_grid = geometry[l + 1].grid;
+      std::uint32_t c = expected_child;
+      for (std::uint32_t d = 0; d < 8; ++d) {
+        const std::uint32_t cx = 2 * p.x + (d & 1u), cy = 2 * p.y + ((d >> 1) & 1u),
+                            cz = 2 * p.z + (d >> 2);
+        if (cx >= child_grid[0] || cy >= child_grid[1] || cz >= child_grid[2]) continue;
+        if (c >= levels_[l + 1].first_node + levels_[l + 1].node_count)
+          fail(at + 4, "children of node " + str(i) + " within level " + str(l + 1),
+               "past its end");
+        positions_[c] = {l + 1, cx, cy, cz};
+        ++c;
+      }
+      expected_child = c;
+    }
+    if (l + 1 < h.level_count &&
+        expected_child != levels_[l + 1].first_node + levels_[l + 1].node_count)
+      fail(nodes_at + sizeof(Node) * e.first_node,
+           "children of level " + str(l) + " covering level " + str(l + 1) + " (" +
+               str(levels_[l + 1].node_count) + " nodes)",
+           str(expected_child - levels_[l + 1].first_node) + " children");
+  }
+  // 5. Brick offsets: start at 0, nondecreasing, multiples of 4, end at payload_bytes.
+  std::uint64_t previous = 0;
+  for (std::uint32_t b = 0; b <= h.brick_count; ++b) {
+    const std::uint64_t at = offsets_at + 8 * std::uint64_t{b};
+    const auto v = load<std::uint64_t>(bytes, at);
+    if (b == 0 && v != 0) fail(at, "brick offset 0", str(v));
+    if (v < previous || v > h.payload_bytes || v % 4 != 0)
+      fail(at,
+           "brick " + str(b) + " offset, a multiple of 4 in [" + str(previous) + ", " +
+               str(h.payload_bytes) + "]",
+           str(v));
+    if (b == h.brick_count && v != h.payload_bytes)
+      fail(at, "end offset " + str(h.payload_bytes), str(v));
+    previous = v;
+  }
+}
+
+Node FrameView::node(std::uint32_t i) const {
+  return load<Node>(bytes_, header_.node_table_offset + sizeof(Node) * std::uint64_t{i});
+}
+
+std::uint64_t FrameView::brick_offset(std::uint32_t b) const {
+  return header_.payload_offset +
+         load<std::uint64_t>(bytes_, header_.brick_offsets_offset + 8 * std::uint64_t{b});
+}
+
+std::span<const std::byte> FrameView::brick_bytes(std::uint32_t b) const {
+  const std::uint64_t begin = brick_offset(b), end = brick_offset(b + 1);
+  return bytes_.subspan(begin, end - begin);
+}
+
+std::uint64_t FrameView::payload_end_for_depth(std::uint32_t depth) const {
+  if (depth >= header_.level_count) return header_.payload_offset + header_.payload_bytes;
+  return brick_offset(levels_[depth].first_node);
+}
+
+void FrameView::check_payload_crc() const {
+  const std::uint64_t end = bytes_.size() - 4;
+  const std::uint32_t want = crc32c(bytes_.subspan(0, end));
+  const auto found = load<std::uint32_t>(bytes_, end);
+  if (want != found)
+    throw FormatError(name_, end, "file CRC-32C " + str(want), str(found) + " (file corrupt)");
+}
+
+MappedFile::MappedFile(const fs::path& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw FormatError(path, std::string("cannot open: ") + std::strerror(errno));
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) {
+    const int e = errno;
+    ::close(fd);
+    throw FormatError(path, std::string("cannot stat: ") + std::strerror(e));
+  }
+  size_ = static_cast<std::size_t>(st.st_size);
+  if (size_ > 0) {
+    void* p = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd, 0);
+    if (p == MAP_FAILED) {
+      const int e = errno;
+      ::close(fd);
+      throw FormatError(path, std::string("cannot map: ") + std::strerror(e));
+    }
+    data_ = static_cast<const std::byte*>(p);
+  }
+  ::close(fd);
+}
+
+MappedFile::~MappedFile() {
+  if (data_) ::munmap(const_cast<std::byte*>(data_), size_);
+}
+
+MappedFile::MappedFile(MappedFile&& other) noexcept : data_(other.data_), size_(other.size_) {
+  other.data_ = nullptr;
+  other.size_ = 0;
+}
+
+MappedFile& MappedFile::operator=(MappedFile&& other) noexcept {
+  if (this != &other) {
+    if (data_) ::munmap(const_cast<std::byte*>(data_), size_);
+    data_ = other.data_;
+    size_ = other.size_;
+    other.data_ = nullptr;
+    other.size_ = 0;
+  }
+  return *this;
+}
+
+}  // namespace volreel::format

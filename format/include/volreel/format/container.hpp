@@ -1,0 +1,109 @@
+// container.hpp: the container directory `NAME.vreel/` (DESIGN.md): manifest.json, dictionary.bin
+// (ksvd only) and frames/NNNNNN.vrf. The manifest is rewritten (atomically) after every frame with
+// "complete": false until the last one, so an interrupted encode can be resumed.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "volreel/format/decoder.hpp"
+#include "volreel/format/dictionary_file.hpp"
+#include "volreel/format/frame_file.hpp"
+
+namespace volreel::format {
+
+/// Version of the manifest's layout, independent of the program version.
+inline constexpr std::uint32_t container_format_version = 1;
+
+struct ManifestFrame {
+  std::string file;  ///< "frames/000017.vrf", relative to the container
+  std::uint64_t bytes = 0;
+  std::uint32_t crc32c = 0;  ///< of the whole file
+};
+
+struct ManifestDictionary {
+  std::string file = "dictionary.bin";
+  std::uint64_t bytes = 0;
+  std::uint32_t crc32c = 0;
+  std::uint32_t atom_count = 0;
+};
+
+struct Manifest {
+  std::uint32_t format_version = container_format_version;
+  std::string program_version;
+  std::array<std::uint32_t, 3> dims{};
+  std::array<double, 3> spacing{1, 1, 1};
+  std::string variable, source;
+  std::vector<double> timestamps;  ///< one per frame
+  std::uint32_t brick_size = format::brick_size, brick_apron = format::brick_apron, block_size = 6;
+  std::uint32_t levels = 0;  ///< octree depth (levels, root included)
+  Codec codec = Codec::ksvd;
+  double tolerance = 0;              ///< ksvd ε (0 with fixed sparsity)
+  std::uint32_t fixed_sparsity = 0;  ///< ksvd fixed rate S (0: variable rate)
+  double zfp_accuracy = 0;
+  double value_min = 0, value_max = 0;  ///< of the whole sequence (node histograms use it)
+  std::optional<ManifestDictionary> dictionary;
+  std::vector<std::optional<ManifestFrame>> frames;  ///< one per time step; empty until written
+  bool complete = false;
+  nlohmann::json encoder;  ///< how it was encoded (provenance; free-form)
+};
+
+nlohmann::json manifest_to_json(const Manifest& manifest);
+/// Parses and validates (types, ranges, counts, file names); throws FormatError naming `name`
+/// and the JSON field.
+Manifest manifest_from_json(const std::string& text, const std::filesystem::path& name);
+
+/// The CRC the manifest records for a file: CRC-32C of its bytes before the trailing 4-byte CRC
+/// (so, when the file is intact, the value of that trailing CRC). The CRC of a whole file
+/// including its own CRC is the same constant for every file, so it would detect nothing.
+std::uint32_t manifest_crc(std::span<const std::byte> file_bytes);
+
+/// "frames/000017.vrf".
+std::string frame_file_name(std::size_t t);
+
+/// Writes DIR/manifest.json atomically.
+void write_manifest(const std::filesystem::path& dir, const Manifest& manifest);
+/// Writes bytes to DIR/relative atomically (temporary name + rename), creating folders.
+void write_container_file(const std::filesystem::path& dir, const std::string& relative,
+                          std::span<const std::byte> bytes);
+
+/// A container opened for reading: manifest parsed, dictionary loaded (ksvd), frame files mapped
+/// on demand.
+class Container {
+ public:
+  /// Throws FormatError if the manifest or dictionary is bad, or the encode is not complete
+  /// (unless allow_incomplete).
+  explicit Container(std::filesystem::path dir, bool allow_incomplete = false);
+
+  const std::filesystem::path& directory() const { return dir_; }
+  const Manifest& manifest() const { return manifest_; }
+  std::size_t frame_count() const { return manifest_.frames.size(); }
+  /// The dictionary's atoms (empty for zfp).
+  AtomTable atoms() const { return {atoms_, atom_count_}; }
+  /// Maps and validates frame t's index (header, levels, nodes, offsets); checks that it matches
+  /// the manifest (size, frame index, dims, codec). Throws FormatError.
+  FrameFile open_frame(std::size_t t) const;
+  /// Every byte of the container: manifest, dictionary, frames (for bps).
+  std::uint64_t total_bytes() const;
+
+ private:
+  std::filesystem::path dir_;
+  Manifest manifest_;
+  std::vector<float> atoms_;
+  std::uint32_t atom_count_ = 0;
+};
+
+/// `volreel verify`: every CRC and structure. Returns the problems found (empty: valid); calls
+/// progress(done, total) after each frame if given.
+std::vector<std::string> verify_container(const std::filesystem::path& dir,
+                                          void (*progress)(std::size_t, std::size_t,
+                                                           void*) = nullptr,
+                                          void* user = nullptr);
+
+}  // namespace volreel::format

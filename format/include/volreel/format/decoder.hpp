@@ -1,0 +1,51 @@
+// decoder.hpp: the CPU reference decoder — a brick of a frame file to 36³ float32 values, and a
+// frame at any level of its octree to a dense volume. This is the oracle the GPU decoder is
+// tested against; the per-value arithmetic is brick_decode.h, shared with GLSL.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "volreel/format/frame_file.hpp"
+
+namespace volreel::format {
+
+/// The dictionary a ksvd frame's codes index: K atoms of 216 float32 values, atom-major.
+struct AtomTable {
+  std::span<const float> values;  ///< K·216
+  std::uint32_t count = 0;        ///< K
+};
+
+/// Decodes one brick payload (a 4-byte constant, a ksvd payload or a zfp stream of codec `codec`
+/// with accuracy `zfp_accuracy`) into out (36³ values). `name` and `offset` (the payload's file
+/// offset) are used in errors. Throws FormatError on a bad payload.
+void decode_payload(std::span<const std::byte> payload, Codec codec, double zfp_accuracy,
+                    const AtomTable& atoms, std::span<float> out, const std::filesystem::path& name,
+                    std::uint64_t offset);
+
+/// Decodes brick b into out (36³ values, x fastest). Validates the payload first (length against
+/// its block sparsities, atom indices < K, finite dequantization values) and throws FormatError
+/// naming the frame file and the payload's offset. zfp frames ignore `atoms`.
+void decode_brick(const FrameView& frame, std::uint32_t brick, const AtomTable& atoms,
+                  std::span<float> out);
+
+/// A dense volume at one level of the octree.
+struct LevelVolume {
+  std::array<std::uint32_t, 3> dims{};
+  std::vector<float> data;  ///< dims[0]·dims[1]·dims[2], x fastest
+};
+
+/// Decodes level `level` (0 = root .. level_count−1 = full resolution) of a frame: the interior
+/// of every brick of that level; regions under an empty (constant) ancestor take its value.
+/// Parallel (OpenMP) over bricks. Throws FormatError on a bad payload.
+LevelVolume decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& atoms);
+/// The same into an existing buffer of the level's size.
+void decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& atoms,
+                  std::span<float> out);
+
+/// Checks every brick payload of the frame by decoding it; throws FormatError on the first bad one.
+void validate_payloads(const FrameView& frame, const AtomTable& atoms);
+
+}  // namespace volreel::format

@@ -1,0 +1,198 @@
+// frame_file.hpp: the frame file (`frames/NNNNNN.vrf`): one time step as an octree of bricks
+// (MTV-Player §3.2, Fig. 3) — header, level table, node table (128-bit nodes, breadth-first and
+// Morton order inside a level), brick offsets, brick payloads, CRC-32C. Byte diagrams in
+// format/SPEC.md, "Frame file". Parsing validates every count, offset and length before use and
+// throws FormatError naming the file, the offset, what was expected and what was found.
+#pragma once
+
+#include <array>
+#include <bit>
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace volreel::format {
+
+static_assert(std::endian::native == std::endian::little, "volreel's files are little-endian");
+
+inline constexpr std::array<char, 8> frame_magic = {'V', 'R', 'E', 'E', 'L', 'F', 'R', 'M'};
+/// Version of the frame file layout, independent of the program version.
+inline constexpr std::uint32_t frame_format_version = 1;
+
+inline constexpr std::uint32_t brick_size = 36;      ///< stored voxels per brick axis
+inline constexpr std::uint32_t brick_interior = 34;  ///< interior voxels per brick axis
+inline constexpr std::uint32_t brick_apron = 1;      ///< voxels copied from each neighbour
+inline constexpr std::uint32_t brick_voxels = brick_size * brick_size * brick_size;
+inline constexpr std::uint32_t max_levels = 16;
+inline constexpr std::uint32_t no_brick = 0xFFFFFFFFu;
+inline constexpr std::uint32_t histogram_bins = 64;
+
+enum class Codec : std::uint32_t { ksvd = 0, zfp = 1 };
+/// inner: has children; leaf: finest level; empty: the node and its whole subtree are one
+/// constant value (its brick is a 4-byte constant payload; no children are stored).
+enum class NodeType : std::uint32_t { inner = 0, leaf = 1, empty = 2 };
+
+/// On-disk header, 128 bytes at offset 0.
+struct FrameHeader {
+  char magic[8];                       //   0  "VREELFRM"
+  std::uint32_t format_version;        //   8  frame_format_version
+  std::uint32_t header_bytes;          //  12  128
+  std::uint32_t codec;                 //  16  Codec
+  std::uint32_t frame_index;           //  20  time step t
+  std::uint32_t dims[3];               //  24  volume size x, y, z at the finest level
+  std::uint32_t brick_size;            //  36  36
+  std::uint32_t brick_apron;           //  40  1
+  std::uint32_t block_size;            //  44  6 (ksvd) or 0 (zfp)
+  std::uint32_t level_count;           //  48  levels L; level 0 is the root, L−1 the finest
+  std::uint32_t node_count;            //  52
+  std::uint32_t brick_count;           //  56
+  std::uint32_t atom_count;            //  60  K of the dictionary the codes index (ksvd), else 0
+  float value_min;                     //  64  histogram range (the sequence's value range)
+  float value_max;                     //  68
+  double codec_parameter;              //  72  ksvd: ε (0 for fixed sparsity); zfp: accuracy
+  std::uint64_t level_table_offset;    //  80  = 128
+  std::uint64_t node_table_offset;     //  88  = level_table_offset + 32·L
+  std::uint64_t brick_offsets_offset;  //  96  = node_table_offset + 16·node_count
+  std::uint64_t payload_offset;        // 104  = brick_offsets_offset + 8·(brick_count + 1)
+  std::uint64_t payload_bytes;         // 112  file size = payload_offset + payload_bytes + 4
+  std::uint32_t index_crc;             // 120  CRC-32C of bytes [level_table_offset, payload_offset)
+  std::uint32_t fixed_sparsity;        // 124  ksvd fixed-rate S, 0 for variable rate
+};
+static_assert(sizeof(FrameHeader) == 128);
+static_assert(offsetof(FrameHeader, codec) == 16);
+static_assert(offsetof(FrameHeader, dims) == 24);
+static_assert(offsetof(FrameHeader, level_count) == 48);
+static_assert(offsetof(FrameHeader, value_min) == 64);
+static_assert(offsetof(FrameHeader, codec_parameter) == 72);
+static_assert(offsetof(FrameHeader, level_table_offset) == 80);
+static_assert(offsetof(FrameHeader, payload_bytes) == 112);
+static_assert(offsetof(FrameHeader, index_crc) == 120);
+
+/// One level of the octree, 32 bytes.
+struct LevelEntry {
+  std::uint32_t first_node;  //   0  index of the level's first node
+  std::uint32_t node_count;  //   4
+  std::uint32_t dims[3];     //   8  size of the level's volume in voxels (finest = frame)
+  std::uint32_t grid[3];     //  20  bricks per axis = ceil(dims / 34)
+};
+static_assert(sizeof(LevelEntry) == 32);
+static_assert(offsetof(LevelEntry, grid) == 20);
+
+/// One spatial node, 128 bits (MTV-Player §3.2).
+struct Node {
+  std::uint32_t brick;           //   0  brick index (bricks are numbered like payloads)
+  std::uint32_t child_and_type;  //   4  bits 0..29 first child (0 unless inner), 30..31 NodeType
+  std::uint64_t histogram;       //   8  bit b: a voxel of the subtree lies in bin b of 64
+                                 //      over [value_min, value_max]
+  NodeType type() const { return static_cast<NodeType>(child_and_type >> 30); }
+  std::uint32_t first_child() const { return child_and_type & 0x3FFFFFFFu; }
+};
+static_assert(sizeof(Node) == 16);
+static_assert(offsetof(Node, histogram) == 8);
+
+/// Level geometry of a frame of `dims` (finest level last): dims_{l} = ceil(dims_{l+1} / 2),
+/// grid = ceil(dims / 34), as many levels as it takes until the grid is 1×1×1.
+struct LevelGeometry {
+  std::array<std::uint32_t, 3> dims{};
+  std::array<std::uint32_t, 3> grid{};
+};
+std::vector<LevelGeometry> level_geometry(std::array<std::uint32_t, 3> dims);
+
+/// Morton code of brick coordinates (x in the lowest bit of each triple), up to 21 bits per axis.
+std::uint64_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z);
+
+/// Bin of value v in the 64-bin histogram over [lo, hi] (clamped).
+std::uint32_t histogram_bin(float v, float lo, float hi);
+
+/// A frame to be written: what the encoder produces.
+struct FrameContents {
+  FrameHeader header{};            ///< codec, frame index, dims, atom count, value range,
+                                   ///< codec parameter, fixed sparsity; the rest is filled in
+  std::vector<LevelEntry> levels;  ///< first_node and node_count per level (dims/grid filled in)
+  std::vector<Node> nodes;
+  std::vector<std::vector<std::byte>> payloads;  ///< one per brick; each a multiple of 4 bytes
+};
+
+/// The file's bytes; fills in magic, version, sizes, offsets and both CRCs.
+std::vector<std::byte> serialize_frame(const FrameContents& frame);
+
+/// Position of a node in the octree, computed by the reader from the child links.
+struct NodePosition {
+  std::uint32_t level = 0;
+  std::uint32_t x = 0, y = 0, z = 0;  ///< brick coordinates within the level's grid
+};
+
+/// A validated view of a frame file's bytes (owned elsewhere: memory map or vector). The
+/// constructor checks the header, the level table, every node and every brick offset, and the index
+/// CRC; check_payload_crc() checks the CRC of the whole file. Payload contents are checked when a
+/// brick is decoded (decoder.hpp).
+class FrameView {
+ public:
+  FrameView() = default;
+  /// Throws FormatError naming `name`, the offset, what was expected and what was found.
+  FrameView(std::span<const std::byte> bytes, std::filesystem::path name);
+
+  const FrameHeader& header() const { return header_; }
+  Codec codec() const { return static_cast<Codec>(header_.codec); }
+  const std::filesystem::path& name() const { return name_; }
+  std::span<const std::byte> bytes() const { return bytes_; }
+
+  std::uint32_t level_count() const { return header_.level_count; }
+  const LevelEntry& level(std::uint32_t l) const { return levels_[l]; }
+  std::uint32_t node_count() const { return header_.node_count; }
+  std::uint32_t brick_count() const { return header_.brick_count; }
+  Node node(std::uint32_t i) const;
+  const NodePosition& position(std::uint32_t i) const { return positions_[i]; }
+  /// Payload bytes of brick b (validated bounds).
+  std::span<const std::byte> brick_bytes(std::uint32_t b) const;
+  /// File offset of brick b's payload.
+  std::uint64_t brick_offset(std::uint32_t b) const;
+  /// File offset where the payloads of levels 0..depth−1 end: they are exactly the bytes
+  /// [payload_offset, payload_end_for_depth(depth)), so a reader that needs only the coarse levels
+  /// reads the index and that prefix (MTV-Player §3.2: bricks stored breadth-first).
+  std::uint64_t payload_end_for_depth(std::uint32_t depth) const;
+
+  /// Throws FormatError if the trailing CRC-32C does not match the file.
+  void check_payload_crc() const;
+
+ private:
+  std::span<const std::byte> bytes_;
+  std::filesystem::path name_;
+  FrameHeader header_{};
+  std::vector<LevelEntry> levels_;
+  std::vector<NodePosition> positions_;
+};
+
+/// A read-only memory map of a whole file (POSIX mmap), movable.
+class MappedFile {
+ public:
+  MappedFile() = default;
+  /// Throws FormatError naming the file if it cannot be opened or mapped.
+  explicit MappedFile(const std::filesystem::path& path);
+  ~MappedFile();
+  MappedFile(MappedFile&& other) noexcept;
+  MappedFile& operator=(MappedFile&& other) noexcept;
+  MappedFile(const MappedFile&) = delete;
+  MappedFile& operator=(const MappedFile&) = delete;
+  std::span<const std::byte> bytes() const { return {data_, size_}; }
+
+ private:
+  const std::byte* data_ = nullptr;
+  std::size_t size_ = 0;
+};
+
+/// A memory-mapped, validated frame file.
+class FrameFile {
+ public:
+  explicit FrameFile(const std::filesystem::path& path) : map_(path), view_(map_.bytes(), path) {}
+  const FrameView& view() const { return view_; }
+
+ private:
+  MappedFile map_;
+  FrameView view_;
+};
+
+}  // namespace volreel::format

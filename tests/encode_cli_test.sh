@@ -1,0 +1,64 @@
+#!/usr/bin/env bash
+# encode_cli_test.sh: `volreel encode`, `info`, `verify`, `decode` and `compare SERIES NAME.vreel`
+# end to end, with damaged containers and --resume. Usage: encode_cli_test.sh PATH/TO/volreel
+set -euo pipefail
+volreel=$1
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+fail() { echo "FAIL: $*" >&2; exit 1; }
+json() { /usr/bin/python3 -c "import json,sys; d=json.load(sys.stdin); print($1)"; }
+expect_error() {
+  local pattern=$1; shift
+  local msg
+  if msg=$("$@" 2>&1 >/dev/null); then fail "expected failure: $*"; fi
+  echo "$msg" | grep -q -e "$pattern" || fail "message for '$*' lacks '$pattern': $msg"
+}
+
+"$volreel" gen analytic --field blobs --dims 40x36x30 --frames 3 --out "$work/s" 2>/dev/null
+"$volreel" train "$work/s" --out "$work/dict.bin" --atoms 64 --coreset 200k --levels 2 --iterations 2 --psnr 45 > /dev/null 2>&1
+
+# Variable rate: info, verify, compare (with bps), decode at both levels.
+"$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/a.vreel" > "$work/enc.txt" 2>/dev/null
+grep -q "quantization:.*dB lost" "$work/enc.txt" || fail "encode does not report the quantization loss"
+grep -q "MVoxel/s" "$work/enc.txt" || fail "encode does not report its speed"
+"$volreel" info "$work/a.vreel" | grep -q "ksvd" || fail "info lacks the codec"
+[ "$("$volreel" info "$work/a.vreel" --json | json 'd["frame_count"]')" = 3 ] || fail "info --json frame count"
+[ "$("$volreel" info "$work/a.vreel" --json | json 'd["levels"]')" = 2 ] || fail "info --json levels"
+"$volreel" verify "$work/a.vreel" 2>/dev/null | grep -q OK || fail "verify of a good container"
+out=$("$volreel" compare "$work/s" "$work/a.vreel" --json 2>/dev/null)
+echo "$out" | json '1 if d["bps"] > 0 and d["sequence"]["psnr"] > 35 else exit(1)' > /dev/null || fail "compare with a container: $out"
+"$volreel" decode "$work/a.vreel" --frame 2 --out "$work/f2.f32" > /dev/null
+[ "$(stat -c %s "$work/f2.f32")" = $((40 * 36 * 30 * 4)) ] || fail "decode at full resolution: wrong size"
+"$volreel" decode "$work/a.vreel" --frame 2 --level 0 --out "$work/f2l0.f32" > /dev/null
+[ "$(stat -c %s "$work/f2l0.f32")" = $((20 * 18 * 15 * 4)) ] || fail "decode at level 0: wrong size"
+expect_error "levels 0..1" "$volreel" decode "$work/a.vreel" --frame 0 --level 5 --out "$work/x.f32"
+expect_error "no frame 3" "$volreel" decode "$work/a.vreel" --frame 3 --out "$work/x.f32"
+expect_error "already holds a container" "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/a.vreel"
+
+# Damage: a flipped byte in a frame, a truncated frame, a broken manifest.
+cp -r "$work/a.vreel" "$work/b.vreel"
+printf '\x13' | dd of="$work/b.vreel/frames/000001.vrf" bs=1 seek=200 conv=notrunc 2>/dev/null
+expect_error "000001.vrf: offset" "$volreel" verify "$work/b.vreel"
+truncate -s 100 "$work/b.vreel/frames/000002.vrf"
+expect_error "000002.vrf: offset 0: expected a frame file of at least 128 bytes" "$volreel" decode "$work/b.vreel" --frame 2 --out "$work/x.f32"
+# Resume repairs both and leaves frame 0 alone.
+"$volreel" encode "$work/s" --out "$work/b.vreel" --resume --tolerance "$("$volreel" info "$work/a.vreel" --json | json 'd["tolerance"]')" \
+  > "$work/resume.txt" 2>/dev/null
+grep -q "2 encoded, 1 already there" "$work/resume.txt" || fail "resume: $(cat "$work/resume.txt")"
+"$volreel" verify "$work/b.vreel" > /dev/null 2>&1 || fail "verify after resume"
+cmp "$work/a.vreel/frames/000001.vrf" "$work/b.vreel/frames/000001.vrf" || fail "resume re-encoded frame 1 differently"
+echo '{"format": "volreel-container", "format_version": 1' > "$work/b.vreel/manifest.json"
+expect_error "manifest.json: not valid JSON" "$volreel" info "$work/b.vreel"
+
+# Fixed rate, zfp, and rate control by --bps.
+"$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/fixed.vreel" --fixed-sparsity 2 > /dev/null 2>&1
+"$volreel" info "$work/fixed.vreel" | grep -q "fixed rate S = 2" || fail "fixed rate"
+"$volreel" encode "$work/s" --codec zfp --zfp-accuracy 1e-3 --out "$work/z.vreel" > /dev/null 2>&1
+"$volreel" verify "$work/z.vreel" > /dev/null 2>&1 || fail "verify zfp"
+out=$("$volreel" compare "$work/s" "$work/z.vreel" --json --no-ssim 2>/dev/null)
+echo "$out" | json '1 if d["sequence"]["max_abs_error"] <= 1e-3 else exit(1)' > /dev/null || fail "zfp max error above its accuracy"
+"$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/r.vreel" --bps 8 --rate-sample-frames 3 > /dev/null 2>&1
+bps=$("$volreel" info "$work/r.vreel" --json | json 'd["bps"]')
+/usr/bin/python3 -c "import sys; b=$bps; sys.exit(0 if abs(b-8)/8 <= 0.05 else 1)" || fail "--bps 8 gave $bps bps"
+
+echo "encode_cli_end_to_end: all checks passed"

@@ -1,0 +1,59 @@
+#!/usr/bin/env bash
+# train_cli_test.sh: `volreel train` and `volreel bench train` end to end on a small analytic
+# series — the dictionary file, the progress lines, and clear errors for bad input.
+# Usage: train_cli_test.sh PATH/TO/volreel
+set -euo pipefail
+volreel=$1
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+fail() { echo "FAIL: $*" >&2; exit 1; }
+
+"$volreel" --help | grep -q "train" || fail "--help does not list train"
+"$volreel" train --help | grep -q -- "--tolerance" || fail "train --help lacks --tolerance"
+"$volreel" bench --help | grep -q "train" || fail "bench --help does not list train"
+
+"$volreel" gen analytic --field blobs --size 48 --frames 6 --out "$work/a" > /dev/null 2>&1
+
+# Hierarchical: 4 levels x 2 iterations, a line each, then the final evaluation; K = 256 atoms of
+# 6^3 floats make a file of 128 + 256*216*4 + 4 bytes.
+"$volreel" train "$work/a" --out "$work/d.bin" --atoms 256 --coreset 400k --levels 3 --iterations 2 \
+  > "$work/train.txt" 2>/dev/null || fail "train failed"
+[ "$(grep -c '^level [1-4]/4 iteration  [12]/2' "$work/train.txt")" = 8 ] || fail "expected 8 progress lines"
+grep -q "^final .*met eps" "$work/train.txt" || fail "no final line"
+grep -q "PSNR >= 50.00 dB" "$work/train.txt" || fail "default --psnr 50 not reported"
+[ "$(stat -c %s "$work/d.bin")" = 221316 ] || fail "dictionary file has the wrong size"
+[ "$(head -c 8 "$work/d.bin")" = VREELDIC ] || fail "dictionary file lacks its magic"
+
+# Flat: one level, 8 iterations; an explicit tolerance.
+"$volreel" train "$work/a" --out "$work/f.bin" --atoms 256 --coreset 400k --levels 3 --iterations 2 --flat \
+  --tolerance 0.01 > "$work/flat.txt" 2>/dev/null || fail "train --flat failed"
+grep -q "^level 1/1 iteration  8/8" "$work/flat.txt" || fail "flat training should run 8 iterations on one level"
+grep -q "tolerance eps = 0.01 " "$work/flat.txt" || fail "--tolerance not used"
+
+# Same seed, same bytes.
+"$volreel" train "$work/a" --out "$work/d2.bin" --atoms 256 --coreset 400k --levels 3 --iterations 2 > /dev/null 2>&1
+cmp -s "$work/d.bin" "$work/d2.bin" || fail "training is not deterministic for a seed"
+
+# Bad input: clear messages, non-zero exit.
+expect_error() {  # expect_error "message fragment" volreel-args...
+  local fragment=$1
+  shift
+  if "$volreel" "$@" > "$work/out.txt" 2> "$work/err.txt"; then fail "accepted: $*"; fi
+  grep -q "$fragment" "$work/err.txt" || fail "for '$*' expected '$fragment', got: $(cat "$work/err.txt")"
+}
+expect_error "does not exist" train "$work/nope" --out "$work/x.bin"
+expect_error "fewer than the 2^6" train "$work/a" --out "$work/x.bin" --coreset 10k
+expect_error "unknown suffix" train "$work/a" --out "$work/x.bin" --coreset 10q
+head -c 16384 /dev/zero > "$work/zeros.raw"
+expect_error "flat (constant)" train "$work/zeros.raw" --dims 16x16x16 --out "$work/x.bin" --coreset 20k --levels 2 --tolerance 0.1
+
+# The benchmark: hierarchical, flat and two plain runs, evaluation on held-out frames, throughput.
+"$volreel" bench train "$work/a" --atoms 128 --coreset 200k --levels 2 --iterations 2 --eval-frames 2 \
+  > "$work/bench.txt" 2>/dev/null || fail "bench train failed"
+grep -q "^machine: " "$work/bench.txt" || fail "bench prints no machine"
+grep -q "evaluation frames (not used for training):" "$work/bench.txt" || fail "bench names no evaluation frames"
+grep -q "hierarchical vs flat 6 " "$work/bench.txt" || fail "bench compares no flat run of 6 iterations"
+grep -q "hierarchical vs plain 6 " "$work/bench.txt" || fail "bench compares no plain run of 6 iterations"
+grep -q "hierarchical vs plain 12 " "$work/bench.txt" || fail "bench compares no plain run of 12 iterations"
+grep -q "blocks/s .* MVoxel/s" "$work/bench.txt" || fail "bench prints no throughput"
+echo "train CLI OK"

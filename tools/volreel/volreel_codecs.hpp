@@ -1,0 +1,26 @@
+// volreel_codecs.hpp: volreel's codecs (variable rate, fixed rate, zfp bricks in the container) as
+// FrameCodecs of the rate-distortion harness.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "volreel/dictionary/dictionary.hpp"
+#include "volreel/psnr/rate_distortion.hpp"
+
+namespace volreel::cli {
+
+struct VolreelSweep {
+  std::vector<double> relative_tolerances;  ///< variable rate: ε / value range
+  std::vector<int> fixed_sparsities;        ///< fixed rate: S
+  std::vector<double>
+      zfp_relative_accuracies;  ///< zfp per brick in the container: accuracy / range
+};
+
+/// Codecs that encode each frame into an in-memory frame file and decode it with the CPU decoder.
+/// dictionary_bytes: the dictionary file's size, counted once in bps.
+std::vector<std::unique_ptr<psnr::FrameCodec>> make_volreel_sweep(
+    std::shared_ptr<const dictionary::Dictionary> dictionary, std::size_t dictionary_bytes,
+    double value_min, double value_max, const VolreelSweep& sweep);
+
+}  // namespace volreel::cli
