@@ -156,7 +156,7 @@ int code_one_block(const float* alpha0, double energy, const Eigen::MatrixXf& gr
     //    α is only needed (with step 1 for the next round, k = argmax |α|) if there is one.
     double delta = 0;
     for (int j = 0; j < s; ++j) delta += static_cast<double>(ws.gamma[j]) * static_cast<double>(ws.alpha0_support[j]);
-    residual = std::max(energy - 0.99 * delta, 0.0);
+    residual = std::max(energy - delta, 0.0);
     ws.columns[static_cast<std::size_t>(s - 1)] = g_k;
     if (residual > target && s < max_atoms)
       k = update_correlations(alpha, alpha0, ws.columns.data(), ws.gamma.data(), ws.support.data(), s, K,

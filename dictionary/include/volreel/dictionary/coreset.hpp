@@ -34,7 +34,7 @@ namespace volreel::dictionary {
 
 struct CoresetOptions {
   int block_size = 6;                    ///< M
-  std::uint64_t coreset_voxels = 1u << 24;  ///< C: voxels in the largest level (C/M³ block slots)
+  std::uint64_t coreset_voxels = 16'000'000;  ///< C: voxels in the largest level (C/M³ block slots)
   int levels = 6;                        ///< L: halvings below C, giving L + 1 levels
   double frame_factor = 16;              ///< choose frames until they hold ≥ frame_factor·C voxels
   std::uint64_t seed = 1;

@@ -4,16 +4,18 @@
 //
 // Two continuation schedules are added to the paper's algorithm (both on by default, both the same
 // in flat and hierarchical mode, so the comparison isolates the coreset hierarchy):
-//  - Coarse-to-fine tolerance: stage s = 0..L (one stage per level; in flat mode each N iterations
-//    on the largest level) codes with ε_s = ε · F^((L−s)/L), F = coarse_tolerance_factor, so the
+//  - Coarse-to-fine tolerance: stage s = 0..L (one stage per level; in flat mode, equal shares of
+//    the iterations on the largest level) codes with ε_s = ε · F^((L−s)/L), F = coarse_tolerance_factor, so the
 //    smallest coresets learn the dominant structure and the last stage runs at ε itself.
 //  - Sparsity ramp: iteration t (counted from 0 over the whole run) codes with at most
 //    min(Smax, t + 1) atoms per block, so training starts as gain-shape vector quantization; the
 //    last stage always codes with Smax.
 // Error-constrained K-SVD started from data samples otherwise settles in poor local minima where
-// blocks use many weak atoms: on volumes built from 48 planted atoms (3 per block) and Smax = 15,
-// plain Algorithm 1 recovered 1 atom with 13.6 atoms per block; with the schedules, 45 atoms with
-// 3.2 per block (tests/ksvd_test.cpp checks this).
+// blocks use many weak atoms. On volumes built from 48 planted atoms (3 per block, noise just below
+// ε), with Smax = 15, 4 levels × 10 iterations, over 8 seeds: without the schedules 0–1 of the 48
+// atoms are recovered (within 5°), with them 26–35; with Smax = 4 both recover 40–44. On the
+// turbulence dataset the schedules are neutral at 50 dB and save about 0.2 atoms per block at
+// 55 dB (bench train, --coarse-tolerance 1 --no-sparsity-ramp to compare).
 #pragma once
 
 #include <cstddef>
