@@ -26,6 +26,14 @@ bool is_png(const std::string& path) {
   return path.size() > 4 && (path.ends_with(".png") || path.ends_with(".PNG"));
 }
 
+/// SSIM for the table: "-" when it was not computed (--no-ssim).
+std::string ssim_text(double ssim) {
+  if (std::isnan(ssim)) return "-";
+  char text[16];
+  std::snprintf(text, sizeof text, "%.5f", ssim);
+  return text;
+}
+
 /// JSON has no infinity: a perfect match is written as null.
 nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
 
@@ -126,8 +134,10 @@ void compare_series(const CompareOptions& o) {
   std::printf("A: %s\nB: %s\n%s, %zu frame(s)\n", ia.source.c_str(), ib.source.c_str(), to_string(ia.dims).c_str(), frames);
   std::printf("%7s %10s %12s %12s %12s %9s\n", "frame", "PSNR dB", "PSNRzfp dB", "RMSE", "max err", "SSIM");
   for (std::size_t t = 0; t < rows.size(); ++t)
-    std::printf("%7zu %10.3f %12.3f %12.4e %12.4e %9.5f\n", t, rows[t].e.psnr, rows[t].e.psnr_zfp, rows[t].e.rmse, rows[t].e.max_abs_error, rows[t].ssim);
-  std::printf("%7s %10.3f %12.3f %12.4e %12.4e %9.5f\n", "all", total.psnr, total.psnr_zfp, total.rmse, total.max_abs_error, mean_ssim);
+    std::printf("%7zu %10.3f %12.3f %12.4e %12.4e %9s\n", t, rows[t].e.psnr, rows[t].e.psnr_zfp, rows[t].e.rmse,
+                rows[t].e.max_abs_error, ssim_text(rows[t].ssim).c_str());
+  std::printf("%7s %10.3f %12.3f %12.4e %12.4e %9s\n", "all", total.psnr, total.psnr_zfp, total.rmse, total.max_abs_error,
+              ssim_text(mean_ssim).c_str());
   if (container)
     std::printf("B is a volreel container: %.4f bps (8 * all its bytes / (voxels per frame * frames))\n", bps);
   std::printf("PSNR = 10*log10(range^2/MSE), range = max-min of A (per frame; 'all' uses the whole sequence).\n"
