@@ -11,6 +11,7 @@
 #include <limits>
 
 #include "detail.hpp"
+#include "volreel/format/file_io.hpp"
 
 namespace volreel::datasets {
 
@@ -145,22 +146,8 @@ RawSeriesWriter::RawSeriesWriter(fs::path dir, Dims dims, std::string variable, 
 
 namespace {
 
-/// Write bytes to path via "path.tmp" + rename, so a reader never sees a half-written file.
 void write_atomically(const fs::path& path, const void* data, std::size_t size) {
-  const fs::path tmp = path.string() + ".tmp";
-  std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) throw InputError("cannot create '" + tmp.string() + "'");
-  const std::size_t put = std::fwrite(data, 1, size, f);
-  const bool ok = put == size && std::fflush(f) == 0;
-  std::fclose(f);
-  std::error_code ec;
-  if (!ok) {
-    fs::remove(tmp, ec);
-    throw InputError("writing '" + tmp.string() + "' failed after " + std::to_string(put) + " of " +
-                     std::to_string(size) + " bytes (disk full?)");
-  }
-  fs::rename(tmp, path, ec);
-  if (ec) throw InputError("cannot rename '" + tmp.string() + "' to '" + path.string() + "': " + ec.message());
+  format::detail::write_file_atomically(path, {static_cast<const std::byte*>(data), size});
 }
 
 }  // namespace

@@ -6,7 +6,7 @@
 #include <cstring>
 #include <string>
 
-#include "file_io.hpp"
+#include "volreel/format/file_io.hpp"
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/error.hpp"
 

@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <cstring>
 
-#include "file_io.hpp"
+#include "volreel/format/file_io.hpp"
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/error.hpp"
 

@@ -1,5 +1,5 @@
 // file_io.cpp: whole-file reads and atomic writes.
-#include "file_io.hpp"
+#include "volreel/format/file_io.hpp"
 
 #include <unistd.h>
 

@@ -1,5 +1,5 @@
-// file_io.hpp (internal to volreel::format): whole-file reads and atomic writes that report
-// failures as FormatError.
+// file_io.hpp: whole-file reads and atomic writes (temporary name, then rename) that report
+// failures as FormatError. Every volreel writer of files goes through write_file_atomically.
 #pragma once
 
 #include <cstddef>
