@@ -1,0 +1,75 @@
+// svo_layout.h: the array-encoded sparse voxel octree the renderers walk (Cesium patent [0049]–
+// [0050]; DESIGN.md "Player", step 5), in plain arithmetic on 32-bit words so that the same text
+// compiles as C++ (the SVO builder, the CPU reference renderer) and as GLSL (the render shader).
+//
+// Geometry. The spatial octree is the frames' brick octree (format/SPEC.md): L levels, level 0 the
+// root, level L−1 the finest. A node at level l and brick coordinates c = (x, y, z) covers finest
+// voxels [c·34·2^(L−1−l), (c+1)·34·2^(L−1−l)) on each axis; its children at level l+1 are
+// 2c + (i & 1, (i >> 1) & 1, (i >> 2) & 1) for octant i = 0..7. The root covers
+// [0, 34·2^(L−1))³, which may extend past the volume's dims: samples outside the dims are empty.
+//
+// Two arrays of 32-bit words:
+//
+// Node records, VR_SVO_NODE_WORDS words each; record 0 is the root:
+//   word 0        parent record index (VR_SVO_NO_PARENT for the root)
+//   words 1..8    child of octant i at word 1 + i: bits 30..31 its kind, bits 0..29 an index
+//                   VR_SVO_CHILD_NODE  the child is a node record (index = its record)
+//                   VR_SVO_CHILD_LEAF  the child is drawn from a leaf record (index = the leaf),
+//                                      whose keyframes are relative to the child node
+//                   VR_SVO_CHILD_UP    the tree does not go deeper here: the child's region is
+//                                      drawn from this node's own leaf record (word 9)
+//                   VR_SVO_CHILD_EMPTY nothing to draw (outside the volume or no data): transparent
+//   word 9        this node's own leaf record (relative to this node), or VR_SVO_NO_LEAF when
+//                 no child is VR_SVO_CHILD_UP
+//
+// Leaf records, VR_SVO_LEAF_WORDS words each:
+//   word 0        atlas slot of keyframe node A (atlas_layout.h)
+//   word 1        atlas slot of keyframe node B
+//   word 2        bits 0..7: LOD difference dA of A; bits 8..15: dB of B — how many levels above the
+//                 spatial node the keyframe node's brick lies (0: the node's own brick)
+//   word 3        interpolation factor f (float bits): value = (1 − f)·A + f·B
+//
+// Sampling a point with local coordinates u ∈ [0,1)³ inside a spatial node at brick coordinates c
+// from a keyframe with LOD difference d: the brick's own local coordinates are
+//   u' = ((c mod 2^d) + u) / 2^d                                           (vr_svo_ancestor_local)
+// and its stored voxel coordinate (texel units, texel centres at +0.5) inside the 36³ slot is
+//   1 + 34·u'                                                                  (vr_svo_slot_coord)
+// — the 1 skips the apron, which makes trilinear filtering seamless across bricks.
+#ifndef VOLREEL_PLAYER_SVO_LAYOUT_H
+#define VOLREEL_PLAYER_SVO_LAYOUT_H
+
+#ifndef VR_GLSL
+#include <cstdint>
+typedef std::uint32_t vr_uint;
+#define VR_INLINE inline
+#else
+#define vr_uint uint
+#define VR_INLINE
+#endif
+
+#define VR_SVO_NODE_WORDS 10u
+#define VR_SVO_LEAF_WORDS 4u
+#define VR_SVO_NO_PARENT 0xFFFFFFFFu
+#define VR_SVO_NO_LEAF 0xFFFFFFFFu
+#define VR_SVO_CHILD_NODE 0u
+#define VR_SVO_CHILD_LEAF 1u
+#define VR_SVO_CHILD_UP 2u
+#define VR_SVO_CHILD_EMPTY 3u
+#define VR_SVO_INDEX_MASK 0x3FFFFFFFu
+
+VR_INLINE vr_uint vr_svo_child_word(vr_uint kind, vr_uint index) { return (kind << 30u) | (index & VR_SVO_INDEX_MASK); }
+VR_INLINE vr_uint vr_svo_child_kind(vr_uint word) { return word >> 30u; }
+VR_INLINE vr_uint vr_svo_child_index(vr_uint word) { return word & VR_SVO_INDEX_MASK; }
+VR_INLINE vr_uint vr_svo_lod_pack(vr_uint d_a, vr_uint d_b) { return (d_a & 0xFFu) | ((d_b & 0xFFu) << 8u); }
+VR_INLINE vr_uint vr_svo_lod_a(vr_uint packed) { return packed & 0xFFu; }
+VR_INLINE vr_uint vr_svo_lod_b(vr_uint packed) { return (packed >> 8u) & 0xFFu; }
+
+/* One axis of u' = ((c mod 2^d) + u) / 2^d, for every d (not only d ≤ 1). */
+VR_INLINE float vr_svo_ancestor_local(vr_uint c, float u, vr_uint d) {
+  vr_uint span = 1u << d;
+  return (float(c & (span - 1u)) + u) / float(span);
+}
+/* One axis of the stored voxel coordinate inside a slot (texel units) of brick-local u'. */
+VR_INLINE float vr_svo_slot_coord(float u_brick) { return 1.0f + 34.0f * u_brick; }
+
+#endif /* VOLREEL_PLAYER_SVO_LAYOUT_H */
