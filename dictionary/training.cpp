@@ -80,9 +80,12 @@ TrainingResult train_dictionary(const CoresetHierarchy& coresets, const Training
   // counted from the end so that the last iterations always run at ε.
   const int stages = level_count;
   int t = 0;  // iteration counted over the whole run
+  if (!(options.convergence >= 0)) throw InputError("the convergence threshold must be at least 0");
   for (int level = first_level; level < level_count; ++level) {
     const Coreset& c = coresets.levels[static_cast<std::size_t>(level)];
     if (c.blocks.cols() == 0) continue;
+    double previous_objective = 0;
+    int previous_stage = -1, previous_atoms = -1;
     for (int it = 0; it < iterations; ++it, ++t) {
       const int stage = options.flat ? stages - 1 - (iterations - 1 - t) * stages / iterations : level;
       const double coarse = stages > 1 ? static_cast<double>(stages - 1 - stage) / (stages - 1) : 0.0;
@@ -93,6 +96,14 @@ TrainingResult train_dictionary(const CoresetHierarchy& coresets, const Training
                                                                    : options.coding.max_atoms;
       const KsvdIterationStats s = ksvd_iteration(atoms, c.blocks, c.weights, ksvd, rng);
       ++result.total_iterations;
+      // The objective is measured by the coding step, before this iteration's update: stop when the
+      // previous update (at the same ε and Smax) gained less than the threshold.
+      const bool comparable = stage == previous_stage && ksvd.coding.max_atoms == previous_atoms;
+      const bool converged = options.convergence > 0 && comparable && (options.flat ? last_stage : true) &&
+                             previous_objective - s.coded.objective < options.convergence * previous_objective;
+      previous_objective = s.coded.objective;
+      previous_stage = stage;
+      previous_atoms = ksvd.coding.max_atoms;
       if (callback) {
         TrainingProgress p = progress_of(s.coded);
         p.level = level - first_level + 1;
@@ -107,6 +118,7 @@ TrainingResult train_dictionary(const CoresetHierarchy& coresets, const Training
         p.elapsed_seconds = elapsed();
         callback(p);
       }
+      if (converged) break;
     }
   }
   result.seconds = elapsed();

@@ -188,6 +188,50 @@ TEST_P(PlantedDictionary, TrainingRecoversMostAtoms) {
   EXPECT_TRUE(reports.back().final);
 }
 
+TEST(Training, ConvergenceEndsALevelWhenTheObjectiveStopsFalling) {
+  // The same planted data; each level stops at the first iteration whose coding step (at the
+  // same ε and Smax as the one before) shows the previous update gained under 2 %.
+  const int M = 4;
+  const Eigen::MatrixXf planted = test::planted_atoms(64, 48, 21);
+  std::vector<Volume> volumes{test::planted_volume({64, 64, 64}, M, planted, 3, 0.02, 30)};
+  CoresetOptions co;
+  co.block_size = M;
+  co.coreset_voxels = 6144 * 64;
+  co.levels = 3;
+  co.seed = 22;
+  const CoresetHierarchy h = build_coreset_hierarchy(volumes, co);
+  TrainingOptions to;
+  to.atom_count = 48;
+  to.coding = {.tolerance = 0.025, .max_atoms = 4};
+  to.iterations = 10;
+  to.seed = 23;
+  to.convergence = 0.02;
+  std::vector<TrainingProgress> reports;
+  const TrainingResult r = train_dictionary(h, to, [&](const TrainingProgress& p) { reports.push_back(p); });
+  ASSERT_FALSE(reports.empty());
+  reports.pop_back();  // the final evaluation
+  EXPECT_LT(r.total_iterations, 4 * 10) << "no level converged early";
+  EXPECT_EQ(static_cast<std::size_t>(r.total_iterations), reports.size());
+  const auto objective = [](const TrainingProgress& p) { return p.rms_error * p.rms_error; };
+  for (std::size_t i = 0; i < reports.size(); ++i) {
+    const bool last_of_level = i + 1 == reports.size() || reports[i + 1].level != reports[i].level;
+    const bool comparable = i > 0 && reports[i - 1].level == reports[i].level &&
+                            reports[i - 1].max_atoms == reports[i].max_atoms;
+    if (!comparable) {
+      EXPECT_TRUE(!last_of_level || reports[i].iteration == reports[i].iterations)
+          << "level " << reports[i].level << " ended without a comparable pair of iterations";
+      continue;
+    }
+    const double gain = (objective(reports[i - 1]) - objective(reports[i])) / objective(reports[i - 1]);
+    if (last_of_level && reports[i].iteration < reports[i].iterations) {
+      EXPECT_LT(gain, to.convergence) << "level " << reports[i].level << " ended while still improving";
+    } else if (!last_of_level) {
+      EXPECT_GE(gain, to.convergence) << "level " << reports[i].level << " went on after converging";
+    }
+  }
+  EXPECT_GE(recovered_atoms(planted, r.dictionary.atoms, 5.0), 24);
+}
+
 INSTANTIATE_TEST_SUITE_P(HierarchicalAndFlat, PlantedDictionary, ::testing::Values(false, true),
                          [](const auto& test_info) { return test_info.param ? "Flat" : "Hierarchical"; });
 

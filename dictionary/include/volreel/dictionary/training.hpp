@@ -40,6 +40,11 @@ struct TrainingOptions {
   double duplicate_threshold = 0.99;
   double coarse_tolerance_factor = 2;  ///< F ≥ 1: ε of the first stage over ε of the last (1: off)
   bool sparsity_ramp = true;           ///< limit atoms per block to t + 1 in iteration t
+  /// Convergence: a stage ends before its N iterations when an iteration lowered the weighted
+  /// objective by less than this fraction (0: always N). Hierarchical levels after the first
+  /// start from a dictionary that already fits, so they converge in few iterations; flat mode
+  /// applies the same test, in its last stage only (its earlier stages are the schedule's).
+  double convergence = 0;
   std::uint64_t seed = 1;
 };
 
