@@ -29,6 +29,12 @@
 //                 spatial node the keyframe node's brick lies (0: the node's own brick)
 //   word 3        interpolation factor f (float bits): value = (1 − f)·A + f·B
 //
+// Leaf histograms (a third array, optional), VR_SVO_HISTOGRAM_WORDS words per leaf record: the OR
+// of the 64-bin value histograms (format's Node::histogram, bins over the sequence's value range)
+// of the spatial nodes whose bricks A and B are, low word first. A renderer may skip a leaf's
+// region when no bin from the lowest to the highest set bit (the hull: trilinear interpolation
+// creates values between those present) maps to a nonzero opacity.
+//
 // Sampling a point with local coordinates u ∈ [0,1)³ inside a spatial node at brick coordinates c
 // from a keyframe with LOD difference d: the brick's own local coordinates are
 //   u' = ((c mod 2^d) + u) / 2^d                                           (vr_svo_ancestor_local)
@@ -49,6 +55,7 @@ typedef std::uint32_t vr_uint;
 
 #define VR_SVO_NODE_WORDS 10u
 #define VR_SVO_LEAF_WORDS 4u
+#define VR_SVO_HISTOGRAM_WORDS 2u
 #define VR_SVO_NO_PARENT 0xFFFFFFFFu
 #define VR_SVO_NO_LEAF 0xFFFFFFFFu
 #define VR_SVO_CHILD_NODE 0u
