@@ -3,6 +3,7 @@
 // space: the volume occupies [0, dims) on each axis, voxel i's centre at i + 0.5.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 
 #include <glm/glm.hpp>

@@ -1,0 +1,124 @@
+// brick_loader.hpp: requests for brick bytes (Cesium patent [0037], [0063]; DESIGN.md "Player",
+// step 2), read on worker threads as byte ranges of the frame files (pread), with a cap on
+// requests in flight and an optional bandwidth and latency limit that makes a local disk act like
+// a slow network or disk (`--bandwidth 20MB/s --latency 50ms`). Arrivals wait in a thread-safe
+// queue until the scheduler polls them, once per rendered frame.
+//
+// Link model: a request accepted at time s has its first byte at s + latency; the bytes of all
+// requests share one link of `bandwidth` bytes/s in the order they are read, so a request of B
+// bytes arrives at max(s + latency, link free) + B / bandwidth.
+//
+// A failed read (missing file, short file, I/O error) arrives as an error naming the file and the
+// offset; the key then backs off (retry_initial_s, doubling up to retry_max_s) before request()
+// accepts it again. Failures never hold a slot in flight and never stop other requests.
+#pragma once
+
+#include <chrono>
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <filesystem>
+#include <functional>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "volreel/stream/spatial_index.hpp"
+
+namespace volreel::stream {
+
+struct LoaderOptions {
+  unsigned threads = 4;              ///< worker threads reading files (≥ 1)
+  std::size_t max_in_flight = 32;    ///< requests accepted and not yet polled (≥ 1)
+  double bandwidth_bytes_per_s = 0;  ///< 0: unlimited
+  double latency_s = 0;              ///< added to every request
+  double retry_initial_s = 0.25;     ///< first back-off after a failure
+  double retry_max_s = 8.0;          ///< longest back-off
+};
+
+struct BrickRequest {
+  KeyframeKey key;
+  KeyframeId keyframe = no_keyframe;  ///< the caller's id, returned with the arrival
+  std::filesystem::path file;
+  std::uint64_t offset = 0;  ///< absolute byte offset in file
+  std::uint32_t bytes = 0;
+};
+
+struct BrickArrival {
+  BrickRequest request;
+  std::vector<std::byte> bytes;  ///< request.bytes bytes, unless error
+  std::string error;             ///< empty on success
+  bool ok() const { return error.empty(); }
+};
+
+enum class RequestStatus {
+  accepted,
+  at_capacity,  ///< max_in_flight requests are in flight: try again later
+  already_in_flight,
+  backing_off,  ///< the key failed recently: try again later
+};
+
+class BrickLoader {
+ public:
+  explicit BrickLoader(LoaderOptions options = {});
+  /// Stops the workers; requests not yet read are dropped.
+  ~BrickLoader();
+  BrickLoader(const BrickLoader&) = delete;
+  BrickLoader& operator=(const BrickLoader&) = delete;
+
+  /// Queues a read (requests are read in the order accepted).
+  RequestStatus request(BrickRequest request);
+  /// Arrivals whose time has come (successes and errors), in arrival order. Never blocks on I/O.
+  std::vector<BrickArrival> poll();
+  /// Drops queued requests that no worker has started and `keep` rejects; they leave the
+  /// in-flight count. Returns how many were dropped.
+  std::size_t cancel_queued(const std::function<bool(const BrickRequest&)>& keep);
+
+  std::size_t in_flight() const;
+  /// Requests accepted that no worker has started reading yet.
+  std::size_t queued() const;
+  bool is_in_flight(const KeyframeKey& key) const;
+  /// Bytes read successfully since construction.
+  std::uint64_t bytes_read() const;
+  const LoaderOptions& options() const { return options_; }
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  struct Pending {
+    BrickRequest request;
+    Clock::time_point issued;
+  };
+  struct Ready {
+    BrickArrival arrival;
+    Clock::time_point at;
+  };
+  struct Backoff {
+    unsigned failures = 0;
+    Clock::time_point until;
+  };
+
+  LoaderOptions options_;
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  bool stopping_ = false;
+  std::deque<Pending> queue_;
+  std::vector<Ready> ready_;
+  std::unordered_map<KeyframeKey, char, KeyframeKeyHash> in_flight_;
+  std::unordered_map<KeyframeKey, Backoff, KeyframeKeyHash> backoff_;
+  Clock::time_point link_free_;
+  std::uint64_t bytes_read_ = 0;
+  std::vector<std::thread> workers_;
+
+  void work();
+};
+
+/// Reads `bytes` bytes at `offset` of `file` with pread into out; returns an error message naming
+/// the file and offset ("frames/000002.vrf: offset 4096: expected 1800 bytes, found 12 (file
+/// truncated)"), or an empty string on success.
+std::string read_byte_range(const std::filesystem::path& file, std::uint64_t offset,
+                            std::uint32_t bytes, std::vector<std::byte>& out);
+
+}  // namespace volreel::stream

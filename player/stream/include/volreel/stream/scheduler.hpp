@@ -1,0 +1,144 @@
+// scheduler.hpp: the patent's streaming, once per rendered frame (Cesium patent [0029]–[0075];
+// DESIGN.md "Player: the patent's streaming, step by step"). update() runs, in order:
+//   1. take the loader's arrivals (errors go to the message list);
+//   2. walk the view (frustum, SSE) and fill the fixed-capacity min-max heap with the keyframe
+//      nodes of the visited nodes by priority (priorities.hpp); the heap's contents are this
+//      frame's selected set;
+//   3. atlas: occupied slots whose keyframe node is no longer selected become over-writeable;
+//      selected keyframe nodes still in an over-writeable slot re-occupy it without a request;
+//   4. arrivals: those no longer selected are discarded (atlas untouched); the rest take a slot
+//      (the stalest over-writeable one whose last GPU frame retired) within the per-frame upload
+//      budget, and become uploads; what does not fit waits for the next frame;
+//   5. requests: the heap drained from highest to lowest priority; selected keyframe nodes not in
+//      the atlas are requested, up to the loader's cap on requests in flight; queued requests no
+//      longer selected are cancelled;
+//   6. pre-render selection and the array-encoded SVO (selection.hpp, svo_builder.hpp) from the
+//      occupied slots only; the slots it references are marked used by this GPU frame.
+// The caller decodes each upload's payload into its slot before rendering with the SVO, and reports
+// completed GPU frames with retire(). Problems (a bad frame file at index time, a failed read)
+// become messages in errors(); update() does not throw on bad data.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <string>
+#include <unordered_map>
+#include <unordered_set>
+#include <vector>
+
+#include "volreel/format/container.hpp"
+#include "volreel/player/camera.hpp"
+#include "volreel/stream/atlas_slots.hpp"
+#include "volreel/stream/brick_loader.hpp"
+#include "volreel/stream/min_max_heap.hpp"
+#include "volreel/stream/priorities.hpp"
+#include "volreel/stream/selection.hpp"
+#include "volreel/stream/spatial_index.hpp"
+#include "volreel/stream/svo_builder.hpp"
+
+namespace volreel::stream {
+
+struct SchedulerSettings {
+  std::uint32_t atlas_slots = 512;  ///< brick slots of the atlas = heap capacity ([0036])
+  PrioritySettings priority;
+  SelectionSettings selection;
+  LoaderOptions loader;
+  std::uint64_t upload_budget_bytes = 64ull << 20;  ///< payload bytes uploaded per frame at most
+                                                    ///< (at least one upload per frame)
+  std::size_t max_messages = 64;                    ///< messages kept for the UI (newest)
+};
+
+/// One brick for the caller to decode into an atlas slot before rendering.
+struct BrickUpload {
+  std::uint32_t slot = 0;
+  KeyframeKey key;
+  std::vector<std::byte> payload;  ///< the brick's codec payload (format/SPEC.md "Brick payload")
+  bool constant = false;           ///< a 4-byte payload: one float32 for every voxel
+  std::filesystem::path file;      ///< frame file and payload offset, for error messages
+  std::uint64_t offset = 0;
+};
+
+struct StreamStats {
+  std::uint32_t target_nodes = 0;     ///< visible nodes at their target LOD (SvoStats)
+  std::uint32_t at_target_nodes = 0;  ///< of those, drawn with both keyframes at full detail
+  double fraction_at_target = 0;      ///< at_target_nodes / target_nodes (1 when none)
+  std::uint32_t holes = 0;            ///< target nodes with nothing to draw yet
+  std::uint32_t selected = 0;         ///< keyframe nodes in the heap this frame
+  std::size_t requests_sent = 0;      ///< this frame
+  std::size_t requests_in_flight = 0;
+  std::size_t arrivals_discarded = 0;  ///< this frame: no longer selected
+  std::size_t arrivals_waiting = 0;    ///< arrived, not yet uploaded (budget or no free slot)
+  std::size_t uploads = 0;             ///< this frame
+  std::uint64_t bytes_uploaded = 0;    ///< this frame
+  std::uint64_t bytes_loaded = 0;      ///< since construction, read by the loader
+  std::uint32_t atlas_occupied = 0, atlas_capacity = 0;
+  std::uint32_t svo_nodes = 0, svo_leaves = 0;
+  std::size_t errors = 0;  ///< since construction
+};
+
+struct FrameUpdate {
+  std::vector<BrickUpload> uploads;
+  std::vector<std::uint32_t> svo_nodes;   ///< svo_layout.h node records
+  std::vector<std::uint32_t> svo_leaves;  ///< svo_layout.h leaf records
+  StreamStats stats;
+  std::vector<std::string> new_errors;  ///< messages added since the previous update
+};
+
+class StreamScheduler {
+ public:
+  /// Indexes the container (bad frames become messages, not exceptions).
+  StreamScheduler(const format::Container& container, SchedulerSettings settings);
+  StreamScheduler(SpatialIndex index, SchedulerSettings settings);
+
+  /// One rendered frame: camera, playhead (keyframe units) and the GPU frame number that will
+  /// render the returned SVO (increasing).
+  FrameUpdate update(const player::OrbitCamera& camera, double playhead,
+                     std::uint64_t gpu_frame_number);
+  /// Every GPU frame ≤ frame_number has completed (its fence signalled).
+  void retire(std::uint64_t frame_number) { atlas_.retire(frame_number); }
+  /// A problem found by the caller (a payload that failed to decode, …) for the message list.
+  void report_error(std::string message);
+
+  const SpatialIndex& index() const { return index_; }
+  const AtlasSlots& atlas() const { return atlas_; }
+  const BrickLoader& loader() const { return loader_; }
+  const SchedulerSettings& settings() const { return settings_; }
+  PrioritySettings& priority_settings() { return settings_.priority; }
+  /// The newest messages (at most settings.max_messages), oldest first.
+  const std::deque<std::string>& errors() const { return errors_; }
+  std::size_t error_count() const { return error_count_; }
+
+ private:
+  struct HeapEntry {
+    double priority = 0;
+    std::uint32_t level = 0;
+    KeyframeId keyframe = no_keyframe;
+  };
+  struct HeapLess {
+    bool operator()(const HeapEntry& a, const HeapEntry& b) const {
+      if (a.priority != b.priority) return a.priority < b.priority;
+      if (a.level != b.level) return a.level > b.level;  // coarser first on ties
+      return a.keyframe > b.keyframe;
+    }
+  };
+
+  SpatialIndex index_;
+  SchedulerSettings settings_;
+  AtlasSlots atlas_;
+  BrickLoader loader_;
+  MinMaxHeap<HeapEntry, HeapLess> heap_;
+  std::vector<double> random_table_, temporal_;
+  ViewTraversal view_;
+  ResidentKeyframes resident_;
+  std::unordered_set<KeyframeId> selected_;
+  std::unordered_map<KeyframeId, BrickArrival> waiting_;  ///< arrived, not uploaded yet
+  std::deque<std::string> errors_;
+  std::size_t error_count_ = 0;
+  std::vector<std::string> frame_errors_;
+
+  void fill_heap(const player::OrbitCamera& camera, double playhead);
+  void add_error(std::string message);
+};
+
+}  // namespace volreel::stream

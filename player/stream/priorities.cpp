@@ -1,0 +1,125 @@
+// priorities.cpp: pre-load priorities (Cesium patent [0042]–[0045]), frustum culling and the
+// SSE-driven view traversal.
+#include "volreel/stream/priorities.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace volreel::stream {
+
+namespace {
+
+void fill_ruler(std::vector<double>& table, std::size_t lo, std::size_t hi, double priority) {
+  if (hi - lo < 2) return;
+  const std::size_t mid = lo + (hi - lo) / 2;
+  table[mid] = priority;
+  fill_ruler(table, lo, mid, priority / 2);
+  fill_ruler(table, mid, hi, priority / 2);
+}
+
+double lerp(double a, double b, double f) {
+  return a + (b - a) * f;
+}
+
+}  // namespace
+
+std::vector<double> random_selection_table(std::size_t keyframes) {
+  std::vector<double> table(keyframes, 0.0);
+  if (keyframes == 0) return table;
+  // First, middle and last 1.0; each half's middle 0.5; and so on ([0044]).
+  table.front() = 1.0;
+  table.back() = 1.0;
+  fill_ruler(table, 0, keyframes - 1, 1.0);
+  return table;
+}
+
+double sse_priority(double sse) {
+  return sse / (1.0 + sse);
+}
+
+double temporal_priority(double keyframe, double playhead, std::size_t keyframes, double exponent) {
+  const double last = keyframes > 0 ? static_cast<double>(keyframes - 1) : 0.0;
+  const double max_distance = std::max(playhead, last - playhead);
+  if (!(max_distance > 0)) return 1.0;
+  const double closeness = std::clamp(1.0 - std::abs(keyframe - playhead) / max_distance, 0.0, 1.0);
+  return std::pow(closeness, exponent);
+}
+
+double combined_priority(double sse_priority_value, double temporal_priority_value,
+                         double random_priority_value, const PrioritySettings& settings) {
+  if (settings.policy == PriorityPolicy::nearest_keyframe_first) return temporal_priority_value;
+  return settings.sse_weight * sse_priority_value +
+         lerp(random_priority_value, temporal_priority_value,
+              lerp(settings.temporal_lerp_min, 1.0, temporal_priority_value));
+}
+
+Box node_box(const SpatialNode& node) {
+  return {glm::dvec3(node.lo[0], node.lo[1], node.lo[2]),
+          glm::dvec3(node.hi[0], node.hi[1], node.hi[2])};
+}
+
+Frustum::Frustum(const player::OrbitCamera& camera) {
+  // Gribb and Hartmann: the planes are sums and differences of the rows of projection · view.
+  const glm::dmat4 m = camera.projection() * camera.view();
+  const auto row = [&](int r) { return glm::dvec4(m[0][r], m[1][r], m[2][r], m[3][r]); };
+  planes_ = {row(3) + row(0), row(3) - row(0), row(3) + row(1),
+             row(3) - row(1), row(3) + row(2), row(3) - row(2)};
+}
+
+bool Frustum::intersects(const Box& box) const {
+  for (const glm::dvec4& p : planes_) {
+    // The corner farthest along the plane's normal.
+    const glm::dvec3 corner{p.x >= 0 ? box.hi.x : box.lo.x, p.y >= 0 ? box.hi.y : box.lo.y,
+                            p.z >= 0 ? box.hi.z : box.lo.z};
+    if (p.x * corner.x + p.y * corner.y + p.z * corner.z + p.w < 0) return false;
+  }
+  return true;
+}
+
+double distance_to_box(const glm::dvec3& p, const Box& box) {
+  const glm::dvec3 nearest = glm::clamp(p, box.lo, box.hi);
+  return glm::length(p - nearest);
+}
+
+double node_sse(const SpatialIndex& index, std::uint32_t node, const player::OrbitCamera& camera) {
+  const SpatialNode& n = index.node(node);
+  const double depth = distance_to_box(camera.eye(), node_box(n));
+  return camera.projected_pixels(static_cast<double>(index.voxel_size(n.key.level)), depth);
+}
+
+void ViewTraversal::run(const SpatialIndex& index, const player::OrbitCamera& camera,
+                        double sse_target) {
+  visits_.clear();
+  if (stamp_.size() != index.node_count()) {
+    stamp_.assign(index.node_count(), 0);
+    where_.assign(index.node_count(), 0);
+    generation_ = 0;
+  }
+  if (++generation_ == 0) {  // wrapped: clear the stamps
+    std::fill(stamp_.begin(), stamp_.end(), 0u);
+    generation_ = 1;
+  }
+  if (index.node_count() == 0) return;
+  const Frustum frustum(camera);
+  // Depth-first preorder with an explicit stack (children pushed in reverse octant order).
+  std::vector<std::uint32_t> stack{0};
+  while (!stack.empty()) {
+    const std::uint32_t id = stack.back();
+    stack.pop_back();
+    const SpatialNode& n = index.node(id);
+    if (!frustum.intersects(node_box(n))) continue;
+    Visit v;
+    v.node = id;
+    v.sse = node_sse(index, id, camera);
+    v.refine = n.has_children && v.sse > sse_target;
+    stamp_[id] = generation_;
+    where_[id] = static_cast<std::uint32_t>(visits_.size());
+    visits_.push_back(v);
+    if (v.refine)
+      for (int i = 7; i >= 0; --i)
+        if (n.children[static_cast<std::size_t>(i)] != no_node)
+          stack.push_back(n.children[static_cast<std::size_t>(i)]);
+  }
+}
+
+}  // namespace volreel::stream

@@ -1,0 +1,188 @@
+// scheduler.cpp: one frame of the patent's streaming (Cesium patent [0035]–[0049], [0060]–[0075]).
+#include "volreel/stream/scheduler.hpp"
+
+#include <algorithm>
+#include <utility>
+
+namespace volreel::stream {
+
+StreamScheduler::StreamScheduler(const format::Container& container, SchedulerSettings settings)
+    : StreamScheduler(SpatialIndex{}, settings) {
+  std::vector<std::string> errors;
+  index_ = build_spatial_index(container, &errors);
+  random_table_ = random_selection_table(index_.frame_count());
+  for (std::string& e : errors) add_error(std::move(e));
+}
+
+StreamScheduler::StreamScheduler(SpatialIndex index, SchedulerSettings settings)
+    : index_(std::move(index)),
+      settings_(settings),
+      atlas_(std::max<std::uint32_t>(1, settings.atlas_slots)),
+      loader_(settings.loader),
+      heap_(std::max<std::uint32_t>(1, settings.atlas_slots)),
+      random_table_(random_selection_table(index_.frame_count())) {}
+
+void StreamScheduler::add_error(std::string message) {
+  ++error_count_;
+  frame_errors_.push_back(message);
+  errors_.push_back(std::move(message));
+  while (errors_.size() > std::max<std::size_t>(1, settings_.max_messages)) errors_.pop_front();
+}
+
+void StreamScheduler::report_error(std::string message) {
+  add_error(std::move(message));
+}
+
+void StreamScheduler::fill_heap(const player::OrbitCamera& camera, double playhead) {
+  heap_.clear();
+  view_.run(index_, camera, settings_.priority.sse_target);
+  const PrioritySettings& ps = settings_.priority;
+  const std::size_t frames = index_.frame_count();
+  // The temporal priority depends on the keyframe only: once per keyframe per frame.
+  temporal_.resize(frames);
+  for (std::size_t t = 0; t < frames; ++t)
+    temporal_[t] =
+        temporal_priority(static_cast<double>(t), playhead, frames, ps.temporal_exponent);
+  const bool patent = ps.policy == PriorityPolicy::patent;
+  for (const ViewTraversal::Visit& v : view_.visits()) {
+    const SpatialNode& n = index_.node(v.node);
+    const double sse_p = sse_priority(v.sse);
+    // A node whose best possible priority cannot enter a full heap is skipped whole.
+    const double best = patent ? ps.sse_weight * sse_p + 1.0 : 1.0;
+    if (heap_.full() && best < heap_.min().priority) continue;
+    const auto keyframes = index_.keyframes(v.node);
+    for (std::uint32_t i = 0; i < keyframes.size(); ++i) {
+      const std::uint32_t t = keyframes[i].t;
+      const double priority = combined_priority(sse_p, temporal_[t], random_table_[t], ps);
+      heap_.push({priority, n.key.level, n.first_keyframe + i});
+    }
+  }
+}
+
+FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double playhead,
+                                    std::uint64_t gpu_frame_number) {
+  FrameUpdate out;
+  const double last = index_.frame_count() > 0 ? static_cast<double>(index_.frame_count() - 1) : 0;
+  playhead = std::clamp(playhead, 0.0, last);
+
+  // 1. Arrivals.
+  for (BrickArrival& a : loader_.poll()) {
+    if (!a.ok()) {
+      add_error(a.error + " (will retry)");
+      continue;
+    }
+    const KeyframeId id = a.request.keyframe;
+    waiting_.insert_or_assign(id, std::move(a));
+  }
+
+  // 2. Priorities into the heap; its contents are the selected set.
+  fill_heap(camera, playhead);
+  selected_.clear();
+  for (const HeapEntry& e : heap_.items()) selected_.insert(e.keyframe);
+
+  // 3. Atlas lists: release what is no longer selected, re-occupy what is selected again.
+  for (const std::uint32_t slot : atlas_.occupied_slots()) {
+    const auto key = atlas_.key(slot);
+    if (!key || !selected_.count(index_.find_keyframe(*key))) atlas_.release_slot(slot);
+  }
+  for (const KeyframeId id : selected_) atlas_.reoccupy(index_.key(id));
+
+  // 4. Arrivals into slots, within the upload budget (highest priority first).
+  {
+    std::vector<HeapEntry> entries;
+    entries.reserve(heap_.size());
+    while (!heap_.empty()) entries.push_back(heap_.pop_max());
+    std::uint64_t budget_used = 0;
+    for (const HeapEntry& e : entries) {
+      const auto it = waiting_.find(e.keyframe);
+      if (it == waiting_.end()) continue;
+      const KeyframeKey key = index_.key(e.keyframe);
+      const std::uint64_t bytes = it->second.bytes.size();
+      if (!out.uploads.empty() && budget_used + bytes > settings_.upload_budget_bytes) break;
+      if (atlas_.is_occupied(key)) {  // already resident (re-requested meanwhile)
+        waiting_.erase(it);
+        continue;
+      }
+      const auto slot = atlas_.acquire(key);
+      if (!slot) break;  // no slot free of in-flight GPU frames: next frame
+      BrickUpload u;
+      u.slot = *slot;
+      u.key = key;
+      u.payload = std::move(it->second.bytes);
+      u.constant = u.payload.size() == 4;
+      u.file = std::move(it->second.request.file);
+      u.offset = it->second.request.offset;
+      budget_used += bytes;
+      out.uploads.push_back(std::move(u));
+      waiting_.erase(it);
+    }
+    // Arrivals whose keyframe node is no longer selected are discarded ([0037]).
+    for (auto it = waiting_.begin(); it != waiting_.end();) {
+      if (!selected_.count(it->first)) {
+        it = waiting_.erase(it);
+        ++out.stats.arrivals_discarded;
+      } else {
+        ++it;
+      }
+    }
+    out.stats.bytes_uploaded = budget_used;
+
+    // 5. Requests in priority order ([0063]); queued ones no longer selected are cancelled.
+    loader_.cancel_queued([&](const BrickRequest& r) { return selected_.count(r.keyframe) != 0; });
+    for (const HeapEntry& e : entries) {
+      if (waiting_.count(e.keyframe)) continue;
+      const KeyframeKey key = index_.key(e.keyframe);
+      if (atlas_.is_occupied(key)) continue;
+      const KeyframeNode& k = index_.keyframe(e.keyframe);
+      BrickRequest r;
+      r.key = key;
+      r.keyframe = e.keyframe;
+      r.file = index_.frame_file(k.t);
+      r.offset = k.offset;
+      r.bytes = k.bytes;
+      const RequestStatus s = loader_.request(std::move(r));
+      if (s == RequestStatus::accepted) ++out.stats.requests_sent;
+      if (s == RequestStatus::at_capacity) break;
+    }
+    out.stats.selected = static_cast<std::uint32_t>(entries.size());
+  }
+
+  // 6. Pre-render selection and the SVO, from occupied slots only.
+  {
+    std::vector<ResidentKeyframe> resident;
+    for (const std::uint32_t slot : atlas_.occupied_slots()) {
+      const auto key = atlas_.key(slot);
+      if (!key) continue;
+      const KeyframeId id = index_.find_keyframe(*key);
+      if (id != no_keyframe) resident.push_back({id, slot});
+    }
+    resident_.assign(index_, resident);
+    SvoStats svo_stats;
+    SvoArrays svo = build_svo(index_, view_, resident_, playhead, settings_.selection, &svo_stats);
+    for (const std::uint32_t slot : svo_stats.used_slots) atlas_.mark_used(slot, gpu_frame_number);
+    out.svo_nodes = std::move(svo.nodes);
+    out.svo_leaves = std::move(svo.leaves);
+    out.stats.target_nodes = svo_stats.target_nodes;
+    out.stats.at_target_nodes = svo_stats.at_target_nodes;
+    out.stats.fraction_at_target =
+        svo_stats.target_nodes > 0
+            ? static_cast<double>(svo_stats.at_target_nodes) / svo_stats.target_nodes
+            : 1.0;
+    out.stats.holes = svo_stats.holes;
+    out.stats.svo_nodes = svo_stats.node_records;
+    out.stats.svo_leaves = svo_stats.leaf_records;
+  }
+
+  out.stats.uploads = out.uploads.size();
+  out.stats.requests_in_flight = loader_.in_flight();
+  out.stats.arrivals_waiting = waiting_.size();
+  out.stats.bytes_loaded = loader_.bytes_read();
+  out.stats.atlas_occupied = atlas_.occupied_count();
+  out.stats.atlas_capacity = atlas_.capacity();
+  out.stats.errors = error_count_;
+  out.new_errors = std::move(frame_errors_);
+  frame_errors_.clear();
+  return out;
+}
+
+}  // namespace volreel::stream

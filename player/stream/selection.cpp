@@ -1,0 +1,103 @@
+// selection.cpp: two keyframe nodes per spatial node with the ancestor handicap (Cesium patent
+// [0046]–[0048], [0069]–[0075]).
+#include "volreel/stream/selection.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace volreel::stream {
+
+void ResidentKeyframes::assign(const SpatialIndex& index,
+                               std::span<const ResidentKeyframe> entries) {
+  entries_.assign(entries.begin(), entries.end());
+  std::sort(entries_.begin(), entries_.end(),
+            [](const ResidentKeyframe& a, const ResidentKeyframe& b) {
+              // Keyframe ids are grouped by node and sorted by t inside a node.
+              return a.keyframe < b.keyframe;
+            });
+  first_.assign(index.node_count(), 0);
+  count_.assign(index.node_count(), 0);
+  for (std::size_t i = 0; i < entries_.size(); ++i) {
+    const std::uint32_t node = index.node_of(entries_[i].keyframe);
+    if (count_[node] == 0) first_[node] = static_cast<std::uint32_t>(i);
+    ++count_[node];
+  }
+}
+
+std::span<const ResidentKeyframe> ResidentKeyframes::of_node(std::uint32_t node) const {
+  if (node >= count_.size() || count_[node] == 0) return {};
+  return {entries_.data() + first_[node], count_[node]};
+}
+
+namespace {
+
+enum class Side { before, after };
+
+/// Step 1 for one node: its resident keyframe node on `side` nearest p, or the nearest on the
+/// other side with the missing-side factor. Returns an invalid pick if nothing is resident.
+KeyframePick nearest_on_side(const SpatialIndex& index, std::span<const ResidentKeyframe> list,
+                             double p, Side side, const SelectionSettings& settings) {
+  KeyframePick best_here, best_other;
+  double d_here = std::numeric_limits<double>::infinity(), d_other = d_here;
+  for (const ResidentKeyframe& r : list) {
+    const double t = static_cast<double>(index.keyframe(r.keyframe).t);
+    const bool on_side = side == Side::before ? t <= p : t >= p;
+    const double d = std::abs(t - p);
+    if (on_side && d < d_here) {
+      d_here = d;
+      best_here.keyframe = r.keyframe;
+      best_here.slot = r.slot;
+    } else if (!on_side && d < d_other) {
+      d_other = d;
+      best_other.keyframe = r.keyframe;
+      best_other.slot = r.slot;
+    }
+  }
+  if (best_here.valid()) {
+    best_here.score = d_here;
+    return best_here;
+  }
+  if (best_other.valid()) best_other.score = d_other * settings.missing_side_factor;
+  return best_other;
+}
+
+KeyframePick pick_side(const SpatialIndex& index, std::uint32_t node, double p,
+                       const ResidentKeyframes& resident, Side side,
+                       const SelectionSettings& settings) {
+  KeyframePick best;
+  best.score = std::numeric_limits<double>::infinity();
+  std::uint32_t up = 0;
+  for (std::uint32_t n = node; n != no_node; n = index.node(n).parent, ++up) {
+    KeyframePick c = nearest_on_side(index, resident.of_node(n), p, side, settings);
+    if (!c.valid()) continue;
+    const KeyframeNode& k = index.keyframe(c.keyframe);
+    // 2. Ancestor handicap, except for a constant subtree, which is exact for its descendants.
+    c.exact = up == 0 || k.subtree_constant;
+    if (!c.exact) c.score *= std::exp(settings.ancestor_handicap * static_cast<double>(up));
+    c.lod_difference = up;
+    c.t = k.t;
+    // 3. Keep the best (ties keep the finer candidate).
+    if (c.score < best.score) best = c;
+  }
+  if (!best.valid()) best = KeyframePick{};
+  return best;
+}
+
+}  // namespace
+
+KeyframePair select_keyframe_pair(const SpatialIndex& index, std::uint32_t node, double playhead,
+                                  const ResidentKeyframes& resident,
+                                  const SelectionSettings& settings) {
+  KeyframePair pair;
+  pair.a = pick_side(index, node, playhead, resident, Side::before, settings);
+  pair.b = pick_side(index, node, playhead, resident, Side::after, settings);
+  if (pair.valid() && pair.a.t != pair.b.t) {
+    const double f = (playhead - static_cast<double>(pair.a.t)) /
+                     (static_cast<double>(pair.b.t) - static_cast<double>(pair.a.t));
+    pair.factor = static_cast<float>(std::clamp(f, 0.0, 1.0));
+  }
+  return pair;
+}
+
+}  // namespace volreel::stream

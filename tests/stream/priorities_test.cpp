@@ -1,0 +1,109 @@
+// priorities_test.cpp: the pre-load priorities of the Cesium patent [0042]–[0045], frustum culling
+// and the SSE-driven traversal.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "stream_test_util.hpp"
+#include "volreel/stream/priorities.hpp"
+
+namespace volreel::stream {
+namespace {
+
+TEST(StreamPriorities, RandomTableOfNineKeyframesIsThePatents) {
+  const std::vector<double> expected{1.0, 0.25, 0.5, 0.25, 1.0, 0.25, 0.5, 0.25, 1.0};
+  EXPECT_EQ(random_selection_table(9), expected);
+}
+
+TEST(StreamPriorities, RandomTableIsRulerLikeForOtherSizes) {
+  EXPECT_EQ(random_selection_table(1), std::vector<double>{1.0});
+  EXPECT_EQ(random_selection_table(2), (std::vector<double>{1.0, 1.0}));
+  EXPECT_EQ(random_selection_table(3), (std::vector<double>{1.0, 1.0, 1.0}));
+  EXPECT_EQ(random_selection_table(5), (std::vector<double>{1.0, 0.5, 1.0, 0.5, 1.0}));
+  // 17 keyframes: the 9-keyframe ruler with one more subdivision.
+  const auto t = random_selection_table(17);
+  EXPECT_EQ(t[0], 1.0);
+  EXPECT_EQ(t[8], 1.0);
+  EXPECT_EQ(t[16], 1.0);
+  EXPECT_EQ(t[4], 0.5);
+  EXPECT_EQ(t[12], 0.5);
+  EXPECT_EQ(t[2], 0.25);
+  EXPECT_EQ(t[1], 0.125);
+  EXPECT_EQ(t[15], 0.125);
+  // Every keyframe gets a priority in (0, 1].
+  for (std::size_t n : {4u, 7u, 10u, 100u, 1000u})
+    for (double p : random_selection_table(n)) {
+      EXPECT_GT(p, 0.0);
+      EXPECT_LE(p, 1.0);
+    }
+}
+
+TEST(StreamPriorities, FormulasOfTheParagraphs) {
+  EXPECT_DOUBLE_EQ(sse_priority(0), 0.0);
+  EXPECT_DOUBLE_EQ(sse_priority(1), 0.5);
+  EXPECT_DOUBLE_EQ(sse_priority(3), 0.75);
+  // 9 keyframes, playhead 2: maxDistance = 6.
+  EXPECT_DOUBLE_EQ(temporal_priority(2, 2, 9), 1.0);
+  EXPECT_DOUBLE_EQ(temporal_priority(5, 2, 9), std::pow(0.5, 4));
+  EXPECT_DOUBLE_EQ(temporal_priority(8, 2, 9), 0.0);
+  EXPECT_DOUBLE_EQ(temporal_priority(0, 2, 9), std::pow(1.0 - 2.0 / 6.0, 4));
+  EXPECT_DOUBLE_EQ(temporal_priority(0, 0, 1), 1.0);
+  // [0045]: 10·sse + lerp(random, temporal, lerp(0.15, 1, temporal)).
+  PrioritySettings s;
+  const double temporal = 0.4, random = 0.25, sse = 0.5;
+  const double w = 0.15 + (1.0 - 0.15) * temporal;
+  EXPECT_DOUBLE_EQ(combined_priority(sse, temporal, random, s),
+                   10 * sse + random + (temporal - random) * w);
+  // Temporal 1: the temporal priority alone; temporal 0: 15 % of the way from random to 0.
+  EXPECT_DOUBLE_EQ(combined_priority(0, 1, 0.25, s), 1.0);
+  EXPECT_DOUBLE_EQ(combined_priority(0, 0, 1, s), 0.85);
+  s.policy = PriorityPolicy::nearest_keyframe_first;
+  EXPECT_DOUBLE_EQ(combined_priority(0.9, 0.3, 1, s), 0.3);
+}
+
+TEST(StreamPriorities, FrustumCullsBoxesBehindAndBesideTheCamera) {
+  player::OrbitCamera c;
+  c.target = {0, 0, 0};
+  c.distance = 100;
+  c.azimuth = 0;
+  c.elevation = 0;  // eye at (100, 0, 0) looking towards -x
+  const Frustum f(c);
+  EXPECT_TRUE(f.intersects({{-1, -1, -1}, {1, 1, 1}}));
+  EXPECT_FALSE(f.intersects({{150, -1, -1}, {160, 1, 1}}));                // behind the eye
+  EXPECT_FALSE(f.intersects({{0, 500, -1}, {1, 510, 1}}));                 // far to the side
+  EXPECT_TRUE(f.intersects({{-1000, -1000, -1000}, {1000, 1000, 1000}}));  // around the eye
+  EXPECT_DOUBLE_EQ(distance_to_box({100, 0, 0}, {{-1, -1, -1}, {1, 1, 1}}), 99.0);
+  EXPECT_DOUBLE_EQ(distance_to_box({0, 0, 0}, {{-1, -1, -1}, {1, 1, 1}}), 0.0);
+}
+
+TEST(StreamPriorities, TraversalRefinesWhileTheSseExceedsTheTarget) {
+  const Dims dims{80, 40, 40};
+  const SpatialIndex index = test::make_index(dims, 2);
+  ASSERT_EQ(index.level_count(), 3u);
+  ViewTraversal view;
+  player::OrbitCamera near_cam = test::close_camera(dims);
+  view.run(index, near_cam, 1.0);
+  // Close: every node is visited, the finest ones are the targets.
+  EXPECT_EQ(view.visits().size(), index.node_count());
+  for (const auto& v : view.visits())
+    EXPECT_EQ(v.refine, index.node(v.node).has_children) << "node " << v.node;
+  // A voxel of a coarser level projects to twice the pixels at about the same distance.
+  EXPECT_GT(view.visit(0).sse, view.visit(index.node(0).children[0]).sse);
+  // Far away: the root alone.
+  player::OrbitCamera far_cam = near_cam;
+  far_cam.distance *= 100;
+  view.run(index, far_cam, 1.0);
+  ASSERT_EQ(view.visits().size(), 1u);
+  EXPECT_FALSE(view.visits()[0].refine);
+  EXPECT_TRUE(view.visited(0));
+  EXPECT_FALSE(view.visited(1));
+  // Looking away: nothing.
+  player::OrbitCamera away = near_cam;
+  away.target = near_cam.target -
+                3.0 * (near_cam.eye() - near_cam.target);  // eye past the volume, facing away
+  view.run(index, away, 1.0);
+  EXPECT_TRUE(view.visits().empty());
+}
+
+}  // namespace
+}  // namespace volreel::stream

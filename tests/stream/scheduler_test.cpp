@@ -1,0 +1,311 @@
+// scheduler_test.cpp: the scheduler end to end on small zfp containers: convergence to full
+// detail with the SVO referencing only resident slots, the per-frame upload budget, discarding of
+// stale arrivals, and I/O errors reported and retried without blocking the rest.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <fstream>
+#include <map>
+#include <thread>
+
+#include "stream_test_util.hpp"
+#include "volreel/stream/scheduler.hpp"
+
+namespace volreel::stream {
+namespace {
+
+constexpr Dims dims{40, 40, 40};
+
+/// Runs frames until done(update) or about 10 s; retires every frame at once (a synchronous
+/// renderer). Checks every upload's payload against the frame file. Returns the last update.
+template <class Done>
+FrameUpdate run_until(StreamScheduler& s, const player::OrbitCamera& cam, double playhead,
+                      std::uint64_t& frame, Done done,
+                      std::vector<BrickUpload>* uploads = nullptr) {
+  FrameUpdate u;
+  for (int i = 0; i < 5000; ++i) {
+    u = s.update(cam, playhead, frame);
+    s.retire(frame);
+    ++frame;
+    for (BrickUpload& up : u.uploads) {
+      const KeyframeId id = s.index().find_keyframe(up.key);
+      EXPECT_NE(id, no_keyframe);
+      EXPECT_EQ(up.payload.size(), s.index().keyframe(id).bytes);
+      EXPECT_EQ(up.offset, s.index().keyframe(id).offset);
+      EXPECT_EQ(up.constant, up.payload.size() == 4);
+      if (uploads) uploads->push_back(std::move(up));
+    }
+    if (done(u)) return u;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  ADD_FAILURE() << "did not converge";
+  return u;
+}
+
+/// Every leaf of the SVO references occupied slots holding keyframe nodes of the right spatial
+/// node (its own, or the ancestor its LOD difference names).
+void expect_svo_references_resident_slots(const StreamScheduler& s, const FrameUpdate& u) {
+  const auto problems =
+      validate_svo(u.svo_nodes, u.svo_leaves, s.atlas().capacity(), s.index().level_count());
+  EXPECT_TRUE(problems.empty()) << problems.front();
+  for (std::size_t l = 0; l < u.svo_leaves.size(); l += VR_SVO_LEAF_WORDS)
+    for (int k = 0; k < 2; ++k) {
+      const std::uint32_t slot = u.svo_leaves[l + static_cast<std::size_t>(k)];
+      EXPECT_EQ(s.atlas().state(slot), AtlasSlots::State::occupied) << "slot " << slot;
+      EXPECT_TRUE(s.atlas().key(slot).has_value());
+    }
+}
+
+class StreamSchedulerPolicy : public ::testing::TestWithParam<PriorityPolicy> {};
+
+TEST_P(StreamSchedulerPolicy, ConvergesToEveryVisibleFinestNodeResident) {
+  test::TempDir dir("stream-scheduler");
+  const auto path = test::make_container(dir.path(), dims, 4);
+  const format::Container c(path);
+  SchedulerSettings settings;
+  settings.atlas_slots = 64;
+  settings.priority.policy = GetParam();
+  StreamScheduler s(c, settings);
+  ASSERT_TRUE(s.errors().empty());
+  ASSERT_EQ(s.index().node_count(), 9u);
+  const auto cam = test::close_camera(dims);
+  std::uint64_t frame = 0;
+  std::vector<BrickUpload> uploads;
+  const double playhead = 1.5;
+  const FrameUpdate u = run_until(
+      s, cam, playhead, frame,
+      [&](const FrameUpdate& f) {
+        return f.stats.fraction_at_target == 1.0 && f.stats.requests_in_flight == 0 &&
+               f.stats.arrivals_waiting == 0 && f.stats.atlas_occupied == 36;
+      },
+      &uploads);
+  // All 9 nodes × 4 keyframes fit (heap and atlas of 64): every one was loaded once.
+  EXPECT_EQ(uploads.size(), 36u);
+  EXPECT_EQ(u.stats.target_nodes, 8u);
+  EXPECT_EQ(u.stats.at_target_nodes, 8u);
+  EXPECT_EQ(u.stats.holes, 0u);
+  EXPECT_EQ(u.stats.errors, 0u);
+  // The uploaded payloads are the frame files' bricks.
+  for (const BrickUpload& up : uploads) {
+    const format::FrameFile f = c.open_frame(up.key.t);
+    const std::uint32_t node = s.index().find({up.key.level, up.key.x, up.key.y, up.key.z});
+    const KeyframeNode& k = s.index().keyframe(s.index().find_keyframe(node, up.key.t));
+    const auto bytes = f.view().brick_bytes(k.brick);
+    EXPECT_TRUE(std::equal(bytes.begin(), bytes.end(), up.payload.begin(), up.payload.end()));
+  }
+  expect_svo_references_resident_slots(s, u);
+  // The root refines into 8 leaves, each interpolating its own keyframes 1 and 2 halfway.
+  ASSERT_EQ(u.svo_nodes.size(), VR_SVO_NODE_WORDS);
+  EXPECT_EQ(u.svo_nodes[9], VR_SVO_NO_LEAF);
+  for (std::uint32_t i = 0; i < 8; ++i) {
+    const std::uint32_t word = u.svo_nodes[1 + i];
+    ASSERT_EQ(vr_svo_child_kind(word), VR_SVO_CHILD_LEAF);
+    const std::uint32_t* leaf = &u.svo_leaves[vr_svo_child_index(word) * VR_SVO_LEAF_WORDS];
+    const NodeKey& child = s.index().node(s.index().node(0).children[i]).key;
+    EXPECT_EQ(s.atlas().key(leaf[0]), (KeyframeKey{child.level, child.x, child.y, child.z, 1}));
+    EXPECT_EQ(s.atlas().key(leaf[1]), (KeyframeKey{child.level, child.x, child.y, child.z, 2}));
+    EXPECT_EQ(leaf[2], vr_svo_lod_pack(0, 0));
+    EXPECT_EQ(std::bit_cast<float>(leaf[3]), 0.5f);
+  }
+  // Nothing more is requested or uploaded once everything is resident.
+  const FrameUpdate again = s.update(cam, playhead, frame++);
+  EXPECT_TRUE(again.uploads.empty());
+  EXPECT_EQ(again.stats.requests_sent, 0u);
+}
+
+INSTANTIATE_TEST_SUITE_P(Stream, StreamSchedulerPolicy,
+                         ::testing::Values(PriorityPolicy::patent,
+                                           PriorityPolicy::nearest_keyframe_first),
+                         [](const ::testing::TestParamInfo<PriorityPolicy>& param_info) {
+                           return param_info.param == PriorityPolicy::patent
+                                      ? std::string("patent")
+                                      : std::string("nearest");
+                         });
+
+TEST(StreamScheduler, TheRootArrivesFirstAndTheUploadBudgetHolds) {
+  test::TempDir dir("stream-scheduler-budget");
+  const auto path = test::make_container(dir.path(), dims, 4);
+  const format::Container c(path);
+  SchedulerSettings settings;
+  settings.atlas_slots = 64;
+  settings.upload_budget_bytes = 1;  // one upload per frame
+  settings.loader.threads = 1;       // reads complete in request order
+  StreamScheduler s(c, settings);
+  const auto cam = test::close_camera(dims);
+  std::uint64_t frame = 0;
+  std::vector<BrickUpload> uploads;
+  std::size_t max_per_frame = 0;
+  const FrameUpdate u = run_until(
+      s, cam, 0.0, frame,
+      [&](const FrameUpdate& f) {
+        max_per_frame = std::max(max_per_frame, f.uploads.size());
+        return f.stats.atlas_occupied == 36;
+      },
+      &uploads);
+  EXPECT_EQ(max_per_frame, 1u);
+  // The patent's priorities load the root's keyframe at the playhead first: the coarsest node
+  // has the largest SSE, and keyframe 0 the largest temporal priority.
+  ASSERT_FALSE(uploads.empty());
+  EXPECT_EQ(uploads.front().key, (KeyframeKey{0, 0, 0, 0, 0}));
+  expect_svo_references_resident_slots(s, u);
+}
+
+TEST(StreamScheduler, SlotsSampledByUnretiredGpuFramesAreNotOverwritten) {
+  test::TempDir dir("stream-scheduler-retire");
+  const auto path = test::make_container(dir.path(), dims, 4);
+  const format::Container c(path);
+  SchedulerSettings settings;
+  settings.atlas_slots = 2;
+  settings.priority.policy = PriorityPolicy::nearest_keyframe_first;
+  StreamScheduler s(c, settings);
+  auto cam = test::close_camera(dims);
+  cam.distance *= 100;  // the root alone is visited
+  const KeyframeKey root[4] = {{0, 0, 0, 0, 0}, {0, 0, 0, 0, 1}, {0, 0, 0, 0, 2}, {0, 0, 0, 0, 3}};
+  std::uint64_t frame = 0;
+  // Playhead 0: the two nearest keyframes of the root, 0 and 1, are loaded.
+  run_until(s, cam, 0.0, frame, [&](const FrameUpdate&) {
+    return s.atlas().is_occupied(root[0]) && s.atlas().is_occupied(root[1]);
+  });
+  // One more frame samples keyframe 0's slot (at playhead 0 both picks are keyframe 0) and is
+  // not retired.
+  const FrameUpdate sampled = s.update(cam, 0.0, frame);
+  const std::uint64_t unretired = frame++;
+  const std::uint32_t slot0 = *s.atlas().find(root[0]);
+  ASSERT_EQ(sampled.svo_leaves.size(), VR_SVO_LEAF_WORDS);
+  ASSERT_EQ(sampled.svo_leaves[0], slot0);
+  // Playhead 3: keyframes 3 and 2 are selected. Keyframe 1's slot (never sampled) takes one of
+  // them; the other waits for keyframe 0's slot, which frame `unretired` still samples.
+  std::vector<BrickUpload> uploads;
+  FrameUpdate u;
+  for (int i = 0; i < 5000; ++i) {
+    u = s.update(cam, 3.0, frame++);
+    for (auto& up : u.uploads) uploads.push_back(std::move(up));
+    if (uploads.size() == 1 && u.stats.arrivals_waiting == 1) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  ASSERT_EQ(uploads.size(), 1u);
+  EXPECT_NE(uploads[0].slot, slot0);
+  EXPECT_EQ(u.stats.arrivals_waiting, 1u);
+  EXPECT_EQ(s.atlas().find(root[0]), slot0);  // still holds keyframe 0
+  for (int i = 0; i < 20; ++i) {              // however long the GPU takes
+    u = s.update(cam, 3.0, frame++);
+    EXPECT_TRUE(u.uploads.empty());
+  }
+  // Every frame up to the last one completes: the slot is free to take.
+  s.retire(frame - 1);
+  u = s.update(cam, 3.0, frame++);
+  ASSERT_EQ(u.uploads.size(), 1u);
+  EXPECT_EQ(u.uploads[0].slot, slot0);
+  EXPECT_TRUE(s.atlas().is_occupied(root[2]));
+  EXPECT_TRUE(s.atlas().is_occupied(root[3]));
+  EXPECT_FALSE(s.atlas().find(root[0]).has_value());
+  (void)unretired;
+}
+
+TEST(StreamScheduler, AStaleArrivalIsDiscardedAndTheAtlasLeftUntouched) {
+  test::TempDir dir("stream-scheduler-stale");
+  const auto path = test::make_container(dir.path(), dims, 4);
+  const format::Container c(path);
+  SchedulerSettings settings;
+  settings.atlas_slots = 1;         // the heap keeps one keyframe node: the root's nearest
+  settings.loader.latency_s = 0.2;  // arrivals come well after the playhead moved
+  StreamScheduler s(c, settings);
+  const auto cam = test::close_camera(dims);
+  const KeyframeKey root0{0, 0, 0, 0, 0}, root3{0, 0, 0, 0, 3};
+  std::uint64_t frame = 0;
+  FrameUpdate u = s.update(cam, 0.0, frame++);
+  ASSERT_EQ(u.stats.requests_sent, 1u);
+  ASSERT_EQ(u.stats.selected, 1u);
+  // Wait until a worker has started the read (so it is not simply cancelled), then move the
+  // playhead to the end: the root's keyframe 3 is selected instead.
+  for (int i = 0; i < 10000 && s.loader().queued() > 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  std::size_t discarded = 0;
+  std::vector<BrickUpload> uploads;
+  u = run_until(
+      s, cam, 3.0, frame,
+      [&](const FrameUpdate& f) {
+        discarded += f.stats.arrivals_discarded;
+        return discarded > 0 && s.atlas().is_occupied(root3);
+      },
+      &uploads);
+  EXPECT_EQ(discarded, 1u);
+  EXPECT_FALSE(s.atlas().find(root0).has_value());
+  ASSERT_EQ(uploads.size(), 1u);
+  EXPECT_EQ(uploads[0].key, root3);
+  expect_svo_references_resident_slots(s, u);
+}
+
+TEST(StreamScheduler, AnIoErrorIsReportedAndRetriedWithoutBlockingOthers) {
+  test::TempDir dir("stream-scheduler-io");
+  const auto path = test::make_container(dir.path(), dims, 4);
+  const format::Container c(path);
+  SchedulerSettings settings;
+  settings.atlas_slots = 64;
+  settings.loader.retry_initial_s = 0.01;
+  settings.loader.retry_max_s = 0.05;
+  StreamScheduler s(c, settings);  // indexed while the files are intact
+  const auto frame2 = path / "frames/000002.vrf", moved = path / "frame2.bak";
+  std::filesystem::rename(frame2, moved);
+  const auto cam = test::close_camera(dims);
+  std::uint64_t frame = 0;
+  const auto resident_of_frame = [&](std::uint32_t t) {
+    std::uint32_t n = 0;
+    for (std::uint32_t node = 0; node < s.index().node_count(); ++node) {
+      const NodeKey& k = s.index().node(node).key;
+      n += s.atlas().is_occupied({k.level, k.x, k.y, k.z, t}) ? 1u : 0u;
+    }
+    return n;
+  };
+  std::vector<std::string> messages;
+  FrameUpdate u = run_until(s, cam, 1.5, frame, [&](const FrameUpdate& f) {
+    for (const auto& m : f.new_errors) messages.push_back(m);
+    return s.error_count() >= 2 * 9 && resident_of_frame(0) == 9 && resident_of_frame(1) == 9 &&
+           resident_of_frame(3) == 9;
+  });
+  // Every brick of frame 2 failed at least twice (retried), and the other frames loaded.
+  EXPECT_EQ(resident_of_frame(2), 0u);
+  ASSERT_FALSE(messages.empty());
+  EXPECT_NE(messages.front().find("000002.vrf"), std::string::npos) << messages.front();
+  EXPECT_NE(s.errors().back().find("will retry"), std::string::npos);
+  EXPECT_LE(s.errors().size(), settings.max_messages);
+  // Meanwhile every node is drawn, from the keyframes that are there: no holes.
+  EXPECT_EQ(u.stats.holes, 0u);
+  expect_svo_references_resident_slots(s, u);
+  // The file comes back: the retries load it.
+  std::filesystem::rename(moved, frame2);
+  u = run_until(s, cam, 1.5, frame, [&](const FrameUpdate&) { return resident_of_frame(2) == 9; });
+  EXPECT_EQ(resident_of_frame(2), 9u);
+  expect_svo_references_resident_slots(s, u);
+}
+
+TEST(StreamScheduler, ABadFrameAtIndexTimeIsReportedNotThrown) {
+  test::TempDir dir("stream-scheduler-bad-frame");
+  const auto path = test::make_container(dir.path(), dims, 4);
+  {
+    std::fstream f(path / "frames/000003.vrf", std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(200);  // inside the node table: the index CRC fails
+    f.put('\x5a');
+  }
+  const format::Container c(path);
+  SchedulerSettings settings;
+  settings.atlas_slots = 64;
+  StreamScheduler s(c, settings);
+  ASSERT_EQ(s.errors().size(), 1u);
+  EXPECT_NE(s.errors().front().find("000003.vrf"), std::string::npos) << s.errors().front();
+  const auto cam = test::close_camera(dims);
+  std::uint64_t frame = 0;
+  bool reported = false;
+  // Playhead on the bad frame: the nodes draw from frame 2, its nearest neighbour.
+  const FrameUpdate u = run_until(s, cam, 3.0, frame, [&](const FrameUpdate& f) {
+    for (const auto& m : f.new_errors) reported |= m.find("000003.vrf") != std::string::npos;
+    return f.stats.atlas_occupied == 27 && f.stats.requests_in_flight == 0;
+  });
+  EXPECT_TRUE(reported);
+  EXPECT_EQ(u.stats.holes, 0u);
+  EXPECT_EQ(u.stats.at_target_nodes, 8u);
+  expect_svo_references_resident_slots(s, u);
+}
+
+}  // namespace
+}  // namespace volreel::stream

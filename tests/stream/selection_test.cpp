@@ -1,0 +1,215 @@
+// selection_test.cpp: two keyframe nodes per spatial node with the ancestor handicap (Cesium
+// patent [0039], [0046]–[0048]) and the array-encoded SVO built from them ([0049]).
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <cmath>
+
+#include "stream_test_util.hpp"
+#include "volreel/stream/selection.hpp"
+#include "volreel/stream/svo_builder.hpp"
+
+namespace volreel::stream {
+namespace {
+
+/// Resident keyframe nodes given as (node, t), slots numbered in order.
+ResidentKeyframes resident(const SpatialIndex& index,
+                           std::initializer_list<std::pair<std::uint32_t, std::uint32_t>> list) {
+  std::vector<ResidentKeyframe> entries;
+  std::uint32_t slot = 0;
+  for (const auto& [node, t] : list) entries.push_back({index.find_keyframe(node, t), slot++});
+  ResidentKeyframes r;
+  r.assign(index, entries);
+  return r;
+}
+
+class StreamSelection : public ::testing::Test {
+ protected:
+  // 40³: a root and 8 finest children; 10 time steps.
+  SpatialIndex index = test::make_index({40, 40, 40}, 10);
+  std::uint32_t child = index.find({1, 0, 0, 0});
+};
+
+TEST_F(StreamSelection, Paragraph0039Example) {
+  ASSERT_EQ(index.level_count(), 2u);
+  ASSERT_NE(child, no_node);
+  // Playhead 5.5; detailed (finest) keyframes at 5 and 7, a coarser one (the root) at 6.
+  const auto r = resident(index, {{child, 5}, {child, 7}, {0, 6}});
+  const KeyframePair p = select_keyframe_pair(index, child, 5.5, r);
+  // Before: own 5 at distance 0.5; the root has nothing before 5.5, so its 6 stands in at
+  // 0.5·200·e^4. After: own 7 at 1.5 beats the root's 6 at 0.5·e^4 ≈ 27.3. The formulas keep the
+  // detailed pair (visual quality); the patent's example pair (5, coarse 6) needs a weaker
+  // handicap.
+  EXPECT_EQ(p.a.t, 5u);
+  EXPECT_EQ(p.a.lod_difference, 0u);
+  EXPECT_DOUBLE_EQ(p.a.score, 0.5);
+  EXPECT_EQ(p.b.t, 7u);
+  EXPECT_EQ(p.b.lod_difference, 0u);
+  EXPECT_DOUBLE_EQ(p.b.score, 1.5);
+  EXPECT_FLOAT_EQ(p.factor, 0.25f);
+  EXPECT_TRUE(p.at_full_detail());
+  EXPECT_EQ(p.a.slot, 0u);
+  EXPECT_EQ(p.b.slot, 1u);
+
+  // With handicap exp(1·up): 0.5·e ≈ 1.36 < 1.5, so the coarser keyframe at 6 is taken — the
+  // patent's example interpolates between 5.0 (detailed) and 6.0 (coarser).
+  SelectionSettings weak;
+  weak.ancestor_handicap = 1.0;
+  const KeyframePair q = select_keyframe_pair(index, child, 5.5, r, weak);
+  EXPECT_EQ(q.a.t, 5u);
+  EXPECT_EQ(q.b.t, 6u);
+  EXPECT_EQ(q.b.lod_difference, 1u);
+  EXPECT_FALSE(q.b.exact);
+  EXPECT_DOUBLE_EQ(q.b.score, 0.5 * std::exp(1.0));
+  EXPECT_FLOAT_EQ(q.factor, 0.5f);
+  EXPECT_FALSE(q.drawn_by_ancestor());
+}
+
+TEST_F(StreamSelection, MissingSideFallsBackToTheAncestor) {
+  // Only 5 is resident at the node: its "after" side is missing (5 stands in at 0.5·200 = 100),
+  // so the root's 6 at 0.5·e^4 ≈ 27.3 wins.
+  const auto r = resident(index, {{child, 5}, {0, 6}});
+  const KeyframePair p = select_keyframe_pair(index, child, 5.5, r);
+  EXPECT_EQ(p.a.t, 5u);
+  EXPECT_EQ(p.a.lod_difference, 0u);
+  EXPECT_EQ(p.b.t, 6u);
+  EXPECT_EQ(p.b.lod_difference, 1u);
+  EXPECT_DOUBLE_EQ(p.b.score, 0.5 * std::exp(4.0));
+  EXPECT_FLOAT_EQ(p.factor, 0.5f);
+  // Nothing at all on either side of the root: the missing side uses the same keyframe.
+  const auto only_root = resident(index, {{0, 6}});
+  const KeyframePair root_pair = select_keyframe_pair(index, 0, 5.5, only_root);
+  EXPECT_EQ(root_pair.a.t, 6u);
+  EXPECT_DOUBLE_EQ(root_pair.a.score, 0.5 * 200);
+  EXPECT_EQ(root_pair.b.t, 6u);
+  EXPECT_FLOAT_EQ(root_pair.factor, 0.0f);
+  // The child with only the root resident: both picks from the ancestor, drawn by it ([0048]).
+  const KeyframePair c = select_keyframe_pair(index, child, 5.5, only_root);
+  EXPECT_TRUE(c.valid());
+  EXPECT_TRUE(c.drawn_by_ancestor());
+  // Nothing resident: no pair.
+  EXPECT_FALSE(select_keyframe_pair(index, child, 5.5, resident(index, {})).valid());
+  // On a keyframe: both sides pick it.
+  const auto on = resident(index, {{child, 5}, {child, 7}});
+  const KeyframePair e = select_keyframe_pair(index, child, 5.0, on);
+  EXPECT_EQ(e.a.t, 5u);
+  EXPECT_EQ(e.b.t, 5u);
+  EXPECT_FLOAT_EQ(e.factor, 0.0f);
+}
+
+/// A constant subtree: the root of frame 1 is `empty`, so frame 1 has no finest bricks.
+TEST(StreamSelectionConstant, AConstantAncestorIsExactData) {
+  const Dims dims{40, 40, 40};
+  Volume varying(dims), constant(dims);
+  datasets::AnalyticParams p;
+  p.dims = dims;
+  datasets::analytic_frame(p, 0, varying.data);
+  std::fill(constant.data.begin(), constant.data.end(), 0.25f);
+  const encoder::FrameEncoder enc(nullptr, test::zfp_coding());
+  const auto b0 = enc.encode(0, varying), b1 = enc.encode(1, constant), b2 = enc.encode(2, varying);
+  SpatialIndexBuilder builder({40, 40, 40}, 3);
+  builder.add_frame(0, format::FrameView(b0, "0.vrf"), "0.vrf");
+  builder.add_frame(1, format::FrameView(b1, "1.vrf"), "1.vrf");
+  builder.add_frame(2, format::FrameView(b2, "2.vrf"), "2.vrf");
+  const SpatialIndex index = std::move(builder).build();
+  const std::uint32_t child = index.find({1, 1, 1, 1});
+  ASSERT_NE(child, no_node);
+  ASSERT_TRUE(index.keyframe(index.find_keyframe(0, 1)).subtree_constant);
+  EXPECT_TRUE(index.keyframe(index.find_keyframe(0, 1)).constant);
+  EXPECT_EQ(index.find_keyframe(child, 1), no_keyframe);  // nothing below a constant root
+  EXPECT_EQ(index.keyframes(child).size(), 2u);
+  // Playhead 0.75: the child's own 0 before; after, the constant root at 1 is exact (no
+  // handicap: 0.25 beats the child's own 2 at 1.25).
+  const auto r = resident(index, {{child, 0}, {child, 2}, {0, 1}});
+  const KeyframePair pair = select_keyframe_pair(index, child, 0.75, r);
+  EXPECT_EQ(pair.a.t, 0u);
+  EXPECT_EQ(pair.b.t, 1u);
+  EXPECT_EQ(pair.b.lod_difference, 1u);
+  EXPECT_TRUE(pair.b.exact);
+  EXPECT_DOUBLE_EQ(pair.b.score, 0.25);
+  EXPECT_TRUE(pair.at_full_detail());
+  EXPECT_FLOAT_EQ(pair.factor, 0.75f);
+}
+
+TEST_F(StreamSelection, SvoOfPartlyResidentData) {
+  const player::OrbitCamera cam = test::close_camera({40, 40, 40});
+  ViewTraversal view;
+  view.run(index, cam, 1.0);
+  ASSERT_EQ(view.visits().size(), 9u);
+  ASSERT_TRUE(view.visit(0).refine);
+  // Root at 5 and 6; child octant 0 at 5 and 6; octant 3 only at 5 (its after side comes from
+  // the root); the other children have nothing (drawn by the root).
+  const std::uint32_t c0 = index.node(0).children[0], c3 = index.node(0).children[3];
+  const auto r = resident(index, {{0, 5}, {0, 6}, {c0, 5}, {c0, 6}, {c3, 5}});
+  SvoStats stats;
+  const SvoArrays svo = build_svo(index, view, r, 5.25, {}, &stats);
+  EXPECT_TRUE(validate_svo(svo.nodes, svo.leaves, 5, index.level_count()).empty());
+  ASSERT_EQ(svo.nodes.size(), VR_SVO_NODE_WORDS);  // the root's record only
+  ASSERT_EQ(svo.leaves.size(), 3 * VR_SVO_LEAF_WORDS);
+  EXPECT_EQ(svo.nodes[0], VR_SVO_NO_PARENT);
+  const auto kind = [&](std::size_t octant) { return vr_svo_child_kind(svo.nodes[1 + octant]); };
+  EXPECT_EQ(kind(0), VR_SVO_CHILD_LEAF);
+  EXPECT_EQ(kind(3), VR_SVO_CHILD_LEAF);
+  for (std::size_t o : {1u, 2u, 4u, 5u, 6u, 7u}) EXPECT_EQ(kind(o), VR_SVO_CHILD_UP) << o;
+  // Octant 0's leaf: slots 2 and 3 (its own 5 and 6), d = 0, factor 0.25.
+  const std::uint32_t* l0 = &svo.leaves[vr_svo_child_index(svo.nodes[1]) * VR_SVO_LEAF_WORDS];
+  EXPECT_EQ(l0[0], 2u);
+  EXPECT_EQ(l0[1], 3u);
+  EXPECT_EQ(l0[2], vr_svo_lod_pack(0, 0));
+  EXPECT_EQ(std::bit_cast<float>(l0[3]), 0.25f);
+  // Octant 3's leaf: its own 5 (slot 4) and the root's 6 (slot 1) one level up.
+  const std::uint32_t* l3 = &svo.leaves[vr_svo_child_index(svo.nodes[4]) * VR_SVO_LEAF_WORDS];
+  EXPECT_EQ(l3[0], 4u);
+  EXPECT_EQ(l3[1], 1u);
+  EXPECT_EQ(l3[2], vr_svo_lod_pack(0, 1));
+  // The root's own leaf draws the other octants.
+  const std::uint32_t* own = &svo.leaves[svo.nodes[9] * VR_SVO_LEAF_WORDS];
+  EXPECT_EQ(own[0], 0u);
+  EXPECT_EQ(own[1], 1u);
+  EXPECT_EQ(stats.target_nodes, 8u);
+  EXPECT_EQ(stats.at_target_nodes, 1u);
+  EXPECT_EQ(stats.ancestor_drawn, 6u);
+  EXPECT_EQ(stats.used_slots, (std::vector<std::uint32_t>{0, 1, 2, 3, 4}));
+
+  // Only the root resident: one record, every octant drawn by its own leaf.
+  const SvoArrays root_only = build_svo(index, view, resident(index, {{0, 5}}), 5.25);
+  EXPECT_TRUE(validate_svo(root_only.nodes, root_only.leaves, 1, 2).empty());
+  ASSERT_EQ(root_only.nodes.size(), VR_SVO_NODE_WORDS);
+  ASSERT_EQ(root_only.leaves.size(), VR_SVO_LEAF_WORDS);
+  for (int o = 0; o < 8; ++o)
+    EXPECT_EQ(vr_svo_child_kind(root_only.nodes[1 + static_cast<std::size_t>(o)]), VR_SVO_CHILD_UP);
+  // Nothing resident: every octant empty, no leaf.
+  const SvoArrays none = build_svo(index, view, resident(index, {}), 5.25);
+  EXPECT_TRUE(validate_svo(none.nodes, none.leaves, 1, 2).empty());
+  EXPECT_EQ(none.nodes[9], VR_SVO_NO_LEAF);
+  EXPECT_TRUE(none.leaves.empty());
+}
+
+TEST(StreamSvo, ValidationFindsBrokenTrees) {
+  // A root with a node child whose parent word is wrong, a leaf with a slot out of range and a
+  // LOD difference deeper than its node.
+  std::vector<std::uint32_t> nodes(2 * VR_SVO_NODE_WORDS, 0),
+      leaves{7, 0, vr_svo_lod_pack(0, 3), std::bit_cast<std::uint32_t>(0.5f)};
+  nodes[0] = VR_SVO_NO_PARENT;
+  nodes[1] = vr_svo_child_word(VR_SVO_CHILD_NODE, 1);
+  for (int i = 2; i <= 8; ++i)
+    nodes[static_cast<std::size_t>(i)] = vr_svo_child_word(VR_SVO_CHILD_EMPTY, 0);
+  nodes[9] = VR_SVO_NO_LEAF;
+  nodes[10] = 5;  // wrong parent
+  nodes[11] = vr_svo_child_word(VR_SVO_CHILD_LEAF, 0);
+  for (int i = 12; i <= 18; ++i)
+    nodes[static_cast<std::size_t>(i)] = vr_svo_child_word(VR_SVO_CHILD_EMPTY, 0);
+  nodes[19] = VR_SVO_NO_LEAF;
+  const auto problems = validate_svo(nodes, leaves, 4, 3);
+  EXPECT_EQ(problems.size(), 3u);
+  // Fixed, it validates.
+  nodes[10] = 0;
+  leaves[0] = 1;
+  leaves[2] = vr_svo_lod_pack(0, 2);
+  EXPECT_TRUE(validate_svo(nodes, leaves, 4, 3).empty());
+  // A record deeper than the octree's levels.
+  EXPECT_FALSE(validate_svo(nodes, leaves, 4, 2).empty());
+}
+
+}  // namespace
+}  // namespace volreel::stream
