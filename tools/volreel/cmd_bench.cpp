@@ -99,6 +99,9 @@ void add_bench_command(CLI::App& app) {
   o->reader.add_to(*rd);
   rd->callback([o] { run_rd(*o); });
   add_bench_train_command(*bench);
+#ifdef VOLREEL_HAVE_PLAYER
+  add_bench_decode_command(*bench);
+#endif
 }
 
 }  // namespace volreel::cli

@@ -15,6 +15,8 @@ void add_train_command(CLI::App& app);
 void add_encode_command(CLI::App& app);
 /// `bench train`, registered by add_bench_command under `bench`.
 void add_bench_train_command(CLI::App& bench);
+/// `bench decode` (cmd_bench_decode.cpp; needs the player's Vulkan decoder).
+void add_bench_decode_command(CLI::App& bench);
 
 /// Options that say how to read a series whose file does not describe itself; shared by every
 /// command that reads one.

@@ -1,0 +1,119 @@
+// atlas_decoder.hpp: decodes batches of compressed bricks into atlas slots with a compute shader
+// (MTV-Player §4.2): the batch's payloads go into a linear storage buffer with one record per
+// brick {payload word offset, slot, kind, payload words}; the dictionary stays in a storage buffer
+// for the dataset's life; one workgroup decodes one brick (shaders/decode/decode_bricks.comp).
+//
+// Kinds: ksvd payloads are decoded on the GPU; 4-byte payloads (constant bricks) are filled
+// without reading codes; zfp payloads are decoded on the CPU (format::decode_payload) and uploaded
+// as 36³ float32 values.
+//
+// Staging: a ring of host-visible buffers, each of `upload_budget_bytes` (the most a frame
+// uploads). A batch larger than one buffer is split over several ring entries. A ring entry is
+// reused only after the fence of its previous submission signaled, so staging memory is never
+// overwritten while the GPU reads it. All submissions go to the context's single queue; each decode
+// command buffer starts with a barrier after all earlier compute and transfer work on that queue
+// and ends with one that makes its atlas writes visible to later compute shader reads and
+// transfers, so a slot is never overwritten while an earlier submitted compute pass (a ray caster)
+// still reads it.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "volreel/format/decoder.hpp"
+#include "volreel/vulkan/atlas.hpp"
+#include "volreel/vulkan/context.hpp"
+#include "volreel/vulkan/resources.hpp"
+
+namespace volreel::vulkan {
+
+/// One brick to decode: its payload as stored in the frame file and its destination slot.
+struct BrickUpload {
+  std::span<const std::byte> payload;
+  format::Codec codec = format::Codec::ksvd;
+  double zfp_accuracy = 0;  ///< the frame's codec_parameter (zfp only)
+  std::uint32_t slot = 0;
+};
+
+struct DecoderOptions {
+  /// Bytes of one staging buffer = the most one submission uploads (≥ 1 MiB: a zfp brick
+  /// uploads 36³ float32 = 186 624 bytes).
+  std::uint64_t upload_budget_bytes = std::uint64_t{8} << 20;
+  /// Staging buffers in the ring (≥ 1): submissions that may be in flight at once.
+  std::uint32_t ring_size = 3;
+};
+
+/// Identifies a submission; 0 means "nothing", always complete. Increases with each submission.
+using Ticket = std::uint64_t;
+
+/// Not thread-safe: one thread submits, waits and reads back.
+class AtlasDecoder {
+ public:
+  /// Builds the pipeline and the staging ring. The context and the atlas must outlive it.
+  AtlasDecoder(const Context& context, const Atlas& atlas, const DecoderOptions& options = {});
+  ~AtlasDecoder();
+  AtlasDecoder(const AtlasDecoder&) = delete;
+  AtlasDecoder& operator=(const AtlasDecoder&) = delete;
+
+  /// Uploads the dictionary (K atoms of 216 float32) for ksvd bricks; waits for all submissions
+  /// first. Throws Error on a Vulkan failure.
+  void set_dictionary(const format::AtomTable& atoms);
+
+  /// Uploads and decodes a batch; returns the ticket of its last submission. Blocks while the
+  /// next ring entry is still in use. Validates every payload first (ksvd: length against the
+  /// block sparsities, atom indices < K, finite dequantization values; constants finite) and
+  /// throws format::FormatError ("brick upload N: ...") on a bad one (a bad zfp stream is found
+  /// only when it is decoded, after the bricks before it were submitted), or std::invalid_argument
+  /// for a slot outside the atlas, a slot named twice in the batch (the order of writes inside
+  /// one dispatch is undefined) or a ksvd brick without a dictionary. Nothing is submitted then.
+  Ticket submit(std::span<const BrickUpload> batch);
+  /// Whether the submission `ticket` (and every earlier one) finished.
+  bool poll(Ticket ticket) const;
+  /// Waits for submission `ticket` and every earlier one.
+  void wait(Ticket ticket) const;
+  void wait_all() const { wait(last_ticket_); }
+  Ticket last_ticket() const { return last_ticket_; }
+
+  /// Reads slots back from the atlas as values (36³ each, x fastest, concatenated in the order
+  /// given); waits for every submission first. For tests and benchmarks.
+  std::vector<float> read_slots(std::span<const std::uint32_t> slots) const;
+  std::vector<float> read_slot(std::uint32_t slot) const { return read_slots({&slot, 1}); }
+
+  /// Bytes that uploading `brick` takes in a staging buffer (its record included).
+  static std::uint64_t upload_bytes(const BrickUpload& brick);
+
+  struct Stats {
+    std::uint64_t bricks = 0, submissions = 0;
+    std::uint64_t uploaded_bytes = 0;  ///< staging bytes written (records, payloads, zfp floats)
+    double cpu_zfp_seconds = 0;        ///< CPU time decoding zfp bricks in submit
+  };
+  const Stats& stats() const { return stats_; }
+  const DecoderOptions& options() const { return options_; }
+
+ private:
+  struct RingEntry;
+  void record_and_submit(RingEntry& entry, std::uint32_t bricks, std::uint64_t bytes);
+  void write_descriptors(RingEntry& entry) const;
+
+  const Context& context_;
+  const Atlas& atlas_;
+  DecoderOptions options_;
+  DescriptorSetLayout set_layout_;
+  ShaderModule shader_;
+  ComputePipeline pipeline_;
+  DescriptorPool descriptor_pool_;
+  CommandPool command_pool_;
+  Buffer atoms_;
+  std::uint32_t atom_count_ = 0;
+  std::vector<RingEntry> ring_;
+  std::size_t next_entry_ = 0;
+  Ticket last_ticket_ = 0;
+  Stats stats_;
+  std::vector<float> zfp_scratch_;
+  std::vector<std::uint64_t> slot_mark_;  ///< per slot, the last submit() call that named it
+  std::uint64_t submit_calls_ = 0;
+};
+
+}  // namespace volreel::vulkan

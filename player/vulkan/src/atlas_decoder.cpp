@@ -1,0 +1,381 @@
+// atlas_decoder.cpp: staging ring, batch layout and submission of the decode compute pass
+// (see atlas_decoder.hpp and shaders/decode/decode_bricks.comp).
+#include "volreel/vulkan/atlas_decoder.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
+#include "volreel/format/brick_decode.h"
+#include "volreel/format/error.hpp"
+#include "volreel/player/atlas_layout.h"
+#include "volreel_decode_bricks_r16_spv.h"
+#include "volreel_decode_bricks_r16f_spv.h"
+
+namespace volreel::vulkan {
+
+namespace {
+
+// Record kinds, as in decode_bricks.comp.
+constexpr std::uint32_t kind_ksvd = 0, kind_constant = 1, kind_raw = 2;
+constexpr std::uint64_t record_bytes = 16;  // {payload word offset, slot, kind, payload words}
+constexpr std::uint64_t raw_bytes = std::uint64_t{format::brick_voxels} * 4;
+constexpr std::uint32_t max_bricks_per_dispatch = 65535;  // maxComputeWorkGroupCount[0] minimum
+constexpr std::uint32_t max_payload_words = 1732;         // decode_bricks.comp's shared copy
+
+std::uint32_t kind_of(const BrickUpload& brick) {
+  if (brick.payload.size() == 4) return kind_constant;
+  return brick.codec == format::Codec::ksvd ? kind_ksvd : kind_raw;
+}
+
+struct PushConstants {
+  std::uint32_t grid_x, grid_y;
+  float value_min, inv_range;
+};
+static_assert(sizeof(PushConstants) == 16);
+
+/// The checks of the CPU reference decoder (format/decoder.cpp) on a payload that is not read
+/// there: header finite, length against the sparsities, atom indices < K.
+void validate_upload(const BrickUpload& brick, std::size_t index, std::uint32_t atom_count) {
+  const std::string name = "brick upload " + std::to_string(index);
+  const auto fail = [&](std::uint64_t offset, const std::string& expected,
+                        const std::string& found) {
+    throw format::FormatError(name, offset, expected, found);
+  };
+  const std::span<const std::byte> bytes = brick.payload;
+  const auto word = [&](std::size_t i) {
+    vr_uint w;
+    std::memcpy(&w, bytes.data() + 4 * i, 4);
+    return w;
+  };
+  const std::uint32_t kind = kind_of(brick);
+  if (kind == kind_constant) {
+    if (!std::isfinite(vr_as_float(word(0)))) fail(0, "a finite constant", "NaN or infinity");
+    return;
+  }
+  if (kind == kind_raw) return;  // decoded (and checked) by format::decode_payload
+  if (atom_count == 0)
+    throw std::invalid_argument(name +
+                                ": a ksvd brick but no dictionary (AtlasDecoder::set_dictionary)");
+  if (bytes.size() < vr_payload_bytes(0) || bytes.size() % 4 != 0)
+    fail(0, "a ksvd payload of at least 448 bytes, a multiple of 4",
+         std::to_string(bytes.size()) + " bytes");
+  for (std::uint32_t w = 0; w < VR_HEADER_WORDS; ++w)
+    if (!std::isfinite(vr_as_float(word(w))))
+      fail(4 * w, "finite dequantization value", "NaN or infinity");
+  const auto unit = [&](std::uint32_t u) {
+    const vr_uint w = word(u >> 1);
+    return (u & 1u) ? (w >> 16) : (w & 0xFFFFu);
+  };
+  std::uint32_t codes = 0;
+  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+    codes += vr_entry_sparsity(unit(2 * VR_HEADER_WORDS + b));
+  const std::uint64_t need = vr_payload_bytes(codes);
+  if (bytes.size() < need || bytes.size() >= need + 4)
+    fail(0,
+         std::to_string(need) + " payload bytes for " + std::to_string(codes) +
+             " codes (+ padding to 4)",
+         std::to_string(bytes.size()) + " bytes");
+  for (std::uint32_t k = 0; k < codes; ++k) {
+    const std::uint32_t a = vr_code_atom(unit(vr_code_unit(k)));
+    if (a >= atom_count)
+      fail(2u * vr_code_unit(k), "atom index < " + std::to_string(atom_count), std::to_string(a));
+  }
+}
+
+}  // namespace
+
+struct AtlasDecoder::RingEntry {
+  Buffer staging;  ///< host-visible: records, then payloads
+  Buffer device;   ///< device-local copy the shader reads, unless staging is device-local itself
+  VkCommandBuffer commands = VK_NULL_HANDLE;
+  Fence fence;  ///< signaled when the entry is free
+  VkDescriptorSet set = VK_NULL_HANDLE;
+  Ticket ticket = 0;  ///< the last submission that used this entry
+  const Buffer& shader_buffer() const { return device.handle() ? device : staging; }
+};
+
+std::uint64_t AtlasDecoder::upload_bytes(const BrickUpload& brick) {
+  switch (kind_of(brick)) {
+    case kind_constant:
+      return record_bytes + 4;
+    case kind_raw:
+      return record_bytes + raw_bytes;
+    default:
+      return record_bytes + (brick.payload.size() + 3) / 4 * 4;
+  }
+}
+
+AtlasDecoder::AtlasDecoder(const Context& context, const Atlas& atlas,
+                           const DecoderOptions& options)
+    : context_(context), atlas_(atlas), options_(options) {
+  // 1. Budget: whole words, room for a zfp brick, within the largest storage buffer binding.
+  options_.upload_budget_bytes = options_.upload_budget_bytes / 4 * 4;
+  if (options_.upload_budget_bytes < (std::uint64_t{1} << 20) || options_.ring_size == 0)
+    throw std::invalid_argument(
+        "AtlasDecoder: upload budget must be >= 1 MiB and the ring >= 1 buffer");
+  options_.upload_budget_bytes = std::min<std::uint64_t>(
+      options_.upload_budget_bytes, context.limits().maxStorageBufferRange / 4 * 4);
+  // 2. Pipeline: batch, dictionary, atlas.
+  const VkDescriptorSetLayoutBinding bindings[] = {
+      {0, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
+      {1, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
+      {2, VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr}};
+  set_layout_ = DescriptorSetLayout(context, bindings);
+  if (atlas.format() == AtlasFormat::r16_unorm)
+    shader_ = ShaderModule(context, volreel_decode_bricks_r16_spv);
+  else
+    shader_ = ShaderModule(context, volreel_decode_bricks_r16f_spv);
+  const VkDescriptorSetLayout set_layout = set_layout_.handle();
+  pipeline_ = ComputePipeline(context, shader_, {&set_layout, 1}, sizeof(PushConstants));
+  const VkDescriptorPoolSize sizes[] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 2 * options_.ring_size},
+                                        {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, options_.ring_size}};
+  descriptor_pool_ = DescriptorPool(context, sizes, options_.ring_size);
+  command_pool_ = CommandPool(context);
+  // 3. A placeholder dictionary (one atom) until set_dictionary: every binding stays valid.
+  atoms_ = Buffer(context, 4 * VR_BLOCK_LENGTH,
+                  VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                  VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+  context.submit_and_wait([&](VkCommandBuffer commands) {
+    vkCmdFillBuffer(commands, atoms_.handle(), 0, VK_WHOLE_SIZE, 0);
+    memory_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                   VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT);
+  });
+  // 4. The staging ring.
+  const std::vector<VkCommandBuffer> commands = command_pool_.allocate(options_.ring_size);
+  ring_.resize(options_.ring_size);
+  for (std::uint32_t i = 0; i < options_.ring_size; ++i) {
+    RingEntry& e = ring_[i];
+    e.staging = Buffer(context, options_.upload_budget_bytes,
+                       VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
+                       VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
+                       VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+    if (!e.staging.device_local())
+      e.device = Buffer(context, options_.upload_budget_bytes,
+                        VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                        VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+    e.commands = commands[i];
+    e.fence = Fence(context, true);
+    e.set = descriptor_pool_.allocate(set_layout);
+    write_descriptors(e);
+  }
+}
+
+AtlasDecoder::~AtlasDecoder() {
+  // Nothing may be destroyed while the GPU still uses it; errors cannot leave a destructor.
+  for (const RingEntry& e : ring_)
+    if (e.fence.handle()) {
+      VkFence fence = e.fence.handle();
+      vkWaitForFences(context_.device(), 1, &fence, VK_TRUE, UINT64_MAX);
+    }
+}
+
+void AtlasDecoder::write_descriptors(RingEntry& entry) const {
+  const VkDevice device = context_.device();
+  write_storage_buffer(device, entry.set, 0, entry.shader_buffer().handle());
+  write_storage_buffer(device, entry.set, 1, atoms_.handle());
+  write_storage_image(device, entry.set, 2, atlas_.view());
+}
+
+void AtlasDecoder::set_dictionary(const format::AtomTable& atoms) {
+  const std::uint64_t values = std::uint64_t{atoms.count} * VR_BLOCK_LENGTH;
+  if (atoms.count == 0 || atoms.values.size() < values)
+    throw std::invalid_argument("AtlasDecoder::set_dictionary: " + std::to_string(atoms.count) +
+                                " atoms need " + std::to_string(values) +
+                                " values, the table has " + std::to_string(atoms.values.size()));
+  if (atoms.count > (1u << VR_ATOM_BITS))
+    throw std::invalid_argument("AtlasDecoder::set_dictionary: more atoms than 10-bit codes index");
+  wait_all();
+  Buffer staging(context_, 4 * values, VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
+                 VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT);
+  std::memcpy(staging.mapped(), atoms.values.data(), 4 * values);
+  Buffer table(context_, 4 * values,
+               VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+               VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+  context_.submit_and_wait([&](VkCommandBuffer commands) {
+    const VkBufferCopy region{0, 0, 4 * values};
+    vkCmdCopyBuffer(commands, staging.handle(), table.handle(), 1, &region);
+    memory_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                   VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT);
+  });
+  atoms_ = std::move(table);
+  atom_count_ = atoms.count;
+  for (RingEntry& e : ring_) write_descriptors(e);
+}
+
+Ticket AtlasDecoder::submit(std::span<const BrickUpload> batch) {
+  // 1. Check everything before anything is uploaded.
+  slot_mark_.resize(atlas_.slot_count(), 0);
+  ++submit_calls_;
+  for (std::size_t i = 0; i < batch.size(); ++i) {
+    if (batch[i].slot >= atlas_.slot_count())
+      throw std::invalid_argument("brick upload " + std::to_string(i) + ": slot " +
+                                  std::to_string(batch[i].slot) + " outside the atlas (" +
+                                  std::to_string(atlas_.slot_count()) + " slots)");
+    if (slot_mark_[batch[i].slot] == submit_calls_)
+      throw std::invalid_argument("brick upload " + std::to_string(i) + ": slot " +
+                                  std::to_string(batch[i].slot) + " named twice in one batch");
+    slot_mark_[batch[i].slot] = submit_calls_;
+    validate_upload(batch[i], i, atom_count_);
+  }
+  const std::uint64_t budget = options_.upload_budget_bytes;
+  std::size_t next = 0;
+  while (next < batch.size()) {
+    // 2. The next ring entry, once the GPU is done with it.
+    RingEntry& entry = ring_[next_entry_];
+    next_entry_ = (next_entry_ + 1) % ring_.size();
+    entry.fence.wait();
+    // 3. As many bricks as fit the staging buffer: records first, then the payloads.
+    std::size_t end = next;
+    std::uint64_t bytes = 0;
+    while (end < batch.size() && end - next < max_bricks_per_dispatch &&
+           bytes + upload_bytes(batch[end]) <= budget)
+      bytes += upload_bytes(batch[end++]);
+    if (end == next)
+      throw std::invalid_argument("brick upload " + std::to_string(next) + " needs " +
+                                  std::to_string(upload_bytes(batch[next])) +
+                                  " bytes, more than the upload budget of " +
+                                  std::to_string(budget));
+    const auto count = static_cast<std::uint32_t>(end - next);
+    auto* words = reinterpret_cast<std::uint32_t*>(entry.staging.mapped());
+    std::uint32_t cursor = 4 * count;  // word offset of the next payload
+    for (std::uint32_t i = 0; i < count; ++i) {
+      const BrickUpload& brick = batch[next + i];
+      const std::uint32_t kind = kind_of(brick);
+      std::uint32_t payload_words = 0;
+      if (kind == kind_raw) {
+        // zfp: decoded on the CPU by the reference decoder, uploaded as float32.
+        const auto start = std::chrono::steady_clock::now();
+        zfp_scratch_.resize(format::brick_voxels);
+        format::decode_payload(brick.payload, format::Codec::zfp, brick.zfp_accuracy, {},
+                               zfp_scratch_, "brick upload " + std::to_string(next + i), 0);
+        stats_.cpu_zfp_seconds +=
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        payload_words = format::brick_voxels;
+        std::memcpy(words + cursor, zfp_scratch_.data(), raw_bytes);
+      } else {
+        payload_words = static_cast<std::uint32_t>(brick.payload.size() / 4);
+        if (payload_words > max_payload_words)
+          payload_words = max_payload_words;  // validated above
+        std::memcpy(words + cursor, brick.payload.data(), 4 * std::size_t{payload_words});
+      }
+      words[4 * i + 0] = cursor;
+      words[4 * i + 1] = brick.slot;
+      words[4 * i + 2] = kind;
+      words[4 * i + 3] = payload_words;
+      cursor += payload_words;
+    }
+    entry.staging.flush(0, VK_WHOLE_SIZE);
+    record_and_submit(entry, count, std::uint64_t{cursor} * 4);
+    stats_.bricks += count;
+    stats_.uploaded_bytes += std::uint64_t{cursor} * 4;
+    next = end;
+  }
+  return last_ticket_;
+}
+
+void AtlasDecoder::record_and_submit(RingEntry& entry, std::uint32_t bricks, std::uint64_t bytes) {
+  const VkCommandBuffer commands = entry.commands;
+  begin_commands(commands);
+  // 1. After all earlier compute and transfer work on this queue: earlier decodes of the same
+  //    slots, readbacks, a ray caster sampling the slots this batch overwrites.
+  memory_barrier(
+      commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+      VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT,
+      VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+      VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
+  // 2. Staging → device-local batch buffer where they differ.
+  if (entry.device.handle()) {
+    const VkBufferCopy region{0, 0, bytes};
+    vkCmdCopyBuffer(commands, entry.staging.handle(), entry.device.handle(), 1, &region);
+    memory_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                   VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT);
+  }
+  // 3. One workgroup per brick.
+  const PushConstants push{atlas_.grid().x, atlas_.grid().y, atlas_.value_min(),
+                           1.0f / (atlas_.value_max() - atlas_.value_min())};
+  vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.handle());
+  vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.layout(), 0, 1,
+                          &entry.set, 0, nullptr);
+  vkCmdPushConstants(commands, pipeline_.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push,
+                     &push);
+  vkCmdDispatch(commands, bricks, 1, 1);
+  // 4. The slots' new values visible to later compute reads (the ray caster) and copies.
+  memory_barrier(
+      commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+      VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+      VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_READ_BIT);
+  end_commands(commands);
+  entry.fence.reset();
+  VkSubmitInfo info{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+  info.commandBufferCount = 1;
+  info.pCommandBuffers = &commands;
+  context_.submit(info, entry.fence.handle());
+  entry.ticket = ++last_ticket_;
+  ++stats_.submissions;
+}
+
+bool AtlasDecoder::poll(Ticket ticket) const {
+  for (const RingEntry& e : ring_)
+    if (e.ticket != 0 && e.ticket <= ticket && !e.fence.signaled()) return false;
+  return true;
+}
+
+void AtlasDecoder::wait(Ticket ticket) const {
+  for (const RingEntry& e : ring_)
+    if (e.ticket != 0 && e.ticket <= ticket) e.fence.wait();
+}
+
+std::vector<float> AtlasDecoder::read_slots(std::span<const std::uint32_t> slots) const {
+  wait_all();
+  constexpr std::uint64_t slot_texels = format::brick_voxels;
+  constexpr std::size_t chunk = 64;  // slots per readback
+  std::vector<float> values(slots.size() * slot_texels);
+  if (slots.empty()) return values;
+  Buffer readback(context_, std::min(chunk, slots.size()) * slot_texels * 2,
+                  VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                  VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
+                  VK_MEMORY_PROPERTY_HOST_CACHED_BIT);
+  for (std::size_t first = 0; first < slots.size(); first += chunk) {
+    const std::size_t n = std::min(chunk, slots.size() - first);
+    std::vector<VkBufferImageCopy> regions(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint32_t slot = slots[first + i];
+      if (slot >= atlas_.slot_count())
+        throw std::invalid_argument("read_slots: slot " + std::to_string(slot) +
+                                    " outside the atlas");
+      VkBufferImageCopy& r = regions[i];
+      r.bufferOffset = i * slot_texels * 2;
+      r.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+      r.imageOffset = atlas_.slot_origin(slot);
+      r.imageExtent = {VR_ATLAS_SLOT_SIZE, VR_ATLAS_SLOT_SIZE, VR_ATLAS_SLOT_SIZE};
+    }
+    context_.submit_and_wait([&](VkCommandBuffer commands) {
+      // The atlas leaves GENERAL only for the copy (the layout copies are fastest in).
+      const VkImage image = atlas_.image().handle();
+      image_barrier(commands, image, VK_IMAGE_LAYOUT_GENERAL, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
+                    VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                    VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT,
+                    VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
+      vkCmdCopyImageToBuffer(commands, image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
+                             readback.handle(), static_cast<std::uint32_t>(n), regions.data());
+      image_barrier(
+          commands, image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, VK_IMAGE_LAYOUT_GENERAL,
+          VK_PIPELINE_STAGE_TRANSFER_BIT, 0,
+          VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+          VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_READ_BIT);
+      memory_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                     VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
+    });
+    readback.invalidate();
+    const auto* texels = reinterpret_cast<const std::uint16_t*>(readback.mapped());
+    float* out = values.data() + first * slot_texels;
+    for (std::size_t i = 0; i < n * slot_texels; ++i) out[i] = atlas_.texel_to_value(texels[i]);
+  }
+  return values;
+}
+
+}  // namespace volreel::vulkan

@@ -1,0 +1,125 @@
+// decode_bricks.comp: decodes a batch of compressed bricks into their atlas slots (MTV-Player
+// §4.2, Fig. 4). One workgroup per brick; each of its 54 invocations reconstructs 4 consecutive
+// values of a block (the paper decodes 2 per thread), so that the codes read from shared memory
+// and the coefficients are reused 4 times and the atom values are read as one vec4.
+//
+// Bindings: 0 the batch (uint words: 4 words of record per brick {payload word offset, slot,
+// kind, payload words}, then the payloads), 1 the dictionary (atom-major; 216 floats = 54 vec4
+// per atom), 2 the atlas. Kinds: 0 ksvd (format/include/volreel/format/brick_decode.h),
+// 1 constant (one float), 2 raw (36³ floats decoded on the CPU, e.g. zfp).
+// VR_ATLAS_QUALIFIER (r16 or r16f) is set by the build, and VR_ATLAS_UNORM for r16: one SPIR-V
+// module per atlas format.
+#version 450
+#extension GL_GOOGLE_include_directive : require
+
+#define VR_GLSL 1
+#define VR_KIND_KSVD 0u
+#define VR_KIND_CONSTANT 1u
+#define VR_KIND_RAW 2u
+#define VR_MAX_PAYLOAD_WORDS 1732u /* (448 + 2·216·15) / 4 */
+#define VR_INVOCATIONS 54u         /* 216 values of a block / 4 */
+
+layout(local_size_x = 54) in;
+
+layout(std430, set = 0, binding = 0) readonly buffer Batch { uint batch_words[]; };
+layout(std430, set = 0, binding = 1) readonly buffer Atoms { vec4 atom_quads[]; };
+layout(set = 0, binding = 2, VR_ATLAS_QUALIFIER) uniform writeonly image3D atlas;
+
+layout(push_constant) uniform Params {
+  uint grid_x;       // atlas slots per axis (atlas_layout.h)
+  uint grid_y;
+  float value_min;   // r16: stored n = (v − value_min)·inv_range
+  float inv_range;
+} params;
+
+// The brick's payload, copied cooperatively: brick_decode.h reads it through vr_load_word.
+shared uint s_payload[VR_MAX_PAYLOAD_WORDS];
+shared uint s_scan[VR_INVOCATIONS];
+shared uint s_first[216];
+
+uint vr_load_word(uint index) { return s_payload[index]; }
+float vr_load_atom(uint index) { return atom_quads[index >> 2u][index & 3u]; }
+
+#include "volreel/format/brick_decode.h"
+#include "volreel/player/atlas_layout.h"
+
+void store_voxel(ivec3 origin, uint voxel, float value) {
+  ivec3 p = origin + ivec3(int(voxel % VR_BRICK_SIZE), int((voxel / VR_BRICK_SIZE) % VR_BRICK_SIZE),
+                           int(voxel / (VR_BRICK_SIZE * VR_BRICK_SIZE)));
+#ifdef VR_ATLAS_UNORM
+  value = clamp((value - params.value_min) * params.inv_range, 0.0, 1.0);
+#endif
+  imageStore(atlas, p, vec4(value, 0.0, 0.0, 0.0));
+}
+
+void main() {
+  const uint t = gl_LocalInvocationIndex;
+  const uint record = 4u * gl_WorkGroupID.x;
+  const uint base = batch_words[record];
+  const uint slot = batch_words[record + 1u];
+  const uint kind = batch_words[record + 2u];
+  const uint words = min(batch_words[record + 3u], VR_MAX_PAYLOAD_WORDS);
+  const ivec3 origin = ivec3(vr_atlas_cell_x(slot, params.grid_x),
+                             vr_atlas_cell_y(slot, params.grid_x, params.grid_y),
+                             vr_atlas_cell_z(slot, params.grid_x, params.grid_y)) *
+                       int(VR_ATLAS_SLOT_SIZE);
+  const uint voxels = VR_BRICK_SIZE * VR_BRICK_SIZE * VR_BRICK_SIZE;
+
+  // Constant and raw bricks: no codes (kind is the same for the whole workgroup).
+  if (kind == VR_KIND_CONSTANT) {
+    const float value = uintBitsToFloat(batch_words[base]);
+    for (uint voxel = t; voxel < voxels; voxel += VR_INVOCATIONS) store_voxel(origin, voxel, value);
+    return;
+  }
+  if (kind == VR_KIND_RAW) {
+    for (uint voxel = t; voxel < voxels; voxel += VR_INVOCATIONS)
+      store_voxel(origin, voxel, uintBitsToFloat(batch_words[base + voxel]));
+    return;
+  }
+
+  // 1. Fetch the payload (header, block entries, codes) into shared memory cooperatively.
+  for (uint w = t; w < words; w += VR_INVOCATIONS) s_payload[w] = batch_words[base + w];
+  barrier();
+
+  // 2. Block start offsets: prefix sum of the sparsities. Invocation t sums blocks 4t..4t+3, a
+  //    Hillis–Steele scan over the 54 sums, then each writes the first code of its 4 blocks.
+  uint own[4];
+  uint sum = 0u;
+  for (uint i = 0u; i < 4u; ++i) {
+    own[i] = vr_entry_sparsity(vr_block_entry(4u * t + i));
+    sum += own[i];
+  }
+  s_scan[t] = sum;
+  barrier();
+  for (uint offset = 1u; offset < VR_INVOCATIONS; offset <<= 1u) {
+    const uint add = t >= offset ? s_scan[t - offset] : 0u;
+    barrier();
+    s_scan[t] += add;
+    barrier();
+  }
+  uint first = s_scan[t] - sum;
+  for (uint i = 0u; i < 4u; ++i) {
+    s_first[4u * t + i] = first;
+    first += own[i];
+  }
+  barrier();
+
+  // 3. Block by block, invocation t reconstructs values 4t..4t+3 as vr_decode_value does:
+  //    mean_bias + mean_scale·q, plus (coef_bias + coef_scale·c)·atom[a][v] for each code.
+  const float mean_bias = vr_as_float(vr_load_word(0u));
+  const float mean_scale = vr_as_float(vr_load_word(1u));
+  const float coef_bias = vr_as_float(vr_load_word(2u));
+  const float coef_scale = vr_as_float(vr_load_word(3u));
+  for (uint b = 0u; b < VR_BLOCKS_PER_BRICK; ++b) {
+    const uint entry = vr_block_entry(b);
+    const uint s = vr_entry_sparsity(entry);
+    const uint first_code = s_first[b];
+    vec4 value = vec4(mean_bias + mean_scale * float(vr_entry_mean(entry)));
+    for (uint k = 0u; k < s; ++k) {
+      const uint code16 = vr_load_u16(vr_code_unit(first_code + k));
+      const float coefficient = coef_bias + coef_scale * float(vr_code_value(code16));
+      value += coefficient * atom_quads[vr_code_atom(code16) * (VR_BLOCK_LENGTH / 4u) + t];
+    }
+    for (uint i = 0u; i < 4u; ++i) store_voxel(origin, vr_brick_voxel(b, 4u * t + i), value[i]);
+  }
+}

@@ -1,0 +1,309 @@
+// decode_test.cpp: the Vulkan atlas decoder against the CPU reference decoder
+// (format::decode_payload), slot by slot, read back from the atlas, for both 16-bit formats:
+// thousands of random ksvd bricks (sparsity 0..15, extreme codes and atom indices, both signs),
+// constant bricks, zfp bricks through the CPU path; batches that fill the atlas, wrap the staging
+// ring and overwrite slots; bad uploads rejected before anything is submitted.
+#include <gtest/gtest.h>
+#include <zfp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <initializer_list>
+#include <numeric>
+#include <ostream>
+#include <stdexcept>
+
+#include "brick_samples.hpp"
+#include "volreel/format/decoder.hpp"
+#include "volreel/format/error.hpp"
+#include "volreel/vulkan/atlas_decoder.hpp"
+#include "vulkan_test_util.hpp"
+
+namespace volreel::vulkan {
+
+// Test names and failure messages show the format's name.
+void PrintTo(AtlasFormat format, std::ostream* os) {
+  *os << atlas_format_name(format);
+}
+
+namespace {
+
+using Payload = std::vector<std::byte>;
+constexpr std::size_t voxels = format::brick_voxels;
+
+/// A zfp payload (fixed accuracy) of a smooth random field, as the encoder writes it.
+Payload zfp_payload(SplitMix64& rng, double accuracy) {
+  std::vector<float> field(voxels);
+  const double fx = rng.uniform(0.05, 0.3), fy = rng.uniform(0.05, 0.3), phase = rng.uniform(0, 6);
+  for (std::size_t i = 0; i < voxels; ++i) {
+    const double x = static_cast<double>(i % 36), y = static_cast<double>((i / 36) % 36),
+                 z = static_cast<double>(i / 1296);
+    field[i] = static_cast<float>(3 * std::sin(fx * x + phase) * std::cos(fy * y) + 0.05 * z);
+  }
+  zfp_stream* zfp = zfp_stream_open(nullptr);
+  zfp_stream_set_accuracy(zfp, accuracy);
+  zfp_field* f = zfp_field_3d(field.data(), zfp_type_float, 36, 36, 36);
+  Payload buffer(zfp_stream_maximum_size(zfp, f));
+  bitstream* bits = stream_open(buffer.data(), buffer.size());
+  zfp_stream_set_bit_stream(zfp, bits);
+  zfp_stream_rewind(zfp);
+  const std::size_t size = zfp_compress(zfp, f);
+  stream_close(bits);
+  zfp_field_free(f);
+  zfp_stream_close(zfp);
+  buffer.resize((size + 3) / 4 * 4);
+  return buffer;
+}
+
+struct Brick {
+  Payload payload;
+  format::Codec codec = format::Codec::ksvd;
+  std::vector<float> expected;  ///< format::decode_payload's output
+};
+
+constexpr double zfp_accuracy = 1e-3;
+
+/// Brick i of a reproducible mix: mostly ksvd of the five styles, every 9th a constant, every
+/// 13th a zfp brick when `with_zfp`.
+Brick make_brick(SplitMix64& rng, std::uint32_t atom_count, const format::AtomTable& atoms,
+                 std::size_t i, bool with_zfp) {
+  Brick b;
+  if (i % 9 == 4) {
+    const float constants[] = {0.0f, -0.0f, 7.25f, -9.5f, static_cast<float>(rng.uniform(-8, 8))};
+    b.payload = test::constant_payload(constants[(i / 9) % 5]);
+  } else if (with_zfp && i % 13 == 6) {
+    b.codec = format::Codec::zfp;
+    b.payload = zfp_payload(rng, zfp_accuracy);
+  } else {
+    b.payload = test::random_ksvd_payload(rng, atom_count, static_cast<int>(i % 5));
+  }
+  b.expected.resize(voxels);
+  format::decode_payload(b.payload, b.codec, zfp_accuracy, atoms, b.expected, "test brick", 0);
+  return b;
+}
+
+BrickUpload upload(const Brick& b, std::uint32_t slot) {
+  return {b.payload, b.codec, zfp_accuracy, slot};
+}
+
+/// Range of every expected value, widened a little (r16_unorm clamps outside it).
+std::pair<float, float> value_range(const std::vector<Brick>& bricks) {
+  float lo = 0, hi = 0;
+  for (const Brick& b : bricks)
+    for (float v : b.expected) {
+      lo = std::min(lo, v);
+      hi = std::max(hi, v);
+    }
+  const float margin = 0.01f * (hi - lo);
+  return {lo - margin, hi + margin};
+}
+
+/// Compares read-back slots with the expected bricks; the tolerance is one unit of the 16-bit
+/// format at the value (its rounding, with room for the device's float rounding to flip it).
+struct Comparison {
+  double max_error = 0, max_units = 0;
+  std::size_t bad = 0;
+};
+Comparison compare(const Atlas& atlas, std::span<const float> gpu,
+                   const std::vector<const Brick*>& bricks) {
+  Comparison c;
+  for (std::size_t s = 0; s < bricks.size(); ++s)
+    for (std::size_t i = 0; i < voxels; ++i) {
+      const float want = bricks[s]->expected[i], got = gpu[s * voxels + i];
+      const double unit = 2.0 * static_cast<double>(atlas.rounding_bound(want));
+      const double error = std::fabs(double{got} - double{want});
+      c.max_error = std::max(c.max_error, error);
+      c.max_units = std::max(c.max_units, error / unit);
+      if (error > unit + 1e-6 * std::max(1.0, std::fabs(double{want})) && ++c.bad <= 5)
+        ADD_FAILURE() << "brick " << s << " voxel " << i << ": GPU " << got << ", CPU " << want
+                      << " (unit " << unit << ")";
+    }
+  return c;
+}
+
+class DecodeTest : public test::VulkanTest, public ::testing::WithParamInterface<AtlasFormat> {};
+
+// Thousands of bricks, in batches of 1 to 200, through an atlas of 216 slots filled 14 times.
+TEST_P(DecodeTest, MatchesTheCpuReferenceDecoder) {
+  Context& ctx = context();
+  SplitMix64 rng(17);
+  const std::uint32_t atom_count = 1024;
+  const std::vector<float> atom_values = test::random_atoms(rng, atom_count);
+  const format::AtomTable atoms{atom_values, atom_count};
+  const std::size_t slots = 216, total = 14 * slots;  // a 6×6×6 atlas filled 14 times
+  std::vector<Brick> bricks;
+  for (std::size_t i = 0; i < total; ++i)
+    bricks.push_back(make_brick(rng, atom_count, atoms, i, false));
+  const auto [lo, hi] = value_range(bricks);
+  AtlasOptions ao;
+  ao.format = GetParam();
+  ao.max_slots = slots;
+  ao.value_min = lo;
+  ao.value_max = hi;
+  Atlas atlas(ctx, ao);
+  ASSERT_EQ(atlas.slot_count(), slots);
+  AtlasDecoder decoder(ctx, atlas);
+  decoder.set_dictionary(atoms);
+  const std::size_t batch_sizes[] = {1, 7, 64, 200, 3, 130};
+  Comparison worst;
+  for (std::size_t first = 0, round = 0; first < total; first += slots, ++round) {
+    // 1. Fill every slot with the next 256 bricks, in batches of varying size.
+    std::vector<std::uint32_t> order(slots);
+    std::iota(order.begin(), order.end(), 0u);
+    std::rotate(order.begin(), order.begin() + static_cast<std::ptrdiff_t>((round * 37) % slots),
+                order.end());
+    std::vector<const Brick*> in_slot(slots);
+    for (std::size_t k = 0, b = 0; k < slots; ++b) {
+      std::vector<BrickUpload> batch;
+      for (std::size_t n = 0; n < batch_sizes[b % 6] && k < slots; ++n, ++k) {
+        in_slot[order[k]] = &bricks[first + k];
+        batch.push_back(upload(bricks[first + k], order[k]));
+      }
+      decoder.submit(batch);
+    }
+    // 2. Read every slot back.
+    std::vector<std::uint32_t> all(slots);
+    std::iota(all.begin(), all.end(), 0u);
+    const Comparison c = compare(atlas, decoder.read_slots(all), in_slot);
+    worst.max_error = std::max(worst.max_error, c.max_error);
+    worst.max_units = std::max(worst.max_units, c.max_units);
+    ASSERT_EQ(c.bad, 0u) << "round " << round;
+  }
+  std::printf("%s: %zu bricks, range [%g, %g], largest error %.3g (%.2f units of the format)\n",
+              atlas_format_name(GetParam()), total, double{lo}, double{hi}, worst.max_error,
+              worst.max_units);
+  EXPECT_EQ(decoder.stats().bricks, total);
+}
+
+// A small atlas, a 2-buffer ring of 1 MiB: zfp bricks (186 KB uploaded each) make every submit
+// span several staging buffers, and each round overwrites every slot without waiting.
+TEST_P(DecodeTest, OverwritesSlotsAndWrapsTheStagingRing) {
+  Context& ctx = context();
+  SplitMix64 rng(23);
+  const std::uint32_t atom_count = 300;
+  const std::vector<float> atom_values = test::random_atoms(rng, atom_count);
+  const format::AtomTable atoms{atom_values, atom_count};
+  const std::size_t slots = 27, rounds = 6;
+  std::vector<Brick> bricks;
+  for (std::size_t i = 0; i < slots * rounds; ++i)
+    bricks.push_back(make_brick(rng, atom_count, atoms, i, true));
+  for (std::size_t i = 0; i < slots * rounds; i += 3)  // more zfp bricks
+    if (bricks[i].codec == format::Codec::ksvd) {
+      bricks[i].codec = format::Codec::zfp;
+      bricks[i].payload = zfp_payload(rng, zfp_accuracy);
+      format::decode_payload(bricks[i].payload, bricks[i].codec, zfp_accuracy, atoms,
+                             bricks[i].expected, "test brick", 0);
+    }
+  const auto [lo, hi] = value_range(bricks);
+  AtlasOptions ao;
+  ao.format = GetParam();
+  ao.max_slots = slots;
+  ao.value_min = lo;
+  ao.value_max = hi;
+  Atlas atlas(ctx, ao);
+  ASSERT_EQ(atlas.slot_count(), slots);
+  DecoderOptions options;
+  options.upload_budget_bytes = 1 << 20;
+  options.ring_size = 2;
+  AtlasDecoder decoder(ctx, atlas, options);
+  decoder.set_dictionary(atoms);
+  std::vector<const Brick*> in_slot(slots);
+  Ticket previous = 0;
+  for (std::size_t r = 0; r < rounds; ++r) {
+    std::vector<BrickUpload> batch;
+    for (std::size_t s = 0; s < slots; ++s) {
+      const std::uint32_t slot = static_cast<std::uint32_t>((s * 7 + r) % slots);
+      in_slot[slot] = &bricks[r * slots + s];
+      batch.push_back(upload(bricks[r * slots + s], slot));
+    }
+    const Ticket t = decoder.submit(batch);
+    EXPECT_GT(t, previous + 1) << "a round of zfp bricks spans several staging buffers";
+    previous = t;
+    if (r == 2) {  // one check in the middle, then keep going without waiting
+      std::vector<std::uint32_t> all(slots);
+      std::iota(all.begin(), all.end(), 0u);
+      EXPECT_EQ(compare(atlas, decoder.read_slots(all), in_slot).bad, 0u);
+    }
+  }
+  std::vector<std::uint32_t> all(slots);
+  std::iota(all.begin(), all.end(), 0u);
+  EXPECT_EQ(compare(atlas, decoder.read_slots(all), in_slot).bad, 0u);
+  EXPECT_GT(decoder.stats().submissions, 2 * rounds);
+  EXPECT_GT(decoder.stats().uploaded_bytes, std::uint64_t{rounds} * options.upload_budget_bytes);
+  // Slot by slot too.
+  for (std::uint32_t s : {0u, 13u, 26u}) {
+    const std::vector<float> one = decoder.read_slot(s);
+    EXPECT_EQ(compare(atlas, one, {in_slot[s]}).bad, 0u);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Formats, DecodeTest,
+                         ::testing::Values(AtlasFormat::r16_unorm, AtlasFormat::r16_sfloat),
+                         [](const ::testing::TestParamInfo<AtlasFormat>& param) {
+                           return param.param == AtlasFormat::r16_unorm ? "R16Unorm" : "R16Sfloat";
+                         });
+
+class DecoderTest : public test::VulkanTest {};
+
+TEST_F(DecoderTest, TicketsPollAndWait) {
+  Context& ctx = context();
+  AtlasOptions ao;
+  ao.max_slots = 4;
+  ao.value_min = -10;
+  ao.value_max = 10;
+  Atlas atlas(ctx, ao);
+  AtlasDecoder decoder(ctx, atlas);
+  EXPECT_TRUE(decoder.poll(0));
+  const Payload c = test::constant_payload(2.5f);
+  const BrickUpload one{c, format::Codec::ksvd, 0, 3};
+  const Ticket a = decoder.submit({&one, 1});
+  const Ticket b = decoder.submit({&one, 1});
+  EXPECT_EQ(b, a + 1);
+  EXPECT_EQ(decoder.submit({}), b);  // an empty batch submits nothing
+  decoder.wait(b);
+  EXPECT_TRUE(decoder.poll(a));
+  EXPECT_TRUE(decoder.poll(b));
+  const std::vector<float> v = decoder.read_slot(3);
+  for (float x : v) ASSERT_NEAR(x, 2.5f, 20.0 / 65535);
+  const std::vector<float> untouched = decoder.read_slot(0);  // cleared to the bottom of the range
+  EXPECT_FLOAT_EQ(untouched[0], -10.0f);
+}
+
+TEST_F(DecoderTest, RejectsBadUploadsBeforeSubmitting) {
+  Context& ctx = context();
+  SplitMix64 rng(3);
+  AtlasOptions ao;
+  ao.max_slots = 8;
+  Atlas atlas(ctx, ao);
+  AtlasDecoder decoder(ctx, atlas);
+  const Payload good = test::random_ksvd_payload(rng, 16, 0);
+  const BrickUpload no_dictionary{good, format::Codec::ksvd, 0, 0};
+  EXPECT_THROW(decoder.submit({&no_dictionary, 1}), std::invalid_argument);
+  const std::vector<float> atom_values = test::random_atoms(rng, 8);
+  decoder.set_dictionary({atom_values, 8});
+  // Atom indices up to 15 against a dictionary of 8.
+  EXPECT_THROW(decoder.submit({&no_dictionary, 1}), format::FormatError);
+  const Payload ok = test::random_ksvd_payload(rng, 8, 1);
+  Payload short_payload(ok.begin(), ok.end() - 4);
+  Payload nan_header = ok;
+  const float nan = std::nanf("");
+  std::memcpy(nan_header.data() + 8, &nan, 4);
+  const Payload nan_constant = test::constant_payload(nan);
+  for (const Payload* bad :
+       std::initializer_list<const Payload*>{&short_payload, &nan_header, &nan_constant}) {
+    const BrickUpload batch[] = {{ok, format::Codec::ksvd, 0, 1},
+                                 {*bad, format::Codec::ksvd, 0, 2}};
+    EXPECT_THROW(decoder.submit(batch), format::FormatError);
+  }
+  const BrickUpload outside{ok, format::Codec::ksvd, 0, 8};
+  EXPECT_THROW(decoder.submit({&outside, 1}), std::invalid_argument);
+  const BrickUpload twice[] = {{ok, format::Codec::ksvd, 0, 5}, {ok, format::Codec::ksvd, 0, 5}};
+  EXPECT_THROW(decoder.submit(twice), std::invalid_argument);
+  EXPECT_EQ(decoder.last_ticket(), 0u);  // nothing was submitted
+  const BrickUpload fine{ok, format::Codec::ksvd, 0, 7};
+  EXPECT_EQ(decoder.submit({&fine, 1}), 1u);
+}
+
+}  // namespace
+}  // namespace volreel::vulkan

@@ -1,0 +1,106 @@
+// layout_test.cpp: brick_decode.h and atlas_layout.h give the same results compiled as GLSL (the
+// probe shader layout_probe.comp, run on the device) as compiled as C++.
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <cmath>
+#include <cstring>
+
+#include "brick_samples.hpp"
+#include "volreel/format/brick_decode.h"
+#include "volreel/player/atlas_layout.h"
+#include "volreel/vulkan/resources.hpp"
+#include "volreel_layout_probe_spv.h"
+#include "vulkan_test_util.hpp"
+
+namespace volreel::vulkan {
+namespace {
+
+constexpr std::uint32_t N = 46656;  // 216 blocks × 216 values
+constexpr std::uint32_t sections = 9;
+
+class LayoutTest : public test::VulkanTest {};
+
+TEST_F(LayoutTest, GlslAndCppAgree) {
+  Context& ctx = context();
+  SplitMix64 rng(5);
+  const std::uint32_t atom_count = 1024;
+  const std::vector<float> atoms = test::random_atoms(rng, atom_count);
+  const std::vector<std::byte> bytes = test::random_ksvd_payload(rng, atom_count, 0);
+  std::vector<vr_uint> payload(bytes.size() / 4);
+  std::memcpy(payload.data(), bytes.data(), bytes.size());
+
+  // 1. Run the probe.
+  const auto host = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+  Buffer payload_buffer(ctx, bytes.size(), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, host);
+  Buffer atom_buffer(ctx, 4 * atoms.size(), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, host);
+  Buffer results(ctx, 4ull * sections * N, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, host);
+  std::memcpy(payload_buffer.mapped(), bytes.data(), bytes.size());
+  std::memcpy(atom_buffer.mapped(), atoms.data(), 4 * atoms.size());
+  VkDescriptorSetLayoutBinding bindings[3];
+  for (std::uint32_t b = 0; b < 3; ++b)
+    bindings[b] = {b, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr};
+  DescriptorSetLayout set_layout(ctx, bindings);
+  ShaderModule shader(ctx, volreel_layout_probe_spv);
+  const VkDescriptorSetLayout layouts[] = {set_layout.handle()};
+  ComputePipeline pipeline(ctx, shader, layouts);
+  const VkDescriptorPoolSize sizes[] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3}};
+  DescriptorPool pool(ctx, sizes, 1);
+  VkDescriptorSet set = pool.allocate(set_layout.handle());
+  write_storage_buffer(ctx.device(), set, 0, payload_buffer.handle());
+  write_storage_buffer(ctx.device(), set, 1, atom_buffer.handle());
+  write_storage_buffer(ctx.device(), set, 2, results.handle());
+  ctx.submit_and_wait([&](VkCommandBuffer commands) {
+    vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.handle());
+    vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.layout(), 0, 1, &set,
+                            0, nullptr);
+    vkCmdDispatch(commands, VR_BLOCKS_PER_BRICK, 1, 1);
+    memory_barrier(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+                   VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
+  });
+  const auto* gpu = reinterpret_cast<const std::uint32_t*>(results.mapped());
+
+  // 2. The same functions in C++.
+  const vr_uint* p = payload.data();
+  const float* a = atoms.data();
+  const std::uint32_t constants[16] = {
+      VR_BRICK_SIZE,      VR_BRICK_INTERIOR,   VR_BLOCK_SIZE,    VR_BLOCK_LENGTH,
+      VR_BLOCKS_PER_AXIS, VR_BLOCKS_PER_BRICK, VR_HEADER_WORDS,  VR_MEAN_BITS,
+      VR_COEF_BITS,       VR_ATOM_BITS,        VR_MAX_SPARSITY,  VR_MEAN_LEVELS,
+      VR_COEF_LEVELS,     VR_ATLAS_SLOT_SIZE,  VR_ATLAS_NO_SLOT, vr_payload_bytes(0)};
+  for (std::uint32_t k = 0; k < 16; ++k)
+    EXPECT_EQ(gpu[8 * N + k], constants[k]) << "constant " << k;
+  std::uint32_t first_code = 0, mismatches = 0;
+  float worst = 0;
+  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) {
+      const std::uint32_t i = b * 216 + v;
+      const vr_uint entry = vr_block_entry(p, i % VR_BLOCKS_PER_BRICK);
+      const std::uint32_t expected[8] = {
+          vr_brick_voxel(b, v),
+          0,  // the decoded value, compared below
+          vr_load_u16(p, i % (2 * VR_HEADER_WORDS + VR_BLOCKS_PER_BRICK)),
+          vr_entry_sparsity(entry) | (vr_entry_mean(entry) << 8),
+          vr_code_atom(i & 0xFFFF) | (vr_code_value(i & 0xFFFF) << 16),
+          vr_code_unit(i) ^ (vr_payload_bytes(i) << 12),
+          vr_atlas_cell_x(i, 7) | (vr_atlas_cell_y(i, 7, 5) << 8) |
+              (vr_atlas_cell_z(i, 7, 5) << 16),
+          vr_atlas_cell_x(i, 56) | (vr_atlas_cell_y(i, 56, 56) << 8) |
+              (vr_atlas_cell_z(i, 56, 56) << 16)};
+      for (std::uint32_t s = 0; s < 8; ++s)
+        if (s != 1 && gpu[s * N + i] != expected[s] && ++mismatches <= 10)
+          ADD_FAILURE() << "section " << s << " index " << i << ": GLSL " << gpu[s * N + i]
+                        << ", C++ " << expected[s];
+      // The decoded value: the same arithmetic; the device may fuse multiply-adds.
+      const float cpu = vr_decode_value(p, a, b, first_code, v);
+      const float glsl = std::bit_cast<float>(gpu[N + i]);
+      worst = std::max(worst, std::fabs(cpu - glsl) / std::max(1.0f, std::fabs(cpu)));
+    }
+    first_code += vr_entry_sparsity(vr_block_entry(p, b));
+  }
+  EXPECT_EQ(mismatches, 0u);
+  EXPECT_LT(worst, 1e-5f) << "largest relative difference of decoded values";
+}
+
+}  // namespace
+}  // namespace volreel::vulkan
