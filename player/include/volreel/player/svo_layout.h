@@ -19,6 +19,8 @@
 //                   VR_SVO_CHILD_UP    the tree does not go deeper here: the child's region is
 //                                      drawn from this node's own leaf record (word 9)
 //                   VR_SVO_CHILD_EMPTY nothing to draw (outside the volume or no data): transparent
+//                 A node record at the finest level (the root when L = 1) has the same 8
+//                 geometric octants as children, each VR_SVO_CHILD_UP or VR_SVO_CHILD_EMPTY.
 //   word 9        this node's own leaf record (relative to this node), or VR_SVO_NO_LEAF when
 //                 no child is VR_SVO_CHILD_UP
 //

@@ -1,0 +1,119 @@
+// renderer.hpp: the CPU reference renderer of volreel's player (DESIGN.md "Player", step 7) — a
+// plain ray caster over the array-encoded SVO (svo_layout.h) and a CpuAtlas, and the brute-force
+// oracle that casts the same rays through dense level volumes. It is the reference the Vulkan
+// renderer is tested against and the headless fallback.
+//
+// Both renderers share one ray loop, so they take exactly the same samples:
+//   1. The ray of pixel (i, j) leaves OrbitCamera::eye() along ray_direction(i + 0.5, j + 0.5)
+//      (world = finest-voxel coordinates) and is clipped to the volume's box [0, dims).
+//   2. Samples lie at distances t = k·step from the eye (k integer) inside the clipped segment:
+//      fixed in world space, so they do not crawl when the clip distance changes.
+//   3. Each sample's value goes through the transfer function with its opacity corrected for the
+//      step (TransferFunction::opacity_corrected(step / reference_step)).
+//   4. Front-to-back compositing of non-premultiplied colours: C += (1 − A)·α·rgb,
+//      A += (1 − A)·α; the ray stops once A > termination_alpha.
+//   5. The pixel is C + (1 − A)·background, with alpha A.
+// They differ only in how a sample's value is found:
+//   render_svo       descends the SVO from the root to the node containing the point (Cesium
+//                    patent [0050]), takes its leaf record, samples keyframes A and B trilinearly
+//                    in their atlas slots at u' = ((c mod 2^d) + u)/2^d for each one's LOD
+//                    difference d (any d), and returns (1 − f)·A + f·B. Empty children are
+//                    transparent.
+//   render_reference samples dense volumes of levels k_A and k_B trilinearly at level voxel
+//                    coordinates p/2^(L−1−k) − 0.5, clamped to the level's edge, and returns
+//                    (1 − f)·A + f·B.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "volreel/cpu_render/cpu_atlas.hpp"
+#include "volreel/cpu_render/transfer_function.hpp"
+#include "volreel/format/decoder.hpp"
+#include "volreel/player/camera.hpp"
+#include "volreel/player/svo_layout.h"
+#include "volreel/psnr/metrics.hpp"
+
+namespace volreel::cpu_render {
+
+/// The spatial octree's geometry: the finest level's dims and the level count L (format's
+/// level_geometry(dims).size()). The root covers [0, 34·2^(L−1))³ finest voxels.
+struct VolumeGeometry {
+  std::array<std::uint32_t, 3> dims{};
+  std::uint32_t levels = 1;
+  /// From the finest dims (levels by format::level_geometry).
+  static VolumeGeometry of(std::array<std::uint32_t, 3> dims);
+};
+
+/// The word arrays of an array-encoded SVO (svo_layout.h): node records (10 words each, record
+/// 0 the root), leaf records (4 words each) and, optionally, leaf histograms (2 words each, one
+/// per leaf record, bins over histogram_range — the manifest's value range).
+struct SvoView {
+  std::span<const vr_uint> nodes;
+  std::span<const vr_uint> leaves;
+  std::span<const vr_uint> histograms;  ///< empty: no transfer-function culling
+  std::array<float, 2> histogram_range{0, 1};
+};
+
+struct RenderOptions {
+  double step = 0.5;            ///< sample spacing along the ray, finest voxels (> 0)
+  double reference_step = 1.0;  ///< the length the transfer function's opacities are for (> 0)
+  std::array<float, 3> background{0, 0, 0};  ///< RGB behind the volume, [0, 1]
+  float termination_alpha = 0.99f;           ///< early ray termination threshold
+};
+
+/// A float RGBA image, rows top to bottom, 4 values per pixel.
+struct RgbaImage {
+  int width = 0, height = 0;
+  std::vector<float> rgba;
+  const float* pixel(int x, int y) const {
+    return rgba.data() + 4 * (static_cast<std::size_t>(y) * static_cast<std::size_t>(width) +
+                              static_cast<std::size_t>(x));
+  }
+};
+
+/// Checks the SVO before it is walked: node and leaf indices in range, node records only above
+/// the finest level and reached once (a tree, no cycles), leaf records with atlas slots below
+/// `slot_count` (VR_ATLAS_NO_SLOT only where its weight, 1 − f or f, is 0), factors in [0, 1],
+/// LOD differences no larger than the spatial node's level, word 9 set wherever a child is
+/// VR_SVO_CHILD_UP, and histograms (when given) 2 words per leaf record. Throws
+/// std::invalid_argument naming the record and word.
+void validate_svo(const SvoView& svo, std::uint32_t slot_count, const VolumeGeometry& geometry);
+
+/// Renders the SVO and atlas from the camera (camera.width × camera.height pixels). Validates
+/// the SVO first (validate_svo) and the options (std::invalid_argument). With leaf histograms,
+/// samples in leaves whose histogram hull the transfer function makes invisible are skipped
+/// (TransferFunction::visible_hull) — the same image, fewer samples. OpenMP over rows.
+RgbaImage render_svo(const SvoView& svo, const CpuAtlas& atlas, const VolumeGeometry& geometry,
+                     const player::OrbitCamera& camera, const TransferFunction& transfer,
+                     const RenderOptions& options = {});
+
+/// A dense volume of one octree level (format::decode_level's output or a pyramid level).
+struct DenseLevel {
+  std::array<std::uint32_t, 3> dims{};  ///< the level's dims (format::level_geometry)
+  std::span<const float> values;        ///< dims[0]·dims[1]·dims[2], x fastest
+  std::uint32_t level = 0;              ///< 0 = root .. L−1 = finest
+  static DenseLevel of(const format::LevelVolume& volume, std::uint32_t level) {
+    return {volume.dims, volume.data, level};
+  }
+};
+
+/// The oracle: the same rays through dense volumes, value (1 − factor)·A + factor·B with A and B
+/// sampled at their own levels. Throws std::invalid_argument when a volume's size does not match
+/// its dims or its level is not below geometry.levels.
+RgbaImage render_reference(const DenseLevel& a, const DenseLevel& b, float factor,
+                           const VolumeGeometry& geometry, const player::OrbitCamera& camera,
+                           const TransferFunction& transfer, const RenderOptions& options = {});
+
+/// 8-bit RGB (alpha dropped: the background is already composited), rounded and clamped.
+psnr::Image to_image(const RgbaImage& image);
+/// Writes the image as an 8-bit RGB PNG (psnr::write_png).
+void write_png(const std::filesystem::path& path, const RgbaImage& image);
+/// Largest absolute difference of any channel of any pixel (images of equal size, else +inf).
+double max_abs_difference(const RgbaImage& a, const RgbaImage& b);
+
+}  // namespace volreel::cpu_render

@@ -1,0 +1,371 @@
+// renderer.cpp: the CPU reference ray caster over the array-encoded SVO and the dense-volume
+// oracle, sharing one ray loop (see renderer.hpp for the numbered steps).
+#include "volreel/cpu_render/renderer.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "trilinear.hpp"
+#include "volreel/format/frame_file.hpp"
+
+namespace volreel::cpu_render {
+namespace {
+
+/// A sample: whether the point is drawn at all (an empty child is not) and its value.
+struct Sample {
+  bool drawn = false;
+  float value = 0;
+};
+
+/// (1 − f)·a + f·b; f = 0 and f = 1 return a and b exactly (the other keyframe is not read).
+inline float mix_keyframes(float a, float b, float f) {
+  return (1.0f - f) * a + f * b;
+}
+
+void check_geometry(const VolumeGeometry& g) {
+  if (g.levels < 1 || g.levels > format::max_levels)
+    throw std::invalid_argument("render: expected 1 to " + std::to_string(format::max_levels) +
+                                " octree levels, found " + std::to_string(g.levels));
+  const std::uint64_t root = std::uint64_t{format::brick_interior} << (g.levels - 1);
+  for (int a = 0; a < 3; ++a)
+    if (g.dims[static_cast<std::size_t>(a)] == 0 || g.dims[static_cast<std::size_t>(a)] > root)
+      throw std::invalid_argument("render: dims[" + std::to_string(a) +
+                                  "] = " + std::to_string(g.dims[static_cast<std::size_t>(a)]) +
+                                  " is not covered by a root of " + std::to_string(root) +
+                                  " voxels (" + std::to_string(g.levels) + " levels)");
+}
+
+void check_options(const RenderOptions& o, const player::OrbitCamera& camera) {
+  if (!(o.step > 0 && std::isfinite(o.step)))
+    throw std::invalid_argument("render: expected a step > 0, found " + std::to_string(o.step));
+  if (!(o.reference_step > 0 && std::isfinite(o.reference_step)))
+    throw std::invalid_argument("render: expected a reference step > 0, found " +
+                                std::to_string(o.reference_step));
+  if (camera.width <= 0 || camera.height <= 0)
+    throw std::invalid_argument("render: expected a positive image size, found " +
+                                std::to_string(camera.width) + "x" + std::to_string(camera.height));
+}
+
+/// Steps 1–5 of renderer.hpp for every pixel; `sample(p)` gives the value at world point p.
+template <class Sampler>
+RgbaImage cast_rays(const VolumeGeometry& geometry, const player::OrbitCamera& camera,
+                    const TransferFunction& transfer, const RenderOptions& options,
+                    const Sampler& sample) {
+  check_options(options, camera);
+  const TransferFunction tf = transfer.opacity_corrected(options.step / options.reference_step);
+  RgbaImage image;
+  image.width = camera.width;
+  image.height = camera.height;
+  image.rgba.assign(
+      4 * static_cast<std::size_t>(camera.width) * static_cast<std::size_t>(camera.height), 0.0f);
+  const glm::dvec3 eye = camera.eye();
+  const glm::dvec3 box{geometry.dims[0], geometry.dims[1], geometry.dims[2]};
+  // The largest coordinates still inside [0, dims).
+  const glm::dvec3 inside{std::nextafter(box.x, 0.0), std::nextafter(box.y, 0.0),
+                          std::nextafter(box.z, 0.0)};
+  const double step = options.step;
+
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int y = 0; y < image.height; ++y) {
+    for (int x = 0; x < image.width; ++x) {
+      // 1. The ray, clipped to the box (slab test).
+      const glm::dvec3 dir = camera.ray_direction(x + 0.5, y + 0.5);
+      double t0 = 0, t1 = std::numeric_limits<double>::infinity();
+      for (int a = 0; a < 3; ++a) {
+        if (dir[a] == 0) {
+          if (eye[a] < 0 || eye[a] >= box[a]) t1 = -1;
+          continue;
+        }
+        const double ta = (0 - eye[a]) / dir[a], tb = (box[a] - eye[a]) / dir[a];
+        t0 = std::max(t0, std::min(ta, tb));
+        t1 = std::min(t1, std::max(ta, tb));
+      }
+      // A degenerate camera (NaN direction) gives no finite segment: draw nothing.
+      if (!std::isfinite(t0) || !std::isfinite(t1)) t1 = -1;
+      float color[3] = {0, 0, 0};
+      float alpha = 0;
+      if (t0 < t1) {
+        // 2. Samples at multiples of the step inside [t0, t1).
+        for (double k = std::ceil(t0 / step);; k += 1) {
+          const double t = k * step;
+          if (t >= t1) break;
+          glm::dvec3 p = eye + t * dir;
+          p = glm::clamp(p, glm::dvec3(0.0), inside);
+          const Sample s = sample(p);
+          if (!s.drawn) continue;
+          // 3. Transfer function (opacity already corrected for the step).
+          const Rgba c = tf.lookup(s.value);
+          if (!(c[3] > 0)) continue;
+          // 4. Front to back.
+          const float w = (1.0f - alpha) * c[3];
+          color[0] += w * c[0];
+          color[1] += w * c[1];
+          color[2] += w * c[2];
+          alpha += w;
+          if (alpha > options.termination_alpha) break;
+        }
+      }
+      // 5. Over the background.
+      float* out = image.rgba.data() +
+                   4 * (static_cast<std::size_t>(y) * static_cast<std::size_t>(image.width) +
+                        static_cast<std::size_t>(x));
+      for (std::size_t c = 0; c < 3; ++c)
+        out[c] = color[c] + (1.0f - alpha) * options.background[c];
+      out[3] = alpha;
+    }
+  }
+  return image;
+}
+
+/// The value at a point from the SVO and the atlas (Cesium patent [0050]).
+class SvoSampler {
+ public:
+  SvoSampler(const SvoView& svo, const CpuAtlas& atlas, const VolumeGeometry& geometry,
+             const TransferFunction& transfer)
+      : svo_(svo), atlas_(atlas), levels_(geometry.levels) {
+    // Transfer-function culling: a leaf whose histogram hull maps only to zero opacity is not
+    // drawn (opacity correction keeps zero at zero, so the uncorrected function decides).
+    if (!svo.histograms.empty()) {
+      const std::size_t leaves = svo.leaves.size() / VR_SVO_LEAF_WORDS;
+      const std::uint64_t visible =
+          transfer.visible_bins(svo.histogram_range[0], svo.histogram_range[1]);
+      leaf_visible_.resize(leaves);
+      for (std::size_t i = 0; i < leaves; ++i) {
+        const std::uint64_t h =
+            std::uint64_t{svo.histograms[VR_SVO_HISTOGRAM_WORDS * i]} |
+            (std::uint64_t{svo.histograms[VR_SVO_HISTOGRAM_WORDS * i + 1]} << 32);
+        leaf_visible_[i] = (TransferFunction::histogram_hull(h) & visible) != 0;
+      }
+    }
+  }
+
+  Sample operator()(const glm::dvec3& p) const {
+    const std::uint32_t q[3] = {static_cast<std::uint32_t>(p.x), static_cast<std::uint32_t>(p.y),
+                                static_cast<std::uint32_t>(p.z)};
+    // 1. Descend from the root to the child containing q until a leaf, an "up" or an empty child.
+    vr_uint node = 0, level = 0, leaf = 0;
+    std::uint32_t c[3] = {0, 0, 0};
+    for (;;) {
+      const std::uint32_t half = (format::brick_interior / 2) << (levels_ - 1 - level);
+      const std::uint32_t child[3] = {q[0] / half, q[1] / half, q[2] / half};
+      const vr_uint octant =
+          (child[0] - 2 * c[0]) | ((child[1] - 2 * c[1]) << 1) | ((child[2] - 2 * c[2]) << 2);
+      const vr_uint word = svo_.nodes[node * VR_SVO_NODE_WORDS + 1 + octant];
+      const vr_uint kind = vr_svo_child_kind(word);
+      if (kind == VR_SVO_CHILD_EMPTY) return {};
+      if (kind == VR_SVO_CHILD_UP) {  // drawn from this node's own leaf record
+        leaf = svo_.nodes[node * VR_SVO_NODE_WORDS + 9];
+        break;
+      }
+      for (int a = 0; a < 3; ++a) c[a] = child[a];
+      ++level;
+      if (kind == VR_SVO_CHILD_LEAF) {
+        leaf = vr_svo_child_index(word);
+        break;
+      }
+      node = vr_svo_child_index(word);
+    }
+    if (!leaf_visible_.empty() && !leaf_visible_[leaf]) return {};
+    // 2. Local coordinates u ∈ [0, 1)³ of p in the spatial node (level, c).
+    const double size = double(format::brick_interior << (levels_ - 1 - level));
+    float u[3];
+    for (int a = 0; a < 3; ++a) u[a] = static_cast<float>((p[a] - double(c[a]) * size) / size);
+    // 3. Both keyframes at their slot coordinates, each mapped into its brick by its LOD
+    //    difference (svo_layout.h), then interpolated with the leaf's factor.
+    const vr_uint* record = svo_.leaves.data() + std::size_t{leaf} * VR_SVO_LEAF_WORDS;
+    const float f = std::bit_cast<float>(record[3]);
+    const auto keyframe = [&](vr_uint slot, vr_uint d) {
+      return atlas_.sample(slot, vr_svo_slot_coord(vr_svo_ancestor_local(c[0], u[0], d)),
+                           vr_svo_slot_coord(vr_svo_ancestor_local(c[1], u[1], d)),
+                           vr_svo_slot_coord(vr_svo_ancestor_local(c[2], u[2], d)));
+    };
+    const float a = f == 1.0f ? 0.0f : keyframe(record[0], vr_svo_lod_a(record[2]));
+    const float b = f == 0.0f ? 0.0f : keyframe(record[1], vr_svo_lod_b(record[2]));
+    return {true, f == 0.0f ? a : f == 1.0f ? b : mix_keyframes(a, b, f)};
+  }
+
+ private:
+  const SvoView& svo_;
+  const CpuAtlas& atlas_;
+  std::uint32_t levels_;
+  std::vector<std::uint8_t> leaf_visible_;  ///< per leaf record; empty: no culling
+};
+
+/// The value at a point from two dense level volumes.
+class DenseSampler {
+ public:
+  DenseSampler(const DenseLevel& a, const DenseLevel& b, float factor,
+               const VolumeGeometry& geometry)
+      : a_(a), b_(b), f_(factor), levels_(geometry.levels) {}
+
+  Sample operator()(const glm::dvec3& p) const {
+    const float a = f_ == 1.0f ? 0.0f : at(a_, p);
+    const float b = f_ == 0.0f ? 0.0f : at(b_, p);
+    return {true, f_ == 0.0f ? a : f_ == 1.0f ? b : mix_keyframes(a, b, f_)};
+  }
+
+ private:
+  /// Trilinear at level voxel coordinates p/2^(L−1−k) − 0.5, clamped to the level's edge.
+  float at(const DenseLevel& v, const glm::dvec3& p) const {
+    const double scale = std::ldexp(1.0, -static_cast<int>(levels_ - 1 - v.level));
+    return detail::trilinear(
+        v.values.data(), v.dims[0], v.dims[1], v.dims[2], static_cast<float>(p.x * scale - 0.5),
+        static_cast<float>(p.y * scale - 0.5), static_cast<float>(p.z * scale - 0.5));
+  }
+  const DenseLevel& a_;
+  const DenseLevel& b_;
+  float f_;
+  std::uint32_t levels_;
+};
+
+}  // namespace
+
+VolumeGeometry VolumeGeometry::of(std::array<std::uint32_t, 3> dims) {
+  return {dims, static_cast<std::uint32_t>(format::level_geometry(dims).size())};
+}
+
+void validate_svo(const SvoView& svo, std::uint32_t slot_count, const VolumeGeometry& geometry) {
+  check_geometry(geometry);
+  const auto bad = [](const std::string& what) { throw std::invalid_argument("SVO: " + what); };
+  if (svo.nodes.empty() || svo.nodes.size() % VR_SVO_NODE_WORDS != 0)
+    bad("expected a non-empty multiple of " + std::to_string(VR_SVO_NODE_WORDS) +
+        " node words, found " + std::to_string(svo.nodes.size()));
+  if (svo.leaves.size() % VR_SVO_LEAF_WORDS != 0)
+    bad("expected a multiple of " + std::to_string(VR_SVO_LEAF_WORDS) + " leaf words, found " +
+        std::to_string(svo.leaves.size()));
+  const std::size_t node_count = svo.nodes.size() / VR_SVO_NODE_WORDS;
+  const std::size_t leaf_count = svo.leaves.size() / VR_SVO_LEAF_WORDS;
+  if (!svo.histograms.empty() && svo.histograms.size() != leaf_count * VR_SVO_HISTOGRAM_WORDS)
+    bad("expected " + std::to_string(VR_SVO_HISTOGRAM_WORDS) + " histogram words per leaf (" +
+        std::to_string(leaf_count * VR_SVO_HISTOGRAM_WORDS) + "), found " +
+        std::to_string(svo.histograms.size()));
+  if (svo.nodes[0] != VR_SVO_NO_PARENT)
+    bad("node 0 (the root) word 0: expected no parent, found " + std::to_string(svo.nodes[0]));
+
+  const auto check_leaf = [&](vr_uint leaf, vr_uint level, const std::string& from) {
+    if (leaf >= leaf_count)
+      bad(from + ": leaf " + std::to_string(leaf) + " of " + std::to_string(leaf_count));
+    const vr_uint* r = svo.leaves.data() + std::size_t{leaf} * VR_SVO_LEAF_WORDS;
+    const std::string at = "leaf " + std::to_string(leaf) + " (from " + from + ")";
+    const float f = std::bit_cast<float>(r[3]);
+    if (!(f >= 0 && f <= 1))
+      bad(at + " word 3: expected a factor in [0, 1], found " + std::to_string(f));
+    const float weight[2] = {1 - f, f};
+    const vr_uint d[2] = {vr_svo_lod_a(r[2]), vr_svo_lod_b(r[2])};
+    for (int k = 0; k < 2; ++k) {
+      if (r[k] >= slot_count && !(r[k] == VR_ATLAS_NO_SLOT && weight[k] == 0))
+        bad(at + " word " + std::to_string(k) + ": slot " + std::to_string(r[k]) + " of " +
+            std::to_string(slot_count));
+      if (d[k] > level)
+        bad(at + " word 2: LOD difference " + std::to_string(d[k]) + " of keyframe " +
+            (k == 0 ? "A" : "B") + " exceeds the spatial node's level " + std::to_string(level));
+    }
+  };
+
+  // Walk the tree from the root: every record reached once, at a level that exists.
+  std::vector<bool> seen(node_count, false);
+  struct Item {
+    vr_uint node, level;
+  };
+  std::vector<Item> stack = {{0, 0}};
+  seen[0] = true;
+  while (!stack.empty()) {
+    const Item it = stack.back();
+    stack.pop_back();
+    const vr_uint* rec = svo.nodes.data() + std::size_t{it.node} * VR_SVO_NODE_WORDS;
+    const std::string at = "node " + std::to_string(it.node);
+    bool up = false;
+    for (vr_uint o = 0; o < 8; ++o) {
+      const vr_uint word = rec[1 + o], kind = vr_svo_child_kind(word),
+                    index = vr_svo_child_index(word);
+      const std::string child = at + " word " + std::to_string(1 + o);
+      if (kind == VR_SVO_CHILD_UP) up = true;
+      if (kind != VR_SVO_CHILD_NODE && kind != VR_SVO_CHILD_LEAF) continue;
+      if (it.level + 1 >= geometry.levels)
+        bad(child + ": a child below the finest level (" + std::to_string(geometry.levels) +
+            " levels)");
+      if (kind == VR_SVO_CHILD_LEAF) {
+        check_leaf(index, it.level + 1, child);
+        continue;
+      }
+      if (index >= node_count)
+        bad(child + ": node " + std::to_string(index) + " of " + std::to_string(node_count));
+      if (seen[index]) bad(child + ": node " + std::to_string(index) + " is reached twice");
+      if (svo.nodes[std::size_t{index} * VR_SVO_NODE_WORDS] != it.node)
+        bad("node " + std::to_string(index) + " word 0: expected parent " +
+            std::to_string(it.node) + ", found " +
+            std::to_string(svo.nodes[std::size_t{index} * VR_SVO_NODE_WORDS]));
+      seen[index] = true;
+      stack.push_back({index, it.level + 1});
+    }
+    if (up || rec[9] != VR_SVO_NO_LEAF) check_leaf(rec[9], it.level, at + " word 9");
+  }
+}
+
+RgbaImage render_svo(const SvoView& svo, const CpuAtlas& atlas, const VolumeGeometry& geometry,
+                     const player::OrbitCamera& camera, const TransferFunction& transfer,
+                     const RenderOptions& options) {
+  validate_svo(svo, atlas.slot_count(), geometry);
+  return cast_rays(geometry, camera, transfer, options, SvoSampler(svo, atlas, geometry, transfer));
+}
+
+RgbaImage render_reference(const DenseLevel& a, const DenseLevel& b, float factor,
+                           const VolumeGeometry& geometry, const player::OrbitCamera& camera,
+                           const TransferFunction& transfer, const RenderOptions& options) {
+  check_geometry(geometry);
+  const auto geometries = format::level_geometry(geometry.dims);
+  if (geometries.size() != geometry.levels)
+    throw std::invalid_argument("render_reference: dims give " + std::to_string(geometries.size()) +
+                                " levels, geometry says " + std::to_string(geometry.levels));
+  for (const DenseLevel* v : {&a, &b}) {
+    const char* name = v == &a ? "A" : "B";
+    if (v->level >= geometry.levels)
+      throw std::invalid_argument(std::string("render_reference: volume ") + name + " level " +
+                                  std::to_string(v->level) + " of " +
+                                  std::to_string(geometry.levels));
+    if (v->dims != geometries[v->level].dims ||
+        v->values.size() != std::size_t{v->dims[0]} * v->dims[1] * v->dims[2])
+      throw std::invalid_argument(std::string("render_reference: volume ") + name +
+                                  " does not have level " + std::to_string(v->level) +
+                                  "'s dims and size");
+  }
+  if (!(factor >= 0 && factor <= 1))
+    throw std::invalid_argument("render_reference: expected a factor in [0, 1], found " +
+                                std::to_string(factor));
+  return cast_rays(geometry, camera, transfer, options, DenseSampler(a, b, factor, geometry));
+}
+
+psnr::Image to_image(const RgbaImage& image) {
+  psnr::Image out;
+  out.width = image.width;
+  out.height = image.height;
+  out.channels = 3;
+  const std::size_t n =
+      static_cast<std::size_t>(image.width) * static_cast<std::size_t>(image.height);
+  out.pixels.resize(3 * n);
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t c = 0; c < 3; ++c) {
+      const float v = std::clamp(image.rgba[4 * i + c], 0.0f, 1.0f);
+      out.pixels[3 * i + c] = static_cast<std::uint8_t>(std::lround(v * 255.0f));
+    }
+  return out;
+}
+
+void write_png(const std::filesystem::path& path, const RgbaImage& image) {
+  psnr::write_png(path, to_image(image));
+}
+
+double max_abs_difference(const RgbaImage& a, const RgbaImage& b) {
+  if (a.width != b.width || a.height != b.height || a.rgba.size() != b.rgba.size())
+    return std::numeric_limits<double>::infinity();
+  double m = 0;
+  for (std::size_t i = 0; i < a.rgba.size(); ++i)
+    m = std::max(m, std::abs(double(a.rgba[i]) - double(b.rgba[i])));
+  return m;
+}
+
+}  // namespace volreel::cpu_render

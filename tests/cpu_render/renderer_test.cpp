@@ -1,0 +1,627 @@
+// renderer_test.cpp: the CPU reference renderer — the LOD-difference mapping for d = 0..3, the
+// SVO ray caster against the dense-volume oracle (fully loaded, time interpolation, LOD
+// differences 1–3 for either keyframe, dims not a multiple of 34, a single-level volume), "up"
+// children, an empty transfer function, opacity correction, SVO validation and PNG output.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <map>
+#include <memory>
+#include <numbers>
+#include <string>
+#include <vector>
+
+#include "../test_util.hpp"
+#include "svo_builder.hpp"
+#include "volreel/cpu_render/cpu_atlas.hpp"
+#include "volreel/cpu_render/renderer.hpp"
+#include "volreel/datasets/analytic.hpp"
+#include "volreel/encoder/encoder.hpp"
+#include "volreel/format/decoder.hpp"
+#include "volreel/player/svo_layout.h"
+#include "volreel/psnr/metrics.hpp"
+
+namespace volreel {
+namespace {
+
+using cpu_render::CpuAtlas;
+using cpu_render::DenseLevel;
+using cpu_render::RgbaImage;
+using cpu_render::TransferFunction;
+using cpu_render::VolumeGeometry;
+using test::build_uniform_svo;
+using test::LeafSpec;
+
+using Coord = std::array<std::uint32_t, 3>;
+
+// --- The LOD-difference mapping ------------------------------------------------------------
+
+TEST(CpuRenderLodMapping, AncestorLocalHandComputed) {
+  // u' = ((c mod 2^d) + u) / 2^d.
+  EXPECT_FLOAT_EQ(vr_svo_ancestor_local(5, 0.25f, 0), 0.25f);
+  EXPECT_FLOAT_EQ(vr_svo_ancestor_local(4, 0.25f, 1), 0.125f);     // (0 + 0.25)/2
+  EXPECT_FLOAT_EQ(vr_svo_ancestor_local(5, 0.25f, 1), 0.625f);     // (1 + 0.25)/2
+  EXPECT_FLOAT_EQ(vr_svo_ancestor_local(5, 0.25f, 2), 0.3125f);    // (1 + 0.25)/4
+  EXPECT_FLOAT_EQ(vr_svo_ancestor_local(7, 0.75f, 2), 0.9375f);    // (3 + 0.75)/4
+  EXPECT_FLOAT_EQ(vr_svo_ancestor_local(13, 0.25f, 3), 0.65625f);  // (5 + 0.25)/8
+  EXPECT_FLOAT_EQ(vr_svo_ancestor_local(8, 0.0f, 3), 0.0f);        // (0 + 0)/8
+  // Stored voxel coordinates: the apron is skipped.
+  EXPECT_FLOAT_EQ(vr_svo_slot_coord(0.0f), 1.0f);
+  EXPECT_FLOAT_EQ(vr_svo_slot_coord(0.5f), 18.0f);
+  // A case that a one-level mapping (fract((c + u)/2) applied for any d, or c mod 2 instead of
+  // c mod 2^d) gets wrong: node 6 at d = 2 lies in the third quarter of its ancestor.
+  EXPECT_FLOAT_EQ(vr_svo_ancestor_local(6, 0.5f, 2), 0.625f);  // (2 + 0.5)/4
+}
+
+TEST(CpuRenderLodMapping, FinestVoxelCentresLandOnTheirAncestorVoxels) {
+  // The centre of finest voxel g = 34c + i (world g + 0.5) lies at level-(L−1−d) voxel
+  // coordinate (g + 0.5)/2^d − 0.5; in the ancestor brick c >> d, whose stored voxel 1 is level
+  // voxel 34·(c >> d), that is stored voxel (g + 0.5)/2^d − 0.5 − 34·(c >> d) + 1. The SVO
+  // mapping must give the same texel coordinate (slot_coord − 0.5) for every d.
+  for (vr_uint d = 0; d <= 3; ++d)
+    for (vr_uint c = 0; c < 16; ++c)
+      for (vr_uint i = 0; i < 34; ++i) {
+        const double g = 34.0 * c + i;
+        const double expected = (g + 0.5) / double(1u << d) - 0.5 - 34.0 * double(c >> d) + 1.0;
+        const float u = (float(i) + 0.5f) / 34.0f;
+        const double got = double(vr_svo_slot_coord(vr_svo_ancestor_local(c, u, d))) - 0.5;
+        ASSERT_NEAR(got, expected, 1e-4) << "d " << d << " c " << c << " i " << i;
+      }
+}
+
+// --- Scenes: two frames of an analytic field, their exact pyramids and an atlas ----------------
+
+struct Scene {
+  Dims dims;
+  VolumeGeometry geometry;
+  std::vector<format::LevelGeometry> levels;
+  std::array<Volume, 2> frames;
+  std::array<encoder::Pyramid, 2> pyramids;
+  float lo = 0, hi = 0;
+  std::vector<std::uint32_t> level_first;  // first brick number of each level
+  std::uint32_t bricks_per_frame = 0;
+
+  std::uint32_t slot(std::size_t frame, std::uint32_t level, Coord c) const {
+    const auto& g = levels[level].grid;
+    return static_cast<std::uint32_t>(frame) * bricks_per_frame + level_first[level] +
+           (c[2] * g[1] + c[1]) * g[0] + c[0];
+  }
+  DenseLevel dense(std::size_t frame, std::uint32_t level) const {
+    return {levels[level].dims, pyramids[frame].levels[level], level};
+  }
+  template <class F>
+  void for_each_brick(F f) const {
+    for (std::uint32_t l = 0; l < levels.size(); ++l) {
+      const auto& g = levels[l].grid;
+      for (std::uint32_t z = 0; z < g[2]; ++z)
+        for (std::uint32_t y = 0; y < g[1]; ++y)
+          for (std::uint32_t x = 0; x < g[0]; ++x) f(l, Coord{x, y, z});
+    }
+  }
+  /// Every brick of every level of both frames, exactly (no coding).
+  CpuAtlas exact_atlas() const {
+    CpuAtlas atlas(2 * bricks_per_frame);
+    std::vector<float> brick(format::brick_voxels);
+    for (std::size_t t = 0; t < 2; ++t)
+      for_each_brick([&](std::uint32_t l, Coord c) {
+        encoder::extract_brick(pyramids[t], l, c[0], c[1], c[2], brick);
+        atlas.store(slot(t, l, c), brick);
+      });
+    return atlas;
+  }
+};
+
+std::shared_ptr<const Scene> make_scene(Dims dims, datasets::AnalyticField field) {
+  auto s = std::make_shared<Scene>();
+  s->dims = dims;
+  const std::array<std::uint32_t, 3> d = {static_cast<std::uint32_t>(dims.x),
+                                          static_cast<std::uint32_t>(dims.y),
+                                          static_cast<std::uint32_t>(dims.z)};
+  s->geometry = VolumeGeometry::of(d);
+  s->levels = format::level_geometry(d);
+  datasets::AnalyticParams p;
+  p.field = field;
+  p.dims = dims;
+  p.frames = 8;
+  s->lo = INFINITY;
+  s->hi = -INFINITY;
+  for (std::size_t t = 0; t < 2; ++t) {
+    s->frames[t] = Volume(dims);
+    // Frames 0 and 3: far enough apart that time interpolation is visible.
+    datasets::analytic_frame(p, 3 * t, s->frames[t].data);
+    s->pyramids[t] = encoder::build_pyramid(s->frames[t]);
+    for (float v : s->frames[t].data) {
+      s->lo = std::min(s->lo, v);
+      s->hi = std::max(s->hi, v);
+    }
+  }
+  for (const auto& l : s->levels) {
+    s->level_first.push_back(s->bricks_per_frame);
+    s->bricks_per_frame += l.grid[0] * l.grid[1] * l.grid[2];
+  }
+  return s;
+}
+
+/// 240 × 40 × 30: no axis a multiple of 34; grids 8×2×1 → 4×1×1 → 2×1×1 → 1: four levels.
+const Scene& elongated() {
+  static const auto scene = make_scene({240, 40, 30}, datasets::AnalyticField::blobs);
+  return *scene;
+}
+
+/// Every value visible, colour and opacity changing across the range.
+TransferFunction test_transfer(const Scene& s) {
+  const float mid = 0.5f * (s.lo + s.hi);
+  return TransferFunction({{s.lo, 0.1f, 0.2f, 1.0f, 0.01f},
+                           {mid, 0.1f, 0.9f, 0.3f, 0.04f},
+                           {s.hi, 1.0f, 0.2f, 0.1f, 0.12f}},
+                          s.lo, s.hi);
+}
+
+player::OrbitCamera test_camera(const Scene& s, int width = 96, int height = 64) {
+  auto camera = player::OrbitCamera::framing(
+      glm::dvec3(double(s.dims.x), double(s.dims.y), double(s.dims.z)), width, height);
+  camera.distance *= 0.6;  // the volume fills the image
+  return camera;
+}
+
+double image_psnr(const RgbaImage& a, const RgbaImage& b) {
+  return psnr::compare_images(cpu_render::to_image(a), cpu_render::to_image(b)).psnr;
+}
+
+/// The image is not all background (the comparison means something).
+double drawn_fraction(const RgbaImage& image) {
+  std::size_t drawn = 0;
+  for (std::size_t i = 3; i < image.rgba.size(); i += 4) drawn += image.rgba[i] > 0.05f ? 1u : 0u;
+  return double(drawn) / double(image.rgba.size() / 4);
+}
+
+// Float rounding only: the slot coordinate 1 + 34·u' and the level coordinate p/2^k − 0.5 differ
+// by a few ulps, which moves trilinear weights by ~1e-5 over hundreds of composited samples.
+constexpr double exact_tolerance = 2e-4;
+
+/// max |got − want| over every channel, recorded in the test's XML output (--gtest_output=xml).
+double difference(const RgbaImage& got, const RgbaImage& want) {
+  const double d = cpu_render::max_abs_difference(got, want);
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g", d);
+  ::testing::Test::RecordProperty("max_abs_difference", text);
+  return d;
+}
+
+// --- Fully loaded: every finest node drawn, A = frame 0, B = frame 1 -------------------------
+
+class CpuRenderFullyLoaded : public ::testing::TestWithParam<float> {};
+
+TEST_P(CpuRenderFullyLoaded, SvoEqualsReferenceInterpolatedInTime) {
+  const Scene& s = elongated();
+  const float f = GetParam();
+  const CpuAtlas atlas = s.exact_atlas();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  const auto svo = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, f};
+  });
+  const auto camera = test_camera(s);
+  const auto transfer = test_transfer(s);
+  const RgbaImage got = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+  const RgbaImage want = cpu_render::render_reference(s.dense(0, finest), s.dense(1, finest), f,
+                                                      s.geometry, camera, transfer);
+  EXPECT_GT(drawn_fraction(want), 0.15);
+  EXPECT_LE(difference(got, want), exact_tolerance);
+}
+
+INSTANTIATE_TEST_SUITE_P(Factors, CpuRenderFullyLoaded, ::testing::Values(0.0f, 0.5f, 1.0f),
+                         [](const auto& param) {
+                           return "f" + std::to_string(static_cast<int>(param.param * 100)) + "pct";
+                         });
+
+TEST(CpuRenderFullyLoaded, TimeInterpolationChangesTheImage) {
+  // The oracle's f = 0, 0.5 and 1 differ: a renderer that ignored the factor would fail above.
+  const Scene& s = elongated();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  const auto camera = test_camera(s);
+  const auto transfer = test_transfer(s);
+  const auto render = [&](float f) {
+    return cpu_render::render_reference(s.dense(0, finest), s.dense(1, finest), f, s.geometry,
+                                        camera, transfer);
+  };
+  const RgbaImage a = render(0), m = render(0.5f), b = render(1);
+  EXPECT_GT(cpu_render::max_abs_difference(a, m), 0.05);
+  EXPECT_GT(cpu_render::max_abs_difference(m, b), 0.05);
+}
+
+TEST(CpuRenderFullyLoaded, DecodedContainerMatchesDecodedVolumes) {
+  // Frames coded with zfp and decoded: the atlas from decode_into, the oracle from decode_level.
+  // Each brick's apron is coded with the brick, so it differs from the neighbour's interior by
+  // up to the zfp accuracy; the images agree to that.
+  const auto scene = make_scene({100, 70, 40}, datasets::AnalyticField::noise);
+  const Scene& s = *scene;
+  encoder::CodingSettings coding;
+  coding.codec = format::Codec::zfp;
+  coding.zfp_accuracy = 1e-4 * double(s.hi - s.lo);
+  coding.value_min = s.lo;
+  coding.value_max = s.hi;
+  const encoder::FrameEncoder frame_encoder(nullptr, coding);
+  const format::AtomTable no_atoms;
+  CpuAtlas atlas(2 * s.bricks_per_frame);
+  std::array<std::vector<std::byte>, 2> bytes;
+  std::array<format::FrameView, 2> views;
+  const std::uint32_t finest = s.geometry.levels - 1;
+  std::array<format::LevelVolume, 2> decoded;
+  for (std::size_t t = 0; t < 2; ++t) {
+    bytes[t] = frame_encoder.encode(t, s.frames[t]);
+    views[t] = format::FrameView(bytes[t], "frame" + std::to_string(t));
+    std::size_t finest_bricks = 0;
+    for (std::uint32_t i = 0; i < views[t].node_count(); ++i) {
+      const auto& pos = views[t].position(i);
+      const format::Node node = views[t].node(i);
+      if (node.brick == format::no_brick) continue;
+      atlas.decode_into(s.slot(t, pos.level, {pos.x, pos.y, pos.z}),
+                        views[t].brick_bytes(node.brick), views[t].codec(),
+                        views[t].header().codec_parameter, no_atoms, views[t].name(),
+                        views[t].brick_offset(node.brick));
+      finest_bricks += pos.level == finest ? 1 : 0;
+    }
+    const auto& g = s.levels[finest].grid;
+    ASSERT_EQ(finest_bricks, std::size_t{g[0]} * g[1] * g[2]) << "a finest brick is missing";
+    decoded[t] = format::decode_level(views[t], finest, no_atoms);
+  }
+  const auto camera = test_camera(s);
+  const auto transfer = test_transfer(s);
+  for (float f : {0.0f, 0.5f, 1.0f}) {
+    const auto svo = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+      return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, f};
+    });
+    const RgbaImage got = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+    const RgbaImage want = cpu_render::render_reference(DenseLevel::of(decoded[0], finest),
+                                                        DenseLevel::of(decoded[1], finest), f,
+                                                        s.geometry, camera, transfer);
+    EXPECT_GT(drawn_fraction(want), 0.15);
+    EXPECT_LE(difference(got, want), 5e-3) << "f " << f;
+    EXPECT_GE(image_psnr(got, want), 50.0) << "f " << f;
+  }
+}
+
+// --- LOD differences: B (or A) from an ancestor d levels up --------------------------------
+
+class CpuRenderLodDifference : public ::testing::TestWithParam<std::uint32_t> {};
+
+TEST_P(CpuRenderLodDifference, SecondKeyframeFromAnAncestor) {
+  const Scene& s = elongated();
+  const std::uint32_t d = GetParam(), finest = s.geometry.levels - 1;
+  ASSERT_LE(d, finest);
+  const CpuAtlas atlas = s.exact_atlas();
+  const auto camera = test_camera(s);
+  const auto transfer = test_transfer(s);
+  for (float f : {1.0f, 0.5f}) {
+    // Every finest node drawn; B is its ancestor brick at level finest − d of frame 1.
+    const auto svo = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+      return LeafSpec{s.slot(0, l, c), s.slot(1, l - d, {c[0] >> d, c[1] >> d, c[2] >> d}), 0, d,
+                      f};
+    });
+    const RgbaImage got = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+    const RgbaImage want = cpu_render::render_reference(s.dense(0, finest), s.dense(1, finest - d),
+                                                        f, s.geometry, camera, transfer);
+    EXPECT_GT(drawn_fraction(want), 0.15);
+    EXPECT_LE(difference(got, want), exact_tolerance) << "f " << f;
+    if (f == 1.0f) {
+      // The coarse level really looks different from the finest, so the test has power.
+      const RgbaImage fine = cpu_render::render_reference(s.dense(0, finest), s.dense(1, finest), f,
+                                                          s.geometry, camera, transfer);
+      EXPECT_GT(cpu_render::max_abs_difference(want, fine), 0.02);
+    }
+  }
+}
+
+TEST_P(CpuRenderLodDifference, FirstKeyframeFromAnAncestor) {
+  const Scene& s = elongated();
+  const std::uint32_t d = GetParam(), finest = s.geometry.levels - 1;
+  const CpuAtlas atlas = s.exact_atlas();
+  const auto camera = test_camera(s);
+  const auto transfer = test_transfer(s);
+  const auto svo = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l - d, {c[0] >> d, c[1] >> d, c[2] >> d}), s.slot(1, l, c), d, 0,
+                    0.25f};
+  });
+  const RgbaImage got = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+  const RgbaImage want = cpu_render::render_reference(s.dense(0, finest - d), s.dense(1, finest),
+                                                      0.25f, s.geometry, camera, transfer);
+  EXPECT_LE(difference(got, want), exact_tolerance);
+}
+
+TEST_P(CpuRenderLodDifference, NodesDrawnAtACoarserLevel) {
+  // Every node of level finest − d drawn with its own bricks: the oracle at that level.
+  const Scene& s = elongated();
+  const std::uint32_t d = GetParam(), level = s.geometry.levels - 1 - d;
+  const CpuAtlas atlas = s.exact_atlas();
+  const auto camera = test_camera(s);
+  const auto transfer = test_transfer(s);
+  const auto svo = build_uniform_svo(s.levels, level, [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
+  });
+  const RgbaImage got = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+  const RgbaImage want = cpu_render::render_reference(s.dense(0, level), s.dense(1, level), 0.5f,
+                                                      s.geometry, camera, transfer);
+  EXPECT_LE(difference(got, want), exact_tolerance);
+}
+
+INSTANTIATE_TEST_SUITE_P(D, CpuRenderLodDifference, ::testing::Values(1u, 2u, 3u),
+                         [](const auto& param) { return "d" + std::to_string(param.param); });
+
+// --- Shapes of trees and volumes -----------------------------------------------------------
+
+TEST(CpuRenderSvoShapes, UpChildrenDrawTheSameAsLeafChildren) {
+  const Scene& s = elongated();
+  const CpuAtlas atlas = s.exact_atlas();
+  const auto camera = test_camera(s);
+  const auto transfer = test_transfer(s);
+  for (std::uint32_t level = 1; level < s.geometry.levels; ++level) {
+    const auto leaf_for = [&](std::uint32_t l, Coord c) {
+      return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
+    };
+    const auto leaf = build_uniform_svo(s.levels, level, leaf_for, false);
+    const auto up = build_uniform_svo(s.levels, level, leaf_for, true);
+    ASSERT_NE(leaf.nodes.size(), up.nodes.size());
+    const RgbaImage a = cpu_render::render_svo(leaf.view(), atlas, s.geometry, camera, transfer);
+    const RgbaImage b = cpu_render::render_svo(up.view(), atlas, s.geometry, camera, transfer);
+    EXPECT_EQ(cpu_render::max_abs_difference(a, b), 0.0) << "level " << level;
+  }
+}
+
+class CpuRenderVolumeShapes : public ::testing::TestWithParam<Dims> {};
+
+TEST_P(CpuRenderVolumeShapes, SvoEqualsReferenceAtEveryLevel) {
+  const auto scene = make_scene(GetParam(), datasets::AnalyticField::rotating);
+  const Scene& s = *scene;
+  const CpuAtlas atlas = s.exact_atlas();
+  const auto camera = test_camera(s, 64, 64);
+  const auto transfer = test_transfer(s);
+  for (std::uint32_t level = 0; level < s.geometry.levels; ++level) {
+    const auto svo = build_uniform_svo(s.levels, level, [&](std::uint32_t l, Coord c) {
+      return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
+    });
+    const RgbaImage got = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+    const RgbaImage want = cpu_render::render_reference(s.dense(0, level), s.dense(1, level), 0.5f,
+                                                        s.geometry, camera, transfer);
+    EXPECT_GT(drawn_fraction(want), 0.2);
+    EXPECT_LE(difference(got, want), exact_tolerance) << "level " << level;
+  }
+}
+
+// One level (the root drawn through "up" children), two levels with ragged edges, two levels
+// with dims an exact multiple of 34.
+INSTANTIATE_TEST_SUITE_P(Dims, CpuRenderVolumeShapes,
+                         ::testing::Values(Dims{30, 20, 25}, Dims{50, 37, 20}, Dims{68, 34, 34}),
+                         [](const auto& param) {
+                           return std::to_string(param.param.x) + "x" +
+                                  std::to_string(param.param.y) + "x" +
+                                  std::to_string(param.param.z);
+                         });
+
+TEST(CpuRender, EmptyTransferFunctionGivesTheBackground) {
+  const Scene& s = elongated();
+  const CpuAtlas atlas = s.exact_atlas();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  const auto svo = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
+  });
+  cpu_render::RenderOptions options;
+  options.background = {0.25f, 0.5f, 0.75f};
+  const auto transparent = TransferFunction::preset("transparent", s.lo, s.hi);
+  for (const RgbaImage& image :
+       {cpu_render::render_svo(svo.view(), atlas, s.geometry, test_camera(s), transparent, options),
+        cpu_render::render_reference(s.dense(0, finest), s.dense(1, finest), 0.5f, s.geometry,
+                                     test_camera(s), transparent, options)})
+    for (int y = 0; y < image.height; ++y)
+      for (int x = 0; x < image.width; ++x) {
+        const float* p = image.pixel(x, y);
+        ASSERT_EQ(p[0], 0.25f);
+        ASSERT_EQ(p[1], 0.5f);
+        ASSERT_EQ(p[2], 0.75f);
+        ASSERT_EQ(p[3], 0.0f);
+      }
+}
+
+TEST(CpuRender, EmptyChildrenAreTransparent) {
+  // Only octant 0 of the root drawn: the rest of the image is background.
+  const Scene& s = elongated();
+  const CpuAtlas atlas = s.exact_atlas();
+  auto svo = build_uniform_svo(s.levels, 1, [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.0f};
+  });
+  const RgbaImage all =
+      cpu_render::render_svo(svo.view(), atlas, s.geometry, test_camera(s), test_transfer(s));
+  for (vr_uint o = 1; o < 8; ++o) svo.nodes[1 + o] = vr_svo_child_word(VR_SVO_CHILD_EMPTY, 0);
+  const RgbaImage part =
+      cpu_render::render_svo(svo.view(), atlas, s.geometry, test_camera(s), test_transfer(s));
+  // Octant 0 of the root is x < 136: part of the volume disappears, not all of it.
+  EXPECT_LT(drawn_fraction(part), drawn_fraction(all) - 0.05);
+  EXPECT_GT(drawn_fraction(part), 0.03);
+}
+
+TEST(CpuRender, HistogramCullingKeepsTheImage) {
+  // Only the top 65 % of the range visible: leaves whose histogram hull lies below are skipped.
+  const Scene& s = elongated();
+  const CpuAtlas atlas = s.exact_atlas();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  auto svo = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
+  });
+  const float cut = s.lo + 0.35f * (s.hi - s.lo);
+  const TransferFunction high({{cut, 1, 0.5f, 0, 0}, {s.hi, 1, 1, 0.5f, 0.3f}}, s.lo, s.hi);
+  const auto camera = test_camera(s);
+  const RgbaImage plain = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, high);
+  test::add_leaf_histograms(svo, atlas, s.lo, s.hi);
+  std::size_t culled = 0;
+  for (std::size_t i = 0; i < svo.histograms.size(); i += 2) {
+    const std::uint64_t h = svo.histograms[i] | std::uint64_t{svo.histograms[i + 1]} << 32;
+    culled += high.visible_hull(h, s.lo, s.hi) ? 0u : 1u;
+  }
+  EXPECT_GT(culled, 0u);                         // some leaves are skipped ...
+  EXPECT_LT(culled, svo.histograms.size() / 2);  // ... not all
+  EXPECT_GT(drawn_fraction(plain), 0.01);
+  const RgbaImage culling = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, high);
+  EXPECT_EQ(cpu_render::max_abs_difference(plain, culling), 0.0);
+  // Histograms that claim every leaf holds only the lowest values: nothing is drawn.
+  for (std::size_t i = 0; i < svo.histograms.size(); i += 2) {
+    svo.histograms[i] = 1;
+    svo.histograms[i + 1] = 0;
+  }
+  const RgbaImage none = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, high);
+  EXPECT_EQ(drawn_fraction(none), 0.0);
+  svo.histograms.pop_back();
+  EXPECT_THROW(cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, high),
+               std::invalid_argument);
+}
+
+TEST(CpuRender, OpacityCorrectionMakesTheStepSizeIrrelevant) {
+  const Scene& s = elongated();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  const auto transfer = test_transfer(s);
+  const auto render = [&](double step) {
+    cpu_render::RenderOptions options;
+    options.step = step;
+    return cpu_render::render_reference(s.dense(0, finest), s.dense(1, finest), 0.5f, s.geometry,
+                                        test_camera(s), transfer, options);
+  };
+  const RgbaImage fine = render(0.25), coarse = render(1.0);
+  // Same picture (sampling noise only) ...
+  EXPECT_GE(image_psnr(fine, coarse), 35.0);
+  // ... where without correction the coarse step would be far more transparent.
+  cpu_render::RenderOptions uncorrected;
+  uncorrected.step = 1.0;
+  uncorrected.reference_step = 0.25;  // pretends the opacities were per quarter voxel
+  const RgbaImage wrong =
+      cpu_render::render_reference(s.dense(0, finest), s.dense(1, finest), 0.5f, s.geometry,
+                                   test_camera(s), transfer, uncorrected);
+  EXPECT_LT(image_psnr(fine, wrong), 30.0);
+}
+
+TEST(CpuRender, RejectsBadSvosAndOptions) {
+  const Scene& s = elongated();
+  const CpuAtlas atlas = s.exact_atlas();
+  const auto camera = test_camera(s, 8, 8);
+  const auto transfer = test_transfer(s);
+  const std::uint32_t finest = s.geometry.levels - 1;
+  const auto good = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
+  });
+  EXPECT_NO_THROW(cpu_render::validate_svo(good.view(), atlas.slot_count(), s.geometry));
+  const auto rejects = [&](auto mutate, const char* needle) {
+    auto svo = good;
+    mutate(svo);
+    try {
+      cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+      ADD_FAILURE() << "accepted an SVO with " << needle;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+  };
+  rejects([](test::BuiltSvo& v) { v.leaves[0] = 1u << 20; }, "slot");
+  rejects([](test::BuiltSvo& v) { v.leaves[2] = vr_svo_lod_pack(0, 9); }, "LOD difference 9");
+  rejects([](test::BuiltSvo& v) { v.leaves[3] = std::bit_cast<vr_uint>(1.5f); }, "factor");
+  rejects([](test::BuiltSvo& v) { v.nodes[1] = vr_svo_child_word(VR_SVO_CHILD_NODE, 999); },
+          "node 999");
+  rejects([](test::BuiltSvo& v) { v.nodes[1] = vr_svo_child_word(VR_SVO_CHILD_NODE, 0); },
+          "reached twice");
+  rejects([](test::BuiltSvo& v) { v.nodes[2] = vr_svo_child_word(VR_SVO_CHILD_UP, 0); }, "word 9");
+  rejects([](test::BuiltSvo& v) { v.nodes.pop_back(); }, "node words");
+  // A NO_SLOT keyframe is fine where its weight is zero.
+  auto only_a = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l, c), VR_ATLAS_NO_SLOT, 0, 0, 0.0f};
+  });
+  EXPECT_NO_THROW(cpu_render::render_svo(only_a.view(), atlas, s.geometry, camera, transfer));
+  cpu_render::RenderOptions bad;
+  bad.step = 0;
+  EXPECT_THROW(cpu_render::render_svo(good.view(), atlas, s.geometry, camera, transfer, bad),
+               std::invalid_argument);
+  DenseLevel mislabelled = s.dense(1, 0);
+  mislabelled.level = 1;  // level 0's dims
+  EXPECT_THROW(cpu_render::render_reference(s.dense(0, finest), mislabelled, 0.5f, s.geometry,
+                                            camera, transfer),
+               std::invalid_argument);
+}
+
+TEST(CpuRender, CameraInsideTheVolume) {
+  // The eye inside the box: rays start at the eye, both renderers agree.
+  const Scene& s = elongated();
+  const CpuAtlas atlas = s.exact_atlas();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  auto camera = test_camera(s);
+  camera.distance = 20;
+  const auto svo = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
+  });
+  const auto transfer = test_transfer(s);
+  const RgbaImage got = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+  const RgbaImage want = cpu_render::render_reference(s.dense(0, finest), s.dense(1, finest), 0.5f,
+                                                      s.geometry, camera, transfer);
+  EXPECT_GT(drawn_fraction(want), 0.9);
+  EXPECT_LE(difference(got, want), exact_tolerance);
+}
+
+TEST(CpuRender, DegenerateCameraDrawsNothing) {
+  // Looking straight down, where the orbit camera's right vector is (nearly) undefined: the
+  // renderer returns an image; it never hangs on rays without a finite segment.
+  const Scene& s = elongated();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  auto camera = test_camera(s, 8, 8);
+  camera.elevation = std::numbers::pi / 2;
+  const RgbaImage image = cpu_render::render_reference(s.dense(0, finest), s.dense(1, finest), 0.5f,
+                                                       s.geometry, camera, test_transfer(s));
+  EXPECT_EQ(image.width, 8);
+}
+
+TEST(CpuRender, WritesAPng) {
+  // A 96³ cube of smooth value noise (3 levels), the "turbulence" preset, through the SVO.
+  const auto scene = make_scene({96, 96, 96}, datasets::AnalyticField::noise);
+  const Scene& s = *scene;
+  const CpuAtlas atlas = s.exact_atlas();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  const auto svo = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
+  });
+  auto camera = player::OrbitCamera::framing({96, 96, 96}, 256, 256);
+  camera.distance *= 0.75;
+  const auto transfer = TransferFunction::preset("turbulence", s.lo, s.hi);
+  cpu_render::RenderOptions options;
+  options.background = {0.08f, 0.08f, 0.1f};
+  const RgbaImage image =
+      cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer, options);
+  EXPECT_GT(drawn_fraction(image), 0.05);
+  test::TempDir dir("cpu_render");
+  cpu_render::write_png(dir / "frame.png", image);
+  const psnr::Image back = psnr::read_png(dir / "frame.png");
+  EXPECT_EQ(back.width, 256);
+  EXPECT_EQ(back.height, 256);
+  EXPECT_EQ(back.channels, 3);
+  EXPECT_EQ(back.pixels, cpu_render::to_image(image).pixels);
+  // VOLREEL_CPU_RENDER_PNG=path keeps a copy to look at.
+  if (const char* keep = std::getenv("VOLREEL_CPU_RENDER_PNG")) cpu_render::write_png(keep, image);
+}
+
+TEST(CpuRenderAtlas, StoresAndSamples) {
+  CpuAtlas atlas(3);
+  std::vector<float> brick(CpuAtlas::slot_values);
+  for (std::size_t i = 0; i < brick.size(); ++i) brick[i] = float(i % 36);  // value = x
+  atlas.store(2, brick);
+  EXPECT_FLOAT_EQ(atlas.sample(2, 10.5f, 3.5f, 7.5f), 10.0f);  // texel centre
+  EXPECT_FLOAT_EQ(atlas.sample(2, 10.75f, 3.5f, 7.5f), 10.25f);
+  EXPECT_FLOAT_EQ(atlas.sample(2, 0.0f, 3.5f, 7.5f), 0.0f);  // clamped to the edge
+  EXPECT_FLOAT_EQ(atlas.sample(1, 10.5f, 3.5f, 7.5f), 0.0f);
+  EXPECT_THROW(atlas.store(3, brick), std::out_of_range);
+  EXPECT_THROW(atlas.store(0, std::span<const float>(brick).first(10)), std::invalid_argument);
+  // A constant payload (4 bytes) through the decoder.
+  const float value = 2.5f;
+  std::array<std::byte, 4> payload;
+  std::memcpy(payload.data(), &value, 4);
+  atlas.decode_into(0, payload, format::Codec::ksvd, 0, format::AtomTable{});
+  EXPECT_FLOAT_EQ(atlas.sample(0, 17.0f, 17.0f, 17.0f), 2.5f);
+}
+
+}  // namespace
+}  // namespace volreel
