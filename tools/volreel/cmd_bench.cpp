@@ -101,6 +101,7 @@ void add_bench_command(CLI::App& app) {
   add_bench_train_command(*bench);
 #ifdef VOLREEL_HAVE_PLAYER
   add_bench_decode_command(*bench);
+  add_bench_stream_command(*bench);
 #endif
 }
 

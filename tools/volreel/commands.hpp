@@ -17,6 +17,8 @@ void add_encode_command(CLI::App& app);
 void add_bench_train_command(CLI::App& bench);
 /// `bench decode` (cmd_bench_decode.cpp; needs the player's Vulkan decoder).
 void add_bench_decode_command(CLI::App& bench);
+/// `bench stream` (cmd_bench_stream.cpp; the stream scheduler and the CPU renderer).
+void add_bench_stream_command(CLI::App& bench);
 
 /// Options that say how to read a series whose file does not describe itself; shared by every
 /// command that reads one.

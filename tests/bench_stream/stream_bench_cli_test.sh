@@ -1,0 +1,87 @@
+#!/usr/bin/env bash
+# stream_bench_cli_test.sh: `volreel bench stream` end to end on a tiny container — both policies
+# run, the per-frame CSVs and the summary hold sane numbers (finite image PSNR above 10 dB at the
+# end, every node at its target LOD with unlimited bandwidth), PNGs are written, bad options give
+# clear errors. Usage: stream_bench_cli_test.sh PATH/TO/volreel
+set -euo pipefail
+volreel=$1
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+fail() { echo "FAIL: $*" >&2; exit 1; }
+expect_error() {
+  local pattern=$1; shift
+  local msg
+  if msg=$("$@" 2>&1 >/dev/null); then fail "expected failure: $*"; fi
+  echo "$msg" | grep -q -e "$pattern" || fail "message for '$*' lacks '$pattern': $msg"
+}
+
+# A tiny container: 2 octree levels (root + 8 bricks), 6 frames.
+"$volreel" gen analytic --field blobs --dims 60x60x60 --frames 6 --out "$work/s" 2>/dev/null
+"$volreel" train "$work/s" --out "$work/dict.bin" --atoms 64 --coreset 200k --levels 2 --iterations 2 --psnr 45 > /dev/null 2>&1
+"$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/a.vreel" > /dev/null 2>&1
+
+# 1. Unlimited bandwidth, both policies: the original series is found through the manifest.
+"$volreel" bench stream "$work/a.vreel" --bandwidth 0 --latency 0 --duration 3 --size 48x48 --out "$work/u" \
+  > "$work/u.txt" 2> "$work/u.err" || { cat "$work/u.txt" "$work/u.err" >&2; fail "bench stream (unlimited)"; }
+grep -q "truth:   the original series" "$work/u.txt" || fail "ground truth is not the original series: $(cat "$work/u.txt")"
+grep -q "nearest-keyframe-first" "$work/u.txt" || fail "no side-by-side table"
+grep -q "patent's mean image PSNR higher than nearest-keyframe-first: " "$work/u.txt" || fail "no PSNR target line"
+grep -q "no frame with a hole after the first root brick arrived: " "$work/u.txt" || fail "no hole target line"
+grep -q "streaming (patent)" "$work/u.err" || fail "no progress bar"
+for p in patent nearest; do
+  csv="$work/u/stream_$p.csv"
+  [ -s "$csv" ] || fail "missing $csv"
+  /usr/bin/python3 - "$csv" <<'PY' || fail "bad numbers in $csv"
+import csv, math, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+assert len(rows) >= 3, f"only {len(rows)} frames"
+last = rows[-1]
+psnr = float(last["psnr_db"])
+assert math.isfinite(psnr) and psnr > 10, f"last PSNR {psnr}"
+assert max(float(r["fraction_at_target"]) for r in rows) == 1.0, "never every node at target LOD"
+assert float(last["fraction_at_target"]) == 1.0, f"last frame at {last['fraction_at_target']} of target LOD"
+assert float(last["fraction_current"]) == 1.0, "last frame not at full quality"
+assert int(last["holes"]) == 0, "holes in the last frame"
+for r in rows:
+    assert 0 <= float(r["fraction_at_target"]) <= 1 and 0 <= float(r["ssim"]) <= 1.0001
+    assert float(r["time_s"]) <= 3.0 + 1e-9
+assert int(last["bytes_loaded"]) > 0, "nothing loaded"
+assert float(last["time_s"]) == 3.0, "the tour did not run to its end"
+PY
+  ls "$work/u/frames_$p/"frame_*.png > /dev/null 2>&1 || fail "no PNG for $p"
+done
+/usr/bin/python3 - "$work/u/summary.json" <<'PY' || fail "bad summary.json"
+import json, sys
+d = json.load(open(sys.argv[1]))
+assert [r["policy"] for r in d["runs"]] == ["patent", "nearest"]
+for r in d["runs"]:
+    assert r["frames"] >= 3 and r["mean_psnr_db"] > 10 and r["bytes_loaded"] > 0
+    assert len(r["seeks"]) == 5
+assert "target_higher_psnr" in d and "target_no_holes" in d
+PY
+
+# 2. A slow link and one policy: less loaded, still sane; the container's own decode as truth.
+mv "$work/s" "$work/s-moved"
+"$volreel" bench stream "$work/a.vreel" --bandwidth 20kB/s --latency 20ms --duration 2 --size 32x32 --policy patent \
+  --out "$work/slow" > "$work/slow.txt" 2>/dev/null || fail "bench stream (slow)"
+grep -q "the container's own finest-level decode" "$work/slow.txt" || fail "no notice of the fallback ground truth"
+/usr/bin/python3 - "$work/slow/stream_patent.csv" <<'PY' || fail "slow link numbers"
+import csv, math, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+loaded = int(rows[-1]["bytes_loaded"])
+assert 0 < loaded, "nothing loaded"
+assert all(float(r["psnr_db"]) > 0 for r in rows)
+PY
+"$volreel" bench stream "$work/a.vreel" --series "$work/s-moved" --bandwidth 0 --duration 1 --size 32x32 --policy nearest \
+  --out "$work/n" > "$work/n.txt" 2>/dev/null || fail "bench stream --series"
+grep -q "truth:   the original series (--series" "$work/n.txt" || fail "--series not used: $(cat "$work/n.txt")"
+
+# 3. Errors.
+expect_error "expected a rate such as 20MB/s" "$volreel" bench stream "$work/a.vreel" --bandwidth fast
+expect_error "expected a duration such as 50ms" "$volreel" bench stream "$work/a.vreel" --latency soon
+expect_error "expected WIDTHxHEIGHT" "$volreel" bench stream "$work/a.vreel" --size 100
+expect_error "both, patent or nearest" "$volreel" bench stream "$work/a.vreel" --policy fastest
+expect_error "not a container folder" "$volreel" bench stream "$work/missing.vreel"
+expect_error "no such file or folder" "$volreel" bench stream "$work/a.vreel" --series "$work/nothing"
+"$volreel" bench stream --help > "$work/help.txt" && grep -q -e "--bandwidth" "$work/help.txt" || fail "--help lacks --bandwidth"
+echo "stream bench CLI: OK"
