@@ -13,6 +13,8 @@
 #include <numeric>
 #include <ostream>
 #include <stdexcept>
+#include <string>
+#include <tuple>
 
 #include "brick_samples.hpp"
 #include "volreel/format/decoder.hpp"
@@ -122,7 +124,16 @@ Comparison compare(const Atlas& atlas, std::span<const float> gpu,
   return c;
 }
 
-class DecodeTest : public test::VulkanTest, public ::testing::WithParamInterface<AtlasFormat> {};
+using Kernel = DecoderOptions::Kernel;
+
+/// Both atlas formats, each with both decode kernels (image stores; a buffer copied into the
+/// slots, the default on lavapipe).
+class DecodeTest : public test::VulkanTest,
+                   public ::testing::WithParamInterface<std::tuple<AtlasFormat, Kernel>> {
+ protected:
+  static AtlasFormat format() { return std::get<0>(GetParam()); }
+  static Kernel kernel() { return std::get<1>(GetParam()); }
+};
 
 // Thousands of bricks, in batches of 1 to 200, through an atlas of 216 slots filled 14 times.
 TEST_P(DecodeTest, MatchesTheCpuReferenceDecoder) {
@@ -137,13 +148,17 @@ TEST_P(DecodeTest, MatchesTheCpuReferenceDecoder) {
     bricks.push_back(make_brick(rng, atom_count, atoms, i, false));
   const auto [lo, hi] = value_range(bricks);
   AtlasOptions ao;
-  ao.format = GetParam();
+  ao.format = format();
   ao.max_slots = slots;
   ao.value_min = lo;
   ao.value_max = hi;
   Atlas atlas(ctx, ao);
   ASSERT_EQ(atlas.slot_count(), slots);
-  AtlasDecoder decoder(ctx, atlas);
+  DecoderOptions options;
+  options.kernel = kernel();
+  options.bricks_per_copy = 50;  // batches of 64 to 200 bricks take several copies
+  AtlasDecoder decoder(ctx, atlas, options);
+  ASSERT_EQ(decoder.kernel(), kernel());
   decoder.set_dictionary(atoms);
   const std::size_t batch_sizes[] = {1, 7, 64, 200, 3, 130};
   Comparison worst;
@@ -171,7 +186,7 @@ TEST_P(DecodeTest, MatchesTheCpuReferenceDecoder) {
     ASSERT_EQ(c.bad, 0u) << "round " << round;
   }
   std::printf("%s: %zu bricks, range [%g, %g], largest error %.3g (%.2f units of the format)\n",
-              atlas_format_name(GetParam()), total, double{lo}, double{hi}, worst.max_error,
+              atlas_format_name(format()), total, double{lo}, double{hi}, worst.max_error,
               worst.max_units);
   EXPECT_EQ(decoder.stats().bricks, total);
 }
@@ -197,7 +212,7 @@ TEST_P(DecodeTest, OverwritesSlotsAndWrapsTheStagingRing) {
     }
   const auto [lo, hi] = value_range(bricks);
   AtlasOptions ao;
-  ao.format = GetParam();
+  ao.format = format();
   ao.max_slots = slots;
   ao.value_min = lo;
   ao.value_max = hi;
@@ -206,6 +221,7 @@ TEST_P(DecodeTest, OverwritesSlotsAndWrapsTheStagingRing) {
   DecoderOptions options;
   options.upload_budget_bytes = 1 << 20;
   options.ring_size = 2;
+  options.kernel = kernel();
   AtlasDecoder decoder(ctx, atlas, options);
   decoder.set_dictionary(atoms);
   std::vector<const Brick*> in_slot(slots);
@@ -238,11 +254,15 @@ TEST_P(DecodeTest, OverwritesSlotsAndWrapsTheStagingRing) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Formats, DecodeTest,
-                         ::testing::Values(AtlasFormat::r16_unorm, AtlasFormat::r16_sfloat),
-                         [](const ::testing::TestParamInfo<AtlasFormat>& param) {
-                           return param.param == AtlasFormat::r16_unorm ? "R16Unorm" : "R16Sfloat";
-                         });
+INSTANTIATE_TEST_SUITE_P(
+    FormatsAndKernels, DecodeTest,
+    ::testing::Combine(::testing::Values(AtlasFormat::r16_unorm, AtlasFormat::r16_sfloat),
+                       ::testing::Values(Kernel::image_store, Kernel::buffer_copy)),
+    [](const ::testing::TestParamInfo<std::tuple<AtlasFormat, Kernel>>& param) {
+      return std::string(std::get<0>(param.param) == AtlasFormat::r16_unorm ? "R16Unorm"
+                                                                             : "R16Sfloat") +
+             (std::get<1>(param.param) == Kernel::image_store ? "ImageStore" : "BufferCopy");
+    });
 
 class DecoderTest : public test::VulkanTest {};
 

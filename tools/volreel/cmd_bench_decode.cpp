@@ -29,6 +29,7 @@ struct BenchDecodeOptions {
   double atlas_mib = 256;
   double upload_mib = 8;
   std::uint32_t ring = 3;
+  std::string kernel = "auto";
 };
 
 using Clock = std::chrono::steady_clock;
@@ -115,6 +116,8 @@ void run_bench_decode(const BenchDecodeOptions& o) {
   vulkan::DecoderOptions decoder_options;
   decoder_options.upload_budget_bytes = static_cast<std::uint64_t>(o.upload_mib * 1048576.0);
   decoder_options.ring_size = o.ring;
+  if (o.kernel == "image") decoder_options.kernel = vulkan::DecoderOptions::Kernel::image_store;
+  if (o.kernel == "copy") decoder_options.kernel = vulkan::DecoderOptions::Kernel::buffer_copy;
   const auto upload_of = [&](std::size_t i, std::uint32_t slot) {
     const BrickRef& r = bricks[i];
     return vulkan::BrickUpload{r.frame->brick_bytes(r.brick), r.frame->codec(),
@@ -164,11 +167,15 @@ void run_bench_decode(const BenchDecodeOptions& o) {
   const vulkan::Atlas atlas(context, make_atlas_options(format));
   vulkan::AtlasDecoder decoder(context, atlas, decoder_options);
   if (m.codec == format::Codec::ksvd) decoder.set_dictionary(atoms);
-  std::printf("\natlas:   %s, %u slots (%ux%ux%u), upload budget %.1f MiB x %u staging buffers\n",
-              vulkan::atlas_format_name(format), atlas.slot_count(), atlas.grid().x, atlas.grid().y,
-              atlas.grid().z,
-              static_cast<double>(decoder.options().upload_budget_bytes) / 1048576.0,
-              decoder.options().ring_size);
+  std::printf(
+      "\natlas:   %s, %u slots (%ux%ux%u), upload budget %.1f MiB x %u staging buffers, kernel "
+      "%s\n",
+      vulkan::atlas_format_name(format), atlas.slot_count(), atlas.grid().x, atlas.grid().y,
+      atlas.grid().z, static_cast<double>(decoder.options().upload_budget_bytes) / 1048576.0,
+      decoder.options().ring_size,
+      decoder.kernel() == vulkan::DecoderOptions::Kernel::buffer_copy
+          ? "buffer_copy (decode_bricks_rows.comp, vkCmdCopyBufferToImage)"
+          : "image_store (decode_bricks.comp)");
   const int threads = omp_get_max_threads();
   std::vector<float> scratch(format::brick_voxels);
   const double cpu1 = time_passes(o.min_seconds, [&] {
@@ -258,6 +265,11 @@ void add_bench_decode_command(CLI::App& bench) {
                   "Upload budget per staging buffer (per frame), MiB")
       ->capture_default_str();
   cmd->add_option("--ring", o->ring, "Staging buffers in the ring")->capture_default_str();
+  cmd->add_option("--kernel", o->kernel,
+                  "Decode kernel: auto (buffer copy on CPU devices, image stores otherwise), image "
+                  "or copy")
+      ->check(CLI::IsMember({"auto", "image", "copy"}))
+      ->capture_default_str();
   cmd->callback([o] { run_bench_decode(*o); });
 }
 

@@ -14,6 +14,8 @@
 #include "volreel/player/atlas_layout.h"
 #include "volreel_decode_bricks_r16_spv.h"
 #include "volreel_decode_bricks_r16f_spv.h"
+#include "volreel_decode_bricks_rows_r16_spv.h"
+#include "volreel_decode_bricks_rows_r16f_spv.h"
 
 namespace volreel::vulkan {
 
@@ -25,14 +27,26 @@ constexpr std::uint64_t record_bytes = 16;  // {payload word offset, slot, kind,
 constexpr std::uint64_t raw_bytes = std::uint64_t{format::brick_voxels} * 4;
 constexpr std::uint32_t max_bricks_per_dispatch = 65535;  // maxComputeWorkGroupCount[0] minimum
 constexpr std::uint32_t max_payload_words = 1732;         // decode_bricks.comp's shared copy
+// decode_bricks_rows.comp: a decoded brick is 6 columns (one per block x), each 36×36 rows of 8
+// texels (6 voxels and 2 unused), copied into the slot with bufferRowLength 8.
+constexpr std::uint32_t column_row_texels = 8;
+constexpr std::uint64_t decoded_column_bytes =
+    std::uint64_t{column_row_texels} * VR_BRICK_SIZE * VR_BRICK_SIZE * 2;
+constexpr std::uint64_t decoded_brick_bytes = decoded_column_bytes * VR_BLOCKS_PER_AXIS;
+// ... and an atom is 36 rows of 6 values padded to 8 floats (two RGBA32F texels per row).
+constexpr std::uint32_t atom_row_floats = 8;
+constexpr std::uint64_t copy_atom_floats =
+    std::uint64_t{atom_row_floats} * VR_BLOCK_LENGTH / VR_BLOCK_SIZE;
 
 std::uint32_t kind_of(const BrickUpload& brick) {
   if (brick.payload.size() == 4) return kind_constant;
   return brick.codec == format::Codec::ksvd ? kind_ksvd : kind_raw;
 }
 
+/// decode_bricks.comp: {grid_x, grid_y, value_min, inv_range}; decode_bricks_rows.comp:
+/// {first_record, unused, value_min, inv_range}.
 struct PushConstants {
-  std::uint32_t grid_x, grid_y;
+  std::uint32_t grid_x_or_first_record, grid_y;
   float value_min, inv_range;
 };
 static_assert(sizeof(PushConstants) == 16);
@@ -119,26 +133,60 @@ AtlasDecoder::AtlasDecoder(const Context& context, const Atlas& atlas,
         "AtlasDecoder: upload budget must be >= 1 MiB and the ring >= 1 buffer");
   options_.upload_budget_bytes = std::min<std::uint64_t>(
       options_.upload_budget_bytes, context.limits().maxStorageBufferRange / 4 * 4);
-  // 2. Pipeline: batch, dictionary, atlas.
+  // 2. Kernel and pipeline: batch, dictionary, atlas (image_store) or decoded bricks
+  //    (buffer_copy).
+  //    buffer_copy reads the dictionary as a texel buffer of up to 1024 atoms · 72 texels.
+  kernel_ = options_.kernel;
+  const bool texels_fit =
+      context.limits().maxTexelBufferElements >= (1u << VR_ATOM_BITS) * copy_atom_floats / 4;
+  if (kernel_ == DecoderOptions::Kernel::automatic)
+    kernel_ = context.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU && texels_fit
+                  ? DecoderOptions::Kernel::buffer_copy
+                  : DecoderOptions::Kernel::image_store;
+  if (kernel_ == DecoderOptions::Kernel::buffer_copy && !texels_fit)
+    throw std::invalid_argument(
+        "AtlasDecoder: the buffer_copy kernel needs texel buffers of 73728 elements");
+  const bool copy = kernel_ == DecoderOptions::Kernel::buffer_copy;
+  const bool unorm = atlas.format() == AtlasFormat::r16_unorm;
+  const VkDescriptorType atoms_type =
+      copy ? VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+  const VkDescriptorType output_type =
+      copy ? VK_DESCRIPTOR_TYPE_STORAGE_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_IMAGE;
   const VkDescriptorSetLayoutBinding bindings[] = {
       {0, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
-      {1, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
-      {2, VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr}};
+      {1, atoms_type, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
+      {2, output_type, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr}};
   set_layout_ = DescriptorSetLayout(context, bindings);
-  if (atlas.format() == AtlasFormat::r16_unorm)
-    shader_ = ShaderModule(context, volreel_decode_bricks_r16_spv);
+  if (copy)
+    shader_ = unorm ? ShaderModule(context, volreel_decode_bricks_rows_r16_spv)
+                    : ShaderModule(context, volreel_decode_bricks_rows_r16f_spv);
   else
-    shader_ = ShaderModule(context, volreel_decode_bricks_r16f_spv);
+    shader_ = unorm ? ShaderModule(context, volreel_decode_bricks_r16_spv)
+                    : ShaderModule(context, volreel_decode_bricks_r16f_spv);
   const VkDescriptorSetLayout set_layout = set_layout_.handle();
   pipeline_ = ComputePipeline(context, shader_, {&set_layout, 1}, sizeof(PushConstants));
-  const VkDescriptorPoolSize sizes[] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 2 * options_.ring_size},
-                                        {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, options_.ring_size}};
+  const VkDescriptorPoolSize sizes[] = {
+      {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 2 * options_.ring_size},
+      {copy ? VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
+       options_.ring_size},
+      {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, options_.ring_size}};
   descriptor_pool_ = DescriptorPool(context, sizes, options_.ring_size);
+  if (copy) {
+    options_.bricks_per_copy = std::clamp<std::uint32_t>(
+        options_.bricks_per_copy, 1,
+        static_cast<std::uint32_t>(std::min<std::uint64_t>(
+            max_bricks_per_dispatch, context.limits().maxStorageBufferRange / decoded_brick_bytes)));
+    decoded_ = Buffer(context, std::uint64_t{options_.bricks_per_copy} * decoded_brick_bytes,
+                      VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
+                      VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+  }
   command_pool_ = CommandPool(context);
   // 3. A placeholder dictionary (one atom) until set_dictionary: every binding stays valid.
-  atoms_ = Buffer(context, 4 * VR_BLOCK_LENGTH,
-                  VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+  atoms_ = Buffer(context, 4 * copy_atom_floats,
+                  VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT |
+                      VK_BUFFER_USAGE_TRANSFER_DST_BIT,
                   VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+  make_atoms_view();
   context.submit_and_wait([&](VkCommandBuffer commands) {
     vkCmdFillBuffer(commands, atoms_.handle(), 0, VK_WHOLE_SIZE, 0);
     memory_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
@@ -176,12 +224,42 @@ AtlasDecoder::~AtlasDecoder() {
 void AtlasDecoder::write_descriptors(RingEntry& entry) const {
   const VkDevice device = context_.device();
   write_storage_buffer(device, entry.set, 0, entry.shader_buffer().handle());
-  write_storage_buffer(device, entry.set, 1, atoms_.handle());
-  write_storage_image(device, entry.set, 2, atlas_.view());
+  if (kernel_ == DecoderOptions::Kernel::buffer_copy) {
+    const VkBufferView view = atoms_view_.get();
+    VkWriteDescriptorSet write{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
+    write.dstSet = entry.set;
+    write.dstBinding = 1;
+    write.descriptorCount = 1;
+    write.descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
+    write.pTexelBufferView = &view;
+    vkUpdateDescriptorSets(device, 1, &write, 0, nullptr);
+  } else {
+    write_storage_buffer(device, entry.set, 1, atoms_.handle());
+  }
+  if (kernel_ == DecoderOptions::Kernel::buffer_copy)
+    write_storage_buffer(device, entry.set, 2, decoded_.handle());
+  else
+    write_storage_image(device, entry.set, 2, atlas_.view());
+}
+
+void AtlasDecoder::make_atoms_view() {
+  if (kernel_ != DecoderOptions::Kernel::buffer_copy) return;
+  // K·72 texels (rows padded to 8 floats): at most 73 728, checked against
+  // maxTexelBufferElements when the kernel was chosen.
+  VkBufferViewCreateInfo info{VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO};
+  info.buffer = atoms_.handle();
+  info.format = VK_FORMAT_R32G32B32A32_SFLOAT;
+  info.offset = 0;
+  info.range = VK_WHOLE_SIZE;
+  VkBufferView view = VK_NULL_HANDLE;
+  check(vkCreateBufferView(context_.device(), &info, nullptr, &view), "vkCreateBufferView");
+  atoms_view_ = detail::DeviceHandle<VkBufferView, vkDestroyBufferView>(context_.device(), view);
 }
 
 void AtlasDecoder::set_dictionary(const format::AtomTable& atoms) {
   const std::uint64_t values = std::uint64_t{atoms.count} * VR_BLOCK_LENGTH;
+  const bool copy = kernel_ == DecoderOptions::Kernel::buffer_copy;
+  const std::uint64_t floats = copy ? atoms.count * copy_atom_floats : values;
   if (atoms.count == 0 || atoms.values.size() < values)
     throw std::invalid_argument("AtlasDecoder::set_dictionary: " + std::to_string(atoms.count) +
                                 " atoms need " + std::to_string(values) +
@@ -189,19 +267,29 @@ void AtlasDecoder::set_dictionary(const format::AtomTable& atoms) {
   if (atoms.count > (1u << VR_ATOM_BITS))
     throw std::invalid_argument("AtlasDecoder::set_dictionary: more atoms than 10-bit codes index");
   wait_all();
-  Buffer staging(context_, 4 * values, VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
+  Buffer staging(context_, 4 * floats, VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
                  VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT);
-  std::memcpy(staging.mapped(), atoms.values.data(), 4 * values);
-  Buffer table(context_, 4 * values,
-               VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+  if (copy) {  // rows of 6 values padded to 8
+    auto* out = reinterpret_cast<float*>(staging.mapped());
+    std::fill(out, out + floats, 0.0f);
+    for (std::uint64_t v = 0; v < values; ++v)
+      out[v / VR_BLOCK_SIZE * atom_row_floats + v % VR_BLOCK_SIZE] = atoms.values[v];
+  } else {
+    std::memcpy(staging.mapped(), atoms.values.data(), 4 * values);
+  }
+  Buffer table(context_, 4 * floats,
+               VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT |
+                   VK_BUFFER_USAGE_TRANSFER_DST_BIT,
                VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
   context_.submit_and_wait([&](VkCommandBuffer commands) {
-    const VkBufferCopy region{0, 0, 4 * values};
+    const VkBufferCopy region{0, 0, 4 * floats};
     vkCmdCopyBuffer(commands, staging.handle(), table.handle(), 1, &region);
     memory_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
                    VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT);
   });
+  atoms_view_.reset();
   atoms_ = std::move(table);
+  make_atoms_view();
   atom_count_ = atoms.count;
   for (RingEntry& e : ring_) write_descriptors(e);
 }
@@ -294,20 +382,18 @@ void AtlasDecoder::record_and_submit(RingEntry& entry, std::uint32_t bricks, std
     memory_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
                    VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT);
   }
-  // 3. One workgroup per brick.
-  const PushConstants push{atlas_.grid().x, atlas_.grid().y, atlas_.value_min(),
-                           1.0f / (atlas_.value_max() - atlas_.value_min())};
+  // 3. The decode pass.
   vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.handle());
   vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.layout(), 0, 1,
                           &entry.set, 0, nullptr);
-  vkCmdPushConstants(commands, pipeline_.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push,
-                     &push);
-  vkCmdDispatch(commands, bricks, 1, 1);
+  record_decode(commands, reinterpret_cast<const std::uint32_t*>(entry.staging.mapped()), bricks);
   // 4. The slots' new values visible to later compute reads (the ray caster) and copies.
   memory_barrier(
-      commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+      commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+      VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT,
       VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
-      VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_READ_BIT);
+      VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_READ_BIT |
+          VK_ACCESS_TRANSFER_WRITE_BIT);
   end_commands(commands);
   entry.fence.reset();
   VkSubmitInfo info{VK_STRUCTURE_TYPE_SUBMIT_INFO};
@@ -316,6 +402,65 @@ void AtlasDecoder::record_and_submit(RingEntry& entry, std::uint32_t bricks, std
   context_.submit(info, entry.fence.handle());
   entry.ticket = ++last_ticket_;
   ++stats_.submissions;
+}
+
+void AtlasDecoder::record_decode(VkCommandBuffer commands, const std::uint32_t* records,
+                                 std::uint32_t bricks) {
+  const float inv_range = 1.0f / (atlas_.value_max() - atlas_.value_min());
+  if (kernel_ == DecoderOptions::Kernel::image_store) {
+    // One workgroup per brick, writing its slot.
+    const PushConstants push{atlas_.grid().x, atlas_.grid().y, atlas_.value_min(), inv_range};
+    vkCmdPushConstants(commands, pipeline_.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push,
+                       &push);
+    vkCmdDispatch(commands, bricks, 1, 1);
+    return;
+  }
+  // buffer_copy: chunks of bricks_per_copy bricks decoded into decoded_, each copied into its
+  // slots (`records`: the batch's records as submit wrote them).
+  std::vector<VkBufferImageCopy>& regions = copy_regions_;
+  for (std::uint32_t first = 0; first < bricks; first += options_.bricks_per_copy) {
+    const std::uint32_t n = std::min(options_.bricks_per_copy, bricks - first);
+    if (first != 0)  // the previous chunk's copy has read decoded_
+      memory_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, 0,
+                     VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT);
+    const PushConstants push{first, 0, atlas_.value_min(), inv_range};
+    vkCmdPushConstants(commands, pipeline_.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push,
+                       &push);
+    vkCmdDispatch(commands, n, 1, 1);
+    memory_barrier(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+                   VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
+    regions.resize(std::size_t{n} * VR_BLOCKS_PER_AXIS);
+    for (std::uint32_t i = 0; i < n; ++i) {
+      const VkOffset3D origin = atlas_.slot_origin(records[4 * (first + i) + 1]);
+      for (std::uint32_t c = 0; c < VR_BLOCKS_PER_AXIS; ++c) {
+        VkBufferImageCopy& r = regions[std::size_t{i} * VR_BLOCKS_PER_AXIS + c];
+        r = {};
+        r.bufferOffset = std::uint64_t{i} * decoded_brick_bytes + c * decoded_column_bytes;
+        r.bufferRowLength = column_row_texels;
+        r.bufferImageHeight = VR_BRICK_SIZE;
+        r.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+        r.imageOffset = {origin.x + static_cast<std::int32_t>(c * VR_BLOCK_SIZE), origin.y,
+                         origin.z};
+        r.imageExtent = {VR_BLOCK_SIZE, VR_BRICK_SIZE, VR_BRICK_SIZE};
+      }
+    }
+    // The atlas leaves GENERAL only for the copy (the layout copies are fastest in), as in
+    // read_slots.
+    const VkImage image = atlas_.image().handle();
+    image_barrier(commands, image, VK_IMAGE_LAYOUT_GENERAL, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                  VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                  VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT,
+                  VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT);
+    vkCmdCopyBufferToImage(commands, decoded_.handle(), image,
+                           VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                           static_cast<std::uint32_t>(regions.size()), regions.data());
+    image_barrier(
+        commands, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_GENERAL,
+        VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+        VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+        VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_READ_BIT |
+            VK_ACCESS_TRANSFER_WRITE_BIT);
+  }
 }
 
 bool AtlasDecoder::poll(Ticket ticket) const {

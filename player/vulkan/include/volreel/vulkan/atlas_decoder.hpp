@@ -1,7 +1,10 @@
 // atlas_decoder.hpp: decodes batches of compressed bricks into atlas slots with a compute shader
 // (MTV-Player §4.2): the batch's payloads go into a linear storage buffer with one record per
 // brick {payload word offset, slot, kind, payload words}; the dictionary stays in a storage buffer
-// for the dataset's life; one workgroup decodes one brick (shaders/decode/decode_bricks.comp).
+// for the dataset's life; one workgroup decodes one brick. Two kernels (DecoderOptions::Kernel):
+// on GPUs the workgroup writes the slot with imageStore (shaders/decode/decode_bricks.comp); on CPU
+// implementations (lavapipe) it writes 16-bit texels into a storage buffer that is then copied
+// into the slots (shaders/decode/decode_bricks_rows.comp), several times faster there.
 //
 // Kinds: ksvd payloads are decoded on the GPU; 4-byte payloads (constant bricks) are filled
 // without reading codes; zfp payloads are decoded on the CPU (format::decode_payload) and uploaded
@@ -43,6 +46,19 @@ struct DecoderOptions {
   std::uint64_t upload_budget_bytes = std::uint64_t{8} << 20;
   /// Staging buffers in the ring (≥ 1): submissions that may be in flight at once.
   std::uint32_t ring_size = 3;
+  /// How the compute pass writes the slots:
+  ///  - image_store: one workgroup of 54 invocations per brick, imageStore into the atlas
+  ///    (shaders/decode/decode_bricks.comp): for GPUs;
+  ///  - buffer_copy: one workgroup of 8 invocations per brick, 16-bit texel pairs written to a
+  ///    storage buffer then copied into the slots with vkCmdCopyBufferToImage
+  ///    (shaders/decode/decode_bricks_rows.comp): for CPU implementations (lavapipe), where
+  ///    storage-image stores, shared memory and barriers are slow;
+  ///  - automatic: buffer_copy on a VK_PHYSICAL_DEVICE_TYPE_CPU device, image_store otherwise.
+  enum class Kernel { automatic, image_store, buffer_copy };
+  Kernel kernel = Kernel::automatic;
+  /// buffer_copy: bricks decoded per dispatch (the decoded-brick buffer holds this many 36³
+  /// bricks of 16-bit texels, rows padded from 6 to 8 texels: 124 416 bytes each).
+  std::uint32_t bricks_per_copy = 256;
 };
 
 /// Identifies a submission; 0 means "nothing", always complete. Increases with each submission.
@@ -91,27 +107,36 @@ class AtlasDecoder {
   };
   const Stats& stats() const { return stats_; }
   const DecoderOptions& options() const { return options_; }
+  /// The kernel in use (options().kernel with automatic resolved).
+  DecoderOptions::Kernel kernel() const { return kernel_; }
 
  private:
   struct RingEntry;
   void record_and_submit(RingEntry& entry, std::uint32_t bricks, std::uint64_t bytes);
   void write_descriptors(RingEntry& entry) const;
+  void make_atoms_view();
+  void record_decode(VkCommandBuffer commands, const std::uint32_t* records, std::uint32_t bricks);
 
   const Context& context_;
   const Atlas& atlas_;
   DecoderOptions options_;
+  DecoderOptions::Kernel kernel_ = DecoderOptions::Kernel::image_store;
+  Buffer decoded_;  ///< buffer_copy: the decoded bricks of one dispatch, before the copy
   DescriptorSetLayout set_layout_;
   ShaderModule shader_;
   ComputePipeline pipeline_;
   DescriptorPool descriptor_pool_;
   CommandPool command_pool_;
   Buffer atoms_;
+  /// buffer_copy: atoms_ as a uniform texel buffer of RGBA32F (4 values of an atom a texel).
+  detail::DeviceHandle<VkBufferView, vkDestroyBufferView> atoms_view_;
   std::uint32_t atom_count_ = 0;
   std::vector<RingEntry> ring_;
   std::size_t next_entry_ = 0;
   Ticket last_ticket_ = 0;
   Stats stats_;
   std::vector<float> zfp_scratch_;
+  std::vector<VkBufferImageCopy> copy_regions_;
   std::vector<std::uint64_t> slot_mark_;  ///< per slot, the last submit() call that named it
   std::uint64_t submit_calls_ = 0;
 };
