@@ -102,6 +102,7 @@ void add_bench_command(CLI::App& app) {
 #ifdef VOLREEL_HAVE_PLAYER
   add_bench_decode_command(*bench);
   add_bench_stream_command(*bench);
+  add_bench_play_command(*bench);
 #endif
 }
 

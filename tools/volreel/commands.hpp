@@ -19,6 +19,12 @@ void add_bench_train_command(CLI::App& bench);
 void add_bench_decode_command(CLI::App& bench);
 /// `bench stream` (cmd_bench_stream.cpp; the stream scheduler and the CPU renderer).
 void add_bench_stream_command(CLI::App& bench);
+/// `play` (cmd_play.cpp; needs the player: a window, Vulkan, ImGui).
+void add_play_command(CLI::App& app);
+/// `render` (cmd_render.cpp; headless tours on the player's Vulkan renderer or the CPU).
+void add_render_command(CLI::App& app);
+/// `bench play` (cmd_bench_play.cpp; needs the player's Vulkan renderer).
+void add_bench_play_command(CLI::App& bench);
 
 /// Options that say how to read a series whose file does not describe itself; shared by every
 /// command that reads one.

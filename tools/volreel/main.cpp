@@ -19,6 +19,10 @@ int main(int argc, char** argv) {
   volreel::cli::add_bench_command(app);
   volreel::cli::add_train_command(app);
   volreel::cli::add_encode_command(app);
+#ifdef VOLREEL_HAVE_PLAYER
+  volreel::cli::add_play_command(app);
+  volreel::cli::add_render_command(app);
+#endif
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,0 +1,79 @@
+// cpu_frame_loop.cpp: the streaming loop on the CPU (see cpu_frame_loop.hpp).
+#include "volreel/vulkan_render/cpu_frame_loop.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "volreel/format/error.hpp"
+
+namespace volreel::vulkan_render {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+constexpr std::uint64_t gpu_slot_bytes = std::uint64_t{VR_ATLAS_SLOT_SIZE} * VR_ATLAS_SLOT_SIZE *
+                                         VR_ATLAS_SLOT_SIZE * 2;
+
+}  // namespace
+
+CpuFrameLoop::CpuFrameLoop(const format::Container& container, const FrameLoopOptions& options)
+    : container_(container), options_(options) {
+  geometry_ = cpu_render::VolumeGeometry::of(container.manifest().dims);
+  const auto slots = static_cast<std::uint32_t>(
+      std::clamp<std::uint64_t>(options.atlas_bytes / gpu_slot_bytes, 1, 1u << 20));
+  atlas_ = std::make_unique<cpu_render::CpuAtlas>(slots);
+  options_.scheduler.atlas_slots = slots;
+  scheduler_ = std::make_unique<stream::StreamScheduler>(container, options_.scheduler);
+}
+
+FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhead,
+                                const cpu_render::TransferFunction& transfer) {
+  const auto start = Clock::now();
+  FrameReport report;
+  report.ticket = ++ticket_;
+  // 1. The scheduler (the previous frame is complete: rendering is synchronous).
+  auto t = Clock::now();
+  stream::FrameUpdate update = scheduler_->update(camera, playhead, report.ticket);
+  report.timings.schedule_ms = ms_since(t);
+  report.new_errors = std::move(update.new_errors);
+  // 2. Decode the arrived bricks into their slots; a bad one becomes the lowest value.
+  t = Clock::now();
+  const format::Manifest& m = container_.manifest();
+  const format::AtomTable atoms = container_.atoms();
+  for (const stream::BrickUpload& u : update.uploads) {
+    try {
+      atlas_->decode_into(u.slot, u.payload, m.codec, m.zfp_accuracy, atoms, u.file, u.offset);
+    } catch (const format::FormatError& e) {
+      std::string message = e.what();
+      scheduler_->report_error(message);
+      report.new_errors.push_back(std::move(message));
+      const auto slot = atlas_->slot(u.slot);
+      std::fill(slot.begin(), slot.end(), static_cast<float>(m.value_min));
+    }
+  }
+  report.timings.decode_ms = ms_since(t);
+  // 3. Render.
+  t = Clock::now();
+  image_ = cpu_render::render_svo({update.svo_nodes, update.svo_leaves}, *atlas_, geometry_,
+                                  camera, transfer, options_.render);
+  report.timings.render_ms = ms_since(t);
+  scheduler_->retire(report.ticket);
+  report.stats = update.stats;
+  report.timings.frame_ms = ms_since(start);
+  return report;
+}
+
+const cpu_render::RgbaImage& CpuFrameLoop::read_back(Ticket ticket) const {
+  if (ticket != ticket_ || ticket == 0)
+    throw std::invalid_argument("CpuFrameLoop::read_back: only the last frame's image is kept");
+  return image_;
+}
+
+}  // namespace volreel::vulkan_render

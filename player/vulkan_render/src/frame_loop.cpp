@@ -1,0 +1,205 @@
+// frame_loop.cpp: the per-frame streaming loop on the GPU (see frame_loop.hpp).
+#include "volreel/vulkan_render/frame_loop.hpp"
+
+#include <bit>
+#include <chrono>
+#include <cstring>
+#include <exception>
+#include <stdexcept>
+
+#include "volreel/format/error.hpp"
+#include "volreel/player/svo_layout.h"
+
+namespace volreel::vulkan_render {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+}  // namespace
+
+void leaf_histograms(std::span<const std::uint32_t> svo_leaves,
+                     std::span<const std::uint64_t> slot_histograms,
+                     std::vector<std::uint64_t>& out) {
+  const std::size_t leaves = svo_leaves.size() / VR_SVO_LEAF_WORDS;
+  out.assign(leaves, 0);
+  for (std::size_t i = 0; i < leaves; ++i) {
+    const std::uint32_t* r = svo_leaves.data() + i * VR_SVO_LEAF_WORDS;
+    const float f = std::bit_cast<float>(r[3]);
+    std::uint64_t h = 0;
+    bool unknown = false;
+    for (int k = 0; k < 2; ++k) {
+      const float weight = k == 0 ? 1.0f - f : f;
+      if (weight == 0.0f) continue;
+      const std::uint32_t slot = r[k];
+      const std::uint64_t s = slot < slot_histograms.size() ? slot_histograms[slot] : 0;
+      unknown = unknown || s == 0;
+      h |= s;
+    }
+    out[i] = unknown ? 0 : h;
+  }
+}
+
+FrameLoop::FrameLoop(const vulkan::Context& context, const format::Container& container,
+                     const FrameLoopOptions& options)
+    : context_(context), container_(container), options_(options) {
+  const format::Manifest& m = container.manifest();
+  geometry_ = cpu_render::VolumeGeometry::of(m.dims);
+  // 1. The atlas over the sequence's value range with a margin (decoded values overshoot it).
+  vulkan::AtlasOptions ao;
+  ao.format = options.atlas_format;
+  ao.memory_budget_bytes = options.atlas_bytes;
+  const double range = m.value_max - m.value_min;
+  const double margin = 0.01 * (range > 0 ? range : 1.0);
+  ao.value_min = static_cast<float>(m.value_min - margin);
+  ao.value_max = static_cast<float>(m.value_max + margin);
+  atlas_ = std::make_unique<vulkan::Atlas>(context, ao);
+  // 2. The decoder, the ray caster, the scheduler with one heap entry per atlas slot ([0036]).
+  vulkan::DecoderOptions dopt;
+  dopt.upload_budget_bytes = options.staging_bytes;
+  dopt.ring_size = 3;
+  decoder_ = std::make_unique<vulkan::AtlasDecoder>(context, *atlas_, dopt);
+  if (m.codec == format::Codec::ksvd) decoder_->set_dictionary(container.atoms());
+  raycaster_ = std::make_unique<Raycaster>(context, *atlas_, options.raycaster);
+  options_.scheduler.atlas_slots = atlas_->slot_count();
+  scheduler_ = std::make_unique<stream::StreamScheduler>(container, options_.scheduler);
+  slot_histograms_.assign(atlas_->slot_count(), 0);
+}
+
+FrameLoop::~FrameLoop() {
+  try {
+    finish();
+  } catch (...) {
+    context_.wait_idle();
+  }
+}
+
+void FrameLoop::retire_completed() {
+  while (retired_ < raycaster_->last_ticket() && raycaster_->poll(retired_ + 1)) ++retired_;
+  if (retired_ > 0) scheduler_->retire(retired_);
+}
+
+void FrameLoop::finish() {
+  raycaster_->wait_all();
+  decoder_->wait_all();
+  retired_ = raycaster_->last_ticket();
+  if (retired_ > 0) scheduler_->retire(retired_);
+}
+
+std::uint64_t FrameLoop::histogram_of(const stream::KeyframeKey& key) {
+  auto it = brick_histograms_.find(key.t);
+  if (it == brick_histograms_.end()) {
+    std::vector<std::uint64_t> bricks;
+    try {
+      const format::FrameFile file = container_.open_frame(key.t);
+      const format::FrameView& view = file.view();
+      bricks.assign(view.brick_count(), 0);
+      for (std::uint32_t i = 0; i < view.node_count(); ++i) {
+        const format::Node node = view.node(i);
+        if (node.brick < bricks.size()) bricks[node.brick] = node.histogram;
+      }
+    } catch (const std::exception&) {
+      bricks.clear();  // unknown histograms: never culled (the loader reports the frame)
+    }
+    it = brick_histograms_.emplace(key.t, std::move(bricks)).first;
+  }
+  const stream::KeyframeId id = scheduler_->index().find_keyframe(key);
+  if (id == stream::no_keyframe) return 0;
+  const std::uint32_t brick = scheduler_->index().keyframe(id).brick;
+  return brick < it->second.size() ? it->second[brick] : 0;
+}
+
+void FrameLoop::decode_uploads(const std::vector<stream::BrickUpload>& uploads,
+                               std::vector<std::string>& errors) {
+  if (uploads.empty()) return;
+  const format::Manifest& m = container_.manifest();
+  const auto to_decoder = [&](const stream::BrickUpload& u) {
+    return vulkan::BrickUpload{u.payload, m.codec, m.zfp_accuracy, u.slot};
+  };
+  std::vector<vulkan::BrickUpload> batch;
+  batch.reserve(uploads.size());
+  for (const stream::BrickUpload& u : uploads) batch.push_back(to_decoder(u));
+  try {
+    decoder_->submit(batch);
+  } catch (const format::FormatError&) {
+    // A bad payload rejects the whole batch before anything is submitted: decode the bricks one
+    // by one and fill each bad one's slot with the lowest value, so it shows as background.
+    const float fill = static_cast<float>(m.value_min);
+    std::byte constant[4];
+    std::memcpy(constant, &fill, 4);
+    for (std::size_t i = 0; i < uploads.size(); ++i) {
+      try {
+        decoder_->submit({&batch[i], 1});
+      } catch (const format::FormatError& e) {
+        std::string message = uploads[i].file.string() + ": offset " +
+                              std::to_string(uploads[i].offset) + ": " + e.what();
+        scheduler_->report_error(message);
+        errors.push_back(std::move(message));
+        const vulkan::BrickUpload blank{constant, m.codec, m.zfp_accuracy, uploads[i].slot};
+        decoder_->submit({&blank, 1});
+        slot_histograms_[uploads[i].slot] = 0;
+      }
+    }
+  }
+}
+
+FrameReport FrameLoop::frame(const player::OrbitCamera& camera, double playhead,
+                             const cpu_render::TransferFunction& transfer, bool readback) {
+  const auto start = Clock::now();
+  FrameReport report;
+  // 1. Retire finished frames: their slots may be overwritten now.
+  retire_completed();
+  // 2. The scheduler: arrivals, priorities, requests, slots, the SVO ([0029]–[0075]).
+  const Ticket gpu_frame = raycaster_->last_ticket() + 1;
+  auto t = Clock::now();
+  stream::FrameUpdate update = scheduler_->update(camera, playhead, gpu_frame);
+  report.timings.schedule_ms = ms_since(t);
+  report.new_errors = std::move(update.new_errors);
+  // 3. Decode the arrived bricks into their slots (MTV-Player §4.2).
+  t = Clock::now();
+  for (const stream::BrickUpload& u : update.uploads)
+    slot_histograms_[u.slot] = options_.transfer_culling ? histogram_of(u.key) : 0;
+  decode_uploads(update.uploads, report.new_errors);
+  report.timings.upload_ms = ms_since(t);
+  if (!options_.pipelined) {
+    t = Clock::now();
+    decoder_->wait_all();
+    report.timings.decode_ms = ms_since(t);
+  }
+  // 4. Ray casting (same queue: it sees the decoded slots).
+  FrameInput input;
+  input.svo_nodes = update.svo_nodes;
+  input.svo_leaves = update.svo_leaves;
+  if (options_.transfer_culling) {
+    leaf_histograms(update.svo_leaves, slot_histograms_, leaf_histograms_);
+    input.leaf_histograms = leaf_histograms_;
+  }
+  const format::Manifest& m = container_.manifest();
+  input.histogram_range = {static_cast<float>(m.value_min), static_cast<float>(m.value_max)};
+  input.geometry = geometry_;
+  input.camera = camera;
+  input.transfer = &transfer;
+  input.options = options_.render;
+  changed_slots_.clear();
+  for (const stream::BrickUpload& u : update.uploads) changed_slots_.push_back(u.slot);
+  input.changed_slots = changed_slots_;
+  input.skip_invisible_blocks = options_.transfer_culling;
+  t = Clock::now();
+  report.ticket = raycaster_->render(input, readback);
+  if (gpu_frame != report.ticket)
+    throw std::logic_error("FrameLoop: the ray caster's frame numbers went out of step");
+  if (!options_.pipelined) {
+    raycaster_->wait(report.ticket);
+    const double wall = ms_since(t);
+    report.timings.render_ms = raycaster_->gpu_milliseconds(report.ticket).value_or(wall);
+    retire_completed();
+  }
+  report.stats = update.stats;
+  last_update_ = std::move(update);
+  report.timings.frame_ms = ms_since(start);
+  return report;
+}
+
+}  // namespace volreel::vulkan_render

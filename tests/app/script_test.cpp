@@ -1,0 +1,80 @@
+// script_test.cpp: parsing of the player's test scripts (volreel/app/script.hpp).
+#include <gtest/gtest.h>
+
+#include "volreel/app/script.hpp"
+#include "volreel/datasets/volume.hpp"
+
+namespace volreel::app {
+namespace {
+
+using Kind = ScriptAction::Kind;
+
+TEST(Script, ParsesTheDocumentedExample) {
+  const auto a = parse_script("0.5 key space; 1.0 key right; 1.5 screenshot a.png; 2.0 quit");
+  ASSERT_EQ(a.size(), 4u);
+  EXPECT_EQ(a[0].kind, Kind::key);
+  EXPECT_EQ(a[0].text, "space");
+  EXPECT_DOUBLE_EQ(a[0].at_seconds, 0.5);
+  EXPECT_EQ(a[0].at_frame, -1);
+  EXPECT_EQ(a[1].text, "right");
+  EXPECT_EQ(a[2].kind, Kind::screenshot);
+  EXPECT_EQ(a[2].text, "a.png");
+  EXPECT_EQ(a[3].kind, Kind::quit);
+  EXPECT_DOUBLE_EQ(a[3].at_seconds, 2.0);
+}
+
+TEST(Script, FramesRelativeTimesCommentsAndArguments) {
+  const auto a = parse_script(
+      "# a comment line\n"
+      "12f seek 2.5   # trailing comment\n"
+      "+3f key [\n"
+      "+0.25s orbit 30 -10; 1s settle; 2 settle 5; 3 resize 640 480; 4 sse 2; 5 zoom 0.5\n");
+  ASSERT_EQ(a.size(), 8u);
+  EXPECT_EQ(a[0].at_frame, 12);
+  EXPECT_EQ(a[0].kind, Kind::seek);
+  EXPECT_DOUBLE_EQ(a[0].x, 2.5);
+  EXPECT_FALSE(a[0].relative);
+  EXPECT_TRUE(a[1].relative);
+  EXPECT_EQ(a[1].at_frame, 3);
+  EXPECT_EQ(key_code(a[1].text), key_code("["));
+  EXPECT_TRUE(a[2].relative);
+  EXPECT_DOUBLE_EQ(a[2].at_seconds, 0.25);
+  EXPECT_DOUBLE_EQ(a[2].x, 30);
+  EXPECT_DOUBLE_EQ(a[2].y, -10);
+  EXPECT_DOUBLE_EQ(a[3].x, 20);  // default settle timeout
+  EXPECT_DOUBLE_EQ(a[4].x, 5);
+  EXPECT_EQ(a[5].kind, Kind::resize);
+  EXPECT_DOUBLE_EQ(a[5].y, 480);
+  EXPECT_EQ(a[6].kind, Kind::sse);
+  EXPECT_EQ(a[7].kind, Kind::zoom);
+  EXPECT_TRUE(parse_script("").empty());
+}
+
+TEST(Script, KeyNames) {
+  EXPECT_GE(key_code("space"), 0);
+  EXPECT_EQ(key_code("a") + 1, key_code("b"));
+  EXPECT_EQ(key_code("A"), key_code("a"));
+  EXPECT_GE(key_code("home"), 0);
+  EXPECT_EQ(key_code("nosuchkey"), -1);
+}
+
+TEST(Script, ErrorsNameTheEntry) {
+  const auto message = [](const std::string& text) {
+    try {
+      parse_script(text);
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(message("1 jump").find("'1 jump': unknown action 'jump'"), std::string::npos);
+  EXPECT_NE(message("x key space").find("expected a time"), std::string::npos);
+  EXPECT_NE(message("1 key nosuchkey").find("unknown key"), std::string::npos);
+  EXPECT_NE(message("1 seek").find("takes 1 argument"), std::string::npos);
+  EXPECT_NE(message("1 zoom -2").find("positive"), std::string::npos);
+  EXPECT_NE(message("1 resize 0 10").find("width and a height"), std::string::npos);
+  EXPECT_NE(message("quit").find("expected WHEN ACTION"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace volreel::app

@@ -1,0 +1,239 @@
+// cmd_bench_play.cpp: `volreel bench play NAME.vreel` — the player's frame rate and frame-time
+// split (schedule, upload, decode, render) while playing forward, reversing and seeking along a
+// built-in script with an orbiting camera, the throughput when the CPU work of a frame overlaps
+// the GPU work of the previous one, and the time from a random seek until every visible node is
+// drawn at its target LOD.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "commands.hpp"
+#include "volreel/cpu_render/transfer_function.hpp"
+#include "volreel/datasets/prng.hpp"
+#include "volreel/format/container.hpp"
+#include "volreel/vulkan/context.hpp"
+#include "volreel/vulkan/error.hpp"
+#include "volreel/vulkan_render/auto_transfer.hpp"
+#include "volreel/vulkan_render/cpu_frame_loop.hpp"
+#include "volreel/vulkan_render/frame_loop.hpp"
+#include "volreel/vulkan_render/loop_settings.hpp"
+
+namespace volreel::cli {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+
+struct BenchPlayOptions {
+  std::string container;
+  vulkan_render::LoopSettings loop;
+  std::size_t frames_per_phase = 60;
+  std::size_t seeks = 5;
+  double speed = 10;  ///< keyframes per second of playback
+  double frame_dt = 1.0 / 30;  ///< playback time per rendered frame, seconds
+  double timeout = 60;         ///< seconds a seek may take to reach full quality
+  std::string transfer = "auto";
+  bool cpu = false;
+  std::uint64_t seed = 1;
+};
+
+/// Per-phase sums.
+struct PhaseStats {
+  std::size_t frames = 0;
+  double wall_s = 0, schedule = 0, upload = 0, decode = 0, render = 0, at_target = 0, min_at_target = 1;
+  std::uint64_t loaded_before = 0, loaded_after = 0;
+  void add(const vulkan_render::FrameReport& r) {
+    ++frames;
+    schedule += r.timings.schedule_ms;
+    upload += r.timings.upload_ms;
+    decode += r.timings.decode_ms;
+    render += r.timings.render_ms;
+    at_target += r.stats.fraction_at_target;
+    min_at_target = std::min(min_at_target, r.stats.fraction_at_target);
+    loaded_after = r.stats.bytes_loaded;
+  }
+  void print(const char* name) const {
+    const double n = static_cast<double>(std::max<std::size_t>(frames, 1));
+    std::printf("%-18s %6zu %8.2f %9.1f %9.2f %8.2f %8.2f %8.1f %9.1f %8.0f%% %7.0f%%\n", name, frames, n / wall_s,
+                1000 * wall_s / n, schedule / n, upload / n, decode / n, render / n,
+                double(loaded_after - loaded_before) * 1e-6, 100 * at_target / n, 100 * min_at_target);
+  }
+};
+
+/// The Vulkan loop, or the CPU loop with --cpu.
+struct Loop {
+  std::unique_ptr<vulkan::Context> context;
+  std::unique_ptr<vulkan_render::FrameLoop> gpu;
+  std::unique_ptr<vulkan_render::CpuFrameLoop> cpu;
+  vulkan_render::FrameReport frame(const player::OrbitCamera& c, double p, const cpu_render::TransferFunction& tf) {
+    return gpu ? gpu->frame(c, p, tf) : cpu->frame(c, p, tf);
+  }
+  void set_pipelined(bool on) {
+    if (gpu) gpu->options().pipelined = on;
+  }
+  void finish() {
+    if (gpu) gpu->finish();
+  }
+};
+
+void run_bench_play(const BenchPlayOptions& o) {
+  // 1. Container, device, loop.
+  const format::Container container(o.container);
+  const format::Manifest& m = container.manifest();
+  vulkan_render::FrameLoopOptions options;
+  options.render.background = {0.06f, 0.06f, 0.08f};
+  try {
+    vulkan_render::apply(o.loop, options);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(e.what());
+  }
+  Loop loop;
+  std::string device;
+  if (!o.cpu) {
+    try {
+      loop.context = std::make_unique<vulkan::Context>(vulkan::ContextOptions{});
+    } catch (const vulkan::NoDeviceError& e) {
+      throw InputError(std::string("bench play needs a Vulkan device: ") + e.what() + " (--cpu measures the CPU renderer)");
+    }
+    loop.gpu = std::make_unique<vulkan_render::FrameLoop>(*loop.context, container, options);
+    device = loop.context->describe();
+  } else {
+    loop.cpu = std::make_unique<vulkan_render::CpuFrameLoop>(container, options);
+    device = "CPU reference renderer (" + std::to_string(std::thread::hardware_concurrency()) + " threads)";
+  }
+  const std::uint32_t slots = loop.gpu ? loop.gpu->atlas().slot_count() : loop.cpu->atlas().slot_count();
+  const std::size_t keyframes = container.frame_count();
+  const double last = static_cast<double>(keyframes - 1);
+  const cpu_render::TransferFunction tf = vulkan_render::transfer_from_spec(o.transfer, container);
+  std::printf("volreel bench play\nmachine: %s\ndevice:  %s\n", describe_machine().c_str(), device.c_str());
+  std::printf("input:   %s: %ux%ux%u, %zu frames, %s, %u octree levels\n", o.container.c_str(), m.dims[0], m.dims[1],
+              m.dims[2], keyframes, m.codec == format::Codec::ksvd ? "ksvd" : "zfp", m.levels);
+  std::printf("view:    %dx%d, transfer function '%s', ray step %g voxels, SSE target %g px, culling %s\n",
+              options.raycaster.width, options.raycaster.height, o.transfer.c_str(), options.render.step,
+              options.scheduler.priority.sse_target, options.transfer_culling ? "on" : "off");
+  std::printf("atlas:   %u slots (%.0f MiB), upload budget %.0f MiB/frame, bandwidth %s, latency %s\n", slots,
+              o.loop.atlas_mb, o.loop.upload_budget_mb,
+              options.scheduler.loader.bandwidth_bytes_per_s > 0 ? o.loop.bandwidth.c_str() : "unlimited",
+              o.loop.latency.c_str());
+  std::printf("script:  playback %g keyframes/s, %.4f s of playback per frame, camera orbiting 1 degree per frame, "
+              "%zu frames per phase\n\n",
+              o.speed, o.frame_dt, o.frames_per_phase);
+
+  auto camera = player::OrbitCamera::framing({double(m.dims[0]), double(m.dims[1]), double(m.dims[2])},
+                                             options.raycaster.width, options.raycaster.height);
+  const double azimuth0 = camera.azimuth;
+  std::size_t frame_number = 0;
+  const auto next_camera = [&] {
+    camera.azimuth = azimuth0 + glm::radians(static_cast<double>(frame_number++));
+    return camera;
+  };
+
+  // 2. Cold start: playhead 0, fixed camera, until everything visible is at its target LOD.
+  double playhead = 0;
+  {
+    const auto start = Clock::now();
+    std::size_t frames = 0;
+    vulkan_render::FrameReport r;
+    do {
+      r = loop.frame(camera, playhead, tf);
+      ++frames;
+    } while (r.stats.fraction_at_target < 1.0 && seconds_since(start) < o.timeout);
+    std::printf("cold start to full quality: %.2f s, %zu frames (%.0f%% at target, %.1f MB loaded)\n\n", seconds_since(start),
+                frames, 100 * r.stats.fraction_at_target, double(r.stats.bytes_loaded) * 1e-6);
+  }
+
+  // 3. Phases along the script; serial frames give the exact time split.
+  std::printf("%-18s %6s %8s %9s %9s %8s %8s %8s %9s %9s %8s\n", "phase", "frames", "fps", "frame ms", "schedule",
+              "upload", "decode", "render", "MB read", "at target", "worst");
+  SplitMix64 rng(o.seed);
+  const auto run_phase = [&](const char* name, auto&& advance, bool pipelined) {
+    PhaseStats s;
+    loop.set_pipelined(pipelined);
+    vulkan_render::FrameReport r = loop.frame(next_camera(), playhead, tf);  // not counted: settles the mode
+    s.loaded_before = r.stats.bytes_loaded;
+    const auto start = Clock::now();
+    for (std::size_t i = 0; i < o.frames_per_phase; ++i) {
+      playhead = std::clamp(advance(i), 0.0, last);
+      s.add(loop.frame(next_camera(), playhead, tf));
+    }
+    loop.finish();
+    s.wall_s = seconds_since(start);
+    s.print(name);
+  };
+  const double step = o.speed * o.frame_dt;
+  run_phase("forward", [&](std::size_t) { return playhead + step; }, false);
+  run_phase("reverse", [&](std::size_t) { return playhead - step; }, false);
+  run_phase("seek every 10th", [&](std::size_t i) { return i % 10 == 0 ? rng.uniform(0, last) : playhead + step; }, false);
+  playhead = 0;
+  if (loop.gpu) {
+    run_phase("forward, overlapped", [&](std::size_t) { return playhead + step; }, true);
+    std::printf("(overlapped: the CPU work of a frame runs while the GPU renders the previous one; its decode and\n"
+                " render columns are not measured per frame)\n");
+  }
+  loop.set_pipelined(false);
+
+  // 4. Random seeks: how long until every visible node is drawn at its target LOD.
+  std::printf("\nrandom seek to full quality (camera still; %zu seeks):\n", o.seeks);
+  std::vector<double> times;
+  for (std::size_t k = 0; k < o.seeks; ++k) {
+    // Spread over the timeline (golden-ratio steps from a seeded start), never the same twice.
+    playhead = last * std::fmod(0.5 + 0.6180339887 * double(k + 1) + 0.1 * double(o.seed), 1.0);
+    const auto start = Clock::now();
+    std::size_t frames = 0;
+    vulkan_render::FrameReport r;
+    const std::uint64_t before = loop.frame(camera, playhead, tf).stats.bytes_loaded;
+    do {
+      r = loop.frame(camera, playhead, tf);
+      ++frames;
+    } while (r.stats.fraction_at_target < 1.0 && seconds_since(start) < o.timeout);
+    const double t = seconds_since(start);
+    times.push_back(t);
+    std::printf("  seek to keyframe %7.2f: %.3f s, %4zu frames, %.1f MB read%s\n", playhead, t, frames,
+                double(r.stats.bytes_loaded - before) * 1e-6, r.stats.fraction_at_target < 1.0 ? " (timed out)" : "");
+  }
+  if (!times.empty()) {
+    double sum = 0;
+    for (double t : times) sum += t;
+    std::printf("  mean %.3f s, worst %.3f s\n", sum / double(times.size()), *std::max_element(times.begin(), times.end()));
+  }
+  loop.finish();
+}
+
+}  // namespace
+
+void add_bench_play_command(CLI::App& bench) {
+  auto o = std::make_shared<BenchPlayOptions>();
+  CLI::App* cmd = bench.add_subcommand(
+      "play",
+      "Player frame rate and frame-time split while playing forward, reversing and seeking, and the time from a "
+      "random seek to full quality (Vulkan; --cpu for the CPU renderer)");
+  o->loop.size = "512x512";
+  cmd->add_option("CONTAINER", o->container, "The container directory NAME.vreel")->required();
+  cmd->add_option("--size", o->loop.size, "Image size WxH")->capture_default_str();
+  cmd->add_option("--frames-per-phase", o->frames_per_phase, "Frames measured per phase")->capture_default_str();
+  cmd->add_option("--seeks", o->seeks, "Random seeks timed to full quality")->capture_default_str();
+  cmd->add_option("--speed", o->speed, "Playback rate, keyframes per second")->capture_default_str();
+  cmd->add_option("--timeout", o->timeout, "Seconds a seek may take to reach full quality")->capture_default_str();
+  cmd->add_option("--transfer", o->transfer, "Transfer function: auto (data quantiles), a preset or a JSON file")
+      ->capture_default_str();
+  cmd->add_option("--atlas-mb", o->loop.atlas_mb, "Brick atlas memory, MiB")->capture_default_str();
+  cmd->add_option("--bandwidth", o->loop.bandwidth, "Simulated read bandwidth, e.g. 20MB/s (0: unlimited)")
+      ->capture_default_str();
+  cmd->add_option("--latency", o->loop.latency, "Simulated latency per request, e.g. 50ms")->capture_default_str();
+  cmd->add_option("--sse-target", o->loop.sse_target, "Screen-space error target, pixels per voxel")->capture_default_str();
+  cmd->add_option("--upload-budget", o->loop.upload_budget_mb, "Compressed bytes uploaded per frame at most, MiB")
+      ->capture_default_str();
+  cmd->add_option("--step", o->loop.step, "Ray step, finest voxels")->capture_default_str();
+  cmd->add_flag("--no-culling", o->loop.no_culling, "Do not skip nodes the transfer function makes invisible");
+  cmd->add_flag("--cpu", o->cpu, "Measure the CPU reference renderer instead of Vulkan");
+  cmd->add_option("--seed", o->seed, "Seed of the seek positions")->capture_default_str();
+  cmd->callback([o] { run_bench_play(*o); });
+}
+
+}  // namespace volreel::cli

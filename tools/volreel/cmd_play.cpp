@@ -1,0 +1,176 @@
+// cmd_play.cpp: `volreel play NAME.vreel` — the interactive player window (player/app). Exit codes
+// beyond the usual: 3 when there is no display, 4 when there is no Vulkan device that can present
+// to a window (scripts and tests skip on them).
+#include <algorithm>
+#include <charconv>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <string>
+
+#include "commands.hpp"
+#include "volreel/app/player.hpp"
+#include "volreel/vulkan/error.hpp"
+
+namespace volreel::cli {
+
+namespace {
+
+struct PlayCommandOptions {
+  app::PlayerOptions player;
+  std::string size = "1024x720";
+  double atlas_mb = 256, upload_mb = 8;
+  std::string bandwidth = "0", latency = "0";
+  std::string renderer = "auto";
+  std::string script_file, script_inline, screenshot_on_exit;
+};
+
+/// "20MB/s", "500kB/s", "1.5e6" (bytes/s), "0" (unlimited) → bytes per second.
+double parse_bandwidth(std::string text) {
+  if (text.size() > 2 && text.substr(text.size() - 2) == "/s") text.resize(text.size() - 2);
+  double scale = 1;
+  for (auto [suffix, factor] : {std::pair<const char*, double>{"GB", 1e9},
+                                {"MB", 1e6},
+                                {"kB", 1e3},
+                                {"KB", 1e3},
+                                {"B", 1}}) {
+    const std::string s = suffix;
+    if (text.size() > s.size() && text.substr(text.size() - s.size()) == s) {
+      text.resize(text.size() - s.size());
+      scale = factor;
+      break;
+    }
+  }
+  double value = 0;
+  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (ec != std::errc{} || ptr != text.data() + text.size() || value < 0)
+    throw InputError("--bandwidth: expected a rate like 20MB/s, found '" + text + "'");
+  return value * scale;
+}
+
+/// "50ms", "0.05s", "0.05" (seconds) → seconds.
+double parse_latency(std::string text) {
+  double scale = 1;
+  if (text.size() > 2 && text.substr(text.size() - 2) == "ms") {
+    text.resize(text.size() - 2);
+    scale = 1e-3;
+  } else if (!text.empty() && text.back() == 's') {
+    text.pop_back();
+  }
+  double value = 0;
+  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (ec != std::errc{} || ptr != text.data() + text.size() || value < 0)
+    throw InputError("--latency: expected a time like 50ms, found '" + text + "'");
+  return value * scale;
+}
+
+void run_play(PlayCommandOptions& o) {
+  app::PlayerOptions& p = o.player;
+  {
+    int w = 0, h = 0;
+    char x = 0, rest = 0;
+    std::istringstream in(o.size);
+    if (!(in >> w >> x >> h) || x != 'x' || (in >> rest) || w < 64 || h < 64 || w > 16384 ||
+        h > 16384)
+      throw InputError("--size: expected WxH with each side in 64..16384, found '" + o.size + "'");
+    p.width = w;
+    p.height = h;
+  }
+  if (!(o.atlas_mb > 0)) throw InputError("--atlas-mb: expected a positive size");
+  p.atlas_bytes = static_cast<std::uint64_t>(o.atlas_mb * 1024 * 1024);
+  p.upload_bytes =
+      std::max<std::uint64_t>(static_cast<std::uint64_t>(o.upload_mb * 1024 * 1024), 1);
+  p.bandwidth_bytes_per_s = parse_bandwidth(o.bandwidth);
+  p.latency_s = parse_latency(o.latency);
+  p.renderer = o.renderer == "cpu"      ? app::RendererKind::cpu
+               : o.renderer == "vulkan" ? app::RendererKind::vulkan
+                                        : app::RendererKind::automatic;
+  if (!o.script_file.empty()) {
+    std::ifstream in(o.script_file);
+    if (!in) throw InputError(o.script_file + ": cannot open the script");
+    std::stringstream text;
+    text << in.rdbuf();
+    p.script = text.str();
+  }
+  if (!o.script_inline.empty()) p.script += "\n" + o.script_inline;
+  if (!o.screenshot_on_exit.empty()) p.screenshot_on_exit = o.screenshot_on_exit;
+  try {
+    app::run_player(p);
+  } catch (const app::NoDisplayError& e) {
+    std::fprintf(stderr, "volreel play: %s\n", e.what());
+    throw CLI::RuntimeError(3);
+  } catch (const vulkan::NoDeviceError& e) {
+    std::fprintf(
+        stderr,
+        "volreel play: no Vulkan device that can show a window: %s\n"
+        "Render without a window with `volreel render NAME.vreel --tour T.json --out DIR`.\n",
+        e.what());
+    throw CLI::RuntimeError(4);
+  }
+}
+
+}  // namespace
+
+void add_play_command(CLI::App& app) {
+  auto o = std::make_shared<PlayCommandOptions>();
+  CLI::App* cmd = app.add_subcommand("play",
+                                     "Play a container in a window, like a video: space "
+                                     "play/pause, r reverse, [ ] speed (0.25x-8x),\n"
+                                     "left/right step one keyframe, Home/End, c reset view, h hide "
+                                     "the panels; left drag orbits, right or\n"
+                                     "middle drag pans, the wheel zooms. Needs a display (try "
+                                     "`xvfb-run -a volreel play ...`); without one,\n"
+                                     "use `volreel render`. Scripts replay timed actions for "
+                                     "tests: \"0.5 key space; 12f key right;\n"
+                                     "2.0 settle; 2.1 screenshot a.png; 3 quit\" (see "
+                                     "player/app/include/volreel/app/script.hpp).");
+  cmd->add_option("CONTAINER", o->player.container, "Container directory NAME.vreel")->required();
+  cmd->add_option("--size", o->size, "Window size WxH, pixels")->capture_default_str();
+  cmd->add_option("--atlas-mb", o->atlas_mb, "Brick atlas memory budget, MiB")
+      ->capture_default_str();
+  cmd->add_option("--bandwidth", o->bandwidth,
+                  "Limit brick reads to this rate, e.g. 20MB/s (0: unlimited)")
+      ->capture_default_str();
+  cmd->add_option("--latency", o->latency, "Add this latency to every brick read, e.g. 50ms")
+      ->capture_default_str();
+  cmd->add_option("--upload-mb", o->upload_mb,
+                  "Compressed brick data decoded per frame at most, MiB")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--max-requests", o->player.max_requests, "Brick reads in flight at most")
+      ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
+  cmd->add_option("--transfer", o->player.transfer,
+                  "Transfer function: a preset (grayscale, cool-warm, fire, turbulence, "
+                  "transparent) or a JSON file")
+      ->capture_default_str();
+  cmd->add_option("--sse", o->player.sse_target, "Screen-space error target, pixels per voxel")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--keyframes-per-second", o->player.keyframes_per_second, "Playback rate at 1x")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_flag("--loop", o->player.loop, "Wrap around at the ends of the timeline");
+  cmd->add_flag("!--no-vsync", o->player.vsync, "Present as fast as possible (mailbox/immediate)");
+  cmd->add_option("--renderer", o->renderer, "Volume renderer: auto, cpu or vulkan")
+      ->check(CLI::IsMember({"auto", "cpu", "vulkan"}))
+      ->capture_default_str();
+  cmd->add_option("--render-scale", o->player.render_scale,
+                  "Volume image size relative to the window")
+      ->check(CLI::Range(0.05, 1.0))
+      ->capture_default_str();
+  cmd->add_option("--script", o->script_file, "Replay the timed actions of this file");
+  cmd->add_option("--script-inline", o->script_inline,
+                  "Replay these timed actions ('0.5 key space; 2 quit')");
+  cmd->add_option("--frames", o->player.max_frames, "Quit after N frames (0: run until closed)");
+  cmd->add_option("--screenshot-on-exit", o->screenshot_on_exit,
+                  "Write the last frame to this PNG");
+  cmd->add_option(
+      "--fixed-frame-time", o->player.fixed_frame_seconds,
+      "Advance the playhead by this many seconds per frame instead of the real frame time");
+  cmd->add_flag("--quiet", o->player.quiet, "No status lines on stdout");
+  cmd->callback([o] { run_play(*o); });
+}
+
+}  // namespace volreel::cli

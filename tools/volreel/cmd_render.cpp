@@ -1,0 +1,345 @@
+// cmd_render.cpp: `volreel render NAME.vreel` — headless rendering of a tour (no window, no
+// display): every frame drives the streaming loop (scheduler → uploads → decode → ray casting) on
+// the Vulkan device, or on the CPU where there is none (--cpu), and writes DIR/frame_NNNNN.png and
+// a row of DIR/metrics.csv; optionally encodes the frames with ffmpeg (--video) and measures each
+// frame against a ground-truth render of the original series (--compare).
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <future>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "commands.hpp"
+#include "progress.hpp"
+#include "volreel/cpu_render/renderer.hpp"
+#include "volreel/cpu_render/tour.hpp"
+#include "volreel/datasets/series.hpp"
+#include "volreel/format/container.hpp"
+#include "volreel/psnr/metrics.hpp"
+#include "volreel/vulkan/context.hpp"
+#include "volreel/vulkan/error.hpp"
+#include "volreel/vulkan_render/auto_transfer.hpp"
+#include "volreel/vulkan_render/cpu_frame_loop.hpp"
+#include "volreel/vulkan_render/frame_loop.hpp"
+#include "volreel/vulkan_render/loop_settings.hpp"
+
+namespace volreel::cli {
+
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+struct RenderCommandOptions {
+  std::string container, tour, out, video, compare, transfer;
+  bool cpu = false, realtime = false;
+  std::size_t max_frames = 0;
+  vulkan_render::LoopSettings loop;
+  ReaderOptions reader;
+};
+
+/// The executable's full path if `name` is on PATH, else empty.
+std::string find_on_path(const std::string& name) {
+  const char* path = std::getenv("PATH");
+  if (!path) return {};
+  std::string dirs = path;
+  std::size_t start = 0;
+  while (start <= dirs.size()) {
+    const std::size_t end = dirs.find(':', start);
+    const std::string dir = dirs.substr(start, end == std::string::npos ? std::string::npos : end - start);
+    if (!dir.empty()) {
+      const fs::path candidate = fs::path(dir) / name;
+      if (::access(candidate.c_str(), X_OK) == 0) return candidate.string();
+    }
+    if (end == std::string::npos) break;
+    start = end + 1;
+  }
+  return {};
+}
+
+/// Runs a program with arguments (no shell); returns its exit status, or -1 if it did not start.
+int run_program(const std::string& program, const std::vector<std::string>& args) {
+  std::vector<char*> argv;
+  argv.push_back(const_cast<char*>(program.c_str()));
+  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  if (posix_spawn(&pid, program.c_str(), nullptr, nullptr, argv.data(), environ) != 0) return -1;
+  int status = 0;
+  if (waitpid(pid, &status, 0) < 0) return -1;
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+/// The original series at a continuous playhead: frames ⌊p⌋ and ⌊p⌋ + 1 (two kept in memory).
+class GroundTruth {
+ public:
+  GroundTruth(const std::string& path, const ReaderOptions& reader, const format::Manifest& m)
+      : series_(datasets::open_series(path, reader.to_open_options())) {
+    const auto& info = series_->info();
+    if (info.dims.x != m.dims[0] || info.dims.y != m.dims[1] || info.dims.z != m.dims[2])
+      throw InputError("--compare " + path + ": the series is " + to_string(info.dims) + ", the container " +
+                       std::to_string(m.dims[0]) + "x" + std::to_string(m.dims[1]) + "x" + std::to_string(m.dims[2]));
+    if (info.frames < m.frames.size())
+      throw InputError("--compare " + path + ": the series has " + std::to_string(info.frames) +
+                       " frames, the container " + std::to_string(m.frames.size()));
+    geometry_ = cpu_render::VolumeGeometry::of(m.dims);
+  }
+
+  /// The reference image at `playhead`: the finest level of both neighbouring frames, blended.
+  cpu_render::RgbaImage render(double playhead, std::size_t keyframes, const player::OrbitCamera& camera,
+                               const cpu_render::TransferFunction& tf, const cpu_render::RenderOptions& options) {
+    const double p = std::clamp(playhead, 0.0, static_cast<double>(keyframes - 1));
+    const auto t0 = static_cast<std::size_t>(std::floor(p));
+    const std::size_t t1 = std::min(t0 + 1, keyframes - 1);
+    const auto f = static_cast<float>(p - static_cast<double>(t0));
+    const std::uint32_t finest = geometry_.levels - 1;
+    for (auto it = cache_.begin(); it != cache_.end();) it = it->first == t0 || it->first == t1 ? std::next(it) : cache_.erase(it);
+    const auto level = [&](std::size_t t) {
+      return cpu_render::DenseLevel{geometry_.dims, frame(t).data, finest};
+    };
+    return cpu_render::render_reference(level(t0), level(t1), f, geometry_, camera, tf, options);
+  }
+
+ private:
+  const Volume& frame(std::size_t t) {
+    auto it = cache_.find(t);
+    if (it != cache_.end()) return it->second;
+    return cache_.emplace(t, series_->read_frame(t)).first->second;
+  }
+  std::unique_ptr<datasets::SeriesReader> series_;
+  cpu_render::VolumeGeometry geometry_;
+  std::map<std::size_t, Volume> cache_;
+};
+
+/// Either loop behind one call: Vulkan (serial: exact time split) or CPU.
+struct Renderer {
+  std::unique_ptr<vulkan::Context> context;
+  std::unique_ptr<vulkan_render::FrameLoop> gpu;
+  std::unique_ptr<vulkan_render::CpuFrameLoop> cpu;
+  std::string device;
+
+  vulkan_render::FrameReport frame(const player::OrbitCamera& camera, double playhead,
+                                   const cpu_render::TransferFunction& tf) {
+    return gpu ? gpu->frame(camera, playhead, tf, true) : cpu->frame(camera, playhead, tf);
+  }
+  cpu_render::RgbaImage image(vulkan_render::Ticket ticket) const {
+    return gpu ? gpu->read_back(ticket) : cpu->read_back(ticket);
+  }
+  std::uint32_t slots() const {
+    return gpu ? gpu->atlas().slot_count() : cpu->atlas().slot_count();
+  }
+};
+
+Renderer make_renderer(const format::Container& container, const vulkan_render::FrameLoopOptions& options, bool cpu) {
+  Renderer r;
+  if (!cpu) {
+    try {
+      r.context = std::make_unique<vulkan::Context>(vulkan::ContextOptions{});
+    } catch (const vulkan::NoDeviceError& e) {
+      std::fprintf(stderr, "volreel: notice: no Vulkan device (%s): rendering on the CPU, as with --cpu\n", e.what());
+    }
+  }
+  if (r.context) {
+    r.gpu = std::make_unique<vulkan_render::FrameLoop>(*r.context, container, options);
+    r.device = r.context->describe();
+  } else {
+    r.cpu = std::make_unique<vulkan_render::CpuFrameLoop>(container, options);
+    r.device = "CPU reference renderer (" + std::to_string(std::thread::hardware_concurrency()) + " threads)";
+  }
+  return r;
+}
+
+void run_render(const RenderCommandOptions& o) {
+  // 1. Input, tour, output folder; ffmpeg is checked before any work.
+  const format::Container container(o.container);
+  const format::Manifest& m = container.manifest();
+  const cpu_render::TourContext tour_context{m.dims, container.frame_count(),
+                                             {static_cast<float>(m.value_min), static_cast<float>(m.value_max)}};
+  const cpu_render::Tour tour = o.tour.empty() ? cpu_render::Tour::default_for(tour_context)
+                                               : cpu_render::Tour::load(o.tour, tour_context);
+  std::string ffmpeg;
+  if (!o.video.empty()) {
+    ffmpeg = find_on_path("ffmpeg");
+    if (ffmpeg.empty())
+      throw InputError("--video needs ffmpeg, which is not installed (Debian: apt-get install ffmpeg); "
+                       "run without --video to write the PNG frames only");
+  }
+  const fs::path out = o.out;
+  if (fs::exists(out) && !fs::is_directory(out))
+    throw InputError("--out " + o.out + ": exists and is not a directory");
+  fs::create_directories(out);
+  vulkan_render::FrameLoopOptions options;
+  options.raycaster.width = tour.width();
+  options.raycaster.height = tour.height();
+  options.render.background = {0.06f, 0.06f, 0.08f};
+  try {
+    vulkan_render::apply(o.loop, options);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(e.what());
+  }
+  // Without a tour, the default tour with a transfer function from the data's quantiles (the
+  // default tour's cool-warm over the whole range leaves turbulence pressure an opaque haze).
+  const std::string transfer_spec = !o.transfer.empty() ? o.transfer : o.tour.empty() ? "auto" : "";
+  std::optional<cpu_render::TransferFunction> transfer;
+  if (!transfer_spec.empty()) transfer = vulkan_render::transfer_from_spec(transfer_spec, container);
+  std::optional<GroundTruth> truth;
+  if (!o.compare.empty()) truth.emplace(o.compare, o.reader, m);
+
+  // 2. The renderer: Vulkan, or the CPU where there is no device.
+  Renderer renderer = make_renderer(container, options, o.cpu);
+  const std::size_t frames = o.max_frames ? std::min(o.max_frames, tour.frame_count()) : tour.frame_count();
+  std::printf("volreel render\nmachine: %s\ndevice:  %s\ninput:   %s: %ux%ux%u, %zu frames, %s\n", describe_machine().c_str(),
+              renderer.device.c_str(), o.container.c_str(), m.dims[0], m.dims[1], m.dims[2], container.frame_count(),
+              m.codec == format::Codec::ksvd ? "ksvd" : "zfp");
+  std::printf("transfer function: %s\n", transfer_spec.empty() ? "the tour's" : transfer_spec.c_str());
+  std::printf("tour:    %s, %.1f s at %.0f fps, %zu frames, %dx%d\natlas:   %u slots (%.0f MiB), upload budget %.0f MiB/frame, "
+              "bandwidth %s, latency %s, SSE target %g\n",
+              o.tour.empty() ? "default tour" : o.tour.c_str(), tour.duration(), tour.fps(), frames, options.raycaster.width,
+              options.raycaster.height, renderer.slots(), o.loop.atlas_mb, o.loop.upload_budget_mb,
+              options.scheduler.loader.bandwidth_bytes_per_s > 0 ? o.loop.bandwidth.c_str() : "unlimited",
+              o.loop.latency.c_str(), o.loop.sse_target);
+  std::fflush(stdout);
+
+  // 3. Frames: render, write the PNG on a worker thread while the next frame renders.
+  std::ofstream csv(out / "metrics.csv");
+  if (!csv) throw InputError("cannot write " + (out / "metrics.csv").string());
+  csv << "frame,time_s,playhead,frame_ms,fps,schedule_ms,upload_ms,decode_ms,render_ms,readback_ms,atlas_occupied,"
+         "atlas_capacity,atlas_occupancy,requests_in_flight,requests_sent,uploads,mb_uploaded,mb_loaded,"
+         "fraction_at_target,holes,svo_nodes,svo_leaves,errors"
+      << (truth ? ",psnr_db,ssim" : "") << '\n';
+  std::future<void> writing;
+  double sum_ms[5] = {0, 0, 0, 0, 0};
+  double sum_psnr = 0, sum_ssim = 0;
+  std::size_t compared = 0, errors = 0;
+  vulkan_render::FrameReport last;
+  const auto start = Clock::now();
+  {
+    ProgressBar bar("rendering", "frames");
+    for (std::size_t i = 0; i < frames; ++i) {
+      const double time = tour.frame_time(i);
+      if (o.realtime) std::this_thread::sleep_until(start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(time)));
+      cpu_render::TourFrame tf = tour.at(time);
+      if (transfer) tf.transfer = *transfer;
+      tf.camera.width = options.raycaster.width;
+      tf.camera.height = options.raycaster.height;
+      const vulkan_render::FrameReport report = renderer.frame(tf.camera, tf.playhead, tf.transfer);
+      const auto read_start = Clock::now();
+      cpu_render::RgbaImage image = renderer.image(report.ticket);
+      const double readback_ms = std::chrono::duration<double, std::milli>(Clock::now() - read_start).count();
+      for (const std::string& e : report.new_errors) std::fprintf(stderr, "\nvolreel: warning: %s\n", e.c_str());
+      errors += report.new_errors.size();
+      std::optional<psnr::ImageComparison> quality;
+      if (truth) {
+        const auto reference = truth->render(tf.playhead, container.frame_count(), tf.camera, tf.transfer, options.render);
+        quality = psnr::compare_images(cpu_render::to_image(reference), cpu_render::to_image(image));
+        sum_psnr += quality->psnr;
+        sum_ssim += quality->ssim;
+        ++compared;
+      }
+      if (writing.valid()) writing.get();
+      char name[32];
+      std::snprintf(name, sizeof name, "frame_%05zu.png", i);
+      writing = std::async(std::launch::async, [path = out / name, img = std::move(image)] { cpu_render::write_png(path, img); });
+      const auto& s = report.stats;
+      const auto& t = report.timings;
+      const double frame_ms = t.frame_ms + readback_ms;
+      const double values[5] = {frame_ms, t.schedule_ms, t.upload_ms, t.decode_ms, t.render_ms};
+      for (int k = 0; k < 5; ++k) sum_ms[k] += values[k];
+      char row[512];
+      std::snprintf(row, sizeof row,
+                    "%zu,%.4f,%.4f,%.3f,%.2f,%.3f,%.3f,%.3f,%.3f,%.3f,%u,%u,%.4f,%zu,%zu,%zu,%.4f,%.4f,%.4f,%u,%u,%u,%zu", i,
+                    time, tf.playhead, frame_ms, 1000.0 / frame_ms, t.schedule_ms, t.upload_ms, t.decode_ms, t.render_ms,
+                    readback_ms, s.atlas_occupied, s.atlas_capacity,
+                    s.atlas_capacity ? double(s.atlas_occupied) / double(s.atlas_capacity) : 0.0, s.requests_in_flight,
+                    s.requests_sent, s.uploads, double(s.bytes_uploaded) * 1e-6, double(s.bytes_loaded) * 1e-6,
+                    s.fraction_at_target, s.holes, s.svo_nodes, s.svo_leaves, report.new_errors.size());
+      csv << row;
+      if (quality) csv << ',' << quality->psnr << ',' << quality->ssim;
+      csv << '\n';
+      char status[96];
+      std::snprintf(status, sizeof status, "%.1f fps, %.0f%% at target LOD", 1000.0 / frame_ms, 100 * s.fraction_at_target);
+      bar.update({static_cast<double>(i + 1), static_cast<double>(frames), status});
+      last = report;
+    }
+    if (writing.valid()) writing.get();
+    bar.finish();
+  }
+  csv.close();
+  if (!csv) throw InputError("writing " + (out / "metrics.csv").string() + " failed");
+
+  // 4. Summary, video.
+  const double n = static_cast<double>(std::max<std::size_t>(frames, 1));
+  std::printf("\n%zu frames in %s: mean frame %.1f ms (%.1f fps): schedule %.1f, upload %.1f, decode %.1f, render %.1f ms\n",
+              frames, format_duration(std::chrono::duration<double>(Clock::now() - start).count()).c_str(), sum_ms[0] / n,
+              1000.0 * n / sum_ms[0], sum_ms[1] / n, sum_ms[2] / n, sum_ms[3] / n, sum_ms[4] / n);
+  std::printf("last frame: %.0f%% of the visible nodes at their target LOD, atlas %u of %u slots, %.1f MB loaded\n",
+              100 * last.stats.fraction_at_target, last.stats.atlas_occupied, last.stats.atlas_capacity,
+              double(last.stats.bytes_loaded) * 1e-6);
+  if (errors) std::printf("%zu errors (see the warnings above)\n", errors);
+  if (compared)
+    std::printf("image quality against the original series (CPU render_reference, time-interpolated): mean PSNR %.2f dB "
+                "(10*log10(255^2/MSE), 8-bit RGB), mean SSIM %.4f over %zu frames\n",
+                sum_psnr / double(compared), sum_ssim / double(compared), compared);
+  std::printf("wrote %s/frame_00000.png .. frame_%05zu.png and %s\n", out.c_str(), frames ? frames - 1 : 0,
+              (out / "metrics.csv").c_str());
+  if (!ffmpeg.empty()) {
+    const int status = run_program(ffmpeg, {"-y", "-loglevel", "error", "-framerate", std::to_string(tour.fps()), "-i",
+                                            (out / "frame_%05d.png").string(), "-c:v", "libx264", "-pix_fmt", "yuv420p",
+                                            "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", o.video});
+    if (status != 0) throw InputError("ffmpeg failed (exit status " + std::to_string(status) + ") encoding " + o.video);
+    std::printf("wrote %s\n", o.video.c_str());
+  }
+}
+
+}  // namespace
+
+void add_render_command(CLI::App& app) {
+  auto o = std::make_shared<RenderCommandOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      "render",
+      "Render a tour of a container headlessly (no window or display): PNG frames and per-frame metrics, on the "
+      "Vulkan device or, where there is none, on the CPU");
+  cmd->add_option("CONTAINER", o->container, "The container directory NAME.vreel")->required();
+  cmd->add_option("--tour", o->tour,
+                  "Tour JSON (camera, playhead and transfer-function keys; see player/cpu_render tour.hpp); "
+                  "default: the built-in tour (play, reverse, seek, slow motion, one orbit)");
+  cmd->add_option("--out", o->out, "Output folder for frame_NNNNN.png and metrics.csv")->required();
+  cmd->add_option("--size", o->loop.size, "Image size WxH (default: the tour's, 512x512)");
+  cmd->add_option("--transfer", o->transfer,
+                  "Transfer function for every frame: auto (from the data's quantiles), a preset (grayscale, "
+                  "cool-warm, fire, turbulence) or a JSON file; default: the tour's, or auto without --tour");
+  cmd->add_option("--video", o->video, "Also encode the frames into this video with ffmpeg (H.264)");
+  cmd->add_flag("--cpu", o->cpu, "Render on the CPU (CPU atlas and reference ray caster) instead of Vulkan");
+  cmd->add_option("--atlas-mb", o->loop.atlas_mb, "Brick atlas memory, MiB (93 312 bytes per slot)")->capture_default_str();
+  cmd->add_option("--bandwidth", o->loop.bandwidth, "Simulated read bandwidth, e.g. 20MB/s (0: unlimited)")
+      ->capture_default_str();
+  cmd->add_option("--latency", o->loop.latency, "Simulated latency per request, e.g. 50ms")->capture_default_str();
+  cmd->add_option("--sse-target", o->loop.sse_target, "Screen-space error target, pixels per voxel")->capture_default_str();
+  cmd->add_option("--upload-budget", o->loop.upload_budget_mb, "Compressed bytes uploaded per frame at most, MiB")
+      ->capture_default_str();
+  cmd->add_option("--step", o->loop.step, "Ray step, finest voxels")->capture_default_str();
+  cmd->add_flag("--no-culling", o->loop.no_culling, "Do not skip nodes the transfer function makes invisible");
+  cmd->add_flag("--realtime", o->realtime,
+                "Start frame i no earlier than i/fps seconds in, so streaming (which runs in wall-clock time) keeps "
+                "the tour's pace; by default frames render as fast as they can");
+  cmd->add_option("--max-frames", o->max_frames, "Render only the first N frames of the tour");
+  cmd->add_option("--compare", o->compare,
+                  "Original series (raw series directory, HDF5 or raw file): measure each frame's image PSNR/SSIM "
+                  "against a CPU render of the original data at that playhead, interpolated in time");
+  o->reader.add_to(*cmd);
+  cmd->callback([o] { run_render(*o); });
+}
+
+}  // namespace volreel::cli
