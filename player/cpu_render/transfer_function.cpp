@@ -107,6 +107,24 @@ TransferFunction::TransferFunction(std::vector<ControlPoint> points, float lo, f
   }
 }
 
+TransferFunction TransferFunction::from_quantiles(std::vector<float> values, float lo, float hi) {
+  if (!(hi > lo) || values.empty()) return preset("cool-warm", lo, hi > lo ? hi : lo + 1);
+  std::sort(values.begin(), values.end());
+  const auto q = [&](double p) {
+    const auto i = static_cast<std::size_t>(p * static_cast<double>(values.size() - 1));
+    return std::clamp(values[i], lo, hi);
+  };
+  // Moreland's cool-warm ends, clear in between; opacity per voxel of ray.
+  std::vector<ControlPoint> points = {
+      {lo, 0.10f, 0.20f, 0.80f, 0.70f},       {q(0.001), 0.15f, 0.35f, 0.95f, 0.45f},
+      {q(0.01), 0.35f, 0.65f, 1.00f, 0.12f},  {q(0.04), 0.60f, 0.80f, 1.00f, 0.0f},
+      {q(0.96), 1.00f, 0.80f, 0.60f, 0.0f},   {q(0.99), 1.00f, 0.55f, 0.25f, 0.05f},
+      {q(0.999), 0.90f, 0.20f, 0.10f, 0.25f}, {hi, 0.70f, 0.02f, 0.15f, 0.50f}};
+  for (std::size_t i = 1; i < points.size(); ++i)
+    points[i].value = std::max(points[i].value, points[i - 1].value);
+  return TransferFunction(points, lo, hi, 256);
+}
+
 TransferFunction TransferFunction::preset(const std::string& name, float lo, float hi,
                                           float opacity, int entries) {
   const auto it = presets().find(name);

@@ -347,31 +347,12 @@ std::unique_ptr<datasets::SeriesReader> open_original(const BenchStreamOptions& 
   return nullptr;
 }
 
-/// A transfer function at quantiles of one volume's values: the lowest 4 % blue rising to opaque,
-/// the highest 4 % orange to red, the bulk clear — so that heavy-tailed fields such as turbulence
-/// pressure show their structures instead of a haze.
-cpu_render::TransferFunction quantile_transfer(std::vector<float> values, float lo, float hi) {
-  if (!(hi > lo) || values.empty()) return cpu_render::TransferFunction::preset("cool-warm", lo, hi > lo ? hi : lo + 1);
-  std::sort(values.begin(), values.end());
-  const auto q = [&](double p) {
-    const auto i = static_cast<std::size_t>(p * static_cast<double>(values.size() - 1));
-    return std::clamp(values[i], lo, hi);
-  };
-  std::vector<cpu_render::ControlPoint> points = {
-      {lo, 0.10f, 0.20f, 0.80f, 0.70f},      {q(0.001), 0.15f, 0.35f, 0.95f, 0.45f},
-      {q(0.01), 0.35f, 0.65f, 1.00f, 0.12f}, {q(0.04), 0.60f, 0.80f, 1.00f, 0.0f},
-      {q(0.96), 1.00f, 0.80f, 0.60f, 0.0f},  {q(0.99), 1.00f, 0.55f, 0.25f, 0.05f},
-      {q(0.999), 0.90f, 0.20f, 0.10f, 0.25f}, {hi, 0.70f, 0.02f, 0.15f, 0.50f}};
-  for (std::size_t i = 1; i < points.size(); ++i) points[i].value = std::max(points[i].value, points[i - 1].value);
-  return cpu_render::TransferFunction(points, lo, hi, 256);
-}
-
 /// --transfer: "auto", "tour", a preset name or a JSON file.
 std::optional<cpu_render::TransferFunction> transfer_from_spec(const std::string& spec, const format::Manifest& m,
                                                                GroundTruth& truth, std::size_t keyframes) {
   const auto lo = static_cast<float>(m.value_min), hi = static_cast<float>(m.value_max);
   if (spec == "tour") return std::nullopt;
-  if (spec == "auto") return quantile_transfer(truth.frame(keyframes / 2), lo, hi);
+  if (spec == "auto") return cpu_render::TransferFunction::from_quantiles(truth.frame(keyframes / 2), lo, hi);
   const auto& presets = cpu_render::TransferFunction::preset_names();
   if (std::find(presets.begin(), presets.end(), spec) != presets.end())
     return cpu_render::TransferFunction::preset(spec, lo, hi > lo ? hi : lo + 1);

@@ -142,8 +142,8 @@ void add_play_command(CLI::App& app) {
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
   cmd->add_option("--transfer", o->player.transfer,
-                  "Transfer function: a preset (grayscale, cool-warm, fire, turbulence, "
-                  "transparent) or a JSON file")
+                  "Transfer function: auto (from the data's quantiles), a preset (grayscale, "
+                  "cool-warm, fire, turbulence, transparent) or a JSON file")
       ->capture_default_str();
   cmd->add_option("--sse", o->player.sse_target, "Screen-space error target, pixels per voxel")
       ->check(CLI::PositiveNumber)

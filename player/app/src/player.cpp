@@ -18,6 +18,7 @@
 // zero size (minimized) waits for events without rendering.
 #define GLFW_INCLUDE_VULKAN
 #include "volreel/app/player.hpp"
+#include "volreel/vulkan_render/auto_transfer.hpp"
 
 #include <GLFW/glfw3.h>
 #include <backends/imgui_impl_glfw.h>
@@ -326,30 +327,16 @@ Player::Player(const PlayerOptions& options)
   range_lo_ = static_cast<float>(m.value_min);
   range_hi_ = static_cast<float>(m.value_max);
   if (!(range_hi_ > range_lo_)) range_hi_ = range_lo_ + 1.0f;
+  // "auto" (quantiles of the data), a preset or a JSON file, as `volreel render` takes them.
   const auto& names = cpu_render::TransferFunction::preset_names();
-  const std::filesystem::path transfer_file(options.transfer);
   if (auto it = std::find(names.begin(), names.end(), options.transfer); it != names.end()) {
     apply_preset(*it);
-  } else if (transfer_file.extension() == ".json") {
-    std::ifstream in(transfer_file);
-    if (!in) throw InputError(options.transfer + ": cannot open the transfer-function file");
-    nlohmann::json json;
-    try {
-      in >> json;
-    } catch (const nlohmann::json::exception& e) {
-      throw InputError(options.transfer + ": not valid JSON (" + e.what() + ")");
-    }
-    transfer_ =
-        cpu_render::TransferFunction::from_json(json, {range_lo_, range_hi_}, options.transfer);
+  } else {
+    transfer_ = vulkan_render::transfer_from_spec(options.transfer, container_, "--transfer");
     points_ = transfer_.points();
     range_lo_ = transfer_.lo();
     range_hi_ = transfer_.hi();
     preset_ = -1;
-  } else {
-    std::string known;
-    for (const auto& n : names) known += (known.empty() ? "" : ", ") + n;
-    throw InputError("--transfer: expected a preset (" + known + ") or a .json file, found '" +
-                     options.transfer + "'");
   }
   mark_ = last_status_ = Clock::now();
 }

@@ -97,6 +97,13 @@ class TransferFunction {
   /// entry count); the points are a's when w < 0.5, else b's. Used by tours between keys.
   static TransferFunction blend(const TransferFunction& a, const TransferFunction& b, float w);
 
+  /// A transfer function placed at quantiles of sample values, for signed fields with heavy tails
+  /// such as turbulence pressure, whose bulk fills the middle of the range while the structures
+  /// of interest (low-pressure vortex cores, high-pressure stagnation regions) are the rare
+  /// extremes: the lowest 4 % blue rising to opaque, the highest 4 % orange to red, the bulk
+  /// clear. Spans [lo, hi]; "cool-warm" when there are no values or the range is empty.
+  static TransferFunction from_quantiles(std::vector<float> values, float lo, float hi);
+
   friend bool operator==(const TransferFunction&, const TransferFunction&) = default;
 
  private:

@@ -14,8 +14,8 @@
 namespace volreel::vulkan_render {
 
 /// Quantiles of the values of up to `max_bricks` finest-level bricks (evenly spread) of the
-/// middle frame, decoded on the CPU; the transfer function spans the manifest's value range.
-/// Throws format::FormatError when that frame cannot be read.
+/// middle frame (or the nearest readable frame when that one is damaged), decoded on the CPU;
+/// the transfer function spans the manifest's value range. "cool-warm" when no frame is readable.
 cpu_render::TransferFunction quantile_transfer(const format::Container& container,
                                                std::size_t max_bricks = 64);
 
