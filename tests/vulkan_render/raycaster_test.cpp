@@ -236,8 +236,27 @@ vulkan::AtlasOptions atlas_options(const Scene& s) {
   return o;
 }
 
-GpuScene& gpu_scene(vulkan::Context& context) {
+GpuScene& gpu_scene_storage() {
   static GpuScene g;
+  return g;
+}
+
+/// Releases the scene's atlases before the shared context goes (environments are torn down in
+/// the reverse order of registration), so that leak checkers see everything released.
+class GpuSceneEnvironment : public ::testing::Environment {
+ public:
+  void TearDown() override {
+    gpu_scene_storage().from_cpu.reset();
+    gpu_scene_storage().from_gpu.reset();
+  }
+};
+[[maybe_unused]] ::testing::Environment* const vulkan_environment =
+    ::testing::AddGlobalTestEnvironment(new test::VulkanEnvironment);
+[[maybe_unused]] ::testing::Environment* const scene_environment =
+    ::testing::AddGlobalTestEnvironment(new GpuSceneEnvironment);
+
+GpuScene& gpu_scene(vulkan::Context& context) {
+  GpuScene& g = gpu_scene_storage();
   if (g.from_cpu) return g;
   const Scene& s = scene();
   g.from_cpu = std::make_unique<vulkan::Atlas>(context, atlas_options(s));
