@@ -46,6 +46,7 @@
 #include "volreel/format/error.hpp"
 #include "volreel/psnr/metrics.hpp"
 #include "volreel/stream/scheduler.hpp"
+#include "volreel/vulkan_render/loop_settings.hpp"
 
 namespace volreel::cli {
 
@@ -77,70 +78,6 @@ struct BenchStreamOptions {
 
 [[noreturn]] void bad(const std::string& option, const std::string& expected, const std::string& found) {
   throw InputError(option + ": expected " + expected + ", found '" + found + "'");
-}
-
-/// "20MB/s" → (20, "mb/s"): a number and a lower-case unit.
-bool split_number(const std::string& text, double& value, std::string& unit) {
-  std::size_t used = 0;
-  try {
-    value = std::stod(text, &used);
-  } catch (const std::exception&) {
-    return false;
-  }
-  if (!std::isfinite(value)) return false;
-  unit.clear();
-  for (std::size_t i = used; i < text.size(); ++i)
-    if (text[i] != ' ') unit += static_cast<char>(std::tolower(static_cast<unsigned char>(text[i])));
-  return true;
-}
-
-/// Bytes per second; 0 (or "unlimited") for no limit.
-double parse_bandwidth(const std::string& text) {
-  if (text == "unlimited") return 0;
-  double v = 0;
-  std::string unit;
-  const std::string expected = "a rate such as 20MB/s, 500kB/s, 1GB/s or 5MiB/s (0 or unlimited: no limit)";
-  if (!split_number(text, v, unit) || v < 0) bad("--bandwidth", expected, text);
-  if (unit.size() >= 2 && unit.substr(unit.size() - 2) == "/s") unit.resize(unit.size() - 2);
-  double scale = 0;
-  if (unit.empty() || unit == "mb") scale = 1e6;
-  else if (unit == "b") scale = 1;
-  else if (unit == "kb") scale = 1e3;
-  else if (unit == "gb") scale = 1e9;
-  else if (unit == "kib") scale = 1024.0;
-  else if (unit == "mib") scale = 1048576.0;
-  else if (unit == "gib") scale = 1073741824.0;
-  else bad("--bandwidth", expected, text);
-  return v * scale;
-}
-
-/// Seconds.
-double parse_latency(const std::string& text) {
-  double v = 0;
-  std::string unit;
-  const std::string expected = "a duration such as 50ms, 0.2s or 0";
-  if (!split_number(text, v, unit) || v < 0) bad("--latency", expected, text);
-  if (unit.empty() || unit == "ms") return v * 1e-3;
-  if (unit == "s") return v;
-  if (unit == "us") return v * 1e-6;
-  bad("--latency", expected, text);
-}
-
-std::pair<int, int> parse_size(const std::string& text) {
-  const std::size_t x = text.find_first_of("xX");
-  int w = 0, h = 0;
-  try {
-    if (x == std::string::npos) throw std::invalid_argument("no x");
-    std::size_t used = 0;
-    w = std::stoi(text.substr(0, x), &used);
-    if (used != x) throw std::invalid_argument("junk");
-    h = std::stoi(text.substr(x + 1), &used);
-    if (used != text.size() - x - 1) throw std::invalid_argument("junk");
-  } catch (const std::exception&) {
-    bad("--size", "WIDTHxHEIGHT such as 192x192", text);
-  }
-  if (w < 8 || h < 8 || w > 8192 || h > 8192) bad("--size", "a width and height in 8..8192", text);
-  return {w, h};
 }
 
 std::string mb(double bytes) {
@@ -810,9 +747,9 @@ void print_side_by_side(const std::vector<RunResult>& runs) {
 
 void run_bench_stream(const BenchStreamOptions& o) {
   // 1. Options (all checked before any work).
-  const auto [width, height] = parse_size(o.size);
-  const double bandwidth = parse_bandwidth(o.bandwidth);
-  const double latency = parse_latency(o.latency);
+  const auto [width, height] = vulkan_render::parse_size(o.size);
+  const double bandwidth = o.bandwidth == "unlimited" ? 0 : vulkan_render::parse_bandwidth(o.bandwidth);
+  const double latency = vulkan_render::parse_latency(o.latency);
   if (!(o.duration > 0) || o.duration > 3600) bad("--duration", "seconds in (0, 3600]", std::to_string(o.duration));
   if (!(o.sse_target > 0) || !std::isfinite(o.sse_target)) bad("--sse-target", "pixels per voxel > 0", std::to_string(o.sse_target));
   if (!(o.sse_weight >= 0) || !std::isfinite(o.sse_weight)) bad("--sse-weight", "a weight >= 0", std::to_string(o.sse_weight));
