@@ -14,6 +14,19 @@
 
 namespace volreel::test {
 
+/// K random zero-mean unit atoms of 216 values (seeded: the same everywhere).
+inline dictionary::Dictionary random_dictionary(int atoms, std::uint64_t seed) {
+  dictionary::Dictionary d;
+  d.block_size = 6;
+  d.atoms.resize(216, atoms);
+  SplitMix64 rng(seed);
+  for (int k = 0; k < atoms; ++k)
+    for (int v = 0; v < 216; ++v) d.atoms(v, k) = static_cast<float>(rng.normal());
+  dictionary::normalize_atoms(d.atoms);
+  return d;
+}
+
+
 /// A smooth multi-scale field (a few random plane waves) with some noise; no two frames alike.
 inline Volume wavy_volume(Dims dims, std::uint64_t seed) {
   SplitMix64 rng(seed);

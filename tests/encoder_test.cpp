@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "dictionary_test_data.hpp"
 #include "test_util.hpp"
 #include "volreel/datasets/analytic.hpp"
 #include "volreel/datasets/prng.hpp"
@@ -27,18 +28,7 @@ namespace {
 
 using format::brick_size;
 using format::brick_voxels;
-
-/// K random zero-mean unit atoms of 216 values (seeded: the same everywhere).
-dictionary::Dictionary random_dictionary(int atoms, std::uint64_t seed) {
-  dictionary::Dictionary d;
-  d.block_size = 6;
-  d.atoms.resize(216, atoms);
-  SplitMix64 rng(seed);
-  for (int k = 0; k < atoms; ++k)
-    for (int v = 0; v < 216; ++v) d.atoms(v, k) = static_cast<float>(rng.normal());
-  dictionary::normalize_atoms(d.atoms);
-  return d;
-}
+using test::random_dictionary;
 
 Volume analytic_volume(datasets::AnalyticField field, Dims dims, std::size_t t = 0) {
   datasets::AnalyticParams p;

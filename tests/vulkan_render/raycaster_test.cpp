@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "../cpu_render/svo_builder.hpp"
+#include "../dictionary_test_data.hpp"
 #include "../test_util.hpp"
 #include "../vulkan/vulkan_test_util.hpp"
 #include "volreel/cpu_render/cpu_atlas.hpp"
@@ -47,6 +48,7 @@ using cpu_render::TransferFunction;
 using cpu_render::VolumeGeometry;
 using test::build_uniform_svo;
 using test::LeafSpec;
+using test::random_dictionary;
 using vulkan_render::FrameInput;
 using vulkan_render::OutputFormat;
 using vulkan_render::Raycaster;
@@ -56,19 +58,6 @@ using Coord = std::array<std::uint32_t, 3>;
 constexpr double min_psnr = 40.0, min_ssim = 0.98;
 
 // --- The scene: two frames of an analytic field, ksvd-coded, every brick decoded ------------
-
-/// K random zero-mean unit atoms (seeded): the coding quality does not matter here, only that
-/// the CPU and the GPU decode the same payloads.
-dictionary::Dictionary random_dictionary(int atoms, std::uint64_t seed) {
-  dictionary::Dictionary d;
-  d.block_size = 6;
-  d.atoms.resize(216, atoms);
-  SplitMix64 rng(seed);
-  for (int k = 0; k < atoms; ++k)
-    for (int v = 0; v < 216; ++v) d.atoms(v, k) = static_cast<float>(rng.normal());
-  dictionary::normalize_atoms(d.atoms);
-  return d;
-}
 
 struct Scene {
   std::array<std::uint32_t, 3> dims{};

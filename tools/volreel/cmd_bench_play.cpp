@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "loop_options.hpp"
 #include "volreel/cpu_render/transfer_function.hpp"
 #include "volreel/datasets/prng.hpp"
 #include "volreel/format/container.hpp"
@@ -222,15 +223,7 @@ void add_bench_play_command(CLI::App& bench) {
   cmd->add_option("--timeout", o->timeout, "Seconds a seek may take to reach full quality")->capture_default_str();
   cmd->add_option("--transfer", o->transfer, "Transfer function: auto (data quantiles), a preset or a JSON file")
       ->capture_default_str();
-  cmd->add_option("--atlas-mb", o->loop.atlas_mb, "Brick atlas memory, MiB")->capture_default_str();
-  cmd->add_option("--bandwidth", o->loop.bandwidth, "Simulated read bandwidth, e.g. 20MB/s (0: unlimited)")
-      ->capture_default_str();
-  cmd->add_option("--latency", o->loop.latency, "Simulated latency per request, e.g. 50ms")->capture_default_str();
-  cmd->add_option("--sse-target", o->loop.sse_target, "Screen-space error target, pixels per voxel")->capture_default_str();
-  cmd->add_option("--upload-budget", o->loop.upload_budget_mb, "Compressed bytes uploaded per frame at most, MiB")
-      ->capture_default_str();
-  cmd->add_option("--step", o->loop.step, "Ray step, finest voxels")->capture_default_str();
-  cmd->add_flag("--no-culling", o->loop.no_culling, "Do not skip nodes the transfer function makes invisible");
+  add_loop_options(*cmd, o->loop);
   cmd->add_flag("--cpu", o->cpu, "Measure the CPU reference renderer instead of Vulkan");
   cmd->add_option("--seed", o->seed, "Seed of the seek positions")->capture_default_str();
   cmd->callback([o] { run_bench_play(*o); });

@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "loop_options.hpp"
 #include "progress.hpp"
 #include "volreel/cpu_render/renderer.hpp"
 #include "volreel/cpu_render/tour.hpp"
@@ -322,15 +323,7 @@ void add_render_command(CLI::App& app) {
                   "cool-warm, fire, turbulence) or a JSON file; default: the tour's, or auto without --tour");
   cmd->add_option("--video", o->video, "Also encode the frames into this video with ffmpeg (H.264)");
   cmd->add_flag("--cpu", o->cpu, "Render on the CPU (CPU atlas and reference ray caster) instead of Vulkan");
-  cmd->add_option("--atlas-mb", o->loop.atlas_mb, "Brick atlas memory, MiB (93 312 bytes per slot)")->capture_default_str();
-  cmd->add_option("--bandwidth", o->loop.bandwidth, "Simulated read bandwidth, e.g. 20MB/s (0: unlimited)")
-      ->capture_default_str();
-  cmd->add_option("--latency", o->loop.latency, "Simulated latency per request, e.g. 50ms")->capture_default_str();
-  cmd->add_option("--sse-target", o->loop.sse_target, "Screen-space error target, pixels per voxel")->capture_default_str();
-  cmd->add_option("--upload-budget", o->loop.upload_budget_mb, "Compressed bytes uploaded per frame at most, MiB")
-      ->capture_default_str();
-  cmd->add_option("--step", o->loop.step, "Ray step, finest voxels")->capture_default_str();
-  cmd->add_flag("--no-culling", o->loop.no_culling, "Do not skip nodes the transfer function makes invisible");
+  add_loop_options(*cmd, o->loop);
   cmd->add_flag("--realtime", o->realtime,
                 "Start frame i no earlier than i/fps seconds in, so streaming (which runs in wall-clock time) keeps "
                 "the tour's pace; by default frames render as fast as they can");
