@@ -9,6 +9,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <utility>
 
 namespace volreel::stream {
 
@@ -40,11 +41,33 @@ std::string read_byte_range(const std::filesystem::path& file, std::uint64_t off
   return error;
 }
 
-BrickLoader::BrickLoader(LoaderOptions options) : options_(options) {
+BrickLoader::BrickLoader(LoaderOptions options) : options_(std::move(options)) {
   options_.threads = std::max(1u, options_.threads);
   options_.max_in_flight = std::max<std::size_t>(1, options_.max_in_flight);
-  link_free_ = Clock::now();
-  for (unsigned i = 0; i < options_.threads; ++i) workers_.emplace_back([this] { work(); });
+  link_free_ = now();
+  if (!options_.clock)
+    for (unsigned i = 0; i < options_.threads; ++i) workers_.emplace_back([this] { work(); });
+}
+
+BrickLoader::Clock::time_point BrickLoader::now() const {
+  if (!options_.clock) return Clock::now();
+  return Clock::time_point{} + std::chrono::duration_cast<Clock::duration>(
+                                   std::chrono::duration<double>(options_.clock()));
+}
+
+BrickLoader::Clock::time_point BrickLoader::arrival_time(Clock::time_point issued,
+                                                         std::size_t bytes) {
+  // First byte after the latency, then the link's bandwidth, shared in order.
+  const auto latency = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(std::max(0.0, options_.latency_s)));
+  Clock::time_point at = issued + latency;
+  if (options_.bandwidth_bytes_per_s > 0) {
+    const auto transfer = std::chrono::duration_cast<Clock::duration>(
+        std::chrono::duration<double>(static_cast<double>(bytes) / options_.bandwidth_bytes_per_s));
+    at = std::max(at, link_free_) + transfer;
+    link_free_ = at;
+  }
+  return at;
 }
 
 BrickLoader::~BrickLoader() {
@@ -58,24 +81,40 @@ BrickLoader::~BrickLoader() {
 }
 
 RequestStatus BrickLoader::request(BrickRequest request) {
-  const Clock::time_point now = Clock::now();
+  const Clock::time_point t = now();
   {
     std::lock_guard lock(mutex_);
     if (in_flight_.count(request.key)) return RequestStatus::already_in_flight;
-    if (const auto it = backoff_.find(request.key); it != backoff_.end() && now < it->second.until)
+    if (const auto it = backoff_.find(request.key); it != backoff_.end() && t < it->second.until)
       return RequestStatus::backing_off;
     if (in_flight_.size() >= options_.max_in_flight) return RequestStatus::at_capacity;
     in_flight_.emplace(request.key, 0);
-    queue_.push_back({std::move(request), now});
+    if (options_.clock) {
+      const Clock::time_point at = arrival_time(t, request.bytes);
+      on_link_.push_back({std::move(request), t, at});
+      return RequestStatus::accepted;
+    }
+    queue_.push_back({std::move(request), t, {}});
   }
   wake_.notify_one();
   return RequestStatus::accepted;
 }
 
 std::vector<BrickArrival> BrickLoader::poll() {
-  const Clock::time_point now = Clock::now();
+  const Clock::time_point now = this->now();
   std::vector<BrickArrival> out;
   std::lock_guard lock(mutex_);
+  // Simulated clock: read what the link has delivered by now, in request order. (A failed read
+  // keeps the link time it reserved: the model does not know it will fail when it is accepted.)
+  while (!on_link_.empty() && on_link_.front().at <= now) {
+    Pending p = std::move(on_link_.front());
+    on_link_.pop_front();
+    BrickArrival a;
+    a.error = read_byte_range(p.request.file, p.request.offset, p.request.bytes, a.bytes);
+    a.request = std::move(p.request);
+    if (a.ok()) bytes_read_ += a.bytes.size();
+    ready_.push_back({std::move(a), p.at});
+  }
   // Keep arrival order: ready_ is ordered by completion; deliver those due.
   auto due = std::stable_partition(ready_.begin(), ready_.end(),
                                    [&](const Ready& r) { return r.at <= now; });
@@ -149,19 +188,14 @@ void BrickLoader::work() {
     a.error = read_byte_range(p.request.file, p.request.offset, p.request.bytes, a.bytes);
     a.request = std::move(p.request);
     std::lock_guard lock(mutex_);
-    // The simulated link: first byte after the latency, then the link's bandwidth.
-    const auto latency = std::chrono::duration_cast<Clock::duration>(
-        std::chrono::duration<double>(std::max(0.0, options_.latency_s)));
-    Clock::time_point at = p.issued + latency;
+    // The simulated link; a failed read takes no link time and arrives after the latency.
+    Clock::time_point at = p.issued;
     if (a.ok()) {
       bytes_read_ += a.bytes.size();
-      if (options_.bandwidth_bytes_per_s > 0) {
-        const auto transfer =
-            std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
-                static_cast<double>(a.bytes.size()) / options_.bandwidth_bytes_per_s));
-        at = std::max(at, link_free_) + transfer;
-        link_free_ = at;
-      }
+      at = arrival_time(p.issued, a.bytes.size());
+    } else {
+      at += std::chrono::duration_cast<Clock::duration>(
+          std::chrono::duration<double>(std::max(0.0, options_.latency_s)));
     }
     ready_.push_back({std::move(a), at});
   }

@@ -2,7 +2,7 @@
 # stream_bench_cli_test.sh: `volreel bench stream` end to end on a tiny container — both policies
 # run, the per-frame CSVs and the summary hold sane numbers (finite image PSNR above 10 dB at the
 # end, every node at its target LOD with unlimited bandwidth), PNGs are written, bad options give
-# clear errors. Usage: stream_bench_cli_test.sh PATH/TO/volreel
+# clear errors, and two runs on the simulated clock agree frame for frame. Usage: stream_bench_cli_test.sh PATH/TO/volreel
 set -euo pipefail
 volreel=$1
 work=$(mktemp -d)
@@ -76,11 +76,31 @@ PY
   --out "$work/n" > "$work/n.txt" 2>/dev/null || fail "bench stream --series"
 grep -q "truth:   the original series (--series" "$work/n.txt" || fail "--series not used: $(cat "$work/n.txt")"
 
-# 3. Errors.
+# 3. The simulated clock (the default) makes a run repeatable: everything but the timings agrees.
+for run in 1 2; do
+  "$volreel" bench stream "$work/a.vreel" --series "$work/s-moved" --bandwidth 30kB/s --latency 40ms --duration 2 \
+    --fps 8 --size 32x32 --policy patent --out "$work/r$run" > "$work/r$run.txt" 2>/dev/null || fail "bench stream run $run"
+done
+grep -q "simulated clock, 8 frames per tour second" "$work/r1.txt" || fail "no simulated-clock line: $(cat "$work/r1.txt")"
+[ "$(wc -l < "$work/r1/stream_patent.csv")" -eq 18 ] || fail "expected 17 frames at 8 fps over 2 s, found $(($(wc -l < "$work/r1/stream_patent.csv") - 1))"
+cut -d, -f1-24 "$work/r1/stream_patent.csv" > "$work/r1.cut"
+cut -d, -f1-24 "$work/r2/stream_patent.csv" > "$work/r2.cut"
+cmp -s "$work/r1.cut" "$work/r2.cut" || fail "two simulated runs differ: $(diff "$work/r1.cut" "$work/r2.cut" | head -5)"
+/usr/bin/python3 - "$work/r1/stream_patent.csv" <<'PY' || fail "simulated clock: the link's bandwidth is not respected"
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+for r in rows:  # 30 kB/s after 40 ms of latency: never more bytes than the link can have delivered
+    t = float(r["time_s"])
+    assert int(r["bytes_loaded"]) <= 30000 * max(0.0, t - 0.04) + 1, (t, r["bytes_loaded"])
+assert int(rows[-1]["bytes_loaded"]) > 0.5 * 30000 * (2 - 0.04), "the link sat idle"
+PY
+
+# 4. Errors.
 expect_error "expected a rate such as 20MB/s" "$volreel" bench stream "$work/a.vreel" --bandwidth fast
 expect_error "expected a duration such as 50ms" "$volreel" bench stream "$work/a.vreel" --latency soon
 expect_error "expected WIDTHxHEIGHT" "$volreel" bench stream "$work/a.vreel" --size 100
 expect_error "both, patent or nearest" "$volreel" bench stream "$work/a.vreel" --policy fastest
+expect_error "simulated or wall" "$volreel" bench stream "$work/a.vreel" --clock sundial
 expect_error "not a container folder" "$volreel" bench stream "$work/missing.vreel"
 expect_error "no such file or folder" "$volreel" bench stream "$work/a.vreel" --series "$work/nothing"
 "$volreel" bench stream --help > "$work/help.txt" && grep -q -e "--bandwidth" "$work/help.txt" || fail "--help lacks --bandwidth"

@@ -125,5 +125,68 @@ TEST(StreamLoader, BackOffEndsAndTheRetrySucceeds) {
   EXPECT_EQ(second[0].bytes, pattern(8));
 }
 
+TEST(StreamLoader, SimulatedClockDeliversAtTheLinkModelsTimes) {
+  test::TempDir dir("stream-loader-sim");
+  const auto data = pattern(10000);
+  write_file(dir / "frame.vrf", data);
+  double t = 10.0;
+  LoaderOptions o;
+  o.bandwidth_bytes_per_s = 1000;  // 1 byte per ms
+  o.latency_s = 0.05;
+  o.max_in_flight = 8;
+  o.clock = [&t] { return t; };
+  BrickLoader loader(o);
+  // Accepted at t = 10: the first arrives at 10.05 + 0.1, the second shares the link after it
+  // (10.15 + 0.2); one accepted at 10.3 starts after its own latency (10.35 + 0.05).
+  ASSERT_EQ(loader.request(request(dir / "frame.vrf", 0, 0, 100)), RequestStatus::accepted);
+  ASSERT_EQ(loader.request(request(dir / "frame.vrf", 1, 200, 200)), RequestStatus::accepted);
+  EXPECT_EQ(loader.queued(), 0u);  // on the link at once, as with the workers
+  EXPECT_EQ(loader.cancel_queued([](const BrickRequest&) { return false; }), 0u);
+  const auto at = [&](double when) {
+    t = when;
+    std::vector<std::uint32_t> xs;
+    for (const BrickArrival& a : loader.poll()) {
+      EXPECT_TRUE(a.ok()) << a.error;
+      const auto begin = data.begin() + static_cast<std::ptrdiff_t>(a.request.offset);
+      EXPECT_TRUE(std::equal(a.bytes.begin(), a.bytes.end(), begin, begin + a.request.bytes));
+      xs.push_back(a.request.key.x);
+    }
+    return xs;
+  };
+  EXPECT_TRUE(at(10.149).empty());
+  EXPECT_EQ(at(10.151), std::vector<std::uint32_t>{0});
+  t = 10.3;
+  ASSERT_EQ(loader.request(request(dir / "frame.vrf", 2, 1000, 50)), RequestStatus::accepted);
+  EXPECT_TRUE(at(10.349).empty());
+  EXPECT_EQ(at(10.351), std::vector<std::uint32_t>{1});
+  EXPECT_EQ(loader.in_flight(), 1u);
+  EXPECT_TRUE(at(10.399).empty());
+  EXPECT_EQ(at(10.401), std::vector<std::uint32_t>{2});
+  EXPECT_EQ(loader.in_flight(), 0u);
+  EXPECT_EQ(loader.bytes_read(), 350u);
+}
+
+TEST(StreamLoader, SimulatedClockBacksOffInSimulatedTime) {
+  test::TempDir dir("stream-loader-sim-retry");
+  double t = 0;
+  LoaderOptions o;
+  o.retry_initial_s = 1.0;
+  o.retry_max_s = 4.0;
+  o.clock = [&t] { return t; };
+  BrickLoader loader(o);
+  ASSERT_EQ(loader.request(request(dir / "late.vrf", 0, 0, 8)), RequestStatus::accepted);
+  const auto failed = loader.poll();  // no latency: due at once
+  ASSERT_EQ(failed.size(), 1u);
+  EXPECT_NE(failed[0].error.find("late.vrf"), std::string::npos) << failed[0].error;
+  write_file(dir / "late.vrf", pattern(8));
+  t = 0.999;
+  EXPECT_EQ(loader.request(request(dir / "late.vrf", 0, 0, 8)), RequestStatus::backing_off);
+  t = 1.0;
+  ASSERT_EQ(loader.request(request(dir / "late.vrf", 0, 0, 8)), RequestStatus::accepted);
+  const auto second = loader.poll();
+  ASSERT_EQ(second.size(), 1u);
+  EXPECT_EQ(second[0].bytes, pattern(8));
+}
+
 }  // namespace
 }  // namespace volreel::stream

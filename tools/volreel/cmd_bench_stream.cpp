@@ -1,8 +1,11 @@
 // cmd_bench_stream.cpp: `volreel bench stream NAME.vreel` — the streaming benchmark of the player
 // (DESIGN.md "Player"). A scripted tour (play forward, reverse, random seeks, camera moves) is
-// replayed against a real player's clock: each frame samples the tour at the wall-clock time since
-// the start, so the loader's bandwidth limit (which works in real time) means bytes per tour
-// second. Every frame runs the whole streaming loop on the CPU:
+// replayed against a player's clock, by default a simulated one: frame k is drawn at tour time
+// k/fps and the loader's link (bandwidth, latency) runs on the same clock, so a run is the same on
+// any machine whatever the CPU renderer's speed, and the policies are compared without noise.
+// With --clock wall each frame samples the tour at the wall-clock time since the start instead
+// (the loader then runs in real time; results vary with the machine's load). Every frame runs the
+// whole streaming loop on the CPU:
 //   1. StreamScheduler::update(camera, playhead, frame) — priorities, requests, arrivals, slots,
 //      pre-render selection and the array-encoded SVO;
 //   2. each upload decoded into its CpuAtlas slot (CPU reference decoder);
@@ -67,6 +70,8 @@ struct BenchStreamOptions {
   std::size_t max_in_flight = 0;  ///< 0: from the bandwidth (see run_bench_stream)
   unsigned io_threads = 4;
   double duration = 20;
+  std::string clock = "simulated";
+  double fps = 10;  ///< simulated clock: frames per tour second
   double sse_target = 1.0;
   double sse_weight = 10.0, temporal_lerp_min = 0.15;
   double step = 1.0;
@@ -362,6 +367,7 @@ struct RunSetup {
   stream::SchedulerSettings settings;
   cpu_render::RenderOptions render;
   int width = 0, height = 0;
+  double simulated_fps = 0;  ///< > 0: the simulated clock at this frame rate; 0: the wall clock
 };
 
 double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
@@ -436,6 +442,8 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy) {
   const format::AtomTable atoms = container.atoms();
   stream::SchedulerSettings settings = s.settings;
   settings.priority.policy = policy;
+  double simulated_time = 0;
+  if (s.simulated_fps > 0) settings.loader.clock = [&simulated_time] { return simulated_time; };
   // Indexing (frame files opened and validated) is not part of the timed tour.
   stream::StreamScheduler scheduler(container, settings);
   for (const std::string& e : scheduler.errors()) std::fprintf(stderr, "volreel: warning: %s\n", e.c_str());
@@ -452,7 +460,11 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy) {
   stream::ResidentKeyframes resident;
   for (std::uint64_t frame = 1;; ++frame) {
     const auto frame_start = Clock::now();
-    const double time = std::min(std::chrono::duration<double>(frame_start - start).count(), duration);
+    const double time =
+        std::min(s.simulated_fps > 0 ? static_cast<double>(frame - 1) / s.simulated_fps
+                                     : std::chrono::duration<double>(frame_start - start).count(),
+                 duration);
+    simulated_time = time;
     const cpu_render::TourFrame tf = frame_at(s, time);
     FrameRecord rec;
     rec.time = time;
@@ -751,6 +763,8 @@ void run_bench_stream(const BenchStreamOptions& o) {
   const double bandwidth = o.bandwidth == "unlimited" ? 0 : vulkan_render::parse_bandwidth(o.bandwidth);
   const double latency = vulkan_render::parse_latency(o.latency);
   if (!(o.duration > 0) || o.duration > 3600) bad("--duration", "seconds in (0, 3600]", std::to_string(o.duration));
+  if (o.clock != "simulated" && o.clock != "wall") bad("--clock", "simulated or wall", o.clock);
+  if (!(o.fps > 0) || o.fps > 240) bad("--fps", "frames per second in (0, 240]", std::to_string(o.fps));
   if (!(o.sse_target > 0) || !std::isfinite(o.sse_target)) bad("--sse-target", "pixels per voxel > 0", std::to_string(o.sse_target));
   if (!(o.sse_weight >= 0) || !std::isfinite(o.sse_weight)) bad("--sse-weight", "a weight >= 0", std::to_string(o.sse_weight));
   if (!(o.temporal_lerp_min >= 0 && o.temporal_lerp_min <= 1))
@@ -792,6 +806,7 @@ void run_bench_stream(const BenchStreamOptions& o) {
   setup.height = height;
   setup.transfer = transfer_from_spec(transfer_spec, m, truth, container.frame_count());
   setup.render.step = o.step;
+  setup.simulated_fps = o.clock == "simulated" ? o.fps : 0;
   setup.render.background = {0.06f, 0.06f, 0.08f};
   stream::SchedulerSettings& ss = setup.settings;
   ss.atlas_slots = o.atlas_slots;
@@ -829,10 +844,15 @@ void run_bench_stream(const BenchStreamOptions& o) {
               m.codec == format::Codec::ksvd ? "ksvd" : "zfp", mb(static_cast<double>(container.total_bytes())).c_str(),
               brick_bytes);
   std::printf("truth:   %s\n", truth.original() ? ("the original series (" + truth_note + ")").c_str() : truth_note.c_str());
-  std::printf("tour:    %s, %.1f s, %zu seeks; rendered against the wall clock (tour time = seconds since start)\n",
+  char clock_text[96];
+  if (setup.simulated_fps > 0)
+    std::snprintf(clock_text, sizeof clock_text, "simulated clock, %g frames per tour second", setup.simulated_fps);
+  else
+    std::snprintf(clock_text, sizeof clock_text, "wall clock (tour time = seconds since start)");
+  std::printf("tour:    %s, %.1f s, %zu seeks; %s\n",
               o.tour.empty() ? "built-in bench tour (play, reverse, 5 random seeks, pauses, slow motion, orbit, zoom)"
                              : o.tour.c_str(),
-              tour.duration(), seeks.size());
+              tour.duration(), seeks.size(), clock_text);
   std::printf("render:  CPU ray caster, %dx%d, step %g voxel, transfer function: %s\n", width, height, o.step,
               transfer_spec == "auto" ? "auto (quantiles of the middle frame)" : transfer_spec.c_str());
   std::printf("stream:  bandwidth %s, latency %g ms, %zu requests in flight at most, %u atlas slots%s, SSE target %g px\n",
@@ -862,6 +882,8 @@ void run_bench_stream(const BenchStreamOptions& o) {
   nlohmann::json summary = {{"container", o.container},
                             {"bandwidth_bytes_per_s", bandwidth},
                             {"latency_s", latency},
+                            {"clock", o.clock},
+                            {"fps", setup.simulated_fps > 0 ? nlohmann::json(setup.simulated_fps) : nlohmann::json()},
                             {"atlas_slots", ss.atlas_slots},
                             {"max_in_flight", ss.loader.max_in_flight},
                             {"sse_weight", o.sse_weight},
@@ -908,9 +930,10 @@ void add_bench_stream_command(CLI::App& bench) {
   auto o = std::make_shared<BenchStreamOptions>();
   CLI::App* cmd = bench.add_subcommand(
       "stream",
-      "Streaming benchmark: replay a tour (play, reverse, random seeks, camera moves) against the wall clock with\n"
-      "the CPU renderer, streaming bricks through a bandwidth- and latency-limited loader, once with the patent's\n"
-      "priorities and once nearest-keyframe-first. Per frame and averaged: image PSNR/SSIM against a render of the\n"
+      "Streaming benchmark: replay a tour (play, reverse, random seeks, camera moves) with the CPU renderer,\n"
+      "streaming bricks through a bandwidth- and latency-limited loader, once with the patent's priorities and\n"
+      "once nearest-keyframe-first. By default the tour and the link run on a simulated clock (--fps frames per\n"
+      "tour second), so results do not depend on the machine's speed or load; --clock wall replays in real time. Per frame and averaged: image PSNR/SSIM against a render of the\n"
       "original data at that playhead, fraction of nodes at target LOD, holes, bytes loaded, time to full quality\n"
       "after each seek. Writes OUT/stream_<policy>.csv, OUT/summary.json and a few PNGs.");
   cmd->add_option("CONTAINER", o->container, "The container directory NAME.vreel")->required();
@@ -921,6 +944,11 @@ void add_bench_stream_command(CLI::App& bench) {
                   "Tour JSON (player/cpu_render tour.hpp); default: the built-in bench tour of --duration seconds");
   cmd->add_option("--duration", o->duration, "Length of the built-in bench tour, seconds")->capture_default_str();
   cmd->add_option("--seed", o->seed, "Seed of the built-in tour's random seeks")->capture_default_str();
+  cmd->add_option("--clock", o->clock,
+                  "simulated: frame k at tour time k/fps, the link on the same clock (deterministic); wall: the tour\n"
+                  "and the link in real time")
+      ->capture_default_str();
+  cmd->add_option("--fps", o->fps, "Simulated clock: frames drawn per tour second")->capture_default_str();
   cmd->add_option("--series", o->series,
                   "Original series for the ground truth (raw series directory, HDF5 or raw file); default: the\n"
                   "manifest's source if that path exists, else the container's own finest-level decode");

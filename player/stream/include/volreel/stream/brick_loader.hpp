@@ -11,6 +11,12 @@
 // A failed read (missing file, short file, I/O error) arrives as an error naming the file and the
 // offset; the key then backs off (retry_initial_s, doubling up to retry_max_s) before request()
 // accepts it again. Failures never hold a slot in flight and never stop other requests.
+//
+// Simulated time (LoaderOptions::clock): the same link model on a caller's clock instead of the
+// steady clock, with no worker threads. A request takes its place on the link when accepted (as
+// the workers do at once in real time), and poll() reads, synchronously and in request order, the
+// requests whose arrival time has come. A run then depends only on the sequence of calls and the
+// clock's values, not on the machine's speed: benchmarks use it to compare policies without noise.
 #pragma once
 
 #include <chrono>
@@ -37,6 +43,8 @@ struct LoaderOptions {
   double latency_s = 0;              ///< added to every request
   double retry_initial_s = 0.25;     ///< first back-off after a failure
   double retry_max_s = 8.0;          ///< longest back-off
+  /// Simulated time in seconds (non-decreasing); empty: the steady clock and worker threads.
+  std::function<double()> clock;
 };
 
 struct BrickRequest {
@@ -74,7 +82,8 @@ class BrickLoader {
   /// Arrivals whose time has come (successes and errors), in arrival order. Never blocks on I/O.
   std::vector<BrickArrival> poll();
   /// Drops queued requests that no worker has started and `keep` rejects; they leave the
-  /// in-flight count. Returns how many were dropped.
+  /// in-flight count. Returns how many were dropped (always 0 on a simulated clock, where every
+  /// accepted request is already on the link).
   std::size_t cancel_queued(const std::function<bool(const BrickRequest&)>& keep);
 
   std::size_t in_flight() const;
@@ -90,6 +99,7 @@ class BrickLoader {
   struct Pending {
     BrickRequest request;
     Clock::time_point issued;
+    Clock::time_point at;  ///< simulated clock: when the link delivers it
   };
   struct Ready {
     BrickArrival arrival;
@@ -105,6 +115,7 @@ class BrickLoader {
   std::condition_variable wake_;
   bool stopping_ = false;
   std::deque<Pending> queue_;
+  std::deque<Pending> on_link_;  ///< simulated clock: accepted, in request order
   std::vector<Ready> ready_;
   std::unordered_map<KeyframeKey, char, KeyframeKeyHash> in_flight_;
   std::unordered_map<KeyframeKey, Backoff, KeyframeKeyHash> backoff_;
@@ -112,6 +123,10 @@ class BrickLoader {
   std::uint64_t bytes_read_ = 0;
   std::vector<std::thread> workers_;
 
+  Clock::time_point now() const;
+  /// The link model: when a successful read of `bytes` bytes issued at `issued` arrives; advances
+  /// the link. Requires mutex_.
+  Clock::time_point arrival_time(Clock::time_point issued, std::size_t bytes);
   void work();
 };
 
