@@ -15,11 +15,33 @@
 namespace volreel::cpu_render {
 namespace {
 
-/// A sample: whether the point is drawn at all (an empty child is not) and its value.
+/// A sample: whether the point is drawn at all (an empty child is not), its value and, for the
+/// step (renderer.hpp step 2), how often the base step may be doubled there (before the cap) and
+/// the region it lies in — the box [lo, lo + size)³ whose exit ends a coarse step.
 struct Sample {
   bool drawn = false;
   float value = 0;
+  std::uint32_t doublings = 0;
+  glm::dvec3 region_lo{0.0};
+  double region_size = 0;
 };
+
+/// The largest max_step_doublings (2^16 fine steps: k stays exact in a float on the GPU).
+constexpr std::uint32_t max_doublings_allowed = 16;
+
+/// Ray parameter where the ray from `eye` along `dir` leaves the box [lo, hi) (raycast.comp's
+/// exit_distance).
+double exit_distance(const glm::dvec3& eye, const glm::dvec3& dir, const glm::dvec3& lo,
+                     const glm::dvec3& hi) {
+  double t = 1e30;
+  for (int a = 0; a < 3; ++a) {
+    if (dir[a] > 0)
+      t = std::min(t, (hi[a] - eye[a]) / dir[a]);
+    else if (dir[a] < 0)
+      t = std::min(t, (lo[a] - eye[a]) / dir[a]);
+  }
+  return t;
+}
 
 /// (1 − f)·a + f·b; f = 0 and f = 1 return a and b exactly (the other keyframe is not read).
 inline float mix_keyframes(float a, float b, float f) {
@@ -45,6 +67,10 @@ void check_options(const RenderOptions& o, const player::OrbitCamera& camera) {
   if (!(o.reference_step > 0 && std::isfinite(o.reference_step)))
     throw std::invalid_argument("render: expected a reference step > 0, found " +
                                 std::to_string(o.reference_step));
+  if (o.max_step_doublings > max_doublings_allowed)
+    throw std::invalid_argument("render: expected max_step_doublings ≤ " +
+                                std::to_string(max_doublings_allowed) + ", found " +
+                                std::to_string(o.max_step_doublings));
   if (camera.width <= 0 || camera.height <= 0)
     throw std::invalid_argument("render: expected a positive image size, found " +
                                 std::to_string(camera.width) + "x" + std::to_string(camera.height));
@@ -68,8 +94,9 @@ RgbaImage cast_rays(const VolumeGeometry& geometry, const player::OrbitCamera& c
   const glm::dvec3 inside{std::nextafter(box.x, 0.0), std::nextafter(box.y, 0.0),
                           std::nextafter(box.z, 0.0)};
   const double step = options.step;
+  std::uint64_t samples = 0;
 
-#pragma omp parallel for schedule(dynamic, 1)
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : samples)
   for (int y = 0; y < image.height; ++y) {
     for (int x = 0; x < image.width; ++x) {
       // 1. The ray, clipped to the box (slab test).
@@ -89,16 +116,37 @@ RgbaImage cast_rays(const VolumeGeometry& geometry, const player::OrbitCamera& c
       float color[3] = {0, 0, 0};
       float alpha = 0;
       if (t0 < t1) {
-        // 2. Samples at multiples of the step inside [t0, t1).
-        for (double k = std::ceil(t0 / step);; k += 1) {
+        // 2. Samples at multiples of the step inside [t0, t1): k from the first to k_end, the
+        //    first k with k·step ≥ t1 (the quotient's rounding corrected).
+        double k_end = std::ceil(t1 / step);
+        if ((k_end - 1) * step >= t1)
+          k_end -= 1;
+        else if (k_end * step < t1)
+          k_end += 1;
+        for (double k = std::ceil(t0 / step), k_next = k; k < k_end; k = k_next) {
           const double t = k * step;
-          if (t >= t1) break;
           glm::dvec3 p = eye + t * dir;
           p = glm::clamp(p, glm::dvec3(0.0), inside);
           const Sample s = sample(p);
+          k_next = k + 1;
           if (!s.drawn) continue;
-          // 3. Transfer function (opacity already corrected for the step).
-          const Rgba c = tf.lookup(s.value);
+          ++samples;
+          // 2a–c. The next sample: the next multiple of 2^e, but not past the region's exit or
+          //       the segment's end (raycast.comp step 3 computes the same in float).
+          const std::uint32_t e = std::min(s.doublings, options.max_step_doublings);
+          if (e > 0) {
+            const double span = std::ldexp(1.0, static_cast<int>(e));
+            const double k_exit = std::ceil(
+                exit_distance(eye, dir, s.region_lo, s.region_lo + glm::dvec3(s.region_size)) /
+                    step -
+                0.01);
+            k_next = std::max(k + 1, std::min({(std::floor(k / span) + 1) * span, k_exit, k_end}));
+          }
+          // 3. Transfer function (opacity corrected for the base step), then for the n = k' − k
+          //    steps this sample stands for.
+          Rgba c = tf.lookup(s.value);
+          const float n = static_cast<float>(k_next - k);
+          if (n > 1.0f && c[3] < 1.0f) c[3] = 1.0f - std::pow(1.0f - c[3], n);
           if (!(c[3] > 0)) continue;
           // 4. Front to back.
           const float w = (1.0f - alpha) * c[3];
@@ -118,6 +166,7 @@ RgbaImage cast_rays(const VolumeGeometry& geometry, const player::OrbitCamera& c
       out[3] = alpha;
     }
   }
+  image.samples = samples;
   return image;
 }
 
@@ -149,6 +198,10 @@ class SvoSampler {
     // 1. Descend from the root to the child containing q until a leaf, an "up" or an empty child.
     vr_uint node = 0, level = 0, leaf = 0;
     std::uint32_t c[3] = {0, 0, 0};
+    // The region: the child box the descent ends in (for an "up" child, the child's box, not
+    // its node's: a coarse step ends where the up child does, as raycast.comp's region does).
+    std::uint32_t region[3] = {0, 0, 0};
+    vr_uint region_level = 0;
     for (;;) {
       const std::uint32_t half = (format::brick_interior / 2) << (levels_ - 1 - level);
       const std::uint32_t child[3] = {q[0] / half, q[1] / half, q[2] / half};
@@ -157,6 +210,8 @@ class SvoSampler {
       const vr_uint word = svo_.nodes[node * VR_SVO_NODE_WORDS + 1 + octant];
       const vr_uint kind = vr_svo_child_kind(word);
       if (kind == VR_SVO_CHILD_EMPTY) return {};
+      for (int a = 0; a < 3; ++a) region[a] = child[a];
+      region_level = level + 1;
       if (kind == VR_SVO_CHILD_UP) {  // drawn from this node's own leaf record
         leaf = svo_.nodes[node * VR_SVO_NODE_WORDS + 9];
         break;
@@ -185,7 +240,15 @@ class SvoSampler {
     };
     const float a = f == 1.0f ? 0.0f : keyframe(record[0], vr_svo_lod_a(record[2]));
     const float b = f == 0.0f ? 0.0f : keyframe(record[1], vr_svo_lod_b(record[2]));
-    return {true, f == 0.0f ? a : f == 1.0f ? b : mix_keyframes(a, b, f)};
+    // 4. The step's doublings from the leaf's level (svo_layout.h; the cap is the caller's) and
+    //    the region's box.
+    const double region_size = double(format::brick_interior << (levels_ - 1 - region_level));
+    return {true,
+            f == 0.0f   ? a
+            : f == 1.0f ? b
+                        : mix_keyframes(a, b, f),
+            vr_svo_step_doublings(levels_, level, record[2], f, max_doublings_allowed),
+            glm::dvec3(region[0], region[1], region[2]) * region_size, region_size};
   }
 
  private:
@@ -205,7 +268,8 @@ class DenseSampler {
   Sample operator()(const glm::dvec3& p) const {
     const float a = f_ == 1.0f ? 0.0f : at(a_, p);
     const float b = f_ == 0.0f ? 0.0f : at(b_, p);
-    return {true, f_ == 0.0f ? a : f_ == 1.0f ? b : mix_keyframes(a, b, f_)};
+    // The ground truth steps finely everywhere (renderer.hpp): no doublings.
+    return {true, f_ == 0.0f ? a : f_ == 1.0f ? b : mix_keyframes(a, b, f_), 0, glm::dvec3(0.0), 0};
   }
 
  private:

@@ -4,8 +4,12 @@
 // trilinear filtering, the second mapped into its ancestor's brick for any LOD difference.
 //
 // It takes exactly the samples of the CPU reference renderer (player/cpu_render/renderer.hpp,
-// steps 1–5): rays from the eye clipped to [0, dims), samples at t = k·step, an opacity-corrected
-// transfer function, front-to-back compositing with early termination, the background behind.
+// steps 1–5): rays from the eye clipped to [0, dims), samples at t = k·step where the step follows
+// the level of the leaf a sample reads (step 2a–c there: the next sample is the next multiple of
+// 2^e fine steps, e = vr_svo_step_doublings, but no later than the region's exit or the ray's
+// end), an opacity-corrected transfer function (for the base step on the host, then for the
+// n = k' − k fine steps a sample stands for: α' = 1 − (1 − α)^n), front-to-back compositing with
+// early termination, the background behind.
 // Three things make it faster without changing the image:
 //   - restart: a sample inside the region of the previous one reuses its leaf; otherwise the walk
 //     climbs the parent chain (word 0) to the first node whose box holds the sample and descends
@@ -46,7 +50,7 @@ layout(std430, set = 0, binding = 0) readonly buffer Params {
   vec4 background_lo;     // background RGB, atlas value offset (value = lo + scale·texel)
   vec4 inv_extent_scale;  // 1 / atlas image extent in texels, atlas value scale
   vec4 dims_tf_lo;        // volume dims (voxels), transfer function's lo
-  vec4 tf_scale_entries;  // (entries − 1)/(hi − lo), entries, 0, 0
+  vec4 tf_scale_entries;  // (entries − 1)/(hi − lo), entries, max step doublings, 0
   uvec4 size_levels;      // width, height, octree levels, flags
   uvec4 grid_mask;        // atlas grid x, y; visible-bin mask low word, high word
 } params;
@@ -174,6 +178,7 @@ void main() {
   const bool use_histograms = (params.size_levels.w & VR_FLAG_HISTOGRAMS) != 0u;
   const bool block_skip = (params.size_levels.w & VR_FLAG_BLOCK_SKIP) != 0u;
   const uvec2 visible = params.grid_mask.zw;
+  const uint max_doublings = uint(params.tf_scale_entries.z);
 
   // 1. The ray of the pixel centre (OrbitCamera::ray_direction), clipped to the box (slab test).
   vec3 eye = params.eye_step.xyz;
@@ -209,11 +214,17 @@ void main() {
     bool have_region = false;
     uint leaf = 0u, leaf_level = 0u;  // leaf record and the spatial node it is relative to
     uvec3 leaf_c = uvec3(0u);
+    uint doublings = 0u;     // of a drawn region's step (capped)
+    float region_k_exit = 0.0;  // first fine-grid k past a drawn region (when doublings > 0)
 
-    // 2. Samples at multiples of the step inside [t0, t1).
-    for (float k = ceil(t0 / step);; k += 1.0) {
+    // 2. Samples at multiples of the step inside [t0, t1): k from the first to k_end, the first k
+    //    with k·step ≥ t1 (the quotient's rounding corrected).
+    float k_end = ceil(t1 / step);
+    if ((k_end - 1.0) * step >= t1) k_end -= 1.0;
+    else if (k_end * step < t1) k_end += 1.0;
+    for (float k = ceil(t0 / step), k_next = k; k < k_end; k = k_next) {
+      k_next = k + 1.0;
       float t = k * step;
-      if (t >= t1) break;
       vec3 p = clamp(eye + t * dir, vec3(0.0), inside);
       uvec3 q = uvec3(p);
 
@@ -264,6 +275,17 @@ void main() {
           uvec2 seen = hull(h) & visible;
           if (seen.x == 0u && seen.y == 0u) region = REGION_INVISIBLE;
         }
+        // 2e. The drawn region's step: doublings from the leaf's level, and where it ends.
+        if (region == REGION_DRAWN) {
+          uint record = leaf * VR_SVO_LEAF_WORDS;
+          doublings = vr_svo_step_doublings(levels, leaf_level, leaf_words[record + 2u],
+                                            uintBitsToFloat(leaf_words[record + 3u]), max_doublings);
+          if (doublings > 0u) {
+            float size = float(node_size(region_level));
+            vec3 lo = vec3(region_c) * size;
+            region_k_exit = ceil(exit_distance(eye, dir, lo, lo + vec3(size)) / step - 0.01);
+          }
+        }
       }
 
       if (region != REGION_DRAWN) {
@@ -272,18 +294,24 @@ void main() {
         float size = float(node_size(region_level));
         vec3 lo = vec3(region_c) * size;
         float t_exit = exit_distance(eye, dir, lo, lo + vec3(size));
-        k = max(k, ceil(t_exit / step - 0.01) - 1.0);
+        k_next = max(k + 1.0, ceil(t_exit / step - 0.01));
         continue;
       }
 
-      // 3. Local coordinates in the leaf's spatial node, both keyframes, the leaf's factor.
+      // 3. The next sample: the next multiple of 2^doublings, not past the region or the ray.
+      if (doublings > 0u) {
+        float span = float(1u << doublings);
+        k_next = max(k + 1.0, min(min((floor(k / span) + 1.0) * span, region_k_exit), k_end));
+      }
+
+      // 4. Local coordinates in the leaf's spatial node, both keyframes, the leaf's factor.
       float size = float(node_size(leaf_level));
       vec3 u = (p - vec3(leaf_c) * size) / size;
       uint record = leaf * VR_SVO_LEAF_WORDS;
       float f = uintBitsToFloat(leaf_words[record + 3u]);
       uint lods = leaf_words[record + 2u];
       if (block_skip) {
-        // 3a. Both keyframes' blocks hold only values the transfer function hides: so does
+        // 4a. Both keyframes' blocks hold only values the transfer function hides: so does
         //     their blend. Skip the fetches, keep the sample positions.
         vec2 r = vec2(1e30, -1e30);
         if (f != 1.0) {
@@ -300,8 +328,11 @@ void main() {
       float b = f == 0.0 ? 0.0 : keyframe(leaf_words[record + 1u], vr_svo_lod_b(lods), leaf_c, u);
       float value = f == 0.0 ? a : f == 1.0 ? b : (1.0 - f) * a + f * b;
 
-      // 4. Transfer function, front to back, early termination.
+      // 5. Transfer function (corrected for the base step), corrected for the n = k' − k fine
+      //    steps the sample stands for; front to back, early termination.
       vec4 c = lookup(value);
+      float n = k_next - k;
+      if (n > 1.0 && c.a < 1.0) c.a = 1.0 - pow(1.0 - c.a, n);
       if (!(c.a > 0.0)) continue;
       float w = (1.0 - alpha) * c.a;
       color += w * c.rgb;
@@ -309,6 +340,6 @@ void main() {
       if (alpha > params.up_termination.w) break;
     }
   }
-  // 5. Over the background.
+  // 6. Over the background.
   imageStore(out_image, ivec2(pixel), vec4(color + (1.0 - alpha) * params.background_lo.rgb, alpha));
 }

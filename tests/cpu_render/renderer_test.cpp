@@ -1,7 +1,12 @@
 // renderer_test.cpp: the CPU reference renderer — the LOD-difference mapping for d = 0..3, the
 // SVO ray caster against the dense-volume oracle (fully loaded, time interpolation, LOD
 // differences 1–3 for either keyframe, dims not a multiple of 34, a single-level volume), "up"
-// children, an empty transfer function, opacity correction, SVO validation and PNG output.
+// children, an empty transfer function, opacity correction, the step from the leaf's level
+// (rule, uniform and piecewise-constant media against fine steps and 1 − exp(−σL), sample
+// counts), SVO validation and PNG output.
+//
+// Coarse states take coarser steps than the oracle (which always takes the fine step): they are
+// compared sample for sample with max_step_doublings = 0, and as they render by PSNR.
 #include <gtest/gtest.h>
 
 #include <array>
@@ -184,6 +189,16 @@ double drawn_fraction(const RgbaImage& image) {
 // by a few ulps, which moves trilinear weights by ~1e-5 over hundreds of composited samples.
 constexpr double exact_tolerance = 2e-4;
 
+/// The fixed step everywhere: the oracle's samples, for sample-for-sample comparisons.
+cpu_render::RenderOptions fixed_step() {
+  cpu_render::RenderOptions o;
+  o.max_step_doublings = 0;
+  return o;
+}
+
+// Coarse steps against the oracle's fine ones, e = 1..3 on the test scenes (measured 56–69 dB).
+constexpr double coarse_step_min_psnr = 50.0;
+
 /// max |got − want| over every channel, recorded in the test's XML output (--gtest_output=xml).
 double difference(const RgbaImage& got, const RgbaImage& want) {
   const double d = cpu_render::max_abs_difference(got, want);
@@ -212,6 +227,9 @@ TEST_P(CpuRenderFullyLoaded, SvoEqualsReferenceInterpolatedInTime) {
                                                       s.geometry, camera, transfer);
   EXPECT_GT(drawn_fraction(want), 0.15);
   EXPECT_LE(difference(got, want), exact_tolerance);
+  // Finest leaves take the fine step: every sample of the oracle, no more.
+  EXPECT_GT(want.samples, 0u);
+  EXPECT_EQ(got.samples, want.samples);
 }
 
 INSTANTIATE_TEST_SUITE_P(Factors, CpuRenderFullyLoaded, ::testing::Values(0.0f, 0.5f, 1.0f),
@@ -303,11 +321,25 @@ TEST_P(CpuRenderLodDifference, SecondKeyframeFromAnAncestor) {
       return LeafSpec{s.slot(0, l, c), s.slot(1, l - d, {c[0] >> d, c[1] >> d, c[2] >> d}), 0, d,
                       f};
     });
-    const RgbaImage got = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+    const RgbaImage got =
+        cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer, fixed_step());
     const RgbaImage want = cpu_render::render_reference(s.dense(0, finest), s.dense(1, finest - d),
                                                         f, s.geometry, camera, transfer);
     EXPECT_GT(drawn_fraction(want), 0.15);
     EXPECT_LE(difference(got, want), exact_tolerance) << "f " << f;
+    // With the step from the leaf's level: f = 1 reads only B (d levels up), f = 0.5 also A.
+    const RgbaImage stepped =
+        cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+    std::printf("  d %u f %.1f: coarse steps %.1f dB, %llu of %llu samples\n", d, double(f),
+                image_psnr(stepped, want), static_cast<unsigned long long>(stepped.samples),
+                static_cast<unsigned long long>(got.samples));
+    EXPECT_GE(image_psnr(stepped, want), coarse_step_min_psnr) << "f " << f;
+    if (f == 1.0f) {  // about 2^d times fewer (a little more: steps end at region exits)
+      EXPECT_LT(double(stepped.samples), 1.5 * double(got.samples) / double(1u << d));
+      EXPECT_GT(double(stepped.samples), double(got.samples) / double(1u << d));
+    } else {
+      EXPECT_EQ(stepped.samples, got.samples) << "f " << f;
+    }
     if (f == 1.0f) {
       // The coarse level really looks different from the finest, so the test has power.
       const RgbaImage fine = cpu_render::render_reference(s.dense(0, finest), s.dense(1, finest), f,
@@ -343,10 +375,20 @@ TEST_P(CpuRenderLodDifference, NodesDrawnAtACoarserLevel) {
   const auto svo = build_uniform_svo(s.levels, level, [&](std::uint32_t l, Coord c) {
     return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
   });
-  const RgbaImage got = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+  const RgbaImage got =
+      cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer, fixed_step());
   const RgbaImage want = cpu_render::render_reference(s.dense(0, level), s.dense(1, level), 0.5f,
                                                       s.geometry, camera, transfer);
   EXPECT_LE(difference(got, want), exact_tolerance);
+  EXPECT_EQ(got.samples, want.samples);
+  const RgbaImage stepped = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+  std::printf("  level %u: coarse steps %.1f dB, %llu of %llu samples\n", level,
+              image_psnr(stepped, want), static_cast<unsigned long long>(stepped.samples),
+              static_cast<unsigned long long>(got.samples));
+  EXPECT_GE(image_psnr(stepped, want), coarse_step_min_psnr);
+  // About 2^d times fewer samples (a little more: steps end at region exits).
+  EXPECT_LT(double(stepped.samples), 1.5 * double(got.samples) / double(1u << d));
+  EXPECT_GT(double(stepped.samples), double(got.samples) / double(1u << d));
 }
 
 INSTANTIATE_TEST_SUITE_P(D, CpuRenderLodDifference, ::testing::Values(1u, 2u, 3u),
@@ -366,9 +408,19 @@ TEST(CpuRenderSvoShapes, UpChildrenDrawTheSameAsLeafChildren) {
     const auto leaf = build_uniform_svo(s.levels, level, leaf_for, false);
     const auto up = build_uniform_svo(s.levels, level, leaf_for, true);
     ASSERT_NE(leaf.nodes.size(), up.nodes.size());
-    const RgbaImage a = cpu_render::render_svo(leaf.view(), atlas, s.geometry, camera, transfer);
-    const RgbaImage b = cpu_render::render_svo(up.view(), atlas, s.geometry, camera, transfer);
+    const RgbaImage a =
+        cpu_render::render_svo(leaf.view(), atlas, s.geometry, camera, transfer, fixed_step());
+    const RgbaImage b =
+        cpu_render::render_svo(up.view(), atlas, s.geometry, camera, transfer, fixed_step());
     EXPECT_EQ(cpu_render::max_abs_difference(a, b), 0.0) << "level " << level;
+    // Coarse steps end at region exits, which are the up children's boxes, one level finer than
+    // the leaf children's: a few steps are split in two, with the opacity corrected for each.
+    const RgbaImage c = cpu_render::render_svo(leaf.view(), atlas, s.geometry, camera, transfer);
+    const RgbaImage d = cpu_render::render_svo(up.view(), atlas, s.geometry, camera, transfer);
+    std::printf("  level %u: leaf vs up children with coarse steps %.1f dB\n", level,
+                image_psnr(c, d));
+    EXPECT_GE(image_psnr(c, d), 45.0) << "level " << level;
+    EXPECT_GE(d.samples, c.samples) << "level " << level;
   }
 }
 
@@ -384,11 +436,16 @@ TEST_P(CpuRenderVolumeShapes, SvoEqualsReferenceAtEveryLevel) {
     const auto svo = build_uniform_svo(s.levels, level, [&](std::uint32_t l, Coord c) {
       return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
     });
-    const RgbaImage got = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+    const RgbaImage got =
+        cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer, fixed_step());
     const RgbaImage want = cpu_render::render_reference(s.dense(0, level), s.dense(1, level), 0.5f,
                                                         s.geometry, camera, transfer);
     EXPECT_GT(drawn_fraction(want), 0.2);
     EXPECT_LE(difference(got, want), exact_tolerance) << "level " << level;
+    const RgbaImage stepped =
+        cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer);
+    std::printf("  level %u: coarse steps %.1f dB\n", level, image_psnr(stepped, want));
+    EXPECT_GE(image_psnr(stepped, want), coarse_step_min_psnr) << "level " << level;
   }
 }
 
@@ -501,6 +558,145 @@ TEST(CpuRender, OpacityCorrectionMakesTheStepSizeIrrelevant) {
   EXPECT_LT(image_psnr(fine, wrong), 30.0);
 }
 
+// --- The step from the leaf's level -------------------------------------------------------
+
+TEST(CpuRenderStep, DoublingsFromTheLeafLevelHandComputed) {
+  // e = min(levels − 1 − leaf_level + d, cap), d of the finer keyframe read (svo_layout.h).
+  EXPECT_EQ(vr_svo_step_doublings(4, 3, vr_svo_lod_pack(0, 0), 0.5f, 3), 0u);  // finest
+  EXPECT_EQ(vr_svo_step_doublings(4, 1, vr_svo_lod_pack(0, 0), 0.5f, 3), 2u);
+  EXPECT_EQ(vr_svo_step_doublings(4, 3, vr_svo_lod_pack(2, 0), 0.0f, 3), 2u);  // A only
+  EXPECT_EQ(vr_svo_step_doublings(4, 3, vr_svo_lod_pack(2, 0), 1.0f, 3), 0u);  // B only
+  EXPECT_EQ(vr_svo_step_doublings(4, 3, vr_svo_lod_pack(2, 0), 0.5f, 3), 0u);  // the finer
+  EXPECT_EQ(vr_svo_step_doublings(4, 3, vr_svo_lod_pack(2, 3), 1.0f, 3), 3u);
+  EXPECT_EQ(vr_svo_step_doublings(4, 3, vr_svo_lod_pack(2, 3), 0.5f, 3), 2u);
+  EXPECT_EQ(vr_svo_step_doublings(4, 2, vr_svo_lod_pack(1, 2), 0.25f, 16), 2u);
+  EXPECT_EQ(vr_svo_step_doublings(6, 0, vr_svo_lod_pack(0, 0), 0.5f, 3), 3u);  // capped
+  EXPECT_EQ(vr_svo_step_doublings(6, 0, vr_svo_lod_pack(0, 0), 0.5f, 16), 5u);
+  EXPECT_EQ(vr_svo_step_doublings(6, 0, vr_svo_lod_pack(0, 0), 0.5f, 0), 0u);
+}
+
+/// A volume whose bricks hold constant values (slot i holds values[i]); 200 × 120 × 90 gives
+/// grids 6×4×3 → 3×2×2 → 2×1×1 → 1: four levels.
+struct ConstantScene {
+  std::array<std::uint32_t, 3> dims{200, 120, 90};
+  VolumeGeometry geometry = VolumeGeometry::of(dims);
+  std::vector<format::LevelGeometry> levels = format::level_geometry(dims);
+  CpuAtlas atlas;
+  explicit ConstantScene(const std::vector<float>& values)
+      : atlas(static_cast<std::uint32_t>(values.size())) {
+    for (std::size_t i = 0; i < values.size(); ++i)
+      atlas.store(static_cast<std::uint32_t>(i),
+                  std::vector<float>(format::brick_voxels, values[i]));
+  }
+  player::OrbitCamera camera() const {
+    auto c = player::OrbitCamera::framing(glm::dvec3(dims[0], dims[1], dims[2]), 48, 32);
+    c.distance *= 0.6;
+    return c;
+  }
+};
+
+/// The ray of pixel (x, y) clipped to [0, dims) (renderer.hpp step 1): its length, 0 if missed.
+double clipped_length(const player::OrbitCamera& camera, std::array<std::uint32_t, 3> dims, int x,
+                      int y) {
+  const glm::dvec3 eye = camera.eye(), dir = camera.ray_direction(x + 0.5, y + 0.5);
+  double t0 = 0, t1 = INFINITY;
+  for (int a = 0; a < 3; ++a) {
+    const double ta = -eye[a] / dir[a],
+                 tb = (double(dims[static_cast<std::size_t>(a)]) - eye[a]) / dir[a];
+    t0 = std::max(t0, std::min(ta, tb));
+    t1 = std::min(t1, std::max(ta, tb));
+  }
+  return t0 < t1 ? t1 - t0 : 0.0;
+}
+
+TEST(CpuRenderStep, UniformMediumCompositesToOneMinusExpMinusSigmaL) {
+  // One value everywhere, opacity α per reference step (1 voxel): σ = −ln(1 − α). At every draw
+  // level (e = 3 − level doublings) the composited opacity is 1 − exp(−σ·N·step) for the N fine
+  // grid points in [t0, t1) (|N·step − L| ≤ step), exactly as the fine steps give, with about
+  // 2^e times fewer samples.
+  const ConstantScene s({0.5f});
+  const float alpha_ref = 0.005f;
+  const double sigma = -std::log(1.0 - double(alpha_ref));
+  const TransferFunction transfer(
+      {{0, 0.2f, 0.6f, 1.0f, alpha_ref}, {1, 0.2f, 0.6f, 1.0f, alpha_ref}}, 0, 1);
+  const auto camera = s.camera();
+  cpu_render::RenderOptions options;
+  options.termination_alpha = 1.0f;  // no early termination: the whole segment counts
+  cpu_render::RenderOptions fixed = options;
+  fixed.max_step_doublings = 0;
+  ASSERT_EQ(s.geometry.levels, 4u);
+  for (std::uint32_t level = 0; level < 4; ++level) {
+    const auto svo = build_uniform_svo(s.levels, level, [](std::uint32_t, Coord) {
+      return LeafSpec{0, 0, 0, 0, 0.0f};
+    });
+    const RgbaImage coarse =
+        cpu_render::render_svo(svo.view(), s.atlas, s.geometry, camera, transfer, options);
+    const RgbaImage fine =
+        cpu_render::render_svo(svo.view(), s.atlas, s.geometry, camera, transfer, fixed);
+    ASSERT_GT(drawn_fraction(fine), 0.5);
+    std::size_t checked = 0;
+    for (int y = 0; y < camera.height; ++y)
+      for (int x = 0; x < camera.width; ++x) {
+        const double length = clipped_length(camera, s.dims, x, y);
+        const double a = coarse.pixel(x, y)[3];
+        ASSERT_NEAR(a, fine.pixel(x, y)[3], 2e-5)
+            << "level " << level << " pixel " << x << "," << y;
+        if (length < 1) continue;
+        const double lo = 1 - std::exp(-sigma * (length - options.step));
+        const double hi = 1 - std::exp(-sigma * (length + options.step));
+        ASSERT_GE(a, lo - 2e-5) << "level " << level << " pixel " << x << "," << y;
+        ASSERT_LE(a, hi + 2e-5) << "level " << level << " pixel " << x << "," << y;
+        ++checked;
+      }
+    EXPECT_GT(checked, std::size_t(camera.width * camera.height / 2));
+    EXPECT_LE(cpu_render::max_abs_difference(coarse, fine), 2e-5) << "level " << level;
+    // Fewer samples: about 2^e times (steps also end at region exits and at the ray's end).
+    const double ratio = double(fine.samples) / double(coarse.samples);
+    std::printf("  level %u: %llu samples at the fine step, %llu with e = %u (%.2fx)\n", level,
+                static_cast<unsigned long long>(fine.samples),
+                static_cast<unsigned long long>(coarse.samples), 3 - level, ratio);
+    const double e = 3.0 - level;
+    EXPECT_GE(ratio, 0.7 * std::exp2(e)) << "level " << level;
+    EXPECT_LE(ratio, std::exp2(e)) << "level " << level;
+  }
+}
+
+TEST(CpuRenderStep, CoarseStepsEndAtTheRegionsExit) {
+  // Finest leaves on a 3D checkerboard: "coarse" ones read a constant brick 3 levels up (e = 3),
+  // "fine" ones a denser constant brick (e = 0). The medium is constant per leaf box, so the
+  // image equals the fine-step image only if no coarse step runs into the next box (each sample
+  // stands for fine points of its own box alone).
+  const ConstantScene s({0.25f, 0.75f});
+  const TransferFunction transfer({{0, 0.0f, 0.0f, 1.0f, 0.0f}, {1, 1.0f, 0.0f, 0.0f, 0.1f}}, 0, 1);
+  const std::uint32_t finest = s.geometry.levels - 1;
+  const auto svo = build_uniform_svo(s.levels, finest, [](std::uint32_t, Coord c) {
+    const bool coarse = (c[0] + c[1] + c[2]) % 2 == 0;
+    return coarse ? LeafSpec{0, 0, 3, 3, 0.0f} : LeafSpec{1, 1, 0, 0, 0.0f};
+  });
+  const auto camera = s.camera();
+  // No early termination: a coarse sample may carry the opacity past the threshold further than
+  // the fine one that stops there.
+  cpu_render::RenderOptions options;
+  options.termination_alpha = 1.0f;
+  cpu_render::RenderOptions fixed = options;
+  fixed.max_step_doublings = 0;
+  const RgbaImage stepped =
+      cpu_render::render_svo(svo.view(), s.atlas, s.geometry, camera, transfer, options);
+  const RgbaImage fine =
+      cpu_render::render_svo(svo.view(), s.atlas, s.geometry, camera, transfer, fixed);
+  ASSERT_GT(drawn_fraction(fine), 0.5);
+  EXPECT_LE(difference(stepped, fine), 5e-5);
+  EXPECT_LT(double(stepped.samples), 0.7 * double(fine.samples));
+  // The two media differ (the comparison has power): the dense one alone is far more opaque.
+  const auto dense_only = build_uniform_svo(s.levels, finest, [](std::uint32_t, Coord) {
+    return LeafSpec{1, 1, 0, 0, 0.0f};
+  });
+  EXPECT_GT(
+      cpu_render::max_abs_difference(
+          cpu_render::render_svo(dense_only.view(), s.atlas, s.geometry, camera, transfer), fine),
+      0.05);
+}
+
 TEST(CpuRender, RejectsBadSvosAndOptions) {
   const Scene& s = elongated();
   const CpuAtlas atlas = s.exact_atlas();
@@ -539,6 +735,13 @@ TEST(CpuRender, RejectsBadSvosAndOptions) {
   bad.step = 0;
   EXPECT_THROW(cpu_render::render_svo(good.view(), atlas, s.geometry, camera, transfer, bad),
                std::invalid_argument);
+  cpu_render::RenderOptions too_coarse;
+  too_coarse.max_step_doublings = 17;
+  EXPECT_THROW(cpu_render::render_svo(good.view(), atlas, s.geometry, camera, transfer, too_coarse),
+               std::invalid_argument);
+  too_coarse.max_step_doublings = 16;
+  EXPECT_NO_THROW(
+      cpu_render::render_svo(good.view(), atlas, s.geometry, camera, transfer, too_coarse));
   DenseLevel mislabelled = s.dense(1, 0);
   mislabelled.level = 1;  // level 0's dims
   EXPECT_THROW(cpu_render::render_reference(s.dense(0, finest), mislabelled, 0.5f, s.geometry,

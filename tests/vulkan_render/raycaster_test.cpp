@@ -2,13 +2,15 @@
 // (cpu_render::render_svo) on a small ksvd-coded scene of two frames and four octree levels:
 // fully loaded states with B from an ancestor d = 0..3 levels up and factors 0, 0.5, 1, with the
 // atlas filled from CPU-decoded bricks and decoded on the GPU (vulkan::AtlasDecoder) from the same
-// payloads; transfer-function culling leaves the image unchanged; frames in flight; bad input
-// rejected; the streaming frame loop end to end on a container on disk.
+// payloads; the step from the leaf's level (coarse leaves next to fine ones) as the CPU takes it;
+// transfer-function culling leaves the image unchanged; frames in flight; bad input rejected; the
+// streaming frame loop end to end on a container on disk.
 //
 // Image agreement is measured on the 8-bit RGB images both write (cpu_render::to_image):
 // PSNR = 10·log10(255²/MSE) over all channels and the mean per-channel SSIM (psnr::compare_images).
-// The two renderers take the same samples; they differ by the atlas's 16-bit storage and the
-// GPU's fixed-point filter weights.
+// The two renderers take the same samples (coarse steps included: both step by the leaf's level,
+// RenderOptions::max_step_doublings = 3 by default); they differ by the atlas's 16-bit storage,
+// the GPU's fixed-point filter weights and float rounding where a coarse step ends at a region.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -411,6 +413,57 @@ TEST_F(VulkanRender, EmptyChildrenAndRgba8Output) {
   EXPECT_EQ(got.pixel(95, 0)[0], std::round(0.2f * 255) / 255);  // background
 }
 
+TEST_F(VulkanRender, StepFromTheLeafLevelMatchesTheCpuRenderer) {
+  // Finest leaves on a 3D checkerboard: half read both keyframes 3 levels up (steps 8x the base
+  // step), half their own bricks (the base step), so coarse steps end at fine regions all along
+  // the rays. The GPU takes the CPU's samples: it is closer to the CPU's coarse-step image than
+  // the CPU's fixed-step image is, and its own fixed-step image differs.
+  const Scene& s = scene();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  ASSERT_GE(finest, 3u);
+  const auto svo = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    if ((c[0] + c[1] + c[2]) % 2 == 1)
+      return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
+    const Coord up = {c[0] >> 3, c[1] >> 3, c[2] >> 3};
+    return LeafSpec{s.slot(0, l - 3, up), s.slot(1, l - 3, up), 3, 3, 0.5f};
+  });
+  const TransferFunction tf = test_transfer(s);
+  const auto camera = test_camera();
+  cpu_render::RenderOptions fixed;
+  fixed.max_step_doublings = 0;
+  const RgbaImage want =
+      cpu_render::render_svo({svo.nodes, svo.leaves}, *s.cpu_atlas, s.geometry, camera, tf);
+  const RgbaImage want_fixed =
+      cpu_render::render_svo({svo.nodes, svo.leaves}, *s.cpu_atlas, s.geometry, camera, tf, fixed);
+  ASSERT_GT(drawn_fraction(want), 0.15);
+  ASSERT_LT(double(want.samples), 0.8 * double(want_fixed.samples));
+  const vulkan::Atlas& atlas = *gpu_scene(context()).from_gpu;
+  FrameInput in = frame_input(s, svo, tf, camera);
+  for (const auto filter :
+       {vulkan_render::AtlasFilter::sampler, vulkan_render::AtlasFilter::fetch}) {
+    const char* which = filter == vulkan_render::AtlasFilter::fetch ? "fetches" : "sampler";
+    in.options = {};
+    const RgbaImage got = render_gpu(context(), atlas, in, OutputFormat::rgba16_sfloat, filter);
+    in.options = fixed;
+    const RgbaImage got_fixed =
+        render_gpu(context(), atlas, in, OutputFormat::rgba16_sfloat, filter);
+    const psnr::ImageComparison c = compare(got, want), c_fixed = compare(got, want_fixed);
+    std::printf(
+        "  %s: PSNR %.1f dB, SSIM %.4f, max |diff| %.4f against the CPU's coarse steps; "
+        "%.1f dB against its fixed step; GPU coarse vs fixed max |diff| %.4f\n",
+        which, c.psnr, c.ssim, cpu_render::max_abs_difference(got, want), c_fixed.psnr,
+        cpu_render::max_abs_difference(got, got_fixed));
+    EXPECT_GE(c.psnr, min_psnr) << which;
+    EXPECT_GE(c.ssim, min_ssim) << which;
+    EXPECT_LE(cpu_render::max_abs_difference(got, want),
+              filter == vulkan_render::AtlasFilter::fetch ? 3e-3 : 1e-2)
+        << which;
+    EXPECT_GT(c.psnr, c_fixed.psnr + 3.0) << which;
+    EXPECT_GE(compare(got_fixed, want_fixed).psnr, min_psnr) << which;
+    EXPECT_GT(cpu_render::max_abs_difference(got, got_fixed), 1e-3) << which;
+  }
+}
+
 // --- Transfer-function culling ------------------------------------------------------------
 
 TEST_F(VulkanRender, TransferFunctionCullingKeepsTheImage) {
@@ -555,6 +608,9 @@ TEST_F(VulkanRender, RejectsBadInput) {
   const std::uint64_t one = 1;
   short_histograms.leaf_histograms = {&one, 1};
   rejects(short_histograms, "histogram");
+  FrameInput too_coarse = frame_input(s, good, tf, camera);
+  too_coarse.options.max_step_doublings = 17;
+  rejects(too_coarse, "max_step_doublings");
   EXPECT_EQ(raycaster.last_ticket(), 0u);  // nothing was submitted
   EXPECT_THROW(Raycaster(context(), *gpu_scene(context()).from_gpu, RaycasterOptions{0, 4}),
                std::invalid_argument);

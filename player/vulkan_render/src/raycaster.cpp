@@ -21,6 +21,9 @@ constexpr std::uint32_t flag_histograms = 1;
 constexpr std::uint32_t flag_fetch_filter = 2;
 constexpr std::uint32_t flag_block_skip = 4;
 constexpr std::uint32_t blocks_per_slot = 216;  // 6³ blocks of 6³ voxels
+// RenderOptions::max_step_doublings at most (as cpu_render checks): 2^16 fine steps, and k stays
+// an exact integer in the shader's floats.
+constexpr std::uint32_t max_step_doublings = 16;
 
 // The shader's Params block (std430: vec4 and uvec4 members only, 160 bytes).
 struct Params {
@@ -231,6 +234,10 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
     throw std::invalid_argument("Raycaster: expected step and reference step > 0, found " +
                                 std::to_string(o.step) + " and " +
                                 std::to_string(o.reference_step));
+  if (o.max_step_doublings > max_step_doublings)
+    throw std::invalid_argument("Raycaster: expected max_step_doublings ≤ " +
+                                std::to_string(max_step_doublings) + ", found " +
+                                std::to_string(o.max_step_doublings));
   cpu_render::validate_svo({input.svo_nodes, input.svo_leaves}, atlas_.slot_count(),
                            input.geometry);
   const std::size_t leaf_count = input.svo_leaves.size() / VR_SVO_LEAF_WORDS;
@@ -277,6 +284,7 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
   p.tf_scale_entries[0] =
       static_cast<float>(double(entries - 1) / (double(tf.hi()) - double(tf.lo())));
   p.tf_scale_entries[1] = static_cast<float>(entries);
+  p.tf_scale_entries[2] = static_cast<float>(o.max_step_doublings);  // exact: ≤ 16
   p.size_levels[0] = static_cast<std::uint32_t>(camera.width);
   p.size_levels[1] = static_cast<std::uint32_t>(camera.height);
   p.size_levels[2] = input.geometry.levels;

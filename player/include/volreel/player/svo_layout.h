@@ -81,4 +81,19 @@ VR_INLINE float vr_svo_ancestor_local(vr_uint c, float u, vr_uint d) {
 /* One axis of the stored voxel coordinate inside a slot (texel units) of brick-local u'. */
 VR_INLINE float vr_svo_slot_coord(float u_brick) { return 1.0f + 34.0f * u_brick; }
 
+/* Ray step from the leaf's level (DESIGN.md "Player", step 7): how many times the base step may
+   be doubled in the region of a leaf record — the levels between the finest level and the level
+   of the finer brick the sample reads, at most `cap`:
+     e = min((levels − 1 − leaf_level) + d, cap),  d = dA when f = 0, dB when f = 1, else min(dA, dB)
+   where leaf_level is the level of the spatial node the record is relative to (a VR_SVO_CHILD_UP
+   region's node, a VR_SVO_CHILD_LEAF child). A brick of level k has voxels of 2^(levels−1−k) finest
+   voxels, so a step of base·2^e keeps the base step's samples per stored voxel. */
+VR_INLINE vr_uint vr_svo_step_doublings(vr_uint levels, vr_uint leaf_level, vr_uint packed_lods, float f,
+                                        vr_uint cap) {
+  vr_uint d_a = vr_svo_lod_a(packed_lods), d_b = vr_svo_lod_b(packed_lods);
+  vr_uint d = f == 0.0f ? d_a : (f == 1.0f ? d_b : (d_a < d_b ? d_a : d_b));
+  vr_uint e = levels - 1u - leaf_level + d;
+  return e < cap ? e : cap;
+}
+
 #endif /* VOLREEL_PLAYER_SVO_LAYOUT_H */

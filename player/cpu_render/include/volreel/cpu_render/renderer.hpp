@@ -3,16 +3,28 @@
 // oracle that casts the same rays through dense level volumes. It is the reference the Vulkan
 // renderer is tested against and the headless fallback.
 //
-// Both renderers share one ray loop, so they take exactly the same samples:
+// Both renderers share one ray loop (they take exactly the same samples where the SVO is drawn
+// at the finest level):
 //   1. The ray of pixel (i, j) leaves OrbitCamera::eye() along ray_direction(i + 0.5, j + 0.5)
 //      (world = finest-voxel coordinates) and is clipped to the volume's box [0, dims).
 //   2. Samples lie at distances t = k·step from the eye (k integer) inside the clipped segment:
-//      fixed in world space, so they do not crawl when the clip distance changes.
+//      fixed in world space, so they do not crawl when the clip distance changes. Not every k is
+//      taken: the step follows the level of the data (step size from the node's level):
+//        a. A sample reads a leaf whose finer brick lies e levels above the finest
+//           (vr_svo_step_doublings, e capped at RenderOptions::max_step_doublings).
+//        b. The next sample is k' = the next multiple of 2^e after k (coarse samples sit on a
+//           grid nested in the fine one, so they do not crawl either), but no later than the
+//           first k whose point lies past the sample's region (the SVO child box the descent
+//           ended in, exit rounded as ceil(t_exit/step − 0.01)) and no later than the segment's
+//           end: a coarse step never jumps into the next, possibly finer, region — the first
+//           sample there is the first fine-grid point inside it. k' ≥ k + 1.
+//        c. The sample stands for the n = k' − k fine steps up to the next one.
+//      Where every leaf is at the finest level (e = 0) this is every k, as with a fixed step.
 //   3. Each sample's value goes through the transfer function with its opacity corrected for the
-//      step (TransferFunction::opacity_corrected(step / reference_step)).
-//   4. Front-to-back compositing of non-premultiplied colours: C += (1 − A)·α·rgb,
-//      A += (1 − A)·α; the ray stops once A > termination_alpha.
-//   5. The pixel is C + (1 − A)·background, with alpha A.
+//      base step (TransferFunction::opacity_corrected(step / reference_step)), then for the n
+//      steps it stands for: α' = 1 − (1 − α)^n, that is 1 − (1 − α_ref)^(n·step/reference_step)
+//      (the power is taken after the table's linear interpolation, in float: n = 1 leaves α as
+//      it is). A uniform medium composites to the same opacity at any step.
 // They differ only in how a sample's value is found:
 //   render_svo       descends the SVO from the root to the node containing the point (Cesium
 //                    patent [0050]), takes its leaf record, samples keyframes A and B trilinearly
@@ -21,7 +33,10 @@
 //                    transparent.
 //   render_reference samples dense volumes of levels k_A and k_B trilinearly at level voxel
 //                    coordinates p/2^(L−1−k) − 0.5, clamped to the level's edge, and returns
-//                    (1 − f)·A + f·B.
+//                    (1 − f)·A + f·B. It always takes every k (e = 0, n = 1): it is the
+//                    ground truth that coarse steps approximate. A fully loaded finest-level SVO
+//                    takes exactly its samples; coarser states take fewer (compare by PSNR, or
+//                    render them with max_step_doublings = 0 to compare sample for sample).
 #pragma once
 
 #include <array>
@@ -64,12 +79,19 @@ struct RenderOptions {
   double reference_step = 1.0;  ///< the length the transfer function's opacities are for (> 0)
   std::array<float, 3> background{0, 0, 0};  ///< RGB behind the volume, [0, 1]
   float termination_alpha = 0.99f;           ///< early ray termination threshold
+  /// Step size from the node's level (steps 2a–2c): the step in a leaf whose data lies e levels
+  /// above the finest is step·2^min(e, max_step_doublings); 0 keeps the fixed step everywhere.
+  /// At most 16. render_reference ignores it (always the fixed step).
+  std::uint32_t max_step_doublings = 3;
 };
 
 /// A float RGBA image, rows top to bottom, 4 values per pixel.
 struct RgbaImage {
   int width = 0, height = 0;
   std::vector<float> rgba;
+  /// Samples whose value was computed (drawn SVO regions, every sample of render_reference):
+  /// the CPU renderers count them; 0 where nobody counted (a Vulkan read-back).
+  std::uint64_t samples = 0;
   const float* pixel(int x, int y) const {
     return rgba.data() + 4 * (static_cast<std::size_t>(y) * static_cast<std::size_t>(width) +
                               static_cast<std::size_t>(x));

@@ -5,8 +5,11 @@
 // interpolates them with the leaf's factor and composites front to back through a 1D transfer
 // function, skipping regions that are empty or whose leaf histograms the transfer function makes
 // invisible, and samples whose 6³ atlas blocks hold only invisible values (block value ranges,
-// recomputed for the slots a frame lists as changed: shaders/render/block_ranges.comp). It takes the same samples as cpu_render::render_svo (cpu_render/renderer.hpp,
-// steps 1–5), so the two images agree up to 16-bit atlas storage and the GPU's filtering.
+// recomputed for the slots a frame lists as changed: shaders/render/block_ranges.comp). The step
+// follows the level of the leaf a sample reads, with the opacity corrected for it
+// (RenderOptions::max_step_doublings). It takes the same samples as cpu_render::render_svo
+// (cpu_render/renderer.hpp, steps 1–5), so the two images agree up to 16-bit atlas storage, the
+// GPU's filtering and float rounding where a coarse step ends at a region's exit.
 //
 // Output: a 2D storage image (rgba8 or rgba16f, usage STORAGE | SAMPLED | TRANSFER_SRC) in
 // VK_IMAGE_LAYOUT_GENERAL between frames. A headless caller reads it back (render() with readback,
@@ -65,7 +68,8 @@ struct FrameInput {
   cpu_render::VolumeGeometry geometry;         ///< finest dims and octree levels
   player::OrbitCamera camera;                  ///< its width/height must equal the output's
   const cpu_render::TransferFunction* transfer = nullptr;  ///< required
-  cpu_render::RenderOptions options;           ///< step, reference step, background, termination
+  /// Step, reference step, background, termination, max step doublings.
+  cpu_render::RenderOptions options;
   /// Atlas slots written since the previous frame (decoded bricks): their 6³-block value ranges
   /// are recomputed before ray casting. Every slot written must be listed once it is sampled
   /// with skip_invisible_blocks.
