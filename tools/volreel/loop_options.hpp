@@ -8,7 +8,8 @@
 
 namespace volreel::cli {
 
-/// --atlas-mb, --bandwidth, --latency, --sse-target, --upload-budget, --step, --no-culling.
+/// --atlas-mb, --bandwidth, --latency, --sse-target, --upload-budget, --step,
+/// --max-step-doublings, --no-culling.
 inline void add_loop_options(CLI::App& cmd, vulkan_render::LoopSettings& loop) {
   cmd.add_option("--atlas-mb", loop.atlas_mb, "Brick atlas memory, MiB (93 312 bytes per slot)")->capture_default_str();
   cmd.add_option("--bandwidth", loop.bandwidth, "Simulated read bandwidth, e.g. 20MB/s (0: unlimited)")
@@ -18,6 +19,10 @@ inline void add_loop_options(CLI::App& cmd, vulkan_render::LoopSettings& loop) {
   cmd.add_option("--upload-budget", loop.upload_budget_mb, "Compressed bytes uploaded per frame at most, MiB")
       ->capture_default_str();
   cmd.add_option("--step", loop.step, "Ray step, finest voxels")->capture_default_str();
+  cmd.add_option("--max-step-doublings", loop.max_step_doublings,
+                 "A leaf e levels coarser than the finest is sampled every step*2^min(e, N) voxels, with\n"
+                 "opacity corrected for the longer step (0: the fixed step everywhere)")
+      ->capture_default_str();
   cmd.add_flag("--no-culling", loop.no_culling, "Do not skip nodes the transfer function makes invisible");
 }
 

@@ -91,6 +91,9 @@ void apply(const LoopSettings& s, FrameLoopOptions& o) {
   if (!(s.step > 0) || !std::isfinite(s.step))
     bad("--step", "a ray step in voxels > 0", std::to_string(s.step));
   o.render.step = s.step;
+  if (s.max_step_doublings > 16)
+    bad("--max-step-doublings", "0..16", std::to_string(s.max_step_doublings));
+  o.render.max_step_doublings = s.max_step_doublings;
   o.transfer_culling = !s.no_culling;
 }
 

@@ -3,6 +3,7 @@
 // "50ms" — parsed into FrameLoopOptions with errors that name the option and the text.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <utility>
 
@@ -18,6 +19,7 @@ struct LoopSettings {
   double sse_target = 1.0;        ///< pixels per voxel at which a node is detailed enough
   double upload_budget_mb = 64;   ///< compressed bytes uploaded per frame at most, MiB
   double step = 0.5;              ///< ray step, finest voxels
+  std::uint32_t max_step_doublings = 3;  ///< coarse leaves step up to 2^this times longer (0: fixed)
   bool no_culling = false;        ///< no transfer-function culling
 };
 
