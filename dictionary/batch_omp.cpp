@@ -1,5 +1,5 @@
 // batch_omp.cpp: batch-OMP with progressive Cholesky updates (Rubinstein, Zibulevsky, Elad 2008,
-// algorithm 5), and the plain reference OMP.
+// algorithm 5) with an optional rate-distortion (Lagrangian) stop, and the plain reference OMP.
 #include <omp.h>
 
 #include <algorithm>
@@ -33,10 +33,22 @@ void check_options(const SparseCodingOptions& options, Eigen::Index block_length
   if (!(options.tolerance >= 0) || !std::isfinite(options.tolerance))
     throw std::invalid_argument("sparse coding tolerance must be a finite value >= 0, not " +
                                 std::to_string(options.tolerance));
+  if (!(options.min_atom_gain >= 0) || !std::isfinite(options.min_atom_gain))
+    throw std::invalid_argument("the minimum atom gain must be a finite value >= 0, not " +
+                                std::to_string(options.min_atom_gain));
+  if (!(options.max_error >= 0) || !std::isfinite(options.max_error))
+    throw std::invalid_argument("the maximum block error must be a finite value >= 0, not " +
+                                std::to_string(options.max_error));
   if (options.max_atoms < 1 || options.max_atoms > 255 || options.max_atoms > block_length)
     throw std::invalid_argument("maximum atoms per block must be in 1.." +
                                 std::to_string(std::min<Eigen::Index>(255, block_length)) + ", not " +
                                 std::to_string(options.max_atoms));
+}
+
+/// m·max_error², or +∞ without a bound (max_error = 0).
+double bound_energy(const SparseCodingOptions& options, Eigen::Index block_length) {
+  return options.max_error > 0 ? static_cast<double>(block_length) * options.max_error * options.max_error
+                               : std::numeric_limits<double>::infinity();
 }
 
 /// Correlations are updated and searched in chunks of this many values, held in registers.
@@ -101,10 +113,21 @@ Eigen::Index update_correlations(float* alpha, const float* alpha0, const float*
   return best_chunk * chunk;
 }
 
-/// Error-constrained OMP-Cholesky for one block, from α⁰ = Dᵀy and ‖y‖² (RZE08, algorithm 5).
-/// Writes the support, coefficients and ‖r‖²; returns the number of atoms.
-int code_one_block(const float* alpha0, double energy, const Eigen::MatrixXf& gram, int max_atoms, double target,
+/// The stopping rules of a pursuit in energies (see SparseCodingOptions).
+struct StopRule {
+  double target = 0;    ///< m·ε²: stop once ‖r‖² ≤ target
+  int max_atoms = 1;    ///< Smax
+  double min_gain = 0;  ///< stop before an atom that lowers ‖r‖² by less (0: off)
+  double bound = 0;     ///< ... unless ‖r‖² > bound (m·max_error², +∞ without a bound)
+};
+
+/// Error-constrained OMP-Cholesky for one block, from α⁰ = Dᵀy and ‖y‖² (RZE08, algorithm 5),
+/// with the rate-distortion stop. Writes the support, coefficients and ‖r‖²; returns the number
+/// of atoms.
+int code_one_block(const float* alpha0, double energy, const Eigen::MatrixXf& gram, const StopRule& rule,
                    OmpWorkspace& ws, std::int32_t* atoms_out, float* coefficients_out, float* residual_out) {
+  const int max_atoms = rule.max_atoms;
+  const double target = rule.target;
   const Eigen::Index K = gram.rows();
   float* alpha = ws.alpha.data();
   auto& L = ws.lower;
@@ -120,9 +143,8 @@ int code_one_block(const float* alpha0, double energy, const Eigen::MatrixXf& gr
 
     // 2. Progressive Cholesky: L ← [L 0; wᵀ sqrt(G_kk − wᵀw)] with L w = G_{I,k}.
     const float* g_k = gram.col(k).data();
-    if (s == 0) {
-      L(0, 0) = std::sqrt(g_k[k]);
-    } else {
+    float pivot = g_k[k];
+    if (s > 0) {
       float ww = 0;
       for (int r = 0; r < s; ++r) {
         float v = g_k[ws.support[static_cast<std::size_t>(r)]];
@@ -130,11 +152,16 @@ int code_one_block(const float* alpha0, double energy, const Eigen::MatrixXf& gr
         ws.w[r] = v / L(r, r);
         ww += ws.w[r] * ws.w[r];
       }
-      const float pivot = g_k[k] - ww;
+      pivot = g_k[k] - ww;
       if (!(pivot > 1e-5f)) break;  // atom k is (numerically) in the span of the support
-      for (int c = 0; c < s; ++c) L(s, c) = ws.w[c];
-      L(s, s) = std::sqrt(pivot);
     }
+    // 2b. Rate-distortion stop: atom k would lower ‖r‖² by (d_kᵀr)² / ‖P⊥d_k‖² = α_k² / pivot.
+    if (rule.min_gain > 0 && residual <= rule.bound) {
+      const double gain = static_cast<double>(alpha[k]) * static_cast<double>(alpha[k]) / static_cast<double>(pivot);
+      if (gain < rule.min_gain) break;
+    }
+    for (int c = 0; c < s; ++c) L(s, c) = ws.w[c];
+    L(s, s) = std::sqrt(pivot);
     ws.support[static_cast<std::size_t>(s)] = static_cast<int>(k);
     ws.alpha0_support[s] = alpha0[k];
     ++s;
@@ -178,15 +205,21 @@ BatchOmp::BatchOmp(const Eigen::MatrixXf& atoms, SparseCodingOptions options)
   if (atoms.cols() < 1) throw std::invalid_argument("a dictionary needs at least one atom");
   gram_.noalias() = atoms_.transpose() * atoms_;
   target_energy_ = static_cast<double>(atoms.rows()) * options.tolerance * options.tolerance;
+  bound_energy_ = bound_energy(options, atoms.rows());
 }
 
-void BatchOmp::encode(const Eigen::Ref<const Eigen::MatrixXf>& blocks, SparseCodes& codes) const {
+void BatchOmp::encode(const Eigen::Ref<const Eigen::MatrixXf>& blocks, SparseCodes& codes,
+                      const std::vector<float>& gain_weights) const {
   if (blocks.rows() != atoms_.rows())
     throw std::invalid_argument("blocks have " + std::to_string(blocks.rows()) + " values, atoms " +
                                 std::to_string(atoms_.rows()));
+  if (!gain_weights.empty() && gain_weights.size() != static_cast<std::size_t>(blocks.cols()))
+    throw std::invalid_argument(std::to_string(gain_weights.size()) + " gain weights for " +
+                                std::to_string(blocks.cols()) + " blocks");
   const auto n = static_cast<std::size_t>(blocks.cols());
   const int S = options_.max_atoms;
   codes.resize(n, S);
+  const StopRule rule{target_energy_, S, options_.min_atom_gain, bound_energy_};
   // Batches of columns: one GEMM Dᵀ·Y per batch gives every α⁰ of the batch.
   constexpr Eigen::Index batch = 256;
   const auto batches = static_cast<std::int64_t>((blocks.cols() + batch - 1) / batch);
@@ -204,8 +237,12 @@ void BatchOmp::encode(const Eigen::Ref<const Eigen::MatrixXf>& blocks, SparseCod
         // ‖y‖² in float, vectorized (sixteen partial sums: the error is of the order of that in α⁰).
         const auto energy = static_cast<double>(blocks.col(first + j).squaredNorm());
         const std::size_t slot = i * static_cast<std::size_t>(S);
-        codes.count[i] = static_cast<std::uint8_t>(code_one_block(correlations.col(j).data(), energy, gram_, S,
-                                                                  target_energy_, ws, codes.atom.data() + slot,
+        StopRule block_rule = rule;
+        if (!gain_weights.empty() && rule.min_gain > 0)  // gain·w < min_gain ⇔ gain < min_gain / w
+          block_rule.min_gain = gain_weights[i] > 0 ? rule.min_gain / static_cast<double>(gain_weights[i])
+                                                    : std::numeric_limits<double>::infinity();
+        codes.count[i] = static_cast<std::uint8_t>(code_one_block(correlations.col(j).data(), energy, gram_, block_rule,
+                                                                  ws, codes.atom.data() + slot,
                                                                   codes.coefficient.data() + slot,
                                                                   codes.residual_energy.data() + i));
       }
@@ -218,6 +255,7 @@ ReferenceCode reference_omp(const Eigen::MatrixXf& atoms, const Eigen::VectorXf&
   const Eigen::MatrixXd D = atoms.cast<double>();
   const Eigen::VectorXd y = block.cast<double>();
   const double target = static_cast<double>(atoms.rows()) * options.tolerance * options.tolerance;
+  const double bound = bound_energy(options, atoms.rows());
   ReferenceCode code;
   code.min_selection_margin = std::numeric_limits<double>::infinity();
   Eigen::VectorXd r = y;
@@ -231,13 +269,21 @@ ReferenceCode reference_omp(const Eigen::MatrixXf& atoms, const Eigen::VectorXf&
     if (!(best > 0)) break;
     c[k] = -1;
     const double second = c.size() > 1 ? c.maxCoeff() : 0.0;
-    code.min_selection_margin = std::min(code.min_selection_margin, (best - second) / best);
     code.atoms.push_back(static_cast<int>(k));
     // 2. Least squares on the support, from scratch.
     Eigen::MatrixXd DI(D.rows(), static_cast<Eigen::Index>(code.atoms.size()));
     for (std::size_t j = 0; j < code.atoms.size(); ++j) DI.col(static_cast<Eigen::Index>(j)) = D.col(code.atoms[j]);
-    gamma = DI.colPivHouseholderQr().solve(y);
-    r = y - DI * gamma;
+    const Eigen::VectorXd trial = DI.colPivHouseholderQr().solve(y);
+    const Eigen::VectorXd trial_r = y - DI * trial;
+    // 3. Rate-distortion stop: the atom is not kept if it lowers ‖r‖² by less than min_atom_gain.
+    if (options.min_atom_gain > 0 && r.squaredNorm() <= bound &&
+        r.squaredNorm() - trial_r.squaredNorm() < options.min_atom_gain) {
+      code.atoms.pop_back();
+      break;
+    }
+    code.min_selection_margin = std::min(code.min_selection_margin, (best - second) / best);
+    gamma = trial;
+    r = trial_r;
   }
   code.coefficients.assign(gamma.data(), gamma.data() + gamma.size());
   code.residual_energy = r.squaredNorm();

@@ -77,6 +77,7 @@ struct Cell {
   std::uint32_t level = 0, x = 0, y = 0, z = 0;
   std::uint64_t morton = 0;
   std::vector<std::byte> payload;
+  std::size_t codes = 0;  ///< ksvd codes in the payload
   std::uint64_t histogram = 0;
   bool constant = false, subtree_constant = false;
   float value = 0;
@@ -98,7 +99,75 @@ void brick_to_blocks(const float* brick, float* columns, float* means) {
   }
 }
 
+/// Share of each of the 216 blocks of brick (x, y, z) of a level of size `dims` that the decoder
+/// reads: voxels of the brick's interior (stored index 1..34 on each axis) inside the level; at
+/// least 1/216 (one voxel), so that as ε → 0 every block is still coded up to Smax.
+void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
+                         const std::array<std::uint32_t, 3>& dims, float* weights) {
+  const std::uint32_t position[3] = {x, y, z};
+  float owned[3][VR_BLOCKS_PER_AXIS];  // owned voxels of block column c on axis a
+  for (std::size_t a = 0; a < 3; ++a) {
+    // Stored index i holds level voxel 34·p − 1 + i: owned for 1 ≤ i ≤ 34 and 34·p − 1 + i < dim.
+    const std::int64_t end = std::min<std::int64_t>(
+        brick_interior + 1, std::int64_t{dims[a]} - std::int64_t{brick_interior} * position[a] + 1);
+    for (std::uint32_t c = 0; c < VR_BLOCKS_PER_AXIS; ++c) {
+      const std::int64_t lo = std::max<std::int64_t>(1, c * VR_BLOCK_SIZE),
+                         hi = std::min<std::int64_t>(end, (c + 1) * VR_BLOCK_SIZE);
+      owned[a][c] = static_cast<float>(std::max<std::int64_t>(0, hi - lo)) / VR_BLOCK_SIZE;
+    }
+  }
+  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+    weights[b] = std::max(owned[0][b % VR_BLOCKS_PER_AXIS] *
+                              owned[1][(b / VR_BLOCKS_PER_AXIS) % VR_BLOCKS_PER_AXIS] *
+                              owned[2][b / (VR_BLOCKS_PER_AXIS * VR_BLOCKS_PER_AXIS)],
+                          1.0f / VR_BLOCK_LENGTH);
+}
+
+/// Adds a stored brick's payload to the byte breakdown and sparsity histogram of a frame.
+void add_to_breakdown(const Cell& c, const std::array<std::uint32_t, 3>& level_dims, bool coarse,
+                      bool ksvd, FrameStats& st) {
+  ByteBreakdown& b = st.breakdown;
+  const std::size_t size = c.payload.size();
+  if (c.constant) {
+    b.constant_bricks += size;
+  } else if (!ksvd) {
+    b.zfp_streams += size;
+  } else {
+    b.brick_headers += 4 * VR_HEADER_WORDS;
+    b.block_entries += 2 * VR_BLOCKS_PER_BRICK;
+    b.codes += 2 * c.codes;
+    b.alignment += size - vr_payload_bytes(static_cast<vr_uint>(c.codes));
+    for (std::uint32_t k = 0; k < VR_BLOCKS_PER_BRICK; ++k) {
+      std::uint16_t entry;
+      std::memcpy(&entry, c.payload.data() + 4 * VR_HEADER_WORDS + 2 * k, 2);
+      ++st.sparsity_histogram[vr_entry_sparsity(entry)];
+    }
+  }
+  if (coarse) b.coarse_levels += size;
+  // Interior voxels inside the level: the rest of the 36³ are apron or padding.
+  const std::uint32_t position[3] = {c.x, c.y, c.z};
+  double owned = 1;
+  for (int a = 0; a < 3; ++a)
+    owned *= static_cast<double>(
+        std::min<std::int64_t>(brick_interior, std::int64_t{level_dims[static_cast<std::size_t>(a)]} -
+                                                   std::int64_t{brick_interior} * position[a]));
+  b.aprons_and_padding += static_cast<double>(size) * (1 - owned / static_cast<double>(brick_voxels));
+}
+
 }  // namespace
+
+ByteBreakdown& ByteBreakdown::operator+=(const ByteBreakdown& o) {
+  frame_tables += o.frame_tables;
+  constant_bricks += o.constant_bricks;
+  brick_headers += o.brick_headers;
+  block_entries += o.block_entries;
+  codes += o.codes;
+  alignment += o.alignment;
+  zfp_streams += o.zfp_streams;
+  coarse_levels += o.coarse_levels;
+  aprons_and_padding += o.aprons_and_padding;
+  return *this;
+}
 
 Pyramid build_pyramid(const Volume& frame) {
   Pyramid p;
@@ -170,10 +239,20 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
     if (settings_.fixed_sparsity == 0 &&
         !(settings_.tolerance > 0 && std::isfinite(settings_.tolerance)))
       throw InputError("the tolerance must be positive and finite");
+    if (settings_.fixed_sparsity == 0 && settings_.rule == VariableRateRule::lagrangian &&
+        !(settings_.lagrangian_factor > 0 && std::isfinite(settings_.lagrangian_factor)))
+      throw InputError("the Lagrangian factor must be positive and finite");
+    if (!(settings_.error_bound_factor >= 0 && std::isfinite(settings_.error_bound_factor)))
+      throw InputError("the error bound factor must be >= 0 and finite");
     dictionary::SparseCodingOptions o;
     if (settings_.fixed_sparsity > 0) {
       o.tolerance = 0;
       o.max_atoms = settings_.fixed_sparsity;
+    } else if (settings_.rule == VariableRateRule::lagrangian) {
+      o.tolerance = 0;
+      o.max_atoms = settings_.max_atoms;
+      o.min_atom_gain = atom_gain_threshold();
+      o.max_error = settings_.error_bound_factor * settings_.tolerance;
     } else {
       o.tolerance = settings_.tolerance;
       o.max_atoms = settings_.max_atoms;
@@ -404,12 +483,21 @@ std::vector<std::byte> zfp_payload(const float* brick, double accuracy) {
 
 }  // namespace
 
+double FrameEncoder::atom_gain_threshold() const {
+  if (settings_.codec != format::Codec::ksvd || settings_.fixed_sparsity > 0 ||
+      settings_.rule != VariableRateRule::lagrangian)
+    return 0;
+  return settings_.lagrangian_factor * static_cast<double>(VR_BLOCK_LENGTH) * settings_.tolerance *
+         settings_.tolerance;
+}
+
 QuantizeOptions FrameEncoder::quantize_options() const {
   QuantizeOptions o;
   o.refit = settings_.refit_quantization;
   o.optimize_interval = settings_.optimize_interval;
   o.max_atoms = settings_.max_atoms;
-  if (settings_.extend_pursuit && settings_.fixed_sparsity == 0)
+  if (settings_.extend_pursuit && settings_.fixed_sparsity == 0 &&
+      settings_.rule == VariableRateRule::tolerance)
     o.target_energy =
         static_cast<double>(VR_BLOCK_LENGTH) * settings_.tolerance * settings_.tolerance;
   return o;
@@ -466,8 +554,9 @@ std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
   // 2. Bricks in chunks: extract, histogram, constant test; then code the non-constant ones.
   std::vector<float> bricks(chunk_bricks * brick_voxels);
   Eigen::MatrixXf columns;
-  std::vector<float> means;
+  std::vector<float> means, weights;
   dictionary::SparseCodes codes;
+  const bool weighted = ksvd && settings_.weight_owned_voxels && atom_gain_threshold() > 0;
   for (std::size_t begin = 0; begin < cells.size(); begin += chunk_bricks) {
     const std::size_t n = std::min(chunk_bricks, cells.size() - begin);
     auto part = Clock::now();
@@ -502,16 +591,22 @@ std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
     const auto blocks = static_cast<Eigen::Index>(coded.size() * VR_BLOCKS_PER_BRICK);
     columns.resize(VR_BLOCK_LENGTH, blocks);
     means.resize(static_cast<std::size_t>(blocks));
+    weights.resize(weighted ? static_cast<std::size_t>(blocks) : 0);
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(coded.size()); ++k) {
       const auto kk = static_cast<std::size_t>(k);
       brick_to_blocks(bricks.data() + coded[kk] * brick_voxels,
                       columns.data() + kk * VR_BLOCKS_PER_BRICK * VR_BLOCK_LENGTH,
                       means.data() + kk * VR_BLOCKS_PER_BRICK);
+      if (weighted) {
+        const Cell& c = cells[begin + coded[kk]];
+        owned_block_weights(c.x, c.y, c.z, pyramid.geometry[c.level].dims,
+                            weights.data() + kk * VR_BLOCKS_PER_BRICK);
+      }
     }
     st.seconds_bricks += seconds_since(part);
     part = Clock::now();
-    omp_->encode(columns, codes);
+    omp_->encode(columns, codes, weights);
     st.seconds_omp += seconds_since(part);
     part = Clock::now();
     double quantized_error = 0;
@@ -520,10 +615,12 @@ std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : quantized_error, code_count)
     for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(coded.size()); ++k) {
       const auto kk = static_cast<std::size_t>(k);
-      cells[begin + coded[kk]].payload =
+      Cell& cell = cells[begin + coded[kk]];
+      cell.payload =
           quantize_brick(columns.data() + kk * VR_BLOCKS_PER_BRICK * VR_BLOCK_LENGTH,
                          means.data() + kk * VR_BLOCKS_PER_BRICK, codes, kk * VR_BLOCKS_PER_BRICK,
-                         dictionary_->atoms, qo, &quantized_error, &code_count);
+                         dictionary_->atoms, qo, &quantized_error, &cell.codes);
+      code_count += cell.codes;
     }
     st.codes += code_count;
     st.quantized_squared_error += quantized_error;
@@ -581,6 +678,7 @@ std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
       node.brick = index[i];
       node.histogram = cells[i].histogram;
       out.nodes.push_back(node);
+      add_to_breakdown(cells[i], pyramid.geometry[l].dims, l + 1 < levels, ksvd, st);
       out.payloads.push_back(std::move(cells[i].payload));
       ++st.bricks;
       if (cells[i].constant) ++st.constant_bricks;
@@ -610,6 +708,7 @@ std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
   }
   std::vector<std::byte> bytes = format::serialize_frame(out);
   st.bytes = bytes.size();
+  st.breakdown.frame_tables = st.bytes - st.breakdown.total();  // what is not a brick payload
   st.seconds = seconds_since(start);
   if (stats) *stats = st;
   return bytes;
@@ -800,6 +899,9 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     summary.seconds_bricks += st.seconds_bricks;
     summary.seconds_omp += st.seconds_omp;
     summary.seconds_quantize += st.seconds_quantize;
+    summary.breakdown += st.breakdown;
+    for (std::size_t k = 0; k < st.sparsity_histogram.size(); ++k)
+      summary.sparsity_histogram[k] += st.sparsity_histogram[k];
     char status[64];
     std::snprintf(status, sizeof status, "%.1f MVoxel/s",
                   voxels * static_cast<double>(summary.encoded) / 1e6 / summary.seconds);

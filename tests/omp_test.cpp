@@ -1,5 +1,7 @@
 // omp_test.cpp: batch-OMP recovers planted sparse codes exactly, agrees with a plain double
-// precision OMP, and stops exactly when the residual meets ε or at Smax.
+// precision OMP, and stops exactly when the residual meets ε or at Smax, or (rate-distortion
+// stop) before the first atom worth less than its cost; the Lagrangian allocation beats the ε
+// rule at equal code count.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -150,6 +152,156 @@ TEST(BatchOmp, ZeroBlocksNeedNoAtomsAndBadOptionsAreRefused) {
   EXPECT_THROW(BatchOmp(D, {.tolerance = -1, .max_atoms = 5}), std::invalid_argument);
   EXPECT_THROW(BatchOmp(D, {.tolerance = 0, .max_atoms = 0}), std::invalid_argument);
   EXPECT_THROW(BatchOmp(D, {.tolerance = 0, .max_atoms = 28}), std::invalid_argument);
+}
+
+/// ‖r‖² after j greedy steps of every block, j = 0..15 (ε = 0 runs with Smax = j follow the same
+/// path as any stopping rule).
+std::vector<std::vector<double>> greedy_path(const Eigen::MatrixXf& D, const Eigen::MatrixXf& Y) {
+  std::vector<std::vector<double>> path(16, std::vector<double>(static_cast<std::size_t>(Y.cols())));
+  for (Eigen::Index i = 0; i < Y.cols(); ++i) path[0][static_cast<std::size_t>(i)] = Y.col(i).cast<double>().squaredNorm();
+  for (int s = 1; s <= 15; ++s) {
+    SparseCodes codes;
+    BatchOmp(D, {.tolerance = 0, .max_atoms = s}).encode(Y, codes);
+    for (std::size_t i = 0; i < codes.size(); ++i)
+      path[static_cast<std::size_t>(s)][i] = codes.count[i] == s ? static_cast<double>(codes.residual_energy[i]) : 0.0;
+  }
+  return path;
+}
+
+TEST(BatchOmp, RateDistortionStopKeepsExactlyTheAtomsWorthTheirCost) {
+  const Eigen::Index m = 216, K = 512, n = 300;
+  const Eigen::MatrixXf D = random_dictionary(m, K, 21);
+  const Eigen::MatrixXf Y = random_signals(m, n, 22);  // ‖y‖² ≈ 216: the first gains are ≈ 12
+  const auto path = greedy_path(D, Y);
+  for (double gain : {6.0, 8.0, 10.0}) {
+    SparseCodes codes;
+    BatchOmp(D, {.tolerance = 0, .max_atoms = 15, .min_atom_gain = gain}).encode(Y, codes);
+    int between = 0;
+    for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
+      const auto c = static_cast<std::size_t>(codes.count[i]);
+      EXPECT_NEAR(codes.residual_energy[i], path[c][i], 1e-4 * path[0][i]) << "block " << i;
+      // Every atom kept lowered ‖r‖² by at least the gain; the next one would not have.
+      for (std::size_t j = 1; j <= c; ++j)
+        EXPECT_GE(path[j - 1][i] - path[j][i], gain * (1 - 1e-3)) << "block " << i << " atom " << j;
+      if (c < 15) {
+        EXPECT_LT(path[c][i] - path[c + 1][i], gain * (1 + 1e-3)) << "block " << i;
+      }
+      if (c > 0 && c < 15) ++between;
+    }
+    EXPECT_GT(between, n / 4) << "gain " << gain;
+  }
+}
+
+TEST(BatchOmp, RateDistortionStopAgreesWithReferenceOmp) {
+  const Eigen::Index m = 64, K = 200, n = 300;
+  const Eigen::MatrixXf D = random_dictionary(m, K, 23);
+  const Eigen::MatrixXf Y = random_signals(m, n, 24);
+  for (const SparseCodingOptions options : {SparseCodingOptions{.tolerance = 0, .max_atoms = 12, .min_atom_gain = 2.0},
+                                            SparseCodingOptions{.tolerance = 0.3, .max_atoms = 12, .min_atom_gain = 1.5},
+                                            SparseCodingOptions{.tolerance = 0, .max_atoms = 12, .min_atom_gain = 3.0, .max_error = 0.8}}) {
+    SparseCodes codes;
+    BatchOmp(D, options).encode(Y, codes);
+    int compared = 0;
+    for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
+      const ReferenceCode ref = reference_omp(D, Y.col(static_cast<Eigen::Index>(i)), options);
+      if (ref.min_selection_margin < 1e-3) continue;
+      ++compared;
+      ASSERT_EQ(codes.count[i], ref.atoms.size()) << "block " << i << " gain " << options.min_atom_gain;
+      for (std::size_t j = 0; j < ref.atoms.size(); ++j) ASSERT_EQ(codes.atoms_of(i)[j], ref.atoms[j]);
+      if (options.max_error > 0 && ref.atoms.size() < 12) {  // the bound holds whatever the gains
+        EXPECT_LE(ref.residual_energy, static_cast<double>(m) * options.max_error * options.max_error * (1 + 1e-6));
+      }
+    }
+    EXPECT_GT(compared, n * 7 / 10);
+  }
+}
+
+TEST(BatchOmp, VanishingAtomGainReproducesThePursuitToSmaxOrTolerance) {
+  const Eigen::Index m = 216, K = 512, n = 200;
+  const Eigen::MatrixXf D = random_dictionary(m, K, 25);
+  const Eigen::MatrixXf Y = random_signals(m, n, 26);
+  for (double tolerance : {0.0, 0.9}) {
+    SparseCodes plain, lagrangian;
+    BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15}).encode(Y, plain);
+    BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15, .min_atom_gain = 1e-9}).encode(Y, lagrangian);
+    EXPECT_EQ(plain.count, lagrangian.count);
+    EXPECT_EQ(plain.atom, lagrangian.atom);
+    EXPECT_EQ(plain.coefficient, lagrangian.coefficient);
+    if (tolerance == 0) {
+      for (std::uint8_t c : lagrangian.count) ASSERT_EQ(c, 15);
+    }
+  }
+}
+
+TEST(BatchOmp, GainWeightsScaleTheRateDistortionStop) {
+  const Eigen::Index m = 216, K = 512, n = 100;
+  const Eigen::MatrixXf D = random_dictionary(m, K, 27);
+  const Eigen::MatrixXf Y = random_signals(m, n, 28);
+  const BatchOmp omp(D, {.tolerance = 0, .max_atoms = 15, .min_atom_gain = 8.0});
+  const BatchOmp half(D, {.tolerance = 0, .max_atoms = 15, .min_atom_gain = 4.0});
+  std::vector<float> weights(static_cast<std::size_t>(n));
+  for (std::size_t i = 0; i < weights.size(); ++i) weights[i] = i % 2 ? 2.0f : 0.0f;
+  SparseCodes weighted, reference;
+  omp.encode(Y, weighted, weights);
+  half.encode(Y, reference);
+  for (std::size_t i = 0; i < weights.size(); ++i) {
+    if (i % 2)
+      EXPECT_EQ(weighted.count[i], reference.count[i]) << "block " << i;  // gain·2 ≥ 8 ⇔ gain ≥ 4
+    else
+      EXPECT_EQ(weighted.count[i], 0) << "block " << i;
+  }
+  EXPECT_THROW(omp.encode(Y, weighted, std::vector<float>(3, 1.0f)), std::invalid_argument);
+  EXPECT_THROW(BatchOmp(D, {.tolerance = 0, .max_atoms = 5, .min_atom_gain = -1}), std::invalid_argument);
+  EXPECT_THROW(BatchOmp(D, {.tolerance = 0, .max_atoms = 5, .max_error = -1}), std::invalid_argument);
+}
+
+/// Blocks of two kinds: noise (‖y‖² ≈ 216, each atom buys ≈ 5 % of what is left) and sparse
+/// blocks of 10 atoms with coefficients ±6 (each atom buys ≈ 36) over noise of RMS 0.5.
+Eigen::MatrixXf smooth_and_rough_blocks(const Eigen::MatrixXf& D, Eigen::Index n, std::uint64_t seed) {
+  Eigen::MatrixXf Y = random_signals(D.rows(), n, seed);
+  SplitMix64 rng(seed + 1);
+  for (Eigen::Index i = 0; i < n; i += 2) {
+    Y.col(i) *= 0.5f;
+    std::set<int> support;
+    while (support.size() < 10) support.insert(static_cast<int>(rng.below(static_cast<std::uint64_t>(D.cols()))));
+    for (int k : support) Y.col(i) += static_cast<float>(rng.uniform() < 0.5 ? -6 : 6) * D.col(k);
+  }
+  return Y;
+}
+
+TEST(BatchOmp, LagrangianAllocationBeatsToleranceAtEqualCodeCount) {
+  const Eigen::Index m = 216, K = 512, n = 400;
+  const Eigen::MatrixXf D = random_dictionary(m, K, 29);
+  const Eigen::MatrixXf Y = smooth_and_rough_blocks(D, n, 30);
+  const auto total = [&](const SparseCodingOptions& options) {
+    SparseCodes codes;
+    BatchOmp(D, options).encode(Y, codes);
+    std::size_t count = 0;
+    double error = 0;
+    for (std::size_t i = 0; i < codes.size(); ++i) count += codes.count[i], error += explicit_residual(D, Y, codes, i);
+    return std::pair{count, error};
+  };
+  for (double tolerance : {0.75, 0.9}) {
+    const auto [tolerance_codes, tolerance_error] = total({.tolerance = tolerance, .max_atoms = 15});
+    // About the smallest atom gain that uses no more codes than the ε rule (bisection in log gain;
+    // the code count falls as the gain grows).
+    double lo = 1e-2, hi = 1e3;
+    auto lagrangian = total({.tolerance = 0, .max_atoms = 15, .min_atom_gain = hi});
+    for (int step = 0; step < 24; ++step) {
+      const double mid = std::sqrt(lo * hi);
+      const auto trial = total({.tolerance = 0, .max_atoms = 15, .min_atom_gain = mid});
+      if (trial.first <= tolerance_codes)
+        hi = mid, lagrangian = trial;
+      else
+        lo = mid;
+    }
+    const double gain = hi;
+    ASSERT_LE(lagrangian.first, tolerance_codes);
+    // Measured: 20 % and 24 % less squared error for the same number of codes.
+    EXPECT_LT(lagrangian.second, 0.85 * tolerance_error)
+        << "eps " << tolerance << ": " << tolerance_codes << " codes, error " << tolerance_error << " (eps rule), "
+        << lagrangian.first << " codes, error " << lagrangian.second << " (Lagrangian, gain " << gain << ")";
+  }
 }
 
 TEST(BatchOmp, ToleranceAndPsnr) {

@@ -24,6 +24,8 @@ struct RdCommandOptions {
   std::string dictionary;                   ///< volreel's codecs need one; without it only zfp runs
   std::vector<double> tolerances = {1.0 / 64, 1.0 / 128, 1.0 / 256, 1.0 / 512, 1.0 / 1024, 1.0 / 2048};
   std::vector<int> sparsities = {1, 2, 3, 4, 5, 6, 7, 8};
+  std::vector<double> lagrangian_factors = {encoder::CodingSettings{}.lagrangian_factor};
+  bool tolerance_rule = false;              ///< also variable rate with the ε rule
   std::vector<double> zfp_bricks;           ///< zfp inside the container, accuracy / range (default none)
 };
 
@@ -45,10 +47,10 @@ void run_rd(const RdCommandOptions& o) {
     auto dict = std::make_shared<const dictionary::Dictionary>(dictionary::load_dictionary(o.dictionary));
     const auto bytes = static_cast<std::size_t>(std::filesystem::file_size(o.dictionary));
     std::printf("volreel codecs: dictionary %s (K = %d, %zu bytes, counted once in bps)\n", o.dictionary.c_str(), dict->atom_count(), bytes);
-    for (auto& c : make_volreel_sweep(dict, bytes, range.first, range.second, {o.tolerances, o.sparsities, {}})) codecs.push_back(std::move(c));
+    for (auto& c : make_volreel_sweep(dict, bytes, range.first, range.second, {o.tolerances, o.lagrangian_factors, o.tolerance_rule, o.sparsities, {}})) codecs.push_back(std::move(c));
   }
   if (!o.zfp_bricks.empty())
-    for (auto& c : make_volreel_sweep(nullptr, 0, range.first, range.second, {{}, {}, o.zfp_bricks})) codecs.push_back(std::move(c));
+    for (auto& c : make_volreel_sweep(nullptr, 0, range.first, range.second, {{}, {}, false, {}, o.zfp_bricks})) codecs.push_back(std::move(c));
   if (o.dictionary.empty()) std::printf("no --dictionary: volreel's sparse codecs are skipped (zfp only)\n");
   std::vector<psnr::RdPoint> points;
   {
@@ -93,7 +95,12 @@ void add_bench_command(CLI::App& app) {
   rd->add_option("--dictionary", o->dictionary,
                  "Dictionary (volreel train): adds volreel variable rate (--tolerances) and fixed rate (--sparsities), each\n"
                  "frame encoded into a frame file in memory and decoded by the CPU decoder; the dictionary counts in bps");
-  rd->add_option("--tolerances", o->tolerances, "Variable rate: eps as fractions of the value range")->capture_default_str();
+  rd->add_option("--tolerances", o->tolerances,
+                 "Variable rate: eps as fractions of the value range; each block gets the atoms that lower its squared\n"
+                 "error by at least k*216*eps^2 (the rate-distortion optimal, Lagrangian rule)")->capture_default_str();
+  rd->add_option("--lagrangian-factors", o->lagrangian_factors, "Variable rate: k, one row per value and eps")->capture_default_str();
+  rd->add_flag("--tolerance-rule", o->tolerance_rule,
+               "Also variable rate with the eps rule (atoms until each block's RMS error <= eps), for comparison");
   rd->add_option("--sparsities", o->sparsities, "Fixed rate: atoms per block")->capture_default_str();
   rd->add_option("--zfp-bricks", o->zfp_bricks, "Also zfp per brick inside the container, accuracy as fractions of the range");
   o->reader.add_to(*rd);

@@ -33,7 +33,7 @@ using Clock = std::chrono::steady_clock;
 constexpr double default_psnr = 55.0;  ///< when neither the dictionary nor the user says
 
 struct EncodeOptions {
-  std::string series, dictionary, out, codec = "ksvd";
+  std::string series, dictionary, out, codec = "ksvd", rate_rule = "lagrangian";
   ReaderOptions reader;
   double tolerance = 0, psnr = 0, bps = 0, zfp_accuracy = 0;
   int fixed_sparsity = 0, max_atoms = 15, atoms = 0;
@@ -114,6 +114,37 @@ void train_default_dictionary(const datasets::SeriesReader& series, double eps, 
   std::printf("using the dictionary of K = %u atoms (eps %.4g)\n", chosen.atom_count, eps);
 }
 
+/// Where the frame files' bytes went, and the atoms per block (ksvd).
+void print_breakdown(const encoder::EncodeSummary& s) {
+  const encoder::ByteBreakdown& b = s.breakdown;
+  const double total = static_cast<double>(b.total());
+  if (!(total > 0)) return;
+  const auto share = [&](double bytes) { return 100.0 * bytes / total; };
+  std::printf("frame bytes (%zu frames encoded): ", s.encoded);
+  const std::pair<const char*, std::size_t> parts[] = {
+      {"frame tables", b.frame_tables},   {"constant bricks", b.constant_bricks},
+      {"brick headers", b.brick_headers}, {"block means+counts", b.block_entries},
+      {"codes", b.codes},                 {"alignment", b.alignment},
+      {"zfp streams", b.zfp_streams}};
+  bool first = true;
+  for (const auto& [name, bytes] : parts) {
+    if (bytes == 0) continue;
+    std::printf("%s%s %.1f%%", first ? "" : ", ", name, share(static_cast<double>(bytes)));
+    first = false;
+  }
+  std::printf("; coarse levels %.1f%%, aprons and padding about %.1f%% (of all frame bytes)\n",
+              share(static_cast<double>(b.coarse_levels)), share(b.aprons_and_padding));
+  std::size_t blocks = 0, codes = 0;
+  for (std::size_t k = 0; k < s.sparsity_histogram.size(); ++k)
+    blocks += s.sparsity_histogram[k], codes += k * s.sparsity_histogram[k];
+  if (blocks == 0) return;
+  std::printf("atoms per block: mean %.2f; blocks with 0..15 atoms (%%):",
+              static_cast<double>(codes) / static_cast<double>(blocks));
+  for (std::size_t count : s.sparsity_histogram)
+    std::printf(" %.1f", 100.0 * static_cast<double>(count) / static_cast<double>(blocks));
+  std::printf("\n");
+}
+
 void run_encode(const EncodeOptions& o) {
   const auto series = datasets::open_series(o.series, o.reader.to_open_options());
   const auto& info = series->info();
@@ -133,6 +164,14 @@ void run_encode(const EncodeOptions& o) {
     throw InputError("--codec must be ksvd or zfp, not '" + o.codec + "'");
   c.max_atoms = o.max_atoms;
   c.fixed_sparsity = o.fixed_sparsity;
+  if (o.rate_rule == "lagrangian")
+    c.rule = encoder::VariableRateRule::lagrangian;
+  else if (o.rate_rule == "tolerance")
+    c.rule = encoder::VariableRateRule::tolerance;
+  else
+    throw InputError("--rate-rule must be lagrangian or tolerance, not '" + o.rate_rule + "'");
+  if (o.extend && c.fixed_sparsity == 0 && c.rule != encoder::VariableRateRule::tolerance)
+    throw InputError("--extend-pursuit needs --rate-rule tolerance");
   c.refit_quantization = !o.no_refit;
   c.extend_pursuit = o.extend;
   c.optimize_interval = !o.no_interval;
@@ -202,16 +241,27 @@ void run_encode(const EncodeOptions& o) {
     } else {
       c.tolerance = dictionary::tolerance_for_psnr(default_psnr, range);
     }
-    if (c.fixed_sparsity == 0)
+    if (c.fixed_sparsity == 0 && c.rule == encoder::VariableRateRule::tolerance)
       std::printf(
-          "tolerance eps %.4g (PSNR >= %.2f dB before quantization if every block meets it), K = "
-          "%u\n",
+          "tolerance eps %.4g, eps rule (PSNR >= %.2f dB before quantization if every block meets "
+          "it), K = %u\n",
           c.tolerance, dictionary::psnr_for_tolerance(c.tolerance, range), file.atom_count);
+    else if (c.fixed_sparsity == 0)
+      std::printf(
+          "tolerance eps %.4g, Lagrangian rule: a block keeps an atom if it lowers its squared "
+          "error by >= %.3g (%g*216*eps^2; nominal PSNR %.2f dB), K = %u\n",
+          c.tolerance, c.lagrangian_factor * 216 * c.tolerance * c.tolerance, c.lagrangian_factor,
+          dictionary::psnr_for_tolerance(c.tolerance, range), file.atom_count);
   }
   job.provenance = {
       {"program", "volreel " VOLREEL_VERSION},      {"series", o.series},
       {"refit_quantization", c.refit_quantization}, {"extend_pursuit", c.extend_pursuit},
       {"optimize_interval", c.optimize_interval},   {"max_atoms", c.max_atoms}};
+  if (c.codec == format::Codec::ksvd && c.fixed_sparsity == 0) {
+    job.provenance["rate_rule"] = o.rate_rule;
+    if (c.rule == encoder::VariableRateRule::lagrangian)
+      job.provenance["lagrangian_factor"] = c.lagrangian_factor;
+  }
   encoder::EncodeSummary s;
   {
     ProgressBar bar("encoding", "frames");
@@ -232,7 +282,11 @@ void run_encode(const EncodeOptions& o) {
         "every level; refit %s, optimized interval %s, pursuit extension %s)\n",
         10 * std::log10(s.quantized_squared_error / s.unquantized_squared_error),
         c.refit_quantization ? "on" : "off", c.optimize_interval ? "on" : "off",
-        c.extend_pursuit && c.fixed_sparsity == 0 ? "on" : "off");
+        c.extend_pursuit && c.fixed_sparsity == 0 &&
+                c.rule == encoder::VariableRateRule::tolerance
+            ? "on"
+            : "off");
+  print_breakdown(s);
   std::printf(
       "wrote %s: %zu frames (%zu encoded, %zu already there), %ju bytes, %.4f bps; encoding %.1f "
       "s, %.2f MVoxel/s on %d threads\n",
@@ -362,9 +416,12 @@ void add_encode_command(CLI::App& app) {
                                      "Encode a series into a NAME.vreel container (MTV-Player "
                                      "3.2): per frame an octree of bricks (34^3 + 1-voxel apron,\n"
                                      "coarser levels averaging 2x2x2), each brick's 6^3 blocks "
-                                     "sparse-coded against the dictionary to tolerance eps\n"
-                                     "(variable rate) or to S atoms (fixed rate) and quantized, or "
-                                     "each brick coded by zfp (--codec zfp).");
+                                     "sparse-coded against the dictionary (variable rate: each block\n"
+                                     "keeps the atoms that lower its squared error by at least "
+                                     "0.25*216*eps^2, the rate-distortion optimal\n"
+                                     "allocation; or, --rate-rule tolerance, atoms until its RMS "
+                                     "error <= eps; fixed rate: S atoms) and\n"
+                                     "quantized, or each brick coded by zfp (--codec zfp).");
   cmd->add_option("SERIES", o->series, "Raw series directory, HDF5 file or raw file")->required();
   cmd->add_option("--out", o->out, "The container directory to write, e.g. turb.vreel")->required();
   cmd->add_option("--dictionary", o->dictionary,
@@ -373,8 +430,10 @@ void add_encode_command(CLI::App& app) {
                   "Without --dictionary: K of the dictionary trained here (default 0: try 1024, "
                   "512, 256, 128 and keep the K\n"
                   "that gives the smallest container, dictionary included)");
-  o->tolerance_opt = cmd->add_option("--tolerance", o->tolerance,
-                                     "eps: RMS error per value of a block, data units");
+  o->tolerance_opt = cmd->add_option(
+      "--tolerance", o->tolerance,
+      "eps, data units: an atom is kept if it lowers its block's squared error by at least\n"
+      "0.25*216*eps^2 (--rate-rule tolerance: the RMS error per value of every block)");
   o->psnr_opt = cmd->add_option("--psnr", o->psnr, "eps = range * 10^(-PSNR/20)");
   o->bps_opt = cmd->add_option(
       "--bps", o->bps,
@@ -384,6 +443,13 @@ void add_encode_command(CLI::App& app) {
   cmd->add_option("--fixed-sparsity", o->fixed_sparsity,
                   "Fixed rate: S atoms per block (1..15) instead of a tolerance");
   cmd->add_option("--max-atoms", o->max_atoms, "Smax for variable rate (1..15)")
+      ->capture_default_str();
+  cmd->add_option("--rate-rule", o->rate_rule,
+                  "Variable rate: lagrangian (equal distortion-per-bit slope in every block: the "
+                  "least squared error\n"
+                  "for the size; blocks of aprons and padding weigh by the voxels the decoder "
+                  "reads from them) or\n"
+                  "tolerance (every block's RMS error <= eps: equal error per block)")
       ->capture_default_str();
   cmd->add_option("--codec", o->codec, "ksvd (sparse coding) or zfp (fixed accuracy per brick)")
       ->capture_default_str();
@@ -400,9 +466,9 @@ void add_encode_command(CLI::App& app) {
   cmd->add_flag("--no-interval", o->no_interval,
                 "Quantize coefficients over [min, max] of each brick (for comparison)");
   cmd->add_flag("--extend-pursuit", o->extend,
-                "Add atoms to blocks whose quantized error exceeds eps (quantization inside the "
-                "pursuit): meets eps after\n"
-                "quantization, at more bytes and half the speed");
+                "--rate-rule tolerance: add atoms to blocks whose quantized error exceeds eps "
+                "(quantization inside the\n"
+                "pursuit): meets eps after quantization, at more bytes and half the speed");
   o->reader.add_to(*cmd);
   cmd->callback([o] { run_encode(*o); });
 

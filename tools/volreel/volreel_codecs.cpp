@@ -70,11 +70,24 @@ std::vector<std::unique_ptr<psnr::FrameCodec>> make_volreel_sweep(
   base.value_min = value_min;
   base.value_max = value_max;
   for (double relative : sweep.relative_tolerances) {
-    auto s = base;
-    s.tolerance = range * relative;
-    codecs.push_back(std::make_unique<VolreelCodec>(dictionary, dictionary_bytes, s,
-                                                    "volreel variable-rate",
-                                                    setting_text("eps=%.2e", s.tolerance)));
+    for (double factor : sweep.lagrangian_factors) {
+      auto s = base;
+      s.tolerance = range * relative;
+      s.rule = encoder::VariableRateRule::lagrangian;
+      s.lagrangian_factor = factor;
+      std::string setting = setting_text("eps=%.2e", s.tolerance);
+      if (sweep.lagrangian_factors.size() > 1) setting += setting_text(",k=%g", factor);
+      codecs.push_back(std::make_unique<VolreelCodec>(dictionary, dictionary_bytes, s,
+                                                      "volreel variable-rate", setting));
+    }
+    if (sweep.tolerance_rule) {
+      auto s = base;
+      s.tolerance = range * relative;
+      s.rule = encoder::VariableRateRule::tolerance;
+      codecs.push_back(std::make_unique<VolreelCodec>(dictionary, dictionary_bytes, s,
+                                                      "volreel variable-rate eps-rule",
+                                                      setting_text("eps=%.2e", s.tolerance)));
+    }
   }
   for (int sparsity : sweep.fixed_sparsities) {
     auto s = base;

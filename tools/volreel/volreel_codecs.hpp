@@ -6,12 +6,16 @@
 #include <vector>
 
 #include "volreel/dictionary/dictionary.hpp"
+#include "volreel/encoder/encoder.hpp"
 #include "volreel/psnr/rate_distortion.hpp"
 
 namespace volreel::cli {
 
 struct VolreelSweep {
   std::vector<double> relative_tolerances;  ///< variable rate: ε / value range
+  /// Variable rate with the Lagrangian rule, once per factor (family "volreel variable-rate")
+  std::vector<double> lagrangian_factors = {encoder::CodingSettings{}.lagrangian_factor};
+  bool tolerance_rule = false;  ///< also with the ε rule (family "volreel variable-rate eps-rule")
   std::vector<int> fixed_sparsities;        ///< fixed rate: S
   std::vector<double>
       zfp_relative_accuracies;  ///< zfp per brick in the container: accuracy / range

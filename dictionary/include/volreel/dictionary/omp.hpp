@@ -23,9 +23,24 @@ namespace volreel::dictionary {
 /// Maximum atoms per block in volreel's format (4-bit sparsity field).
 inline constexpr int default_max_atoms = 15;
 
+/// When the pursuit of a block stops: at the first of these that holds.
+///   1. ‖r‖² ≤ m·ε² (the tolerance; ε = 0: never);
+///   2. s = Smax;
+///   3. rate-distortion stop (min_atom_gain > 0): the next atom would lower ‖r‖² by less than
+///      min_atom_gain, unless ‖r‖² > m·max_error² (max_error > 0: a hard bound on the block's RMS
+///      error that overrides the gain test; 0: no bound).
+/// Rule 3 is the Lagrangian rule of rate-distortion optimisation (Shoham & Gersho 1988; Ortega &
+/// Ramchandran 1998, "Rate-distortion methods for image and video compression", §III): with a
+/// constant cost per atom (a 16-bit code), keeping every atom whose gain exceeds λ·bits gives every
+/// block the same slope −ΔE/Δbits, which minimises the total squared error for the total number of
+/// codes, where rule 1 equalises the error per block instead. The gain of atom k is computed
+/// before it is added: the residual is orthogonal to the support, so ΔE = (d_kᵀr)² / ‖P⊥d_k‖²,
+/// with ‖P⊥d_k‖² the new Cholesky pivot G_kk − wᵀw. min_atom_gain = 0 is plain OMP (rules 1–2).
 struct SparseCodingOptions {
   double tolerance = 0;                 ///< ε ≥ 0, RMS error per value of a block (see above)
   int max_atoms = default_max_atoms;    ///< Smax ≥ 1: a block uses at most this many atoms
+  double min_atom_gain = 0;             ///< ≥ 0, data units² (squared error of the block): rule 3
+  double max_error = 0;                 ///< ≥ 0, RMS error per value: rule 3's bound (0: none)
 };
 
 /// ε for a PSNR target: ε = range · 10^(−psnr/20), so that PSNR ≥ psnr if every block meets ε.
@@ -55,11 +70,15 @@ struct SparseCodes {
 class BatchOmp {
  public:
   /// atoms: m × K, unit-norm columns (zero-mean for volreel's blocks). Throws std::invalid_argument
-  /// on bad options (ε < 0 or not finite, Smax < 1 or > 255 or > m).
+  /// on bad options (ε, min_atom_gain or max_error < 0 or not finite, Smax < 1 or > 255 or > m).
   BatchOmp(const Eigen::MatrixXf& atoms, SparseCodingOptions options);
 
-  /// Codes every column of `blocks` (m × n, zero-mean). codes is resized to n.
-  void encode(const Eigen::Ref<const Eigen::MatrixXf>& blocks, SparseCodes& codes) const;
+  /// Codes every column of `blocks` (m × n, zero-mean). codes is resized to n. gain_weights: empty,
+  /// or n values ≥ 0, the importance of each block's error in the rate-distortion stop: block i
+  /// stops before an atom whose gain × gain_weights[i] is below min_atom_gain (0: no atoms, unless
+  /// the max_error bound asks for them). Throws std::invalid_argument on a size mismatch.
+  void encode(const Eigen::Ref<const Eigen::MatrixXf>& blocks, SparseCodes& codes,
+              const std::vector<float>& gain_weights = {}) const;
 
   const SparseCodingOptions& options() const { return options_; }
   const Eigen::MatrixXf& atoms() const { return atoms_; }
@@ -69,6 +88,7 @@ class BatchOmp {
   Eigen::MatrixXf gram_;   ///< K × K
   SparseCodingOptions options_;
   double target_energy_;   ///< m·ε²
+  double bound_energy_;    ///< m·max_error² (+∞ without a bound)
 };
 
 /// One block's code from the reference OMP.
@@ -81,7 +101,8 @@ struct ReferenceCode {
 
 /// Plain OMP in double precision: at each step correlate the explicit residual with every atom,
 /// add the best, re-solve least squares on the support by QR. Slow; the yardstick for tests.
-/// Same stopping rule as BatchOmp (‖r‖² ≤ m·ε², or Smax atoms).
+/// Same stopping rules as BatchOmp (‖r‖² ≤ m·ε², Smax atoms, or an atom's gain below
+/// min_atom_gain, measured here as the drop of the explicit ‖r‖²; such an atom is not kept).
 ReferenceCode reference_omp(const Eigen::MatrixXf& atoms, const Eigen::VectorXf& block, SparseCodingOptions options);
 
 /// y ≈ Dγ for block i of codes, written into out (m values).

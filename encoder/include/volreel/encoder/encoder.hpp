@@ -4,6 +4,7 @@
 // (or zfp per brick), node table with bottom-up histograms; and a whole series -> a container.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -27,10 +28,36 @@ namespace detail {
 struct QuantizeOptions;
 }
 
+/// How variable rate chooses the number of atoms of each block (both driven by ε).
+enum class VariableRateRule {
+  /// Rate-distortion optimal (Lagrangian): add the next atom while it lowers the block's squared
+  /// error by at least lagrangian_factor·m·ε² (m = 216 values). Every code costs the same 16 bits,
+  /// so this gives every block the same distortion-per-bit slope, which minimises the total
+  /// squared error (hence maximises PSNR) for the total size: smooth blocks get few atoms, rough
+  /// blocks many.
+  lagrangian,
+  /// Add atoms until the block's RMS error is at most ε (equal error per block; the paper's rule).
+  tolerance,
+};
+
 /// How bricks are coded.
 struct CodingSettings {
   format::Codec codec = format::Codec::ksvd;
-  double tolerance = 0;  ///< ksvd variable rate: ε, RMS error per value of a block (data units)
+  double tolerance = 0;  ///< ksvd variable rate: ε (data units), see VariableRateRule
+  VariableRateRule rule = VariableRateRule::lagrangian;
+  /// Lagrangian rule: the minimum gain of an atom, as a fraction of m·ε² (> 0). Only the product
+  /// with ε² matters, so this sets what ε means: at 0.25, on turbulence-128 between 0.26 and
+  /// 0.6 bps, the PSNR at a given ε is about that of the ε rule and above 20·log10(range/ε), so
+  /// that --psnr keeps its meaning (the ε rule's bound per block no longer holds).
+  double lagrangian_factor = 0.25;
+  /// Lagrangian rule: keep adding atoms (up to Smax) while a block's RMS error exceeds
+  /// error_bound_factor·ε, whatever their gain (0: no bound).
+  double error_bound_factor = 0;
+  /// Lagrangian rule: weigh each block's atom gains by the share of its voxels that the decoder
+  /// takes from it (its brick's interior, inside the level). The rest are the apron, a copy of a
+  /// neighbour's interior coded there, and padding outside the volume: a block of padding only
+  /// weighs as one voxel (1/216), so it gets atoms only where they are 216 times cheaper.
+  bool weight_owned_voxels = true;
   int fixed_sparsity =
       0;               ///< ksvd fixed rate: exactly min(S, needed) atoms per block (0: variable)
   int max_atoms = 15;  ///< Smax ≤ 15 (4-bit field)
@@ -38,7 +65,7 @@ struct CodingSettings {
   /// Quantize coefficients one at a time, re-solving the least-squares fit of the block's later
   /// coefficients against the error of the ones already quantized ("quantize inside the pursuit").
   bool refit_quantization = true;
-  /// Variable rate: while a block's quantized error exceeds ε, add the atom most correlated with
+  /// Variable rate, ε rule: while a block's quantized error exceeds ε, add the atom most correlated with
   /// the quantized residual (up to Smax) and quantize again ("quantization inside the pursuit").
   /// Off by default: on turbulence it recovers 0.26 dB of the quantization loss for 6.7 % more
   /// bytes (about neutral at equal bps) and halves the encoding speed.
@@ -62,6 +89,27 @@ Pyramid build_pyramid(const Volume& frame);
 void extract_brick(const Pyramid& pyramid, std::size_t level, std::uint32_t x, std::uint32_t y,
                    std::uint32_t z, std::span<float> out);
 
+/// Where a frame file's bytes go. The parts from frame_tables to zfp_streams sum to the file's
+/// size; the last two are shares of the payload parts.
+struct ByteBreakdown {
+  std::size_t frame_tables = 0;     ///< header, level table, node table, brick offsets
+  std::size_t constant_bricks = 0;  ///< 4-byte values
+  std::size_t brick_headers = 0;    ///< ksvd: 16 bytes of dequantization values per coded brick
+  std::size_t block_entries = 0;    ///< ksvd: 2 bytes per block (12-bit mean, 4-bit sparsity)
+  std::size_t codes = 0;            ///< ksvd: 2 bytes per code (10-bit atom, 6-bit value)
+  std::size_t alignment = 0;        ///< ksvd: payloads padded to a multiple of 4 bytes
+  std::size_t zfp_streams = 0;      ///< zfp bricks
+  std::size_t coarse_levels = 0;    ///< payload bytes of the levels above the finest
+  /// Payload bytes in proportion to the stored voxels that are aprons or padding (outside the
+  /// level), brick by brick: an estimate of what the brick layout costs.
+  double aprons_and_padding = 0;
+  ByteBreakdown& operator+=(const ByteBreakdown& o);
+  std::size_t total() const {
+    return frame_tables + constant_bricks + brick_headers + block_entries + codes + alignment +
+           zfp_streams;
+  }
+};
+
 struct FrameStats {
   std::size_t bricks = 0, constant_bricks = 0, empty_nodes = 0;
   std::size_t blocks = 0, codes = 0;  ///< coded blocks and coefficients (ksvd)
@@ -73,6 +121,8 @@ struct FrameStats {
   /// of the unquantized sparse approximation, and of what the payload decodes to. Their ratio is
   /// the PSNR lost to quantization: 10·log10(quantized / unquantized).
   double unquantized_squared_error = 0, quantized_squared_error = 0;
+  ByteBreakdown breakdown;
+  std::array<std::size_t, 16> sparsity_histogram{};  ///< coded blocks (ksvd) by atom count
 };
 
 /// Encodes frames with fixed settings and dictionary; safe to use from one thread at a time
@@ -88,6 +138,9 @@ class FrameEncoder {
   /// or a zfp stream (the same coding encode() applies to every brick).
   std::vector<std::byte> encode_brick(std::span<const float> brick) const;
   const CodingSettings& settings() const { return settings_; }
+  /// The Lagrangian rule's minimum atom gain, lagrangian_factor·m·ε² (data units²); 0 for the
+  /// other rules and codecs.
+  double atom_gain_threshold() const;
 
  private:
   const dictionary::Dictionary* dictionary_;
@@ -112,6 +165,8 @@ struct EncodeSummary {
   double seconds = 0;  ///< encoding only (skipped frames excluded)
   double mvoxels_per_s = 0;
   double unquantized_squared_error = 0, quantized_squared_error = 0;  ///< FrameStats', summed
+  ByteBreakdown breakdown;                                            ///< of the frames encoded
+  std::array<std::size_t, 16> sparsity_histogram{};                   ///< FrameStats', summed
   double seconds_pyramid = 0, seconds_bricks = 0, seconds_omp = 0, seconds_quantize = 0;
 };
 /// Writes OUT (a NAME.vreel directory). Frames go to temporary names renamed when complete; the
