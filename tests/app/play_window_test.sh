@@ -1,13 +1,16 @@
 #!/usr/bin/env bash
 # play_window_test.sh: `volreel play` in a window under Xvfb. Makes a small container (gen →
 # train → encode), then plays it with a script: the panels hidden, a screenshot of keyframe 0, a
-# step (right arrow), play for three frames and pause (space), a seek back to 0, End, a window
-# resize, and a screenshot with the panels. Checks that the frames are not blank, that stepping
-# and playing change the picture, that seeking back reproduces keyframe 0's picture, that the
-# script ran in order and the swapchain followed the resize (and, where the validation layer is
+# step (right arrow), play for three frames and pause (space), a seek back to 0, End, window
+# resizes, and screenshots with the panels at 400x300, 320x240 and 1280x720. Checks that the
+# frames are not blank, that stepping and playing change the picture, that seeking back
+# reproduces keyframe 0's picture, that the script ran in order and the swapchain followed the
+# resizes, that the panels (HUD, timeline, side panel, as reported by the `layout` script action)
+# stay inside the window without overlapping at each size (and, where the validation layer is
 # installed, that it reports no error). Then: the CPU reference renderer in the same window draws
 # keyframe 0 like the Vulkan ray caster (PSNR > 30 dB); a copy with a truncated frame file plays to
-# the end with the problem reported; without a display the command says how to get one.
+# the end with the problem reported; without a display the command says how to get one. Real
+# mouse input and minimizing are tested by play_input_test.sh.
 # Exits 77 (skipped) without xvfb-run or without a Vulkan device that can present to a window.
 # Usage: play_window_test.sh PATH/TO/volreel
 set -euo pipefail
@@ -42,6 +45,15 @@ cat > "$work/script.txt" <<SCRIPT
 0 resize 400 300
 +2f settle 30
 0 screenshot $work/ui.png
+0 layout
+0 resize 320 240
++2f settle 30
+0 layout
+0 screenshot $work/ui320.png
+0 resize 1280 720
++2f settle 30
+0 layout
+0 screenshot $work/ui1280.png
 0 quit
 SCRIPT
 
@@ -68,7 +80,7 @@ case $rc in
 esac
 grep -q "settle timed out" "$work/err.txt" && fail "streaming did not settle: $(cat "$work/err.txt")"
 grep -q "Validation Error" "$work/err.txt" && fail "Vulkan validation errors: $(cat "$work/err.txt")"
-for f in s0 s1 s2 s3 ui exit; do [ -s "$work/$f.png" ] || fail "no screenshot $f.png"; done
+for f in s0 s1 s2 s3 ui ui320 ui1280 exit; do [ -s "$work/$f.png" ] || fail "no screenshot $f.png"; done
 
 # The playhead: keyframe 1 after the step, further on after playing, 0 after the seek.
 keyframe_at() { grep "screenshot $work/$1.png" "$work/out.txt" | sed -E 's/.*keyframe ([0-9.]+):.*/\1/'; }
@@ -103,6 +115,32 @@ ui = img["ui"]
 check(ui.shape == (300, 400, 3), f"ui: 400x300 after resizing the window, found {ui.shape}")
 panel = ui[-60:, :, :]  # the timeline panel along the bottom edge
 check(panel.std() > 10, f"ui: the panels show when turned on (std of the timeline strip {panel.std():.1f})")
+check(np.asarray(Image.open(f"{work}/ui320.png")).shape[:2] == (240, 320), "ui320: 320x240")
+check(np.asarray(Image.open(f"{work}/ui1280.png")).shape[:2] == (720, 1280), "ui1280: 1280x720")
+
+# The panels' rectangles (the `layout` script action): inside the window, none over another.
+import re
+layouts = [l for l in open(f"{work}/out.txt") if l.startswith("layout ")]
+check([l.split(":")[0] for l in layouts] == ["layout 400x300", "layout 320x240", "layout 1280x720"],
+      f"layout reported at 400x300, 320x240, 1280x720 (found {[l.split(':')[0] for l in layouts]})")
+for l in layouts:
+    size, rest = l.split(":", 1)
+    w, h = (float(v) for v in size.split()[1].split("x"))
+    rects = {}
+    for part in rest.split(";"):
+        words = part.split()
+        if len(words) >= 5:
+            rects[words[0]] = [float(v) for v in words[1:5]]
+    check(set(rects) == {"hud", "timeline", "panel"}, f"{size}: all three panels shown ({sorted(rects)})")
+    for name, (x, y, rw, rh) in rects.items():
+        check(x >= 0 and y >= 0 and x + rw <= w and y + rh <= h, f"{size}: {name} {x:.0f},{y:.0f} {rw:.0f}x{rh:.0f} inside the window")
+    names = sorted(rects)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            ax, ay, aw, ah = rects[a]
+            bx, by, bw, bh = rects[b]
+            overlap = ax < bx + bw and bx < ax + aw and ay < by + bh and by < ay + ah
+            check(not overlap, f"{size}: {a} and {b} do not overlap")
 sys.exit(0 if ok else 1)
 PY
 

@@ -50,6 +50,16 @@ TEST(Script, FramesRelativeTimesCommentsAndArguments) {
   EXPECT_TRUE(parse_script("").empty());
 }
 
+TEST(Script, CameraAndLayoutReports) {
+  const auto a = parse_script("0 camera; +2f layout");
+  ASSERT_EQ(a.size(), 2u);
+  EXPECT_EQ(a[0].kind, Kind::camera);
+  EXPECT_EQ(a[1].kind, Kind::layout);
+  EXPECT_EQ(a[1].at_frame, 2);
+  EXPECT_THROW(parse_script("0 camera 1"), InputError);
+  EXPECT_THROW(parse_script("0 layout now"), InputError);
+}
+
 TEST(Script, KeyNames) {
   EXPECT_GE(key_code("space"), 0);
   EXPECT_EQ(key_code("a") + 1, key_code("b"));

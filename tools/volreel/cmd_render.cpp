@@ -174,8 +174,9 @@ void run_render(const RenderCommandOptions& o) {
   if (!o.video.empty()) {
     ffmpeg = find_on_path("ffmpeg");
     if (ffmpeg.empty())
-      throw InputError("--video needs ffmpeg, which is not installed (Debian: apt-get install ffmpeg); "
-                       "run without --video to write the PNG frames only");
+      throw InputError("--video " + o.video +
+                       ": needs ffmpeg, which is not installed or not on PATH (Debian: apt-get install ffmpeg); "
+                       "nothing was rendered: install it, or run without --video to write the PNG frames only");
   }
   const fs::path out = o.out;
   if (fs::exists(out) && !fs::is_directory(out))
@@ -296,11 +297,20 @@ void run_render(const RenderCommandOptions& o) {
   std::printf("wrote %s/frame_00000.png .. frame_%05zu.png and %s\n", out.c_str(), frames ? frames - 1 : 0,
               (out / "metrics.csv").c_str());
   if (!ffmpeg.empty()) {
-    const int status = run_program(ffmpeg, {"-y", "-loglevel", "error", "-framerate", std::to_string(tour.fps()), "-i",
-                                            (out / "frame_%05d.png").string(), "-c:v", "libx264", "-pix_fmt", "yuv420p",
-                                            "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", o.video});
+    // Exactly this run's frames (-frames:v: the folder may hold more frame_NNNNN.png from an
+    // earlier, longer run); '%' in the folder name escaped for ffmpeg's image-sequence pattern;
+    // -nostdin: ffmpeg must not read the terminal (it stops a `volreel render ... &` job).
+    std::string pattern;
+    for (const char c : (out / "frame_").string()) pattern += c == '%' ? std::string("%%") : std::string(1, c);
+    pattern += "%05d.png";
+    if (const fs::path parent = fs::path(o.video).parent_path(); !parent.empty()) fs::create_directories(parent);
+    const int status =
+        run_program(ffmpeg, {"-nostdin", "-y", "-loglevel", "error", "-framerate", std::to_string(tour.fps()),
+                             "-start_number", "0", "-i", pattern, "-frames:v", std::to_string(frames), "-c:v",
+                             "libx264", "-pix_fmt", "yuv420p", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", o.video});
+    if (status < 0) throw InputError("could not run " + ffmpeg + " to encode " + o.video);
     if (status != 0) throw InputError("ffmpeg failed (exit status " + std::to_string(status) + ") encoding " + o.video);
-    std::printf("wrote %s\n", o.video.c_str());
+    std::printf("wrote %s (%zu frames, H.264)\n", o.video.c_str(), frames);
   }
 }
 

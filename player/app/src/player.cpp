@@ -14,8 +14,15 @@
 //   6. acquire a swapchain image; record: the volume image, a blit onto the swapchain image, ImGui
 //      on top, an optional read-back; submit with slot s's fence; present;
 //   7. HUD figures.
-// A swapchain that is out of date or suboptimal is recreated before the next frame; a window of
-// zero size (minimized) waits for events without rendering.
+// A swapchain that is out of date or suboptimal is recreated before the next frame. A minimized
+// (iconified) window, or one whose framebuffer has zero size, renders nothing: the loop blocks in
+// glfwWaitEvents until the window is back (or closed), and the time away does not advance the
+// playhead or the script clock; both events are reported on stdout.
+//
+// Panel layout (draw_ui): the timeline along the bottom edge, the HUD in the top-left corner above
+// it, and the side panel at the top right when it fits beside the HUD, otherwise below the HUD,
+// never taller than the space above the timeline. Below 560 × 400 pixels the HUD and the timeline
+// switch to a compact form, so nothing overlaps down to about 320 × 240.
 #define GLFW_INCLUDE_VULKAN
 #include "volreel/app/player.hpp"
 #include "volreel/vulkan_render/auto_transfer.hpp"
@@ -172,6 +179,38 @@ struct Smoothed {
   }
 };
 
+/// An ImGui window's rectangle on screen, pixels.
+struct ScreenRect {
+  float x = 0, y = 0, width = 0, height = 0;
+  bool shown = false;
+  float right() const { return x + width; }
+  float bottom() const { return y + height; }
+};
+
+/// The rectangle of the ImGui window being drawn (between Begin and End).
+ScreenRect current_window_rect() {
+  const ImVec2 pos = ImGui::GetWindowPos(), size = ImGui::GetWindowSize();
+  return {pos.x, pos.y, size.x, size.y, true};
+}
+
+/// Width of a button with this label, pixels.
+float button_width(const char* label) {
+  return ImGui::CalcTextSize(label, nullptr, true).x + 2 * ImGui::GetStyle().FramePadding.x;
+}
+
+/// Width of a checkbox with this label, pixels.
+float checkbox_width(const char* label) {
+  return ImGui::GetFrameHeight() + ImGui::GetStyle().ItemInnerSpacing.x +
+         ImGui::CalcTextSize(label, nullptr, true).x;
+}
+
+/// Continues the current row when an item `width` pixels wide still fits in the window, else
+/// starts a new row: a flow layout, so a narrow window wraps its controls instead of clipping.
+void same_line_if_fits(float width) {
+  const float end = ImGui::GetItemRectMax().x + ImGui::GetStyle().ItemSpacing.x + width;
+  if (end <= ImGui::GetWindowPos().x + ImGui::GetWindowContentRegionMax().x) ImGui::SameLine();
+}
+
 class Player {
  public:
   explicit Player(const PlayerOptions& options);
@@ -205,6 +244,13 @@ class Player {
   float sse_target_ = 1.0f;
   bool show_ui_ = true;
 
+  ScreenRect hud_rect_, timeline_rect_, panel_rect_;  ///< as drawn in the latest frame
+  bool panel_collapsed_ = false;
+  bool compact_ui_ = false;           ///< small window: the short HUD and the wrapped timeline
+  const char* drag_cause_ = nullptr;  ///< what the current mouse drag does to the camera
+  /// Key presses since the last frame: GLFW key code, and whether it is an auto-repeat.
+  std::vector<std::pair<int, bool>> typed_keys_;
+
   // Loop state.
   std::uint64_t frame_number_ = 0;  ///< frames submitted so far
   bool recreate_ = false, quit_ = false;
@@ -213,6 +259,7 @@ class Player {
   double script_clock_ = 0;
   std::uint64_t previous_action_frame_ = 0;  ///< when the last script entry ran
   double previous_action_clock_ = 0;
+  bool resumed_ = false;  ///< the window was just restored: the next frame time is not a sample
   bool settling_ = false;
   double settle_timeout_ = 0, settle_waited_ = 0;
   std::uint64_t settle_from_ = 0;  ///< first frame whose statistics count
@@ -230,10 +277,15 @@ class Player {
   VkExtent2D render_extent_{};
 
   VkExtent2D render_size(VkExtent2D window) const;
+  bool window_hidden() const;
+  void wait_while_hidden();
   void recreate_swapchain();
+  void report_camera(const char* cause) const;
+  void report_layout() const;
   void press(int key);
   void run_script(double dt);
   void handle_input();
+  static void on_key(GLFWwindow* window, int key, int scancode, int action, int mods);
   void apply_preset(const std::string& name);
   void rebuild_transfer();
   void draw_ui();
@@ -279,8 +331,9 @@ Player::Player(const PlayerOptions& options)
   swapchain_ = std::make_unique<detail::Swapchain>(*context_, surface_->handle(), options.vsync);
   int fw = 0, fh = 0;
   glfwGetFramebufferSize(window_.get(), &fw, &fh);
-  swapchain_->recreate(
-      {static_cast<std::uint32_t>(std::max(fw, 1)), static_cast<std::uint32_t>(std::max(fh, 1))});
+  if (!swapchain_->recreate({static_cast<std::uint32_t>(std::max(fw, 1)),
+                             static_cast<std::uint32_t>(std::max(fh, 1))}))
+    throw vulkan::Error("vkCreateSwapchainKHR: the window's surface has zero size at start-up");
 
   // 2. The renderer with its scheduler (its atlas decides the slot count).
   detail::RendererSetup setup;
@@ -321,6 +374,10 @@ Player::Player(const PlayerOptions& options)
     slots_[i].done = vulkan::Fence(*context_, true);
     slots_[i].image_acquired = vulkan::Semaphore(*context_);
   }
+  // Key presses are queued by our GLFW callback (ImGui's backend chains to it), so a tap shorter
+  // than a frame is not lost: ImGui 1.86 only sees whether a key is down when a frame starts.
+  glfwSetWindowUserPointer(window_.get(), this);
+  glfwSetKeyCallback(window_.get(), &Player::on_key);
   imgui_ = std::make_unique<ImGuiSession>(*context_, window_.get(), *swapchain_);
 
   // 4. View and transfer function.
@@ -375,18 +432,41 @@ VkExtent2D Player::render_size(VkExtent2D window) const {
   return {scaled(window.width), scaled(window.height)};
 }
 
+bool Player::window_hidden() const {
+  int fw = 0, fh = 0;
+  glfwGetFramebufferSize(window_.get(), &fw, &fh);
+  return glfwGetWindowAttrib(window_.get(), GLFW_ICONIFIED) == GLFW_TRUE || fw <= 0 || fh <= 0;
+}
+
+void Player::wait_while_hidden() {
+  const auto since = Clock::now();
+  const bool iconified = glfwGetWindowAttrib(window_.get(), GLFW_ICONIFIED) == GLFW_TRUE;
+  if (!options_.quiet) {
+    std::printf("window %s at frame %llu: rendering paused\n",
+                iconified ? "minimized" : "has zero size",
+                static_cast<unsigned long long>(frame_number_));
+    std::fflush(stdout);
+  }
+  while (window_hidden() && !glfwWindowShouldClose(window_.get())) glfwWaitEvents();
+  if (!options_.quiet && !glfwWindowShouldClose(window_.get())) {
+    std::printf("window restored after %.1f s: rendering resumes at frame %llu\n",
+                seconds_between(since, Clock::now()),
+                static_cast<unsigned long long>(frame_number_));
+    std::fflush(stdout);
+  }
+  recreate_ = true;  // the surface may have changed size or become out of date meanwhile
+  resumed_ = true;
+}
+
 void Player::recreate_swapchain() {
   int fw = 0, fh = 0;
   glfwGetFramebufferSize(window_.get(), &fw, &fh);
-  // Minimized: nothing to draw on; wait for the window to come back (or close).
-  while ((fw == 0 || fh == 0) && !glfwWindowShouldClose(window_.get())) {
-    glfwWaitEvents();
-    glfwGetFramebufferSize(window_.get(), &fw, &fh);
-  }
-  if (glfwWindowShouldClose(window_.get())) return;
+  if (fw <= 0 || fh <= 0) return;  // minimized again: the loop waits (window_hidden)
   context_->wait_idle();
-  if (!swapchain_->recreate({static_cast<std::uint32_t>(fw), static_cast<std::uint32_t>(fh)}))
-    return;  // zero extent: try again next frame
+  if (!swapchain_->recreate({static_cast<std::uint32_t>(fw), static_cast<std::uint32_t>(fh)})) {
+    glfwWaitEventsTimeout(0.05);  // the surface reports zero size: try again shortly
+    return;
+  }
   ImGui_ImplVulkan_SetMinImageCount(std::max(swapchain_->min_image_count(), 2u));
   recreate_ = false;
 }
@@ -512,6 +592,12 @@ void Player::run_script(double dt) {
       case Kind::screenshot:
         pending_screenshots_.emplace_back(a.text);
         return;  // this frame is the screenshot: later entries wait for the next frame
+      case Kind::camera:
+        report_camera("script");
+        break;
+      case Kind::layout:
+        report_layout();
+        break;
       case Kind::quit:
         quit_ = true;
         break;
@@ -519,24 +605,36 @@ void Player::run_script(double dt) {
   }
 }
 
+void Player::on_key(GLFWwindow* window, int key, int, int action, int) {
+  auto* player = static_cast<Player*>(glfwGetWindowUserPointer(window));
+  if (player && (action == GLFW_PRESS || action == GLFW_REPEAT))
+    player->typed_keys_.emplace_back(key, action == GLFW_REPEAT);
+}
+
 void Player::handle_input() {
   const ImGuiIO& io = ImGui::GetIO();
-  if (!io.WantCaptureKeyboard) {
-    for (int key :
-         {GLFW_KEY_SPACE, GLFW_KEY_R, GLFW_KEY_LEFT_BRACKET, GLFW_KEY_RIGHT_BRACKET, GLFW_KEY_C,
-          GLFW_KEY_H, GLFW_KEY_L, GLFW_KEY_HOME, GLFW_KEY_END, GLFW_KEY_ESCAPE, GLFW_KEY_Q})
-      if (ImGui::IsKeyPressed(key, false)) press(key);
-    for (int key : {GLFW_KEY_LEFT, GLFW_KEY_RIGHT})  // steps repeat while held
-      if (ImGui::IsKeyPressed(key, true)) press(key);
+  std::vector<std::pair<int, bool>> typed;
+  typed.swap(typed_keys_);
+  if (!io.WantCaptureKeyboard)
+    for (const auto& [key, repeat] : typed)
+      if (!repeat || key == GLFW_KEY_LEFT || key == GLFW_KEY_RIGHT)  // steps repeat while held
+        press(key);
+  // A drag's camera change is reported once, when its button is released.
+  if (drag_cause_ && !ImGui::IsMouseDown(ImGuiMouseButton_Left) &&
+      !ImGui::IsMouseDown(ImGuiMouseButton_Right) && !ImGui::IsMouseDown(ImGuiMouseButton_Middle)) {
+    report_camera(drag_cause_);
+    drag_cause_ = nullptr;
   }
   if (io.WantCaptureMouse) return;
   const double dx = io.MouseDelta.x, dy = io.MouseDelta.y;
   if (ImGui::IsMouseDown(ImGuiMouseButton_Left) && (dx != 0 || dy != 0)) {
     camera_.azimuth -= dx * 0.01;
     camera_.elevation = std::clamp(camera_.elevation + dy * 0.01, -1.5, 1.5);
+    drag_cause_ = "left drag: orbit";
   }
   if ((ImGui::IsMouseDown(ImGuiMouseButton_Right) || ImGui::IsMouseDown(ImGuiMouseButton_Middle)) &&
       (dx != 0 || dy != 0)) {
+    drag_cause_ = "right drag: pan";
     // Pan in the view plane: one window pixel moves the target by one pixel at its depth.
     const glm::dvec3 forward = glm::normalize(camera_.target - camera_.eye());
     const glm::dvec3 right = glm::normalize(glm::cross(forward, glm::dvec3(0, 0, 1)));
@@ -545,95 +643,151 @@ void Player::handle_input() {
                              std::max(1.0, static_cast<double>(io.DisplaySize.y));
     camera_.target += (-dx * right + dy * up) * per_pixel;
   }
-  if (io.MouseWheel != 0)
+  if (io.MouseWheel != 0) {
     camera_.distance = std::max(1.0, camera_.distance * std::pow(0.9, double(io.MouseWheel)));
+    report_camera("wheel: zoom");
+  }
+}
+
+void Player::report_camera(const char* cause) const {
+  if (options_.quiet) return;
+  std::printf(
+      "camera (%s): azimuth %.2f deg elevation %.2f deg distance %.3f target %.3f %.3f %.3f\n",
+      cause, camera_.azimuth * 180.0 / M_PI, camera_.elevation * 180.0 / M_PI, camera_.distance,
+      camera_.target.x, camera_.target.y, camera_.target.z);
+  std::fflush(stdout);
+}
+
+void Player::report_layout() const {
+  const ImVec2 size = ImGui::GetIO().DisplaySize;
+  std::printf("layout %.0fx%.0f:", double{size.x}, double{size.y});
+  const auto print = [](const char* name, const ScreenRect& r, const char* note) {
+    if (r.shown)
+      std::printf(" %s %.0f %.0f %.0f %.0f%s;", name, double{r.x}, double{r.y}, double{r.width},
+                  double{r.height}, note);
+    else
+      std::printf(" %s hidden;", name);
+  };
+  print("hud", hud_rect_, "");
+  print("timeline", timeline_rect_, "");
+  print("panel", panel_rect_, panel_collapsed_ ? " collapsed" : "");
+  std::printf("\n");
+  std::fflush(stdout);
 }
 
 void Player::draw_hud() {
+  const ImVec2 size = ImGui::GetIO().DisplaySize;
+  const ImGuiStyle& style = ImGui::GetStyle();
   const ImGuiWindowFlags flags = ImGuiWindowFlags_NoDecoration | ImGuiWindowFlags_AlwaysAutoResize |
                                  ImGuiWindowFlags_NoSavedSettings |
                                  ImGuiWindowFlags_NoFocusOnAppearing | ImGuiWindowFlags_NoNav;
+  // Top left, above the timeline; lines longer than the window is wide wrap.
+  const float bottom = timeline_rect_.shown ? timeline_rect_.y - 8 : size.y - 10;
+  const ImVec2 max_size(std::max(size.x - 20, 1.0f), std::max(bottom - 10, 1.0f));
   ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_Always);
+  ImGui::SetNextWindowSizeConstraints(ImVec2(0, 0), max_size);
   ImGui::SetNextWindowBgAlpha(0.55f);
-  if (ImGui::Begin("HUD", nullptr, flags)) {
+  const bool open = ImGui::Begin("HUD", nullptr, flags);
+  hud_rect_ = current_window_rect();
+  if (open) {
+    ImGui::PushTextWrapPos(std::min(max_size.x - style.WindowPadding.x,
+                                    style.WindowPadding.x + ImGui::GetFontSize() * 36.0f));
     const double t = playhead_.position();
     const auto& ts = container_.manifest().timestamps;
     // Between keyframes k and k + 1 the picture interpolates both: say so, with the simulation
     // time interpolated from the manifest's timestamps.
     const auto k = static_cast<std::size_t>(std::floor(t));
     const double f = t - static_cast<double>(k);
-    ImGui::Text("%s", options_.container.filename().string().c_str());
-    if (f < 1e-6)
-      ImGui::Text("keyframe %.2f / %.0f   frame %zu", t, playhead_.last(), k);
-    else
-      ImGui::Text("keyframe %.2f / %.0f   frames %zu-%zu (f = %.2f)", t, playhead_.last(), k, k + 1,
-                  f);
-    if (k < ts.size()) {
-      const double time = k + 1 < ts.size() ? ts[k] + f * (ts[k + 1] - ts[k]) : ts[k];
-      ImGui::SameLine();
-      ImGui::Text("  t = %.4g", time);
+    ImGui::TextUnformatted(options_.container.filename().string().c_str());
+    if (compact_ui_) {
+      // A small window: four short lines (position and transport, rate, streaming state).
+      ImGui::Text("keyframe %.2f / %.0f  %s %s %.2gx", t, playhead_.last(),
+                  playhead_.playing() ? "playing" : "paused", playhead_.reversed() ? "back" : "fwd",
+                  playhead_.speed());
+      ImGui::Text("%.1f fps  %.1f ms  %.2f MB/s", fps_.value, 1e3 * t_frame_.value, mb_per_s_);
+      ImGui::Text(
+          "atlas %.0f%%  at target %.0f%%  holes %u",
+          stats_.atlas_capacity ? 100.0 * stats_.atlas_occupied / stats_.atlas_capacity : 0.0,
+          100.0 * stats_.fraction_at_target, stats_.holes);
+    } else {
+      if (f < 1e-6)
+        ImGui::Text("keyframe %.2f / %.0f   frame %zu", t, playhead_.last(), k);
+      else
+        ImGui::Text("keyframe %.2f / %.0f   frames %zu-%zu (f = %.2f)", t, playhead_.last(), k,
+                    k + 1, f);
+      if (k < ts.size()) {
+        const double time = k + 1 < ts.size() ? ts[k] + f * (ts[k + 1] - ts[k]) : ts[k];
+        ImGui::SameLine();
+        ImGui::Text("  t = %.4g", time);
+      }
+      ImGui::Text("%s %s %.2gx%s", playhead_.playing() ? "playing" : "paused",
+                  playhead_.reversed() ? "backward" : "forward", playhead_.speed(),
+                  playhead_.options().loop ? "  loop" : "");
+      ImGui::Separator();
+      ImGui::Text("%.1f fps   frame %.1f ms", fps_.value, 1e3 * t_frame_.value);
+      const auto ms = [](bool measured, const Smoothed& v) {
+        char text[32] = "-";
+        if (measured) std::snprintf(text, sizeof text, "%.2f", v.value);
+        return std::string(text);
+      };
+      ImGui::Text("schedule %.2f  upload %.2f  decode %s  render %s  wait %.2f ms",
+                  t_schedule_.value, t_upload_.value, ms(decode_measured_, t_decode_).c_str(),
+                  ms(render_measured_, t_render_).c_str(), 1e3 * t_wait_.value);
+      ImGui::Checkbox("exact timings (no overlap)", &exact_timings_);
+      ImGui::Text(
+          "atlas %u / %u slots (%.0f%%)", stats_.atlas_occupied, stats_.atlas_capacity,
+          stats_.atlas_capacity ? 100.0 * stats_.atlas_occupied / stats_.atlas_capacity : 0.0);
+      ImGui::Text("requests in flight %zu   %.2f MB/s   uploads %zu", stats_.requests_in_flight,
+                  mb_per_s_, stats_.uploads);
+      ImGui::Text("at target LOD %.0f%% of %u nodes   holes %u", 100.0 * stats_.fraction_at_target,
+                  stats_.target_nodes, stats_.holes);
+      ImGui::TextDisabled("%s", renderer_->name().c_str());
     }
-    ImGui::Text("%s %s %.2gx%s", playhead_.playing() ? "playing" : "paused",
-                playhead_.reversed() ? "backward" : "forward", playhead_.speed(),
-                playhead_.options().loop ? "  loop" : "");
-    ImGui::Separator();
-    ImGui::Text("%.1f fps   frame %.1f ms", fps_.value, 1e3 * t_frame_.value);
-    const auto ms = [](bool measured, const Smoothed& v) {
-      char text[32] = "-";
-      if (measured) std::snprintf(text, sizeof text, "%.2f", v.value);
-      return std::string(text);
-    };
-    ImGui::Text("schedule %.2f  upload %.2f  decode %s  render %s  wait %.2f ms", t_schedule_.value,
-                t_upload_.value, ms(decode_measured_, t_decode_).c_str(),
-                ms(render_measured_, t_render_).c_str(), 1e3 * t_wait_.value);
-    ImGui::Checkbox("exact timings (no overlap)", &exact_timings_);
-    ImGui::Text(
-        "atlas %u / %u slots (%.0f%%)", stats_.atlas_occupied, stats_.atlas_capacity,
-        stats_.atlas_capacity ? 100.0 * stats_.atlas_occupied / stats_.atlas_capacity : 0.0);
-    ImGui::Text("requests in flight %zu   %.2f MB/s   uploads %zu", stats_.requests_in_flight,
-                mb_per_s_, stats_.uploads);
-    ImGui::Text("at target LOD %.0f%% of %u nodes   holes %u", 100.0 * stats_.fraction_at_target,
-                stats_.target_nodes, stats_.holes);
-    ImGui::TextDisabled("%s", renderer_->name().c_str());
     const auto& errors = renderer_->scheduler().errors();
     if (!errors.empty()) {
       ImGui::Separator();
       ImGui::TextColored(ImVec4(1.0f, 0.45f, 0.35f, 1.0f),
                          "%zu problem(s), newest:", renderer_->scheduler().error_count());
-      const std::size_t shown = std::min<std::size_t>(errors.size(), 4);
-      ImGui::PushTextWrapPos(ImGui::GetFontSize() * 36.0f);
+      const std::size_t shown = std::min<std::size_t>(errors.size(), compact_ui_ ? 1 : 4);
       ImGui::PushStyleColor(ImGuiCol_Text, ImVec4(1.0f, 0.6f, 0.5f, 1.0f));
       for (std::size_t i = errors.size() - shown; i < errors.size(); ++i)
         ImGui::TextUnformatted(errors[i].c_str());
       ImGui::PopStyleColor();
-      ImGui::PopTextWrapPos();
     }
+    ImGui::PopTextWrapPos();
   }
   ImGui::End();
 }
 
 void Player::draw_timeline() {
   const ImVec2 size = ImGui::GetIO().DisplaySize;
+  const ImGuiStyle& style = ImGui::GetStyle();
+  // Along the bottom edge, as wide as the window; its height follows its rows (0: auto-fit).
   ImGui::SetNextWindowPos(ImVec2(10, size.y - 10), ImGuiCond_Always, ImVec2(0, 1));
-  ImGui::SetNextWindowSize(ImVec2(size.x - 20, 0), ImGuiCond_Always);
+  ImGui::SetNextWindowSize(ImVec2(std::max(size.x - 20, 1.0f), 0), ImGuiCond_Always);
   ImGui::SetNextWindowBgAlpha(0.6f);
   const ImGuiWindowFlags flags =
       ImGuiWindowFlags_NoDecoration | ImGuiWindowFlags_NoSavedSettings | ImGuiWindowFlags_NoMove;
-  if (ImGui::Begin("Timeline", nullptr, flags)) {
+  const bool open = ImGui::Begin("Timeline", nullptr, flags);
+  timeline_rect_ = current_window_rect();
+  if (open) {
+    // Transport buttons, reverse, speed and reset view on one row while they fit (a narrow window
+    // wraps them onto more rows), then the slider across the whole width.
     if (ImGui::Button("|<")) press(GLFW_KEY_HOME);
-    ImGui::SameLine();
+    same_line_if_fits(button_width("<"));
     if (ImGui::Button("<")) press(GLFW_KEY_LEFT);
-    ImGui::SameLine();
+    same_line_if_fits(button_width("pause"));
     if (ImGui::Button(playhead_.playing() ? "pause" : "play ")) press(GLFW_KEY_SPACE);
-    ImGui::SameLine();
+    same_line_if_fits(button_width(">"));
     if (ImGui::Button(">")) press(GLFW_KEY_RIGHT);
-    ImGui::SameLine();
+    same_line_if_fits(button_width(">|"));
     if (ImGui::Button(">|")) press(GLFW_KEY_END);
-    ImGui::SameLine();
+    same_line_if_fits(checkbox_width("reverse"));
     bool reversed = playhead_.reversed();
     if (ImGui::Checkbox("reverse", &reversed)) playhead_.set_reversed(reversed);
-    ImGui::SameLine();
-    ImGui::SetNextItemWidth(110);
+    const float speed_width = compact_ui_ ? 70.0f : 110.0f;
+    same_line_if_fits(speed_width + style.ItemInnerSpacing.x + ImGui::CalcTextSize("speed").x);
+    ImGui::SetNextItemWidth(speed_width);
     static constexpr std::array<double, 6> speeds{0.25, 0.5, 1, 2, 4, 8};
     char label[32];
     std::snprintf(label, sizeof label, "%.2gx", playhead_.speed());
@@ -644,7 +798,7 @@ void Player::draw_timeline() {
       }
       ImGui::EndCombo();
     }
-    ImGui::SameLine();
+    same_line_if_fits(button_width("reset view"));
     if (ImGui::Button("reset view")) press(GLFW_KEY_C);
     ImGui::SetNextItemWidth(-1);
     float t = static_cast<float>(playhead_.position());
@@ -657,10 +811,21 @@ void Player::draw_timeline() {
 
 void Player::draw_panel() {
   const ImVec2 size = ImGui::GetIO().DisplaySize;
-  ImGui::SetNextWindowPos(ImVec2(size.x - 10, 10), ImGuiCond_Always, ImVec2(1, 0));
-  ImGui::SetNextWindowSizeConstraints(ImVec2(330, 0), ImVec2(330, FLT_MAX));
+  const float width = std::min(330.0f, std::max(size.x - 20, 1.0f));
+  // Top right when it fits beside the HUD, else right below the HUD; never over the timeline
+  // (a panel taller than the space left scrolls).
+  const bool beside = !hud_rect_.shown || hud_rect_.right() + 10 + width <= size.x - 10;
+  const float top = beside ? 10.0f : hud_rect_.bottom() + 8;
+  const float bottom = timeline_rect_.shown ? timeline_rect_.y - 8 : size.y - 10;
+  const float max_height = std::max(bottom - top, ImGui::GetFrameHeight());
+  ImGui::SetNextWindowPos(ImVec2(size.x - 10, top), ImGuiCond_Always, ImVec2(1, 0));
+  ImGui::SetNextWindowSizeConstraints(ImVec2(width, 0), ImVec2(width, max_height));
   ImGui::SetNextWindowCollapsed(size.x < 1000, ImGuiCond_FirstUseEver);
-  if (ImGui::Begin("Transfer function & quality", nullptr, ImGuiWindowFlags_AlwaysAutoResize)) {
+  const bool open =
+      ImGui::Begin("Transfer function & quality", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
+  panel_rect_ = current_window_rect();
+  panel_collapsed_ = ImGui::IsWindowCollapsed();
+  if (open) {
     const auto& names = cpu_render::TransferFunction::preset_names();
     const char* current =
         preset_ >= 0 ? names[static_cast<std::size_t>(preset_)].c_str() : "(custom)";
@@ -735,9 +900,13 @@ void Player::draw_panel() {
 }
 
 void Player::draw_ui() {
+  hud_rect_ = timeline_rect_ = panel_rect_ = ScreenRect{};
   if (!show_ui_) return;
-  draw_hud();
+  const ImVec2 size = ImGui::GetIO().DisplaySize;
+  compact_ui_ = size.x < 560 || size.y < 400;
+  // The timeline first: the HUD and the panel are placed in the space above it.
   draw_timeline();
+  draw_hud();
   draw_panel();
 }
 
@@ -815,7 +984,10 @@ void Player::finish_screenshots(FrameSlot& slot) {
   for (const auto& path : slot.screenshots) {
     try {
       psnr::write_png(path, image);
-      if (!options_.quiet) std::printf("screenshot: %s\n", path.string().c_str());
+      if (!options_.quiet) {
+        std::printf("screenshot: %s\n", path.string().c_str());
+        std::fflush(stdout);
+      }
     } catch (const std::exception& e) {
       renderer_->scheduler().report_error(std::string("screenshot: ") + e.what());
       std::fprintf(stderr, "volreel play: screenshot: %s\n", e.what());
@@ -853,6 +1025,12 @@ int Player::run() {
     // 1. Events; window closed or quit requested: one more frame for the exit screenshot.
     glfwPollEvents();
     if (glfwWindowShouldClose(window_.get())) quit_ = true;
+    if (window_hidden()) {  // minimized: no frames until the window is back
+      if (quit_) break;
+      wait_while_hidden();
+      previous = Clock::now();  // the time away moves neither the playhead nor the script
+      continue;
+    }
     if (options_.max_frames > 0 && frame_number_ >= options_.max_frames) break;
     const bool last_of_n = options_.max_frames > 0 && frame_number_ + 1 == options_.max_frames;
     if (quit_ || last_of_n) {
@@ -863,7 +1041,7 @@ int Player::run() {
     }
     if (recreate_) {
       recreate_swapchain();
-      if (recreate_) continue;  // still minimized or zero-sized
+      if (recreate_) continue;  // minimized or zero-sized again: the next pass waits
     }
     const VkExtent2D extent = swapchain_->extent();
     const VkExtent2D wanted = render_size(extent);
@@ -966,8 +1144,11 @@ int Player::run() {
 
     // 7. HUD figures.
     const auto end = Clock::now();
-    if (frame_number_ > 0 && dt > 0) fps_.add(1.0 / dt);
-    t_frame_.add(dt);
+    if (frame_number_ > 0 && dt > 0 && !resumed_) {
+      fps_.add(1.0 / dt);
+      t_frame_.add(dt);
+    }
+    resumed_ = false;
     t_schedule_.add(output.times.schedule);
     t_upload_.add(output.times.upload);
     decode_measured_ = output.times.decode.has_value();

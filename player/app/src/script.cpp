@@ -66,7 +66,8 @@ std::vector<ScriptAction> parse_script(const std::string& text) {
       {"orbit", {Kind::orbit, 2}},       {"zoom", {Kind::zoom, 1}},
       {"transfer", {Kind::transfer, 1}}, {"sse", {Kind::sse, 1}},
       {"settle", {Kind::settle, -1}},    {"screenshot", {Kind::screenshot, 1}},
-      {"resize", {Kind::resize, 2}},     {"quit", {Kind::quit, 0}}};
+      {"resize", {Kind::resize, 2}},     {"camera", {Kind::camera, 0}},
+      {"layout", {Kind::layout, 0}},     {"quit", {Kind::quit, 0}}};
   for (const std::string& e : entries) {
     const auto fail = [&](const std::string& why) {
       throw InputError("script entry '" + e + "': " + why);

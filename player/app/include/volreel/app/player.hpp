@@ -6,8 +6,10 @@
 // Controls: space play/pause, r reverse, [ ] speed ÷2 ×2 (0.25×–8×), ← → step one keyframe,
 // Home/End first/last keyframe, c reset view, h hide the panels, l loop, q or Escape quit; left
 // drag orbits, right or middle drag pans, the wheel zooms. The timeline slider scrubs; the side
-// panel edits the transfer function and the screen-space-error target. A script (script.hpp)
-// replays the same actions for tests.
+// panel edits the transfer function and the screen-space-error target; in small windows (down to
+// about 320 × 240) the panels take a compact form and never overlap. While the window is minimized
+// nothing is rendered and the playhead stands still. A script (script.hpp) replays the same
+// actions for tests.
 #pragma once
 
 #include <cstddef>

@@ -20,6 +20,10 @@
 //                             keyframes may go on), or the timeout (default 20 s) passes
 //           screenshot PATH   write this frame, as presented, to PATH (PNG); later entries
 //                             run from the next frame on
+//           camera            print the camera ("camera (script): azimuth A deg elevation E deg
+//                             distance D target X Y Z") on stdout
+//           layout            print the screen rectangles of the HUD, timeline and side panel as
+//                             drawn in the previous frame ("layout WxH: hud X Y W H; ...")
 //           quit
 // Entries run in the order given; an entry runs at the first frame at or after its time. Time
 // spent in `settle` does not count: the script clock stops while it waits.
@@ -46,6 +50,8 @@ struct ScriptAction {
     settle,
     resize,
     screenshot,
+    camera,
+    layout,
     quit
   };
   double at_seconds = -1;      ///< when ≥ 0: seconds of script clock
