@@ -73,7 +73,7 @@ struct BenchStreamOptions {
   std::string clock = "simulated";
   double fps = 10;  ///< simulated clock: frames per tour second
   double sse_target = 1.0;
-  double sse_weight = 10.0, temporal_lerp_min = 0.15;
+  double sse_weight = 10.0, temporal_lerp_min = 0.15, temporal_exponent = 4.0;
   double step = 1.0;
   double upload_budget_mb = 64;
   std::uint64_t seed = 1;
@@ -169,6 +169,32 @@ std::vector<std::pair<double, double>> tour_seeks(const cpu_render::Tour& tour) 
     if (keys[i].time == keys[i - 1].time && keys[i].keyframe != keys[i - 1].keyframe)
       seeks.emplace_back(keys[i].time, keys[i].keyframe);
   return seeks;
+}
+
+/// The tour's fastest playback, keyframes per tour second (0 when it never plays).
+double tour_play_speed(const cpu_render::Tour& tour) {
+  double speed = 0;
+  const auto& keys = tour.playhead_keys();
+  for (std::size_t i = 1; i < keys.size(); ++i)
+    if (keys[i].time > keys[i - 1].time)
+      speed = std::max(speed, std::abs(keys[i].keyframe - keys[i - 1].keyframe) / (keys[i].time - keys[i - 1].time));
+  return speed;
+}
+
+/// --bandwidth: a rate (20MB/s), unlimited (or 0), or a multiple of the playback data rate (0.5x).
+double bench_bandwidth(const std::string& text, double playback_bytes_per_s) {
+  if (text == "unlimited") return 0;
+  if (!text.empty() && (text.back() == 'x' || text.back() == 'X')) {
+    const std::string number = text.substr(0, text.size() - 1);
+    char* end = nullptr;
+    const double factor = std::strtod(number.c_str(), &end);
+    if (number.empty() || end != number.c_str() + number.size() || !(factor > 0) || !std::isfinite(factor))
+      bad("--bandwidth", "a multiple of the playback data rate such as 0.5x, or a rate such as 20MB/s", text);
+    if (!(playback_bytes_per_s > 0))
+      throw InputError("--bandwidth " + text + ": the tour never plays, so there is no playback data rate; give a rate such as 1MB/s");
+    return factor * playback_bytes_per_s;
+  }
+  return vulkan_render::parse_bandwidth(text);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -760,13 +786,16 @@ void print_side_by_side(const std::vector<RunResult>& runs) {
 void run_bench_stream(const BenchStreamOptions& o) {
   // 1. Options (all checked before any work).
   const auto [width, height] = vulkan_render::parse_size(o.size);
-  const double bandwidth = o.bandwidth == "unlimited" ? 0 : vulkan_render::parse_bandwidth(o.bandwidth);
+  if (o.bandwidth.empty() || (o.bandwidth.back() != 'x' && o.bandwidth.back() != 'X'))
+    bench_bandwidth(o.bandwidth, 0);  // a malformed rate is reported before any work
   const double latency = vulkan_render::parse_latency(o.latency);
   if (!(o.duration > 0) || o.duration > 3600) bad("--duration", "seconds in (0, 3600]", std::to_string(o.duration));
   if (o.clock != "simulated" && o.clock != "wall") bad("--clock", "simulated or wall", o.clock);
   if (!(o.fps > 0) || o.fps > 240) bad("--fps", "frames per second in (0, 240]", std::to_string(o.fps));
   if (!(o.sse_target > 0) || !std::isfinite(o.sse_target)) bad("--sse-target", "pixels per voxel > 0", std::to_string(o.sse_target));
   if (!(o.sse_weight >= 0) || !std::isfinite(o.sse_weight)) bad("--sse-weight", "a weight >= 0", std::to_string(o.sse_weight));
+  if (!(o.temporal_exponent > 0) || o.temporal_exponent > 64)
+    bad("--temporal-exponent", "an exponent in (0, 64]", std::to_string(o.temporal_exponent));
   if (!(o.temporal_lerp_min >= 0 && o.temporal_lerp_min <= 1))
     bad("--temporal-lerp-min", "a weight in [0, 1]", std::to_string(o.temporal_lerp_min));
   if (!(o.step > 0) || !std::isfinite(o.step)) bad("--step", "a ray step in voxels > 0", std::to_string(o.step));
@@ -785,6 +814,11 @@ void run_bench_stream(const BenchStreamOptions& o) {
   const cpu_render::TourContext context = cpu_render::TourContext::of(m);
   const cpu_render::Tour tour = o.tour.empty() ? bench_tour(context, o.duration, o.seed, width, height)
                                                : cpu_render::Tour::load(o.tour, context);
+  // Playing every brick of the volume at the tour's fastest speed needs this many bytes per second.
+  const double play_speed = tour_play_speed(tour);
+  const double playback_rate =
+      static_cast<double>(container.total_bytes()) / static_cast<double>(container.frame_count()) * play_speed;
+  const double bandwidth = bench_bandwidth(o.bandwidth, playback_rate);
   fs::path out;
   if (o.out.empty()) {
     char pattern[] = "/tmp/volreel-bench-stream-XXXXXX";
@@ -813,6 +847,7 @@ void run_bench_stream(const BenchStreamOptions& o) {
   ss.priority.sse_target = o.sse_target;
   ss.priority.sse_weight = o.sse_weight;
   ss.priority.temporal_lerp_min = o.temporal_lerp_min;
+  ss.priority.temporal_exponent = o.temporal_exponent;
   ss.upload_budget_bytes = static_cast<std::uint64_t>(o.upload_budget_mb * 1e6);
   ss.loader.bandwidth_bytes_per_s = bandwidth;
   ss.loader.latency_s = latency;
@@ -858,6 +893,12 @@ void run_bench_stream(const BenchStreamOptions& o) {
   std::printf("stream:  bandwidth %s, latency %g ms, %zu requests in flight at most, %u atlas slots%s, SSE target %g px\n",
               rate_text(bandwidth).c_str(), latency * 1e3, ss.loader.max_in_flight, ss.atlas_slots,
               capped ? " (every brick of the container)" : "", o.sse_target);
+  if (playback_rate > 0)
+    std::printf("         playing the whole volume at the tour's fastest speed (%.3g keyframes/s) needs %s: the link "
+                "carries %s of it\n",
+                play_speed, rate_text(playback_rate).c_str(),
+                bandwidth > 0 ? (std::to_string(static_cast<int>(std::lround(100 * bandwidth / playback_rate))) + " %").c_str()
+                              : "all");
   std::printf("patent:  priority = %g*SSE/(1+SSE) + lerp(random, temporal, lerp(%g, 1, temporal)), temporal exponent %g\n",
               o.sse_weight, o.temporal_lerp_min, ss.priority.temporal_exponent);
   std::fflush(stdout);
@@ -882,12 +923,14 @@ void run_bench_stream(const BenchStreamOptions& o) {
   nlohmann::json summary = {{"container", o.container},
                             {"bandwidth_bytes_per_s", bandwidth},
                             {"latency_s", latency},
+                            {"playback_bytes_per_s", playback_rate},
                             {"clock", o.clock},
                             {"fps", setup.simulated_fps > 0 ? nlohmann::json(setup.simulated_fps) : nlohmann::json()},
                             {"atlas_slots", ss.atlas_slots},
                             {"max_in_flight", ss.loader.max_in_flight},
                             {"sse_weight", o.sse_weight},
                             {"temporal_lerp_min", o.temporal_lerp_min},
+                            {"temporal_exponent", o.temporal_exponent},
                             {"size", {width, height}},
                             {"ground_truth", truth.original() ? "original series" : "container finest level"},
                             {"runs", nlohmann::json::array()}};
@@ -937,7 +980,9 @@ void add_bench_stream_command(CLI::App& bench) {
       "original data at that playhead, fraction of nodes at target LOD, holes, bytes loaded, time to full quality\n"
       "after each seek. Writes OUT/stream_<policy>.csv, OUT/summary.json and a few PNGs.");
   cmd->add_option("CONTAINER", o->container, "The container directory NAME.vreel")->required();
-  cmd->add_option("--bandwidth", o->bandwidth, "Simulated read bandwidth, e.g. 20MB/s, 500kB/s (0 or unlimited: none)")
+  cmd->add_option("--bandwidth", o->bandwidth,
+                  "Simulated read bandwidth: a rate (20MB/s, 500kB/s), a multiple of the playback data rate (0.5x: half\n"
+                  "of what playing every brick at the tour's fastest speed needs), or 0/unlimited")
       ->capture_default_str();
   cmd->add_option("--latency", o->latency, "Simulated latency per request, e.g. 50ms, 0.2s")->capture_default_str();
   cmd->add_option("--tour", o->tour,
@@ -967,6 +1012,9 @@ void add_bench_stream_command(CLI::App& bench) {
   cmd->add_option("--sse-weight", o->sse_weight, "Patent policy: weight of the SSE priority ([0045]: 10)")->capture_default_str();
   cmd->add_option("--temporal-lerp-min", o->temporal_lerp_min,
                   "Patent policy: weight of the temporal priority against the random one at temporal 0 ([0045]: 0.15)")
+      ->capture_default_str();
+  cmd->add_option("--temporal-exponent", o->temporal_exponent,
+                  "Both policies: exponent of temporalPriority = (1 - distance/maxDistance)^e ([0043]: 4)")
       ->capture_default_str();
   cmd->add_option("--step", o->step, "Ray step, finest voxels (the ground truth uses the same)")->capture_default_str();
   cmd->add_option("--upload-budget", o->upload_budget_mb, "Compressed bytes uploaded per frame at most, MB")
