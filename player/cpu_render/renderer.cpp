@@ -242,7 +242,8 @@ class SvoSampler {
     const float b = f == 0.0f ? 0.0f : keyframe(record[1], vr_svo_lod_b(record[2]));
     // 4. The step's doublings from the leaf's level (svo_layout.h; the cap is the caller's) and
     //    the region's box.
-    const double region_size = double(format::brick_interior << (levels_ - 1 - region_level));
+    // (region_level ≤ levels_: the octants of a one-level volume's root are half a brick.)
+    const double region_size = double((format::brick_interior / 2) << (levels_ - region_level));
     return {true,
             f == 0.0f   ? a
             : f == 1.0f ? b

@@ -70,7 +70,9 @@ layout(std430, set = 0, binding = 8) readonly buffer Visible { uint visible_pref
 #define REGION_INVISIBLE 2u  // a leaf record whose values the transfer function hides
 
 // Finest voxels per axis of a node of `level`.
-uint node_size(uint level) { return VR_BRICK_INTERIOR << (params.size_levels.z - 1u - level); }
+// Edge of a level's boxes in finest voxels, for level ≤ levels: a child box of the finest level
+// (an octant of a one-level volume's root) is half a brick.
+uint node_size(uint level) { return (VR_BRICK_INTERIOR / 2u) << (params.size_levels.z - level); }
 
 bool inside_box(uvec3 q, uvec3 c, uint size) {
   uvec3 lo = c * size;
