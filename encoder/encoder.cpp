@@ -745,8 +745,20 @@ double manifest_estimate(std::size_t frames) {
   return 900.0 + 70.0 * static_cast<double>(frames);
 }
 
+/// The variable-rate rule recorded in a manifest's provenance ("tolerance" for containers written
+/// before the field existed, which all used it), with its parameters.
+nlohmann::json rate_rule_of(const format::Manifest& m) {
+  nlohmann::json r = nlohmann::json::object();
+  if (m.codec != format::Codec::ksvd || m.fixed_sparsity != 0) return r;
+  const bool has = m.encoder.is_object() && m.encoder.contains("rate_rule");
+  r["rate_rule"] = has ? m.encoder["rate_rule"] : nlohmann::json("tolerance");
+  for (const char* key : {"lagrangian_factor", "weight_owned_voxels"})
+    if (m.encoder.is_object() && m.encoder.contains(key)) r[key] = m.encoder[key];
+  return r;
+}
+
 bool same_settings(const format::Manifest& a, const format::Manifest& b) {
-  return a.dims == b.dims && a.codec == b.codec && a.tolerance == b.tolerance &&
+  return rate_rule_of(a) == rate_rule_of(b) && a.dims == b.dims && a.codec == b.codec && a.tolerance == b.tolerance &&
          a.fixed_sparsity == b.fixed_sparsity && a.zfp_accuracy == b.zfp_accuracy &&
          a.value_min == b.value_min && a.value_max == b.value_max &&
          a.frames.size() == b.frames.size() &&
@@ -789,6 +801,16 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   m.value_max = coding.value_max;
   m.frames.assign(frames, std::nullopt);
   m.encoder = job.provenance;
+  if (!m.encoder.is_object()) m.encoder = nlohmann::json::object();
+  if (coding.codec == format::Codec::ksvd && coding.fixed_sparsity == 0) {
+    // How variable rate spent its atoms: a resumed encode must spend them the same way.
+    const bool lagrangian = coding.rule == VariableRateRule::lagrangian;
+    m.encoder["rate_rule"] = lagrangian ? "lagrangian" : "tolerance";
+    if (lagrangian) {
+      m.encoder["lagrangian_factor"] = coding.lagrangian_factor;
+      m.encoder["weight_owned_voxels"] = coding.weight_owned_voxels;
+    }
+  }
 
   std::optional<dictionary::Dictionary> dict;
   std::vector<std::byte> dict_bytes;
@@ -810,8 +832,8 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       const format::Container old(out, true);
       if (!same_settings(old.manifest(), m))
         throw InputError("'" + out.string() +
-                         "' was encoded with other settings (dims, codec, tolerance, value range, "
-                         "frames or dictionary); "
+                         "' was encoded with other settings (dims, codec, tolerance, rate rule, "
+                         "value range, frames or dictionary); "
                          "cannot --resume it: use --overwrite to start again");
       m.frames = old.manifest().frames;
       resuming = true;

@@ -467,8 +467,15 @@ TEST(Container, EncodeResumeVerifyAndDecode) {
   EXPECT_EQ(second.skipped, 2u);
   EXPECT_TRUE(format::verify_container(out).empty());
   EXPECT_EQ(second.container_bytes, first.container_bytes);
-  // Resuming with other settings is refused.
+  // Resuming with other settings is refused: another tolerance, or another variable-rate rule
+  // (which the manifest's provenance records).
+  const double tolerance = job.coding.tolerance;
   job.coding.tolerance = 0.03;
+  EXPECT_THROW(encoder::encode_series(*series, out, job), InputError);
+  job.coding.tolerance = tolerance;
+  job.coding.rule = job.coding.rule == encoder::VariableRateRule::lagrangian
+                        ? encoder::VariableRateRule::tolerance
+                        : encoder::VariableRateRule::lagrangian;
   EXPECT_THROW(encoder::encode_series(*series, out, job), InputError);
   // Decode a frame at every level; full resolution matches the input within a few ε.
   const format::Container c(out);
