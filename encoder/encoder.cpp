@@ -242,8 +242,6 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
     if (settings_.fixed_sparsity == 0 && settings_.rule == VariableRateRule::lagrangian &&
         !(settings_.lagrangian_factor > 0 && std::isfinite(settings_.lagrangian_factor)))
       throw InputError("the Lagrangian factor must be positive and finite");
-    if (!(settings_.error_bound_factor >= 0 && std::isfinite(settings_.error_bound_factor)))
-      throw InputError("the error bound factor must be >= 0 and finite");
     dictionary::SparseCodingOptions o;
     if (settings_.fixed_sparsity > 0) {
       o.tolerance = 0;
@@ -252,7 +250,6 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
       o.tolerance = 0;
       o.max_atoms = settings_.max_atoms;
       o.min_atom_gain = atom_gain_threshold();
-      o.max_error = settings_.error_bound_factor * settings_.tolerance;
     } else {
       o.tolerance = settings_.tolerance;
       o.max_atoms = settings_.max_atoms;

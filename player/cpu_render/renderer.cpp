@@ -311,22 +311,24 @@ void validate_svo(const SvoView& svo, std::uint32_t slot_count, const VolumeGeom
   if (svo.nodes[0] != VR_SVO_NO_PARENT)
     bad("node 0 (the root) word 0: expected no parent, found " + std::to_string(svo.nodes[0]));
 
-  const auto check_leaf = [&](vr_uint leaf, vr_uint level, const std::string& from) {
+  // Messages are built only on failure: this runs on every frame. `from` names the referring
+  // word (a callable returning the text).
+  const auto check_leaf = [&](vr_uint leaf, vr_uint level, const auto& from) {
     if (leaf >= leaf_count)
-      bad(from + ": leaf " + std::to_string(leaf) + " of " + std::to_string(leaf_count));
+      bad(from() + ": leaf " + std::to_string(leaf) + " of " + std::to_string(leaf_count));
     const vr_uint* r = svo.leaves.data() + std::size_t{leaf} * VR_SVO_LEAF_WORDS;
-    const std::string at = "leaf " + std::to_string(leaf) + " (from " + from + ")";
+    const auto at = [&] { return "leaf " + std::to_string(leaf) + " (from " + from() + ")"; };
     const float f = std::bit_cast<float>(r[3]);
     if (!(f >= 0 && f <= 1))
-      bad(at + " word 3: expected a factor in [0, 1], found " + std::to_string(f));
+      bad(at() + " word 3: expected a factor in [0, 1], found " + std::to_string(f));
     const float weight[2] = {1 - f, f};
     const vr_uint d[2] = {vr_svo_lod_a(r[2]), vr_svo_lod_b(r[2])};
     for (int k = 0; k < 2; ++k) {
       if (r[k] >= slot_count && !(r[k] == VR_ATLAS_NO_SLOT && weight[k] == 0))
-        bad(at + " word " + std::to_string(k) + ": slot " + std::to_string(r[k]) + " of " +
+        bad(at() + " word " + std::to_string(k) + ": slot " + std::to_string(r[k]) + " of " +
             std::to_string(slot_count));
       if (d[k] > level)
-        bad(at + " word 2: LOD difference " + std::to_string(d[k]) + " of keyframe " +
+        bad(at() + " word 2: LOD difference " + std::to_string(d[k]) + " of keyframe " +
             (k == 0 ? "A" : "B") + " exceeds the spatial node's level " + std::to_string(level));
     }
   };
@@ -342,24 +344,24 @@ void validate_svo(const SvoView& svo, std::uint32_t slot_count, const VolumeGeom
     const Item it = stack.back();
     stack.pop_back();
     const vr_uint* rec = svo.nodes.data() + std::size_t{it.node} * VR_SVO_NODE_WORDS;
-    const std::string at = "node " + std::to_string(it.node);
+    const auto at = [&] { return "node " + std::to_string(it.node); };
     bool up = false;
     for (vr_uint o = 0; o < 8; ++o) {
       const vr_uint word = rec[1 + o], kind = vr_svo_child_kind(word),
                     index = vr_svo_child_index(word);
-      const std::string child = at + " word " + std::to_string(1 + o);
+      const auto child = [&] { return at() + " word " + std::to_string(1 + o); };
       if (kind == VR_SVO_CHILD_UP) up = true;
       if (kind != VR_SVO_CHILD_NODE && kind != VR_SVO_CHILD_LEAF) continue;
       if (it.level + 1 >= geometry.levels)
-        bad(child + ": a child below the finest level (" + std::to_string(geometry.levels) +
+        bad(child() + ": a child below the finest level (" + std::to_string(geometry.levels) +
             " levels)");
       if (kind == VR_SVO_CHILD_LEAF) {
         check_leaf(index, it.level + 1, child);
         continue;
       }
       if (index >= node_count)
-        bad(child + ": node " + std::to_string(index) + " of " + std::to_string(node_count));
-      if (seen[index]) bad(child + ": node " + std::to_string(index) + " is reached twice");
+        bad(child() + ": node " + std::to_string(index) + " of " + std::to_string(node_count));
+      if (seen[index]) bad(child() + ": node " + std::to_string(index) + " is reached twice");
       if (svo.nodes[std::size_t{index} * VR_SVO_NODE_WORDS] != it.node)
         bad("node " + std::to_string(index) + " word 0: expected parent " +
             std::to_string(it.node) + ", found " +
@@ -367,7 +369,8 @@ void validate_svo(const SvoView& svo, std::uint32_t slot_count, const VolumeGeom
       seen[index] = true;
       stack.push_back({index, it.level + 1});
     }
-    if (up || rec[9] != VR_SVO_NO_LEAF) check_leaf(rec[9], it.level, at + " word 9");
+    if (up || rec[9] != VR_SVO_NO_LEAF)
+      check_leaf(rec[9], it.level, [&] { return at() + " word 9"; });
   }
 }
 

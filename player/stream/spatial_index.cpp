@@ -56,6 +56,7 @@ void SpatialIndexBuilder::add_frame(std::uint32_t t, const format::FrameView& fr
     k.bytes = static_cast<std::uint32_t>(frame.brick_offset(n.brick + 1) - k.offset);
     k.constant = k.bytes == 4;
     k.subtree_constant = n.type() == format::NodeType::empty;
+    k.histogram = n.histogram;
     entries_.push_back({{p.level, p.x, p.y, p.z}, k});
   }
   files_[t] = std::move(file);

@@ -30,7 +30,6 @@
 #include <map>
 #include <memory>
 #include <optional>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -49,6 +48,7 @@
 #include "volreel/format/error.hpp"
 #include "volreel/psnr/metrics.hpp"
 #include "volreel/stream/scheduler.hpp"
+#include "volreel/vulkan_render/auto_transfer.hpp"
 #include "volreel/vulkan_render/loop_settings.hpp"
 
 namespace volreel::cli {
@@ -315,30 +315,16 @@ std::unique_ptr<datasets::SeriesReader> open_original(const BenchStreamOptions& 
   return nullptr;
 }
 
-/// --transfer: "auto", "tour", a preset name or a JSON file.
-std::optional<cpu_render::TransferFunction> transfer_from_spec(const std::string& spec, const format::Manifest& m,
-                                                               GroundTruth& truth, std::size_t keyframes) {
-  const auto lo = static_cast<float>(m.value_min), hi = static_cast<float>(m.value_max);
+/// --transfer: "tour" (the tour's own), "auto" (quantiles of the ground truth's middle frame), or
+/// what the player takes (a preset name or a JSON file: vulkan_render::transfer_from_spec).
+std::optional<cpu_render::TransferFunction> bench_transfer(const std::string& spec, const format::Container& container,
+                                                           GroundTruth& truth) {
+  const format::Manifest& m = container.manifest();
   if (spec == "tour") return std::nullopt;
-  if (spec == "auto") return cpu_render::TransferFunction::from_quantiles(truth.frame(keyframes / 2), lo, hi);
-  const auto& presets = cpu_render::TransferFunction::preset_names();
-  if (std::find(presets.begin(), presets.end(), spec) != presets.end())
-    return cpu_render::TransferFunction::preset(spec, lo, hi > lo ? hi : lo + 1);
-  if (!fs::is_regular_file(spec)) {
-    std::string names = "auto, tour";
-    for (const std::string& p : presets) names += ", " + p;
-    throw InputError("--transfer " + spec + ": not one of " + names + " nor a JSON file");
-  }
-  std::ifstream in(spec);
-  std::stringstream text;
-  text << in.rdbuf();
-  nlohmann::json json;
-  try {
-    json = nlohmann::json::parse(text.str());
-  } catch (const nlohmann::json::exception& e) {
-    throw InputError("--transfer " + spec + ": not valid JSON (" + e.what() + ")");
-  }
-  return cpu_render::TransferFunction::from_json(json, {lo, hi}, spec);
+  if (spec == "auto")
+    return cpu_render::TransferFunction::from_quantiles(truth.frame(container.frame_count() / 2),
+                                                        static_cast<float>(m.value_min), static_cast<float>(m.value_max));
+  return vulkan_render::transfer_from_spec(spec, container, "--transfer");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -388,6 +374,8 @@ const char* policy_name(stream::PriorityPolicy p) {
 
 struct RunSetup {
   const format::Container* container = nullptr;
+  const stream::SpatialIndex* index = nullptr;  ///< built once, copied into each run's scheduler
+  std::size_t index_errors = 0;                 ///< frames the index left out (printed once)
   const cpu_render::Tour* tour = nullptr;
   std::optional<cpu_render::TransferFunction> transfer;
   stream::SchedulerSettings settings;
@@ -470,10 +458,8 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy) {
   settings.priority.policy = policy;
   double simulated_time = 0;
   if (s.simulated_fps > 0) settings.loader.clock = [&simulated_time] { return simulated_time; };
-  // Indexing (frame files opened and validated) is not part of the timed tour.
-  stream::StreamScheduler scheduler(container, settings);
-  for (const std::string& e : scheduler.errors()) std::fprintf(stderr, "volreel: warning: %s\n", e.c_str());
-  r.errors = scheduler.error_count();
+  // Indexing (frame files opened and validated) happened once, before the runs.
+  stream::StreamScheduler scheduler(*s.index, settings);
   cpu_render::CpuAtlas atlas(settings.atlas_slots);
   const cpu_render::VolumeGeometry geometry = cpu_render::VolumeGeometry::of(m.dims);
   const double duration = s.tour->duration();
@@ -500,7 +486,6 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy) {
     stream::FrameUpdate update = scheduler.update(tf.camera, tf.playhead, frame);
     rec.update_ms = ms_since(t);
     for (const std::string& e : update.new_errors) std::fprintf(stderr, "\nvolreel: warning: %s\n", e.c_str());
-    r.errors += update.new_errors.size();
     // 2. Decode the uploads into their slots; a bad payload becomes the lowest value.
     t = Clock::now();
     for (const stream::BrickUpload& u : update.uploads) {
@@ -509,9 +494,7 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy) {
       try {
         atlas.decode_into(u.slot, u.payload, m.codec, m.zfp_accuracy, atoms, u.file, u.offset);
       } catch (const format::FormatError& e) {
-        std::fprintf(stderr, "\nvolreel: warning: %s\n", e.what());
-        scheduler.report_error(e.what());
-        ++r.errors;
+        scheduler.report_error(e.what());  // printed with the next frame's new_errors
         const auto slot = atlas.slot(u.slot);
         std::fill(slot.begin(), slot.end(), static_cast<float>(m.value_min));
       }
@@ -545,6 +528,7 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy) {
     if (time >= duration) break;
   }
   r.wall_s = std::chrono::duration<double>(Clock::now() - start).count();
+  r.errors = s.index_errors + scheduler.error_count();
   bar.finish();
   return r;
 }
@@ -838,7 +822,7 @@ void run_bench_stream(const BenchStreamOptions& o) {
   setup.tour = &tour;
   setup.width = width;
   setup.height = height;
-  setup.transfer = transfer_from_spec(transfer_spec, m, truth, container.frame_count());
+  setup.transfer = bench_transfer(transfer_spec, container, truth);
   setup.render.step = o.step;
   setup.simulated_fps = o.clock == "simulated" ? o.fps : 0;
   setup.render.background = {0.06f, 0.06f, 0.08f};
@@ -855,14 +839,17 @@ void run_bench_stream(const BenchStreamOptions& o) {
   // Requests in flight: arrivals are taken once per rendered frame, and the CPU renders far fewer
   // frames per second than a GPU player, so a small cap would limit throughput instead of the
   // bandwidth. By default the cap holds what the link delivers in latency + 0.5 s.
-  double brick_bytes = 0;
-  std::size_t keyframe_nodes = 0;
+  std::vector<std::string> index_errors;
+  const stream::SpatialIndex index = stream::build_spatial_index(container, &index_errors);
+  for (const std::string& e : index_errors) std::fprintf(stderr, "volreel: warning: %s\n", e.c_str());
+  setup.index = &index;
+  setup.index_errors = index_errors.size();
+  const std::size_t keyframe_nodes = index.keyframe_count();
+  double brick_bytes = 1;
   {
-    std::uint64_t total = 0, n = 0;
-    const stream::SpatialIndex index = stream::build_spatial_index(container);
-    keyframe_nodes = index.keyframe_count();
-    for (std::size_t k = 0; k < index.keyframe_count(); ++k) total += index.keyframe(static_cast<stream::KeyframeId>(k)).bytes, ++n;
-    brick_bytes = n ? static_cast<double>(total) / static_cast<double>(n) : 1;
+    std::uint64_t total = 0;
+    for (std::size_t k = 0; k < keyframe_nodes; ++k) total += index.keyframe(static_cast<stream::KeyframeId>(k)).bytes;
+    if (keyframe_nodes > 0) brick_bytes = static_cast<double>(total) / static_cast<double>(keyframe_nodes);
   }
   // More slots than bricks change nothing (every keyframe node fits in the heap) but cost memory.
   const bool capped = keyframe_nodes > 0 && ss.atlas_slots > keyframe_nodes;

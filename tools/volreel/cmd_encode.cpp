@@ -257,11 +257,7 @@ void run_encode(const EncodeOptions& o) {
       {"program", "volreel " VOLREEL_VERSION},      {"series", o.series},
       {"refit_quantization", c.refit_quantization}, {"extend_pursuit", c.extend_pursuit},
       {"optimize_interval", c.optimize_interval},   {"max_atoms", c.max_atoms}};
-  if (c.codec == format::Codec::ksvd && c.fixed_sparsity == 0) {
-    job.provenance["rate_rule"] = o.rate_rule;
-    if (c.rule == encoder::VariableRateRule::lagrangian)
-      job.provenance["lagrangian_factor"] = c.lagrangian_factor;
-  }
+  // encode_series adds the variable-rate rule and its parameters.
   encoder::EncodeSummary s;
   {
     ProgressBar bar("encoding", "frames");

@@ -46,7 +46,6 @@ int key_code(const std::string& name) {
 
 std::vector<ScriptAction> parse_script(const std::string& text) {
   std::vector<ScriptAction> actions;
-  std::string entry;
   std::stringstream all(text);
   std::vector<std::string> entries;
   for (std::string line; std::getline(all, line);) {

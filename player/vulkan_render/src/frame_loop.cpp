@@ -88,27 +88,10 @@ void FrameLoop::finish() {
   if (retired_ > 0) scheduler_->retire(retired_);
 }
 
-std::uint64_t FrameLoop::histogram_of(const stream::KeyframeKey& key) {
-  auto it = brick_histograms_.find(key.t);
-  if (it == brick_histograms_.end()) {
-    std::vector<std::uint64_t> bricks;
-    try {
-      const format::FrameFile file = container_.open_frame(key.t);
-      const format::FrameView& view = file.view();
-      bricks.assign(view.brick_count(), 0);
-      for (std::uint32_t i = 0; i < view.node_count(); ++i) {
-        const format::Node node = view.node(i);
-        if (node.brick < bricks.size()) bricks[node.brick] = node.histogram;
-      }
-    } catch (const std::exception&) {
-      bricks.clear();  // unknown histograms: never culled (the loader reports the frame)
-    }
-    it = brick_histograms_.emplace(key.t, std::move(bricks)).first;
-  }
+std::uint64_t FrameLoop::histogram_of(const stream::KeyframeKey& key) const {
+  // Read with the node table when the index was built; 0 (never culled) for an unknown key.
   const stream::KeyframeId id = scheduler_->index().find_keyframe(key);
-  if (id == stream::no_keyframe) return 0;
-  const std::uint32_t brick = scheduler_->index().keyframe(id).brick;
-  return brick < it->second.size() ? it->second[brick] : 0;
+  return id == stream::no_keyframe ? 0 : scheduler_->index().keyframe(id).histogram;
 }
 
 void FrameLoop::decode_uploads(const std::vector<stream::BrickUpload>& uploads,

@@ -50,9 +50,6 @@ struct CodingSettings {
   /// 0.6 bps, the PSNR at a given ε is about that of the ε rule and above 20·log10(range/ε), so
   /// that --psnr keeps its meaning (the ε rule's bound per block no longer holds).
   double lagrangian_factor = 0.25;
-  /// Lagrangian rule: keep adding atoms (up to Smax) while a block's RMS error exceeds
-  /// error_bound_factor·ε, whatever their gain (0: no bound).
-  double error_bound_factor = 0;
   /// Lagrangian rule: weigh each block's atom gains by the share of its voxels that the decoder
   /// takes from it (its brick's interior, inside the level). The rest are the apron, a copy of a
   /// neighbour's interior coded there, and padding outside the volume: a block of padding only

@@ -15,7 +15,6 @@
 #include <memory>
 #include <optional>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include "volreel/cpu_render/renderer.hpp"
@@ -103,7 +102,7 @@ class FrameLoop {
   void retire_completed();
   void decode_uploads(const std::vector<stream::BrickUpload>& uploads,
                       std::vector<std::string>& errors);
-  std::uint64_t histogram_of(const stream::KeyframeKey& key);
+  std::uint64_t histogram_of(const stream::KeyframeKey& key) const;
 
   const vulkan::Context& context_;
   const format::Container& container_;
@@ -114,8 +113,6 @@ class FrameLoop {
   std::unique_ptr<Raycaster> raycaster_;
   std::unique_ptr<stream::StreamScheduler> scheduler_;
   std::vector<std::uint64_t> slot_histograms_;  ///< per atlas slot, its brick's node histogram
-  /// Per frame file, the node histogram of every brick (read on first use).
-  std::unordered_map<std::uint32_t, std::vector<std::uint64_t>> brick_histograms_;
   std::vector<std::uint64_t> leaf_histograms_;
   std::vector<std::uint32_t> changed_slots_;
   stream::FrameUpdate last_update_;
