@@ -16,6 +16,7 @@
 
 #include "volreel/format/brick_decode.h"
 #include "volreel/format/crc32c.hpp"
+#include "volreel/format/decoder.hpp"
 #include "volreel/format/error.hpp"
 
 namespace volreel::encoder {
@@ -29,6 +30,10 @@ struct QuantizeOptions {
   int max_atoms = 15;
   bool optimize_interval =
       true;  ///< choose the 6-bit interval by squared error (may clip extremes)
+  /// The largest step of a brick's quantized block means: each brick takes the fewest bits
+  /// (0..12) whose step over its means' range is at most this. 0: always 12 bits.
+  double mean_step = 0;
+  int mean_bits = -1;  ///< ≥ 0: every brick takes exactly this many mean bits (overrides mean_step)
 };
 }  // namespace detail
 using detail::QuantizeOptions;
@@ -133,15 +138,16 @@ void add_to_breakdown(const Cell& c, const std::array<std::uint32_t, 3>& level_d
   } else if (!ksvd) {
     b.zfp_streams += size;
   } else {
+    vr_uint words[VR_MAX_PAYLOAD_WORDS] = {};
+    std::memcpy(words, c.payload.data(), std::min(size, sizeof words));
+    const vr_uint entry_bits = vr_entry_bits(vr_mean_bits(words));
     b.brick_headers += 4 * VR_HEADER_WORDS;
-    b.block_entries += 2 * VR_BLOCKS_PER_BRICK;
+    b.block_entries += 2 * vr_entry_units(entry_bits);
     b.codes += 2 * c.codes;
-    b.alignment += size - vr_payload_bytes(static_cast<vr_uint>(c.codes));
-    for (std::uint32_t k = 0; k < VR_BLOCKS_PER_BRICK; ++k) {
-      std::uint16_t entry;
-      std::memcpy(&entry, c.payload.data() + 4 * VR_HEADER_WORDS + 2 * k, 2);
-      ++st.sparsity_histogram[vr_entry_sparsity(entry)];
-    }
+    b.alignment += size - vr_payload_bytes(entry_bits, static_cast<vr_uint>(c.codes));
+    ++st.mean_bits_histogram[vr_mean_bits(words)];
+    for (std::uint32_t k = 0; k < VR_BLOCKS_PER_BRICK; ++k)
+      ++st.sparsity_histogram[vr_entry_sparsity(vr_block_entry(words, entry_bits, k))];
   }
   if (coarse) b.coarse_levels += size;
   // Interior voxels inside the level: the rest of the 36³ are apron or padding.
@@ -239,6 +245,10 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
     if (settings_.fixed_sparsity == 0 &&
         !(settings_.tolerance > 0 && std::isfinite(settings_.tolerance)))
       throw InputError("the tolerance must be positive and finite");
+    if (settings_.mean_bits < -1 || settings_.mean_bits > static_cast<int>(VR_MEAN_BITS))
+      throw InputError("--mean-bits must be auto or 0..12");
+    if (!(settings_.mean_step_factor > 0 && std::isfinite(settings_.mean_step_factor)))
+      throw InputError("the mean step factor must be positive and finite");
     if (settings_.fixed_sparsity == 0 && settings_.rule == VariableRateRule::lagrangian &&
         !(settings_.lagrangian_factor > 0 && std::isfinite(settings_.lagrangian_factor)))
       throw InputError("the Lagrangian factor must be positive and finite");
@@ -345,9 +355,22 @@ double quantize_block(const float* y, float mean_error, const std::int32_t* a, c
   return e;
 }
 
+/// The mean bits of a brick whose block means span [lo, hi]: `forced` when ≥ 0, else the fewest
+/// bits b (0..12) whose quantization step (hi − lo)/(2^b − 1) is at most `step` (b = 0: the one
+/// level is the midpoint, so a span up to `step` suffices), and 12 when step ≤ 0.
+std::uint32_t choose_mean_bits(float lo, float hi, double step, int forced) {
+  if (forced >= 0) return static_cast<std::uint32_t>(forced);
+  if (!(step > 0)) return VR_MEAN_BITS;
+  const double span = static_cast<double>(hi) - static_cast<double>(lo);
+  for (std::uint32_t b = 0; b < VR_MEAN_BITS; ++b)
+    if (span <= step * static_cast<double>(b == 0 ? 1u : (1u << b) - 1u)) return b;
+  return VR_MEAN_BITS;
+}
+
 /// Quantizes one brick's sparse codes into its payload (brick_decode.h's layout).
-/// Step 1: means to 12 bits over [min, max] of the brick's block means. Step 2: coefficients to 6
-/// bits over [min, max] of the brick's coefficients, block by block (quantize_block). Step 3
+/// Step 1: means to b bits over [min, max] of the brick's block means, b the fewest bits whose
+/// step is at most options.mean_step (choose_mean_bits). Step 2: coefficients to 6 bits over
+/// [min, max] of the brick's coefficients, block by block (quantize_block). Step 3
 /// ("quantization inside the pursuit"): while a block's quantized error exceeds m·ε² and it has
 /// fewer than Smax atoms, add the atom most correlated with the quantized residual and quantize
 /// again; keep it only if the error falls.
@@ -401,8 +424,14 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
         }
       }
   }
-  const Quantizer mq(mean_lo, mean_hi, VR_MEAN_LEVELS), cq(coef_lo, coef_hi, VR_COEF_LEVELS);
-  std::vector<std::uint16_t> entries(VR_BLOCKS_PER_BRICK), code_words;
+  format::KsvdPayloadParts parts;
+  parts.mean_bits = choose_mean_bits(mean_lo, mean_hi, options.mean_step, options.mean_bits);
+  const float mean_mid = mean_lo + (mean_hi - mean_lo) / 2;
+  const Quantizer mq = parts.mean_bits == 0
+                           ? Quantizer(mean_mid, mean_mid, 0)
+                           : Quantizer(mean_lo, mean_hi, (1u << parts.mean_bits) - 1u);
+  const Quantizer cq(coef_lo, coef_hi, VR_COEF_LEVELS);
+  std::vector<std::uint16_t>& code_words = parts.codes;
   code_words.reserve(total + 64);
   Eigen::VectorXf residual(VR_BLOCK_LENGTH), correlation;
   for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
@@ -438,24 +467,19 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
       e = e2;
       std::copy_n(q2, s, q);
     }
-    entries[b] = static_cast<std::uint16_t>((static_cast<std::uint32_t>(s) << 12) | qmean);
+    parts.sparsity[b] = static_cast<std::uint32_t>(s);
+    parts.mean[b] = qmean;
     for (int k = 0; k < s; ++k)
       code_words.push_back(
           static_cast<std::uint16_t>((static_cast<std::uint32_t>(a[k]) << 6) | q[k]));
     *squared_error += e;
   }
   *code_count += code_words.size();
-  std::vector<std::byte> payload((vr_payload_bytes(static_cast<vr_uint>(code_words.size())) + 3) /
-                                 4 * 4);
-  const float header[VR_HEADER_WORDS] = {mq.bias, mq.scale, cq.bias, cq.scale};
-  std::byte* data = payload.data();
-  if (data == nullptr) throw std::logic_error("empty payload");
-  std::memcpy(data, header, sizeof header);
-  std::memcpy(data + 4 * VR_HEADER_WORDS, entries.data(), 2 * entries.size());
-  if (!code_words.empty())
-    std::memcpy(data + 4 * VR_HEADER_WORDS + 2 * VR_BLOCKS_PER_BRICK, code_words.data(),
-                2 * code_words.size());
-  return payload;
+  parts.dequantization[0] = mq.bias;
+  parts.dequantization[1] = mq.scale;
+  parts.dequantization[2] = cq.bias;
+  parts.dequantization[3] = cq.scale;
+  return format::pack_ksvd_payload(parts);
 }
 
 std::vector<std::byte> zfp_payload(const float* brick, double accuracy) {
@@ -493,6 +517,8 @@ QuantizeOptions FrameEncoder::quantize_options() const {
   o.refit = settings_.refit_quantization;
   o.optimize_interval = settings_.optimize_interval;
   o.max_atoms = settings_.max_atoms;
+  o.mean_bits = settings_.mean_bits;
+  if (settings_.fixed_sparsity == 0) o.mean_step = settings_.mean_step_factor * settings_.tolerance;
   if (settings_.extend_pursuit && settings_.fixed_sparsity == 0 &&
       settings_.rule == VariableRateRule::tolerance)
     o.target_energy =
@@ -746,7 +772,10 @@ double manifest_estimate(std::size_t frames) {
 /// before the field existed, which all used it), with its parameters.
 nlohmann::json rate_rule_of(const format::Manifest& m) {
   nlohmann::json r = nlohmann::json::object();
-  if (m.codec != format::Codec::ksvd || m.fixed_sparsity != 0) return r;
+  if (m.codec != format::Codec::ksvd) return r;
+  for (const char* key : {"mean_bits", "mean_step_factor"})
+    if (m.encoder.is_object() && m.encoder.contains(key)) r[key] = m.encoder[key];
+  if (m.fixed_sparsity != 0) return r;
   const bool has = m.encoder.is_object() && m.encoder.contains("rate_rule");
   r["rate_rule"] = has ? m.encoder["rate_rule"] : nlohmann::json("tolerance");
   for (const char* key : {"lagrangian_factor", "weight_owned_voxels"})
@@ -799,6 +828,13 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   m.frames.assign(frames, std::nullopt);
   m.encoder = job.provenance;
   if (!m.encoder.is_object()) m.encoder = nlohmann::json::object();
+  if (coding.codec == format::Codec::ksvd) {
+    // How each brick chose its mean bits: a resumed encode must choose them the same way.
+    m.encoder["mean_bits"] =
+        coding.mean_bits >= 0 ? nlohmann::json(coding.mean_bits) : nlohmann::json("auto");
+    if (coding.mean_bits < 0 && coding.fixed_sparsity == 0)
+      m.encoder["mean_step_factor"] = coding.mean_step_factor;
+  }
   if (coding.codec == format::Codec::ksvd && coding.fixed_sparsity == 0) {
     // How variable rate spent its atoms: a resumed encode must spend them the same way.
     const bool lagrangian = coding.rule == VariableRateRule::lagrangian;
@@ -921,6 +957,8 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     summary.breakdown += st.breakdown;
     for (std::size_t k = 0; k < st.sparsity_histogram.size(); ++k)
       summary.sparsity_histogram[k] += st.sparsity_histogram[k];
+    for (std::size_t k = 0; k < st.mean_bits_histogram.size(); ++k)
+      summary.mean_bits_histogram[k] += st.mean_bits_histogram[k];
     char status[64];
     std::snprintf(status, sizeof status, "%.1f MVoxel/s",
                   voxels * static_cast<double>(summary.encoded) / 1e6 / summary.seconds);

@@ -96,7 +96,12 @@ Manifest manifest_from_json(const std::string& text, const fs::path& name) {
   if (get("format") != "volreel-container") fail("format", "\"volreel-container\"", get("format"));
   m.format_version = static_cast<std::uint32_t>(uint_field("format_version", 1, 1000000));
   if (m.format_version != container_format_version)
-    fail("format_version", "1", get("format_version"));
+    fail("format_version",
+         std::to_string(container_format_version) +
+             (m.format_version < container_format_version
+                  ? " (a container of an older volreel: encode the series again)"
+                  : ""),
+         get("format_version"));
   m.program_version = string_field("program_version");
   const json& dims = get("dims");
   if (!dims.is_array() || dims.size() != 3) fail("dims", "[x, y, z]", dims);

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <exception>
+#include <stdexcept>
 #include <string>
 
 #include "volreel/format/brick_decode.h"
@@ -29,49 +30,29 @@ std::string str(std::uint64_t v) {
 
 void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::span<float> out,
                  const std::filesystem::path& name, std::uint64_t at) {
-  const auto fail = [&](std::uint64_t offset, const std::string& expected,
-                        const std::string& found) {
-    throw FormatError(name, offset, "brick payload " + expected, found);
-  };
-  // 1. Header and block entries present.
-  const std::size_t words = bytes.size() / 4;
-  if (bytes.size() < vr_payload_bytes(0))
-    fail(at, "a payload of at least " + str(vr_payload_bytes(0)) + " bytes",
-         str(bytes.size()) + " bytes");
+  // 1. Structure, dequantization values and atom indices.
+  const KsvdPayloadLayout layout = check_ksvd_payload(bytes, atoms.count, name, at);
   // Payloads are 4-byte aligned inside the file and the map is page-aligned, but copy to be safe
   // for in-memory views of arbitrary alignment.
-  std::vector<vr_uint> payload_words(words);
-  std::memcpy(payload_words.data(), bytes.data(), words * 4);
+  std::vector<vr_uint> payload_words(bytes.size() / 4);
+  std::memcpy(payload_words.data(), bytes.data(), payload_words.size() * 4);
   const vr_uint* payload = payload_words.data();
-  for (vr_uint w = 0; w < VR_HEADER_WORDS; ++w)
-    if (!std::isfinite(vr_as_float(payload[w])))
-      fail(at + 4 * w, "finite dequantization value", "NaN or infinity");
-  // 2. Prefix sum of sparsities = first code of each block; total fits the payload.
+  // 2. Prefix sum of sparsities = first code of each block.
   vr_uint first_code[VR_BLOCKS_PER_BRICK + 1];
   first_code[0] = 0;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
-    first_code[b + 1] = first_code[b] + vr_entry_sparsity(vr_block_entry(payload, b));
-  const vr_uint codes = first_code[VR_BLOCKS_PER_BRICK];
-  const std::uint64_t need = vr_payload_bytes(codes);
-  if (bytes.size() < need || bytes.size() >= need + 4)
-    fail(at, str(need) + " payload bytes for " + str(codes) + " codes (+ padding to 4)",
-         str(bytes.size()) + " bytes");
-  // 3. Atom indices.
-  for (vr_uint k = 0; k < codes; ++k) {
-    const vr_uint a = vr_code_atom(vr_load_u16(payload, vr_code_unit(k)));
-    if (a >= atoms.count)
-      fail(at + 2u * vr_code_unit(k), "atom index < " + str(atoms.count), str(a));
-  }
+    first_code[b + 1] =
+        first_code[b] + vr_entry_sparsity(vr_block_entry(payload, layout.entry_bits, b));
   if (atoms.values.size() < std::size_t{atoms.count} * VR_BLOCK_LENGTH)
     throw FormatError(
         name, "dictionary holds fewer than the " + str(atoms.count) + " atoms the frame needs");
-  // 4. Decode every value of every block (brick_decode.h's arithmetic, vectorized over the block:
+  // 3. Decode every value of every block (brick_decode.h's arithmetic, vectorized over the block:
   //    the codes are unpacked first, then each atom is added to all 216 values at once).
   const float* atom_values = atoms.values.data();
   const float mean_bias = vr_as_float(payload[0]), mean_scale = vr_as_float(payload[1]);
   const float coef_bias = vr_as_float(payload[2]), coef_scale = vr_as_float(payload[3]);
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
-    const vr_uint entry = vr_block_entry(payload, b);
+    const vr_uint entry = vr_block_entry(payload, layout.entry_bits, b);
     const vr_uint s = vr_entry_sparsity(entry);
     const float mean = mean_bias + mean_scale * static_cast<float>(vr_entry_mean(entry));
     alignas(64) float block[VR_BLOCK_LENGTH];
@@ -79,7 +60,8 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
     float coefficient[VR_MAX_SPARSITY];
     const float* atom_of[VR_MAX_SPARSITY];
     for (vr_uint k = 0; k < s; ++k) {
-      const vr_uint code16 = vr_load_u16(payload, vr_code_unit(first_code[b] + k));
+      const vr_uint code16 =
+          vr_load_u16(payload, vr_code_unit(layout.entry_bits, first_code[b] + k));
       coefficient[k] = coef_bias + coef_scale * static_cast<float>(vr_code_value(code16));
       atom_of[k] = atom_values + std::size_t{vr_code_atom(code16)} * VR_BLOCK_LENGTH;
     }
@@ -93,6 +75,90 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
             block + (z * 6 + y) * 6, 6 * sizeof(float));
   }
 }
+
+}  // namespace
+
+std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
+  if (parts.mean_bits > VR_MEAN_BITS)
+    throw std::invalid_argument("mean bits " + str(parts.mean_bits) + " > " + str(VR_MEAN_BITS));
+  const vr_uint entry_bits = vr_entry_bits(parts.mean_bits);
+  std::uint64_t codes = 0;
+  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    if (parts.sparsity[b] > VR_MAX_SPARSITY || (parts.mean[b] >> parts.mean_bits) != 0)
+      throw std::invalid_argument("block " + str(b) + ": sparsity " + str(parts.sparsity[b]) +
+                                  " or mean " + str(parts.mean[b]) + " does not fit its bits");
+    codes += parts.sparsity[b];
+  }
+  if (codes != parts.codes.size())
+    throw std::invalid_argument(str(parts.codes.size()) + " codes for sparsities summing to " +
+                                str(codes));
+  const vr_uint bytes = vr_payload_bytes(entry_bits, static_cast<vr_uint>(codes));
+  std::vector<vr_uint> words((bytes + 3) / 4, 0u);
+  for (vr_uint w = 0; w < 4; ++w) std::memcpy(&words[w], &parts.dequantization[w], 4);
+  words[4] = parts.mean_bits;
+  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    const vr_uint entry = parts.sparsity[b] | (parts.mean[b] << VR_SPARSITY_BITS);
+    const vr_uint bit = b * entry_bits, word = VR_HEADER_WORDS + bit / 32, shift = bit % 32;
+    words[word] |= entry << shift;
+    if (shift + entry_bits > 32) words[word + 1] |= entry >> (32 - shift);
+  }
+  for (std::size_t k = 0; k < parts.codes.size(); ++k) {
+    const vr_uint unit = vr_code_unit(entry_bits, static_cast<vr_uint>(k));
+    words[unit / 2] |= vr_uint{parts.codes[k]} << (16 * (unit % 2));
+  }
+  std::vector<std::byte> payload(words.size() * 4);
+  std::memcpy(payload.data(), words.data(), payload.size());
+  return payload;
+}
+
+KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> bytes, std::uint32_t atom_count,
+                                     const std::filesystem::path& name, std::uint64_t at) {
+  const auto fail = [&](std::uint64_t offset, const std::string& expected,
+                        const std::string& found) {
+    throw FormatError(name, at + offset, "brick payload " + expected, found);
+  };
+  const auto word = [&](std::size_t i) {
+    vr_uint w;
+    std::memcpy(&w, bytes.data() + 4 * i, 4);
+    return w;
+  };
+  // 1. Header: four finite dequantization values and the mean bits.
+  if (bytes.size() < 4 * VR_HEADER_WORDS || bytes.size() % 4 != 0)
+    fail(0, "of at least " + str(4 * VR_HEADER_WORDS) + " bytes, a multiple of 4",
+         str(bytes.size()) + " bytes");
+  for (vr_uint w = 0; w < 4; ++w)
+    if (!std::isfinite(vr_as_float(word(w))))
+      fail(4 * w, "finite dequantization value", "NaN or infinity");
+  const vr_uint layout_word = word(4);
+  KsvdPayloadLayout layout;
+  layout.mean_bits = layout_word & 0xFu;
+  if (layout.mean_bits > VR_MEAN_BITS || (layout_word >> 4) != 0)
+    fail(16, "mean bits 0.." + str(VR_MEAN_BITS) + " in bits 0..3 and zero bits 4..31",
+         "word " + str(layout_word));
+  layout.entry_bits = vr_entry_bits(layout.mean_bits);
+  // 2. The entries, then the length their sparsities give.
+  if (bytes.size() < vr_payload_bytes(layout.entry_bits, 0))
+    fail(0, "of at least " + str(vr_payload_bytes(layout.entry_bits, 0)) + " bytes for " +
+                str(layout.entry_bits) + "-bit block entries",
+         str(bytes.size()) + " bytes");
+  std::vector<vr_uint> words(bytes.size() / 4);
+  for (std::size_t i = 0; i < words.size(); ++i) words[i] = word(i);
+  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+    layout.codes += vr_entry_sparsity(vr_block_entry(words.data(), layout.entry_bits, b));
+  const std::uint64_t need = vr_payload_bytes(layout.entry_bits, layout.codes);
+  if (bytes.size() < need || bytes.size() >= need + 4)
+    fail(0, str(need) + " bytes for " + str(layout.codes) + " codes (+ padding to 4)",
+         str(bytes.size()) + " bytes");
+  // 3. Atom indices.
+  for (vr_uint k = 0; k < layout.codes; ++k) {
+    const vr_uint unit = vr_code_unit(layout.entry_bits, k);
+    const vr_uint a = vr_code_atom(vr_load_u16(words.data(), unit));
+    if (a >= atom_count) fail(2u * unit, "atom index < " + str(atom_count), str(a));
+  }
+  return layout;
+}
+
+namespace {
 
 void decode_zfp(std::span<const std::byte> bytes, double accuracy, std::span<float> out,
                 const std::filesystem::path& name, std::uint64_t at) {

@@ -146,7 +146,12 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
   if (std::memcmp(h.magic, frame_magic.data(), 8) != 0)
     fail(0, "magic \"VREELFRM\"", "other bytes (not a volreel frame file)");
   if (h.format_version != frame_format_version)
-    fail(offsetof(FrameHeader, format_version), "format version 1", str(h.format_version));
+    fail(offsetof(FrameHeader, format_version),
+         "format version " + str(frame_format_version) +
+             (h.format_version < frame_format_version
+                  ? " (a file of an older volreel: encode the series again)"
+                  : ""),
+         str(h.format_version));
   if (h.header_bytes != sizeof(FrameHeader))
     fail(offsetof(FrameHeader, header_bytes), "header size 128", str(h.header_bytes));
   if (h.codec > 1) fail(offsetof(FrameHeader, codec), "codec 0 (ksvd) or 1 (zfp)", str(h.codec));

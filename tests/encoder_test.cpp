@@ -161,12 +161,15 @@ TEST(Encoder, RoundTripOfABrickBuiltFromAtoms) {
   const encoder::FrameEncoder enc(&d, s);
   const auto payload = enc.encode_brick(brick);
   // One code per block, naming the atom the block was built from.
-  ASSERT_EQ(payload.size(), (vr_payload_bytes(216) + 3) / 4 * 4);
   std::vector<vr_uint> words(payload.size() / 4);
   std::memcpy(words.data(), payload.data(), payload.size());
+  ASSERT_GE(words.size(), VR_HEADER_WORDS);
+  ASSERT_NE(words.data(), nullptr);
+  const vr_uint entry_bits = vr_entry_bits(vr_mean_bits(words.data()));
+  ASSERT_EQ(payload.size(), (vr_payload_bytes(entry_bits, 216) + 3) / 4 * 4);
   for (vr_uint b = 0, code = 0; b < 216; ++b) {
-    ASSERT_EQ(vr_entry_sparsity(vr_block_entry(words.data(), b)), 1u) << "block " << b;
-    ASSERT_EQ(vr_code_atom(vr_load_u16(words.data(), vr_code_unit(code++))),
+    ASSERT_EQ(vr_entry_sparsity(vr_block_entry(words.data(), entry_bits, b)), 1u) << "block " << b;
+    ASSERT_EQ(vr_code_atom(vr_load_u16(words.data(), vr_code_unit(entry_bits, code++))),
               static_cast<vr_uint>(chosen[b]));
   }
   std::vector<float> out(brick_voxels);
@@ -302,8 +305,10 @@ TEST(Encoder, PaddingBlocksGetNoAtomsUnderTheLagrangianRule) {  // (at this ε: 
       ASSERT_GT(payload.size(), 4u);
       std::vector<vr_uint> words(payload.size() / 4);
       std::memcpy(words.data(), payload.data(), payload.size());
+      ASSERT_NE(words.data(), nullptr);
+      const vr_uint entry_bits = vr_entry_bits(vr_mean_bits(words.data()));
       for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
-        const vr_uint atoms = vr_entry_sparsity(vr_block_entry(words.data(), b));
+        const vr_uint atoms = vr_entry_sparsity(vr_block_entry(words.data(), entry_bits, b));
         (f.position(i).x == 1 && b % VR_BLOCKS_PER_AXIS >= 2 ? padding_codes : other_codes) += atoms;
       }
     }
@@ -313,6 +318,131 @@ TEST(Encoder, PaddingBlocksGetNoAtomsUnderTheLagrangianRule) {  // (at this ε: 
     else
       EXPECT_GT(padding_codes, 0u);  // the ε rule codes them like any block
   }
+}
+
+/// Mean bits and the block means' decoded errors of every coded brick of a frame file: the largest
+/// |decoded mean − true mean| over blocks relative to the brick's step bound, and the bits used.
+struct MeanCheck {
+  std::vector<std::uint32_t> bits;  ///< per coded brick
+  double worst_error = 0;           ///< the largest |decoded − exact block mean|
+};
+MeanCheck check_means(const std::vector<std::byte>& bytes, const encoder::Pyramid& pyramid) {
+  const format::FrameView f(bytes, "means.vrf");
+  MeanCheck out;
+  std::vector<float> brick(brick_voxels);
+  for (std::uint32_t i = 0; i < f.node_count(); ++i) {
+    const auto payload = f.brick_bytes(i);
+    if (payload.size() == 4) continue;
+    std::vector<vr_uint> words(payload.size() / 4);
+    std::memcpy(words.data(), payload.data(), payload.size());
+    if (words.size() < VR_HEADER_WORDS) throw std::logic_error("short payload");
+    const vr_uint bits = vr_mean_bits(words.data()), entry_bits = vr_entry_bits(bits);
+    out.bits.push_back(bits);
+    const auto p = f.position(i);
+    encoder::extract_brick(pyramid, p.level, p.x, p.y, p.z, brick);
+    for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+      double exact = 0;
+      for (vr_uint v = 0; v < VR_BLOCK_LENGTH; ++v)
+        exact += static_cast<double>(brick[vr_brick_voxel(b, v)]);
+      exact /= VR_BLOCK_LENGTH;
+      const vr_uint q = vr_entry_mean(vr_block_entry(words.data(), entry_bits, b));
+      const double decoded = static_cast<double>(vr_as_float(words[0])) +
+                             static_cast<double>(vr_as_float(words[1])) * q;
+      out.worst_error = std::max(out.worst_error, std::abs(decoded - exact));
+    }
+  }
+  return out;
+}
+
+TEST(Encoder, VariableRateTakesTheFewestMeanBitsForAStepOfHalfEpsilon) {
+  const Volume v = analytic_volume(datasets::AnalyticField::noise, {70, 68, 40});
+  const auto d = random_dictionary(64, 3);
+  const auto pyramid = encoder::build_pyramid(v);
+  double previous_bits = 13;
+  for (double eps : {1e-4, 1e-2, 5e-2, 2e-1}) {
+    const auto s = ksvd_settings(eps, v);
+    const auto bytes = encoder::FrameEncoder(&d, s).encode(0, v);
+    const MeanCheck m = check_means(bytes, pyramid);
+    ASSERT_FALSE(m.bits.empty());
+    double bits = 0;
+    for (auto b : m.bits) bits += b;
+    bits /= static_cast<double>(m.bits.size());
+    EXPECT_LT(bits, previous_bits) << "eps " << eps;  // a larger ε takes fewer bits
+    if (eps == 1e-4) {
+      EXPECT_EQ(bits, 12.0);  // the step bound is below what 12 bits give: 12, never more
+    } else {
+      // Rounding to a step of at most ε/2 errs by at most ε/4 (plus float rounding).
+      EXPECT_LE(m.worst_error, 0.25 * eps + 1e-5) << "eps " << eps;
+      EXPECT_GT(m.worst_error, 0.05 * eps) << "eps " << eps;  // and the step is not far finer
+    }
+    previous_bits = bits;
+  }
+  // Fewer bits than 12 for the same ε: fewer bytes.
+  auto s = ksvd_settings(5e-2, v);
+  const auto adaptive = encoder::FrameEncoder(&d, s).encode(0, v);
+  s.mean_bits = 12;
+  const auto twelve = encoder::FrameEncoder(&d, s).encode(0, v);
+  EXPECT_LT(adaptive.size(), twelve.size());
+  // Fixed rate has no ε: 12 bits, and --mean-bits N forces N in every brick.
+  auto fixed = ksvd_settings(0, v);
+  fixed.fixed_sparsity = 2;
+  for (auto b : check_means(encoder::FrameEncoder(&d, fixed).encode(0, v), pyramid).bits)
+    ASSERT_EQ(b, 12u);
+  for (int forced : {0, 5}) {
+    s.mean_bits = forced;
+    for (auto b : check_means(encoder::FrameEncoder(&d, s).encode(0, v), pyramid).bits)
+      ASSERT_EQ(b, static_cast<std::uint32_t>(forced));
+  }
+  s.mean_bits = 13;
+  EXPECT_THROW(encoder::FrameEncoder(&d, s), InputError);
+}
+
+TEST(BrickPayload, PackedFieldsReadBackAtEveryMeanWidth) {
+  SplitMix64 rng(17);
+  for (std::uint32_t bits = 0; bits <= VR_MEAN_BITS; ++bits) {
+    format::KsvdPayloadParts parts;
+    parts.dequantization[0] = 0.5f;
+    parts.dequantization[1] = 0.25f;
+    parts.dequantization[2] = -1.0f;
+    parts.dequantization[3] = 0.125f;
+    parts.mean_bits = bits;
+    for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+      parts.sparsity[b] = static_cast<std::uint32_t>(rng.below(16));
+      parts.mean[b] = static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << bits));
+      if (b == 0) parts.mean[b] = (1u << bits) - 1u;  // the largest value of the width
+      for (std::uint32_t k = 0; k < parts.sparsity[b]; ++k)
+        parts.codes.push_back(static_cast<std::uint16_t>((rng.below(30) << 6) | rng.below(64)));
+    }
+    const auto payload = format::pack_ksvd_payload(parts);
+    const auto layout = format::check_ksvd_payload(payload, 30, "p", 0);
+    ASSERT_EQ(layout.mean_bits, bits);
+    ASSERT_EQ(layout.codes, parts.codes.size());
+    ASSERT_EQ(payload.size(), (vr_payload_bytes(4 + bits, layout.codes) + 3) / 4 * 4);
+    std::vector<vr_uint> w(payload.size() / 4);
+    std::memcpy(w.data(), payload.data(), payload.size());
+    ASSERT_GE(w.size(), VR_HEADER_WORDS);
+    for (std::uint32_t b = 0, code = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+      const vr_uint entry = vr_block_entry(w.data(), 4 + bits, b);
+      ASSERT_EQ(vr_entry_sparsity(entry), parts.sparsity[b]) << bits << " bits, block " << b;
+      ASSERT_EQ(vr_entry_mean(entry), parts.mean[b]) << bits << " bits, block " << b;
+      for (std::uint32_t k = 0; k < parts.sparsity[b]; ++k, ++code)
+        ASSERT_EQ(vr_load_u16(w.data(), vr_code_unit(4 + bits, code)), parts.codes[code]);
+    }
+    // Word 4 with a width past 12, or other bits set, and a short payload are refused.
+    for (vr_uint bad : {13u, 15u, bits | 0x100u}) {
+      auto broken = payload;
+      std::memcpy(broken.data() + 16, &bad, 4);
+      EXPECT_THROW(format::check_ksvd_payload(broken, 30, "p", 0), format::FormatError) << bad;
+    }
+    const std::vector<std::byte> short_payload(payload.begin(), payload.end() - 4);
+    if (layout.codes > 1) {
+      EXPECT_THROW(format::check_ksvd_payload(short_payload, 30, "p", 0), format::FormatError);
+    }
+  }
+  format::KsvdPayloadParts wide;
+  wide.mean_bits = 3;
+  wide.mean[7] = 8;  // does not fit 3 bits
+  EXPECT_THROW(format::pack_ksvd_payload(wide), std::invalid_argument);
 }
 
 TEST(Encoder, NodeTableIsBreadthFirstWithBottomUpHistograms) {
@@ -389,8 +519,8 @@ TEST(Encoder, FixedSparsityUsesAtMostSAtoms) {
 /// coding changes on purpose, print the new values with VOLREEL_PRINT_CHECKSUMS=1 and update them
 /// (KSVD_* and ZFP_* in tests/CMakeLists.txt: the ε rule and zfp; LAGRANGIAN_* below: the default
 /// variable rate).
-constexpr std::size_t LAGRANGIAN_BYTES = 4224;
-constexpr std::uint32_t LAGRANGIAN_CRC = 0x8ca82f2du;
+constexpr std::size_t LAGRANGIAN_BYTES = 3336;
+constexpr std::uint32_t LAGRANGIAN_CRC = 0x1a4d6878u;
 
 TEST(Encoder, RegressionChecksums) {
   const Volume v = analytic_volume(datasets::AnalyticField::blobs, {40, 36, 34}, 1);
@@ -473,10 +603,16 @@ TEST(Container, EncodeResumeVerifyAndDecode) {
   job.coding.tolerance = 0.03;
   EXPECT_THROW(encoder::encode_series(*series, out, job), InputError);
   job.coding.tolerance = tolerance;
+  const auto rule = job.coding.rule;
   job.coding.rule = job.coding.rule == encoder::VariableRateRule::lagrangian
                         ? encoder::VariableRateRule::tolerance
                         : encoder::VariableRateRule::lagrangian;
   EXPECT_THROW(encoder::encode_series(*series, out, job), InputError);
+  // ... or other mean bits.
+  job.coding.rule = rule;
+  job.coding.mean_bits = 7;
+  EXPECT_THROW(encoder::encode_series(*series, out, job), InputError);
+  job.coding.mean_bits = -1;
   // Decode a frame at every level; full resolution matches the input within a few ε.
   const format::Container c(out);
   EXPECT_EQ(c.frame_count(), 4u);

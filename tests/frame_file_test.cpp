@@ -85,7 +85,7 @@ TEST(FrameLayout, OffsetsAndGeometry) {
   const auto d = small_dictionary();
   const auto bytes = small_frame(format::Codec::ksvd, d);
   EXPECT_EQ(std::memcmp(bytes.data(), "VREELFRM", 8), 0);
-  EXPECT_EQ(static_cast<int>(bytes[8]), 1);
+  EXPECT_EQ(static_cast<int>(bytes[8]), 2);
   EXPECT_EQ(static_cast<int>(bytes[9]), 0);
 }
 
@@ -142,7 +142,10 @@ TEST(DamagedFrame, PayloadErrorsNameTheBrick) {
   auto bytes = small_frame(format::Codec::ksvd, d);
   const format::FrameView view(bytes, "x");
   // An atom index past K in brick 0's first code: caught by payload validation (not the index CRC).
-  const std::uint64_t code = view.brick_offset(0) + 2 * vr_code_unit(0);
+  vr_uint layout_word;
+  std::memcpy(&layout_word, bytes.data() + view.brick_offset(0) + 16, 4);
+  const std::uint64_t code =
+      view.brick_offset(0) + 2 * vr_code_unit(vr_entry_bits(layout_word & 0xFu), 0);
   std::uint16_t v;
   std::memcpy(&v, bytes.data() + code, 2);
   v = static_cast<std::uint16_t>(v | (1023u << 6));

@@ -16,7 +16,6 @@
 #define VR_KIND_KSVD 0u
 #define VR_KIND_CONSTANT 1u
 #define VR_KIND_RAW 2u
-#define VR_MAX_PAYLOAD_WORDS 1732u /* (448 + 2·216·15) / 4 */
 #define VR_INVOCATIONS 54u         /* 216 values of a block / 4 */
 
 layout(local_size_x = 54) in;
@@ -32,16 +31,18 @@ layout(push_constant) uniform Params {
   float inv_range;
 } params;
 
-// The brick's payload, copied cooperatively: brick_decode.h reads it through vr_load_word.
+uint vr_load_word(uint index);   // below: brick_decode.h reads the payload through it
+float vr_load_atom(uint index) { return atom_quads[index >> 2u][index & 3u]; }
+
+#include "volreel/format/brick_decode.h"
+#include "volreel/player/atlas_layout.h"
+
+// The brick's payload, copied cooperatively.
 shared uint s_payload[VR_MAX_PAYLOAD_WORDS];
 shared uint s_scan[VR_INVOCATIONS];
 shared uint s_first[216];
 
 uint vr_load_word(uint index) { return s_payload[index]; }
-float vr_load_atom(uint index) { return atom_quads[index >> 2u][index & 3u]; }
-
-#include "volreel/format/brick_decode.h"
-#include "volreel/player/atlas_layout.h"
 
 void store_voxel(ivec3 origin, uint voxel, float value) {
   ivec3 p = origin + ivec3(int(voxel % VR_BRICK_SIZE), int((voxel / VR_BRICK_SIZE) % VR_BRICK_SIZE),
@@ -83,10 +84,11 @@ void main() {
 
   // 2. Block start offsets: prefix sum of the sparsities. Invocation t sums blocks 4t..4t+3, a
   //    Hillis–Steele scan over the 54 sums, then each writes the first code of its 4 blocks.
+  const uint entry_bits = vr_entry_bits(vr_mean_bits());
   uint own[4];
   uint sum = 0u;
   for (uint i = 0u; i < 4u; ++i) {
-    own[i] = vr_entry_sparsity(vr_block_entry(4u * t + i));
+    own[i] = vr_entry_sparsity(vr_block_entry(entry_bits, 4u * t + i));
     sum += own[i];
   }
   s_scan[t] = sum;
@@ -111,12 +113,12 @@ void main() {
   const float coef_bias = vr_as_float(vr_load_word(2u));
   const float coef_scale = vr_as_float(vr_load_word(3u));
   for (uint b = 0u; b < VR_BLOCKS_PER_BRICK; ++b) {
-    const uint entry = vr_block_entry(b);
+    const uint entry = vr_block_entry(entry_bits, b);
     const uint s = vr_entry_sparsity(entry);
     const uint first_code = s_first[b];
     vec4 value = vec4(mean_bias + mean_scale * float(vr_entry_mean(entry)));
     for (uint k = 0u; k < s; ++k) {
-      const uint code16 = vr_load_u16(vr_code_unit(first_code + k));
+      const uint code16 = vr_load_u16(vr_code_unit(entry_bits, first_code + k));
       const float coefficient = coef_bias + coef_scale * float(vr_code_value(code16));
       value += coefficient * atom_quads[vr_code_atom(code16) * (VR_BLOCK_LENGTH / 4u) + t];
     }

@@ -3,6 +3,7 @@
 // dequantization values — and a random dictionary. Our own PRNG, fixed seeds.
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -11,6 +12,7 @@
 
 #include "volreel/datasets/prng.hpp"
 #include "volreel/format/brick_decode.h"
+#include "volreel/format/decoder.hpp"
 
 namespace volreel::test {
 
@@ -21,32 +23,33 @@ inline std::vector<float> random_atoms(SplitMix64& rng, std::uint32_t count) {
   return atoms;
 }
 
-/// A ksvd payload. `style` picks the pattern: 0 random sparsities and codes, 1 every block at
-/// sparsity 15, 2 every block at sparsity 0, 3 extreme codes (atoms 0 and K−1, values 0 and 63,
-/// means 0 and 4095), 4 like 0 with negative scales.
+/// A ksvd payload. `style` picks the pattern: 0 random sparsities, codes and mean bits (0..12),
+/// 1 every block at sparsity 15, 2 every block at sparsity 0, 3 extreme codes (atoms 0 and K−1,
+/// values 0 and 63, 12-bit means 0 and 4095), 4 like 0 with negative scales.
 inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t atom_count,
                                                   int style) {
   const auto sign = [&] { return rng.below(2) ? 1.0f : -1.0f; };
-  float header[4] = {static_cast<float>(rng.uniform(-2, 2)),
-                     sign() * static_cast<float>(rng.uniform(1e-4, 1e-3)),
-                     static_cast<float>(rng.uniform(-0.5, 0.5)),
-                     sign() * static_cast<float>(rng.uniform(0.005, 0.03))};
+  format::KsvdPayloadParts parts;
+  parts.dequantization[0] = static_cast<float>(rng.uniform(-2, 2));
+  parts.dequantization[1] = sign() * static_cast<float>(rng.uniform(1e-4, 1e-3));
+  parts.dequantization[2] = static_cast<float>(rng.uniform(-0.5, 0.5));
+  parts.dequantization[3] = sign() * static_cast<float>(rng.uniform(0.005, 0.03));
   if (style == 4) {
-    header[1] = -std::abs(header[1]);
-    header[3] = -std::abs(header[3]);
+    parts.dequantization[1] = -std::abs(parts.dequantization[1]);
+    parts.dequantization[3] = -std::abs(parts.dequantization[3]);
   }
-  std::vector<std::uint16_t> units;
-  std::vector<std::uint16_t> codes;
+  parts.mean_bits = style == 3 ? VR_MEAN_BITS : static_cast<std::uint32_t>(rng.below(VR_MEAN_BITS + 1));
   for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     std::uint32_t s = static_cast<std::uint32_t>(rng.below(16));
-    std::uint32_t mean = static_cast<std::uint32_t>(rng.below(4096));
+    std::uint32_t mean = static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << parts.mean_bits));
     if (style == 1) s = 15;
     if (style == 2) s = 0;
     if (style == 3) {
       s = 1 + b % 15;
-      mean = b % 2 ? 4095 : 0;
+      mean = b % 2 ? (1u << VR_MEAN_BITS) - 1u : 0u;
     }
-    units.push_back(static_cast<std::uint16_t>((s << 12) | mean));
+    parts.sparsity[b] = s;
+    parts.mean[b] = mean;
     for (std::uint32_t k = 0; k < s; ++k) {
       std::uint32_t atom = static_cast<std::uint32_t>(rng.below(atom_count));
       std::uint32_t value = static_cast<std::uint32_t>(rng.below(64));
@@ -54,17 +57,10 @@ inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t
         atom = (b + k) % 2 ? atom_count - 1 : 0;
         value = (b + k) % 3 == 0 ? 0 : 63;
       }
-      codes.push_back(static_cast<std::uint16_t>((atom << 6) | value));
+      parts.codes.push_back(static_cast<std::uint16_t>((atom << 6) | value));
     }
   }
-  units.insert(units.end(), codes.begin(), codes.end());
-  std::vector<std::byte> payload((vr_payload_bytes(static_cast<vr_uint>(codes.size())) + 3) / 4 *
-                                 4);
-  std::byte* data = payload.data();
-  if (data == nullptr) throw std::logic_error("empty payload");
-  std::memcpy(data, header, sizeof header);
-  std::memcpy(data + sizeof header, units.data(), 2 * units.size());
-  return payload;
+  return format::pack_ksvd_payload(parts);
 }
 
 /// A 4-byte constant payload.

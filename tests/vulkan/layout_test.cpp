@@ -66,23 +66,29 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
   const std::uint32_t constants[16] = {
       VR_BRICK_SIZE,      VR_BRICK_INTERIOR,   VR_BLOCK_SIZE,    VR_BLOCK_LENGTH,
       VR_BLOCKS_PER_AXIS, VR_BLOCKS_PER_BRICK, VR_HEADER_WORDS,  VR_MEAN_BITS,
-      VR_COEF_BITS,       VR_ATOM_BITS,        VR_MAX_SPARSITY,  VR_MEAN_LEVELS,
-      VR_COEF_LEVELS,     VR_ATLAS_SLOT_SIZE,  VR_ATLAS_NO_SLOT, vr_payload_bytes(0)};
+      VR_COEF_BITS,       VR_ATOM_BITS,        VR_MAX_SPARSITY,  VR_MAX_PAYLOAD_WORDS,
+      VR_COEF_LEVELS,     VR_ATLAS_SLOT_SIZE,  VR_ATLAS_NO_SLOT,
+      vr_mean_bits(p) | (vr_entry_bits(vr_mean_bits(p)) << 8) | (VR_SPARSITY_BITS << 16)};
   for (std::uint32_t k = 0; k < 16; ++k)
     EXPECT_EQ(gpu[8 * N + k], constants[k]) << "constant " << k;
+  EXPECT_EQ(VR_MAX_PAYLOAD_WORDS * 4, vr_payload_bytes(16, 216 * VR_MAX_SPARSITY));
+  const vr_uint entry_bits = vr_entry_bits(vr_mean_bits(p));
+  ASSERT_GE(payload.size(), VR_HEADER_WORDS + 108u) << "the probe reads 216 entries of 16 bits";
   std::uint32_t first_code = 0, mismatches = 0;
   float worst = 0;
   for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) {
       const std::uint32_t i = b * 216 + v;
-      const vr_uint entry = vr_block_entry(p, i % VR_BLOCKS_PER_BRICK);
+      const vr_uint entry = vr_block_entry(p, 4 + (i / 216) % 13, i % VR_BLOCKS_PER_BRICK);
+      const vr_uint width = 4 + i % 13;
       const std::uint32_t expected[8] = {
           vr_brick_voxel(b, v),
           0,  // the decoded value, compared below
           vr_load_u16(p, i % (2 * VR_HEADER_WORDS + VR_BLOCKS_PER_BRICK)),
           vr_entry_sparsity(entry) | (vr_entry_mean(entry) << 8),
           vr_code_atom(i & 0xFFFF) | (vr_code_value(i & 0xFFFF) << 16),
-          vr_code_unit(i) ^ (vr_payload_bytes(i) << 12),
+          vr_code_unit(width, i) ^ (vr_payload_bytes(width, i) << 12) ^
+              (vr_entry_units(width) << 24),
           vr_atlas_cell_x(i, 7) | (vr_atlas_cell_y(i, 7, 5) << 8) |
               (vr_atlas_cell_z(i, 7, 5) << 16),
           vr_atlas_cell_x(i, 56) | (vr_atlas_cell_y(i, 56, 56) << 8) |
@@ -96,7 +102,7 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
       const float glsl = std::bit_cast<float>(gpu[N + i]);
       worst = std::max(worst, std::fabs(cpu - glsl) / std::max(1.0f, std::fabs(cpu)));
     }
-    first_code += vr_entry_sparsity(vr_block_entry(p, b));
+    first_code += vr_entry_sparsity(vr_block_entry(p, entry_bits, b));
   }
   EXPECT_EQ(mismatches, 0u);
   EXPECT_LT(worst, 1e-5f) << "largest relative difference of decoded values";

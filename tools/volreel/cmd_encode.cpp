@@ -3,9 +3,11 @@
 #include <omp.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -33,7 +35,7 @@ using Clock = std::chrono::steady_clock;
 constexpr double default_psnr = 55.0;  ///< when neither the dictionary nor the user says
 
 struct EncodeOptions {
-  std::string series, dictionary, out, codec = "ksvd", rate_rule = "lagrangian";
+  std::string series, dictionary, out, codec = "ksvd", rate_rule = "lagrangian", mean_bits = "auto";
   ReaderOptions reader;
   double tolerance = 0, psnr = 0, bps = 0, zfp_accuracy = 0;
   int fixed_sparsity = 0, max_atoms = 15, atoms = 0;
@@ -142,6 +144,14 @@ void print_breakdown(const encoder::EncodeSummary& s) {
               static_cast<double>(codes) / static_cast<double>(blocks));
   for (std::size_t count : s.sparsity_histogram)
     std::printf(" %.1f", 100.0 * static_cast<double>(count) / static_cast<double>(blocks));
+  std::size_t bricks = 0, bits = 0;
+  for (std::size_t k = 0; k < s.mean_bits_histogram.size(); ++k)
+    bricks += s.mean_bits_histogram[k], bits += k * s.mean_bits_histogram[k];
+  std::printf("\nmean bits per brick: mean %.2f; bricks with 0..12 bits (%%):",
+              static_cast<double>(bits) / static_cast<double>(std::max<std::size_t>(bricks, 1)));
+  for (std::size_t count : s.mean_bits_histogram)
+    std::printf(" %.1f", 100.0 * static_cast<double>(count) /
+                             static_cast<double>(std::max<std::size_t>(bricks, 1)));
   std::printf("\n");
 }
 
@@ -172,6 +182,15 @@ void run_encode(const EncodeOptions& o) {
     throw InputError("--rate-rule must be lagrangian or tolerance, not '" + o.rate_rule + "'");
   if (o.extend && c.fixed_sparsity == 0 && c.rule != encoder::VariableRateRule::tolerance)
     throw InputError("--extend-pursuit needs --rate-rule tolerance");
+  if (o.mean_bits == "auto") {
+    c.mean_bits = -1;
+  } else {
+    char* end = nullptr;
+    const long bits = std::strtol(o.mean_bits.c_str(), &end, 10);
+    if (o.mean_bits.empty() || *end != '\0' || bits < 0 || bits > 12)
+      throw InputError("--mean-bits must be auto or a whole number 0..12, not '" + o.mean_bits + "'");
+    c.mean_bits = static_cast<int>(bits);
+  }
   c.refit_quantization = !o.no_refit;
   c.extend_pursuit = o.extend;
   c.optimize_interval = !o.no_interval;
@@ -446,6 +465,11 @@ void add_encode_command(CLI::App& app) {
                   "for the size; blocks of aprons and padding weigh by the voxels the decoder "
                   "reads from them) or\n"
                   "tolerance (every block's RMS error <= eps: equal error per block)")
+      ->capture_default_str();
+  cmd->add_option("--mean-bits", o->mean_bits,
+                  "Bits of each brick's quantized block means: auto (variable rate: per brick the "
+                  "fewest bits, 0..12,\n"
+                  "whose step is at most eps/2; fixed rate: 12) or 0..12 for every brick")
       ->capture_default_str();
   cmd->add_option("--codec", o->codec, "ksvd (sparse coding) or zfp (fixed accuracy per brick)")
       ->capture_default_str();

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "volreel/format/brick_decode.h"
+#include "volreel/format/decoder.hpp"
 #include "volreel/format/error.hpp"
 #include "volreel/player/atlas_layout.h"
 #include "volreel_decode_bricks_r16_spv.h"
@@ -26,7 +27,7 @@ constexpr std::uint32_t kind_ksvd = 0, kind_constant = 1, kind_raw = 2;
 constexpr std::uint64_t record_bytes = 16;  // {payload word offset, slot, kind, payload words}
 constexpr std::uint64_t raw_bytes = std::uint64_t{format::brick_voxels} * 4;
 constexpr std::uint32_t max_bricks_per_dispatch = 65535;  // maxComputeWorkGroupCount[0] minimum
-constexpr std::uint32_t max_payload_words = 1732;         // decode_bricks.comp's shared copy
+constexpr std::uint32_t max_payload_words = VR_MAX_PAYLOAD_WORDS;  // decode_bricks.comp's copy
 // decode_bricks_rows.comp: a decoded brick is 6 columns (one per block x), each 36×36 rows of 8
 // texels (6 voxels and 2 unused), copied into the slot with bufferRowLength 8.
 constexpr std::uint32_t column_row_texels = 8;
@@ -51,8 +52,8 @@ struct PushConstants {
 };
 static_assert(sizeof(PushConstants) == 16);
 
-/// The checks of the CPU reference decoder (format/decoder.cpp) on a payload that is not read
-/// there: header finite, length against the sparsities, atom indices < K.
+/// The checks of the CPU reference decoder (format::check_ksvd_payload) on a payload that is not
+/// read there: header finite, mean bits, length against the sparsities, atom indices < K.
 void validate_upload(const BrickUpload& brick, std::size_t index, std::uint32_t atom_count) {
   const std::string name = "brick upload " + std::to_string(index);
   const auto fail = [&](std::uint64_t offset, const std::string& expected,
@@ -74,30 +75,7 @@ void validate_upload(const BrickUpload& brick, std::size_t index, std::uint32_t 
   if (atom_count == 0)
     throw std::invalid_argument(name +
                                 ": a ksvd brick but no dictionary (AtlasDecoder::set_dictionary)");
-  if (bytes.size() < vr_payload_bytes(0) || bytes.size() % 4 != 0)
-    fail(0, "a ksvd payload of at least 448 bytes, a multiple of 4",
-         std::to_string(bytes.size()) + " bytes");
-  for (std::uint32_t w = 0; w < VR_HEADER_WORDS; ++w)
-    if (!std::isfinite(vr_as_float(word(w))))
-      fail(4 * w, "finite dequantization value", "NaN or infinity");
-  const auto unit = [&](std::uint32_t u) {
-    const vr_uint w = word(u >> 1);
-    return (u & 1u) ? (w >> 16) : (w & 0xFFFFu);
-  };
-  std::uint32_t codes = 0;
-  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
-    codes += vr_entry_sparsity(unit(2 * VR_HEADER_WORDS + b));
-  const std::uint64_t need = vr_payload_bytes(codes);
-  if (bytes.size() < need || bytes.size() >= need + 4)
-    fail(0,
-         std::to_string(need) + " payload bytes for " + std::to_string(codes) +
-             " codes (+ padding to 4)",
-         std::to_string(bytes.size()) + " bytes");
-  for (std::uint32_t k = 0; k < codes; ++k) {
-    const std::uint32_t a = vr_code_atom(unit(vr_code_unit(k)));
-    if (a >= atom_count)
-      fail(2u * vr_code_unit(k), "atom index < " + std::to_string(atom_count), std::to_string(a));
-  }
+  format::check_ksvd_payload(bytes, atom_count, name, 0);
 }
 
 }  // namespace

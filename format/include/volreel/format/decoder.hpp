@@ -18,6 +18,37 @@ struct AtomTable {
   std::uint32_t count = 0;        ///< K
 };
 
+/// The structure of a ksvd brick payload (brick_decode.h's layout), once checked.
+struct KsvdPayloadLayout {
+  std::uint32_t mean_bits = 0;   ///< b, 0..12
+  std::uint32_t entry_bits = 0;  ///< 4 + b
+  std::uint32_t codes = 0;       ///< Σ sparsities
+};
+
+/// Checks a ksvd payload before anything decodes it (the CPU decoder here, or the GPU): the header
+/// and entries present, finite dequantization values, word 4 (mean bits ≤ 12, the other bits
+/// zero), the length = header + entries + 2·codes rounded up to 4, every atom index < atom_count.
+/// Throws FormatError naming `name` and the offset `at` + the bad field's offset in the payload.
+KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> payload, std::uint32_t atom_count,
+                                     const std::filesystem::path& name, std::uint64_t at);
+
+/// The parts of a ksvd brick payload before packing: the four dequantization values (mean_bias,
+/// mean_scale, coef_bias, coef_scale), the mean bits b (0..12), per block its sparsity (0..15) and
+/// quantized mean (0..2^b − 1), and the codes of all blocks in block order (bits 6..15 atom, 0..5
+/// value).
+struct KsvdPayloadParts {
+  float dequantization[4] = {0, 0, 0, 0};
+  std::uint32_t mean_bits = 12;
+  std::array<std::uint32_t, 216> sparsity{};
+  std::array<std::uint32_t, 216> mean{};
+  std::vector<std::uint16_t> codes;
+};
+
+/// Packs the parts into a payload of brick_decode.h's layout (entries of 4 + b bits, padded to 4
+/// bytes). Throws std::invalid_argument when a field does not fit its bits or the codes do not
+/// number Σ sparsity.
+std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts);
+
 /// Decodes one brick payload (a 4-byte constant, a ksvd payload or a zfp stream of codec `codec`
 /// with accuracy `zfp_accuracy`) into out (36³ values). `name` and `offset` (the payload's file
 /// offset) are used in errors. Throws FormatError on a bad payload.
