@@ -17,6 +17,7 @@
 #include "volreel/format/brick_decode.h"
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/decoder.hpp"
+#include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/error.hpp"
 
 namespace volreel::encoder {
@@ -850,7 +851,12 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   if (coding.codec == format::Codec::ksvd) {
     if (job.dictionary_file.empty()) throw InputError("the ksvd codec needs a dictionary file");
     dict_bytes = read_file_bytes(job.dictionary_file);
-    dict = dictionary::load_dictionary(job.dictionary_file);  // validates it
+    auto file = format::parse_dictionary_file(dict_bytes, job.dictionary_file);  // validates it
+    if (job.half_atoms && !file.half_atoms) {
+      file = format::with_half_atoms(std::move(file));
+      dict_bytes = format::serialize_dictionary_file(file);
+    }
+    dict = dictionary::from_file(file);
     m.dictionary = format::ManifestDictionary{"dictionary.bin", dict_bytes.size(),
                                               format::manifest_crc(dict_bytes),
                                               static_cast<std::uint32_t>(dict->atom_count())};

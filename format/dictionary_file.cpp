@@ -1,6 +1,8 @@
 // dictionary_file.cpp: writing and checking dictionary files (format/SPEC.md, "Dictionary file").
 #include "volreel/format/dictionary_file.hpp"
 
+#include <Eigen/Core>
+
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -34,7 +36,21 @@ std::string quoted_bytes(const char* bytes, std::size_t n) {
   return text + "\"";
 }
 
+std::uint16_t to_half_bits(float value) {
+  return Eigen::numext::bit_cast<std::uint16_t>(Eigen::half(value));
+}
+float from_half_bits(std::uint16_t bits) {
+  return static_cast<float>(Eigen::numext::bit_cast<Eigen::half>(bits));
+}
+
 }  // namespace
+
+DictionaryFile with_half_atoms(DictionaryFile d) {
+  if (d.half_atoms) return d;
+  d.half_atoms = true;
+  for (float& a : d.atoms) a = from_half_bits(to_half_bits(a));
+  return d;
+}
 
 std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& d) {
   const std::filesystem::path memory = "<memory>";
@@ -66,15 +82,22 @@ std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& d) {
   h.coreset_levels = d.training.coreset_levels;
   h.iterations = d.training.iterations;
   h.seed = d.training.seed;
-  h.flags = d.training.flat ? dictionary_flag_flat : 0u;
+  h.flags = (d.training.flat ? dictionary_flag_flat : 0u) | (d.half_atoms ? dictionary_flag_half : 0u);
   h.training_frames = d.training.training_frames;
   h.rms_error = d.training.rms_error;
   h.mean_sparsity = d.training.mean_sparsity;
   std::memcpy(h.program_version, d.program_version.data(), d.program_version.size());
 
-  std::vector<std::byte> bytes(dictionary_file_size(d.atom_count, m));
+  std::vector<std::byte> bytes(dictionary_file_size(d.atom_count, m, d.half_atoms));
   std::memcpy(bytes.data(), &h, sizeof h);
-  std::memcpy(bytes.data() + sizeof h, d.atoms.data(), d.atoms.size() * sizeof(float));
+  if (d.half_atoms) {
+    for (std::size_t i = 0; i < d.atoms.size(); ++i) {
+      const std::uint16_t bits = to_half_bits(d.atoms[i]);
+      std::memcpy(bytes.data() + sizeof h + 2 * i, &bits, 2);
+    }
+  } else {
+    std::memcpy(bytes.data() + sizeof h, d.atoms.data(), d.atoms.size() * sizeof(float));
+  }
   const std::size_t crc_offset = bytes.size() - sizeof(std::uint32_t);
   const std::uint32_t crc = crc32c(std::span(bytes.data(), crc_offset));
   std::memcpy(bytes.data() + crc_offset, &crc, sizeof crc);
@@ -114,16 +137,19 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes, const std
     throw FormatError(name, offsetof(DictionaryFileHeader, atom_length),
                       "atom length " + std::to_string(m) + " (block size " + std::to_string(h.block_size) + " cubed)",
                       std::to_string(h.atom_length));
-  if ((h.flags & ~dictionary_flag_flat) != 0)
-    throw FormatError(name, offsetof(DictionaryFileHeader, flags), "flags with only bit 0 defined",
+  if ((h.flags & ~(dictionary_flag_flat | dictionary_flag_half)) != 0)
+    throw FormatError(name, offsetof(DictionaryFileHeader, flags), "flags with only bits 0 and 1 defined",
                       hex32(h.flags));
+  const bool half = (h.flags & dictionary_flag_half) != 0;
+  const std::size_t value_bytes = half ? 2 : sizeof(float);
 
   // 4. Size: header + atoms + CRC, exactly.
-  const std::uint64_t expected = dictionary_file_size(h.atom_count, m);
+  const std::uint64_t expected = dictionary_file_size(h.atom_count, m, half);
+  const char* const value_type = half ? "binary16" : "float32";
   if (bytes.size() < expected)
     throw FormatError(name, bytes.size(),
                       std::to_string(expected) + " bytes (128-byte header, " + std::to_string(h.atom_count) + " atoms of " +
-                          std::to_string(m) + " float32, 4-byte CRC)",
+                          std::to_string(m) + " " + value_type + ", 4-byte CRC)",
                       "end of file (truncated: " + std::to_string(bytes.size()) + " bytes)");
   if (bytes.size() > expected)
     throw FormatError(name, expected, "end of file after " + std::to_string(expected) + " bytes",
@@ -142,12 +168,21 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes, const std
   DictionaryFile d;
   d.block_size = h.block_size;
   d.atom_count = h.atom_count;
+  d.half_atoms = half;
   d.atoms.resize(static_cast<std::size_t>(h.atom_count * m));
-  std::memcpy(d.atoms.data(), bytes.data() + sizeof h, d.atoms.size() * sizeof(float));
+  if (half) {
+    for (std::size_t i = 0; i < d.atoms.size(); ++i) {
+      std::uint16_t bits;
+      std::memcpy(&bits, bytes.data() + sizeof h + 2 * i, 2);
+      d.atoms[i] = from_half_bits(bits);
+    }
+  } else {
+    std::memcpy(d.atoms.data(), bytes.data() + sizeof h, d.atoms.size() * sizeof(float));
+  }
   for (std::size_t i = 0; i < d.atoms.size(); ++i)
     if (!std::isfinite(d.atoms[i]))
-      throw FormatError(name, sizeof h + i * sizeof(float),
-                        "a finite float32 (atom " + std::to_string(i / m) + ", value " + std::to_string(i % m) + ")",
+      throw FormatError(name, sizeof h + i * value_bytes,
+                        std::string("a finite ") + value_type + " (atom " + std::to_string(i / m) + ", value " + std::to_string(i % m) + ")",
                         std::to_string(d.atoms[i]));
 
   d.training.tolerance = h.tolerance;

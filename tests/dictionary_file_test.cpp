@@ -144,6 +144,50 @@ TEST(DictionaryFile, EveryFlippedByteIsDetected) {
   EXPECT_EQ(expect_error(bad, "CRC-32C"), good.size() - 4);
 }
 
+TEST(DictionaryFile, HalfAtomsRoundTripAndTakeHalfTheBytes) {
+  const DictionaryFile original = small_dictionary(3, 4);
+  const DictionaryFile half = with_half_atoms(original);
+  ASSERT_TRUE(half.half_atoms);
+  ASSERT_EQ(half.atoms.size(), original.atoms.size());
+  for (std::size_t i = 0; i < half.atoms.size(); ++i) {
+    // binary16 keeps 11 significant bits: rounding errs by at most 2^-11 of the value (normals).
+    EXPECT_LE(std::abs(half.atoms[i] - original.atoms[i]), std::abs(original.atoms[i]) * 0x1p-11f)
+        << i;
+  }
+  EXPECT_NE(half.atoms, original.atoms);                 // something was rounded
+  EXPECT_EQ(with_half_atoms(half).atoms, half.atoms);    // and rounding again changes nothing
+  const auto bytes = serialize_dictionary_file(half);
+  EXPECT_EQ(bytes.size(), dictionary_file_size(4, 27, true));
+  EXPECT_EQ(bytes.size(), 128u + 2 * 4 * 27 + 4);
+  EXPECT_EQ(u32_at(bytes, 80), dictionary_flag_flat | dictionary_flag_half);
+  const DictionaryFile back = parse_dictionary_file(bytes, "half.bin");
+  EXPECT_TRUE(back.half_atoms);
+  EXPECT_EQ(back.atoms, half.atoms);  // exactly what the encoder coded against
+  // Serializing unrounded atoms with the flag stores the same rounded values.
+  DictionaryFile flagged = original;
+  flagged.half_atoms = true;
+  EXPECT_EQ(serialize_dictionary_file(flagged), bytes);
+  // Damage: every truncation and every flipped byte is an error; the flag off makes the size wrong.
+  for (std::size_t n = 0; n < bytes.size(); ++n)
+    EXPECT_THROW(parse_dictionary_file(std::vector<std::byte>(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(n)), "half.bin"), FormatError) << n;
+  for (std::size_t i = 0; i < bytes.size(); ++i) {
+    auto bad = bytes;
+    bad[i] ^= std::byte{0x40};
+    EXPECT_THROW(parse_dictionary_file(bad, "half.bin"), FormatError) << "byte " << i;
+  }
+  auto unflagged = bytes;
+  const std::uint32_t flags = dictionary_flag_flat;
+  std::memcpy(unflagged.data() + 80, &flags, 4);
+  fix_crc(unflagged);
+  expect_error(unflagged, "float32");
+  // An infinity in binary16 is refused like a non-finite float32.
+  auto infinite = bytes;
+  const std::uint16_t inf = 0x7C00;
+  std::memcpy(infinite.data() + 128 + 2 * 5, &inf, 2);
+  fix_crc(infinite);
+  EXPECT_EQ(expect_error(infinite, "finite binary16"), 128u + 2 * 5);
+}
+
 TEST(DictionaryFile, BadFieldsNameTheirOffset) {
   const auto good = serialize_dictionary_file(small_dictionary());
   auto bad = good;

@@ -15,12 +15,14 @@
 #include "volreel/datasets/prng.hpp"
 #include "volreel/datasets/series.hpp"
 #include "volreel/dictionary/coreset.hpp"
+#include "volreel/dictionary/dictionary.hpp"
 #include "volreel/dictionary/training.hpp"
 #include "volreel/encoder/encoder.hpp"
 #include "volreel/format/brick_decode.h"
 #include "volreel/format/container.hpp"
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/decoder.hpp"
+#include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/error.hpp"
 
 namespace volreel {
@@ -581,6 +583,20 @@ TEST(Container, EncodeResumeVerifyAndDecode) {
   const auto first = encoder::encode_series(*series, out, job);
   EXPECT_EQ(first.encoded, 4u);
   EXPECT_TRUE(format::verify_container(out).empty());
+  // The container stores the atoms in binary16 and the frames were coded against them.
+  {
+    const auto stored = format::read_dictionary_file(out / "dictionary.bin");
+    EXPECT_TRUE(stored.half_atoms);
+    EXPECT_EQ(std::filesystem::file_size(out / "dictionary.bin"),
+              format::dictionary_file_size(static_cast<std::uint64_t>(d.atom_count()), 216, true));
+    const auto half = format::with_half_atoms(dictionary::to_file(d, t));
+    EXPECT_EQ(stored.atoms, half.atoms);
+    auto f32_job = job;
+    f32_job.half_atoms = false;
+    encoder::encode_series(*series, dir / "f32.vreel", f32_job);
+    EXPECT_FALSE(format::read_dictionary_file(dir / "f32.vreel/dictionary.bin").half_atoms);
+    EXPECT_TRUE(format::verify_container(dir / "f32.vreel").empty());
+  }
   // A complete container is not overwritten by accident.
   EXPECT_THROW(encoder::encode_series(*series, out, job), InputError);
   // Interrupted: a frame missing, another corrupt, the manifest marked incomplete.

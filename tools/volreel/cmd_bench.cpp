@@ -22,6 +22,7 @@ struct RdCommandOptions {
   psnr::RdOptions rd;
   bool no_plot = false;
   std::string dictionary;                   ///< volreel's codecs need one; without it only zfp runs
+  std::string atom_storage = "f16";         ///< how the dictionary counts: as encode stores it
   std::vector<double> tolerances = {1.0 / 64, 1.0 / 128, 1.0 / 256, 1.0 / 512, 1.0 / 1024, 1.0 / 2048};
   std::vector<int> sparsities = {1, 2, 3, 4, 5, 6, 7, 8};
   std::vector<double> lagrangian_factors = {encoder::CodingSettings{}.lagrangian_factor};
@@ -44,9 +45,14 @@ void run_rd(const RdCommandOptions& o) {
   std::printf("value range [%.6g, %.6g]\n", range.first, range.second);
   auto codecs = psnr::make_zfp_sweep(range.second - range.first);
   if (!o.dictionary.empty()) {
-    auto dict = std::make_shared<const dictionary::Dictionary>(dictionary::load_dictionary(o.dictionary));
-    const auto bytes = static_cast<std::size_t>(std::filesystem::file_size(o.dictionary));
-    std::printf("volreel codecs: dictionary %s (K = %d, %zu bytes, counted once in bps)\n", o.dictionary.c_str(), dict->atom_count(), bytes);
+    if (o.atom_storage != "f16" && o.atom_storage != "f32")
+      throw InputError("--atom-storage must be f16 or f32, not '" + o.atom_storage + "'");
+    // The dictionary as volreel encode stores it in the container (binary16 atoms by default).
+    auto file = format::read_dictionary_file(o.dictionary);
+    if (o.atom_storage == "f16") file = format::with_half_atoms(std::move(file));
+    const auto bytes = static_cast<std::size_t>(format::dictionary_file_size(file.atom_count, file.atoms.size() / file.atom_count, file.half_atoms));
+    auto dict = std::make_shared<const dictionary::Dictionary>(dictionary::from_file(file));
+    std::printf("volreel codecs: dictionary %s (K = %d, atoms stored as %s, %zu bytes, counted once in bps)\n", o.dictionary.c_str(), dict->atom_count(), file.half_atoms ? "f16" : "f32", bytes);
     for (auto& c : make_volreel_sweep(dict, bytes, range.first, range.second, {o.tolerances, o.lagrangian_factors, o.tolerance_rule, o.sparsities, {}})) codecs.push_back(std::move(c));
   }
   if (!o.zfp_bricks.empty())
@@ -95,6 +101,9 @@ void add_bench_command(CLI::App& app) {
   rd->add_option("--dictionary", o->dictionary,
                  "Dictionary (volreel train): adds volreel variable rate (--tolerances) and fixed rate (--sparsities), each\n"
                  "frame encoded into a frame file in memory and decoded by the CPU decoder; the dictionary counts in bps");
+  rd->add_option("--atom-storage", o->atom_storage,
+                 "How the dictionary's atoms are stored and counted: f16 (what volreel encode stores by default) or f32")
+      ->capture_default_str();
   rd->add_option("--tolerances", o->tolerances,
                  "Variable rate: eps as fractions of the value range; each block gets the atoms that lower its squared\n"
                  "error by at least k*216*eps^2 (the rate-distortion optimal, Lagrangian rule)")->capture_default_str();

@@ -35,7 +35,8 @@ using Clock = std::chrono::steady_clock;
 constexpr double default_psnr = 55.0;  ///< when neither the dictionary nor the user says
 
 struct EncodeOptions {
-  std::string series, dictionary, out, codec = "ksvd", rate_rule = "lagrangian", mean_bits = "auto";
+  std::string series, dictionary, out, codec = "ksvd", rate_rule = "lagrangian", mean_bits = "auto",
+              atom_storage = "f16";
   ReaderOptions reader;
   double tolerance = 0, psnr = 0, bps = 0, zfp_accuracy = 0;
   int fixed_sparsity = 0, max_atoms = 15, atoms = 0;
@@ -66,10 +67,11 @@ format::DictionaryTraining provenance(const dictionary::CoresetOptions& co,
 /// Trains a dictionary with volreel train's defaults at ε and writes it to path. atoms > 0: that K.
 /// atoms = 0: the dictionary counts in bps, so K is chosen by measured total size — for K = 1024,
 /// 512, 256, 128 a dictionary is trained, `sample` frames are encoded at ε, and the K with the
-/// smallest estimated container (frames · mean frame size + dictionary file) wins.
+/// smallest estimated container (frames · mean frame size + dictionary file, its atoms stored in
+/// binary16 if `half`, as the container will store them) wins.
 void train_default_dictionary(const datasets::SeriesReader& series, double eps, int atoms,
                               std::size_t frames, const encoder::CodingSettings& coding,
-                              std::size_t sample, const fs::path& path) {
+                              std::size_t sample, bool half, const fs::path& path) {
   dictionary::CoresetOptions co;
   dictionary::CoresetHierarchy h;
   {
@@ -90,13 +92,17 @@ void train_default_dictionary(const datasets::SeriesReader& series, double eps, 
     const auto r = dictionary::train_dictionary(h, to);
     const double train_s = std::chrono::duration<double>(Clock::now() - start).count();
     const double dict_bytes =
-        static_cast<double>(format::dictionary_file_size(static_cast<std::uint64_t>(k), 216));
+        static_cast<double>(format::dictionary_file_size(static_cast<std::uint64_t>(k), 216, half));
     double total = dict_bytes;
     if (atoms == 0) {
       auto c = coding;
       c.tolerance = eps;
       c.fixed_sparsity = 0;
-      const encoder::FrameEncoder enc(&r.dictionary, c);
+      auto stored = r.dictionary;
+      if (half)
+        stored = dictionary::from_file(
+            format::with_half_atoms(dictionary::to_file(r.dictionary, format::DictionaryTraining{})));
+      const encoder::FrameEncoder enc(&stored, c);
       double bytes = 0;
       for (std::size_t i = 0; i < samples.size(); ++i)
         bytes += static_cast<double>(enc.encode(i, samples[i]).size());
@@ -182,6 +188,9 @@ void run_encode(const EncodeOptions& o) {
     throw InputError("--rate-rule must be lagrangian or tolerance, not '" + o.rate_rule + "'");
   if (o.extend && c.fixed_sparsity == 0 && c.rule != encoder::VariableRateRule::tolerance)
     throw InputError("--extend-pursuit needs --rate-rule tolerance");
+  if (o.atom_storage != "f16" && o.atom_storage != "f32")
+    throw InputError("--atom-storage must be f16 or f32, not '" + o.atom_storage + "'");
+  job.half_atoms = o.atom_storage == "f16";
   if (o.mean_bits == "auto") {
     c.mean_bits = -1;
   } else {
@@ -224,6 +233,7 @@ void run_encode(const EncodeOptions& o) {
           o.atoms ? ("K = " + std::to_string(o.atoms)).c_str()
                   : "K chosen by the total size it gives (--atoms to fix it)");
       train_default_dictionary(*series, eps_hint, o.atoms, frames, c, o.rate_sample_frames,
+                               o.atom_storage == "f16",
                                trained);
       dict_path = trained;
     }
@@ -233,7 +243,12 @@ void run_encode(const EncodeOptions& o) {
     fs::copy_file(dict_path, copy, fs::copy_options::overwrite_existing);
     if (!trained.empty()) fs::remove(trained);
     job.dictionary_file = copy;
-    const auto file = format::read_dictionary_file(copy);
+    auto file = format::read_dictionary_file(copy);
+    if (job.half_atoms && !file.half_atoms) {
+      // Stored as the container will store it, so that --bps measures what the encode writes.
+      file = format::with_half_atoms(std::move(file));
+      format::write_dictionary_file(copy, file);
+    }
     // ε: --tolerance, --psnr, --bps, else the dictionary's training ε, else PSNR 55 dB.
     if (c.fixed_sparsity > 0) {
       std::printf("fixed rate: %d atoms per block\n", c.fixed_sparsity);
@@ -470,6 +485,11 @@ void add_encode_command(CLI::App& app) {
                   "Bits of each brick's quantized block means: auto (variable rate: per brick the "
                   "fewest bits, 0..12,\n"
                   "whose step is at most eps/2; fixed rate: 12) or 0..12 for every brick")
+      ->capture_default_str();
+  cmd->add_option("--atom-storage", o->atom_storage,
+                  "How the container stores the dictionary's atoms: f16 (IEEE half: half the "
+                  "bytes; the frames are coded\n"
+                  "against the rounded atoms) or f32 (a dictionary stored in f16 stays f16)")
       ->capture_default_str();
   cmd->add_option("--codec", o->codec, "ksvd (sparse coding) or zfp (fixed accuracy per brick)")
       ->capture_default_str();

@@ -46,6 +46,10 @@ struct DictionaryFile {
   std::uint32_t atom_count = 0;  ///< K
   /// K·M³ values: atom 0 (x fastest, then y, then z inside the block), atom 1, ...
   std::vector<float> atoms;
+  /// Stored as IEEE 754 binary16 (2 bytes a value, flag bit 1) instead of float32: half the
+  /// bytes. serialize_dictionary_file rounds to the nearest half; use with_half_atoms to get the
+  /// values a reader will see before coding with them.
+  bool half_atoms = false;
   DictionaryTraining training;
   std::string program_version;   ///< the volreel version that wrote it, at most 15 characters
 };
@@ -85,14 +89,22 @@ static_assert(offsetof(DictionaryFileHeader, program_version) == 104);
 static_assert(offsetof(DictionaryFileHeader, reserved) == 120);
 
 inline constexpr std::uint32_t dictionary_flag_flat = 1u;
+inline constexpr std::uint32_t dictionary_flag_half = 2u;
 /// Limits a reader accepts (a header beyond them is corrupt, not merely large).
 inline constexpr std::uint32_t dictionary_max_block_size = 64;
 inline constexpr std::uint32_t dictionary_max_atoms = 1u << 16;
 
-/// Total file size for K atoms of m values: header + atoms + CRC.
-constexpr std::uint64_t dictionary_file_size(std::uint64_t atom_count, std::uint64_t atom_length) {
-  return sizeof(DictionaryFileHeader) + atom_count * atom_length * sizeof(float) + sizeof(std::uint32_t);
+/// Total file size for K atoms of m values: header + atoms (float32, or binary16 if `half`) + CRC.
+constexpr std::uint64_t dictionary_file_size(std::uint64_t atom_count, std::uint64_t atom_length,
+                                             bool half = false) {
+  return sizeof(DictionaryFileHeader) + atom_count * atom_length * (half ? 2u : sizeof(float)) +
+         sizeof(std::uint32_t);
 }
+
+/// The dictionary as it will be read back once stored in binary16: half_atoms set and every atom
+/// value rounded to the nearest binary16 (Eigen::half, round to nearest even). A dictionary that
+/// is already half comes back unchanged.
+DictionaryFile with_half_atoms(DictionaryFile dictionary);
 
 /// The file's bytes. Throws FormatError (file "<memory>") if `dictionary` is inconsistent
 /// (atoms.size() != K·M³, K or M out of range, a version string over 15 characters).
