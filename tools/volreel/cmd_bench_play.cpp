@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "either_loop.hpp"
 #include "loop_options.hpp"
 #include "volreel/cpu_render/transfer_function.hpp"
 #include "volreel/datasets/prng.hpp"
@@ -67,22 +68,6 @@ struct PhaseStats {
   }
 };
 
-/// The Vulkan loop, or the CPU loop with --cpu.
-struct Loop {
-  std::unique_ptr<vulkan::Context> context;
-  std::unique_ptr<vulkan_render::FrameLoop> gpu;
-  std::unique_ptr<vulkan_render::CpuFrameLoop> cpu;
-  vulkan_render::FrameReport frame(const player::OrbitCamera& c, double p, const cpu_render::TransferFunction& tf) {
-    return gpu ? gpu->frame(c, p, tf) : cpu->frame(c, p, tf);
-  }
-  void set_pipelined(bool on) {
-    if (gpu) gpu->options().pipelined = on;
-  }
-  void finish() {
-    if (gpu) gpu->finish();
-  }
-};
-
 void run_bench_play(const BenchPlayOptions& o) {
   // 1. Container, device, loop.
   const format::Container container(o.container);
@@ -94,21 +79,9 @@ void run_bench_play(const BenchPlayOptions& o) {
   } catch (const std::invalid_argument& e) {
     throw InputError(e.what());
   }
-  Loop loop;
-  std::string device;
-  if (!o.cpu) {
-    try {
-      loop.context = std::make_unique<vulkan::Context>(vulkan::ContextOptions{});
-    } catch (const vulkan::NoDeviceError& e) {
-      throw InputError(std::string("bench play needs a Vulkan device: ") + e.what() + " (--cpu measures the CPU renderer)");
-    }
-    loop.gpu = std::make_unique<vulkan_render::FrameLoop>(*loop.context, container, options);
-    device = loop.context->describe();
-  } else {
-    loop.cpu = std::make_unique<vulkan_render::CpuFrameLoop>(container, options);
-    device = "CPU reference renderer (" + std::to_string(std::thread::hardware_concurrency()) + " threads)";
-  }
-  const std::uint32_t slots = loop.gpu ? loop.gpu->atlas().slot_count() : loop.cpu->atlas().slot_count();
+  EitherLoop loop = open_loop(container, options, o.cpu, NoDevice::fail, "(bench play measures the Vulkan player; --cpu measures the CPU renderer)");
+  const std::string& device = loop.device;
+  const std::uint32_t slots = loop.slots();
   const std::size_t keyframes = container.frame_count();
   const double last = static_cast<double>(keyframes - 1);
   const cpu_render::TransferFunction tf = vulkan_render::transfer_from_spec(o.transfer, container);

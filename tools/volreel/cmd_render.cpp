@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "either_loop.hpp"
 #include "loop_options.hpp"
 #include "progress.hpp"
 #include "volreel/cpu_render/renderer.hpp"
@@ -124,44 +125,6 @@ class GroundTruth {
   std::map<std::size_t, Volume> cache_;
 };
 
-/// Either loop behind one call: Vulkan (serial: exact time split) or CPU.
-struct Renderer {
-  std::unique_ptr<vulkan::Context> context;
-  std::unique_ptr<vulkan_render::FrameLoop> gpu;
-  std::unique_ptr<vulkan_render::CpuFrameLoop> cpu;
-  std::string device;
-
-  vulkan_render::FrameReport frame(const player::OrbitCamera& camera, double playhead,
-                                   const cpu_render::TransferFunction& tf) {
-    return gpu ? gpu->frame(camera, playhead, tf, true) : cpu->frame(camera, playhead, tf);
-  }
-  cpu_render::RgbaImage image(vulkan_render::Ticket ticket) const {
-    return gpu ? gpu->read_back(ticket) : cpu->read_back(ticket);
-  }
-  std::uint32_t slots() const {
-    return gpu ? gpu->atlas().slot_count() : cpu->atlas().slot_count();
-  }
-};
-
-Renderer make_renderer(const format::Container& container, const vulkan_render::FrameLoopOptions& options, bool cpu) {
-  Renderer r;
-  if (!cpu) {
-    try {
-      r.context = std::make_unique<vulkan::Context>(vulkan::ContextOptions{});
-    } catch (const vulkan::NoDeviceError& e) {
-      std::fprintf(stderr, "volreel: notice: no Vulkan device (%s): rendering on the CPU, as with --cpu\n", e.what());
-    }
-  }
-  if (r.context) {
-    r.gpu = std::make_unique<vulkan_render::FrameLoop>(*r.context, container, options);
-    r.device = r.context->describe();
-  } else {
-    r.cpu = std::make_unique<vulkan_render::CpuFrameLoop>(container, options);
-    r.device = "CPU reference renderer (" + std::to_string(std::thread::hardware_concurrency()) + " threads)";
-  }
-  return r;
-}
-
 void run_render(const RenderCommandOptions& o) {
   // 1. Input, tour, output folder; ffmpeg is checked before any work.
   const format::Container container(o.container);
@@ -200,7 +163,8 @@ void run_render(const RenderCommandOptions& o) {
   if (!o.compare.empty()) truth.emplace(o.compare, o.reader, m);
 
   // 2. The renderer: Vulkan, or the CPU where there is no device.
-  Renderer renderer = make_renderer(container, options, o.cpu);
+  // Vulkan frames with readback (serial: the time split is exact), or the CPU loop.
+  EitherLoop renderer = open_loop(container, options, o.cpu, NoDevice::use_cpu, "");
   const std::size_t frames = o.max_frames ? std::min(o.max_frames, tour.frame_count()) : tour.frame_count();
   std::printf("volreel render\nmachine: %s\ndevice:  %s\ninput:   %s: %ux%ux%u, %zu frames, %s\n", describe_machine().c_str(),
               renderer.device.c_str(), o.container.c_str(), m.dims[0], m.dims[1], m.dims[2], container.frame_count(),
@@ -236,7 +200,7 @@ void run_render(const RenderCommandOptions& o) {
       if (transfer) tf.transfer = *transfer;
       tf.camera.width = options.raycaster.width;
       tf.camera.height = options.raycaster.height;
-      const vulkan_render::FrameReport report = renderer.frame(tf.camera, tf.playhead, tf.transfer);
+      const vulkan_render::FrameReport report = renderer.frame(tf.camera, tf.playhead, tf.transfer, true);
       const auto read_start = Clock::now();
       cpu_render::RgbaImage image = renderer.image(report.ticket);
       const double readback_ms = std::chrono::duration<double, std::milli>(Clock::now() - read_start).count();

@@ -636,9 +636,7 @@ void Player::handle_input() {
       (dx != 0 || dy != 0)) {
     drag_cause_ = "right drag: pan";
     // Pan in the view plane: one window pixel moves the target by one pixel at its depth.
-    const glm::dvec3 forward = glm::normalize(camera_.target - camera_.eye());
-    const glm::dvec3 right = glm::normalize(glm::cross(forward, glm::dvec3(0, 0, 1)));
-    const glm::dvec3 up = glm::cross(right, forward);
+    const auto [forward, right, up] = camera_.basis();
     const double per_pixel = 2.0 * camera_.distance * std::tan(0.5 * camera_.fov_y) /
                              std::max(1.0, static_cast<double>(io.DisplaySize.y));
     camera_.target += (-dx * right + dy * up) * per_pixel;

@@ -258,9 +258,7 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
       input.transfer->opacity_corrected(o.step / o.reference_step);
   Params p{};
   const glm::dvec3 eye = camera.eye();
-  const glm::dvec3 forward = glm::normalize(camera.target - eye);
-  const glm::dvec3 right = glm::normalize(glm::cross(forward, glm::dvec3(0, 0, 1)));
-  const glm::dvec3 up = glm::cross(right, forward);
+  const auto [forward, right, up] = camera.basis();
   const auto put = [](float* dst, glm::dvec3 v, double w) {
     dst[0] = static_cast<float>(v.x);
     dst[1] = static_cast<float>(v.y);

@@ -43,15 +43,25 @@ struct OrbitCamera {
   double projected_pixels(double size, double depth) const {
     return size * 0.5 * double(height) / (std::max(depth, 1e-9) * std::tan(0.5 * fov_y));
   }
+  /// The view's orthonormal basis: forward (eye to target), right (forward × +z) and up
+  /// (right × forward), the axes every renderer and the pan gesture use.
+  struct Basis {
+    glm::dvec3 forward, right, up;
+  };
+  Basis basis() const {
+    Basis b;
+    b.forward = glm::normalize(target - eye());
+    b.right = glm::normalize(glm::cross(b.forward, glm::dvec3(0, 0, 1)));
+    b.up = glm::cross(b.right, b.forward);
+    return b;
+  }
   /// World-space direction of the ray through pixel (px, py) (pixel centres at +0.5, y down).
   glm::dvec3 ray_direction(double px, double py) const {
     const double t = std::tan(0.5 * fov_y);
     const double ndc_x = (2.0 * px / width - 1.0) * t * double(width) / double(height);
     const double ndc_y = (1.0 - 2.0 * py / height) * t;
-    const glm::dvec3 forward = glm::normalize(target - eye());
-    const glm::dvec3 right = glm::normalize(glm::cross(forward, glm::dvec3(0, 0, 1)));
-    const glm::dvec3 up = glm::cross(right, forward);
-    return glm::normalize(forward + ndc_x * right + ndc_y * up);
+    const Basis b = basis();
+    return glm::normalize(b.forward + ndc_x * b.right + ndc_y * b.up);
   }
 };
 
