@@ -45,6 +45,7 @@ BrickLoader::BrickLoader(LoaderOptions options) : options_(std::move(options)) {
   options_.threads = std::max(1u, options_.threads);
   options_.max_in_flight = std::max<std::size_t>(1, options_.max_in_flight);
   link_free_ = now();
+  started_ = Clock::now();
   if (!options_.clock)
     for (unsigned i = 0; i < options_.threads; ++i) workers_.emplace_back([this] { work(); });
 }
@@ -152,6 +153,11 @@ std::size_t BrickLoader::cancel_queued(const std::function<bool(const BrickReque
     }
   }
   return dropped;
+}
+
+double BrickLoader::now_seconds() const {
+  if (options_.clock) return options_.clock();
+  return std::chrono::duration<double>(Clock::now() - started_).count();
 }
 
 std::size_t BrickLoader::in_flight() const {

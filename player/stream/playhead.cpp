@@ -47,4 +47,35 @@ double Playhead::advance(double dt_seconds) {
   return position_;
 }
 
+double PlayheadMotion::observe(double seconds, double position) {
+  if (!std::isfinite(seconds) || !std::isfinite(position)) return velocity_;
+  if (!has_last_) {
+    has_last_ = true;
+    last_time_ = seconds;
+    last_position_ = position;
+    return velocity_;
+  }
+  const double dt = seconds - last_time_;
+  if (!(dt > 0)) {
+    last_position_ = position;  // same instant: the newest position, no new difference
+    return velocity_;
+  }
+  const double v = (position - last_position_) / dt;
+  last_time_ = seconds;
+  last_position_ = position;
+  recent_ = {recent_[1], recent_[2], v};
+  count_ = std::min<std::size_t>(count_ + 1, 3);
+  if (count_ < 3) {
+    // Fewer than three differences: the first one (playback usually starts with the first
+    // frames), then the one of smaller magnitude (a seek is not read as fast playback).
+    const double smaller = std::abs(recent_[1]) < std::abs(recent_[2]) ? recent_[1] : recent_[2];
+    velocity_ = count_ == 1 ? v : smaller;
+    return velocity_;
+  }
+  std::array<double, 3> sorted = recent_;
+  std::sort(sorted.begin(), sorted.end());
+  velocity_ = sorted[1];
+  return velocity_;
+}
+
 }  // namespace volreel::stream

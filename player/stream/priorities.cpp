@@ -53,6 +53,49 @@ double combined_priority(double sse_priority_value, double temporal_priority_val
               lerp(settings.temporal_lerp_min, 1.0, temporal_priority_value));
 }
 
+void due_seconds(std::span<const KeyframeNode> keyframes, double playhead, double velocity,
+                 double lookahead_s, std::vector<double>& seconds) {
+  seconds.assign(keyframes.size(), -1.0);
+  if (keyframes.empty()) return;
+  // The last time step ≤ playhead and the first ≥ playhead (the pre-render selection's picks).
+  const auto after = std::lower_bound(
+      keyframes.begin(), keyframes.end(), playhead,
+      [](const KeyframeNode& k, double p) { return static_cast<double>(k.t) < p; });
+  const auto n = static_cast<std::ptrdiff_t>(keyframes.size());
+  const auto i_after = static_cast<std::ptrdiff_t>(after - keyframes.begin());
+  // On a keyframe it is both sides' pick.
+  const bool on_keyframe =
+      i_after < n &&
+      static_cast<double>(keyframes[static_cast<std::size_t>(i_after)].t) == playhead;
+  const std::ptrdiff_t i_before = on_keyframe ? i_after : i_after - 1;
+  const auto mark = [&](std::ptrdiff_t i, double s) {
+    if (i >= 0 && i < n && seconds[static_cast<std::size_t>(i)] < 0)
+      seconds[static_cast<std::size_t>(i)] = s;
+  };
+  mark(i_before, 0);
+  mark(i_after, 0);
+  // Those the playhead reaches within the lookahead, in its direction of travel.
+  const double reach = velocity * std::max(0.0, lookahead_s);
+  if (std::abs(reach) > 0 && std::isfinite(reach))
+    for (std::size_t i = 0; i < keyframes.size(); ++i) {
+      if (seconds[i] >= 0) continue;
+      const double d = static_cast<double>(keyframes[i].t) - playhead;
+      if (d != 0 && (d > 0) == (reach > 0) && std::abs(d) <= std::abs(reach))
+        seconds[i] = std::abs(d / velocity);
+    }
+  // The next one beyond those on each side, where a step, a start of playback or a change of
+  // direction goes first: due last (as if needed at the end of the lookahead).
+  const double last = std::max(0.0, lookahead_s);
+  mark(i_before - 1, last);
+  mark(i_after + 1, last);
+}
+
+double due_priority(double seconds, const PrioritySettings& settings) {
+  const double s = std::max(0.0, seconds);
+  const double horizon = settings.lookahead_s > 0 ? settings.lookahead_s : 1.0;
+  return settings.sse_weight + 2.0 - s / (s + horizon);
+}
+
 Box node_box(const SpatialNode& node) {
   return {glm::dvec3(node.lo[0], node.lo[1], node.lo[2]),
           glm::dvec3(node.hi[0], node.hi[1], node.hi[2])};

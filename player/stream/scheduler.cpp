@@ -33,6 +33,14 @@ void StreamScheduler::report_error(std::string message) {
   add_error(std::move(message));
 }
 
+void StreamScheduler::end_request(KeyframeId id) {
+  const auto it = in_flight_.find(id);
+  if (it == in_flight_.end()) return;
+  in_flight_bytes_ -= it->second.bytes;
+  if (it->second.speculative) speculative_bytes_ -= it->second.bytes;
+  in_flight_.erase(it);
+}
+
 void StreamScheduler::fill_heap(const player::OrbitCamera& camera, double playhead) {
   heap_.clear();
   view_.run(index_, camera, settings_.priority.sse_target);
@@ -44,17 +52,24 @@ void StreamScheduler::fill_heap(const player::OrbitCamera& camera, double playhe
     temporal_[t] =
         temporal_priority(static_cast<double>(t), playhead, frames, ps.temporal_exponent);
   const bool patent = ps.policy == PriorityPolicy::patent;
+  const bool due_window = patent && ps.due_window;
+  const double velocity = motion_.velocity();
   for (const ViewTraversal::Visit& v : view_.visits()) {
     const SpatialNode& n = index_.node(v.node);
     const double sse_p = sse_priority(v.sse);
     // A node whose best possible priority cannot enter a full heap is skipped whole.
-    const double best = patent ? ps.sse_weight * sse_p + 1.0 : 1.0;
+    const double best = due_window ? ps.sse_weight + 2.0
+                        : patent   ? ps.sse_weight * sse_p + 1.0
+                                   : 1.0;
     if (heap_.full() && best < heap_.min().priority) continue;
     const auto keyframes = index_.keyframes(v.node);
+    if (due_window) due_seconds(keyframes, playhead, velocity, ps.lookahead_s, due_);
     for (std::uint32_t i = 0; i < keyframes.size(); ++i) {
       const std::uint32_t t = keyframes[i].t;
-      const double priority = combined_priority(sse_p, temporal_[t], random_table_[t], ps);
-      heap_.push({priority, n.key.level, n.first_keyframe + i});
+      const bool due = due_window && due_[i] >= 0;
+      const double priority = due ? due_priority(due_[i], ps)
+                                  : combined_priority(sse_p, temporal_[t], random_table_[t], ps);
+      heap_.push({priority, n.key.level, n.first_keyframe + i, due});
     }
   }
 }
@@ -67,6 +82,7 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
 
   // 1. Arrivals.
   for (BrickArrival& a : loader_.poll()) {
+    end_request(a.request.keyframe);
     if (!a.ok()) {
       add_error(a.error + " (will retry)");
       continue;
@@ -76,6 +92,7 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
   }
 
   // 2. Priorities into the heap; its contents are the selected set.
+  motion_.observe(loader_.now_seconds(), playhead);
   fill_heap(camera, playhead);
   selected_.clear();
   for (const HeapEntry& e : heap_.items()) selected_.insert(e.keyframe);
@@ -128,12 +145,27 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     out.stats.bytes_uploaded = budget_used;
 
     // 5. Requests in priority order ([0063]); queued ones no longer selected are cancelled.
-    loader_.cancel_queued([&](const BrickRequest& r) { return selected_.count(r.keyframe) != 0; });
+    loader_.cancel_queued([&](const BrickRequest& r) {
+      const bool keep = selected_.count(r.keyframe) != 0;
+      if (!keep) end_request(r.keyframe);
+      return keep;
+    });
+    // Speculative requests (outside the due window) only while the link's backlog is short.
+    const double bandwidth = settings_.loader.bandwidth_bytes_per_s;
+    const bool bounded = settings_.priority.policy == PriorityPolicy::patent &&
+                         settings_.priority.due_window && bandwidth > 0 &&
+                         settings_.speculative_link_s > 0;
+    const double speculative_limit = bounded ? bandwidth * settings_.speculative_link_s : 0;
     for (const HeapEntry& e : entries) {
       if (waiting_.count(e.keyframe)) continue;
       const KeyframeKey key = index_.key(e.keyframe);
       if (atlas_.is_occupied(key)) continue;
       const KeyframeNode& k = index_.keyframe(e.keyframe);
+      // Entries come highest priority first and due ones before all others: once a speculative
+      // one does not fit the bound, none after it does (one is allowed on an idle link).
+      if (bounded && !e.due && in_flight_bytes_ > 0 &&
+          static_cast<double>(in_flight_bytes_ + k.bytes) > speculative_limit)
+        break;
       BrickRequest r;
       r.key = key;
       r.keyframe = e.keyframe;
@@ -141,7 +173,14 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
       r.offset = k.offset;
       r.bytes = k.bytes;
       const RequestStatus s = loader_.request(std::move(r));
-      if (s == RequestStatus::accepted) ++out.stats.requests_sent;
+      if (s == RequestStatus::accepted) {
+        ++out.stats.requests_sent;
+        const bool speculative = bounded && !e.due;
+        if (in_flight_.emplace(e.keyframe, InFlight{k.bytes, speculative}).second) {
+          in_flight_bytes_ += k.bytes;
+          if (speculative) speculative_bytes_ += k.bytes;
+        }
+      }
       if (s == RequestStatus::at_capacity) break;
     }
     out.stats.selected = static_cast<std::uint32_t>(entries.size());

@@ -65,6 +65,7 @@ mv "$work/s" "$work/s-moved"
 "$volreel" bench stream "$work/a.vreel" --bandwidth 20kB/s --latency 20ms --duration 2 --size 32x32 --policy patent \
   --out "$work/slow" > "$work/slow.txt" 2>/dev/null || fail "bench stream (slow)"
 grep -q "the container's own finest-level decode" "$work/slow.txt" || fail "no notice of the fallback ground truth"
+grep -q "due window first" "$work/slow.txt" || fail "no due-window line: $(cat "$work/slow.txt")"
 /usr/bin/python3 - "$work/slow/stream_patent.csv" <<'PY' || fail "slow link numbers"
 import csv, math, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
@@ -103,5 +104,9 @@ expect_error "both, patent or nearest" "$volreel" bench stream "$work/a.vreel" -
 expect_error "simulated or wall" "$volreel" bench stream "$work/a.vreel" --clock sundial
 expect_error "not a container folder" "$volreel" bench stream "$work/missing.vreel"
 expect_error "no such file or folder" "$volreel" bench stream "$work/a.vreel" --series "$work/nothing"
+expect_error "seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --lookahead -1
+expect_error "seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --speculative-link 100
+expect_error "an exponent in \[0, 64\]" "$volreel" bench stream "$work/a.vreel" --ancestor-handicap -2
 "$volreel" bench stream --help > "$work/help.txt" && grep -q -e "--bandwidth" "$work/help.txt" || fail "--help lacks --bandwidth"
+for o in --due-window --lookahead --speculative-link --ancestor-handicap; do grep -q -e "$o" "$work/help.txt" || fail "--help lacks $o"; done
 echo "stream bench CLI: OK"

@@ -67,5 +67,37 @@ TEST(StreamPlayhead, LoopsAroundBothEnds) {
   EXPECT_DOUBLE_EQ(one.advance(10), 0.0);
 }
 
+TEST(StreamPlayhead, MotionFollowsPlaybackAndIgnoresSeeks) {
+  PlayheadMotion m;
+  EXPECT_EQ(m.observe(0.0, 0.0), 0.0);
+  // Forward at 6 keyframes/s, 10 frames per second.
+  double v = 0;
+  for (int i = 1; i <= 5; ++i) v = m.observe(0.1 * i, 0.6 * i);
+  EXPECT_NEAR(v, 6.0, 1e-9);
+  // A seek (one jump) does not read as fast playback.
+  EXPECT_NEAR(m.observe(0.6, 40.0), 6.0, 1e-9);
+  // Paused after it: the velocity drops to 0 within two frames.
+  m.observe(0.7, 40.0);
+  EXPECT_NEAR(m.observe(0.8, 40.0), 0.0, 1e-9);
+  // Reverse at 2 keyframes/s.
+  for (int i = 1; i <= 3; ++i) v = m.observe(0.8 + 0.1 * i, 40.0 - 0.2 * i);
+  EXPECT_NEAR(v, -2.0, 1e-9);
+  // The same instant again changes nothing.
+  EXPECT_NEAR(m.observe(1.1, 10.0), -2.0, 1e-9);
+  EXPECT_NEAR(m.velocity(), -2.0, 1e-9);
+}
+
+TEST(StreamPlayhead, MotionAtTheStart) {
+  PlayheadMotion m;
+  EXPECT_EQ(m.observe(0.0, 0.0), 0.0);
+  EXPECT_NEAR(m.observe(0.1, 0.5), 5.0, 1e-9);  // the first difference: playback starts
+  // A seek as the second difference: the smaller of the two, not the jump.
+  EXPECT_NEAR(m.observe(0.2, 30.5), 5.0, 1e-9);
+  PlayheadMotion n;
+  n.observe(0.0, 0.0);
+  n.observe(0.1, 30.0);                          // a seek first: one frame of a wrong velocity
+  EXPECT_NEAR(n.observe(0.2, 30.0), 0.0, 1e-9);  // gone at once
+}
+
 }  // namespace
 }  // namespace volreel::stream

@@ -105,5 +105,65 @@ TEST(StreamPriorities, TraversalRefinesWhileTheSseExceedsTheTarget) {
   EXPECT_TRUE(view.visits().empty());
 }
 
+/// Keyframe nodes at the given time steps (only t matters to the due window).
+std::vector<KeyframeNode> at_times(std::initializer_list<std::uint32_t> times) {
+  std::vector<KeyframeNode> k;
+  for (const std::uint32_t t : times) k.push_back({.t = t});
+  return k;
+}
+
+TEST(StreamPriorities, DueWindowIsTheTwoAroundThePlayheadAndTheirNeighboursWhenPaused) {
+  const auto k = at_times({0, 1, 2, 3, 4, 5, 6, 7, 8});
+  std::vector<double> s;
+  due_seconds(k, 2.5, 0.0, 1.0, s);
+  EXPECT_EQ(s, (std::vector<double>{-1, 1, 0, 0, 1, -1, -1, -1, -1}));
+  // On a keyframe: that keyframe (both sides' pick) and its neighbours.
+  due_seconds(k, 4.0, 0.0, 1.0, s);
+  EXPECT_EQ(s, (std::vector<double>{-1, -1, -1, 1, 0, 1, -1, -1, -1}));
+  due_seconds(k, 0.0, 0.0, 1.0, s);
+  EXPECT_EQ(s, (std::vector<double>{0, 1, -1, -1, -1, -1, -1, -1, -1}));
+  // Before the node's first time step / after its last: the nearest one and the next.
+  const auto sparse = at_times({3, 6, 9});
+  due_seconds(sparse, 1.0, 0.0, 1.0, s);
+  EXPECT_EQ(s, (std::vector<double>{0, 1, -1}));
+  due_seconds(sparse, 9.5, 0.0, 1.0, s);
+  EXPECT_EQ(s, (std::vector<double>{-1, 1, 0}));
+  // A gap in the node's time steps: the data nearest on each side.
+  due_seconds(sparse, 4.0, 0.0, 2.0, s);
+  EXPECT_EQ(s, (std::vector<double>{0, 0, 2}));
+  std::vector<double> none;
+  due_seconds({}, 2.5, 0.0, 1.0, none);
+  EXPECT_TRUE(none.empty());
+}
+
+TEST(StreamPriorities, DueWindowLooksAheadInTheDirectionOfPlay) {
+  const auto k = at_times({0, 1, 2, 3, 4, 5, 6, 7, 8});
+  std::vector<double> s;
+  // Forward at 2 keyframes/s for 1.5 s: reaches 5.5; keyframes 3, 4, 5 due in 0.25, 0.75, 1.25 s
+  // (3 is the playhead's pick after it: 0); 1 and 6 are the next ones beyond.
+  due_seconds(k, 2.5, 2.0, 1.5, s);
+  EXPECT_EQ(s, (std::vector<double>{-1, 1.5, 0, 0, 0.75, 1.25, -1, -1, -1}));
+  // Backwards: the keyframes behind it instead; ahead only the next one.
+  due_seconds(k, 6.5, -4.0, 1.0, s);
+  EXPECT_EQ(s, (std::vector<double>{-1, -1, -1, 0.875, 0.625, 0.375, 0, 0, 1}));
+  // No lookahead: the two around the playhead and their neighbours (all due now), whatever the
+  // speed.
+  due_seconds(k, 2.5, 8.0, 0.0, s);
+  EXPECT_EQ(s, (std::vector<double>{-1, 0, 0, 0, 0, -1, -1, -1, -1}));
+}
+
+TEST(StreamPriorities, DuePriorityOutranksEveryPatentPriorityAndFallsWithTime) {
+  PrioritySettings ps;
+  // The largest [0045] priority: SSE priority → 1, temporal 1.
+  const double max_patent = combined_priority(sse_priority(1e12), 1.0, 1.0, ps);
+  EXPECT_GT(due_priority(0.0, ps), due_priority(0.5, ps));
+  EXPECT_GT(due_priority(0.5, ps), due_priority(5.0, ps));
+  EXPECT_DOUBLE_EQ(due_priority(0.0, ps), ps.sse_weight + 2.0);
+  for (const double seconds : {0.0, 0.5, 1.0, 10.0, 1e6})
+    EXPECT_GT(due_priority(seconds, ps), max_patent);
+  ps.sse_weight = 1.5;
+  EXPECT_GT(due_priority(1e6, ps), combined_priority(sse_priority(1e12), 1.0, 1.0, ps));
+}
+
 }  // namespace
 }  // namespace volreel::stream

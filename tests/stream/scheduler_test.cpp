@@ -150,6 +150,99 @@ TEST(StreamScheduler, TheRootArrivesFirstAndTheUploadBudgetHolds) {
   expect_svo_references_resident_slots(s, u);
 }
 
+/// The order in which keyframe nodes arrive when one request is in flight at a time on a
+/// simulated link that delivers one brick per frame, playhead fixed at `playhead`.
+std::vector<KeyframeKey> arrival_order(const format::Container& c, bool due_window, double playhead,
+                                       std::size_t count) {
+  double now = 0;
+  SchedulerSettings settings;
+  settings.atlas_slots = 256;
+  settings.priority.policy = PriorityPolicy::patent;
+  settings.priority.due_window = due_window;
+  settings.loader.clock = [&now] { return now; };
+  settings.loader.max_in_flight = 1;
+  settings.loader.bandwidth_bytes_per_s = 1e9;
+  StreamScheduler s(c, settings);
+  const auto cam = test::close_camera(dims);
+  std::vector<KeyframeKey> order;
+  for (std::uint64_t frame = 1; frame < 400 && order.size() < count; ++frame) {
+    const FrameUpdate u = s.update(cam, playhead, frame);
+    s.retire(frame);
+    for (const BrickUpload& up : u.uploads) order.push_back(up.key);
+    now += 1.0;
+  }
+  return order;
+}
+
+TEST(StreamScheduler, TheDueWindowLoadsTheKeyframesAroundThePlayheadFirst) {
+  test::TempDir dir("stream-scheduler-due");
+  const auto path = test::make_container(dir.path(), dims, 9);
+  const format::Container c(path);
+  // Playhead 4.5: keyframes 4 and 5 at every level (2 × 9 bricks) come before anything else,
+  // each keyframe's root before its children.
+  const auto due = arrival_order(c, true, 4.5, 18);
+  ASSERT_EQ(due.size(), 18u);
+  for (const KeyframeKey& k : due) EXPECT_TRUE(k.t == 4 || k.t == 5) << "t " << k.t;
+  for (const std::uint32_t t : {4u, 5u}) {
+    const auto first =
+        std::find_if(due.begin(), due.end(), [&](const KeyframeKey& k) { return k.t == t; });
+    ASSERT_NE(first, due.end());
+    EXPECT_EQ(first->level, 0u);
+  }
+  // [0045] alone: the 10·ssePriority term puts the roots of other keyframes (the ruler's first,
+  // middle and last) before the leaves the frame draws.
+  const auto patent_only = arrival_order(c, false, 4.5, 18);
+  ASSERT_EQ(patent_only.size(), 18u);
+  EXPECT_TRUE(std::any_of(patent_only.begin(), patent_only.end(),
+                          [](const KeyframeKey& k) { return k.t != 4 && k.t != 5; }));
+}
+
+TEST(StreamScheduler, SpeculativeRequestsGoOutOnlyWhileTheLinkBacklogIsShort) {
+  test::TempDir dir("stream-scheduler-speculative");
+  const auto path = test::make_container(dir.path(), dims, 9);
+  const format::Container c(path);
+  const auto run = [&](double speculative_link_s, std::uint64_t* max_speculative) {
+    double now = 0;
+    SchedulerSettings settings;
+    settings.atlas_slots = 256;
+    settings.priority.policy = PriorityPolicy::patent;
+    settings.speculative_link_s = speculative_link_s;
+    settings.loader.clock = [&now] { return now; };
+    settings.loader.max_in_flight = 1000;
+    settings.loader.bandwidth_bytes_per_s = 200000;
+    StreamScheduler s(c, settings);
+    std::uint32_t largest = 0;
+    for (KeyframeId k = 0; k < s.index().keyframe_count(); ++k)
+      largest = std::max(largest, s.index().keyframe(k).bytes);
+    const auto cam = test::close_camera(dims);
+    const double bound = std::max(200000.0 * speculative_link_s, static_cast<double>(largest));
+    std::size_t first_in_flight = 0;
+    for (std::uint64_t frame = 1; frame <= 40; ++frame) {
+      const std::uint64_t speculative_before = s.speculative_bytes_in_flight();
+      const FrameUpdate u = s.update(cam, 4.0, frame);
+      s.retire(frame);
+      if (frame == 1) first_in_flight = u.stats.requests_in_flight;
+      *max_speculative = std::max(*max_speculative, s.speculative_bytes_in_flight());
+      // A speculative request went out this frame: the whole backlog is within the bound (due
+      // requests go out before speculative ones).
+      if (s.speculative_bytes_in_flight() > speculative_before) {
+        EXPECT_LE(static_cast<double>(s.requested_bytes_in_flight()), bound) << "frame " << frame;
+      }
+      EXPECT_LE(static_cast<double>(s.speculative_bytes_in_flight()), bound);
+      now += 0.1;
+    }
+    return first_in_flight;
+  };
+  std::uint64_t bounded_max = 0, unbounded_max = 0;
+  const std::size_t bounded = run(0.25, &bounded_max);
+  const std::size_t unbounded = run(0.0, &unbounded_max);
+  EXPECT_GT(bounded_max, 0u);     // speculative requests do go out
+  EXPECT_EQ(unbounded_max, 0u);   // no bound: not tracked
+  EXPECT_LT(bounded, unbounded);  // the bound holds back the [0045] order's far keyframes
+  // The due keyframe (4, 9 bricks) is always requested whatever the bound.
+  EXPECT_GE(bounded, 9u);
+}
+
 TEST(StreamScheduler, SlotsSampledByUnretiredGpuFramesAreNotOverwritten) {
   test::TempDir dir("stream-scheduler-retire");
   const auto path = test::make_container(dir.path(), dims, 4);

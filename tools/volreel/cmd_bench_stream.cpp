@@ -74,6 +74,10 @@ struct BenchStreamOptions {
   double fps = 10;  ///< simulated clock: frames per tour second
   double sse_target = 1.0;
   double sse_weight = 10.0, temporal_lerp_min = 0.15, temporal_exponent = 4.0;
+  bool due_window = true;
+  double lookahead = 1.0;
+  double speculative_link = 0.15;
+  double ancestor_handicap = 4.0;
   double step = 1.0;
   double upload_budget_mb = 64;
   std::uint64_t seed = 1;
@@ -782,6 +786,11 @@ void run_bench_stream(const BenchStreamOptions& o) {
     bad("--temporal-exponent", "an exponent in (0, 64]", std::to_string(o.temporal_exponent));
   if (!(o.temporal_lerp_min >= 0 && o.temporal_lerp_min <= 1))
     bad("--temporal-lerp-min", "a weight in [0, 1]", std::to_string(o.temporal_lerp_min));
+  if (!(o.ancestor_handicap >= 0) || o.ancestor_handicap > 64)
+    bad("--ancestor-handicap", "an exponent in [0, 64]", std::to_string(o.ancestor_handicap));
+  if (!(o.speculative_link >= 0) || o.speculative_link > 60)
+    bad("--speculative-link", "seconds in [0, 60]", std::to_string(o.speculative_link));
+  if (!(o.lookahead >= 0) || o.lookahead > 60) bad("--lookahead", "seconds in [0, 60]", std::to_string(o.lookahead));
   if (!(o.step > 0) || !std::isfinite(o.step)) bad("--step", "a ray step in voxels > 0", std::to_string(o.step));
   if (o.atlas_slots < 1 || o.atlas_slots > (1u << 16)) bad("--atlas-slots", "1..65536 slots", std::to_string(o.atlas_slots));
   if (!(o.upload_budget_mb > 0)) bad("--upload-budget", "MB per frame > 0", std::to_string(o.upload_budget_mb));
@@ -832,6 +841,10 @@ void run_bench_stream(const BenchStreamOptions& o) {
   ss.priority.sse_weight = o.sse_weight;
   ss.priority.temporal_lerp_min = o.temporal_lerp_min;
   ss.priority.temporal_exponent = o.temporal_exponent;
+  ss.priority.due_window = o.due_window;
+  ss.priority.lookahead_s = o.lookahead;
+  ss.speculative_link_s = o.speculative_link;
+  ss.selection.ancestor_handicap = o.ancestor_handicap;
   ss.upload_budget_bytes = static_cast<std::uint64_t>(o.upload_budget_mb * 1e6);
   ss.loader.bandwidth_bytes_per_s = bandwidth;
   ss.loader.latency_s = latency;
@@ -888,6 +901,12 @@ void run_bench_stream(const BenchStreamOptions& o) {
                               : "all");
   std::printf("patent:  priority = %g*SSE/(1+SSE) + lerp(random, temporal, lerp(%g, 1, temporal)), temporal exponent %g\n",
               o.sse_weight, o.temporal_lerp_min, ss.priority.temporal_exponent);
+  if (o.due_window)
+    std::printf("         due window first: the keyframes around the playhead and those it reaches within %g s; the\n"
+                "         rest ([0045] order) holds at most %g s of the link in flight\n",
+                o.lookahead, o.speculative_link);
+  else
+    std::printf("         no due window (--due-window off): every keyframe node by [0045] alone\n");
   std::fflush(stdout);
   {
     std::ofstream t(out / "tour.json");
@@ -918,6 +937,10 @@ void run_bench_stream(const BenchStreamOptions& o) {
                             {"sse_weight", o.sse_weight},
                             {"temporal_lerp_min", o.temporal_lerp_min},
                             {"temporal_exponent", o.temporal_exponent},
+                            {"due_window", o.due_window},
+                            {"lookahead_s", o.lookahead},
+                            {"speculative_link_s", o.speculative_link},
+                            {"ancestor_handicap", o.ancestor_handicap},
                             {"size", {width, height}},
                             {"ground_truth", truth.original() ? "original series" : "container finest level"},
                             {"runs", nlohmann::json::array()}};
@@ -1002,6 +1025,23 @@ void add_bench_stream_command(CLI::App& bench) {
       ->capture_default_str();
   cmd->add_option("--temporal-exponent", o->temporal_exponent,
                   "Both policies: exponent of temporalPriority = (1 - distance/maxDistance)^e ([0043]: 4)")
+      ->capture_default_str();
+  cmd->add_option("--due-window", o->due_window,
+                  "Patent policy: request first the keyframes the playhead needs now (the two around it) and those\n"
+                  "it reaches within --lookahead seconds at its current speed and direction, before the rest by\n"
+                  "[0045] (true/false; false: [0045] alone)")
+      ->capture_default_str();
+  cmd->add_option("--lookahead", o->lookahead,
+                  "Patent policy, due window: seconds of playback ahead of the playhead whose keyframes are due")
+      ->capture_default_str();
+  cmd->add_option("--speculative-link", o->speculative_link,
+                  "Patent policy, due window: requests outside it (the [0045] order: coarse levels of the whole\n"
+                  "timeline, the ruler's keyframes) hold at most this many seconds of the link in flight, so the\n"
+                  "keyframes the playhead needs next never wait behind more (0: no bound)")
+      ->capture_default_str();
+  cmd->add_option("--ancestor-handicap", o->ancestor_handicap,
+                  "Both policies, pre-render selection: an ancestor's keyframe distance is multiplied by\n"
+                  "exp(h * levels up) ([0046]: 4)")
       ->capture_default_str();
   cmd->add_option("--step", o->step, "Ray step, finest voxels (the ground truth uses the same)")->capture_default_str();
   cmd->add_option("--upload-budget", o->upload_budget_mb, "Compressed bytes uploaded per frame at most, MB")

@@ -87,6 +87,9 @@ class BrickLoader {
   std::size_t cancel_queued(const std::function<bool(const BrickRequest&)>& keep);
 
   std::size_t in_flight() const;
+  /// The loader's clock in seconds: the simulated clock's value, or the steady clock's time since
+  /// construction.
+  double now_seconds() const;
   /// Requests accepted that no worker has started reading yet.
   std::size_t queued() const;
   bool is_in_flight(const KeyframeKey& key) const;
@@ -120,6 +123,7 @@ class BrickLoader {
   std::unordered_map<KeyframeKey, char, KeyframeKeyHash> in_flight_;
   std::unordered_map<KeyframeKey, Backoff, KeyframeKeyHash> backoff_;
   Clock::time_point link_free_;
+  Clock::time_point started_;
   std::uint64_t bytes_read_ = 0;
   std::vector<std::thread> workers_;
 

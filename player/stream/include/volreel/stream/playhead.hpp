@@ -4,6 +4,7 @@
 // wraps around (looping).
 #pragma once
 
+#include <array>
 #include <cstddef>
 
 namespace volreel::stream {
@@ -52,6 +53,27 @@ class Playhead {
   bool playing_ = false, reversed_ = false;
 
   double wrap(double t) const;
+};
+
+/// The playhead's velocity (keyframes per second, negative backwards) as seen by a consumer that
+/// only gets its positions, one per rendered frame: the median of the last three finite
+/// differences, so that a seek (one huge difference) does not read as fast playback, while playback
+/// at any speed, reverse and pauses are followed within two frames (before three differences: the
+/// first difference, then the smaller of the two). The scheduler's due window uses it
+/// (priorities.hpp).
+class PlayheadMotion {
+ public:
+  /// A position at time `seconds` (non-decreasing); returns the velocity estimate. Observations at
+  /// the same time as the previous one change nothing.
+  double observe(double seconds, double position);
+  double velocity() const { return velocity_; }
+
+ private:
+  std::array<double, 3> recent_{};  ///< the last finite differences, oldest first
+  std::size_t count_ = 0;           ///< differences seen (saturates at 3)
+  double last_time_ = 0, last_position_ = 0;
+  bool has_last_ = false;
+  double velocity_ = 0;
 };
 
 }  // namespace volreel::stream

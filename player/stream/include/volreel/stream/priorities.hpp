@@ -8,6 +8,22 @@
 //   randomPriority   = a ruler-like table: first, middle and last keyframe 1, then the middle of
 //                      each half ½, recursively halving                                  [0044]
 //   priority         = 10·ssePriority + lerp(random, temporal, lerp(0.15, 1, temporal))   [0045]
+//
+// Due window (volreel's request management, patent policy only; [0033], [0037]): the keyframe
+// nodes the pre-render selection needs now — for each visited node, its keyframe nodes nearest the
+// playhead on each side —, those the playhead reaches within `lookahead_s` seconds at its current
+// velocity (play direction and speed), and the next one beyond the first two on each side (a step,
+// a start of playback or a change of direction), are "due". A due keyframe node's priority is
+//   due_priority = sse_weight + 2 − s/(s + lookahead_s) ∈ (sse_weight + 1, sse_weight + 2]
+// (s: seconds until the playhead reaches it, 0 for the two around the playhead), above every [0045]
+// priority (< sse_weight + 1). So the heap always holds them and they are requested first, the
+// soonest needed first and, for one time step, coarser levels first (the heap's tie rule); every
+// other keyframe node ("speculative") keeps its [0045] priority and gets the link time the due
+// window leaves (SchedulerSettings::speculative_link_s). Without it the 10·ssePriority term puts
+// the coarse levels of every keyframe of the timeline — and the fine bricks near the camera of far
+// keyframes — ahead of the fine bricks the current frame draws, and a full heap can even leave
+// out fine bricks of the keyframes at the playhead.
+// The nearest-keyframe-first baseline has no due window (it is the temporal order already).
 #pragma once
 
 #include <array>
@@ -33,6 +49,11 @@ struct PrioritySettings {
   double sse_weight = 10.0;         ///< factor of ssePriority in the combined priority
   double temporal_exponent = 4.0;   ///< exponent of temporalPriority
   double temporal_lerp_min = 0.15;  ///< lerp(min, 1, temporal): weight of temporal vs random
+  /// Patent policy: the due window (see above). false: every keyframe node by [0045] alone.
+  bool due_window = true;
+  /// Due window: seconds of playback ahead of the playhead (at its current velocity) whose
+  /// keyframes are due; the two keyframes around the playhead are always due.
+  double lookahead_s = 1.0;
 };
 
 /// [0044]: the ruler-like table for `keyframes` time steps. 9 keyframes give exactly
@@ -49,6 +70,18 @@ double temporal_priority(double keyframe, double playhead, std::size_t keyframes
 /// temporal priority alone for PriorityPolicy::nearest_keyframe_first.
 double combined_priority(double sse_priority_value, double temporal_priority_value,
                          double random_priority_value, const PrioritySettings& settings);
+
+/// Due window for one spatial node's keyframe nodes (sorted by time step; only `t` is read):
+/// seconds[i] = seconds until the playhead at `playhead` moving at `velocity` keyframes per second
+/// (negative: backwards) needs keyframes[i] — 0 for the last time step ≤ playhead and the first
+/// ≥ playhead; (t − playhead)/velocity for those the playhead reaches within lookahead_s;
+/// lookahead_s for the next one beyond those two on each side (where a step, a start of playback
+/// or a change of direction goes first) — or a negative value when keyframes[i] is not due.
+void due_seconds(std::span<const KeyframeNode> keyframes, double playhead, double velocity,
+                 double lookahead_s, std::vector<double>& seconds);
+/// The priority of a due keyframe node needed in `seconds` (see above): in
+/// (settings.sse_weight + 1, settings.sse_weight + 2], decreasing with seconds.
+double due_priority(double seconds, const PrioritySettings& settings);
 
 /// Axis-aligned box in world space (finest voxels), [lo, hi).
 struct Box {

@@ -2,16 +2,19 @@
 // DESIGN.md "Player: the patent's streaming, step by step"). update() runs, in order:
 //   1. take the loader's arrivals (errors go to the message list);
 //   2. walk the view (frustum, SSE) and fill the fixed-capacity min-max heap with the keyframe
-//      nodes of the visited nodes by priority (priorities.hpp); the heap's contents are this
-//      frame's selected set;
+//      nodes of the visited nodes by priority (priorities.hpp; with the patent policy, the due
+//      window's keyframe nodes — around the playhead and ahead of it in its direction of travel,
+//      the velocity estimated from successive playheads on the loader's clock — come first);
+//      the heap's contents are this frame's selected set;
 //   3. atlas: occupied slots whose keyframe node is no longer selected become over-writeable;
 //      selected keyframe nodes still in an over-writeable slot re-occupy it without a request;
 //   4. arrivals: those no longer selected are discarded (atlas untouched); the rest take a slot
 //      (the stalest over-writeable one whose last GPU frame retired) within the per-frame upload
 //      budget, and become uploads; what does not fit waits for the next frame;
 //   5. requests: the heap drained from highest to lowest priority; selected keyframe nodes not in
-//      the atlas are requested, up to the loader's cap on requests in flight; queued requests no
-//      longer selected are cancelled;
+//      the atlas are requested, up to the loader's cap on requests in flight (and, outside the due
+//      window, up to speculative_link_s of the link's bandwidth); queued requests no longer
+//      selected are cancelled;
 //   6. pre-render selection and the array-encoded SVO (selection.hpp, svo_builder.hpp) from the
 //      occupied slots only; the slots it references are marked used by this GPU frame.
 // The caller decodes each upload's payload into its slot before rendering with the SVO, and reports
@@ -32,6 +35,7 @@
 #include "volreel/stream/atlas_slots.hpp"
 #include "volreel/stream/brick_loader.hpp"
 #include "volreel/stream/min_max_heap.hpp"
+#include "volreel/stream/playhead.hpp"
 #include "volreel/stream/priorities.hpp"
 #include "volreel/stream/selection.hpp"
 #include "volreel/stream/spatial_index.hpp"
@@ -44,6 +48,13 @@ struct SchedulerSettings {
   PrioritySettings priority;
   SelectionSettings selection;
   LoaderOptions loader;
+  /// With the due window (patent policy): a request outside it ("speculative": the [0045] order)
+  /// goes out only while all requests in flight hold less than this many seconds of the link's
+  /// bandwidth. Speculative requests so take only the link time the due window leaves, and the
+  /// keyframes the playhead needs next (after a seek, a start or a change of direction) never
+  /// queue behind more than this much of them ([0037]: lower-priority requests throttled and tried
+  /// again later). 0 or an unlimited link: no bound beyond the loader's cap on requests in flight.
+  double speculative_link_s = 0.15;
   std::uint64_t upload_budget_bytes = 64ull << 20;  ///< payload bytes uploaded per frame at most
                                                     ///< (at least one upload per frame)
   std::size_t max_messages = 64;                    ///< messages kept for the UI (newest)
@@ -105,6 +116,12 @@ class StreamScheduler {
   const BrickLoader& loader() const { return loader_; }
   const SchedulerSettings& settings() const { return settings_; }
   PrioritySettings& priority_settings() { return settings_.priority; }
+  /// The playhead's velocity used by the due window, keyframes per second (negative: backwards).
+  double playhead_velocity() const { return motion_.velocity(); }
+  /// Bytes of speculative requests in flight (outside the due window when requested).
+  std::uint64_t speculative_bytes_in_flight() const { return speculative_bytes_; }
+  /// Bytes of all requests in flight (sent, not yet arrived).
+  std::uint64_t requested_bytes_in_flight() const { return in_flight_bytes_; }
   /// The newest messages (at most settings.max_messages), oldest first.
   const std::deque<std::string>& errors() const { return errors_; }
   std::size_t error_count() const { return error_count_; }
@@ -114,6 +131,7 @@ class StreamScheduler {
     double priority = 0;
     std::uint32_t level = 0;
     KeyframeId keyframe = no_keyframe;
+    bool due = false;  ///< in the due window (priorities.hpp)
   };
   struct HeapLess {
     bool operator()(const HeapEntry& a, const HeapEntry& b) const {
@@ -128,7 +146,15 @@ class StreamScheduler {
   AtlasSlots atlas_;
   BrickLoader loader_;
   MinMaxHeap<HeapEntry, HeapLess> heap_;
-  std::vector<double> random_table_, temporal_;
+  std::vector<double> random_table_, temporal_, due_;
+  PlayheadMotion motion_;
+  /// Requests in flight: bytes and whether speculative (outside the due window when requested).
+  struct InFlight {
+    std::uint32_t bytes = 0;
+    bool speculative = false;
+  };
+  std::unordered_map<KeyframeId, InFlight> in_flight_;
+  std::uint64_t in_flight_bytes_ = 0, speculative_bytes_ = 0;
   ViewTraversal view_;
   ResidentKeyframes resident_;
   std::unordered_set<KeyframeId> selected_;
@@ -139,6 +165,7 @@ class StreamScheduler {
 
   void fill_heap(const player::OrbitCamera& camera, double playhead);
   void add_error(std::string message);
+  void end_request(KeyframeId id);
 };
 
 }  // namespace volreel::stream
