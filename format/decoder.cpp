@@ -30,13 +30,13 @@ std::string str(std::uint64_t v) {
 
 void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::span<float> out,
                  const std::filesystem::path& name, std::uint64_t at) {
-  // 1. Structure, dequantization values and atom indices.
-  const KsvdPayloadLayout layout = check_ksvd_payload(bytes, atoms.count, name, at);
   // Payloads are 4-byte aligned inside the file and the map is page-aligned, but copy to be safe
   // for in-memory views of arbitrary alignment.
   std::vector<vr_uint> payload_words(bytes.size() / 4);
   std::memcpy(payload_words.data(), bytes.data(), payload_words.size() * 4);
   const vr_uint* payload = payload_words.data();
+  // 1. Structure, dequantization values and atom indices.
+  const KsvdPayloadLayout layout = check_ksvd_payload(payload_words, bytes.size(), atoms.count, name, at);
   // 2. Prefix sum of sparsities = first code of each block.
   vr_uint first_code[VR_BLOCKS_PER_BRICK + 1];
   first_code[0] = 0;
@@ -113,23 +113,26 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
 
 KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> bytes, std::uint32_t atom_count,
                                      const std::filesystem::path& name, std::uint64_t at) {
+  std::vector<vr_uint> words(bytes.size() / 4);
+  std::memcpy(words.data(), bytes.data(), 4 * words.size());
+  return check_ksvd_payload(words, bytes.size(), atom_count, name, at);
+}
+
+KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::size_t bytes,
+                                     std::uint32_t atom_count, const std::filesystem::path& name,
+                                     std::uint64_t at) {
   const auto fail = [&](std::uint64_t offset, const std::string& expected,
                         const std::string& found) {
     throw FormatError(name, at + offset, "brick payload " + expected, found);
   };
-  const auto word = [&](std::size_t i) {
-    vr_uint w;
-    std::memcpy(&w, bytes.data() + 4 * i, 4);
-    return w;
-  };
   // 1. Header: four finite dequantization values and the mean bits.
-  if (bytes.size() < 4 * VR_HEADER_WORDS || bytes.size() % 4 != 0)
+  if (bytes < 4 * VR_HEADER_WORDS || bytes % 4 != 0 || words.size() != bytes / 4)
     fail(0, "of at least " + str(4 * VR_HEADER_WORDS) + " bytes, a multiple of 4",
-         str(bytes.size()) + " bytes");
+         str(bytes) + " bytes");
   for (vr_uint w = 0; w < 4; ++w)
-    if (!std::isfinite(vr_as_float(word(w))))
+    if (!std::isfinite(vr_as_float(words[w])))
       fail(4 * w, "finite dequantization value", "NaN or infinity");
-  const vr_uint layout_word = word(4);
+  const vr_uint layout_word = words[4];
   KsvdPayloadLayout layout;
   layout.mean_bits = layout_word & 0xFu;
   if (layout.mean_bits > VR_MEAN_BITS || (layout_word >> 4) != 0)
@@ -137,18 +140,16 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> bytes, std::uint
          "word " + str(layout_word));
   layout.entry_bits = vr_entry_bits(layout.mean_bits);
   // 2. The entries, then the length their sparsities give.
-  if (bytes.size() < vr_payload_bytes(layout.entry_bits, 0))
+  if (bytes < vr_payload_bytes(layout.entry_bits, 0))
     fail(0, "of at least " + str(vr_payload_bytes(layout.entry_bits, 0)) + " bytes for " +
                 str(layout.entry_bits) + "-bit block entries",
-         str(bytes.size()) + " bytes");
-  std::vector<vr_uint> words(bytes.size() / 4);
-  for (std::size_t i = 0; i < words.size(); ++i) words[i] = word(i);
+         str(bytes) + " bytes");
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
     layout.codes += vr_entry_sparsity(vr_block_entry(words.data(), layout.entry_bits, b));
   const std::uint64_t need = vr_payload_bytes(layout.entry_bits, layout.codes);
-  if (bytes.size() < need || bytes.size() >= need + 4)
+  if (bytes < need || bytes >= need + 4)
     fail(0, str(need) + " bytes for " + str(layout.codes) + " codes (+ padding to 4)",
-         str(bytes.size()) + " bytes");
+         str(bytes) + " bytes");
   // 3. Atom indices.
   for (vr_uint k = 0; k < layout.codes; ++k) {
     const vr_uint unit = vr_code_unit(layout.entry_bits, k);

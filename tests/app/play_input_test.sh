@@ -12,8 +12,8 @@
 # Usage: play_input_test.sh PATH/TO/volreel
 set -euo pipefail
 volreel=$1
-fail() { echo "FAIL: $*" >&2; exit 1; }
-skip() { echo "SKIP: $*"; exit 77; }
+# shellcheck source=window_test_lib.sh
+. "$(dirname "$0")/window_test_lib.sh"
 command -v xvfb-run > /dev/null || skip "xvfb-run is not installed (Debian: apt install xvfb)"
 command -v xdotool > /dev/null || skip "xdotool is not installed (Debian: apt install xdotool): real mouse input and minimize not tested"
 command -v twm > /dev/null || skip "twm is not installed (Debian: apt install twm): minimize needs a window manager"
@@ -115,12 +115,7 @@ timeout 150 xvfb-run -a -s "-screen 0 1024x768x24" "$work/session.sh" "$work" "$
 rc=$?
 set -e
 cat "$work/out.txt" 2> /dev/null || true
-case $rc in
-  0) ;;
-  3) skip "no display under xvfb-run: $(cat "$work/err.txt")" ;;
-  4) skip "no Vulkan device that can present: $(cat "$work/err.txt")" ;;
-  *) cat "$work/session.txt" "$work/err.txt" >&2; fail "the session exited with $rc" ;;
-esac
+check_player_exit $rc "$work/err.txt" "the session" "$work/session.txt" "$work/err.txt"
 grep -q "Validation Error" "$work/err.txt" && fail "Vulkan validation errors: $(cat "$work/err.txt")"
 for f in before exit; do [ -s "$work/$f.png" ] || fail "no screenshot $f.png"; done
 

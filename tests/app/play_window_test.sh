@@ -15,8 +15,8 @@
 # Usage: play_window_test.sh PATH/TO/volreel
 set -euo pipefail
 volreel=$1
-fail() { echo "FAIL: $*" >&2; exit 1; }
-skip() { echo "SKIP: $*"; exit 77; }
+# shellcheck source=window_test_lib.sh
+. "$(dirname "$0")/window_test_lib.sh"
 command -v xvfb-run > /dev/null || skip "xvfb-run is not installed (Debian: apt install xvfb)"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
@@ -72,12 +72,7 @@ VOLREEL_VULKAN_VALIDATION=$validation timeout 120 xvfb-run -a -s "-screen 0 1280
 rc=$?
 set -e
 cat "$work/out.txt"
-case $rc in
-  0) ;;
-  3) skip "no display under xvfb-run: $(cat "$work/err.txt")" ;;
-  4) skip "no Vulkan device that can present: $(cat "$work/err.txt")" ;;
-  *) cat "$work/err.txt" >&2; fail "volreel play exited with $rc" ;;
-esac
+check_player_exit $rc "$work/err.txt" "volreel play" "$work/err.txt"
 grep -q "settle timed out" "$work/err.txt" && fail "streaming did not settle: $(cat "$work/err.txt")"
 grep -q "Validation Error" "$work/err.txt" && fail "Vulkan validation errors: $(cat "$work/err.txt")"
 for f in s0 s1 s2 s3 ui ui320 ui1280 exit; do [ -s "$work/$f.png" ] || fail "no screenshot $f.png"; done

@@ -45,8 +45,6 @@ void run_rd(const RdCommandOptions& o) {
   std::printf("value range [%.6g, %.6g]\n", range.first, range.second);
   auto codecs = psnr::make_zfp_sweep(range.second - range.first);
   if (!o.dictionary.empty()) {
-    if (o.atom_storage != "f16" && o.atom_storage != "f32")
-      throw InputError("--atom-storage must be f16 or f32, not '" + o.atom_storage + "'");
     // The dictionary as volreel encode stores it in the container (binary16 atoms by default).
     auto file = format::read_dictionary_file(o.dictionary);
     if (o.atom_storage == "f16") file = format::with_half_atoms(std::move(file));
@@ -103,6 +101,7 @@ void add_bench_command(CLI::App& app) {
                  "frame encoded into a frame file in memory and decoded by the CPU decoder; the dictionary counts in bps");
   rd->add_option("--atom-storage", o->atom_storage,
                  "How the dictionary's atoms are stored and counted: f16 (what volreel encode stores by default) or f32")
+      ->check(CLI::IsMember({"f16", "f32"}))
       ->capture_default_str();
   rd->add_option("--tolerances", o->tolerances,
                  "Variable rate: eps as fractions of the value range; each block gets the atoms that lower its squared\n"

@@ -188,8 +188,6 @@ void run_encode(const EncodeOptions& o) {
     throw InputError("--rate-rule must be lagrangian or tolerance, not '" + o.rate_rule + "'");
   if (o.extend && c.fixed_sparsity == 0 && c.rule != encoder::VariableRateRule::tolerance)
     throw InputError("--extend-pursuit needs --rate-rule tolerance");
-  if (o.atom_storage != "f16" && o.atom_storage != "f32")
-    throw InputError("--atom-storage must be f16 or f32, not '" + o.atom_storage + "'");
   job.half_atoms = o.atom_storage == "f16";
   if (o.mean_bits == "auto") {
     c.mean_bits = -1;
@@ -490,6 +488,7 @@ void add_encode_command(CLI::App& app) {
                   "How the container stores the dictionary's atoms: f16 (IEEE half: half the "
                   "bytes; the frames are coded\n"
                   "against the rounded atoms) or f32 (a dictionary stored in f16 stays f16)")
+      ->check(CLI::IsMember({"f16", "f32"}))
       ->capture_default_str();
   cmd->add_option("--codec", o->codec, "ksvd (sparse coding) or zfp (fixed accuracy per brick)")
       ->capture_default_str();

@@ -31,6 +31,10 @@ struct KsvdPayloadLayout {
 /// Throws FormatError naming `name` and the offset `at` + the bad field's offset in the payload.
 KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> payload, std::uint32_t atom_count,
                                      const std::filesystem::path& name, std::uint64_t at);
+/// The same on a payload already copied into 32-bit words (`bytes` long; bytes/4 words).
+KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::size_t bytes,
+                                     std::uint32_t atom_count, const std::filesystem::path& name,
+                                     std::uint64_t at);
 
 /// The parts of a ksvd brick payload before packing: the four dequantization values (mean_bias,
 /// mean_scale, coef_bias, coef_scale), the mean bits b (0..12), per block its sparsity (0..15) and
