@@ -52,6 +52,11 @@ expect_error "000003.f32.*missing" "$volreel" compare "$work/a" "$work/b"
 expect_error "already holds a series" "$volreel" gen analytic --frames 2 --out "$work/a"
 expect_error "unknown analytic field" "$volreel" gen analytic --field nope --out "$work/d"
 expect_error "not a PNG\|cannot\|PNG" "$volreel" compare "$work/frame.raw" "$work/frame.png"
+# The player checks its options before it opens a window.
+expect_error "at least 64x64" "$volreel" play "$work/none.vreel" --size 10x10
+expect_error "WIDTHxHEIGHT" "$volreel" play "$work/none.vreel" --size big
+expect_error "bandwidth: expected a rate" "$volreel" play "$work/none.vreel" --bandwidth 5xb
+expect_error "latency: expected a duration" "$volreel" play "$work/none.vreel" --latency 3parsecs
 
 # Rate-distortion benchmark on a small series: table, CSV and plot.
 "$volreel" bench rd "$work/a" --out "$work/rd" --ssim-frames 1 > "$work/rd.txt" 2>/dev/null

@@ -6,7 +6,6 @@
 #include <bit>
 #include <cmath>
 #include <limits>
-#include <map>
 
 #include "json_fields.hpp"
 
@@ -19,8 +18,14 @@ struct PresetPoint {
   float t, r, g, b, a;
 };
 
-const std::map<std::string, std::vector<PresetPoint>>& presets() {
-  static const std::map<std::string, std::vector<PresetPoint>> table = {
+struct Preset {
+  std::string name;
+  std::vector<PresetPoint> points;
+};
+
+/// The presets in the order menus and messages list them.
+const std::vector<Preset>& presets() {
+  static const std::vector<Preset> table = {
       {"grayscale", {{0.0f, 0, 0, 0, 0}, {1.0f, 1, 1, 1, 0.2f}}},
       // Moreland's diverging map (2009): both extremes opaque, the middle clear — for signed
       // fields such as pressure (low-pressure vortex cores in blue, stagnation regions in red).
@@ -127,7 +132,8 @@ TransferFunction TransferFunction::from_quantiles(std::vector<float> values, flo
 
 TransferFunction TransferFunction::preset(const std::string& name, float lo, float hi,
                                           float opacity, int entries) {
-  const auto it = presets().find(name);
+  const auto it = std::find_if(presets().begin(), presets().end(),
+                               [&](const Preset& p) { return p.name == name; });
   if (it == presets().end()) {
     std::string list;
     for (const auto& p : preset_names()) list += (list.empty() ? "" : ", ") + p;
@@ -138,14 +144,17 @@ TransferFunction TransferFunction::preset(const std::string& name, float lo, flo
                      std::to_string(opacity));
   check_range(lo, hi, "transfer function preset \"" + name + "\"");
   std::vector<ControlPoint> points;
-  for (const PresetPoint& p : it->second)
+  for (const PresetPoint& p : it->points)
     points.push_back({lo + (hi - lo) * p.t, p.r, p.g, p.b, std::min(1.0f, p.a * opacity)});
   return TransferFunction(std::move(points), lo, hi, entries);
 }
 
 const std::vector<std::string>& TransferFunction::preset_names() {
-  static const std::vector<std::string> names = {"grayscale", "cool-warm", "fire", "turbulence",
-                                                 "transparent"};
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> list;
+    for (const Preset& p : presets()) list.push_back(p.name);
+    return list;
+  }();
   return names;
 }
 

@@ -99,15 +99,24 @@ vec3 slot_texel(uint d, uvec3 c, vec3 u) {
               vr_svo_slot_coord(vr_svo_ancestor_local(c.z, u.z, d)));
 }
 
+// The origin of `slot` in the atlas, texels.
+ivec3 slot_origin(uint slot) {
+  return ivec3(vr_atlas_cell_x(slot, params.grid_mask.x),
+               vr_atlas_cell_y(slot, params.grid_mask.x, params.grid_mask.y),
+               vr_atlas_cell_z(slot, params.grid_mask.x, params.grid_mask.y)) *
+         int(VR_ATLAS_SLOT_SIZE);
+}
+
+// Atlas position (texel units, centres at +0.5) of node-local u in `slot` for LOD difference d.
+vec3 atlas_position(uint slot, uint d, uvec3 c, vec3 u) {
+  return vec3(slot_origin(slot)) + slot_texel(d, c, u);
+}
+
 // The value range (normalized texel units) of the 6³ block of `slot` that a trilinear sample at
-// `texel` reads (block_ranges.comp). The lower neighbour is found in atlas coordinates, rounded
-// as keyframe() rounds them; the ranges' margin covers filter hardware's own rounding.
-vec2 block_range(uint slot, vec3 texel) {
-  ivec3 origin = ivec3(vr_atlas_cell_x(slot, params.grid_mask.x),
-                       vr_atlas_cell_y(slot, params.grid_mask.x, params.grid_mask.y),
-                       vr_atlas_cell_z(slot, params.grid_mask.x, params.grid_mask.y)) *
-                 int(VR_ATLAS_SLOT_SIZE);
-  ivec3 i = ivec3(floor(vec3(origin) + texel - 0.5)) - origin;
+// atlas position `at` reads (block_ranges.comp). The lower neighbour is rounded as keyframe()
+// rounds it; the ranges' margin covers filter hardware's own rounding.
+vec2 block_range(uint slot, vec3 at) {
+  ivec3 i = ivec3(floor(at - 0.5)) - slot_origin(slot);
   uvec3 b = min(uvec3(clamp(i, ivec3(0), ivec3(int(VR_ATLAS_SLOT_SIZE) - 1))) / 6u,
                 uvec3(VR_BLOCKS_PER_AXIS - 1u));
   uint block = b.x + VR_BLOCKS_PER_AXIS * (b.y + VR_BLOCKS_PER_AXIS * b.z);
@@ -126,13 +135,8 @@ bool range_visible(vec2 r) {
   return visible_prefix[e1 + 1] != visible_prefix[e0];
 }
 
-// One keyframe: trilinear sample of `slot` at node-local u for LOD difference d (patent [0050]).
-float keyframe(uint slot, uint d, uvec3 c, vec3 u) {
-  vec3 texel = slot_texel(d, c, u);
-  uvec3 cell = uvec3(vr_atlas_cell_x(slot, params.grid_mask.x),
-                     vr_atlas_cell_y(slot, params.grid_mask.x, params.grid_mask.y),
-                     vr_atlas_cell_z(slot, params.grid_mask.x, params.grid_mask.y));
-  vec3 at = vec3(cell * VR_ATLAS_SLOT_SIZE) + texel;  // atlas texel units, centres at +0.5
+// One keyframe: trilinear sample at atlas position `at` (atlas_position; patent [0050]).
+float keyframe(vec3 at) {
   float n;
   if ((params.size_levels.w & VR_FLAG_FETCH_FILTER) != 0u) {
     // Trilinear from the eight neighbours (the apron keeps them inside the slot): much faster
@@ -312,22 +316,25 @@ void main() {
       uint record = leaf * VR_SVO_LEAF_WORDS;
       float f = uintBitsToFloat(leaf_words[record + 3u]);
       uint lods = leaf_words[record + 2u];
+      uint slot_a = leaf_words[record], slot_b = leaf_words[record + 1u];
+      vec3 at_a = f == 1.0 ? vec3(0.0) : atlas_position(slot_a, vr_svo_lod_a(lods), leaf_c, u);
+      vec3 at_b = f == 0.0 ? vec3(0.0) : atlas_position(slot_b, vr_svo_lod_b(lods), leaf_c, u);
       if (block_skip) {
         // 4a. Both keyframes' blocks hold only values the transfer function hides: so does
         //     their blend. Skip the fetches, keep the sample positions.
         vec2 r = vec2(1e30, -1e30);
         if (f != 1.0) {
-          vec2 ra = block_range(leaf_words[record], slot_texel(vr_svo_lod_a(lods), leaf_c, u));
+          vec2 ra = block_range(slot_a, at_a);
           r = vec2(min(r.x, ra.x), max(r.y, ra.y));
         }
         if (f != 0.0) {
-          vec2 rb = block_range(leaf_words[record + 1u], slot_texel(vr_svo_lod_b(lods), leaf_c, u));
+          vec2 rb = block_range(slot_b, at_b);
           r = vec2(min(r.x, rb.x), max(r.y, rb.y));
         }
         if (!range_visible(r)) continue;
       }
-      float a = f == 1.0 ? 0.0 : keyframe(leaf_words[record], vr_svo_lod_a(lods), leaf_c, u);
-      float b = f == 0.0 ? 0.0 : keyframe(leaf_words[record + 1u], vr_svo_lod_b(lods), leaf_c, u);
+      float a = f == 1.0 ? 0.0 : keyframe(at_a);
+      float b = f == 0.0 ? 0.0 : keyframe(at_b);
       float value = f == 0.0 ? a : f == 1.0 ? b : (1.0 - f) * a + f * b;
 
       // 5. Transfer function (corrected for the base step), corrected for the n = k' − k fine

@@ -2,7 +2,6 @@
 // beyond the usual: 3 when there is no display, 4 when there is no Vulkan device that can present
 // to a window (scripts and tests skip on them).
 #include <algorithm>
-#include <charconv>
 #include <cstdio>
 #include <fstream>
 #include <memory>
@@ -12,6 +11,7 @@
 #include "commands.hpp"
 #include "volreel/app/player.hpp"
 #include "volreel/vulkan/error.hpp"
+#include "volreel/vulkan_render/loop_settings.hpp"
 
 namespace volreel::cli {
 
@@ -26,54 +26,12 @@ struct PlayCommandOptions {
   std::string script_file, script_inline, screenshot_on_exit;
 };
 
-/// "20MB/s", "500kB/s", "1.5e6" (bytes/s), "0" (unlimited) → bytes per second.
-double parse_bandwidth(std::string text) {
-  if (text.size() > 2 && text.substr(text.size() - 2) == "/s") text.resize(text.size() - 2);
-  double scale = 1;
-  for (auto [suffix, factor] : {std::pair<const char*, double>{"GB", 1e9},
-                                {"MB", 1e6},
-                                {"kB", 1e3},
-                                {"KB", 1e3},
-                                {"B", 1}}) {
-    const std::string s = suffix;
-    if (text.size() > s.size() && text.substr(text.size() - s.size()) == s) {
-      text.resize(text.size() - s.size());
-      scale = factor;
-      break;
-    }
-  }
-  double value = 0;
-  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (ec != std::errc{} || ptr != text.data() + text.size() || value < 0)
-    throw InputError("--bandwidth: expected a rate like 20MB/s, found '" + text + "'");
-  return value * scale;
-}
-
-/// "50ms", "0.05s", "0.05" (seconds) → seconds.
-double parse_latency(std::string text) {
-  double scale = 1;
-  if (text.size() > 2 && text.substr(text.size() - 2) == "ms") {
-    text.resize(text.size() - 2);
-    scale = 1e-3;
-  } else if (!text.empty() && text.back() == 's') {
-    text.pop_back();
-  }
-  double value = 0;
-  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (ec != std::errc{} || ptr != text.data() + text.size() || value < 0)
-    throw InputError("--latency: expected a time like 50ms, found '" + text + "'");
-  return value * scale;
-}
-
 void run_play(PlayCommandOptions& o) {
   app::PlayerOptions& p = o.player;
   {
-    int w = 0, h = 0;
-    char x = 0, rest = 0;
-    std::istringstream in(o.size);
-    if (!(in >> w >> x >> h) || x != 'x' || (in >> rest) || w < 64 || h < 64 || w > 16384 ||
-        h > 16384)
-      throw InputError("--size: expected WxH with each side in 64..16384, found '" + o.size + "'");
+    const auto [w, h] = vulkan_render::parse_size(o.size);
+    if (w < 64 || h < 64)
+      throw InputError("--size: a window needs at least 64x64 pixels, found '" + o.size + "'");
     p.width = w;
     p.height = h;
   }
@@ -81,8 +39,8 @@ void run_play(PlayCommandOptions& o) {
   p.atlas_bytes = static_cast<std::uint64_t>(o.atlas_mb * 1024 * 1024);
   p.upload_bytes =
       std::max<std::uint64_t>(static_cast<std::uint64_t>(o.upload_mb * 1024 * 1024), 1);
-  p.bandwidth_bytes_per_s = parse_bandwidth(o.bandwidth);
-  p.latency_s = parse_latency(o.latency);
+  p.bandwidth_bytes_per_s = vulkan_render::parse_bandwidth(o.bandwidth);
+  p.latency_s = vulkan_render::parse_latency(o.latency);
   p.renderer = o.renderer == "cpu"      ? app::RendererKind::cpu
                : o.renderer == "vulkan" ? app::RendererKind::vulkan
                                         : app::RendererKind::automatic;
@@ -130,9 +88,10 @@ void add_play_command(CLI::App& app) {
   cmd->add_option("--atlas-mb", o->atlas_mb, "Brick atlas memory budget, MiB")
       ->capture_default_str();
   cmd->add_option("--bandwidth", o->bandwidth,
-                  "Limit brick reads to this rate, e.g. 20MB/s (0: unlimited)")
+                  "Limit brick reads to this rate, e.g. 20MB/s, 500kB/s or 1GB/s (a bare number: "
+                  "MB/s; 0: unlimited)")
       ->capture_default_str();
-  cmd->add_option("--latency", o->latency, "Add this latency to every brick read, e.g. 50ms")
+  cmd->add_option("--latency", o->latency, "Add this latency to every brick read, e.g. 50ms or 0.2s (a bare number: ms)")
       ->capture_default_str();
   cmd->add_option("--upload-mb", o->upload_mb,
                   "Compressed brick data decoded per frame at most, MiB")

@@ -254,8 +254,19 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
   entry.ticket = ++last_ticket_;
 
   // 3. Parameters (raycast.comp's Params).
-  const cpu_render::TransferFunction tf =
-      input.transfer->opacity_corrected(o.step / o.reference_step);
+  const double step_ratio = o.step / o.reference_step;
+  if (step_ratio != tf_step_ratio_ || !(*input.transfer == tf_source_) || visible_prefix_.empty()) {
+    tf_source_ = *input.transfer;
+    tf_step_ratio_ = step_ratio;
+    tf_corrected_ = input.transfer->opacity_corrected(step_ratio);
+    // The prefix count of visible entries: entries i..j hold a visible one iff prefix[j + 1] ≠
+    // prefix[i] (opacity correction keeps zero opacities zero).
+    const std::vector<cpu_render::Rgba>& table = tf_corrected_.table();
+    visible_prefix_.assign(table.size() + 1, 0);
+    for (std::size_t i = 0; i < table.size(); ++i)
+      visible_prefix_[i + 1] = visible_prefix_[i] + (table[i][3] > 0 ? 1u : 0u);
+  }
+  const cpu_render::TransferFunction& tf = tf_corrected_;
   Params p{};
   const glm::dvec3 eye = camera.eye();
   const auto [forward, right, up] = camera.basis();
@@ -311,13 +322,8 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
   upload(entry.histograms, input.leaf_histograms.data(), input.leaf_histograms.size_bytes());
   static_assert(sizeof(cpu_render::Rgba) == 16);
   upload(entry.transfer, tf.table().data(), tf.table().size() * sizeof(cpu_render::Rgba));
-  // The prefix count of visible entries: entries i..j hold a visible one iff prefix[j + 1] ≠
-  // prefix[i] (opacity correction keeps zero opacities zero).
-  std::vector<std::uint32_t> prefix(std::size_t{entries} + 1, 0);
-  for (std::size_t i = 0; i < entries; ++i)
-    prefix[i + 1] = prefix[i] + (tf.table()[i][3] > 0 ? 1u : 0u);
-  ensure(context_, entry.visible_prefix, prefix.size() * 4, storage, device_local);
-  upload(entry.visible_prefix, prefix.data(), prefix.size() * 4);
+  ensure(context_, entry.visible_prefix, visible_prefix_.size() * 4, storage, device_local);
+  upload(entry.visible_prefix, visible_prefix_.data(), visible_prefix_.size() * 4);
   // Slots whose block ranges this frame recomputes (checked: the shader indexes with them).
   for (const std::uint32_t slot : input.changed_slots)
     if (slot >= atlas_.slot_count())

@@ -158,6 +158,11 @@ class Raycaster {
   VkQueryPool timestamps_ = VK_NULL_HANDLE;
   double timestamp_period_ns_ = 0;
   std::vector<std::unique_ptr<Entry>> ring_;
+  // The opacity-corrected transfer function of the last frame and its visible-entry prefix count,
+  // kept so that a frame with the same function and step allocates nothing.
+  cpu_render::TransferFunction tf_source_, tf_corrected_;
+  double tf_step_ratio_ = 0;
+  std::vector<std::uint32_t> visible_prefix_;
   Ticket last_ticket_ = 0;
   bool fetch_filter_ = false;
 };
