@@ -54,9 +54,18 @@ void StreamScheduler::fill_heap(const player::OrbitCamera& camera, double playhe
   const bool patent = ps.policy == PriorityPolicy::patent;
   const bool due_window = patent && ps.due_window;
   const double velocity = motion_.velocity();
+  // SseScope::level: one SSE per level, the largest of its visited nodes.
+  const bool level_sse = patent && ps.sse_scope == SseScope::level;
+  if (level_sse) {
+    level_sse_.assign(index_.level_count(), 0.0);
+    for (const ViewTraversal::Visit& v : view_.visits()) {
+      double& sse = level_sse_[index_.node(v.node).key.level];
+      sse = std::max(sse, v.sse);
+    }
+  }
   for (const ViewTraversal::Visit& v : view_.visits()) {
     const SpatialNode& n = index_.node(v.node);
-    const double sse_p = sse_priority(v.sse);
+    const double sse_p = sse_priority(level_sse ? level_sse_[n.key.level] : v.sse);
     // A node whose best possible priority cannot enter a full heap is skipped whole.
     const double best = due_window ? ps.sse_weight + 2.0
                         : patent   ? ps.sse_weight * sse_p + 1.0

@@ -50,6 +50,7 @@ TEST(StreamPriorities, FormulasOfTheParagraphs) {
   EXPECT_DOUBLE_EQ(temporal_priority(0, 0, 1), 1.0);
   // [0045]: 10·sse + lerp(random, temporal, lerp(0.15, 1, temporal)).
   PrioritySettings s;
+  s.temporal_lerp_min = 0.15;  // [0045]'s weight (volreel's default is 1)
   const double temporal = 0.4, random = 0.25, sse = 0.5;
   const double w = 0.15 + (1.0 - 0.15) * temporal;
   EXPECT_DOUBLE_EQ(combined_priority(sse, temporal, random, s),

@@ -197,6 +197,58 @@ TEST(StreamScheduler, TheDueWindowLoadsTheKeyframesAroundThePlayheadFirst) {
                           [](const KeyframeKey& k) { return k.t != 4 && k.t != 5; }));
 }
 
+/// Per time step, the finest-level keyframe nodes resident (occupied) once a scheduler with
+/// `slots` atlas slots (fewer than the 9 × 9 keyframe nodes) has converged at playhead 4.2 with the
+/// [0045] order alone; `roots`: time steps whose root is resident.
+std::map<std::uint32_t, int> resident_leaves(const format::Container& c, SseScope scope,
+                                             std::uint32_t slots, int* roots) {
+  SchedulerSettings settings;
+  settings.atlas_slots = slots;
+  settings.priority.policy = PriorityPolicy::patent;
+  settings.priority.due_window = false;
+  settings.priority.sse_scope = scope;
+  StreamScheduler s(c, settings);
+  const auto cam = test::close_camera(dims);
+  std::uint64_t frame = 0;
+  run_until(s, cam, 4.2, frame, [&](const FrameUpdate& f) {
+    return f.stats.requests_in_flight == 0 && f.stats.arrivals_waiting == 0 &&
+           f.stats.atlas_occupied == slots;
+  });
+  std::map<std::uint32_t, int> leaves;
+  *roots = 0;
+  for (std::uint32_t slot = 0; slot < slots; ++slot) {
+    const auto key = s.atlas().key(slot);
+    if (!key || s.atlas().state(slot) != AtlasSlots::State::occupied) continue;
+    if (key->level == 0) ++*roots;
+    else ++leaves[key->t];
+  }
+  return leaves;
+}
+
+TEST(StreamScheduler, TheSseOfALevelKeepsWholeKeyframesWhenTheAtlasIsFull) {
+  test::TempDir dir("stream-scheduler-sse-scope");
+  const auto path = test::make_container(dir.path(), dims, 9);
+  const format::Container c(path);
+  // 45 slots: the 9 roots and 36 of the 72 leaves.
+  int roots = 0;
+  const auto partial = [](const std::map<std::uint32_t, int>& leaves) {
+    return std::count_if(leaves.begin(), leaves.end(),
+                         [](const auto& e) { return e.second > 0 && e.second < 8; });
+  };
+  const auto level = resident_leaves(c, SseScope::level, 45, &roots);
+  EXPECT_EQ(roots, 9);  // coarser levels first: every time step's root
+  int total = 0;
+  for (const auto& [t, n] : level) total += n;
+  EXPECT_EQ(total, 36);
+  // One SSE per level: whole keyframes nearest the playhead (4, 5, 3, 6), half of the next (2).
+  EXPECT_LE(partial(level), 1);
+  for (const std::uint32_t t : {3u, 4u, 5u, 6u}) EXPECT_EQ(level.count(t) ? level.at(t) : 0, 8) << t;
+  // Each node's own SSE: the leaves nearer the camera of many time steps, few of them whole.
+  const auto node = resident_leaves(c, SseScope::node, 45, &roots);
+  EXPECT_EQ(roots, 9);
+  EXPECT_GE(partial(node), 3);
+}
+
 TEST(StreamScheduler, SpeculativeRequestsGoOutOnlyWhileTheLinkBacklogIsShort) {
   test::TempDir dir("stream-scheduler-speculative");
   const auto path = test::make_container(dir.path(), dims, 9);

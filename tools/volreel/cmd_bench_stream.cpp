@@ -73,8 +73,9 @@ struct BenchStreamOptions {
   std::string clock = "simulated";
   double fps = 10;  ///< simulated clock: frames per tour second
   double sse_target = 1.0;
-  double sse_weight = 10.0, temporal_lerp_min = 0.15, temporal_exponent = 4.0;
+  double sse_weight = 10.0, temporal_lerp_min = 1.0, temporal_exponent = 4.0;
   bool due_window = true;
+  std::string sse_priority = "level";
   double lookahead = 1.0;
   double speculative_link = 0.15;
   double ancestor_handicap = 4.0;
@@ -842,6 +843,7 @@ void run_bench_stream(const BenchStreamOptions& o) {
   ss.priority.temporal_lerp_min = o.temporal_lerp_min;
   ss.priority.temporal_exponent = o.temporal_exponent;
   ss.priority.due_window = o.due_window;
+  ss.priority.sse_scope = o.sse_priority == "node" ? stream::SseScope::node : stream::SseScope::level;
   ss.priority.lookahead_s = o.lookahead;
   ss.speculative_link_s = o.speculative_link;
   ss.selection.ancestor_handicap = o.ancestor_handicap;
@@ -899,8 +901,10 @@ void run_bench_stream(const BenchStreamOptions& o) {
                 play_speed, rate_text(playback_rate).c_str(),
                 bandwidth > 0 ? (std::to_string(static_cast<int>(std::lround(100 * bandwidth / playback_rate))) + " %").c_str()
                               : "all");
-  std::printf("patent:  priority = %g*SSE/(1+SSE) + lerp(random, temporal, lerp(%g, 1, temporal)), temporal exponent %g\n",
-              o.sse_weight, o.temporal_lerp_min, ss.priority.temporal_exponent);
+  std::printf("patent:  priority = %g*SSE/(1+SSE) + lerp(random, temporal, lerp(%g, 1, temporal)), temporal exponent %g;\n"
+              "         SSE of %s\n",
+              o.sse_weight, o.temporal_lerp_min, ss.priority.temporal_exponent,
+              o.sse_priority == "node" ? "the node ([0042])" : "the node's level (the largest of its visible nodes)");
   if (o.due_window)
     std::printf("         due window first: the keyframes around the playhead and those it reaches within %g s; the\n"
                 "         rest ([0045] order) holds at most %g s of the link in flight\n",
@@ -938,6 +942,7 @@ void run_bench_stream(const BenchStreamOptions& o) {
                             {"temporal_lerp_min", o.temporal_lerp_min},
                             {"temporal_exponent", o.temporal_exponent},
                             {"due_window", o.due_window},
+                            {"sse_priority", o.sse_priority},
                             {"lookahead_s", o.lookahead},
                             {"speculative_link_s", o.speculative_link},
                             {"ancestor_handicap", o.ancestor_handicap},
@@ -1021,10 +1026,16 @@ void add_bench_stream_command(CLI::App& bench) {
   cmd->add_option("--sse-target", o->sse_target, "Screen-space error target, pixels per voxel")->capture_default_str();
   cmd->add_option("--sse-weight", o->sse_weight, "Patent policy: weight of the SSE priority ([0045]: 10)")->capture_default_str();
   cmd->add_option("--temporal-lerp-min", o->temporal_lerp_min,
-                  "Patent policy: weight of the temporal priority against the random one at temporal 0 ([0045]: 0.15)")
+                  "Patent policy: weight of the temporal priority against the random one at temporal 0 ([0045]: 0.15;\n"
+                  "1: the temporal priority alone, measured best)")
       ->capture_default_str();
   cmd->add_option("--temporal-exponent", o->temporal_exponent,
                   "Both policies: exponent of temporalPriority = (1 - distance/maxDistance)^e ([0043]: 4)")
+      ->capture_default_str();
+  cmd->add_option("--sse-priority", o->sse_priority,
+                  "Patent policy: the SSE behind ssePriority: level (the largest SSE of the node's level in view,\n"
+                  "so that a full atlas keeps whole keyframes) or node (the node's own, [0042] literally)")
+      ->check(CLI::IsMember({"level", "node"}))
       ->capture_default_str();
   cmd->add_option("--due-window", o->due_window,
                   "Patent policy: request first the keyframes the playhead needs now (the two around it) and those\n"

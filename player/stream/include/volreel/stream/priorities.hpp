@@ -24,6 +24,17 @@
 // keyframes — ahead of the fine bricks the current frame draws, and a full heap can even leave
 // out fine bricks of the keyframes at the playhead.
 // The nearest-keyframe-first baseline has no due window (it is the temporal order already).
+//
+// SSE of a level (volreel's reading of [0042], SseScope::level, the default): ssePriority is
+// computed from the largest SSE among the visited nodes of the keyframe node's level, not from
+// the node's own SSE. With the node's own SSE the spread within one level (a nearer node projects
+// its voxels larger: 0.5 to 2 pixels for the finest level of a typical view, 3.3 to 6.7 after the
+// factor 10) outweighs the temporal and random terms (at most 1), so once the heap is full it
+// holds the near-camera fine bricks of every keyframe of the timeline and no keyframe whole: a
+// seek anywhere finds its time step only partly detailed, which looks worse than a whole
+// keyframe or a coarse level. With one SSE per level the levels keep their order (coarser levels
+// project larger voxels: the coarse levels of the whole timeline still come first), and within a
+// level whole keyframes are kept, by the temporal and random terms.
 #pragma once
 
 #include <array>
@@ -43,17 +54,30 @@ enum class PriorityPolicy {
   nearest_keyframe_first,  ///< baseline: temporal priority only (nearest the playhead first)
 };
 
+/// Which SSE the patent policy's ssePriority is computed from (see above).
+enum class SseScope {
+  node,   ///< the keyframe node's spatial node ([0042] literally)
+  level,  ///< the largest SSE among this frame's visited nodes of the same level
+};
+
 struct PrioritySettings {
   PriorityPolicy policy = PriorityPolicy::patent;
   double sse_target = 1.0;          ///< pixels per voxel at which a node is detailed enough [0030]
   double sse_weight = 10.0;         ///< factor of ssePriority in the combined priority
   double temporal_exponent = 4.0;   ///< exponent of temporalPriority
-  double temporal_lerp_min = 0.15;  ///< lerp(min, 1, temporal): weight of temporal vs random
+  /// lerp(min, 1, temporal): weight of temporal vs random. [0045] uses 0.15; volreel's default 1
+  /// (the temporal priority alone, nearest in time first within a level) measured better in
+  /// `volreel bench stream` at every link speed: with the image metric, the partial or
+  /// interpolated time steps the ruler keeps far from the playhead look little better than the
+  /// coarse levels, and cost whole keyframes next to it (see README "bench stream").
+  double temporal_lerp_min = 1.0;
   /// Patent policy: the due window (see above). false: every keyframe node by [0045] alone.
   bool due_window = true;
   /// Due window: seconds of playback ahead of the playhead (at its current velocity) whose
   /// keyframes are due; the two keyframes around the playhead are always due.
   double lookahead_s = 1.0;
+  /// Patent policy: the SSE behind ssePriority (see above).
+  SseScope sse_scope = SseScope::level;
 };
 
 /// [0044]: the ruler-like table for `keyframes` time steps. 9 keyframes give exactly

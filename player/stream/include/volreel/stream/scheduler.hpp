@@ -147,6 +147,7 @@ class StreamScheduler {
   BrickLoader loader_;
   MinMaxHeap<HeapEntry, HeapLess> heap_;
   std::vector<double> random_table_, temporal_, due_;
+  std::vector<double> level_sse_;  ///< SseScope::level: per level, this frame
   PlayheadMotion motion_;
   /// Requests in flight: bytes and whether speculative (outside the due window when requested).
   struct InFlight {
