@@ -96,7 +96,36 @@ for r in rows:  # 30 kB/s after 40 ms of latency: never more bytes than the link
 assert int(rows[-1]["bytes_loaded"]) > 0.5 * 30000 * (2 - 0.04), "the link sat idle"
 PY
 
-# 4. Errors.
+# 4. Several tours (--seeds): one folder per seed, each with both policies, and the targets on the
+#    mean over the tours, which is the mean of the tours' own means.
+"$volreel" bench stream "$work/a.vreel" --series "$work/s-moved" --bandwidth 40kB/s --duration 1 --size 32x32 \
+  --seeds 2 --seed 3 --out "$work/m" > "$work/m.txt" 2>/dev/null || fail "bench stream --seeds"
+grep -q "higher than nearest-keyframe-first (mean over the tours): " "$work/m.txt" || fail "no mean target line: $(cat "$work/m.txt")"
+grep -q "tour seed 4:" "$work/m.txt" || fail "no table for the second tour"
+/usr/bin/python3 - "$work/m" <<'PY' || fail "bad --seeds output"
+import csv, json, os, sys
+out = sys.argv[1]
+d = json.load(open(os.path.join(out, "summary.json")))
+assert [t["seed"] for t in d["tours"]] == [3, 4]
+means = {}
+for t in d["tours"]:
+    tour = json.load(open(os.path.join(out, f"seed_{t['seed']}", "tour.json")))
+    assert tour["playhead"], "empty tour"
+    for r in t["runs"]:
+        rows = list(csv.DictReader(open(os.path.join(out, f"seed_{t['seed']}", f"stream_{r['policy']}.csv"))))
+        assert len(rows) == r["frames"] >= 3
+        assert abs(sum(float(x["psnr_db"]) for x in rows) / len(rows) - r["mean_psnr_db"]) < 1e-3
+        means.setdefault(r["policy"], []).append(r["mean_psnr_db"])
+# The two tours seek to different time steps.
+t3 = json.load(open(os.path.join(out, "seed_3", "tour.json")))
+t4 = json.load(open(os.path.join(out, "seed_4", "tour.json")))
+assert t3["playhead"] != t4["playhead"], "same playhead keys"
+assert d["target_higher_psnr"] == (sum(means["patent"]) > sum(means["nearest"]))
+PY
+expect_error "drop --tour or --seeds" "$volreel" bench stream "$work/a.vreel" --seeds 2 --tour "$work/m/seed_3/tour.json"
+expect_error "1..100 tours" "$volreel" bench stream "$work/a.vreel" --seeds 0
+
+# 5. Errors.
 expect_error "expected a rate such as 20MB/s" "$volreel" bench stream "$work/a.vreel" --bandwidth fast
 expect_error "expected a duration such as 50ms" "$volreel" bench stream "$work/a.vreel" --latency soon
 expect_error "expected WIDTHxHEIGHT" "$volreel" bench stream "$work/a.vreel" --size 100
@@ -108,5 +137,5 @@ expect_error "seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --lo
 expect_error "seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --speculative-link 100
 expect_error "an exponent in \[0, 64\]" "$volreel" bench stream "$work/a.vreel" --ancestor-handicap -2
 "$volreel" bench stream --help > "$work/help.txt" && grep -q -e "--bandwidth" "$work/help.txt" || fail "--help lacks --bandwidth"
-for o in --due-window --lookahead --speculative-link --ancestor-handicap; do grep -q -e "$o" "$work/help.txt" || fail "--help lacks $o"; done
+for o in --due-window --lookahead --speculative-link --ancestor-handicap --sse-priority --seeds; do grep -q -e "$o" "$work/help.txt" || fail "--help lacks $o"; done
 echo "stream bench CLI: OK"

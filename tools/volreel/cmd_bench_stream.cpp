@@ -82,6 +82,7 @@ struct BenchStreamOptions {
   double step = 1.0;
   double upload_budget_mb = 64;
   std::uint64_t seed = 1;
+  unsigned seeds = 1;  ///< built-in tours with seeds seed, seed + 1, ...
   std::size_t png_every = 0;
   ReaderOptions reader;
 };
@@ -796,6 +797,9 @@ void run_bench_stream(const BenchStreamOptions& o) {
   if (o.atlas_slots < 1 || o.atlas_slots > (1u << 16)) bad("--atlas-slots", "1..65536 slots", std::to_string(o.atlas_slots));
   if (!(o.upload_budget_mb > 0)) bad("--upload-budget", "MB per frame > 0", std::to_string(o.upload_budget_mb));
   if (o.io_threads < 1 || o.io_threads > 64) bad("--io-threads", "1..64", std::to_string(o.io_threads));
+  if (o.seeds < 1 || o.seeds > 100) bad("--seeds", "1..100 tours", std::to_string(o.seeds));
+  if (o.seeds > 1 && !o.tour.empty())
+    throw InputError("--seeds " + std::to_string(o.seeds) + ": several seeds vary the built-in tour; drop --tour or --seeds");
   std::vector<stream::PriorityPolicy> policies;
   if (o.policy == "both") policies = {stream::PriorityPolicy::patent, stream::PriorityPolicy::nearest_keyframe_first};
   else if (o.policy == "patent") policies = {stream::PriorityPolicy::patent};
@@ -890,6 +894,9 @@ void run_bench_stream(const BenchStreamOptions& o) {
               o.tour.empty() ? "built-in bench tour (play, reverse, 5 random seeks, pauses, slow motion, orbit, zoom)"
                              : o.tour.c_str(),
               tour.duration(), seeks.size(), clock_text);
+  if (o.seeds > 1)
+    std::printf("         %u tours, seeds %llu to %llu (their seeks differ), each run with both policies\n", o.seeds,
+                static_cast<unsigned long long>(o.seed), static_cast<unsigned long long>(o.seed + o.seeds - 1));
   std::printf("render:  CPU ray caster, %dx%d, step %g voxel, transfer function: %s\n", width, height, o.step,
               transfer_spec == "auto" ? "auto (quantiles of the middle frame)" : transfer_spec.c_str());
   std::printf("stream:  bandwidth %s, latency %g ms, %zu requests in flight at most, %u atlas slots%s, SSE target %g px\n",
@@ -912,24 +919,44 @@ void run_bench_stream(const BenchStreamOptions& o) {
   else
     std::printf("         no due window (--due-window off): every keyframe node by [0045] alone\n");
   std::fflush(stdout);
-  {
-    std::ofstream t(out / "tour.json");
-    t << tour.to_json().dump(1) << '\n';
+  // 2. The runs (timed), then the ground truth of each; with --seeds, once per tour, each tour's
+  //    files in OUT/seed_S.
+  struct TourRuns {
+    std::uint64_t seed = 0;
+    std::vector<RunResult> runs;
+  };
+  std::vector<TourRuns> tours;
+  for (unsigned i = 0; i < o.seeds; ++i) {
+    TourRuns& tr = tours.emplace_back();
+    tr.seed = o.seed + i;
+    const cpu_render::Tour tour_i = i == 0 ? tour : bench_tour(context, o.duration, tr.seed, width, height);
+    const fs::path dir = o.seeds > 1 ? out / ("seed_" + std::to_string(tr.seed)) : out;
+    fs::create_directories(dir);
+    {
+      std::ofstream t(dir / "tour.json");
+      t << tour_i.to_json().dump(1) << '\n';
+      if (!t) throw InputError("writing " + (dir / "tour.json").string() + " failed");
+    }
+    setup.tour = &tour_i;
+    const auto tour_seeks_i = tour_seeks(tour_i);
+    for (const stream::PriorityPolicy p : policies) {
+      tr.runs.push_back(run_tour(setup, p));
+      measure(tr.runs.back(), setup, truth, tour_seeks_i, dir, o.png_every);
+      write_csv(dir / ("stream_" + tr.runs.back().name + ".csv"), tr.runs.back(), tour_seeks_i);
+    }
+    setup.tour = nullptr;
+    if (o.seeds > 1) {
+      std::printf("\ntour seed %llu:\n", static_cast<unsigned long long>(tr.seed));
+      print_side_by_side(tr.runs);
+    }
   }
-
-  // 2. The runs (timed), then the ground truth of each.
-  std::vector<RunResult> runs;
-  for (const stream::PriorityPolicy p : policies) {
-    runs.push_back(run_tour(setup, p));
-    measure(runs.back(), setup, truth, seeks, out, o.png_every);
-    write_csv(out / ("stream_" + runs.back().name + ".csv"), runs.back(), seeks);
-  }
+  const std::vector<RunResult>& runs = tours.front().runs;
 
   // 3. Side by side, the targets, the files.
   std::printf("\nimage PSNR = 10*log10(255^2/MSE) over 8-bit RGB against the ground truth (frames identical to it count "
               "as %.0f dB); SSIM: per channel, averaged\n",
               psnr_cap_db);
-  print_side_by_side(runs);
+  if (o.seeds == 1) print_side_by_side(runs);
   nlohmann::json summary = {{"container", o.container},
                             {"bandwidth_bytes_per_s", bandwidth},
                             {"latency_s", latency},
@@ -947,27 +974,70 @@ void run_bench_stream(const BenchStreamOptions& o) {
                             {"speculative_link_s", o.speculative_link},
                             {"ancestor_handicap", o.ancestor_handicap},
                             {"size", {width, height}},
-                            {"ground_truth", truth.original() ? "original series" : "container finest level"},
-                            {"runs", nlohmann::json::array()}};
-  for (const RunResult& r : runs) summary["runs"].push_back(summary_json(r));
-  const auto find = [&](const char* name) -> const RunResult* {
-    for (const RunResult& r : runs)
-      if (r.name == name) return &r;
-    return nullptr;
+                            {"ground_truth", truth.original() ? "original series" : "container finest level"}};
+  if (o.seeds == 1) {
+    summary["runs"] = nlohmann::json::array();
+    for (const RunResult& r : runs) summary["runs"].push_back(summary_json(r));
+  } else {
+    summary["tours"] = nlohmann::json::array();
+    for (const TourRuns& tr : tours) {
+      nlohmann::json t = {{"seed", tr.seed}, {"runs", nlohmann::json::array()}};
+      for (const RunResult& r : tr.runs) t["runs"].push_back(summary_json(r));
+      summary["tours"].push_back(t);
+    }
+  }
+  // Per policy, over the tours: the mean of the tours' mean image PSNRs, and the frames with holes
+  // after the first root brick (and whether every tour's first root arrived).
+  struct PolicyTotals {
+    double mean_psnr = 0;
+    std::size_t holes = 0, frames = 0;
+    bool roots = true;
   };
-  const RunResult* patent = find("patent");
-  const RunResult* nearest = find("nearest");
+  const auto totals = [&](const char* name) -> std::optional<PolicyTotals> {
+    PolicyTotals t;
+    std::size_t n = 0;
+    for (const TourRuns& tr : tours)
+      for (const RunResult& r : tr.runs)
+        if (r.name == name) {
+          t.mean_psnr += r.mean_psnr;
+          t.holes += r.frames_with_holes_after_root;
+          t.frames += r.frames.size();
+          t.roots = t.roots && !std::isnan(r.first_root_s);
+          ++n;
+        }
+    if (n == 0) return std::nullopt;
+    t.mean_psnr /= static_cast<double>(n);
+    return t;
+  };
+  const auto patent = totals("patent");
+  const auto nearest = totals("nearest");
+  if (o.seeds > 1) {
+    std::printf("\n  %-10s %16s %24s %12s\n", "tour seed", "patent [0045]", "nearest-keyframe-first", "difference");
+    for (const TourRuns& tr : tours) {
+      std::printf("  %-10llu", static_cast<unsigned long long>(tr.seed));
+      double p = std::nan(""), n = std::nan("");
+      for (const RunResult& r : tr.runs) (r.name == "patent" ? p : n) = r.mean_psnr;
+      std::printf(" %13.2f dB %21.2f dB", p, n);
+      if (patent && nearest) std::printf(" %+9.2f dB", p - n);
+      std::printf("\n");
+    }
+    std::printf("  %-10s %13.2f dB %21.2f dB", "mean", patent ? patent->mean_psnr : std::nan(""),
+                nearest ? nearest->mean_psnr : std::nan(""));
+    if (patent && nearest) std::printf(" %+9.2f dB", patent->mean_psnr - nearest->mean_psnr);
+    std::printf("   (mean image PSNR of each tour)\n");
+  }
+  const char* over = o.seeds > 1 ? " (mean over the tours)" : "";
   std::printf("\ntargets (issue 6):\n");
   if (patent && nearest) {
     const bool higher = patent->mean_psnr > nearest->mean_psnr;
-    std::printf("  patent's mean image PSNR higher than nearest-keyframe-first: %s (%.2f vs %.2f dB, %+.2f dB)\n",
+    std::printf("  patent's mean image PSNR higher than nearest-keyframe-first%s: %s (%.2f vs %.2f dB, %+.2f dB)\n", over,
                 higher ? "yes" : "NO", patent->mean_psnr, nearest->mean_psnr, patent->mean_psnr - nearest->mean_psnr);
     summary["target_higher_psnr"] = higher;
   }
   if (patent) {
-    const bool no_holes = patent->frames_with_holes_after_root == 0 && !std::isnan(patent->first_root_s);
+    const bool no_holes = patent->holes == 0 && patent->roots;
     std::printf("  patent: no frame with a hole after the first root brick arrived: %s (%zu of %zu frames have holes)\n",
-                no_holes ? "yes" : "NO", patent->frames_with_holes_after_root, patent->frames.size());
+                no_holes ? "yes" : "NO", patent->holes, patent->frames);
     summary["target_no_holes"] = no_holes;
   }
   if (!truth.original())
@@ -977,9 +1047,9 @@ void run_bench_stream(const BenchStreamOptions& o) {
     js << summary.dump(1) << '\n';
     if (!js) throw InputError("writing " + (out / "summary.json").string() + " failed");
   }
-  std::printf("\nwrote %s: stream_<policy>.csv (per frame), summary.json, tour.json, frames_<policy>/frame_NNNNN.png "
+  std::printf("\nwrote %s: %sstream_<policy>.csv (per frame), summary.json, %stour.json, %sframes_<policy>/frame_NNNNN.png "
               "(streamed | ground truth)\n",
-              out.c_str());
+              out.c_str(), o.seeds > 1 ? "seed_S/" : "", o.seeds > 1 ? "seed_S/" : "", o.seeds > 1 ? "seed_S/" : "");
 }
 
 }  // namespace
@@ -1004,6 +1074,10 @@ void add_bench_stream_command(CLI::App& bench) {
                   "Tour JSON (player/cpu_render tour.hpp); default: the built-in bench tour of --duration seconds");
   cmd->add_option("--duration", o->duration, "Length of the built-in bench tour, seconds")->capture_default_str();
   cmd->add_option("--seed", o->seed, "Seed of the built-in tour's random seeks")->capture_default_str();
+  cmd->add_option("--seeds", o->seeds,
+                  "Replay this many built-in tours (seeds --seed, --seed + 1, ...): with five seeks a tour, which time\n"
+                  "steps a policy happened to hold decides much of a fast link's result; the targets use the mean")
+      ->capture_default_str();
   cmd->add_option("--clock", o->clock,
                   "simulated: frame k at tour time k/fps, the link on the same clock (deterministic); wall: the tour\n"
                   "and the link in real time")
