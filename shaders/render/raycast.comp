@@ -107,16 +107,12 @@ ivec3 slot_origin(uint slot) {
          int(VR_ATLAS_SLOT_SIZE);
 }
 
-// Atlas position (texel units, centres at +0.5) of node-local u in `slot` for LOD difference d.
-vec3 atlas_position(uint slot, uint d, uvec3 c, vec3 u) {
-  return vec3(slot_origin(slot)) + slot_texel(d, c, u);
-}
-
-// The value range (normalized texel units) of the 6³ block of `slot` that a trilinear sample at
-// atlas position `at` reads (block_ranges.comp). The lower neighbour is rounded as keyframe()
-// rounds it; the ranges' margin covers filter hardware's own rounding.
-vec2 block_range(uint slot, vec3 at) {
-  ivec3 i = ivec3(floor(at - 0.5)) - slot_origin(slot);
+// The value range (normalized texel units) of the 6³ block of `slot` (its origin `origin`) that a
+// trilinear sample at atlas position `at` (texel units, centres at +0.5) reads
+// (block_ranges.comp). The lower neighbour is rounded as keyframe() rounds it; the ranges' margin
+// covers filter hardware's own rounding.
+vec2 block_range(uint slot, ivec3 origin, vec3 at) {
+  ivec3 i = ivec3(floor(at - 0.5)) - origin;
   uvec3 b = min(uvec3(clamp(i, ivec3(0), ivec3(int(VR_ATLAS_SLOT_SIZE) - 1))) / 6u,
                 uvec3(VR_BLOCKS_PER_AXIS - 1u));
   uint block = b.x + VR_BLOCKS_PER_AXIS * (b.y + VR_BLOCKS_PER_AXIS * b.z);
@@ -135,7 +131,7 @@ bool range_visible(vec2 r) {
   return visible_prefix[e1 + 1] != visible_prefix[e0];
 }
 
-// One keyframe: trilinear sample at atlas position `at` (atlas_position; patent [0050]).
+// One keyframe: trilinear sample at atlas position `at` (patent [0050]).
 float keyframe(vec3 at) {
   float n;
   if ((params.size_levels.w & VR_FLAG_FETCH_FILTER) != 0u) {
@@ -316,19 +312,28 @@ void main() {
       uint record = leaf * VR_SVO_LEAF_WORDS;
       float f = uintBitsToFloat(leaf_words[record + 3u]);
       uint lods = leaf_words[record + 2u];
+      // Each keyframe's slot origin and atlas position, once for the block skip and the sample.
       uint slot_a = leaf_words[record], slot_b = leaf_words[record + 1u];
-      vec3 at_a = f == 1.0 ? vec3(0.0) : atlas_position(slot_a, vr_svo_lod_a(lods), leaf_c, u);
-      vec3 at_b = f == 0.0 ? vec3(0.0) : atlas_position(slot_b, vr_svo_lod_b(lods), leaf_c, u);
+      ivec3 origin_a = ivec3(0), origin_b = ivec3(0);
+      vec3 at_a = vec3(0.0), at_b = vec3(0.0);
+      if (f != 1.0) {
+        origin_a = slot_origin(slot_a);
+        at_a = vec3(origin_a) + slot_texel(vr_svo_lod_a(lods), leaf_c, u);
+      }
+      if (f != 0.0) {
+        origin_b = slot_origin(slot_b);
+        at_b = vec3(origin_b) + slot_texel(vr_svo_lod_b(lods), leaf_c, u);
+      }
       if (block_skip) {
         // 4a. Both keyframes' blocks hold only values the transfer function hides: so does
         //     their blend. Skip the fetches, keep the sample positions.
         vec2 r = vec2(1e30, -1e30);
         if (f != 1.0) {
-          vec2 ra = block_range(slot_a, at_a);
+          vec2 ra = block_range(slot_a, origin_a, at_a);
           r = vec2(min(r.x, ra.x), max(r.y, ra.y));
         }
         if (f != 0.0) {
-          vec2 rb = block_range(slot_b, at_b);
+          vec2 rb = block_range(slot_b, origin_b, at_b);
           r = vec2(min(r.x, rb.x), max(r.y, rb.y));
         }
         if (!range_visible(r)) continue;

@@ -1121,7 +1121,7 @@ void add_bench_stream_command(CLI::App& bench) {
       ->capture_default_str();
   cmd->add_option("--speculative-link", o->speculative_link,
                   "Patent policy, due window: requests outside it (the [0045] order: coarse levels of the whole\n"
-                  "timeline, the ruler's keyframes) hold at most this many seconds of the link in flight, so the\n"
+                  "timeline, then farther keyframes) hold at most this many seconds of the link in flight, so the\n"
                   "keyframes the playhead needs next never wait behind more (0: no bound)")
       ->capture_default_str();
   cmd->add_option("--ancestor-handicap", o->ancestor_handicap,

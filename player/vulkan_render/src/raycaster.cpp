@@ -255,7 +255,8 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
 
   // 3. Parameters (raycast.comp's Params).
   const double step_ratio = o.step / o.reference_step;
-  if (step_ratio != tf_step_ratio_ || !(*input.transfer == tf_source_) || visible_prefix_.empty()) {
+  // tf_step_ratio_ starts at 0, never a valid ratio: the first frame always computes these.
+  if (step_ratio != tf_step_ratio_ || !(*input.transfer == tf_source_)) {
     tf_source_ = *input.transfer;
     tf_step_ratio_ = step_ratio;
     tf_corrected_ = input.transfer->opacity_corrected(step_ratio);
