@@ -63,11 +63,15 @@ struct OmpWorkspace {
   std::vector<int> support;
   std::vector<const float*> columns;  // G's columns of the support
   std::vector<float> chunk_max;       // largest |α| per chunk of α
+  // ORMP only:
+  Eigen::VectorXf projected;          // K: ‖P⊥d_k‖², the atoms' squared norms orthogonal to the support
+  std::vector<float> rows;            // S × K: row j = (L⁻¹ G_{I,:})_j, the support's Gram–Schmidt rows
 
-  OmpWorkspace(Eigen::Index atoms, int slots)
+  OmpWorkspace(Eigen::Index atoms, int slots, bool ormp)
       : alpha(atoms), lower(slots, slots), w(slots), z(slots), gamma(slots), alpha0_support(slots),
         support(static_cast<std::size_t>(slots)), columns(static_cast<std::size_t>(slots)),
-        chunk_max(static_cast<std::size_t>(atoms / chunk + 1)) {}
+        chunk_max(static_cast<std::size_t>(atoms / chunk + 1)), projected(ormp ? atoms : 0),
+        rows(ormp ? static_cast<std::size_t>(atoms) * static_cast<std::size_t>(slots) : 0) {}
 };
 
 /// The hot loop of batch-OMP (Σ_s s·K multiply-adds per block), fused with the search for the next
@@ -197,6 +201,92 @@ int code_one_block(const float* alpha0, double energy, const Eigen::MatrixXf& gr
   return s;
 }
 
+/// The smallest Cholesky pivot (‖P⊥d_k‖²) an atom may have to join the support.
+constexpr float min_pivot = 1e-5f;
+
+/// argmax_k α_k² / max(‖P⊥d_k‖², f·‖d_k‖²), the ORMP score (f = ormp_projected_floor; floored
+/// holds f·G_kk), the first on ties, searched like update_correlations: the scores of each chunk
+/// are computed vectorized and their maximum kept, then only the best chunk is scanned.
+Eigen::Index ormp_best(const float* alpha, const float* projected, const float* floored, Eigen::Index K,
+                       float* chunk_max) {
+  using Array = Eigen::Array<float, Eigen::Dynamic, 1>;
+  using Scores = Eigen::Array<float, Eigen::Dynamic, 1, Eigen::ColMajor, chunk, 1>;  // no heap
+  const auto scores = [&](Eigen::Index at, Eigen::Index n) -> Scores {
+    const auto a = Eigen::Map<const Array>(alpha + at, n);
+    return a * a / Eigen::Map<const Array>(projected + at, n).max(Eigen::Map<const Array>(floored + at, n));
+  };
+  const Eigen::Index chunks = (K + chunk - 1) / chunk;
+  Eigen::Index best_chunk = 0;
+  for (Eigen::Index c = 0; c < chunks; ++c) {
+    chunk_max[c] = scores(c * chunk, std::min(chunk, K - c * chunk)).maxCoeff();
+    if (chunk_max[c] > chunk_max[best_chunk]) best_chunk = c;
+  }
+  const Eigen::Index at = best_chunk * chunk, n = std::min(chunk, K - at);
+  const Scores best = scores(at, n);
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (best[i] == chunk_max[best_chunk]) return at + i;
+  return at;
+}
+
+/// ORMP for one block (see AtomSelection), from α⁰ = Dᵀy and ‖y‖², with the same stopping rules and
+/// outputs as code_one_block. Gram–Schmidt in the coefficient domain: adding atom k with pivot
+/// p = ‖P⊥d_k‖² gives the row q = (G_{k,:} − Σ_j L_kj q_j)/√p (L_kj = q_j[k], the new row of the
+/// Cholesky factor of G_II), the residual's new correlations α ← α − z·q with z = α_k/√p (the
+/// residual's coordinate on the new orthonormal direction, so ‖r‖² falls by z²), and the projected
+/// norms ‖P⊥d‖² ← ‖P⊥d‖² − q². The coefficients solve Lᵀγ = z at the end.
+int code_one_block_ormp(const float* alpha0, double energy, const Eigen::MatrixXf& gram, const float* gram_diagonal,
+                        const float* floored, const StopRule& rule, OmpWorkspace& ws, std::int32_t* atoms_out, float* coefficients_out,
+                        float* residual_out) {
+  const Eigen::Index K = gram.rows();
+  const auto Ku = static_cast<std::size_t>(K);
+  float* alpha = ws.alpha.data();
+  float* projected = ws.projected.data();
+  auto& L = ws.lower;
+  std::copy(alpha0, alpha0 + K, alpha);
+  std::copy(gram_diagonal, gram_diagonal + K, projected);
+  double residual = energy;
+  int s = 0;
+  while (residual > rule.target && s < rule.max_atoms) {
+    // 1. The atom that lowers ‖r‖² most (the first on ties; chosen atoms have α = 0).
+    const Eigen::Index k = ormp_best(alpha, projected, floored, K, ws.chunk_max.data());
+    const float pivot = projected[k];
+    if (!(std::abs(alpha[k]) > 0) || !(pivot > min_pivot)) break;
+    const float root = std::sqrt(pivot);
+    const float z = alpha[k] / root;
+    // 2. Rate-distortion stop: atom k would lower ‖r‖² by z².
+    if (rule.min_gain > 0 && residual <= rule.bound && static_cast<double>(z) * static_cast<double>(z) < rule.min_gain) break;
+    // 3. The Cholesky row and the Gram–Schmidt row of atom k; α and ‖P⊥d‖² updated.
+    float* q = ws.rows.data() + static_cast<std::size_t>(s) * Ku;
+    const float* g_k = gram.col(k).data();
+    for (int c = 0; c < s; ++c) L(s, c) = ws.rows[static_cast<std::size_t>(c) * Ku + static_cast<std::size_t>(k)];
+    L(s, s) = root;
+    Eigen::Map<Eigen::VectorXf> row(q, K);
+    row = Eigen::Map<const Eigen::VectorXf>(g_k, K);
+    for (int c = 0; c < s; ++c)
+      row.noalias() -= L(s, c) * Eigen::Map<const Eigen::VectorXf>(ws.rows.data() + static_cast<std::size_t>(c) * Ku, K);
+    row *= 1.0f / root;
+    Eigen::Map<Eigen::VectorXf>(alpha, K).noalias() -= z * row;
+    Eigen::Map<Eigen::VectorXf>(projected, K).array() -= row.array().square();
+    ws.support[static_cast<std::size_t>(s)] = static_cast<int>(k);
+    ws.z[s] = z;
+    ++s;
+    for (int j = 0; j < s; ++j) alpha[ws.support[static_cast<std::size_t>(j)]] = 0, projected[ws.support[static_cast<std::size_t>(j)]] = 0;
+    residual = std::max(residual - static_cast<double>(z) * static_cast<double>(z), 0.0);
+  }
+  // 4. γ from Lᵀγ = z (back substitution).
+  for (int r = s - 1; r >= 0; --r) {
+    float v = ws.z[r];
+    for (int c = r + 1; c < s; ++c) v -= L(c, r) * ws.gamma[c];
+    ws.gamma[r] = v / L(r, r);
+  }
+  for (int j = 0; j < s; ++j) {
+    atoms_out[j] = ws.support[static_cast<std::size_t>(j)];
+    coefficients_out[j] = ws.gamma[j];
+  }
+  *residual_out = static_cast<float>(residual);
+  return s;
+}
+
 }  // namespace
 
 BatchOmp::BatchOmp(const Eigen::MatrixXf& atoms, SparseCodingOptions options)
@@ -204,6 +294,8 @@ BatchOmp::BatchOmp(const Eigen::MatrixXf& atoms, SparseCodingOptions options)
   check_options(options, atoms.rows());
   if (atoms.cols() < 1) throw std::invalid_argument("a dictionary needs at least one atom");
   gram_.noalias() = atoms_.transpose() * atoms_;
+  gram_diagonal_ = gram_.diagonal();
+  floored_diagonal_ = gram_diagonal_ * static_cast<float>(ormp_projected_floor);
   target_energy_ = static_cast<double>(atoms.rows()) * options.tolerance * options.tolerance;
   bound_energy_ = bound_energy(options, atoms.rows());
 }
@@ -226,7 +318,8 @@ void BatchOmp::encode(const Eigen::Ref<const Eigen::MatrixXf>& blocks, SparseCod
 #pragma omp parallel
   {
     Eigen::MatrixXf correlations(atoms_.cols(), batch);
-    OmpWorkspace ws(atoms_.cols(), S);
+    const bool ormp = options_.selection == AtomSelection::error;
+    OmpWorkspace ws(atoms_.cols(), S, ormp);
 #pragma omp for schedule(dynamic, 1)
     for (std::int64_t b = 0; b < batches; ++b) {
       const Eigen::Index first = b * batch;
@@ -241,10 +334,13 @@ void BatchOmp::encode(const Eigen::Ref<const Eigen::MatrixXf>& blocks, SparseCod
         if (!gain_weights.empty() && rule.min_gain > 0)  // gain·w < min_gain ⇔ gain < min_gain / w
           block_rule.min_gain = gain_weights[i] > 0 ? rule.min_gain / static_cast<double>(gain_weights[i])
                                                     : std::numeric_limits<double>::infinity();
-        codes.count[i] = static_cast<std::uint8_t>(code_one_block(correlations.col(j).data(), energy, gram_, block_rule,
-                                                                  ws, codes.atom.data() + slot,
-                                                                  codes.coefficient.data() + slot,
-                                                                  codes.residual_energy.data() + i));
+        codes.count[i] = static_cast<std::uint8_t>(
+            ormp ? code_one_block_ormp(correlations.col(j).data(), energy, gram_, gram_diagonal_.data(),
+                                       floored_diagonal_.data(), block_rule, ws,
+                                       codes.atom.data() + slot, codes.coefficient.data() + slot,
+                                       codes.residual_energy.data() + i)
+                 : code_one_block(correlations.col(j).data(), energy, gram_, block_rule, ws, codes.atom.data() + slot,
+                                  codes.coefficient.data() + slot, codes.residual_energy.data() + i));
       }
     }
   }
@@ -261,8 +357,20 @@ ReferenceCode reference_omp(const Eigen::MatrixXf& atoms, const Eigen::VectorXf&
   Eigen::VectorXd r = y;
   Eigen::VectorXd gamma;
   while (r.squaredNorm() > target && static_cast<int>(code.atoms.size()) < options.max_atoms) {
-    // 1. Correlate the explicit residual with every atom not yet chosen.
+    // 1. Correlate the explicit residual with every atom not yet chosen (ORMP: the gain of each,
+    //    the squared correlation over the atom's squared norm orthogonal to the support).
     Eigen::VectorXd c = (D.transpose() * r).cwiseAbs();
+    if (options.selection == AtomSelection::error) {
+      Eigen::MatrixXd projected = D;
+      if (!code.atoms.empty()) {
+        Eigen::MatrixXd DI(D.rows(), static_cast<Eigen::Index>(code.atoms.size()));
+        for (std::size_t j = 0; j < code.atoms.size(); ++j) DI.col(static_cast<Eigen::Index>(j)) = D.col(code.atoms[j]);
+        projected -= DI * DI.householderQr().solve(D);  // the part of each atom in the support's span
+      }
+      const Eigen::VectorXd norms = D.colwise().squaredNorm().transpose();
+      c = c.cwiseProduct(c).cwiseQuotient(
+          projected.colwise().squaredNorm().transpose().cwiseMax(ormp_projected_floor * norms).cwiseMax(1e-12));
+    }
     for (int k : code.atoms) c[k] = -1;
     Eigen::Index k = 0;
     const double best = c.maxCoeff(&k);

@@ -253,7 +253,10 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
     if (settings_.fixed_sparsity == 0 && settings_.rule == VariableRateRule::lagrangian &&
         !(settings_.lagrangian_factor > 0 && std::isfinite(settings_.lagrangian_factor)))
       throw InputError("the Lagrangian factor must be positive and finite");
+    if (!(settings_.level_tolerance_factor >= 1 && settings_.level_tolerance_factor <= 16))
+      throw InputError("the level tolerance factor must be in [1, 16]");
     dictionary::SparseCodingOptions o;
+    o.selection = settings_.selection;
     if (settings_.fixed_sparsity > 0) {
       o.tolerance = 0;
       o.max_atoms = settings_.fixed_sparsity;
@@ -580,7 +583,15 @@ std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
   Eigen::MatrixXf columns;
   std::vector<float> means, weights;
   dictionary::SparseCodes codes;
-  const bool weighted = ksvd && settings_.weight_owned_voxels && atom_gain_threshold() > 0;
+  // Lagrangian rule: each block's atom gains are weighed by the share of its voxels the decoder
+  // reads and by its level's 1/F^(2d) (coded to ε·F^d, d levels above the finest).
+  const bool weighted = ksvd && atom_gain_threshold() > 0 &&
+                        (settings_.weight_owned_voxels || settings_.level_tolerance_factor != 1);
+  const auto level_scale = [&](std::uint32_t level) {  // F^d
+    return atom_gain_threshold() > 0
+               ? std::pow(settings_.level_tolerance_factor, static_cast<double>(levels - 1 - level))
+               : 1.0;
+  };
   for (std::size_t begin = 0; begin < cells.size(); begin += chunk_bricks) {
     const std::size_t n = std::min(chunk_bricks, cells.size() - begin);
     auto part = Clock::now();
@@ -624,8 +635,14 @@ std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
                       means.data() + kk * VR_BLOCKS_PER_BRICK);
       if (weighted) {
         const Cell& c = cells[begin + coded[kk]];
-        owned_block_weights(c.x, c.y, c.z, pyramid.geometry[c.level].dims,
-                            weights.data() + kk * VR_BLOCKS_PER_BRICK);
+        float* w = weights.data() + kk * VR_BLOCKS_PER_BRICK;
+        if (settings_.weight_owned_voxels)
+          owned_block_weights(c.x, c.y, c.z, pyramid.geometry[c.level].dims, w);
+        else
+          std::fill(w, w + VR_BLOCKS_PER_BRICK, 1.0f);
+        const double scale = level_scale(c.level);
+        for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+          w[b] = static_cast<float>(static_cast<double>(w[b]) / (scale * scale));
       }
     }
     st.seconds_bricks += seconds_since(part);
@@ -640,10 +657,12 @@ std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
     for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(coded.size()); ++k) {
       const auto kk = static_cast<std::size_t>(k);
       Cell& cell = cells[begin + coded[kk]];
+      QuantizeOptions brick_qo = qo;  // the means' step follows the level's ε
+      brick_qo.mean_step *= level_scale(cell.level);
       cell.payload =
           quantize_brick(columns.data() + kk * VR_BLOCKS_PER_BRICK * VR_BLOCK_LENGTH,
                          means.data() + kk * VR_BLOCKS_PER_BRICK, codes, kk * VR_BLOCKS_PER_BRICK,
-                         dictionary_->atoms, qo, &quantized_error, &cell.codes);
+                         dictionary_->atoms, brick_qo, &quantized_error, &cell.codes);
       code_count += cell.codes;
     }
     st.codes += code_count;
@@ -774,6 +793,8 @@ double manifest_estimate(std::size_t frames) {
 nlohmann::json rate_rule_of(const format::Manifest& m) {
   nlohmann::json r = nlohmann::json::object();
   if (m.codec != format::Codec::ksvd) return r;
+  // Containers written before the field existed all used OMP.
+  r["pursuit"] = m.encoder.is_object() && m.encoder.contains("pursuit") ? m.encoder["pursuit"] : nlohmann::json("omp");
   for (const char* key : {"mean_bits", "mean_step_factor"})
     if (m.encoder.is_object() && m.encoder.contains(key)) r[key] = m.encoder[key];
   if (m.fixed_sparsity != 0) return r;
@@ -781,6 +802,11 @@ nlohmann::json rate_rule_of(const format::Manifest& m) {
   r["rate_rule"] = has ? m.encoder["rate_rule"] : nlohmann::json("tolerance");
   for (const char* key : {"lagrangian_factor", "weight_owned_voxels"})
     if (m.encoder.is_object() && m.encoder.contains(key)) r[key] = m.encoder[key];
+  // Containers written before the field existed coded every level to ε.
+  if (r["rate_rule"] == "lagrangian")
+    r["level_tolerance_factor"] = m.encoder.is_object() && m.encoder.contains("level_tolerance_factor")
+                                      ? m.encoder["level_tolerance_factor"]
+                                      : nlohmann::json(1.0);
   return r;
 }
 
@@ -830,7 +856,9 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   m.encoder = job.provenance;
   if (!m.encoder.is_object()) m.encoder = nlohmann::json::object();
   if (coding.codec == format::Codec::ksvd) {
-    // How each brick chose its mean bits: a resumed encode must choose them the same way.
+    // How each block chose its atoms and each brick its mean bits: a resumed encode must choose
+    // them the same way.
+    m.encoder["pursuit"] = coding.selection == dictionary::AtomSelection::error ? "ormp" : "omp";
     m.encoder["mean_bits"] =
         coding.mean_bits >= 0 ? nlohmann::json(coding.mean_bits) : nlohmann::json("auto");
     if (coding.mean_bits < 0 && coding.fixed_sparsity == 0)
@@ -843,6 +871,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     if (lagrangian) {
       m.encoder["lagrangian_factor"] = coding.lagrangian_factor;
       m.encoder["weight_owned_voxels"] = coding.weight_owned_voxels;
+      m.encoder["level_tolerance_factor"] = coding.level_tolerance_factor;
     }
   }
 

@@ -327,10 +327,12 @@ TEST(Encoder, PaddingBlocksGetNoAtomsUnderTheLagrangianRule) {  // (at this ε: 
 struct MeanCheck {
   std::vector<std::uint32_t> bits;  ///< per coded brick
   double worst_error = 0;           ///< the largest |decoded − exact block mean|
+  std::vector<double> worst_by_level;  ///< the same per level (0 = the root)
 };
 MeanCheck check_means(const std::vector<std::byte>& bytes, const encoder::Pyramid& pyramid) {
   const format::FrameView f(bytes, "means.vrf");
   MeanCheck out;
+  out.worst_by_level.assign(f.level_count(), 0.0);
   std::vector<float> brick(brick_voxels);
   for (std::uint32_t i = 0; i < f.node_count(); ++i) {
     const auto payload = f.brick_bytes(i);
@@ -351,6 +353,7 @@ MeanCheck check_means(const std::vector<std::byte>& bytes, const encoder::Pyrami
       const double decoded = static_cast<double>(vr_as_float(words[0])) +
                              static_cast<double>(vr_as_float(words[1])) * q;
       out.worst_error = std::max(out.worst_error, std::abs(decoded - exact));
+      out.worst_by_level[p.level] = std::max(out.worst_by_level[p.level], std::abs(decoded - exact));
     }
   }
   return out;
@@ -362,7 +365,8 @@ TEST(Encoder, VariableRateTakesTheFewestMeanBitsForAStepOfHalfEpsilon) {
   const auto pyramid = encoder::build_pyramid(v);
   double previous_bits = 13;
   for (double eps : {1e-4, 1e-2, 5e-2, 2e-1}) {
-    const auto s = ksvd_settings(eps, v);
+    auto s = ksvd_settings(eps, v);
+    s.level_tolerance_factor = 1;  // every level's step at most ε/2 (see LevelFactor... below)
     const auto bytes = encoder::FrameEncoder(&d, s).encode(0, v);
     const MeanCheck m = check_means(bytes, pyramid);
     ASSERT_FALSE(m.bits.empty());
@@ -397,6 +401,56 @@ TEST(Encoder, VariableRateTakesTheFewestMeanBitsForAStepOfHalfEpsilon) {
   }
   s.mean_bits = 13;
   EXPECT_THROW(encoder::FrameEncoder(&d, s), InputError);
+}
+
+TEST(Encoder, LevelFactorCodesCoarseLevelsToAWiderToleranceAndLeavesTheFinestAlone) {
+  const Volume v = analytic_volume(datasets::AnalyticField::noise, {70, 68, 40});
+  const auto d = random_dictionary(64, 3);
+  const auto pyramid = encoder::build_pyramid(v);
+  const double eps = 5e-2;
+  auto s = ksvd_settings(eps, v);
+  s.level_tolerance_factor = 1;
+  const auto flat = encoder::FrameEncoder(&d, s).encode(0, v);
+  s.level_tolerance_factor = 2;
+  const auto grown = encoder::FrameEncoder(&d, s).encode(0, v);
+  const format::FrameView a(flat, "flat.vrf"), b(grown, "grown.vrf");
+  ASSERT_EQ(a.level_count(), 3u);
+  ASSERT_EQ(a.node_count(), b.node_count());
+  std::vector<std::size_t> bytes_flat(3), bytes_grown(3);
+  for (std::uint32_t i = 0; i < a.node_count(); ++i) {
+    const auto level = a.position(i).level;
+    const auto pa = a.brick_bytes(i), pb = b.brick_bytes(i);
+    bytes_flat[level] += pa.size(), bytes_grown[level] += pb.size();
+    if (level == 2) {  // the finest level: the same bricks, byte for byte
+      ASSERT_EQ(pa.size(), pb.size()) << "node " << i;
+      EXPECT_TRUE(std::equal(pa.begin(), pa.end(), pb.begin())) << "node " << i;
+    }
+  }
+  for (std::size_t level : {0u, 1u}) EXPECT_LT(bytes_grown[level], bytes_flat[level]) << "level " << level;
+  // The means' step follows the level's tolerance ε·2^d: at most ε·2^d/2, so errors ≤ ε·2^d/4,
+  // and coarser than at F = 1 (whose steps are at most ε/2 on every level).
+  const MeanCheck mf = check_means(flat, pyramid), mg = check_means(grown, pyramid);
+  for (std::size_t level = 0; level < 3; ++level) {
+    const double bound = 0.25 * eps * std::pow(2.0, 2.0 - static_cast<double>(level));
+    EXPECT_LE(mg.worst_by_level[level], bound + 1e-5) << "level " << level;
+    EXPECT_LE(mf.worst_by_level[level], 0.25 * eps + 1e-5) << "level " << level;
+  }
+  EXPECT_GT(mg.worst_by_level[0], mf.worst_by_level[0]);
+  // Coarser levels decode with more error, the finest with the same.
+  const auto level_error = [&](const std::vector<std::byte>& bytes, std::uint32_t level) {
+    const format::FrameView f(bytes, "f.vrf");
+    const auto decoded = format::decode_level(f, level, atom_table(d));
+    double se = 0;
+    for (std::size_t i = 0; i < decoded.data.size(); ++i)
+      se += std::pow(static_cast<double>(decoded.data[i] - pyramid.levels[level][i]), 2);
+    return se;
+  };
+  EXPECT_GT(level_error(grown, 1), level_error(flat, 1));
+  EXPECT_EQ(level_error(grown, 2), level_error(flat, 2));
+  for (double bad : {0.5, 17.0, std::nan("")}) {
+    s.level_tolerance_factor = bad;
+    EXPECT_THROW(encoder::FrameEncoder(&d, s), InputError) << bad;
+  }
 }
 
 TEST(BrickPayload, PackedFieldsReadBackAtEveryMeanWidth) {
@@ -521,8 +575,8 @@ TEST(Encoder, FixedSparsityUsesAtMostSAtoms) {
 /// coding changes on purpose, print the new values with VOLREEL_PRINT_CHECKSUMS=1 and update them
 /// (KSVD_* and ZFP_* in tests/CMakeLists.txt: the ε rule and zfp; LAGRANGIAN_* below: the default
 /// variable rate).
-constexpr std::size_t LAGRANGIAN_BYTES = 3336;
-constexpr std::uint32_t LAGRANGIAN_CRC = 0x1a4d6878u;
+constexpr std::size_t LAGRANGIAN_BYTES = 3108;
+constexpr std::uint32_t LAGRANGIAN_CRC = 0xfd3e2d4cu;
 
 TEST(Encoder, RegressionChecksums) {
   const Volume v = analytic_volume(datasets::AnalyticField::blobs, {40, 36, 34}, 1);
@@ -624,11 +678,18 @@ TEST(Container, EncodeResumeVerifyAndDecode) {
                         ? encoder::VariableRateRule::tolerance
                         : encoder::VariableRateRule::lagrangian;
   EXPECT_THROW(encoder::encode_series(*series, out, job), InputError);
-  // ... or other mean bits.
+  // ... or other mean bits, another level factor or another pursuit.
   job.coding.rule = rule;
   job.coding.mean_bits = 7;
   EXPECT_THROW(encoder::encode_series(*series, out, job), InputError);
   job.coding.mean_bits = -1;
+  job.coding.level_tolerance_factor = 1.5;
+  EXPECT_THROW(encoder::encode_series(*series, out, job), InputError);
+  job.coding.level_tolerance_factor = encoder::CodingSettings{}.level_tolerance_factor;
+  job.coding.selection = dictionary::AtomSelection::correlation;
+  EXPECT_THROW(encoder::encode_series(*series, out, job), InputError);
+  job.coding.selection = encoder::CodingSettings{}.selection;
+  EXPECT_EQ(encoder::encode_series(*series, out, job).skipped, 4u);  // the same settings resume
   // Decode a frame at every level; full resolution matches the input within a few ε.
   const format::Container c(out);
   EXPECT_EQ(c.frame_count(), 4u);

@@ -1,7 +1,7 @@
 // omp_test.cpp: batch-OMP recovers planted sparse codes exactly, agrees with a plain double
 // precision OMP, and stops exactly when the residual meets ε or at Smax, or (rate-distortion
 // stop) before the first atom worth less than its cost; the Lagrangian allocation beats the ε
-// rule at equal code count.
+// rule at equal code count; ORMP agrees with a plain double precision ORMP and needs fewer atoms.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -309,6 +309,84 @@ TEST(BatchOmp, LagrangianAllocationBeatsToleranceAtEqualCodeCount) {
         << "eps " << tolerance << ": " << tolerance_codes << " codes, error " << tolerance_error << " (eps rule), "
         << lagrangian.first << " codes, error " << lagrangian.second << " (Lagrangian, gain " << gain << ")";
   }
+}
+
+TEST(BatchOmp, OrmpRecoversPlantedSupport) {
+  const Eigen::Index m = 216, K = 1024, n = 200;
+  const Eigen::MatrixXf D = random_dictionary(m, K, 31);
+  SplitMix64 rng(32);
+  Eigen::MatrixXf Y = Eigen::MatrixXf::Zero(m, n);
+  std::vector<std::set<int>> truth(static_cast<std::size_t>(n));
+  for (Eigen::Index i = 0; i < n; ++i) {
+    auto& support = truth[static_cast<std::size_t>(i)];
+    while (support.size() < 5) support.insert(static_cast<int>(rng.below(K)));
+    for (int k : support) Y.col(i) += static_cast<float>((rng.uniform() < 0.5 ? -1 : 1) * rng.uniform(1.0, 2.0)) * D.col(k);
+  }
+  SparseCodes codes;
+  BatchOmp(D, {.tolerance = 1e-3, .max_atoms = 15, .selection = AtomSelection::error}).encode(Y, codes);
+  for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
+    ASSERT_EQ(codes.count[i], 5) << "block " << i;
+    EXPECT_EQ(std::set<int>(codes.atoms_of(i), codes.atoms_of(i) + 5), truth[i]) << "block " << i;
+    EXPECT_NEAR(codes.residual_energy[i], explicit_residual(D, Y, codes, i), 1e-4 * static_cast<double>(Y.col(static_cast<Eigen::Index>(i)).squaredNorm()));
+  }
+}
+
+TEST(BatchOmp, OrmpAgreesWithReferenceOrmp) {
+  const Eigen::Index m = 64, K = 200, n = 300;
+  const Eigen::MatrixXf D = random_dictionary(m, K, 33);
+  const Eigen::MatrixXf Y = random_signals(m, n, 34);
+  for (const SparseCodingOptions options :
+       {SparseCodingOptions{.tolerance = 0.45, .max_atoms = 12, .selection = AtomSelection::error},
+        SparseCodingOptions{.tolerance = 0, .max_atoms = 12, .min_atom_gain = 2.0, .selection = AtomSelection::error},
+        SparseCodingOptions{.tolerance = 0, .max_atoms = 12, .min_atom_gain = 3.0, .max_error = 0.8,
+                            .selection = AtomSelection::error}}) {
+    SparseCodes codes;
+    BatchOmp(D, options).encode(Y, codes);
+    const auto references = clear_cut_references(D, Y, options);
+    for (const auto& [i, ref] : references) {
+      ASSERT_EQ(codes.count[i], ref.atoms.size()) << "block " << i << " gain " << options.min_atom_gain;
+      for (std::size_t j = 0; j < ref.atoms.size(); ++j) {
+        ASSERT_EQ(codes.atoms_of(i)[j], ref.atoms[j]) << "block " << i << " step " << j;
+        EXPECT_NEAR(codes.coefficients_of(i)[j], ref.coefficients[j], 1e-4 * (1 + std::abs(ref.coefficients[j])));
+      }
+      EXPECT_NEAR(codes.residual_energy[i], ref.residual_energy,
+                  1e-4 * static_cast<double>(Y.col(static_cast<Eigen::Index>(i)).squaredNorm()));
+    }
+    EXPECT_GT(references.size(), static_cast<std::size_t>(n * 7 / 10));
+  }
+}
+
+TEST(BatchOmp, OrmpStepsLowerTheErrorAtLeastAsMuchAsOmpAndMeetToleranceWithFewerAtoms) {
+  const Eigen::Index m = 216, K = 512, n = 300;
+  const Eigen::MatrixXf D = random_dictionary(m, K, 35);
+  const Eigen::MatrixXf Y = random_signals(m, n, 36);
+  // One step from the same (empty) support: ORMP's atom lowers ‖r‖² at least as much as any atom,
+  // OMP's included; with unit-norm atoms the two agree, so use atoms of different norms.
+  Eigen::MatrixXf scaled = D;
+  for (Eigen::Index k = 0; k < K; ++k) scaled.col(k) *= 0.5f + static_cast<float>(k % 7) * 0.25f;
+  SparseCodes omp1, ormp1;
+  BatchOmp(scaled, {.tolerance = 0, .max_atoms = 1}).encode(Y, omp1);
+  BatchOmp(scaled, {.tolerance = 0, .max_atoms = 1, .selection = AtomSelection::error}).encode(Y, ormp1);
+  int better = 0;
+  for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
+    EXPECT_LE(ormp1.residual_energy[i], omp1.residual_energy[i] * (1 + 1e-5f)) << "block " << i;
+    if (ormp1.residual_energy[i] < omp1.residual_energy[i] * (1 - 1e-4f)) ++better;
+  }
+  EXPECT_GT(better, n / 4);
+  // Unit-norm atoms, to a tolerance: fewer atoms in all.
+  std::size_t omp_atoms = 0, ormp_atoms = 0;
+  for (double tolerance : {0.9, 0.85}) {
+    SparseCodes omp, ormp;
+    BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15}).encode(Y, omp);
+    BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15, .selection = AtomSelection::error}).encode(Y, ormp);
+    for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
+      omp_atoms += omp.count[i], ormp_atoms += ormp.count[i];
+      if (ormp.count[i] < 15) {
+        EXPECT_LE(explicit_residual(D, Y, ormp, i), static_cast<double>(m) * tolerance * tolerance * (1 + 1e-5));
+      }
+    }
+  }
+  EXPECT_LT(ormp_atoms, omp_atoms);
 }
 
 TEST(BatchOmp, ToleranceAndPsnr) {

@@ -27,6 +27,8 @@ struct RdCommandOptions {
   std::vector<int> sparsities = {1, 2, 3, 4, 5, 6, 7, 8};
   std::vector<double> lagrangian_factors = {encoder::CodingSettings{}.lagrangian_factor};
   bool tolerance_rule = false;              ///< also variable rate with the ε rule
+  std::string pursuit = "ormp";
+  double level_factor = encoder::CodingSettings{}.level_tolerance_factor;
   std::vector<double> zfp_bricks;           ///< zfp inside the container, accuracy / range (default none)
 };
 
@@ -51,7 +53,11 @@ void run_rd(const RdCommandOptions& o) {
     const auto bytes = static_cast<std::size_t>(format::dictionary_file_size(file.atom_count, file.atoms.size() / file.atom_count, file.half_atoms));
     auto dict = std::make_shared<const dictionary::Dictionary>(dictionary::from_file(file));
     std::printf("volreel codecs: dictionary %s (K = %d, atoms stored as %s, %zu bytes, counted once in bps)\n", o.dictionary.c_str(), dict->atom_count(), file.half_atoms ? "f16" : "f32", bytes);
-    for (auto& c : make_volreel_sweep(dict, bytes, range.first, range.second, {o.tolerances, o.lagrangian_factors, o.tolerance_rule, o.sparsities, {}})) codecs.push_back(std::move(c));
+    VolreelSweep sweep{o.tolerances, o.lagrangian_factors, o.tolerance_rule, o.sparsities, {}};
+    sweep.selection = o.pursuit == "omp" ? dictionary::AtomSelection::correlation : dictionary::AtomSelection::error;
+    sweep.level_tolerance_factor = o.level_factor;
+    std::printf("volreel pursuit %s; variable rate codes level d above the finest to eps*%g^d\n", o.pursuit.c_str(), o.level_factor);
+    for (auto& c : make_volreel_sweep(dict, bytes, range.first, range.second, sweep)) codecs.push_back(std::move(c));
   }
   if (!o.zfp_bricks.empty())
     for (auto& c : make_volreel_sweep(nullptr, 0, range.first, range.second, {{}, {}, false, {}, o.zfp_bricks})) codecs.push_back(std::move(c));
@@ -110,6 +116,14 @@ void add_bench_command(CLI::App& app) {
   rd->add_flag("--tolerance-rule", o->tolerance_rule,
                "Also variable rate with the eps rule (atoms until each block's RMS error <= eps), for comparison");
   rd->add_option("--sparsities", o->sparsities, "Fixed rate: atoms per block")->capture_default_str();
+  rd->add_option("--pursuit", o->pursuit, "volreel's rows: ormp or omp (as volreel encode --pursuit)")
+      ->check(CLI::IsMember({"ormp", "omp"}))
+      ->capture_default_str();
+  rd->add_option("--level-factor", o->level_factor,
+                 "Variable rate: code level d above the finest to eps*F^d (as volreel encode --level-factor; the\n"
+                 "finest level, which the table measures, is the same, so F changes only the bps)")
+      ->check(CLI::Range(1.0, 16.0))
+      ->capture_default_str();
   rd->add_option("--zfp-bricks", o->zfp_bricks, "Also zfp per brick inside the container, accuracy as fractions of the range");
   o->reader.add_to(*rd);
   rd->callback([o] { run_rd(*o); });

@@ -35,10 +35,11 @@ using Clock = std::chrono::steady_clock;
 constexpr double default_psnr = 55.0;  ///< when neither the dictionary nor the user says
 
 struct EncodeOptions {
-  std::string series, dictionary, out, codec = "ksvd", rate_rule = "lagrangian", mean_bits = "auto",
+  std::string series, dictionary, out, codec = "ksvd", rate_rule = "lagrangian", pursuit = "ormp", mean_bits = "auto",
               atom_storage = "f16";
   ReaderOptions reader;
-  double tolerance = 0, psnr = 0, bps = 0, zfp_accuracy = 0;
+  double tolerance = 0, psnr = 0, bps = 0, zfp_accuracy = 0,
+         level_factor = encoder::CodingSettings{}.level_tolerance_factor;
   int fixed_sparsity = 0, max_atoms = 15, atoms = 0;
   std::size_t max_frames = 0, rate_sample_frames = 3;
   bool resume = false, overwrite = false, no_refit = false, no_interval = false, extend = false;
@@ -188,6 +189,8 @@ void run_encode(const EncodeOptions& o) {
     throw InputError("--rate-rule must be lagrangian or tolerance, not '" + o.rate_rule + "'");
   if (o.extend && c.fixed_sparsity == 0 && c.rule != encoder::VariableRateRule::tolerance)
     throw InputError("--extend-pursuit needs --rate-rule tolerance");
+  c.selection = o.pursuit == "omp" ? dictionary::AtomSelection::correlation : dictionary::AtomSelection::error;
+  c.level_tolerance_factor = o.level_factor;
   job.half_atoms = o.atom_storage == "f16";
   if (o.mean_bits == "auto") {
     c.mean_bits = -1;
@@ -478,6 +481,21 @@ void add_encode_command(CLI::App& app) {
                   "for the size; blocks of aprons and padding weigh by the voxels the decoder "
                   "reads from them) or\n"
                   "tolerance (every block's RMS error <= eps: equal error per block)")
+      ->capture_default_str();
+  cmd->add_option("--level-factor", o->level_factor,
+                  "Lagrangian rule: code each coarser level to F times the eps of the level below "
+                  "(F^d, d levels above\n"
+                  "the finest: coarse levels are drawn only where they are small on screen, and "
+                  "differ from the data\n"
+                  "by more than eps already); 1 codes every level to eps")
+      ->check(CLI::Range(1.0, 16.0))
+      ->capture_default_str();
+  cmd->add_option("--pursuit", o->pursuit,
+                  "Which atom each pursuit step adds: ormp (the one that lowers the block's squared "
+                  "error most: fewer atoms\n"
+                  "for the same error) or omp (the one most correlated with the residual, as in "
+                  "the paper)")
+      ->check(CLI::IsMember({"ormp", "omp"}))
       ->capture_default_str();
   cmd->add_option("--mean-bits", o->mean_bits,
                   "Bits of each brick's quantized block means: auto (variable rate: per brick the "

@@ -69,6 +69,8 @@ std::vector<std::unique_ptr<psnr::FrameCodec>> make_volreel_sweep(
   encoder::CodingSettings base;
   base.value_min = value_min;
   base.value_max = value_max;
+  base.selection = sweep.selection;
+  base.level_tolerance_factor = sweep.level_tolerance_factor;
   for (double relative : sweep.relative_tolerances) {
     for (double factor : sweep.lagrangian_factors) {
       auto s = base;

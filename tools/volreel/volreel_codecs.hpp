@@ -19,6 +19,9 @@ struct VolreelSweep {
   std::vector<int> fixed_sparsities;        ///< fixed rate: S
   std::vector<double>
       zfp_relative_accuracies;  ///< zfp per brick in the container: accuracy / range
+  /// Every ksvd row: the pursuit, and (variable rate, Lagrangian rule) the level factor.
+  dictionary::AtomSelection selection = encoder::CodingSettings{}.selection;
+  double level_tolerance_factor = encoder::CodingSettings{}.level_tolerance_factor;
 };
 
 /// Codecs that encode each frame into an in-memory frame file and decode it with the CPU decoder.

@@ -23,6 +23,25 @@ namespace volreel::dictionary {
 /// Maximum atoms per block in volreel's format (4-bit sparsity field).
 inline constexpr int default_max_atoms = 15;
 
+/// Which atom a pursuit step adds (the stopping rules are the same for both):
+///   correlation — OMP: the atom most correlated with the residual, argmax |d_kᵀr|;
+///   error — ORMP, order-recursive matching pursuit (Cotter, Adler, Rao, Kreutz-Delgado 1999,
+///     "Forward sequential algorithms for best basis selection"; also "optimized OMP", Rebollo-Neira
+///     & Lowe 2002): the atom whose addition lowers ‖r‖² most, argmax (d_kᵀr)² / ‖P⊥d_k‖², with
+///     P⊥ the projection orthogonal to the atoms already chosen. It costs the same O(K·s) per step
+///     here (the projected norms are updated with the Gram–Schmidt rows of the support) and, at a
+///     given ε, needs fewer atoms (measured on turbulence-128 with K = 1024: 5 % fewer).
+///     An atom mostly inside the span of the support is scored as if the fraction
+///     ormp_projected_floor of its energy were outside it: such atoms take large, cancelling
+///     coefficients, which a coarse quantizer codes poorly.
+enum class AtomSelection { correlation, error };
+
+/// ORMP's score is (d_kᵀr)² / max(‖P⊥d_k‖², floor·‖d_k‖²). 0 is exact ORMP, 1 is OMP (for atoms of
+/// equal norm). Measured on turbulence-128 (16 frames, K = 1024, volreel encode's defaults): 0.3
+/// gives 0.05 dB more at the same size than ~0 and 19 % less PSNR lost to 6-bit quantization; 0.5
+/// and 0.7 give less, 1 (OMP) 0.19 dB less at 1.3 % more bytes.
+inline constexpr double ormp_projected_floor = 0.3;
+
 /// When the pursuit of a block stops: at the first of these that holds.
 ///   1. ‖r‖² ≤ m·ε² (the tolerance; ε = 0: never);
 ///   2. s = Smax;
@@ -36,11 +55,13 @@ inline constexpr int default_max_atoms = 15;
 /// codes, where rule 1 equalises the error per block instead. The gain of atom k is computed
 /// before it is added: the residual is orthogonal to the support, so ΔE = (d_kᵀr)² / ‖P⊥d_k‖²,
 /// with ‖P⊥d_k‖² the new Cholesky pivot G_kk − wᵀw. min_atom_gain = 0 is plain OMP (rules 1–2).
+
 struct SparseCodingOptions {
   double tolerance = 0;                 ///< ε ≥ 0, RMS error per value of a block (see above)
   int max_atoms = default_max_atoms;    ///< Smax ≥ 1: a block uses at most this many atoms
   double min_atom_gain = 0;             ///< ≥ 0, data units² (squared error of the block): rule 3
   double max_error = 0;                 ///< ≥ 0, RMS error per value: rule 3's bound (0: none)
+  AtomSelection selection = AtomSelection::correlation;  ///< OMP or ORMP
 };
 
 /// ε for a PSNR target: ε = range · 10^(−psnr/20), so that PSNR ≥ psnr if every block meets ε.
@@ -86,6 +107,8 @@ class BatchOmp {
  private:
   Eigen::MatrixXf atoms_;
   Eigen::MatrixXf gram_;   ///< K × K
+  Eigen::VectorXf gram_diagonal_;  ///< G_kk = ‖d_k‖²: ORMP's projected norms before any atom
+  Eigen::VectorXf floored_diagonal_;  ///< ormp_projected_floor·G_kk
   SparseCodingOptions options_;
   double target_energy_;   ///< m·ε²
   double bound_energy_;    ///< m·max_error² (+∞ without a bound)
@@ -96,13 +119,15 @@ struct ReferenceCode {
   std::vector<int> atoms;             ///< in the order chosen
   std::vector<double> coefficients;
   double residual_energy = 0;         ///< ‖y − Dγ‖₂², computed from the residual itself
-  double min_selection_margin = 0;    ///< smallest gap, over the steps, between the best and the second-best |correlation|
+  double min_selection_margin = 0;    ///< smallest relative gap, over the steps, between the best and the second-best score
 };
 
-/// Plain OMP in double precision: at each step correlate the explicit residual with every atom,
-/// add the best, re-solve least squares on the support by QR. Slow; the yardstick for tests.
-/// Same stopping rules as BatchOmp (‖r‖² ≤ m·ε², Smax atoms, or an atom's gain below
-/// min_atom_gain, measured here as the drop of the explicit ‖r‖²; such an atom is not kept).
+/// Plain OMP (or ORMP) in double precision: at each step correlate the explicit residual with
+/// every atom (ORMP: divide the squared correlations by the atoms' squared norms orthogonal to the
+/// support, from a QR of the support), add the best, re-solve least squares on the support by QR.
+/// Slow; the yardstick for tests. Same stopping rules as BatchOmp (‖r‖² ≤ m·ε², Smax atoms, or an
+/// atom's gain below min_atom_gain, measured here as the drop of the explicit ‖r‖²; such an atom
+/// is not kept). min_selection_margin compares the scores (|correlation| or gain).
 ReferenceCode reference_omp(const Eigen::MatrixXf& atoms, const Eigen::VectorXf& block, SparseCodingOptions options);
 
 /// y ≈ Dγ for block i of codes, written into out (m values).
