@@ -203,6 +203,7 @@ int code_one_block(const float* alpha0, double energy, const Eigen::MatrixXf& gr
 
 /// The smallest Cholesky pivot (‖P⊥d_k‖²) an atom may have to join the support.
 constexpr float min_pivot = 1e-5f;
+static_assert(ormp_projected_floor > 0 && ormp_projected_floor <= 1);
 
 /// argmax_k α_k² / max(‖P⊥d_k‖², f·‖d_k‖²), the ORMP score (f = ormp_projected_floor; floored
 /// holds f·G_kk), the first on ties, searched like update_correlations: the scores of each chunk
@@ -295,7 +296,8 @@ BatchOmp::BatchOmp(const Eigen::MatrixXf& atoms, SparseCodingOptions options)
   if (atoms.cols() < 1) throw std::invalid_argument("a dictionary needs at least one atom");
   gram_.noalias() = atoms_.transpose() * atoms_;
   gram_diagonal_ = gram_.diagonal();
-  floored_diagonal_ = gram_diagonal_ * static_cast<float>(ormp_projected_floor);
+  // At least the smallest pivot: a zero atom (α = 0, ‖P⊥d‖² = 0) then scores 0, not 0/0.
+  floored_diagonal_ = (gram_diagonal_ * static_cast<float>(ormp_projected_floor)).cwiseMax(min_pivot);
   target_energy_ = static_cast<double>(atoms.rows()) * options.tolerance * options.tolerance;
   bound_energy_ = bound_energy(options, atoms.rows());
 }

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <set>
 #include <string>
 
 #include <Eigen/Cholesky>
@@ -810,14 +811,38 @@ nlohmann::json rate_rule_of(const format::Manifest& m) {
   return r;
 }
 
-bool same_settings(const format::Manifest& a, const format::Manifest& b) {
-  return rate_rule_of(a) == rate_rule_of(b) && a.dims == b.dims && a.codec == b.codec && a.tolerance == b.tolerance &&
-         a.fixed_sparsity == b.fixed_sparsity && a.zfp_accuracy == b.zfp_accuracy &&
-         a.value_min == b.value_min && a.value_max == b.value_max &&
-         a.frames.size() == b.frames.size() &&
-         (a.dictionary.has_value() == b.dictionary.has_value()) &&
-         (!a.dictionary || (a.dictionary->crc32c == b.dictionary->crc32c &&
-                            a.dictionary->bytes == b.dictionary->bytes));
+/// The settings that differ between an existing container's manifest and this run's, as
+/// "name old (this run: new)" joined by "; " (empty: the same, so --resume may continue it).
+std::string settings_difference(const format::Manifest& old, const format::Manifest& now) {
+  std::vector<std::string> out;
+  const auto differ = [&](const std::string& name, const nlohmann::json& a, const nlohmann::json& b) {
+    if (a != b) out.push_back(name + " " + a.dump() + " (this run: " + b.dump() + ")");
+  };
+  const auto text = [](const auto& v) { return nlohmann::json(v); };
+  const auto codec = [](format::Codec c) { return nlohmann::json(c == format::Codec::ksvd ? "ksvd" : "zfp"); };
+  differ("dims", text(old.dims), text(now.dims));
+  differ("codec", codec(old.codec), codec(now.codec));
+  differ("tolerance", text(old.tolerance), text(now.tolerance));
+  differ("fixed sparsity", text(old.fixed_sparsity), text(now.fixed_sparsity));
+  differ("zfp accuracy", text(old.zfp_accuracy), text(now.zfp_accuracy));
+  differ("value range", text(std::vector<double>{old.value_min, old.value_max}),
+         text(std::vector<double>{now.value_min, now.value_max}));
+  differ("frames", text(old.frames.size()), text(now.frames.size()));
+  const auto dictionary = [](const format::Manifest& m) {
+    return m.dictionary ? nlohmann::json{{"crc32c", m.dictionary->crc32c}, {"bytes", m.dictionary->bytes}}
+                        : nlohmann::json(nullptr);
+  };
+  differ("dictionary", dictionary(old), dictionary(now));
+  // The coding choices recorded in the provenance (pursuit, mean bits, rate rule and its parameters).
+  const nlohmann::json a = rate_rule_of(old), b = rate_rule_of(now);
+  std::set<std::string> keys;
+  for (const auto& [key, value] : a.items()) keys.insert(key);
+  for (const auto& [key, value] : b.items()) keys.insert(key);
+  for (const auto& key : keys)
+    differ(key, a.contains(key) ? a[key] : nlohmann::json(nullptr), b.contains(key) ? b[key] : nlohmann::json(nullptr));
+  std::string joined;
+  for (const auto& d : out) joined += (joined.empty() ? "" : "; ") + d;
+  return joined;
 }
 
 }  // namespace
@@ -898,11 +923,11 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   if (fs::exists(manifest_path)) {
     if (job.resume) {
       const format::Container old(out, true);
-      if (!same_settings(old.manifest(), m))
-        throw InputError("'" + out.string() +
-                         "' was encoded with other settings (dims, codec, tolerance, rate rule, "
-                         "value range, frames or dictionary); "
-                         "cannot --resume it: use --overwrite to start again");
+      if (const std::string d = settings_difference(old.manifest(), m); !d.empty())
+        throw InputError("'" + out.string() + "' was encoded with other settings: " + d +
+                         "; cannot --resume it: give the same options (pursuit: --pursuit, "
+                         "level_tolerance_factor: --level-factor, mean_bits: --mean-bits, "
+                         "rate_rule: --rate-rule) or --overwrite to start again");
       m.frames = old.manifest().frames;
       resuming = true;
     } else if (!job.overwrite) {

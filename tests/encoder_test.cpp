@@ -9,6 +9,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include <nlohmann/json.hpp>
+
 #include "dictionary_test_data.hpp"
 #include "test_util.hpp"
 #include "volreel/datasets/analytic.hpp"
@@ -447,6 +449,19 @@ TEST(Encoder, LevelFactorCodesCoarseLevelsToAWiderToleranceAndLeavesTheFinestAlo
   };
   EXPECT_GT(level_error(grown, 1), level_error(flat, 1));
   EXPECT_EQ(level_error(grown, 2), level_error(flat, 2));
+  // The ε rule and fixed rate code every level alike whatever F (only the Lagrangian rule has a
+  // level-dependent threshold).
+  for (int variant = 0; variant < 2; ++variant) {
+    auto o = ksvd_settings(variant == 0 ? eps : 0.0, v);
+    if (variant == 0)
+      o.rule = encoder::VariableRateRule::tolerance;
+    else
+      o.fixed_sparsity = 3;
+    o.level_tolerance_factor = 1;
+    const auto one = encoder::FrameEncoder(&d, o).encode(0, v);
+    o.level_tolerance_factor = 4;
+    EXPECT_EQ(encoder::FrameEncoder(&d, o).encode(0, v), one) << (variant == 0 ? "eps rule" : "fixed rate");
+  }
   for (double bad : {0.5, 17.0, std::nan("")}) {
     s.level_tolerance_factor = bad;
     EXPECT_THROW(encoder::FrameEncoder(&d, s), InputError) << bad;
@@ -690,6 +705,31 @@ TEST(Container, EncodeResumeVerifyAndDecode) {
   EXPECT_THROW(encoder::encode_series(*series, out, job), InputError);
   job.coding.selection = encoder::CodingSettings{}.selection;
   EXPECT_EQ(encoder::encode_series(*series, out, job).skipped, 4u);  // the same settings resume
+  // A container written before "pursuit" and "level_tolerance_factor" were recorded used OMP and
+  // F = 1: resuming it with those is accepted, with the defaults refused, naming both.
+  {
+    const std::filesystem::path manifest_path = out / "manifest.json";
+    std::ifstream in(manifest_path);
+    nlohmann::json manifest = nlohmann::json::parse(in);
+    in.close();
+    manifest["encoder"].erase("pursuit");
+    manifest["encoder"].erase("level_tolerance_factor");
+    std::ofstream(manifest_path) << manifest.dump(1);
+  }
+  try {
+    encoder::encode_series(*series, out, job);
+    ADD_FAILURE() << "resumed an OMP, F = 1 container with ORMP and F = 2";
+  } catch (const InputError& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find("pursuit \"omp\" (this run: \"ormp\")"), std::string::npos) << message;
+    EXPECT_NE(message.find("level_tolerance_factor 1.0 (this run: 2.0)"), std::string::npos) << message;
+    EXPECT_NE(message.find("--level-factor"), std::string::npos) << message;
+  }
+  job.coding.selection = dictionary::AtomSelection::correlation;
+  job.coding.level_tolerance_factor = 1;
+  EXPECT_EQ(encoder::encode_series(*series, out, job).skipped, 4u);
+  job.coding.selection = encoder::CodingSettings{}.selection;
+  job.coding.level_tolerance_factor = encoder::CodingSettings{}.level_tolerance_factor;
   // Decode a frame at every level; full resolution matches the input within a few ε.
   const format::Container c(out);
   EXPECT_EQ(c.frame_count(), 4u);

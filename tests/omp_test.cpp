@@ -143,9 +143,10 @@ TEST(BatchOmp, StopsAtMaxAtoms) {
   const Eigen::Index m = 64, K = 256, n = 100;
   const Eigen::MatrixXf D = random_dictionary(m, K, 7);
   const Eigen::MatrixXf Y = random_signals(m, n, 8);
+  for (const auto selection : {AtomSelection::correlation, AtomSelection::error})
   for (int smax : {1, 5, 15}) {
     SparseCodes codes;
-    BatchOmp(D, {.tolerance = 0, .max_atoms = smax}).encode(Y, codes);
+    BatchOmp(D, {.tolerance = 0, .max_atoms = smax, .selection = selection}).encode(Y, codes);
     for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
       ASSERT_EQ(codes.count[i], smax);
       std::set<int> distinct(codes.atoms_of(i), codes.atoms_of(i) + smax);
@@ -157,8 +158,10 @@ TEST(BatchOmp, StopsAtMaxAtoms) {
 TEST(BatchOmp, ZeroBlocksNeedNoAtomsAndBadOptionsAreRefused) {
   const Eigen::MatrixXf D = random_dictionary(27, 40, 9);
   SparseCodes codes;
-  BatchOmp(D, {.tolerance = 0, .max_atoms = 5}).encode(Eigen::MatrixXf::Zero(27, 3), codes);
-  for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(codes.count[i], 0);
+  for (const auto selection : {AtomSelection::correlation, AtomSelection::error}) {
+    BatchOmp(D, {.tolerance = 0, .max_atoms = 5, .selection = selection}).encode(Eigen::MatrixXf::Zero(27, 3), codes);
+    for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(codes.count[i], 0);
+  }
   EXPECT_THROW(BatchOmp(D, {.tolerance = -1, .max_atoms = 5}), std::invalid_argument);
   EXPECT_THROW(BatchOmp(D, {.tolerance = 0, .max_atoms = 0}), std::invalid_argument);
   EXPECT_THROW(BatchOmp(D, {.tolerance = 0, .max_atoms = 28}), std::invalid_argument);
@@ -227,10 +230,12 @@ TEST(BatchOmp, VanishingAtomGainReproducesThePursuitToSmaxOrTolerance) {
   const Eigen::Index m = 216, K = 512, n = 200;
   const Eigen::MatrixXf D = random_dictionary(m, K, 25);
   const Eigen::MatrixXf Y = random_signals(m, n, 26);
+  for (const auto selection : {AtomSelection::correlation, AtomSelection::error})
   for (double tolerance : {0.0, 0.9}) {
     SparseCodes plain, lagrangian;
-    BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15}).encode(Y, plain);
-    BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15, .min_atom_gain = 1e-9}).encode(Y, lagrangian);
+    BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15, .selection = selection}).encode(Y, plain);
+    BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15, .min_atom_gain = 1e-9, .selection = selection})
+        .encode(Y, lagrangian);
     EXPECT_EQ(plain.count, lagrangian.count);
     EXPECT_EQ(plain.atom, lagrangian.atom);
     EXPECT_EQ(plain.coefficient, lagrangian.coefficient);
@@ -354,6 +359,58 @@ TEST(BatchOmp, OrmpAgreesWithReferenceOrmp) {
     }
     EXPECT_GT(references.size(), static_cast<std::size_t>(n * 7 / 10));
   }
+}
+
+TEST(BatchOmp, OrmpFloorsTheProjectedNormOfAtomsMostlyInTheSpanOfTheSupport) {
+  // Clusters of near-duplicate atoms: after one member is chosen, the others keep only a small part
+  // of their energy outside the span (‖P⊥d‖² well below the floor), so the floor decides between
+  // them and the rest. A zero atom must never be chosen (its score would be 0/0 without the floor).
+  const Eigen::Index m = 64, K = 200, n = 150;
+  Eigen::MatrixXf D = random_dictionary(m, K, 37);
+  SplitMix64 rng(38);
+  for (Eigen::Index k = 0; k < K / 2; ++k) {
+    const Eigen::Index of = (k / 4) * 4;  // atoms 4c+1..4c+3 near atom 4c
+    if (k == of) continue;
+    for (Eigen::Index v = 0; v < m; ++v) D(v, k) = D(v, of) + 0.35f * static_cast<float>(rng.normal()) / 8.0f;
+  }
+  normalize_atoms(D);
+  D.col(K - 1).setZero();
+  const Eigen::MatrixXf Y = random_signals(m, n, 39);
+  const SparseCodingOptions options{.tolerance = 0.5, .max_atoms = 8, .selection = AtomSelection::error};
+  SparseCodes codes;
+  BatchOmp(D, options).encode(Y, codes);
+  const auto references = clear_cut_references(D, Y, options);
+  for (const auto& [i, ref] : references) {
+    ASSERT_EQ(codes.count[i], ref.atoms.size()) << "block " << i;
+    for (std::size_t j = 0; j < ref.atoms.size(); ++j) ASSERT_EQ(codes.atoms_of(i)[j], ref.atoms[j]) << "block " << i << " step " << j;
+  }
+  // The floor binds: in some blocks the second atom differs from exact ORMP's (argmax of the
+  // unfloored score after the same first atom), and batch ORMP took the floored choice.
+  int differs = 0;
+  for (std::size_t i = 0; i < codes.size(); ++i) {
+    if (codes.count[i] < 2) continue;
+    const Eigen::VectorXd first = D.col(codes.atoms_of(i)[0]).cast<double>();  // unit norm
+    const Eigen::VectorXd y = Y.col(static_cast<Eigen::Index>(i)).cast<double>();
+    const Eigen::VectorXd r = y - first * first.dot(y);
+    Eigen::Index exact = 0, floored = 0;
+    double best_exact = -1, best_floored = -1;
+    for (Eigen::Index k = 0; k < K - 1; ++k) {  // not the zero atom
+      const Eigen::VectorXd d = D.col(k).cast<double>();
+      const double c = d.dot(r), p = d.squaredNorm() - std::pow(d.dot(first), 2);
+      if (p < 1e-6) continue;  // the first atom itself
+      if (c * c / p > best_exact) best_exact = c * c / p, exact = k;
+      if (c * c / std::max(p, ormp_projected_floor * d.squaredNorm()) > best_floored)
+        best_floored = c * c / std::max(p, ormp_projected_floor * d.squaredNorm()), floored = k;
+    }
+    if (exact != floored) {
+      ++differs;
+      EXPECT_EQ(codes.atoms_of(i)[1], floored) << "block " << i;
+    }
+  }
+  EXPECT_GT(differs, 0);
+  EXPECT_GT(references.size(), static_cast<std::size_t>(n / 2));
+  for (std::size_t i = 0; i < codes.size(); ++i)
+    for (int j = 0; j < codes.count[i]; ++j) ASSERT_NE(codes.atoms_of(i)[j], K - 1) << "block " << i;
 }
 
 TEST(BatchOmp, OrmpStepsLowerTheErrorAtLeastAsMuchAsOmpAndMeetToleranceWithFewerAtoms) {

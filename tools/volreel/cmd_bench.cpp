@@ -56,7 +56,7 @@ void run_rd(const RdCommandOptions& o) {
     VolreelSweep sweep{o.tolerances, o.lagrangian_factors, o.tolerance_rule, o.sparsities, {}};
     sweep.selection = o.pursuit == "omp" ? dictionary::AtomSelection::correlation : dictionary::AtomSelection::error;
     sweep.level_tolerance_factor = o.level_factor;
-    std::printf("volreel pursuit %s; variable rate codes level d above the finest to eps*%g^d\n", o.pursuit.c_str(), o.level_factor);
+    std::printf("volreel pursuit %s; variable rate (Lagrangian rule) codes level d above the finest to eps*%g^d\n", o.pursuit.c_str(), o.level_factor);
     for (auto& c : make_volreel_sweep(dict, bytes, range.first, range.second, sweep)) codecs.push_back(std::move(c));
   }
   if (!o.zfp_bricks.empty())

@@ -43,7 +43,8 @@ struct EncodeOptions {
   int fixed_sparsity = 0, max_atoms = 15, atoms = 0;
   std::size_t max_frames = 0, rate_sample_frames = 3;
   bool resume = false, overwrite = false, no_refit = false, no_interval = false, extend = false;
-  CLI::Option *tolerance_opt = nullptr, *psnr_opt = nullptr, *bps_opt = nullptr, *zfp_opt = nullptr;
+  CLI::Option *tolerance_opt = nullptr, *psnr_opt = nullptr, *bps_opt = nullptr, *zfp_opt = nullptr,
+              *level_factor_opt = nullptr;
 };
 
 format::DictionaryTraining provenance(const dictionary::CoresetOptions& co,
@@ -189,6 +190,9 @@ void run_encode(const EncodeOptions& o) {
     throw InputError("--rate-rule must be lagrangian or tolerance, not '" + o.rate_rule + "'");
   if (o.extend && c.fixed_sparsity == 0 && c.rule != encoder::VariableRateRule::tolerance)
     throw InputError("--extend-pursuit needs --rate-rule tolerance");
+  if (o.level_factor_opt->count() > 0 &&
+      (c.fixed_sparsity > 0 || c.rule != encoder::VariableRateRule::lagrangian))
+    throw InputError("--level-factor applies to variable rate with --rate-rule lagrangian only");
   c.selection = o.pursuit == "omp" ? dictionary::AtomSelection::correlation : dictionary::AtomSelection::error;
   c.level_tolerance_factor = o.level_factor;
   job.half_atoms = o.atom_storage == "f16";
@@ -482,7 +486,7 @@ void add_encode_command(CLI::App& app) {
                   "reads from them) or\n"
                   "tolerance (every block's RMS error <= eps: equal error per block)")
       ->capture_default_str();
-  cmd->add_option("--level-factor", o->level_factor,
+  o->level_factor_opt = cmd->add_option("--level-factor", o->level_factor,
                   "Lagrangian rule: code each coarser level to F times the eps of the level below "
                   "(F^d, d levels above\n"
                   "the finest: coarse levels are drawn only where they are small on screen, and "
@@ -494,7 +498,8 @@ void add_encode_command(CLI::App& app) {
                   "Which atom each pursuit step adds: ormp (the one that lowers the block's squared "
                   "error most: fewer atoms\n"
                   "for the same error) or omp (the one most correlated with the residual, as in "
-                  "the paper)")
+                  "the paper; --extend-pursuit\n"
+                  "always adds that one)")
       ->check(CLI::IsMember({"ormp", "omp"}))
       ->capture_default_str();
   cmd->add_option("--mean-bits", o->mean_bits,
