@@ -18,6 +18,14 @@ double tolerance_for_psnr(double psnr_db, double value_range) { return value_ran
 
 double psnr_for_tolerance(double tolerance, double value_range) { return 20.0 * std::log10(value_range / tolerance); }
 
+const char* pursuit_name(AtomSelection selection) { return selection == AtomSelection::error ? "ormp" : "omp"; }
+
+AtomSelection pursuit_from_name(const std::string& name) {
+  if (name == "ormp") return AtomSelection::error;
+  if (name == "omp") return AtomSelection::correlation;
+  throw std::invalid_argument("a pursuit is ormp or omp, not '" + name + "'");
+}
+
 void SparseCodes::resize(std::size_t blocks, int slots) {
   max_atoms = slots;
   const std::size_t total = blocks * static_cast<std::size_t>(slots);

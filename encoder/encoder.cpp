@@ -789,13 +789,16 @@ double manifest_estimate(std::size_t frames) {
   return 900.0 + 70.0 * static_cast<double>(frames);
 }
 
-/// The variable-rate rule recorded in a manifest's provenance ("tolerance" for containers written
-/// before the field existed, which all used it), with its parameters.
-nlohmann::json rate_rule_of(const format::Manifest& m) {
+/// The coding choices recorded in a manifest's provenance, with the values containers written
+/// before a field existed used: the pursuit, the mean bits, and the variable-rate rule ("tolerance"
+/// when absent) with its parameters.
+nlohmann::json coding_choices_of(const format::Manifest& m) {
   nlohmann::json r = nlohmann::json::object();
   if (m.codec != format::Codec::ksvd) return r;
   // Containers written before the field existed all used OMP.
-  r["pursuit"] = m.encoder.is_object() && m.encoder.contains("pursuit") ? m.encoder["pursuit"] : nlohmann::json("omp");
+  r["pursuit"] = m.encoder.is_object() && m.encoder.contains("pursuit")
+                    ? m.encoder["pursuit"]
+                    : nlohmann::json(dictionary::pursuit_name(dictionary::AtomSelection::correlation));
   for (const char* key : {"mean_bits", "mean_step_factor"})
     if (m.encoder.is_object() && m.encoder.contains(key)) r[key] = m.encoder[key];
   if (m.fixed_sparsity != 0) return r;
@@ -834,7 +837,7 @@ std::string settings_difference(const format::Manifest& old, const format::Manif
   };
   differ("dictionary", dictionary(old), dictionary(now));
   // The coding choices recorded in the provenance (pursuit, mean bits, rate rule and its parameters).
-  const nlohmann::json a = rate_rule_of(old), b = rate_rule_of(now);
+  const nlohmann::json a = coding_choices_of(old), b = coding_choices_of(now);
   std::set<std::string> keys;
   for (const auto& [key, value] : a.items()) keys.insert(key);
   for (const auto& [key, value] : b.items()) keys.insert(key);
@@ -883,7 +886,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   if (coding.codec == format::Codec::ksvd) {
     // How each block chose its atoms and each brick its mean bits: a resumed encode must choose
     // them the same way.
-    m.encoder["pursuit"] = coding.selection == dictionary::AtomSelection::error ? "ormp" : "omp";
+    m.encoder["pursuit"] = dictionary::pursuit_name(coding.selection);
     m.encoder["mean_bits"] =
         coding.mean_bits >= 0 ? nlohmann::json(coding.mean_bits) : nlohmann::json("auto");
     if (coding.mean_bits < 0 && coding.fixed_sparsity == 0)

@@ -446,6 +446,13 @@ TEST(BatchOmp, OrmpStepsLowerTheErrorAtLeastAsMuchAsOmpAndMeetToleranceWithFewer
   EXPECT_LT(ormp_atoms, omp_atoms);
 }
 
+TEST(BatchOmp, PursuitNamesRoundTrip) {
+  for (const auto selection : {AtomSelection::correlation, AtomSelection::error})
+    EXPECT_EQ(pursuit_from_name(pursuit_name(selection)), selection);
+  EXPECT_STREQ(pursuit_name(AtomSelection::error), "ormp");
+  EXPECT_THROW(pursuit_from_name("mp"), std::invalid_argument);
+}
+
 TEST(BatchOmp, ToleranceAndPsnr) {
   EXPECT_NEAR(tolerance_for_psnr(60, 2.0), 2e-3, 1e-12);
   EXPECT_NEAR(psnr_for_tolerance(2e-3, 2.0), 60, 1e-9);

@@ -27,7 +27,7 @@ struct RdCommandOptions {
   std::vector<int> sparsities = {1, 2, 3, 4, 5, 6, 7, 8};
   std::vector<double> lagrangian_factors = {encoder::CodingSettings{}.lagrangian_factor};
   bool tolerance_rule = false;              ///< also variable rate with the ε rule
-  std::string pursuit = "ormp";
+  std::string pursuit = dictionary::pursuit_name(encoder::CodingSettings{}.selection);
   double level_factor = encoder::CodingSettings{}.level_tolerance_factor;
   std::vector<double> zfp_bricks;           ///< zfp inside the container, accuracy / range (default none)
 };
@@ -54,7 +54,7 @@ void run_rd(const RdCommandOptions& o) {
     auto dict = std::make_shared<const dictionary::Dictionary>(dictionary::from_file(file));
     std::printf("volreel codecs: dictionary %s (K = %d, atoms stored as %s, %zu bytes, counted once in bps)\n", o.dictionary.c_str(), dict->atom_count(), file.half_atoms ? "f16" : "f32", bytes);
     VolreelSweep sweep{o.tolerances, o.lagrangian_factors, o.tolerance_rule, o.sparsities, {}};
-    sweep.selection = o.pursuit == "omp" ? dictionary::AtomSelection::correlation : dictionary::AtomSelection::error;
+    sweep.selection = dictionary::pursuit_from_name(o.pursuit);
     sweep.level_tolerance_factor = o.level_factor;
     std::printf("volreel pursuit %s; variable rate (Lagrangian rule) codes level d above the finest to eps*%g^d\n", o.pursuit.c_str(), o.level_factor);
     for (auto& c : make_volreel_sweep(dict, bytes, range.first, range.second, sweep)) codecs.push_back(std::move(c));

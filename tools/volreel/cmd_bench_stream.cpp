@@ -72,13 +72,16 @@ struct BenchStreamOptions {
   double duration = 20;
   std::string clock = "simulated";
   double fps = 10;  ///< simulated clock: frames per tour second
-  double sse_target = 1.0;
-  double sse_weight = 10.0, temporal_lerp_min = 1.0, temporal_exponent = 4.0;
-  bool due_window = true;
-  std::string sse_priority = "level";
-  double lookahead = 1.0;
-  double speculative_link = 0.15;
-  double ancestor_handicap = 4.0;
+  // The scheduler's defaults (stream::PrioritySettings, SchedulerSettings, SelectionSettings).
+  double sse_target = stream::PrioritySettings{}.sse_target;
+  double sse_weight = stream::PrioritySettings{}.sse_weight,
+         temporal_lerp_min = stream::PrioritySettings{}.temporal_lerp_min,
+         temporal_exponent = stream::PrioritySettings{}.temporal_exponent;
+  bool due_window = stream::PrioritySettings{}.due_window;
+  std::string sse_priority = stream::PrioritySettings{}.sse_scope == stream::SseScope::node ? "node" : "level";
+  double lookahead = stream::PrioritySettings{}.lookahead_s;
+  double speculative_link = stream::SchedulerSettings{}.speculative_link_s;
+  double ancestor_handicap = stream::SelectionSettings{}.ancestor_handicap;
   double step = 1.0;
   double upload_budget_mb = 64;
   std::uint64_t seed = 1;

@@ -35,7 +35,8 @@ using Clock = std::chrono::steady_clock;
 constexpr double default_psnr = 55.0;  ///< when neither the dictionary nor the user says
 
 struct EncodeOptions {
-  std::string series, dictionary, out, codec = "ksvd", rate_rule = "lagrangian", pursuit = "ormp", mean_bits = "auto",
+  std::string series, dictionary, out, codec = "ksvd", rate_rule = "lagrangian",
+              pursuit = dictionary::pursuit_name(encoder::CodingSettings{}.selection), mean_bits = "auto",
               atom_storage = "f16";
   ReaderOptions reader;
   double tolerance = 0, psnr = 0, bps = 0, zfp_accuracy = 0,
@@ -193,7 +194,7 @@ void run_encode(const EncodeOptions& o) {
   if (o.level_factor_opt->count() > 0 &&
       (c.fixed_sparsity > 0 || c.rule != encoder::VariableRateRule::lagrangian))
     throw InputError("--level-factor applies to variable rate with --rate-rule lagrangian only");
-  c.selection = o.pursuit == "omp" ? dictionary::AtomSelection::correlation : dictionary::AtomSelection::error;
+  c.selection = dictionary::pursuit_from_name(o.pursuit);
   c.level_tolerance_factor = o.level_factor;
   job.half_atoms = o.atom_storage == "f16";
   if (o.mean_bits == "auto") {

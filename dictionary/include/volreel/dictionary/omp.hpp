@@ -14,6 +14,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -35,6 +36,11 @@ inline constexpr int default_max_atoms = 15;
 ///     ormp_projected_floor of its energy were outside it: such atoms take large, cancelling
 ///     coefficients, which a coarse quantizer codes poorly.
 enum class AtomSelection { correlation, error };
+
+/// The names volreel uses for a selection (command lines, manifests): "omp" and "ormp".
+const char* pursuit_name(AtomSelection selection);
+/// The inverse; throws std::invalid_argument on another name.
+AtomSelection pursuit_from_name(const std::string& name);
 
 /// ORMP's score is (d_kᵀr)² / max(‖P⊥d_k‖², floor·‖d_k‖²), in (0, 1]: near 0 it is exact ORMP, 1
 /// is OMP (for atoms of equal norm). Measured on turbulence-128 (16 frames, K = 1024, volreel encode's defaults): 0.3
