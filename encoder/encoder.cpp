@@ -107,10 +107,9 @@ void brick_to_blocks(const float* brick, float* columns, float* means) {
 }
 
 /// Share of each of the 216 blocks of brick (x, y, z) of a level of size `dims` that the decoder
-/// reads: voxels of the brick's interior (stored index 1..34 on each axis) inside the level; at
-/// least 1/216 (one voxel), so that as ε → 0 every block is still coded up to Smax.
-void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
-                         const std::array<std::uint32_t, 3>& dims, float* weights) {
+/// reads: voxels of the brick's interior (stored index 1..34 on each axis) inside the level.
+void owned_block_shares(std::uint32_t x, std::uint32_t y, std::uint32_t z,
+                        const std::array<std::uint32_t, 3>& dims, float* shares) {
   const std::uint32_t position[3] = {x, y, z};
   float owned[3][VR_BLOCKS_PER_AXIS];  // owned voxels of block column c on axis a
   for (std::size_t a = 0; a < 3; ++a) {
@@ -124,10 +123,16 @@ void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
     }
   }
   for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
-    weights[b] = std::max(owned[0][b % VR_BLOCKS_PER_AXIS] *
-                              owned[1][(b / VR_BLOCKS_PER_AXIS) % VR_BLOCKS_PER_AXIS] *
-                              owned[2][b / (VR_BLOCKS_PER_AXIS * VR_BLOCKS_PER_AXIS)],
-                          1.0f / VR_BLOCK_LENGTH);
+    shares[b] = owned[0][b % VR_BLOCKS_PER_AXIS] * owned[1][(b / VR_BLOCKS_PER_AXIS) % VR_BLOCKS_PER_AXIS] *
+                owned[2][b / (VR_BLOCKS_PER_AXIS * VR_BLOCKS_PER_AXIS)];
+}
+
+/// The shares as weights of the Lagrangian rule: at least 1/216 (one voxel), so that as ε → 0
+/// every block is still coded up to Smax.
+void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
+                         const std::array<std::uint32_t, 3>& dims, float* weights) {
+  owned_block_shares(x, y, z, dims, weights);
+  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) weights[b] = std::max(weights[b], 1.0f / VR_BLOCK_LENGTH);
 }
 
 /// Adds a stored brick's payload to the byte breakdown and sparsity histogram of a frame.
@@ -148,8 +153,13 @@ void add_to_breakdown(const Cell& c, const std::array<std::uint32_t, 3>& level_d
     b.codes += 2 * c.codes;
     b.alignment += size - vr_payload_bytes(entry_bits, static_cast<vr_uint>(c.codes));
     ++st.mean_bits_histogram[vr_mean_bits(words)];
-    for (std::uint32_t k = 0; k < VR_BLOCKS_PER_BRICK; ++k)
-      ++st.sparsity_histogram[vr_entry_sparsity(vr_block_entry(words, entry_bits, k))];
+    float shares[VR_BLOCKS_PER_BRICK];
+    owned_block_shares(c.x, c.y, c.z, level_dims, shares);
+    for (std::uint32_t k = 0; k < VR_BLOCKS_PER_BRICK; ++k) {
+      const vr_uint sparsity = vr_entry_sparsity(vr_block_entry(words, entry_bits, k));
+      ++st.sparsity_histogram[sparsity];
+      if (!coarse) b.finest_owned_codes += 2.0 * sparsity * static_cast<double>(shares[k]);
+    }
   }
   if (coarse) b.coarse_levels += size;
   // Interior voxels inside the level: the rest of the 36³ are apron or padding.
@@ -174,6 +184,7 @@ ByteBreakdown& ByteBreakdown::operator+=(const ByteBreakdown& o) {
   zfp_streams += o.zfp_streams;
   coarse_levels += o.coarse_levels;
   aprons_and_padding += o.aprons_and_padding;
+  finest_owned_codes += o.finest_owned_codes;
   return *this;
 }
 

@@ -62,7 +62,10 @@ expect_error "latency: expected a duration" "$volreel" play "$work/none.vreel" -
 "$volreel" bench rd "$work/a" --out "$work/rd" --ssim-frames 1 > "$work/rd.txt" 2>/dev/null
 grep -q "zfp fixed-accuracy" "$work/rd.txt" || fail "bench rd table lacks zfp fixed-accuracy"
 grep -q "machine:" "$work/rd.txt" || fail "bench rd does not print the machine"
-[ "$(wc -l < "$work/rd/rd.csv")" = 21 ] || fail "rd.csv should have a header and 20 rows"
+[ "$(wc -l < "$work/rd/rd.csv")" = 22 ] || fail "rd.csv should have a header and 21 rows"
+grep -q "^At equal bps" "$work/rd.txt" || fail "bench rd prints no equal-bps table"
+# zfp only: 7 bps rows x 2 zfp families, and a header.
+[ "$(wc -l < "$work/rd/rd_equal_bps.csv")" = 15 ] || fail "rd_equal_bps.csv should have a header and 14 rows"
 head -c 4 "$work/rd/rd.png" | grep -q PNG || fail "rd.png is not a PNG"
 
 echo "cli_end_to_end: all checks passed"

@@ -293,6 +293,19 @@ TEST(Encoder, LagrangianRuleBeatsTheToleranceRuleAtEqualSize) {
   }
 }
 
+/// Atoms of each of the 216 blocks of coded brick `node` (empty for a constant brick).
+std::vector<vr_uint> block_sparsities(const format::FrameView& f, std::uint32_t node) {
+  const auto payload = f.brick_bytes(node);
+  if (payload.size() <= 4) return {};
+  std::vector<vr_uint> words(payload.size() / 4);
+  std::memcpy(words.data(), payload.data(), payload.size());
+  const vr_uint entry_bits = vr_entry_bits(vr_mean_bits(words.data()));
+  std::vector<vr_uint> atoms(VR_BLOCKS_PER_BRICK);
+  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+    atoms[b] = vr_entry_sparsity(vr_block_entry(words.data(), entry_bits, b));
+  return atoms;
+}
+
 TEST(Encoder, PaddingBlocksGetNoAtomsUnderTheLagrangianRule) {  // (at this ε: they weigh 1/216)
   // 40 voxels in x: the second brick column holds interior voxels 34..39 (stored indices 1..6)
   // and padding, so its blocks with x index ≥ 2 (stored 12..35) are padding only.
@@ -305,16 +318,10 @@ TEST(Encoder, PaddingBlocksGetNoAtomsUnderTheLagrangianRule) {  // (at this ε: 
     const format::FrameView f(bytes, "padding.vrf");
     std::size_t padding_codes = 0, other_codes = 0;
     for (std::uint32_t i = f.level(f.level_count() - 1).first_node; i < f.node_count(); ++i) {
-      const auto payload = f.brick_bytes(i);
-      ASSERT_GT(payload.size(), 4u);
-      std::vector<vr_uint> words(payload.size() / 4);
-      std::memcpy(words.data(), payload.data(), payload.size());
-      ASSERT_NE(words.data(), nullptr);
-      const vr_uint entry_bits = vr_entry_bits(vr_mean_bits(words.data()));
-      for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
-        const vr_uint atoms = vr_entry_sparsity(vr_block_entry(words.data(), entry_bits, b));
-        (f.position(i).x == 1 && b % VR_BLOCKS_PER_AXIS >= 2 ? padding_codes : other_codes) += atoms;
-      }
+      const std::vector<vr_uint> atoms = block_sparsities(f, i);
+      ASSERT_EQ(atoms.size(), VR_BLOCKS_PER_BRICK);
+      for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+        (f.position(i).x == 1 && b % VR_BLOCKS_PER_AXIS >= 2 ? padding_codes : other_codes) += atoms[b];
     }
     EXPECT_GT(other_codes, 0u);
     if (rule == encoder::VariableRateRule::lagrangian)
@@ -322,6 +329,41 @@ TEST(Encoder, PaddingBlocksGetNoAtomsUnderTheLagrangianRule) {  // (at this ε: 
     else
       EXPECT_GT(padding_codes, 0u);  // the ε rule codes them like any block
   }
+}
+
+TEST(Encoder, FinestOwnedCodesCountEachBlockByItsOwnVoxels) {
+  // 40 x 34 x 20: the second brick column is mostly padding, and every brick is padded in z.
+  const Volume v = analytic_volume(datasets::AnalyticField::noise, {40, 34, 20});
+  const auto d = random_dictionary(64, 13);
+  auto s = ksvd_settings(1e-2, v);
+  s.rule = encoder::VariableRateRule::tolerance;  // codes padding blocks too, so the weights matter
+  encoder::FrameStats st;
+  const auto bytes = encoder::FrameEncoder(&d, s).encode(0, v, &st);
+  const format::FrameView f(bytes, "owned.vrf");
+  const std::uint32_t dims[3] = {40, 34, 20};
+  double expected = 0, finest_codes = 0;
+  for (std::uint32_t i = f.level(f.level_count() - 1).first_node; i < f.node_count(); ++i) {
+    const std::vector<vr_uint> sparsities = block_sparsities(f, i);
+    ASSERT_EQ(sparsities.size(), VR_BLOCKS_PER_BRICK);
+    const std::uint32_t pos[3] = {f.position(i).x, f.position(i).y, f.position(i).z};
+    for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+      const vr_uint atoms = sparsities[b];
+      const std::uint32_t block[3] = {b % 6, (b / 6) % 6, b / 36};
+      double owned = 1;  // voxel by voxel: stored index 1..34 and inside the volume
+      for (int a = 0; a < 3; ++a) {
+        int n = 0;
+        for (std::uint32_t k = 6 * block[a]; k < 6 * block[a] + 6; ++k)
+          n += k >= 1 && k <= 34 && 34 * pos[a] + k - 1 < dims[a];
+        owned *= n / 6.0;
+      }
+      expected += 2.0 * atoms * owned;
+      finest_codes += 2.0 * atoms;
+    }
+  }
+  EXPECT_NEAR(st.breakdown.finest_owned_codes, expected, 1e-6 * expected);
+  EXPECT_GT(expected, 0);
+  EXPECT_LT(expected, 0.7 * finest_codes);  // a good part of these bricks is apron and padding
+  EXPECT_LT(finest_codes, static_cast<double>(st.breakdown.codes));  // coarse levels excluded
 }
 
 /// Mean bits and the block means' decoded errors of every coded brick of a frame file: the largest

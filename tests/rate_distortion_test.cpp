@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 #include "test_util.hpp"
@@ -120,7 +121,7 @@ TEST(RateDistortion, CsvAndPlotAreWritten) {
   volreel::test::TempDir dir("rd");
   MemorySeries series(Dims{12, 12, 12}, 2);
   const auto codecs = vp::make_zfp_sweep(2.0);
-  EXPECT_EQ(codecs.size(), 20u);
+  EXPECT_EQ(codecs.size(), 21u);
   vp::RdOptions options;
   options.ssim_frames = 0;
   const auto points = vp::run_rate_distortion(series, codecs, options);
@@ -131,7 +132,7 @@ TEST(RateDistortion, CsvAndPlotAreWritten) {
   std::getline(csv, line);
   EXPECT_EQ(line.rfind("codec,setting,frames,bytes,bps,psnr_db", 0), 0u);
   while (std::getline(csv, line)) ++rows;
-  EXPECT_EQ(rows, 20);
+  EXPECT_EQ(rows, 21);
   std::ostringstream table;
   vp::print_rd_table(table, points);
   EXPECT_NE(table.str().find("zfp fixed-rate"), std::string::npos);
@@ -149,4 +150,86 @@ TEST(RateDistortion, CsvAndPlotAreWritten) {
   png.read(magic, 8);
   EXPECT_EQ(std::memcmp(magic, "\x89PNG\r\n\x1a\n", 8), 0) << "rd.png is not a PNG";
   EXPECT_FALSE(std::filesystem::exists(dir / "rd.png.gp"));
+}
+
+namespace {
+
+vp::RdPoint rd_point(const std::string& family, double bps, double psnr) {
+  vp::RdPoint p;
+  p.family = family;
+  p.setting = "s";
+  p.bps = bps;
+  p.psnr = psnr;
+  return p;
+}
+
+}  // namespace
+
+TEST(RateDistortion, PsnrAtBpsInterpolatesWithinOneFamilyOnly) {
+  // Out of order, with a lossless setting (infinite PSNR) and a second family in between.
+  const std::vector<vp::RdPoint> points = {
+      rd_point("a", 0.8, 48), rd_point("b", 0.3, 90), rd_point("a", 0.2, 40),
+      rd_point("a", 32, std::numeric_limits<double>::infinity()), rd_point("a", 0.4, 44)};
+  EXPECT_NEAR(*vp::psnr_at_bps(points, "a", 0.3), 42.0, 1e-12);
+  EXPECT_NEAR(*vp::psnr_at_bps(points, "a", 0.4), 44.0, 1e-12);
+  EXPECT_NEAR(*vp::psnr_at_bps(points, "a", 0.6), 46.0, 1e-12);
+  EXPECT_NEAR(*vp::psnr_at_bps(points, "a", 0.2), 40.0, 1e-12);
+  EXPECT_NEAR(*vp::psnr_at_bps(points, "a", 0.8), 48.0, 1e-12);
+  // Never extrapolated: below the first setting, above the last finite one, or another family.
+  EXPECT_FALSE(vp::psnr_at_bps(points, "a", 0.19));
+  EXPECT_FALSE(vp::psnr_at_bps(points, "a", 1.0));
+  EXPECT_FALSE(vp::psnr_at_bps(points, "c", 0.3));
+  EXPECT_NEAR(*vp::psnr_at_bps(points, "b", 0.3), 90.0, 1e-12);
+  EXPECT_FALSE(vp::psnr_at_bps(points, "b", 0.31));
+  // Two settings at the same bps: the better one.
+  const std::vector<vp::RdPoint> tied = {rd_point("t", 0.5, 41), rd_point("t", 0.5, 43), rd_point("t", 0.7, 45)};
+  EXPECT_NEAR(*vp::psnr_at_bps(tied, "t", 0.5), 43.0, 1e-12);
+  EXPECT_NEAR(*vp::psnr_at_bps(tied, "t", 0.6), 44.0, 1e-12);
+}
+
+TEST(RateDistortion, EqualBpsTableComparesWithVariableRate) {
+  const std::string ref = "volreel variable-rate";
+  const std::vector<vp::RdPoint> points = {rd_point("zfp fixed-accuracy", 0.2, 40), rd_point("zfp fixed-accuracy", 0.8, 46),
+                                           rd_point(ref, 0.3, 50), rd_point(ref, 0.5, 52)};
+  const std::vector<double> bps = {0.3, 0.4, 0.6};
+  const vp::EqualBpsTable t = vp::equal_bps_table(points, bps);
+  ASSERT_EQ(t.families.size(), 2u);
+  EXPECT_EQ(t.families[0], ref);
+  EXPECT_EQ(t.reference, ref);
+  ASSERT_EQ(t.psnr.size(), 3u);
+  EXPECT_NEAR(*t.psnr[1][0], 51.0, 1e-12);
+  EXPECT_NEAR(*t.psnr[1][1], 42.0, 1e-12);
+  EXPECT_FALSE(t.psnr[2][0]);
+  EXPECT_NEAR(*t.psnr[2][1], 44.0, 1e-12);
+
+  std::ostringstream text;
+  vp::print_equal_bps_table(text, t);
+  const std::string s = text.str();
+  EXPECT_NE(s.find("41.00 ( +9.00)"), std::string::npos) << s;  // 0.3 bps: 50 - 41
+  EXPECT_NE(s.find("42.00 ( +9.00)"), std::string::npos) << s;  // 0.4 bps: 51 - 42
+  EXPECT_NE(s.find("44.00"), std::string::npos) << s;
+  EXPECT_EQ(s.find("44.00 ("), std::string::npos) << s;  // 0.6 bps: no variable rate to compare
+
+  const volreel::test::TempDir dir("equal_bps");
+  vp::write_equal_bps_csv(dir / "e.csv", t);
+  std::ifstream csv(dir / "e.csv");
+  std::string line, all;
+  std::getline(csv, line);
+  EXPECT_EQ(line, "bps,codec,psnr_db,reference,reference_minus_codec_db");
+  int rows = 0;
+  while (std::getline(csv, line)) ++rows, all += line + '\n';
+  EXPECT_EQ(rows, 6);
+  EXPECT_NE(all.find("0.4,\"zfp fixed-accuracy\",42,\"volreel variable-rate\",9\n"), std::string::npos) << all;
+  EXPECT_NE(all.find("0.6,\"volreel variable-rate\",,\"volreel variable-rate\",\n"), std::string::npos) << all;
+  EXPECT_FALSE(std::filesystem::exists(dir / "e.csv.tmp"));
+
+  // Without volreel's variable rate there is nothing to compare with.
+  const std::vector<vp::RdPoint> zfp_only(points.begin(), points.begin() + 2);
+  const vp::EqualBpsTable z = vp::equal_bps_table(zfp_only, bps);
+  EXPECT_TRUE(z.reference.empty());
+  ASSERT_EQ(z.families.size(), 1u);
+  std::ostringstream ztext;
+  vp::print_equal_bps_table(ztext, z);
+  EXPECT_EQ(ztext.str().find("(+"), std::string::npos) << ztext.str();
+  EXPECT_NE(ztext.str().find("44.00\n"), std::string::npos) << ztext.str();
 }

@@ -22,6 +22,17 @@ namespace fs = std::filesystem;
 
 namespace {
 
+/// Writes text to path through a temporary name, so a reader never sees half a file.
+void write_atomically(const fs::path& path, const std::string& text) {
+  const fs::path tmp = path.string() + ".tmp";
+  {
+    std::ofstream f(tmp);
+    f << text;
+    if (!f.flush()) throw InputError("cannot write '" + tmp.string() + "'");
+  }
+  fs::rename(tmp, path);
+}
+
 std::size_t frames_used(const datasets::SeriesReader& series, const RdOptions& options) {
   const std::size_t n = series.info().frames;
   return options.max_frames ? std::min(n, options.max_frames) : n;
@@ -149,13 +160,96 @@ void write_rd_csv(const fs::path& path, std::span<const RdPoint> points) {
     s << '"' << p.family << "\"," << '"' << p.setting << "\"," << p.frames << ',' << p.bytes << ',' << p.bps << ','
       << p.psnr << ',' << p.psnr_zfp << ',' << p.ssim << ',' << p.rmse << ',' << p.max_abs_error << ','
       << p.compress_mvoxels_per_s << ',' << p.decompress_mvoxels_per_s << '\n';
-  const fs::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream f(tmp);
-    f << s.str();
-    if (!f.flush()) throw InputError("cannot write '" + tmp.string() + "'");
+  write_atomically(path, s.str());
+}
+
+std::optional<double> psnr_at_bps(std::span<const RdPoint> points, const std::string& family, double bps) {
+  std::vector<const RdPoint*> curve;
+  for (const RdPoint& p : points)
+    if (p.family == family && std::isfinite(p.psnr) && std::isfinite(p.bps)) curve.push_back(&p);
+  std::stable_sort(curve.begin(), curve.end(), [](const RdPoint* a, const RdPoint* b) { return a->bps < b->bps; });
+  if (curve.empty() || !(bps >= curve.front()->bps && bps <= curve.back()->bps)) return std::nullopt;
+  for (std::size_t i = 0; i + 1 < curve.size(); ++i) {
+    const RdPoint &a = *curve[i], &b = *curve[i + 1];
+    if (bps > b.bps) continue;
+    if (!(b.bps > a.bps)) return std::max(a.psnr, b.psnr);  // equal bps: the better setting
+    return a.psnr + (b.psnr - a.psnr) * (bps - a.bps) / (b.bps - a.bps);
   }
-  fs::rename(tmp, path);
+  return curve.front()->psnr;  // a single setting, exactly at its bps
+}
+
+EqualBpsTable equal_bps_table(std::span<const RdPoint> points, std::span<const double> bps,
+                              const std::string& reference) {
+  EqualBpsTable t;
+  for (const RdPoint& p : points)
+    if (p.family == reference) t.reference = reference;
+  if (!t.reference.empty()) t.families.push_back(t.reference);
+  for (const RdPoint& p : points)
+    if (std::find(t.families.begin(), t.families.end(), p.family) == t.families.end()) t.families.push_back(p.family);
+  t.bps.assign(bps.begin(), bps.end());
+  for (double b : t.bps) {
+    auto& row = t.psnr.emplace_back();
+    for (const std::string& f : t.families) row.push_back(psnr_at_bps(points, f, b));
+  }
+  return t;
+}
+
+namespace {
+
+/// The reference family's PSNR in row r, NaN when there is none or it was not measured there.
+double reference_psnr(const EqualBpsTable& t, std::size_t r) {
+  if (t.reference.empty() || t.psnr[r].empty() || !t.psnr[r].front()) return std::nan("");
+  return *t.psnr[r].front();
+}
+
+}  // namespace
+
+void print_equal_bps_table(std::ostream& out, const EqualBpsTable& t) {
+  out << "At equal bps: PSNR dB, linear in bps between the two settings that bracket each value ('-': outside "
+         "the settings measured)"
+      << (t.reference.empty() ? "" : "; in parentheses " + t.reference + " minus that codec") << ":\n";
+  char cell[64];
+  std::string header = "    bps";
+  for (const std::string& f : t.families) {
+    std::snprintf(cell, sizeof cell, "  %24.24s", f.c_str());
+    header += cell;
+  }
+  out << header << '\n';
+  for (std::size_t r = 0; r < t.bps.size(); ++r) {
+    std::snprintf(cell, sizeof cell, "%7.3f", t.bps[r]);
+    std::string line = cell;
+    const double ref = reference_psnr(t, r);
+    for (std::size_t f = 0; f < t.families.size(); ++f) {
+      const std::optional<double>& v = t.psnr[r][f];
+      if (!v)
+        std::snprintf(cell, sizeof cell, "  %24s", "-");
+      else if (t.reference.empty() || f == 0)
+        std::snprintf(cell, sizeof cell, "  %24.2f", *v);
+      else if (std::isfinite(ref))
+        std::snprintf(cell, sizeof cell, "  %15.2f (%+6.2f)", *v, ref - *v);
+      else
+        std::snprintf(cell, sizeof cell, "  %15.2f %8s", *v, "");
+      line += cell;
+    }
+    out << line << '\n';
+  }
+}
+
+void write_equal_bps_csv(const fs::path& path, const EqualBpsTable& t) {
+  std::ostringstream s;
+  s.precision(9);
+  s << "bps,codec,psnr_db,reference,reference_minus_codec_db\n";
+  for (std::size_t r = 0; r < t.bps.size(); ++r)
+    for (std::size_t f = 0; f < t.families.size(); ++f) {
+      const std::optional<double>& v = t.psnr[r][f];
+      const double ref = reference_psnr(t, r);
+      s << t.bps[r] << ",\"" << t.families[f] << "\",";
+      if (v) s << *v;
+      s << ",\"" << t.reference << "\",";
+      if (v && std::isfinite(ref)) s << ref - *v;
+      s << '\n';
+    }
+  write_atomically(path, s.str());
 }
 
 namespace {

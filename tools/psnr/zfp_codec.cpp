@@ -89,7 +89,7 @@ std::unique_ptr<FrameCodec> make_zfp_rate(double bits_per_value) {
 std::vector<std::unique_ptr<FrameCodec>> make_zfp_sweep(double value_range) {
   std::vector<std::unique_ptr<FrameCodec>> codecs;
   const double range = value_range > 0 ? value_range : 1.0;
-  for (int k = 0; k <= 12; ++k) codecs.push_back(make_zfp_accuracy(range * std::ldexp(1.0, -k)));
+  for (int k = -1; k <= 12; ++k) codecs.push_back(make_zfp_accuracy(range * std::ldexp(1.0, -k)));
   for (double rate : {0.125, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0}) codecs.push_back(make_zfp_rate(rate));
   return codecs;
 }

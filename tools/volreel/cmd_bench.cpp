@@ -1,5 +1,6 @@
 // cmd_bench.cpp: `volreel bench ...` — benchmark programs that print measured figures.
 //   bench rd SERIES   rate-distortion of every codec (zfp fixed accuracy and fixed rate so far)
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -23,13 +24,17 @@ struct RdCommandOptions {
   bool no_plot = false;
   std::string dictionary;                   ///< volreel's codecs need one; without it only zfp runs
   std::string atom_storage = "f16";         ///< how the dictionary counts: as encode stores it
-  std::vector<double> tolerances = {1.0 / 64, 1.0 / 128, 1.0 / 256, 1.0 / 512, 1.0 / 1024, 1.0 / 2048};
+  /// Octave steps, half-octave steps where turbulence at 128³ lands in 0.3–0.6 bps (the equal-bps rows).
+  std::vector<double> tolerances = {std::ldexp(1.0, -6),  std::ldexp(1.0, -7), std::exp2(-7.5), std::ldexp(1.0, -8),
+                                    std::exp2(-8.5),      std::ldexp(1.0, -9), std::ldexp(1.0, -10), std::ldexp(1.0, -11)};
   std::vector<int> sparsities = {1, 2, 3, 4, 5, 6, 7, 8};
   std::vector<double> lagrangian_factors = {encoder::CodingSettings{}.lagrangian_factor};
   bool tolerance_rule = false;              ///< also variable rate with the ε rule
   std::string pursuit = dictionary::pursuit_name(encoder::CodingSettings{}.selection);
   double level_factor = encoder::CodingSettings{}.level_tolerance_factor;
   std::vector<double> zfp_bricks;           ///< zfp inside the container, accuracy / range (default none)
+  /// Rows of the equal-bps table: the span MTV-Player's Table 1 reports (0.3 to 0.6 bps).
+  std::vector<double> at_bps = {0.30, 0.35, 0.40, 0.45, 0.50, 0.55, 0.60};
 };
 
 void run_rd(const RdCommandOptions& o) {
@@ -73,7 +78,12 @@ void run_rd(const RdCommandOptions& o) {
   std::filesystem::create_directories(o.out);
   const std::filesystem::path csv = std::filesystem::path(o.out) / "rd.csv";
   psnr::write_rd_csv(csv, points);
-  std::printf("\nwrote %s\n", csv.c_str());
+  std::cout << '\n';
+  const psnr::EqualBpsTable equal = psnr::equal_bps_table(points, o.at_bps);
+  psnr::print_equal_bps_table(std::cout, equal);
+  const std::filesystem::path equal_csv = std::filesystem::path(o.out) / "rd_equal_bps.csv";
+  psnr::write_equal_bps_csv(equal_csv, equal);
+  std::printf("\nwrote %s and %s\n", csv.c_str(), equal_csv.c_str());
   if (!o.no_plot) {
     const std::filesystem::path png = std::filesystem::path(o.out) / "rd.png";
     try {
@@ -94,9 +104,10 @@ void add_bench_command(CLI::App& app) {
   auto o = std::make_shared<RdCommandOptions>();
   CLI::App* rd = bench->add_subcommand(
       "rd",
-      "Rate-distortion of the codecs on a series: zfp fixed-accuracy (tolerances range*2^-k, k=0,1,...,12) and\n"
+      "Rate-distortion of the codecs on a series: zfp fixed-accuracy (tolerances range*2^-k, k=-1,0,1,...,12) and\n"
       "fixed-rate (0.125 to 8 bits/value). Prints bps, PSNR, SSIM, compression and decompression MVoxel/s per\n"
-      "setting; writes OUT/rd.csv and OUT/rd.png (PSNR vs bps, via gnuplot).");
+      "setting, then every codec's PSNR at equal bps (--at-bps); writes OUT/rd.csv, OUT/rd_equal_bps.csv and\n"
+      "OUT/rd.png (PSNR vs bps, via gnuplot).");
   rd->add_option("SERIES", o->series, "Raw series directory, HDF5 file or raw file")->required();
   rd->add_option("--out", o->out, "Directory for rd.csv and rd.png")->capture_default_str();
   rd->add_option("--max-frames", o->rd.max_frames, "Use only the first N frames (0: all)")->capture_default_str();
@@ -123,6 +134,11 @@ void add_bench_command(CLI::App& app) {
                  "Variable rate: code level d above the finest to eps*F^d (as volreel encode --level-factor; the\n"
                  "finest level, which the table measures, is the same, so F changes only the bps)")
       ->check(CLI::Range(1.0, 16.0))
+      ->capture_default_str();
+  rd->add_option("--at-bps", o->at_bps,
+                 "Rows of the equal-bps table (OUT/rd_equal_bps.csv): each codec's PSNR at these bps, linear in bps\n"
+                 "between the two settings that bracket each value, never extrapolated, and volreel variable rate's\n"
+                 "difference from each")
       ->capture_default_str();
   rd->add_option("--zfp-bricks", o->zfp_bricks, "Also zfp per brick inside the container, accuracy as fractions of the range");
   o->reader.add_to(*rd);

@@ -145,6 +145,14 @@ void print_breakdown(const encoder::EncodeSummary& s) {
   }
   std::printf("; coarse levels %.1f%%, aprons and padding about %.1f%% (of all frame bytes)\n",
               share(static_cast<double>(b.coarse_levels)), share(b.aprons_and_padding));
+  if (b.codes > 0) {
+    std::printf("codes of the finest level's own voxels (interior, inside the volume): %.1f%% of the frame bytes",
+                share(b.finest_owned_codes));
+    // In bps when this run wrote every frame (the container's bytes are then all accounted for).
+    if (s.skipped == 0 && s.container_bytes > 0)
+      std::printf(", %.4f bps", s.bps * b.finest_owned_codes / static_cast<double>(s.container_bytes));
+    std::printf("\n");
+  }
   std::size_t blocks = 0, codes = 0;
   for (std::size_t k = 0; k < s.sparsity_histogram.size(); ++k)
     blocks += s.sparsity_histogram[k], codes += k * s.sparsity_histogram[k];

@@ -77,10 +77,11 @@ std::vector<std::unique_ptr<psnr::FrameCodec>> make_volreel_sweep(
       s.tolerance = range * relative;
       s.rule = encoder::VariableRateRule::lagrangian;
       s.lagrangian_factor = factor;
-      std::string setting = setting_text("eps=%.2e", s.tolerance);
-      if (sweep.lagrangian_factors.size() > 1) setting += setting_text(",k=%g", factor);
-      codecs.push_back(std::make_unique<VolreelCodec>(dictionary, dictionary_bytes, s,
-                                                      "volreel variable-rate", setting));
+      // Several k: one curve (family) per k, so the plot and the equal-bps table never mix them.
+      std::string family = "volreel variable-rate";
+      if (sweep.lagrangian_factors.size() > 1) family += setting_text(" k=%g", factor);
+      codecs.push_back(std::make_unique<VolreelCodec>(dictionary, dictionary_bytes, s, family,
+                                                      setting_text("eps=%.2e", s.tolerance)));
     }
     if (sweep.tolerance_rule) {
       auto s = base;

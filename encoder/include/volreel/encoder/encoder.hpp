@@ -114,7 +114,7 @@ void extract_brick(const Pyramid& pyramid, std::size_t level, std::uint32_t x, s
                    std::uint32_t z, std::span<float> out);
 
 /// Where a frame file's bytes go. The parts from frame_tables to zfp_streams sum to the file's
-/// size; the last two are shares of the payload parts.
+/// size; the last three are shares of the payload parts.
 struct ByteBreakdown {
   std::size_t frame_tables = 0;     ///< header, level table, node table, brick offsets
   std::size_t constant_bricks = 0;  ///< 4-byte values
@@ -127,6 +127,10 @@ struct ByteBreakdown {
   /// Payload bytes in proportion to the stored voxels that are aprons or padding (outside the
   /// level), brick by brick: an estimate of what the brick layout costs.
   double aprons_and_padding = 0;
+  /// Code bytes of the finest level, each block's weighted by the share of its voxels that are
+  /// the level's own (interior, inside the volume): all a frame would cost if block means, tables,
+  /// coarse levels, aprons and padding were free, at the same codes.
+  double finest_owned_codes = 0;
   ByteBreakdown& operator+=(const ByteBreakdown& o);
   std::size_t total() const {
     return frame_tables + constant_bricks + brick_headers + block_entries + codes + alignment +

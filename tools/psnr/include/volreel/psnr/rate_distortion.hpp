@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <iosfwd>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -62,13 +63,35 @@ std::vector<RdPoint> run_rate_distortion(const datasets::SeriesReader& series,
                                          std::span<const std::unique_ptr<FrameCodec>> codecs,
                                          const RdOptions& options, const Progress& progress = {});
 
-/// zfp fixed-accuracy at tolerances range·2^-k, k = 0, 1, …, 12, and fixed-rate at
-/// 0.125, 0.25, 0.5, 1, 2, 4, 8 bits per value: 20 settings spanning about 0.1 to 10 bps.
+/// zfp fixed-accuracy at tolerances range·2^-k, k = −1, 0, 1, …, 12 (zfp rounds a tolerance down
+/// to a power of two, so no finer steps exist; k = −1 reaches below 0.3 bps on turbulence), and
+/// fixed-rate at 0.125, 0.25, 0.5, 1, 2, 4, 8 bits per value: 21 settings, about 0.1 to 10 bps.
 std::vector<std::unique_ptr<FrameCodec>> make_zfp_sweep(double value_range);
 std::unique_ptr<FrameCodec> make_zfp_accuracy(double tolerance);
 std::unique_ptr<FrameCodec> make_zfp_rate(double bits_per_value);
 
+/// PSNR of one family at a bps, linear in bps between the two measured settings of the family
+/// that bracket it (settings sorted by bps; non-finite PSNRs skipped). std::nullopt outside the
+/// family's measured span: a curve is never extrapolated.
+std::optional<double> psnr_at_bps(std::span<const RdPoint> points, const std::string& family, double bps);
+
+/// Every family's PSNR at the same bps values, for reading comparisons at equal bps.
+struct EqualBpsTable {
+  std::vector<std::string> families;  ///< in order of first appearance in the points
+  std::string reference;              ///< the family the others are compared with ("" for none)
+  std::vector<double> bps;
+  std::vector<std::vector<std::optional<double>>> psnr;  ///< [bps row][family]
+};
+
+/// The family compared with is `reference` when the points have it, else none.
+EqualBpsTable equal_bps_table(std::span<const RdPoint> points, std::span<const double> bps,
+                              const std::string& reference = "volreel variable-rate");
+
 void print_rd_table(std::ostream& out, std::span<const RdPoint> points);
+/// One row per bps: each family's PSNR and, for the others, reference − family.
+void print_equal_bps_table(std::ostream& out, const EqualBpsTable& table);
+/// Long form: bps, family, PSNR and reference − family (empty where not measured).
+void write_equal_bps_csv(const std::filesystem::path& path, const EqualBpsTable& table);
 void write_rd_csv(const std::filesystem::path& path, std::span<const RdPoint> points);
 /// PSNR vs bps, one line per family, via gnuplot (pngcairo). Throws InputError with an
 /// installation hint when gnuplot is not on PATH.
