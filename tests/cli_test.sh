@@ -51,6 +51,7 @@ rm "$work/b/000003.f32"
 expect_error "000003.f32.*missing" "$volreel" compare "$work/a" "$work/b"
 expect_error "already holds a series" "$volreel" gen analytic --frames 2 --out "$work/a"
 expect_error "unknown analytic field" "$volreel" gen analytic --field nope --out "$work/d"
+expect_error "--at-bps: expected bits per voxel > 0" "$volreel" bench rd "$work/a" --at-bps nan
 expect_error "not a PNG\|cannot\|PNG" "$volreel" compare "$work/frame.raw" "$work/frame.png"
 # The player checks its options before it opens a window.
 expect_error "at least 64x64" "$volreel" play "$work/none.vreel" --size 10x10
