@@ -189,11 +189,13 @@ TEST(RateDistortion, PsnrAtBpsInterpolatesWithinOneFamilyOnly) {
 
 TEST(RateDistortion, EqualBpsTableComparesWithVariableRate) {
   const std::string ref = "volreel variable-rate";
+  const std::string long_name = "volreel variable-rate eps-rule";  // longer than the default column
   const std::vector<vp::RdPoint> points = {rd_point("zfp fixed-accuracy", 0.2, 40), rd_point("zfp fixed-accuracy", 0.8, 46),
-                                           rd_point(ref, 0.3, 50), rd_point(ref, 0.5, 52)};
+                                           rd_point(ref, 0.3, 50), rd_point(ref, 0.5, 52),
+                                           rd_point(long_name, 0.3, 47.5), rd_point(long_name, 0.5, 49.5)};
   const std::vector<double> bps = {0.3, 0.4, 0.6};
   const vp::EqualBpsTable t = vp::equal_bps_table(points, bps);
-  ASSERT_EQ(t.families.size(), 2u);
+  ASSERT_EQ(t.families.size(), 3u);
   EXPECT_EQ(t.families[0], ref);
   EXPECT_EQ(t.reference, ref);
   ASSERT_EQ(t.psnr.size(), 3u);
@@ -209,6 +211,8 @@ TEST(RateDistortion, EqualBpsTableComparesWithVariableRate) {
   EXPECT_NE(s.find("42.00 ( +9.00)"), std::string::npos) << s;  // 0.4 bps: 51 - 42
   EXPECT_NE(s.find("44.00"), std::string::npos) << s;
   EXPECT_EQ(s.find("44.00 ("), std::string::npos) << s;  // 0.6 bps: no variable rate to compare
+  EXPECT_NE(s.find(long_name), std::string::npos) << s;    // names are never cut
+  EXPECT_NE(s.find("48.50 ( +2.50)"), std::string::npos) << s;
 
   const volreel::test::TempDir dir("equal_bps");
   vp::write_equal_bps_csv(dir / "e.csv", t);
@@ -218,7 +222,7 @@ TEST(RateDistortion, EqualBpsTableComparesWithVariableRate) {
   EXPECT_EQ(line, "bps,codec,psnr_db,reference,reference_minus_codec_db");
   int rows = 0;
   while (std::getline(csv, line)) ++rows, all += line + '\n';
-  EXPECT_EQ(rows, 6);
+  EXPECT_EQ(rows, 9);
   EXPECT_NE(all.find("0.4,\"zfp fixed-accuracy\",42,\"volreel variable-rate\",9\n"), std::string::npos) << all;
   EXPECT_NE(all.find("0.6,\"volreel variable-rate\",,\"volreel variable-rate\",\n"), std::string::npos) << all;
   EXPECT_FALSE(std::filesystem::exists(dir / "e.csv.tmp"));

@@ -208,10 +208,12 @@ void print_equal_bps_table(std::ostream& out, const EqualBpsTable& t) {
   out << "At equal bps: PSNR dB, linear in bps between the two settings that bracket each value ('-': outside "
          "the settings measured)"
       << (t.reference.empty() ? "" : "; in parentheses " + t.reference + " minus that codec") << ":\n";
-  char cell[64];
+  int width = 24;  // every column as wide as the longest codec name
+  for (const std::string& f : t.families) width = std::max(width, static_cast<int>(f.size()));
+  char cell[128];
   std::string header = "    bps";
   for (const std::string& f : t.families) {
-    std::snprintf(cell, sizeof cell, "  %24.24s", f.c_str());
+    std::snprintf(cell, sizeof cell, "  %*s", width, f.c_str());
     header += cell;
   }
   out << header << '\n';
@@ -222,13 +224,13 @@ void print_equal_bps_table(std::ostream& out, const EqualBpsTable& t) {
     for (std::size_t f = 0; f < t.families.size(); ++f) {
       const std::optional<double>& v = t.psnr[r][f];
       if (!v)
-        std::snprintf(cell, sizeof cell, "  %24s", "-");
+        std::snprintf(cell, sizeof cell, "  %*s", width, "-");
       else if (t.reference.empty() || f == 0)
-        std::snprintf(cell, sizeof cell, "  %24.2f", *v);
+        std::snprintf(cell, sizeof cell, "  %*.2f", width, *v);
       else if (std::isfinite(ref))
-        std::snprintf(cell, sizeof cell, "  %15.2f (%+6.2f)", *v, ref - *v);
+        std::snprintf(cell, sizeof cell, "  %*.2f (%+6.2f)", width - 9, *v, ref - *v);
       else
-        std::snprintf(cell, sizeof cell, "  %15.2f %8s", *v, "");
+        std::snprintf(cell, sizeof cell, "  %*.2f %8s", width - 9, *v, "");
       line += cell;
     }
     out << line << '\n';
