@@ -140,6 +140,8 @@ void add_to_breakdown(const Cell& c, const std::array<std::uint32_t, 3>& level_d
                       bool ksvd, FrameStats& st) {
   ByteBreakdown& b = st.breakdown;
   const std::size_t size = c.payload.size();
+  float shares[VR_BLOCKS_PER_BRICK];  // of each block, the voxels that are the level's own
+  owned_block_shares(c.x, c.y, c.z, level_dims, shares);
   if (c.constant) {
     b.constant_bricks += size;
   } else if (!ksvd) {
@@ -153,8 +155,6 @@ void add_to_breakdown(const Cell& c, const std::array<std::uint32_t, 3>& level_d
     b.codes += 2 * c.codes;
     b.alignment += size - vr_payload_bytes(entry_bits, static_cast<vr_uint>(c.codes));
     ++st.mean_bits_histogram[vr_mean_bits(words)];
-    float shares[VR_BLOCKS_PER_BRICK];
-    owned_block_shares(c.x, c.y, c.z, level_dims, shares);
     for (std::uint32_t k = 0; k < VR_BLOCKS_PER_BRICK; ++k) {
       const vr_uint sparsity = vr_entry_sparsity(vr_block_entry(words, entry_bits, k));
       ++st.sparsity_histogram[sparsity];
@@ -162,14 +162,11 @@ void add_to_breakdown(const Cell& c, const std::array<std::uint32_t, 3>& level_d
     }
   }
   if (coarse) b.coarse_levels += size;
-  // Interior voxels inside the level: the rest of the 36³ are apron or padding.
-  const std::uint32_t position[3] = {c.x, c.y, c.z};
-  double owned = 1;
-  for (int a = 0; a < 3; ++a)
-    owned *= static_cast<double>(
-        std::min<std::int64_t>(brick_interior, std::int64_t{level_dims[static_cast<std::size_t>(a)]} -
-                                                   std::int64_t{brick_interior} * position[a]));
-  b.aprons_and_padding += static_cast<double>(size) * (1 - owned / static_cast<double>(brick_voxels));
+  // The blocks' owned shares average to the brick's interior voxels inside the level: the rest of
+  // the 36³ are apron or padding.
+  double owned = 0;
+  for (float share : shares) owned += static_cast<double>(share);
+  b.aprons_and_padding += static_cast<double>(size) * (1 - owned / VR_BLOCKS_PER_BRICK);
 }
 
 }  // namespace

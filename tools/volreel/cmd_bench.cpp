@@ -2,7 +2,6 @@
 //   bench rd SERIES   rate-distortion of every codec (zfp fixed accuracy and fixed rate so far)
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <memory>
@@ -141,11 +140,7 @@ void add_bench_command(CLI::App& app) {
                  "between the two settings that bracket each value, never extrapolated, and volreel variable rate's\n"
                  "difference from each")
       ->check([](const std::string& text) {
-        char* end = nullptr;
-        const double v = std::strtod(text.c_str(), &end);
-        return end != text.c_str() && *end == '\0' && std::isfinite(v) && v > 0
-                   ? std::string()
-                   : "expected bits per voxel > 0, e.g. 0.3, found '" + text + "'";
+        return positive_number(text) ? std::string() : "expected bits per voxel > 0, e.g. 0.3, found '" + text + "'";
       })
       ->capture_default_str();
   rd->add_option("--zfp-bricks", o->zfp_bricks, "Also zfp per brick inside the container, accuracy as fractions of the range");

@@ -194,14 +194,11 @@ double tour_play_speed(const cpu_render::Tour& tour) {
 double bench_bandwidth(const std::string& text, double playback_bytes_per_s) {
   if (text == "unlimited") return 0;
   if (!text.empty() && (text.back() == 'x' || text.back() == 'X')) {
-    const std::string number = text.substr(0, text.size() - 1);
-    char* end = nullptr;
-    const double factor = std::strtod(number.c_str(), &end);
-    if (number.empty() || end != number.c_str() + number.size() || !(factor > 0) || !std::isfinite(factor))
-      bad("--bandwidth", "a multiple of the playback data rate such as 0.5x, or a rate such as 20MB/s", text);
+    const std::optional<double> factor = positive_number(text.substr(0, text.size() - 1));
+    if (!factor) bad("--bandwidth", "a multiple of the playback data rate such as 0.5x, or a rate such as 20MB/s", text);
     if (!(playback_bytes_per_s > 0))
       throw InputError("--bandwidth " + text + ": the tour never plays, so there is no playback data rate; give a rate such as 1MB/s");
-    return factor * playback_bytes_per_s;
+    return *factor * playback_bytes_per_s;
   }
   return vulkan_render::parse_bandwidth(text);
 }

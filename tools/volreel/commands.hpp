@@ -1,6 +1,9 @@
 // commands.hpp: the subcommands of the volreel program.
 #pragma once
 
+#include <optional>
+#include <string>
+
 #include <CLI/CLI.hpp>
 
 #include "volreel/datasets/series.hpp"
@@ -25,6 +28,10 @@ void add_play_command(CLI::App& app);
 void add_render_command(CLI::App& app);
 /// `bench play` (cmd_bench_play.cpp; needs the player's Vulkan renderer).
 void add_bench_play_command(CLI::App& bench);
+
+/// The whole of text as a finite number > 0, or std::nullopt (empty, trailing characters, NaN,
+/// infinite, zero or negative): for options CLI11's own checks let NaN through.
+std::optional<double> positive_number(const std::string& text);
 
 /// Options that say how to read a series whose file does not describe itself; shared by every
 /// command that reads one.

@@ -1,7 +1,18 @@
-// reader_options.cpp: the command-line options that describe how to read a series.
+// reader_options.cpp: the command-line options that describe how to read a series, and the
+// parsing of option values shared by several commands.
+#include <cmath>
+#include <cstdlib>
+
 #include "commands.hpp"
 
 namespace volreel::cli {
+
+std::optional<double> positive_number(const std::string& text) {
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v) || !(v > 0)) return std::nullopt;
+  return v;
+}
 
 void ReaderOptions::add_to(CLI::App& command) {
   command.add_option("--dims", dims, "Raw file: volume size XxYxZ (x fastest), e.g. 256x256x128");
