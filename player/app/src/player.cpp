@@ -306,6 +306,7 @@ Player::Player(const PlayerOptions& options)
                 stream::PlayheadOptions{options.keyframes_per_second, options.loop}) {
   const format::Manifest& m = container_.manifest();
   // 1. Vulkan: a device whose queue can present to the window's surface.
+  vulkan::keep_vulkan_drivers_loaded();  // before GLFW's own first Vulkan calls
   if (!glfwVulkanSupported())
     throw vulkan::NoDeviceError("no Vulkan loader or implementation usable by GLFW");
   vulkan::ContextOptions co;

@@ -1,6 +1,8 @@
 // context.cpp: instance, validation messenger, physical device choice, device and queue.
 #include "volreel/vulkan/context.hpp"
 
+#include "module_residency.hpp"
+
 #include <algorithm>
 #include <cstdlib>
 #include <cstring>
@@ -118,6 +120,7 @@ Context::Context(const ContextOptions& options) {
       if (self->instance_) vkDestroyInstance(self->instance_, nullptr);
     }
   } cleanup{this};
+  const std::vector<std::string> modules_before = detail::loaded_modules();
 
   // 1. Instance: API version, validation layer, extensions.
   std::uint32_t loader_version = VK_API_VERSION_1_0;
@@ -182,6 +185,7 @@ Context::Context(const ContextOptions& options) {
         "is installed; Debian: mesa-vulkan-drivers)",
         created);
   check(created, "vkCreateInstance");
+  detail::keep_modules_loaded_since(modules_before);  // the drivers (ICDs) and layers just opened
   if (want_validation) {
     auto create = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
         vkGetInstanceProcAddr(instance_, "vkCreateDebugUtilsMessengerEXT"));
@@ -259,6 +263,7 @@ Context::Context(const ContextOptions& options) {
   device_info.ppEnabledExtensionNames = device_extensions.data();
   device_info.pEnabledFeatures = &enabled_features_;
   check(vkCreateDevice(physical_device_, &device_info, nullptr, &device_), "vkCreateDevice");
+  detail::keep_modules_loaded_since(modules_before);  // and any the device brought in
   vkGetDeviceQueue(device_, queue_family_, 0, &queue_);
 
   VkCommandPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};

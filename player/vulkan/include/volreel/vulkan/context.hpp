@@ -40,6 +40,14 @@ struct ContextOptions {
   std::string preferred_device;
 };
 
+/// In LeakSanitizer builds: loads the Vulkan drivers once (a throwaway instance) and keeps them
+/// loaded until exit, so that a leak inside a driver names its module and is suppressed, not
+/// reported from "<unknown module>". A Context does this for the drivers and layers it loads; call
+/// this first where other code makes Vulkan calls before any Context exists (GLFW's
+/// glfwVulkanSupported loads and unloads every driver). Does nothing in other builds or when no
+/// instance can be created.
+void keep_vulkan_drivers_loaded();
+
 /// One validation-layer message (severity warning or error).
 struct ValidationMessage {
   VkDebugUtilsMessageSeverityFlagBitsEXT severity;
