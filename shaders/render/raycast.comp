@@ -1,6 +1,6 @@
-// raycast.comp: the ray caster of volreel's player (DESIGN.md "Player", step 7) — one invocation
-// per pixel walks its ray through the array-encoded SVO (svo_layout.h; Cesium patent [0049]–
-// [0050]) and samples both keyframes of each leaf in the brick atlas (atlas_layout.h) with
+// raycast.comp: the ray caster of volreel's player (docs/design.md, "Streaming", step 7) — one
+// invocation per pixel walks its ray through the array-encoded SVO (svo_layout.h; Cesium patent
+// [0049]–[0050]) and samples both keyframes of each leaf in the brick atlas (atlas_layout.h) with
 // trilinear filtering, the second mapped into its ancestor's brick for any LOD difference.
 //
 // It takes exactly the samples of the CPU reference renderer (player/cpu_render/renderer.hpp,

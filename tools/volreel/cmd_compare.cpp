@@ -70,7 +70,8 @@ void compare_series(const CompareOptions& o) {
   }
   const auto& ia = a->info();
   const auto& ib = b->info();
-  // bps of a container: all its bytes over the voxels of all its frames (DESIGN.md "Metrics").
+  // bps of a container: all its bytes over the voxels of all its frames (docs/design.md,
+  // "Metrics").
   const double bps = container ? 8.0 * static_cast<double>(container->container().total_bytes()) /
                                      (static_cast<double>(ia.dims.voxels()) * static_cast<double>(container->info().frames))
                                : std::nan("");

@@ -1,6 +1,7 @@
-// container.hpp: the container directory `NAME.vreel/` (DESIGN.md): manifest.json, dictionary.bin
-// (ksvd only) and frames/NNNNNN.vrf. The manifest is rewritten (atomically) after every frame with
-// "complete": false until the last one, so an interrupted encode can be resumed.
+// container.hpp: the container directory `NAME.vreel/` (docs/design.md, "Container"):
+// manifest.json, dictionary.bin (ksvd only) and frames/NNNNNN.vrf. The manifest is rewritten
+// (atomically) after every frame with "complete": false until the last one, so an interrupted
+// encode can be resumed.
 #pragma once
 
 #include <array>

@@ -1,6 +1,7 @@
 // svo_layout.h: the array-encoded sparse voxel octree the renderers walk (Cesium patent [0049]–
-// [0050]; DESIGN.md "Player", step 5), in plain arithmetic on 32-bit words so that the same text
-// compiles as C++ (the SVO builder, the CPU reference renderer) and as GLSL (the render shader).
+// [0050]; docs/design.md, "Streaming", step 5), in plain arithmetic on 32-bit words so that the
+// same text compiles as C++ (the SVO builder, the CPU reference renderer) and as GLSL (the render
+// shader).
 //
 // Geometry. The spatial octree is the frames' brick octree (format/SPEC.md): L levels, level 0 the
 // root, level L−1 the finest. A node at level l and brick coordinates c = (x, y, z) covers finest
@@ -81,9 +82,9 @@ VR_INLINE float vr_svo_ancestor_local(vr_uint c, float u, vr_uint d) {
 /* One axis of the stored voxel coordinate inside a slot (texel units) of brick-local u'. */
 VR_INLINE float vr_svo_slot_coord(float u_brick) { return 1.0f + 34.0f * u_brick; }
 
-/* Ray step from the leaf's level (DESIGN.md "Player", step 7): how many times the base step may
-   be doubled in the region of a leaf record — the levels between the finest level and the level
-   of the finer brick the sample reads, at most `cap`:
+/* Ray step from the leaf's level (docs/design.md, "Streaming", step 7): how many times the base
+   step may be doubled in the region of a leaf record — the levels between the finest level and the
+   level of the finer brick the sample reads, at most `cap`:
      e = min((levels − 1 − leaf_level) + d, cap),  d = dA when f = 0, dB when f = 1, else min(dA, dB)
    where leaf_level is the level of the spatial node the record is relative to (a VR_SVO_CHILD_UP
    region's node, a VR_SVO_CHILD_LEAF child). A brick of level k has voxels of 2^(levels−1−k) finest

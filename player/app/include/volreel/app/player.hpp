@@ -1,7 +1,8 @@
 // player.hpp: `volreel play NAME.vreel` — the interactive player window (GLFW + a Vulkan swapchain
-// + Dear ImGui). Per rendered frame (DESIGN.md "Player"): stream scheduler → brick uploads within
-// the budget → decode into the atlas → array SVO → render the volume → ImGui on top → present, with
-// two frames in flight so the CPU work of frame N+1 overlaps the GPU work of frame N.
+// + Dear ImGui). Per rendered frame (docs/design.md, "Streaming"): stream scheduler → brick
+// uploads within the budget → decode into the atlas → array SVO → render the volume → ImGui on
+// top → present, with two frames in flight so the CPU work of frame N+1 overlaps the GPU work of
+// frame N.
 //
 // Controls: space play/pause, r reverse, [ ] speed ÷2 ×2 (0.25×–8×), ← → step one keyframe,
 // Home/End first/last keyframe, c reset view, h hide the panels, l loop, q or Escape quit; left

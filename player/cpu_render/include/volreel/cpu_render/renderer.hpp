@@ -1,7 +1,7 @@
-// renderer.hpp: the CPU reference renderer of volreel's player (DESIGN.md "Player", step 7) — a
-// plain ray caster over the array-encoded SVO (svo_layout.h) and a CpuAtlas, and the brute-force
-// oracle that casts the same rays through dense level volumes. It is the reference the Vulkan
-// renderer is tested against and the headless fallback.
+// renderer.hpp: the CPU reference renderer of volreel's player (docs/design.md, "Streaming",
+// step 7) — a plain ray caster over the array-encoded SVO (svo_layout.h) and a CpuAtlas, and the
+// brute-force oracle that casts the same rays through dense level volumes. It is the reference the
+// Vulkan renderer is tested against and the headless fallback.
 //
 // Both renderers share one ray loop (they take exactly the same samples where the SVO is drawn
 // at the finest level):

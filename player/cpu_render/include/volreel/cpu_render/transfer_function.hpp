@@ -1,7 +1,7 @@
 // transfer_function.hpp: the 1D transfer function of volreel's renderers — a table of RGBA
 // entries over a value range, built from control points, named presets, a JSON form, opacity
 // correction for the ray step, and the histogram test that lets a renderer skip nodes the
-// transfer function makes invisible (DESIGN.md "Player", step 7).
+// transfer function makes invisible (docs/design.md, "Streaming", step 7).
 //
 // Lookup (the same in the CPU reference renderer and the render shader): a value v maps to the
 // table coordinate x = clamp((v − lo)/(hi − lo), 0, 1)·(N − 1), and the result is the linear

@@ -1,5 +1,6 @@
 // atlas_slots.hpp: which keyframe node each brick slot of the atlas holds (Cesium patent [0035];
-// DESIGN.md "Player", step 3). Two index-based doubly linked lists, no allocation per operation:
+// docs/design.md, "Streaming", step 3). Two index-based doubly linked lists, no allocation per
+// operation:
 //   occupied        slots holding a keyframe node that is currently selected;
 //   over-writeable  slots that may be given to another keyframe node, stalest at the front.
 // A slot on the over-writeable list keeps its keyframe node until it is overwritten, so a node that

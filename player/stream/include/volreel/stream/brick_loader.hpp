@@ -1,7 +1,7 @@
-// brick_loader.hpp: requests for brick bytes (Cesium patent [0037], [0063]; DESIGN.md "Player",
-// step 2), read on worker threads as byte ranges of the frame files (pread), with a cap on
-// requests in flight and an optional bandwidth and latency limit that makes a local disk act like
-// a slow network or disk (`--bandwidth 20MB/s --latency 50ms`). Arrivals wait in a thread-safe
+// brick_loader.hpp: requests for brick bytes (Cesium patent [0037], [0063]; docs/design.md,
+// "Streaming", step 2), read on worker threads as byte ranges of the frame files (pread), with a
+// cap on requests in flight and an optional bandwidth and latency limit that makes a local disk act
+// like a slow network or disk (`--bandwidth 20MB/s --latency 50ms`). Arrivals wait in a thread-safe
 // queue until the scheduler polls them, once per rendered frame.
 //
 // Link model: a request accepted at time s has its first byte at s + latency; the bytes of all

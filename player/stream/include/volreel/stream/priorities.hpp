@@ -1,6 +1,7 @@
-// priorities.hpp: pre-load priorities of keyframe nodes (Cesium patent [0041]–[0045]; DESIGN.md
-// "Player", step 1) and the view traversal they run on: frustum culling, screen-space error (SSE)
-// and the refinement rule "descend while the node's SSE exceeds the target" ([0032], [0037]).
+// priorities.hpp: pre-load priorities of keyframe nodes (Cesium patent [0041]–[0045];
+// docs/design.md, "Streaming", step 1) and the view traversal they run on: frustum culling,
+// screen-space error (SSE) and the refinement rule "descend while the node's SSE exceeds the
+// target" ([0032], [0037]).
 //
 //   ssePriority      = SSE / (1 + SSE)                                                    [0042]
 //   temporalPriority = (1 − |k − playhead| / maxDistance)^4, maxDistance = the larger distance

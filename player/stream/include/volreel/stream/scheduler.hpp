@@ -1,5 +1,5 @@
 // scheduler.hpp: the patent's streaming, once per rendered frame (Cesium patent [0029]–[0075];
-// DESIGN.md "Player: the patent's streaming, step by step"). update() runs, in order:
+// docs/design.md, "Streaming"). update() runs, in order:
 //   1. take the loader's arrivals (errors go to the message list);
 //   2. walk the view (frustum, SSE) and fill the fixed-capacity min-max heap with the keyframe
 //      nodes of the visited nodes by priority (priorities.hpp; with the patent policy, the due

@@ -1,6 +1,6 @@
 // selection.hpp: pre-render selection of two keyframe nodes per spatial node (Cesium patent
-// [0046]–[0048], [0065]–[0075]; DESIGN.md "Player", step 4), from the keyframe nodes resident in
-// the atlas only.
+// [0046]–[0048], [0065]–[0075]; docs/design.md, "Streaming", step 4), from the keyframe nodes
+// resident in the atlas only.
 //
 // For each side of the playhead p (before: t ≤ p, after: t ≥ p), in numbered steps:
 //   1. The node's own candidate is its resident keyframe node on that side nearest p, scored by

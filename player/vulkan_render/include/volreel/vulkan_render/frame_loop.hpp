@@ -1,8 +1,8 @@
-// frame_loop.hpp: volreel's per-frame streaming loop on the GPU (DESIGN.md "Player", steps 1–7):
-// for every rendered frame, the stream scheduler's update (priorities, requests, arrivals, atlas
-// slots, the array-encoded SVO), the decode of the arrived bricks into their atlas slots
-// (vulkan::AtlasDecoder), the leaf histograms for transfer-function culling, and the ray caster
-// (Raycaster). `volreel render`, `volreel bench play` and a windowed player drive it.
+// frame_loop.hpp: volreel's per-frame streaming loop on the GPU (docs/design.md, "Streaming",
+// steps 1–7): for every rendered frame, the stream scheduler's update (priorities, requests,
+// arrivals, atlas slots, the array-encoded SVO), the decode of the arrived bricks into their atlas
+// slots (vulkan::AtlasDecoder), the leaf histograms for transfer-function culling, and the ray
+// caster (Raycaster). `volreel render`, `volreel bench play` and a windowed player drive it.
 //
 // Frames in flight: GPU frame numbers are the Raycaster's tickets. A frame's SVO only references
 // slots the scheduler will not overwrite before that frame retired; frame() retires every

@@ -1,5 +1,5 @@
-// raycaster.hpp: the Vulkan ray caster of volreel's player (DESIGN.md "Player", step 7) — a
-// compute shader (shaders/render/raycast.comp) that walks the array-encoded SVO (svo_layout.h)
+// raycaster.hpp: the Vulkan ray caster of volreel's player (docs/design.md, "Streaming", step 7) —
+// a compute shader (shaders/render/raycast.comp) that walks the array-encoded SVO (svo_layout.h)
 // per sample, fetches both keyframes of a leaf from the brick atlas with trilinear filtering (the
 // second mapped into its ancestor's brick for any LOD difference, Cesium patent [0050]),
 // interpolates them with the leaf's factor and composites front to back through a 1D transfer

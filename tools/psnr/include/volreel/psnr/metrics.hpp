@@ -1,6 +1,6 @@
 // metrics.hpp: error metrics between an original and a reconstructed volume, sequence or image.
 //
-// Definitions (DESIGN.md "Metrics"):
+// Definitions (docs/design.md, "Metrics"):
 //   PSNR      = 10·log10((max − min)² / MSE), max/min of the ORIGINAL (the MTV-Player paper's);
 //   PSNR(zfp) = 20·log10((max − min) / (2·RMSE)), what zfp and TTHRESH print: 6.02 dB lower;
 //   SSIM      = Wang et al. 2004 with a Gaussian window (σ = 1.5, truncated at 3.5σ: 11 taps),

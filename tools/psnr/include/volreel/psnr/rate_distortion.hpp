@@ -1,6 +1,6 @@
 // rate_distortion.hpp: the rate-distortion harness. Every codec — zfp now, volreel's own codecs
 // later — implements FrameCodec and lands in the same table, CSV and plot. Comparisons are read
-// at equal bps, never at equal tolerance (DESIGN.md "Metrics").
+// at equal bps, never at equal tolerance (docs/design.md, "Metrics").
 #pragma once
 
 #include <cstddef>
