@@ -2,8 +2,6 @@
 // and the series-to-container loop with resume and rate control.
 #include "volreel/encoder/encoder.hpp"
 
-#include <zfp.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -20,6 +18,7 @@
 #include "volreel/format/decoder.hpp"
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/error.hpp"
+#include "volreel/format/zfp_stream.hpp"
 
 namespace volreel::encoder {
 
@@ -496,18 +495,9 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
 }
 
 std::vector<std::byte> zfp_payload(const float* brick, double accuracy) {
-  zfp_stream* zfp = zfp_stream_open(nullptr);
-  zfp_stream_set_accuracy(zfp, accuracy);
-  zfp_field* field =
-      zfp_field_3d(const_cast<float*>(brick), zfp_type_float, brick_size, brick_size, brick_size);
-  std::vector<std::byte> buffer(zfp_stream_maximum_size(zfp, field));
-  bitstream* bits = stream_open(buffer.data(), buffer.size());
-  zfp_stream_set_bit_stream(zfp, bits);
-  zfp_stream_rewind(zfp);
-  const std::size_t size = zfp_compress(zfp, field);
-  stream_close(bits);
-  zfp_field_free(field);
-  zfp_stream_close(zfp);
+  format::ZfpStream zfp(format::ZfpMode::accuracy(accuracy), brick_size, brick_size, brick_size);
+  std::vector<std::byte> buffer(zfp.maximum_size());
+  const std::size_t size = zfp.compress(brick, buffer.data(), buffer.size());
   if (size == 0) throw std::runtime_error("zfp_compress failed");
   buffer.resize((size + 3) / 4 * 4);
   // A zfp stream of 4 bytes would read as a constant brick; never happens for 36³ (≥ 729 blocks).

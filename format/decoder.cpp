@@ -1,8 +1,6 @@
 // decoder.cpp: the CPU reference decoder (see decoder.hpp).
 #include "volreel/format/decoder.hpp"
 
-#include <zfp.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -12,6 +10,7 @@
 
 #include "volreel/format/brick_decode.h"
 #include "volreel/format/error.hpp"
+#include "volreel/format/zfp_stream.hpp"
 
 namespace volreel::format {
 
@@ -163,20 +162,11 @@ namespace {
 
 void decode_zfp(std::span<const std::byte> bytes, double accuracy, std::span<float> out,
                 const std::filesystem::path& name, std::uint64_t at) {
-  zfp_stream* zfp = zfp_stream_open(nullptr);
-  zfp_stream_set_accuracy(zfp, accuracy);
-  zfp_field* field = zfp_field_3d(out.data(), zfp_type_float, brick_size, brick_size, brick_size);
+  ZfpStream zfp(ZfpMode::accuracy(accuracy), brick_size, brick_size, brick_size);
   // zfp reads without bounds checks: give it a zero-padded copy as long as the longest stream.
-  std::vector<std::byte> padded(
-      std::max<std::size_t>(zfp_stream_maximum_size(zfp, field), bytes.size()) + 64);
+  std::vector<std::byte> padded(std::max<std::size_t>(zfp.maximum_size(), bytes.size()) + 64);
   std::memcpy(padded.data(), bytes.data(), bytes.size());
-  bitstream* bits = stream_open(padded.data(), padded.size());
-  zfp_stream_set_bit_stream(zfp, bits);
-  zfp_stream_rewind(zfp);
-  const std::size_t used = zfp_decompress(zfp, field);
-  stream_close(bits);
-  zfp_field_free(field);
-  zfp_stream_close(zfp);
+  const std::size_t used = zfp.decompress(padded.data(), padded.size(), out.data());
   if (used == 0 || used > bytes.size() + 8)
     throw FormatError(name, at, "brick payload: a zfp stream of " + str(bytes.size()) + " bytes",
                       "a stream that needs " + str(used) + " bytes");

@@ -4,7 +4,6 @@
 // constant bricks, zfp bricks through the CPU path; batches that fill the atlas, wrap the staging
 // ring and overwrite slots; bad uploads rejected before anything is submitted.
 #include <gtest/gtest.h>
-#include <zfp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -19,6 +18,7 @@
 #include "brick_samples.hpp"
 #include "volreel/format/decoder.hpp"
 #include "volreel/format/error.hpp"
+#include "volreel/format/zfp_stream.hpp"
 #include "volreel/vulkan/atlas_decoder.hpp"
 #include "vulkan_test_util.hpp"
 
@@ -43,17 +43,9 @@ Payload zfp_payload(SplitMix64& rng, double accuracy) {
                  z = static_cast<double>(i / 1296);
     field[i] = static_cast<float>(3 * std::sin(fx * x + phase) * std::cos(fy * y) + 0.05 * z);
   }
-  zfp_stream* zfp = zfp_stream_open(nullptr);
-  zfp_stream_set_accuracy(zfp, accuracy);
-  zfp_field* f = zfp_field_3d(field.data(), zfp_type_float, 36, 36, 36);
-  Payload buffer(zfp_stream_maximum_size(zfp, f));
-  bitstream* bits = stream_open(buffer.data(), buffer.size());
-  zfp_stream_set_bit_stream(zfp, bits);
-  zfp_stream_rewind(zfp);
-  const std::size_t size = zfp_compress(zfp, f);
-  stream_close(bits);
-  zfp_field_free(f);
-  zfp_stream_close(zfp);
+  format::ZfpStream zfp(format::ZfpMode::accuracy(accuracy), 36, 36, 36);
+  Payload buffer(zfp.maximum_size());
+  const std::size_t size = zfp.compress(field.data(), buffer.data(), buffer.size());
   buffer.resize((size + 3) / 4 * 4);
   return buffer;
 }

@@ -1,28 +1,15 @@
 // zfp_codec.cpp: libzfp as a FrameCodec, in fixed-accuracy and fixed-rate modes — the
 // reference codec volreel is measured against.
-#include <zfp.h>
-
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
 
+#include "volreel/format/zfp_stream.hpp"
 #include "volreel/psnr/rate_distortion.hpp"
 
 namespace volreel::psnr {
 
 namespace {
-
-/// Owns the zfp objects of one call.
-struct ZfpSession {
-  zfp_field* field = nullptr;
-  zfp_stream* zfp = nullptr;
-  bitstream* bits = nullptr;
-  ~ZfpSession() {
-    if (bits) stream_close(bits);
-    if (zfp) zfp_stream_close(zfp);
-    if (field) zfp_field_free(field);
-  }
-};
 
 class ZfpCodec final : public FrameCodec {
  public:
@@ -40,36 +27,24 @@ class ZfpCodec final : public FrameCodec {
   }
 
   void compress(Dims dims, std::span<const float> frame, std::vector<std::uint8_t>& stream) override {
-    ZfpSession s;
-    s.field = zfp_field_3d(const_cast<float*>(frame.data()), zfp_type_float, static_cast<std::size_t>(dims.x),
-                           static_cast<std::size_t>(dims.y), static_cast<std::size_t>(dims.z));
-    s.zfp = zfp_stream_open(nullptr);
-    configure(s.zfp);
-    stream.resize(zfp_stream_maximum_size(s.zfp, s.field));
-    s.bits = stream_open(stream.data(), stream.size());
-    zfp_stream_set_bit_stream(s.zfp, s.bits);
-    const std::size_t size = zfp_compress(s.zfp, s.field);
+    format::ZfpStream zfp = open(dims);
+    stream.resize(zfp.maximum_size());
+    const std::size_t size = zfp.compress(frame.data(), stream.data(), stream.size());
     if (size == 0) throw std::runtime_error("zfp_compress failed (" + setting() + ")");
     stream.resize(size);
   }
 
   void decompress(Dims dims, std::span<const std::uint8_t> stream, std::span<float> out) override {
-    ZfpSession s;
-    s.field = zfp_field_3d(out.data(), zfp_type_float, static_cast<std::size_t>(dims.x), static_cast<std::size_t>(dims.y),
-                           static_cast<std::size_t>(dims.z));
-    s.zfp = zfp_stream_open(nullptr);
-    configure(s.zfp);
-    s.bits = stream_open(const_cast<std::uint8_t*>(stream.data()), stream.size());
-    zfp_stream_set_bit_stream(s.zfp, s.bits);
-    if (zfp_decompress(s.zfp, s.field) == 0) throw std::runtime_error("zfp_decompress failed (" + setting() + ")");
+    format::ZfpStream zfp = open(dims);
+    if (zfp.decompress(stream.data(), stream.size(), out.data()) == 0)
+      throw std::runtime_error("zfp_decompress failed (" + setting() + ")");
   }
 
  private:
-  void configure(zfp_stream* zfp) const {
-    if (mode_ == Mode::accuracy)
-      zfp_stream_set_accuracy(zfp, parameter_);
-    else
-      zfp_stream_set_rate(zfp, parameter_, zfp_type_float, 3, zfp_false);
+  format::ZfpStream open(Dims dims) const {
+    return format::ZfpStream(
+        mode_ == Mode::accuracy ? format::ZfpMode::accuracy(parameter_) : format::ZfpMode::rate(parameter_),
+        static_cast<std::size_t>(dims.x), static_cast<std::size_t>(dims.y), static_cast<std::size_t>(dims.z));
   }
 
   Mode mode_;
