@@ -21,6 +21,7 @@ using volreel::Dims;
 using volreel::InputError;
 using volreel::SplitMix64;
 namespace psnr = volreel::psnr;
+namespace image = volreel::image;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
@@ -307,7 +308,7 @@ TEST(Ssim, TwoDimensionalDataInAnyOrientation) {
   EXPECT_DOUBLE_EQ(psnr::ssim(Dims{w, 1, h}, original, decoded, options), xy);
   EXPECT_NEAR(reference_ssim(Dims{w, h, 1}, original, decoded, options), xy, 1e-12);
 
-  psnr::Image a{static_cast<int>(w), static_cast<int>(h), 1, {}}, b = a;
+  image::Image a{static_cast<int>(w), static_cast<int>(h), 1, {}}, b = a;
   for (float v : original) a.pixels.push_back(static_cast<std::uint8_t>(v));
   for (float v : decoded) b.pixels.push_back(static_cast<std::uint8_t>(v));
   EXPECT_DOUBLE_EQ(psnr::compare_images(a, b).ssim, xy);
@@ -344,9 +345,9 @@ class ImageFiles : public testing::Test {
   std::filesystem::path directory_;
 };
 
-psnr::Image random_image(int width, int height, int channels, std::uint64_t seed) {
+image::Image random_image(int width, int height, int channels, std::uint64_t seed) {
   SplitMix64 rng(seed);
-  psnr::Image image{width, height, channels, {}};
+  image::Image image{width, height, channels, {}};
   image.pixels.resize(static_cast<std::size_t>(width * height * channels));
   for (auto& p : image.pixels) p = static_cast<std::uint8_t>(rng.below(256));
   return image;
@@ -355,22 +356,22 @@ psnr::Image random_image(int width, int height, int channels, std::uint64_t seed
 TEST_F(ImageFiles, PngRoundTripForEveryChannelCount) {
   for (int channels = 1; channels <= 4; ++channels) {
     SCOPED_TRACE("channels " + std::to_string(channels));
-    const psnr::Image image =
+    const image::Image picture =
         random_image(37, 23, channels, static_cast<std::uint64_t>(70 + channels));
     const std::filesystem::path path = directory_ / ("image" + std::to_string(channels) + ".png");
-    psnr::write_png(path, image);
+    image::write_png(path, picture);
     EXPECT_FALSE(std::filesystem::exists(path.string() + ".tmp"));
-    const psnr::Image back = psnr::read_png(path);
+    const image::Image back = image::read_png(path);
     EXPECT_EQ(back.width, 37);
     EXPECT_EQ(back.height, 23);
     EXPECT_EQ(back.channels, channels);
-    EXPECT_EQ(back.pixels, image.pixels);
+    EXPECT_EQ(back.pixels, picture.pixels);
   }
 }
 
 TEST_F(ImageFiles, DamagedPngGivesInputErrorNamingTheFile) {
   const std::filesystem::path good = directory_ / "good.png";
-  psnr::write_png(good, random_image(64, 48, 3, 80));
+  image::write_png(good, random_image(64, 48, 3, 80));
   std::vector<char> bytes(std::filesystem::file_size(good));
   std::ifstream(good, std::ios::binary)
       .read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
@@ -383,7 +384,7 @@ TEST_F(ImageFiles, DamagedPngGivesInputErrorNamingTheFile) {
   };
   auto expect_input_error = [](const std::filesystem::path& path) {
     try {
-      psnr::read_png(path);
+      image::read_png(path);
       ADD_FAILURE() << path << " was read without error";
     } catch (const InputError& error) {
       EXPECT_NE(std::string(error.what()).find(path.filename().string()), std::string::npos)
@@ -406,9 +407,9 @@ TEST_F(ImageFiles, DamagedPngGivesInputErrorNamingTheFile) {
 }
 
 TEST(Images, CompareKnownDifference) {
-  psnr::Image a = random_image(40, 30, 3, 90);
+  image::Image a = random_image(40, 30, 3, 90);
   for (auto& p : a.pixels) p = static_cast<std::uint8_t>(std::min<int>(p, 254));
-  psnr::Image b = a;
+  image::Image b = a;
   for (auto& p : b.pixels) ++p;
   const psnr::ImageComparison same = psnr::compare_images(a, a);
   EXPECT_EQ(same.psnr, kInf);
@@ -422,11 +423,11 @@ TEST(Images, CompareKnownDifference) {
 }
 
 TEST(Images, MismatchedSizesGiveInputError) {
-  const psnr::Image a = random_image(40, 30, 3, 91);
+  const image::Image a = random_image(40, 30, 3, 91);
   EXPECT_THROW(psnr::compare_images(a, random_image(41, 30, 3, 92)), InputError);
   EXPECT_THROW(psnr::compare_images(a, random_image(40, 31, 3, 92)), InputError);
   EXPECT_THROW(psnr::compare_images(a, random_image(40, 30, 4, 92)), InputError);
-  psnr::Image short_pixels = a;
+  image::Image short_pixels = a;
   short_pixels.pixels.pop_back();
   EXPECT_THROW(psnr::compare_images(a, short_pixels), InputError);
 }

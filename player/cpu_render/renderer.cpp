@@ -407,8 +407,8 @@ RgbaImage render_reference(const DenseLevel& a, const DenseLevel& b, float facto
   return cast_rays(geometry, camera, transfer, options, DenseSampler(a, b, factor, geometry));
 }
 
-psnr::Image to_image(const RgbaImage& image) {
-  psnr::Image out;
+image::Image to_image(const RgbaImage& image) {
+  image::Image out;
   out.width = image.width;
   out.height = image.height;
   out.channels = 3;
@@ -424,7 +424,7 @@ psnr::Image to_image(const RgbaImage& image) {
 }
 
 void write_png(const std::filesystem::path& path, const RgbaImage& image) {
-  psnr::write_png(path, to_image(image));
+  image::write_png(path, to_image(image));
 }
 
 double max_abs_difference(const RgbaImage& a, const RgbaImage& b) {

@@ -798,7 +798,7 @@ TEST(CpuRender, WritesAPng) {
   EXPECT_GT(drawn_fraction(image), 0.05);
   test::TempDir dir("cpu_render");
   cpu_render::write_png(dir / "frame.png", image);
-  const psnr::Image back = psnr::read_png(dir / "frame.png");
+  const image::Image back = image::read_png(dir / "frame.png");
   EXPECT_EQ(back.width, 256);
   EXPECT_EQ(back.height, 256);
   EXPECT_EQ(back.channels, 3);

@@ -346,7 +346,7 @@ struct FrameRecord {
   std::uint32_t current_nodes = 0;   ///< target nodes at target LOD with the right keyframes
   double fraction_current = 0;       ///< current_nodes / target nodes (1 when none)
   std::uint64_t bytes_uploaded = 0;  ///< since the start: payload bytes decoded into the atlas
-  psnr::Image image;
+  image::Image image;
   double psnr = 0, ssim = 0;
 };
 
@@ -568,13 +568,13 @@ void measure(RunResult& r, const RunSetup& s, GroundTruth& truth, const std::vec
     for (const std::size_t i : order) {
       FrameRecord& f = r.frames[i];
       const cpu_render::TourFrame tf = frame_at(s, f.time);
-      const psnr::Image reference = cpu_render::to_image(truth.render(f.playhead, tf.camera, tf.transfer, s.render));
+      const image::Image reference = cpu_render::to_image(truth.render(f.playhead, tf.camera, tf.transfer, s.render));
       const psnr::ImageComparison c = psnr::compare_images(reference, f.image);
       f.psnr = c.psnr;
       f.ssim = c.ssim;
       if (png[i]) {
         fs::create_directories(png_dir);
-        psnr::Image both;
+        image::Image both;
         both.width = 2 * f.image.width;
         both.height = f.image.height;
         both.channels = 3;
@@ -588,7 +588,7 @@ void measure(RunResult& r, const RunSetup& s, GroundTruth& truth, const std::vec
         }
         char name[48];
         std::snprintf(name, sizeof name, "frame_%05zu.png", i);
-        psnr::write_png(png_dir / name, both);
+        image::write_png(png_dir / name, both);
       }
       bar.update({static_cast<double>(++done), static_cast<double>(order.size()), {}});
     }

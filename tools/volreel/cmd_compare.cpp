@@ -38,7 +38,7 @@ std::string ssim_text(double ssim) {
 nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
 
 void compare_images(const CompareOptions& o) {
-  const psnr::Image a = psnr::read_png(o.a), b = psnr::read_png(o.b);
+  const image::Image a = image::read_png(o.a), b = image::read_png(o.b);
   const psnr::ImageComparison c = psnr::compare_images(a, b);
   if (o.json) {
     nlohmann::json j{{"a", o.a}, {"b", o.b}, {"width", a.width}, {"height", a.height}, {"channels", a.channels},

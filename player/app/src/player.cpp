@@ -51,8 +51,8 @@
 #include "volreel/cpu_render/transfer_function.hpp"
 #include "volreel/datasets/volume.hpp"
 #include "volreel/format/container.hpp"
+#include "volreel/image/image.hpp"
 #include "volreel/player/camera.hpp"
-#include "volreel/psnr/metrics.hpp"
 #include "volreel/stream/playhead.hpp"
 #include "volreel/stream/scheduler.hpp"
 #include "volreel/vulkan/context.hpp"
@@ -970,19 +970,19 @@ void Player::record(FrameSlot& slot, std::uint32_t index, bool capture) {
 void Player::finish_screenshots(FrameSlot& slot) {
   if (slot.screenshots.empty()) return;
   slot.readback.invalidate();
-  psnr::Image image;
-  image.width = static_cast<int>(slot.shot_extent.width);
-  image.height = static_cast<int>(slot.shot_extent.height);
-  image.channels = 3;
+  image::Image shot;
+  shot.width = static_cast<int>(slot.shot_extent.width);
+  shot.height = static_cast<int>(slot.shot_extent.height);
+  shot.channels = 3;
   const std::size_t pixels = std::size_t{slot.shot_extent.width} * slot.shot_extent.height;
-  image.pixels.assign(pixels * 3, std::uint8_t{0});
+  shot.pixels.assign(pixels * 3, std::uint8_t{0});
   const auto* in = reinterpret_cast<const std::uint8_t*>(slot.readback.mapped());
   for (std::size_t i = 0; i < pixels; ++i)
     for (std::size_t c = 0; c < 3; ++c)
-      image.pixels[3 * i + c] = in[4 * i + (slot.shot_bgr ? 2 - c : c)];
+      shot.pixels[3 * i + c] = in[4 * i + (slot.shot_bgr ? 2 - c : c)];
   for (const auto& path : slot.screenshots) {
     try {
-      psnr::write_png(path, image);
+      image::write_png(path, shot);
       if (!options_.quiet) {
         std::printf("screenshot: %s\n", path.string().c_str());
         std::fflush(stdout);

@@ -51,7 +51,7 @@
 #include "volreel/format/decoder.hpp"
 #include "volreel/player/camera.hpp"
 #include "volreel/player/svo_layout.h"
-#include "volreel/psnr/metrics.hpp"
+#include "volreel/image/image.hpp"
 
 namespace volreel::cpu_render {
 
@@ -132,8 +132,8 @@ RgbaImage render_reference(const DenseLevel& a, const DenseLevel& b, float facto
                            const TransferFunction& transfer, const RenderOptions& options = {});
 
 /// 8-bit RGB (alpha dropped: the background is already composited), rounded and clamped.
-psnr::Image to_image(const RgbaImage& image);
-/// Writes the image as an 8-bit RGB PNG (psnr::write_png).
+image::Image to_image(const RgbaImage& image);
+/// Writes the image as an 8-bit RGB PNG (image::write_png).
 void write_png(const std::filesystem::path& path, const RgbaImage& image);
 /// Largest absolute difference of any channel of any pixel (images of equal size, else +inf).
 double max_abs_difference(const RgbaImage& a, const RgbaImage& b);

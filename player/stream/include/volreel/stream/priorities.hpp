@@ -67,10 +67,10 @@ struct PrioritySettings {
   double sse_weight = 10.0;         ///< factor of ssePriority in the combined priority
   double temporal_exponent = 4.0;   ///< exponent of temporalPriority
   /// lerp(min, 1, temporal): weight of temporal vs random. [0045] uses 0.15; volreel's default 1
-  /// (the temporal priority alone, nearest in time first within a level) measured better in
-  /// `volreel bench stream` at every link speed: with the image metric, the partial or
-  /// interpolated time steps the ruler keeps far from the playhead look little better than the
-  /// coarse levels, and cost whole keyframes next to it (see README "bench stream").
+  /// (the temporal priority alone, nearest in time first within a level): with the image metric,
+  /// the partial or interpolated time steps the ruler keeps far from the playhead look little
+  /// better than the coarse levels, and cost whole keyframes next to it (measured with
+  /// `volreel bench stream`: docs/benchmarks.md, "Streaming").
   double temporal_lerp_min = 1.0;
   /// Patent policy: the due window (see above). false: every keyframe node by [0045] alone.
   bool due_window = true;

@@ -5,16 +5,10 @@
 // span of their copies).
 //
 // Format: R16_UNORM with the value range stored (v = lo + (hi − lo)·n, n in [0, 1]) is the
-// default, chosen by measurement (`volreel bench decode out/turbulence.vreel --frames 8`: 584
-// bricks of the 128³ turbulence container, GPU decode read back and compared with the CPU
-// reference decoder, PSNR over the manifest range [-4.12, 1.62]):
-//   R16_UNORM   max |error| 4.6e-5, RMSE 2.6e-5, PSNR 106.9 dB
-//   R16_SFLOAT  max |error| 2.0e-3, RMSE 1.4e-4, PSNR  92.5 dB (image-store kernel, which
-//               truncates on lavapipe); 9.8e-4 and 98.5 dB with the buffer-copy kernel, which
-//               rounds to nearest
-// UNORM's error is uniform over the range, at most (hi − lo)/131070; SFLOAT keeps 11 significant
-// bits, so its error grows with |v| (40x larger at the extremes of that data). UNORM also filters
-// linearly on every device. R16_SFLOAT remains an option for data of huge dynamic range around 0.
+// default, chosen by measurement (docs/benchmarks.md, "Atlas format"). UNORM's error is uniform
+// over the range, at most (hi − lo)/131070; SFLOAT keeps 11 significant bits, so its error grows
+// with |v|. UNORM also filters linearly on every device. R16_SFLOAT remains an option for data of
+// huge dynamic range around 0.
 #pragma once
 
 #include <cstdint>

@@ -11,11 +11,11 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <filesystem>
 #include <span>
 #include <vector>
 
 #include "volreel/datasets/volume.hpp"
+#include "volreel/image/image.hpp"
 
 namespace volreel::psnr {
 
@@ -58,23 +58,12 @@ struct SsimOptions {
 double ssim(Dims dims, std::span<const float> original, std::span<const float> decoded,
             const SsimOptions& options = {});
 
-/// An 8-bit image: channels 1 (gray), 2 (gray+alpha), 3 (RGB) or 4 (RGBA), rows top to bottom.
-struct Image {
-  int width = 0, height = 0, channels = 0;
-  std::vector<std::uint8_t> pixels;  ///< width·height·channels, interleaved
-};
-/// Read a PNG of any bit depth/colour type, converted to 8 bits per channel (palette → RGB,
-/// 16-bit → 8-bit). Throws InputError naming the file on any failure.
-Image read_png(const std::filesystem::path& path);
-/// Write an 8-bit PNG, to a temporary name renamed when complete. Throws on I/O failure.
-void write_png(const std::filesystem::path& path, const Image& image);
-
 struct ImageComparison {
   double psnr = 0;   ///< 10·log10(255² / MSE) over all channels (8-bit data range)
   double ssim = 0;   ///< grayscale SSIM of each channel with data range 255, averaged
   double mse = 0;
 };
 /// Images must have equal width, height and channels (InputError otherwise).
-ImageComparison compare_images(const Image& original, const Image& decoded);
+ImageComparison compare_images(const image::Image& original, const image::Image& decoded);
 
 }  // namespace volreel::psnr

@@ -1,6 +1,4 @@
-// image.cpp: 8-bit PNG reading and writing (libpng) and the PSNR/SSIM of two images, defined as
-// scikit-image's peak_signal_noise_ratio(data_range=255) and structural_similarity(channel_axis=2,
-// gaussian_weights=True, sigma=1.5, use_sample_covariance=False, data_range=255).
+// png.cpp: 8-bit PNG reading and writing (libpng), see image.hpp.
 //
 // libpng reports errors by longjmp. The functions that call setjmp (read_png_c, write_png_c)
 // hold only trivially destructible locals and are reached through no C++ frame with destructors,
@@ -8,19 +6,18 @@
 #include <png.h>
 
 #include <cerrno>
-#include <cmath>
 #include <csetjmp>
 #include <cstdio>
 #include <cstring>
-#include <limits>
 #include <new>
 #include <string>
 #include <system_error>
 #include <vector>
 
-#include "volreel/psnr/metrics.hpp"
+#include "volreel/datasets/volume.hpp"
+#include "volreel/image/image.hpp"
 
-namespace volreel::psnr {
+namespace volreel::image {
 namespace {
 
 /// State shared with libpng's error callback; trivially destructible, owned by the C++ caller.
@@ -161,7 +158,9 @@ struct FileCloser {
   }
 };
 
-void check_image(const Image& image, const std::string& what) {
+}  // namespace
+
+void validate_image(const Image& image, const std::string& what) {
   if (image.width <= 0 || image.height <= 0 || image.channels < 1 || image.channels > 4) {
     throw InputError(what + ": image is " + std::to_string(image.width) + "x" +
                      std::to_string(image.height) + " with " + std::to_string(image.channels) +
@@ -175,8 +174,6 @@ void check_image(const Image& image, const std::string& what) {
                      " bytes of pixels, expected " + std::to_string(expected));
   }
 }
-
-}  // namespace
 
 Image read_png(const std::filesystem::path& path) {
   FileCloser file{std::fopen(path.c_str(), "rb")};
@@ -201,7 +198,7 @@ Image read_png(const std::filesystem::path& path) {
 }
 
 void write_png(const std::filesystem::path& path, const Image& image) {
-  check_image(image, path.string());
+  validate_image(image, path.string());
   std::filesystem::path temporary = path;
   temporary += ".tmp";
   std::vector<png_bytep> rows(static_cast<std::size_t>(image.height));
@@ -243,44 +240,4 @@ void write_png(const std::filesystem::path& path, const Image& image) {
   }
 }
 
-ImageComparison compare_images(const Image& original, const Image& decoded) {
-  check_image(original, "original image");
-  check_image(decoded, "decoded image");
-  if (original.width != decoded.width || original.height != decoded.height ||
-      original.channels != decoded.channels) {
-    throw InputError("compare images: original is " + std::to_string(original.width) + "x" +
-                     std::to_string(original.height) + "x" + std::to_string(original.channels) +
-                     " (width x height x channels) but decoded is " +
-                     std::to_string(decoded.width) + "x" + std::to_string(decoded.height) + "x" +
-                     std::to_string(decoded.channels));
-  }
-  // 1. MSE over every channel of every pixel (exact: integer sum of squares).
-  std::uint64_t sum_squared = 0;
-  for (std::size_t i = 0; i < original.pixels.size(); ++i) {
-    const int d = int{original.pixels[i]} - int{decoded.pixels[i]};
-    sum_squared += static_cast<std::uint64_t>(d * d);
-  }
-  ImageComparison result;
-  result.mse = static_cast<double>(sum_squared) / static_cast<double>(original.pixels.size());
-  result.psnr = result.mse == 0 ? std::numeric_limits<double>::infinity()
-                                : 10.0 * std::log10(255.0 * 255.0 / result.mse);
-
-  // 2. SSIM of each channel as a 2D array with data range 255, averaged over channels.
-  const Dims dims{original.width, original.height, 1};
-  const auto channels = static_cast<std::size_t>(original.channels);
-  std::vector<float> a(dims.voxels()), b(dims.voxels());
-  SsimOptions options;
-  options.data_range = 255;
-  double ssim_sum = 0;
-  for (std::size_t c = 0; c < channels; ++c) {
-    for (std::size_t i = 0; i < a.size(); ++i) {
-      a[i] = original.pixels[i * channels + c];
-      b[i] = decoded.pixels[i * channels + c];
-    }
-    ssim_sum += ssim(dims, a, b, options);
-  }
-  result.ssim = ssim_sum / static_cast<double>(channels);
-  return result;
-}
-
-}  // namespace volreel::psnr
+}  // namespace volreel::image
