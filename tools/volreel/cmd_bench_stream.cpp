@@ -49,8 +49,8 @@
 #include "volreel/format/error.hpp"
 #include "volreel/psnr/metrics.hpp"
 #include "volreel/stream/scheduler.hpp"
-#include "volreel/vulkan_render/auto_transfer.hpp"
-#include "volreel/vulkan_render/loop_settings.hpp"
+#include "volreel/loop/auto_transfer.hpp"
+#include "volreel/loop/loop_settings.hpp"
 
 namespace volreel::cli {
 
@@ -201,7 +201,7 @@ double bench_bandwidth(const std::string& text, double playback_bytes_per_s) {
       throw InputError("--bandwidth " + text + ": the tour never plays, so there is no playback data rate; give a rate such as 1MB/s");
     return *factor * playback_bytes_per_s;
   }
-  return vulkan_render::parse_bandwidth(text);
+  return loop::parse_bandwidth(text);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -323,7 +323,7 @@ std::unique_ptr<datasets::SeriesReader> open_original(const BenchStreamOptions& 
 }
 
 /// --transfer: "tour" (the tour's own), "auto" (quantiles of the ground truth's middle frame), or
-/// what the player takes (a preset name or a JSON file: vulkan_render::transfer_from_spec).
+/// what the player takes (a preset name or a JSON file: loop::transfer_from_spec).
 std::optional<cpu_render::TransferFunction> bench_transfer(const std::string& spec, const format::Container& container,
                                                            GroundTruth& truth) {
   const format::Manifest& m = container.manifest();
@@ -331,7 +331,7 @@ std::optional<cpu_render::TransferFunction> bench_transfer(const std::string& sp
   if (spec == "auto")
     return cpu_render::TransferFunction::from_quantiles(truth.frame(container.frame_count() / 2),
                                                         static_cast<float>(m.value_min), static_cast<float>(m.value_max));
-  return vulkan_render::transfer_from_spec(spec, container, "--transfer");
+  return loop::transfer_from_spec(spec, container, "--transfer");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -776,10 +776,10 @@ void print_side_by_side(const std::vector<RunResult>& runs) {
 
 void run_bench_stream(const BenchStreamOptions& o) {
   // 1. Options (all checked before any work).
-  const auto [width, height] = vulkan_render::parse_size(o.size);
+  const auto [width, height] = loop::parse_size(o.size);
   if (o.bandwidth.empty() || (o.bandwidth.back() != 'x' && o.bandwidth.back() != 'X'))
     bench_bandwidth(o.bandwidth, 0);  // a malformed rate is reported before any work
-  const double latency = vulkan_render::parse_latency(o.latency);
+  const double latency = loop::parse_latency(o.latency);
   if (!(o.duration > 0) || o.duration > 3600) bad("--duration", "seconds in (0, 3600]", std::to_string(o.duration));
   if (o.clock != "simulated" && o.clock != "wall") bad("--clock", "simulated or wall", o.clock);
   if (!(o.fps > 0) || o.fps > 240) bad("--fps", "frames per second in (0, 240]", std::to_string(o.fps));

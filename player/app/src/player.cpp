@@ -25,7 +25,7 @@
 // switch to a compact form, so nothing overlaps down to about 320 × 240.
 #define GLFW_INCLUDE_VULKAN
 #include "volreel/app/player.hpp"
-#include "volreel/vulkan_render/auto_transfer.hpp"
+#include "volreel/loop/auto_transfer.hpp"
 
 #include <GLFW/glfw3.h>
 #include <backends/imgui_impl_glfw.h>
@@ -390,7 +390,7 @@ Player::Player(const PlayerOptions& options)
   if (auto it = std::find(names.begin(), names.end(), options.transfer); it != names.end()) {
     apply_preset(*it);
   } else {
-    transfer_ = vulkan_render::transfer_from_spec(options.transfer, container_, "--transfer");
+    transfer_ = loop::transfer_from_spec(options.transfer, container_, "--transfer");
     points_ = transfer_.points();
     range_lo_ = transfer_.lo();
     range_hi_ = transfer_.hi();

@@ -1,16 +1,17 @@
 // cpu_frame_loop.cpp: the streaming loop on the CPU (see cpu_frame_loop.hpp).
-#include "volreel/vulkan_render/cpu_frame_loop.hpp"
+#include "volreel/loop/cpu_frame_loop.hpp"
 
 #include <algorithm>
 #include <chrono>
-#include <cstring>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "volreel/format/error.hpp"
+#include "volreel/player/atlas_layout.h"
 
-namespace volreel::vulkan_render {
+namespace volreel::loop {
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -18,8 +19,8 @@ double ms_since(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
-constexpr std::uint64_t gpu_slot_bytes = std::uint64_t{VR_ATLAS_SLOT_SIZE} * VR_ATLAS_SLOT_SIZE *
-                                         VR_ATLAS_SLOT_SIZE * 2;
+constexpr std::uint64_t gpu_slot_bytes =
+    std::uint64_t{VR_ATLAS_SLOT_SIZE} * VR_ATLAS_SLOT_SIZE * VR_ATLAS_SLOT_SIZE * 2;
 
 }  // namespace
 
@@ -34,7 +35,7 @@ CpuFrameLoop::CpuFrameLoop(const format::Container& container, const FrameLoopOp
 }
 
 FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhead,
-                                const cpu_render::TransferFunction& transfer) {
+                                const cpu_render::TransferFunction& transfer, bool) {
   const auto start = Clock::now();
   FrameReport report;
   report.ticket = ++ticket_;
@@ -61,19 +62,32 @@ FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhe
   report.timings.decode_ms = ms_since(t);
   // 3. Render.
   t = Clock::now();
-  image_ = cpu_render::render_svo({update.svo_nodes, update.svo_leaves}, *atlas_, geometry_,
-                                  camera, transfer, options_.render);
+  cpu_render::SvoView svo;
+  svo.nodes = update.svo_nodes;
+  svo.leaves = update.svo_leaves;
+  image_ = cpu_render::render_svo(svo, *atlas_, geometry_, camera, transfer, options_.render);
   report.timings.render_ms = ms_since(t);
+  // 4. Retire: nothing reads the atlas after render_svo returned.
   scheduler_->retire(report.ticket);
   report.stats = update.stats;
   report.timings.frame_ms = ms_since(start);
   return report;
 }
 
-const cpu_render::RgbaImage& CpuFrameLoop::read_back(Ticket ticket) const {
+const cpu_render::RgbaImage& CpuFrameLoop::last_image(Ticket ticket) const {
   if (ticket != ticket_ || ticket == 0)
     throw std::invalid_argument("CpuFrameLoop::read_back: only the last frame's image is kept");
   return image_;
 }
 
-}  // namespace volreel::vulkan_render
+void CpuFrameLoop::resize(int width, int height) {
+  options_.width = std::max(width, 1);
+  options_.height = std::max(height, 1);
+}
+
+std::string CpuFrameLoop::describe() const {
+  return "CPU reference renderer (" + std::to_string(std::thread::hardware_concurrency()) +
+         " threads)";
+}
+
+}  // namespace volreel::loop
