@@ -5,7 +5,7 @@
 // same on any machine whatever the CPU renderer's speed, and the policies are compared without
 // noise. With --clock wall each frame samples the tour at the wall-clock time since the start
 // instead (the loader then runs in real time; results vary with the machine's load). Every frame
-// runs the whole streaming loop on the CPU:
+// runs the whole streaming loop on the CPU (loop::CpuFrameLoop):
 //   1. StreamScheduler::update(camera, playhead, frame) — priorities, requests, arrivals, slots,
 //      pre-render selection and the array-encoded SVO;
 //   2. each upload decoded into its CpuAtlas slot (CPU reference decoder);
@@ -31,6 +31,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -39,17 +40,16 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
-#include "volreel/cpu_render/cpu_atlas.hpp"
 #include "volreel/cpu_render/renderer.hpp"
 #include "volreel/cpu_render/tour.hpp"
 #include "volreel/datasets/prng.hpp"
 #include "volreel/datasets/series.hpp"
 #include "volreel/format/container.hpp"
 #include "volreel/format/decoder.hpp"
-#include "volreel/format/error.hpp"
 #include "volreel/psnr/metrics.hpp"
 #include "volreel/stream/scheduler.hpp"
 #include "volreel/loop/auto_transfer.hpp"
+#include "volreel/loop/cpu_frame_loop.hpp"
 #include "volreel/loop/loop_settings.hpp"
 
 namespace volreel::cli {
@@ -458,17 +458,18 @@ std::uint32_t current_target_nodes(const stream::StreamScheduler& scheduler, con
 RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy) {
   RunResult r;
   r.name = policy_name(policy);
-  const format::Container& container = *s.container;
-  const format::Manifest& m = container.manifest();
-  const format::AtomTable atoms = container.atoms();
-  stream::SchedulerSettings settings = s.settings;
-  settings.priority.policy = policy;
+  loop::FrameLoopOptions options;
+  options.scheduler = s.settings;
+  options.scheduler.priority.policy = policy;
   double simulated_time = 0;
-  if (s.simulated_fps > 0) settings.loader.clock = [&simulated_time] { return simulated_time; };
+  if (s.simulated_fps > 0) options.scheduler.loader.clock = [&simulated_time] { return simulated_time; };
+  options.atlas_bytes = std::uint64_t{s.settings.atlas_slots} * loop::CpuFrameLoop::gpu_slot_bytes;
+  options.width = s.width;
+  options.height = s.height;
+  options.render = s.render;
   // Indexing (frame files opened and validated) happened once, before the runs.
-  stream::StreamScheduler scheduler(*s.index, settings);
-  cpu_render::CpuAtlas atlas(settings.atlas_slots);
-  const cpu_render::VolumeGeometry geometry = cpu_render::VolumeGeometry::of(m.dims);
+  loop::CpuFrameLoop frames(*s.container, *s.index, options);
+  const stream::StreamScheduler& scheduler = frames.scheduler();
   const double duration = s.tour->duration();
 
   ProgressBar bar(std::string("streaming (") + r.name + ")", "s");
@@ -488,35 +489,21 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy) {
     FrameRecord rec;
     rec.time = time;
     rec.playhead = tf.playhead;
-    // 1. The scheduler.
-    auto t = Clock::now();
-    stream::FrameUpdate update = scheduler.update(tf.camera, tf.playhead, frame);
-    rec.update_ms = ms_since(t);
+    // 1.-4. Scheduler, decode (a bad payload becomes the lowest value), render, retire.
+    const loop::FrameReport report = frames.frame(tf.camera, tf.playhead, tf.transfer);
+    if (report.ticket != frame) throw std::logic_error("bench stream: frame numbers out of step");
+    const stream::FrameUpdate& update = frames.last_update();
+    // The scheduler's problems; a decode error is reported to it and printed with the next frame's.
     for (const std::string& e : update.new_errors) std::fprintf(stderr, "\nvolreel: warning: %s\n", e.c_str());
-    // 2. Decode the uploads into their slots; a bad payload becomes the lowest value.
-    t = Clock::now();
     for (const stream::BrickUpload& u : update.uploads) {
       if (u.key.level == 0) root = true;
       uploaded += u.payload.size();
-      try {
-        atlas.decode_into(u.slot, u.payload, m.codec, m.zfp_accuracy, atoms, u.file, u.offset);
-      } catch (const format::FormatError& e) {
-        scheduler.report_error(e.what());  // printed with the next frame's new_errors
-        const auto slot = atlas.slot(u.slot);
-        std::fill(slot.begin(), slot.end(), static_cast<float>(m.value_min));
-      }
     }
-    rec.decode_ms = ms_since(t);
-    // 3. Render; 4. retire (rendering is synchronous).
-    t = Clock::now();
-    cpu_render::SvoView svo;
-    svo.nodes = update.svo_nodes;
-    svo.leaves = update.svo_leaves;
-    const cpu_render::RgbaImage image = cpu_render::render_svo(svo, atlas, geometry, tf.camera, tf.transfer, s.render);
-    rec.render_ms = ms_since(t);
-    scheduler.retire(frame);
-    rec.image = cpu_render::to_image(image);
-    rec.stats = update.stats;
+    rec.update_ms = report.timings.schedule_ms;
+    rec.decode_ms = report.timings.decode_ms;
+    rec.render_ms = report.timings.render_ms;
+    rec.image = cpu_render::to_image(frames.last_image(report.ticket));
+    rec.stats = report.stats;
     rec.root_resident = root;
     rec.bytes_uploaded = uploaded;
     const auto t_current = Clock::now();

@@ -9,7 +9,6 @@
 #include <vector>
 
 #include "volreel/loop/cpu_frame_loop.hpp"
-#include "volreel/player/atlas_layout.h"
 #include "volreel/vulkan/resources.hpp"
 #include "volume_renderer.hpp"
 
@@ -20,11 +19,10 @@ namespace {
 /// The loop's options: the CPU atlas stores float32 voxels, so `atlas_bytes` holds half as many
 /// slots as a 16-bit GPU atlas of the same memory (the loop counts 16-bit slots), at most 2^16.
 loop::FrameLoopOptions cpu_options(const RendererSetup& setup) {
-  constexpr std::uint64_t gpu_slot_bytes =
-      std::uint64_t{VR_ATLAS_SLOT_SIZE} * VR_ATLAS_SLOT_SIZE * VR_ATLAS_SLOT_SIZE * 2;
   loop::FrameLoopOptions o;
   o.scheduler = setup.scheduler;
-  o.atlas_bytes = std::min<std::uint64_t>(setup.atlas_bytes / 2, (1u << 16) * gpu_slot_bytes);
+  o.atlas_bytes = std::min<std::uint64_t>(setup.atlas_bytes / 2,
+                                          (1u << 16) * loop::CpuFrameLoop::gpu_slot_bytes);
   o.width = static_cast<int>(setup.width);
   o.height = static_cast<int>(setup.height);
   return o;

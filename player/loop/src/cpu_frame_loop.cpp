@@ -9,7 +9,6 @@
 #include <vector>
 
 #include "volreel/format/error.hpp"
-#include "volreel/player/atlas_layout.h"
 
 namespace volreel::loop {
 namespace {
@@ -19,19 +18,28 @@ double ms_since(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
-constexpr std::uint64_t gpu_slot_bytes =
-    std::uint64_t{VR_ATLAS_SLOT_SIZE} * VR_ATLAS_SLOT_SIZE * VR_ATLAS_SLOT_SIZE * 2;
-
 }  // namespace
+
+std::uint32_t CpuFrameLoop::slots_for(const FrameLoopOptions& options) {
+  return static_cast<std::uint32_t>(
+      std::clamp<std::uint64_t>(options.atlas_bytes / gpu_slot_bytes, 1, 1u << 20));
+}
 
 CpuFrameLoop::CpuFrameLoop(const format::Container& container, const FrameLoopOptions& options)
     : container_(container), options_(options) {
   geometry_ = cpu_render::VolumeGeometry::of(container.manifest().dims);
-  const auto slots = static_cast<std::uint32_t>(
-      std::clamp<std::uint64_t>(options.atlas_bytes / gpu_slot_bytes, 1, 1u << 20));
-  atlas_ = std::make_unique<cpu_render::CpuAtlas>(slots);
-  options_.scheduler.atlas_slots = slots;
+  atlas_ = std::make_unique<cpu_render::CpuAtlas>(slots_for(options));
+  options_.scheduler.atlas_slots = atlas_->slot_count();
   scheduler_ = std::make_unique<stream::StreamScheduler>(container, options_.scheduler);
+}
+
+CpuFrameLoop::CpuFrameLoop(const format::Container& container, stream::SpatialIndex index,
+                           const FrameLoopOptions& options)
+    : container_(container), options_(options) {
+  geometry_ = cpu_render::VolumeGeometry::of(container.manifest().dims);
+  atlas_ = std::make_unique<cpu_render::CpuAtlas>(slots_for(options));
+  options_.scheduler.atlas_slots = atlas_->slot_count();
+  scheduler_ = std::make_unique<stream::StreamScheduler>(std::move(index), options_.scheduler);
 }
 
 FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhead,
@@ -43,7 +51,7 @@ FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhe
   auto t = Clock::now();
   stream::FrameUpdate update = scheduler_->update(camera, playhead, report.ticket);
   report.timings.schedule_ms = ms_since(t);
-  report.new_errors = std::move(update.new_errors);
+  report.new_errors = update.new_errors;
   // 2. Decode the arrived bricks into their slots; a bad one becomes the lowest value.
   t = Clock::now();
   const format::Manifest& m = container_.manifest();
@@ -70,6 +78,7 @@ FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhe
   // 4. Retire: nothing reads the atlas after render_svo returned.
   scheduler_->retire(report.ticket);
   report.stats = update.stats;
+  last_update_ = std::move(update);
   report.timings.frame_ms = ms_since(start);
   return report;
 }

@@ -14,10 +14,17 @@ namespace volreel::loop {
 
 class CpuFrameLoop final : public FrameLoop {
  public:
+  /// Bytes of one slot of a 16-bit GPU atlas: options.atlas_bytes / this is the slot count.
+  static constexpr std::uint64_t gpu_slot_bytes =
+      std::uint64_t{cpu_render::CpuAtlas::slot_values} * 2;
+
   /// Indexes the container; the atlas gets as many slots as a 16-bit GPU atlas of
-  /// options.atlas_bytes would (93 312 bytes per slot; it stores float32, twice that). The
-  /// container must outlive the loop.
+  /// options.atlas_bytes would (gpu_slot_bytes each, 1 to 2^20; it stores float32, twice that).
+  /// The container must outlive the loop.
   CpuFrameLoop(const format::Container& container, const FrameLoopOptions& options);
+  /// The same over an index of the container built before (stream::build_spatial_index).
+  CpuFrameLoop(const format::Container& container, stream::SpatialIndex index,
+               const FrameLoopOptions& options);
 
   /// One frame, rendered at once (decode_ms: CPU decoding; render_ms: render_svo) at the
   /// camera's size. The image is kept for read_back(report.ticket) whatever `readback` says.
@@ -39,14 +46,20 @@ class CpuFrameLoop final : public FrameLoop {
   const cpu_render::VolumeGeometry& geometry() const override { return geometry_; }
   const FrameLoopOptions& options() const override { return options_; }
   const cpu_render::CpuAtlas& atlas() const { return *atlas_; }
+  /// The scheduler's output of the last frame (uploads with their payloads, the SVO, the
+  /// scheduler's own new errors).
+  const stream::FrameUpdate& last_update() const { return last_update_; }
 
  private:
+  static std::uint32_t slots_for(const FrameLoopOptions& options);
+
   const format::Container& container_;
   FrameLoopOptions options_;
   cpu_render::VolumeGeometry geometry_;
   std::unique_ptr<cpu_render::CpuAtlas> atlas_;
   std::unique_ptr<stream::StreamScheduler> scheduler_;
   cpu_render::RgbaImage image_;
+  stream::FrameUpdate last_update_;
   Ticket ticket_ = 0;
 };
 
