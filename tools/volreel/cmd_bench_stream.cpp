@@ -48,6 +48,7 @@
 #include "volreel/format/decoder.hpp"
 #include "volreel/psnr/metrics.hpp"
 #include "volreel/stream/scheduler.hpp"
+#include "volreel/stream_bench/run_summary.hpp"
 #include "volreel/loop/auto_transfer.hpp"
 #include "volreel/loop/cpu_frame_loop.hpp"
 #include "volreel/loop/loop_settings.hpp"
@@ -58,9 +59,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
-
-/// Image PSNR of identical images is infinite; means count such a frame as this many dB.
-constexpr double psnr_cap_db = 100.0;
 
 struct BenchStreamOptions {
   std::string container, tour, series, out, transfer;
@@ -337,43 +335,10 @@ std::optional<cpu_render::TransferFunction> bench_transfer(const std::string& sp
 // ---------------------------------------------------------------------------------------------
 // One run of the tour with one priority policy.
 
-struct FrameRecord {
-  double time = 0, playhead = 0;
-  stream::StreamStats stats;
-  double update_ms = 0, decode_ms = 0, render_ms = 0, frame_ms = 0;
-  double measure_ms = 0;  ///< the bench's own bookkeeping (current_target_nodes)
-  bool root_resident = false;  ///< a root brick has arrived by this frame
-  std::uint32_t current_nodes = 0;   ///< target nodes at target LOD with the right keyframes
-  double fraction_current = 0;       ///< current_nodes / target nodes (1 when none)
-  std::uint64_t bytes_uploaded = 0;  ///< since the start: payload bytes decoded into the atlas
-  image::Image image;
-  double psnr = 0, ssim = 0;
-};
-
-struct SeekResult {
-  double time = 0, keyframe = 0;
-  /// Seconds until every target node is drawn as with everything loaded (target LOD and the
-  /// keyframes around the playhead); NaN: not reached before the next seek.
-  double to_full_quality = std::numeric_limits<double>::quiet_NaN();
-  /// Seconds until every target node is at its target LOD (StreamStats, whatever its keyframes).
-  double to_full_lod = std::numeric_limits<double>::quiet_NaN();
-};
-
-struct RunResult {
-  std::string name;
-  std::vector<FrameRecord> frames;
-  std::vector<SeekResult> seeks;
-  double wall_s = 0;
-  double first_root_s = std::numeric_limits<double>::quiet_NaN();
-  std::size_t errors = 0;
-  // Averages.
-  double mean_psnr = 0, mean_ssim = 0, min_psnr = 0, mean_fraction = 0, full_lod_share = 0;
-  double mean_current = 0, full_quality_share = 0;
-  std::size_t frames_with_holes_after_root = 0, hole_frames = 0;
-  std::uint32_t max_holes_after_root = 0;
-  double bytes_loaded = 0, bytes_uploaded = 0;
-  double mean_update_ms = 0, mean_decode_ms = 0, mean_render_ms = 0, mean_frame_ms = 0;
-};
+using stream_bench::FrameRecord;
+using stream_bench::psnr_cap_db;
+using stream_bench::RunResult;
+using stream_bench::SeekResult;
 
 const char* policy_name(stream::PriorityPolicy p) {
   return p == stream::PriorityPolicy::patent ? "patent" : "nearest";
@@ -581,51 +546,8 @@ void measure(RunResult& r, const RunSetup& s, GroundTruth& truth, const std::vec
     }
     bar.finish();
   }
-  // 2. Averages.
-  const double n = static_cast<double>(std::max<std::size_t>(r.frames.size(), 1));
-  r.min_psnr = std::numeric_limits<double>::infinity();
-  std::size_t full = 0, full_lod = 0;
-  for (const FrameRecord& f : r.frames) {
-    r.mean_psnr += std::min(f.psnr, psnr_cap_db);
-    r.min_psnr = std::min(r.min_psnr, f.psnr);
-    r.mean_ssim += f.ssim;
-    r.mean_fraction += f.stats.fraction_at_target;
-    r.mean_current += f.fraction_current;
-    full_lod += f.stats.at_target_nodes == f.stats.target_nodes ? 1 : 0;
-    full += f.current_nodes == f.stats.target_nodes ? 1 : 0;
-    r.hole_frames += f.stats.holes > 0 ? 1 : 0;
-    if (f.root_resident && f.stats.holes > 0) {
-      ++r.frames_with_holes_after_root;
-      r.max_holes_after_root = std::max(r.max_holes_after_root, f.stats.holes);
-    }
-    r.mean_update_ms += f.update_ms;
-    r.mean_decode_ms += f.decode_ms;
-    r.mean_render_ms += f.render_ms;
-    r.mean_frame_ms += f.frame_ms;
-  }
-  for (double* v : {&r.mean_psnr, &r.mean_ssim, &r.mean_fraction, &r.mean_current, &r.mean_update_ms, &r.mean_decode_ms,
-                    &r.mean_render_ms, &r.mean_frame_ms})
-    *v /= n;
-  r.full_quality_share = static_cast<double>(full) / n;
-  r.full_lod_share = static_cast<double>(full_lod) / n;
-  r.bytes_loaded = r.frames.empty() ? 0 : static_cast<double>(r.frames.back().stats.bytes_loaded);
-  r.bytes_uploaded = r.frames.empty() ? 0 : static_cast<double>(r.frames.back().bytes_uploaded);
-  // 3. Time to full quality after each seek: the first frame at or after the seek whose target
-  // nodes are all drawn as with everything loaded, before the next seek (and the same for the
-  // target LOD alone).
-  for (std::size_t k = 0; k < seeks.size(); ++k) {
-    SeekResult sr;
-    sr.time = seeks[k].first;
-    sr.keyframe = seeks[k].second;
-    const double next = k + 1 < seeks.size() ? seeks[k + 1].first : std::numeric_limits<double>::infinity();
-    for (const FrameRecord& f : r.frames) {
-      if (f.time < sr.time || f.time >= next) continue;
-      if (std::isnan(sr.to_full_lod) && f.stats.at_target_nodes == f.stats.target_nodes) sr.to_full_lod = f.time - sr.time;
-      if (std::isnan(sr.to_full_quality) && f.current_nodes == f.stats.target_nodes)
-        sr.to_full_quality = f.time - sr.time;
-    }
-    r.seeks.push_back(sr);
-  }
+  // 2. Averages and the time from each seek to full quality.
+  stream_bench::summarize(r, seeks);
 }
 
 void write_csv(const fs::path& path, const RunResult& r, const std::vector<std::pair<double, double>>& seeks) {
