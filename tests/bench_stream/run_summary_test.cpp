@@ -1,13 +1,18 @@
 // run_summary_test.cpp: stream_bench::summarize on hand-made frame records — the averages (PSNR
 // capped for identical images), holes after the first root brick, the byte totals, and the time
-// from each seek to full LOD and to full quality, bounded by the next seek.
+// from each seek to full LOD and to full quality, bounded by the next seek — and the run's JSON
+// and CSV.
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
 #include <limits>
+#include <string>
 #include <utility>
 #include <vector>
 
+#include "../test_util.hpp"
+#include "volreel/stream_bench/run_report.hpp"
 #include "volreel/stream_bench/run_summary.hpp"
 
 namespace volreel {
@@ -78,6 +83,36 @@ TEST(StreamBenchSummary, SeekTimesStopAtTheNextSeek) {
   EXPECT_TRUE(std::isnan(r.seeks[1].to_full_quality));
   EXPECT_NEAR(r.seeks[2].to_full_lod, 0.1, 1e-12);
   EXPECT_NEAR(r.seeks[2].to_full_quality, 0.1, 1e-12);
+}
+
+TEST(StreamBenchReport, JsonNullsWhatWasNotReachedAndCsvMarksSeeks) {
+  RunResult r;
+  r.name = "patent";
+  r.frames = {frame(0.0, 4, 4, 30), frame(0.1, 1, 0, 30), frame(0.2, 4, 4, 30)};
+  const std::vector<std::pair<double, double>> seeks = {{0.05, 1.0}};
+  stream_bench::summarize(r, seeks);
+  r.seeks[0].to_full_quality = std::numeric_limits<double>::quiet_NaN();
+  const nlohmann::json j = stream_bench::summary_json(r);
+  EXPECT_EQ(j["policy"], "patent");
+  EXPECT_EQ(j["frames"], 3u);
+  EXPECT_TRUE(j["first_root_brick_s"].is_null());  // never set: NaN
+  ASSERT_EQ(j["seeks"].size(), 1u);
+  EXPECT_TRUE(j["seeks"][0]["to_full_quality_s"].is_null());
+  EXPECT_NEAR(j["seeks"][0]["to_full_lod_s"].get<double>(), 0.15, 1e-12);
+  EXPECT_EQ(stream_bench::seconds_or_dash(std::nan("")), "-");
+  EXPECT_EQ(stream_bench::seconds_or_dash(1.234), "1.23 s");
+  EXPECT_EQ(stream_bench::mb_text(1.5e6), "1.50 MB");
+
+  test::TempDir dir("stream-bench-csv");
+  stream_bench::write_csv(dir / "run.csv", r, seeks);
+  std::ifstream in(dir / "run.csv");
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  ASSERT_EQ(lines.size(), 4u);  // header and three frames
+  EXPECT_EQ(lines[0].rfind("frame,time_s,playhead,seek,", 0), 0u);
+  EXPECT_EQ(lines[1].rfind("0,0.0000,0.0000,0,", 0), 0u);
+  EXPECT_EQ(lines[2].rfind("1,0.1000,0.0000,1,", 0), 0u);  // the first frame after the seek
+  EXPECT_EQ(lines[3].rfind("2,0.2000,0.0000,0,", 0), 0u);
 }
 
 }  // namespace
