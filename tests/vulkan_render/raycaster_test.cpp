@@ -38,7 +38,7 @@
 #include "volreel/psnr/metrics.hpp"
 #include "volreel/vulkan/atlas.hpp"
 #include "volreel/vulkan/atlas_decoder.hpp"
-#include "volreel/vulkan_render/frame_loop.hpp"
+#include "volreel/vulkan_render/vulkan_frame_loop.hpp"
 #include "volreel/vulkan_render/raycaster.hpp"
 
 namespace volreel {
@@ -639,18 +639,18 @@ TEST_F(VulkanRender, FrameLoopConvergesAndMatchesTheCpuRenderer) {
   const format::Container container(dir / "test.vreel");
   const format::Manifest& m = container.manifest();
 
-  vulkan_render::FrameLoopOptions o;
+  loop::FrameLoopOptions o;
   o.atlas_bytes = std::uint64_t{125} * 93312;  // every keyframe node of the view fits
-  o.raycaster.width = 80;
-  o.raycaster.height = 60;
+  o.width = 80;
+  o.height = 60;
   o.pipelined = true;
-  vulkan_render::FrameLoop loop(context(), container, o);
+  vulkan_render::VulkanFrameLoop loop(context(), container, o);
   CpuAtlas mirror(loop.atlas().slot_count());
   auto camera = player::OrbitCamera::framing({70, 50, 40}, 80, 60);
   const auto tf = TransferFunction::preset("cool-warm", static_cast<float>(m.value_min),
                                            static_cast<float>(m.value_max));
   const double playhead = 2.25;  // between keyframes 2 and 3: time interpolation
-  vulkan_render::FrameReport report;
+  loop::FrameReport report;
   bool converged = false;
   for (int i = 0; i < 2000 && !converged; ++i) {
     report = loop.frame(camera, playhead, tf, true);
@@ -678,7 +678,7 @@ TEST_F(VulkanRender, FrameLoopConvergesAndMatchesTheCpuRenderer) {
   EXPECT_GE(c.psnr, min_psnr);
   EXPECT_GE(c.ssim, min_ssim);
   // With the leaf histograms of the files (the default) the picture is the same.
-  loop.options().transfer_culling = false;
+  loop.set_transfer_culling(false);
   const auto plain = loop.frame(camera, playhead, tf, true);
   EXPECT_GE(compare(loop.read_back(plain.ticket), got).psnr, 50.0);
   loop.finish();

@@ -147,9 +147,13 @@ void add_bench_command(CLI::App& app) {
   o->reader.add_to(*rd);
   rd->callback([o] { run_rd(*o); });
   add_bench_train_command(*bench);
-#ifdef VOLREEL_HAVE_PLAYER
+#ifdef VOLREEL_HAVE_VULKAN
   add_bench_decode_command(*bench);
+#endif
+#ifdef VOLREEL_HAVE_PLAYER
   add_bench_stream_command(*bench);
+#endif
+#ifdef VOLREEL_HAVE_VULKAN
   add_bench_play_command(*bench);
 #endif
 }

@@ -13,17 +13,14 @@
 #include <vector>
 
 #include "commands.hpp"
-#include "either_loop.hpp"
 #include "loop_options.hpp"
 #include "volreel/cpu_render/transfer_function.hpp"
 #include "volreel/datasets/prng.hpp"
 #include "volreel/format/container.hpp"
-#include "volreel/vulkan/context.hpp"
-#include "volreel/vulkan/error.hpp"
-#include "volreel/vulkan_render/auto_transfer.hpp"
-#include "volreel/vulkan_render/cpu_frame_loop.hpp"
-#include "volreel/vulkan_render/frame_loop.hpp"
-#include "volreel/vulkan_render/loop_settings.hpp"
+#include "volreel/loop/auto_transfer.hpp"
+#include "volreel/loop/frame_loop.hpp"
+#include "volreel/loop/loop_settings.hpp"
+#include "volreel/vulkan_render/open_frame_loop.hpp"
 
 namespace volreel::cli {
 
@@ -34,7 +31,7 @@ double seconds_since(Clock::time_point start) { return std::chrono::duration<dou
 
 struct BenchPlayOptions {
   std::string container;
-  vulkan_render::LoopSettings loop;
+  loop::LoopSettings loop;
   std::size_t frames_per_phase = 60;
   std::size_t seeks = 5;
   double speed = 10;  ///< keyframes per second of playback
@@ -50,7 +47,7 @@ struct PhaseStats {
   std::size_t frames = 0;
   double wall_s = 0, schedule = 0, upload = 0, decode = 0, render = 0, at_target = 0, min_at_target = 1;
   std::uint64_t loaded_before = 0, loaded_after = 0;
-  void add(const vulkan_render::FrameReport& r) {
+  void add(const loop::FrameReport& r) {
     ++frames;
     schedule += r.timings.schedule_ms;
     upload += r.timings.upload_ms;
@@ -72,24 +69,26 @@ void run_bench_play(const BenchPlayOptions& o) {
   // 1. Container, device, loop.
   const format::Container container(o.container);
   const format::Manifest& m = container.manifest();
-  vulkan_render::FrameLoopOptions options;
+  loop::FrameLoopOptions options;
   options.render.background = {0.06f, 0.06f, 0.08f};
   try {
-    vulkan_render::apply(o.loop, options);
+    loop::apply(o.loop, options);
   } catch (const std::invalid_argument& e) {
     throw InputError(e.what());
   }
-  EitherLoop loop = open_loop(container, options, o.cpu, NoDevice::fail, "(bench play measures the Vulkan player; --cpu measures the CPU renderer)");
-  const std::string& device = loop.device;
-  const std::uint32_t slots = loop.slots();
+  const std::unique_ptr<loop::FrameLoop> loop =
+      vulkan_render::open_frame_loop(container, options, o.cpu, vulkan_render::NoDevice::fail,
+                                     "(bench play measures the Vulkan player; --cpu measures the CPU renderer)");
+  const std::string device = loop->describe();
+  const std::uint32_t slots = loop->slot_count();
   const std::size_t keyframes = container.frame_count();
   const double last = static_cast<double>(keyframes - 1);
-  const cpu_render::TransferFunction tf = vulkan_render::transfer_from_spec(o.transfer, container);
+  const cpu_render::TransferFunction tf = loop::transfer_from_spec(o.transfer, container);
   std::printf("volreel bench play\nmachine: %s\ndevice:  %s\n", describe_machine().c_str(), device.c_str());
   std::printf("input:   %s: %ux%ux%u, %zu frames, %s, %u octree levels\n", o.container.c_str(), m.dims[0], m.dims[1],
               m.dims[2], keyframes, m.codec == format::Codec::ksvd ? "ksvd" : "zfp", m.levels);
   std::printf("view:    %dx%d, transfer function '%s', ray step %g voxels, SSE target %g px, culling %s\n",
-              options.raycaster.width, options.raycaster.height, o.transfer.c_str(), options.render.step,
+              options.width, options.height, o.transfer.c_str(), options.render.step,
               options.scheduler.priority.sse_target, options.transfer_culling ? "on" : "off");
   std::printf("atlas:   %u slots (%.0f MiB), upload budget %.0f MiB/frame, bandwidth %s, latency %s\n", slots,
               o.loop.atlas_mb, o.loop.upload_budget_mb,
@@ -100,7 +99,7 @@ void run_bench_play(const BenchPlayOptions& o) {
               o.speed, o.frame_dt, o.frames_per_phase);
 
   auto camera = player::OrbitCamera::framing({double(m.dims[0]), double(m.dims[1]), double(m.dims[2])},
-                                             options.raycaster.width, options.raycaster.height);
+                                             options.width, options.height);
   const double azimuth0 = camera.azimuth;
   std::size_t frame_number = 0;
   const auto next_camera = [&] {
@@ -113,9 +112,9 @@ void run_bench_play(const BenchPlayOptions& o) {
   {
     const auto start = Clock::now();
     std::size_t frames = 0;
-    vulkan_render::FrameReport r;
+    loop::FrameReport r;
     do {
-      r = loop.frame(camera, playhead, tf);
+      r = loop->frame(camera, playhead, tf);
       ++frames;
     } while (r.stats.fraction_at_target < 1.0 && seconds_since(start) < o.timeout);
     std::printf("cold start to full quality: %.2f s, %zu frames (%.0f%% at target, %.1f MB loaded)\n\n", seconds_since(start),
@@ -128,15 +127,15 @@ void run_bench_play(const BenchPlayOptions& o) {
   SplitMix64 rng(o.seed);
   const auto run_phase = [&](const char* name, auto&& advance, bool pipelined) {
     PhaseStats s;
-    loop.set_pipelined(pipelined);
-    vulkan_render::FrameReport r = loop.frame(next_camera(), playhead, tf);  // not counted: settles the mode
+    loop->set_pipelined(pipelined);
+    loop::FrameReport r = loop->frame(next_camera(), playhead, tf);  // not counted: settles the mode
     s.loaded_before = r.stats.bytes_loaded;
     const auto start = Clock::now();
     for (std::size_t i = 0; i < o.frames_per_phase; ++i) {
       playhead = std::clamp(advance(i), 0.0, last);
-      s.add(loop.frame(next_camera(), playhead, tf));
+      s.add(loop->frame(next_camera(), playhead, tf));
     }
-    loop.finish();
+    loop->finish();
     s.wall_s = seconds_since(start);
     s.print(name);
   };
@@ -145,12 +144,12 @@ void run_bench_play(const BenchPlayOptions& o) {
   run_phase("reverse", [&](std::size_t) { return playhead - step; }, false);
   run_phase("seek every 10th", [&](std::size_t i) { return i % 10 == 0 ? rng.uniform(0, last) : playhead + step; }, false);
   playhead = 0;
-  if (loop.gpu) {
+  if (loop->can_pipeline()) {
     run_phase("forward, overlapped", [&](std::size_t) { return playhead + step; }, true);
     std::printf("(overlapped: the CPU work of a frame runs while the GPU renders the previous one; its decode and\n"
                 " render columns are not measured per frame)\n");
   }
-  loop.set_pipelined(false);
+  loop->set_pipelined(false);
 
   // 4. Random seeks: how long until every visible node is drawn at its target LOD.
   std::printf("\nrandom seek to full quality (camera still; %zu seeks):\n", o.seeks);
@@ -160,10 +159,10 @@ void run_bench_play(const BenchPlayOptions& o) {
     playhead = last * std::fmod(0.5 + 0.6180339887 * double(k + 1) + 0.1 * double(o.seed), 1.0);
     const auto start = Clock::now();
     std::size_t frames = 0;
-    vulkan_render::FrameReport r;
-    const std::uint64_t before = loop.frame(camera, playhead, tf).stats.bytes_loaded;
+    loop::FrameReport r;
+    const std::uint64_t before = loop->frame(camera, playhead, tf).stats.bytes_loaded;
     do {
-      r = loop.frame(camera, playhead, tf);
+      r = loop->frame(camera, playhead, tf);
       ++frames;
     } while (r.stats.fraction_at_target < 1.0 && seconds_since(start) < o.timeout);
     const double t = seconds_since(start);
@@ -176,7 +175,7 @@ void run_bench_play(const BenchPlayOptions& o) {
     for (double t : times) sum += t;
     std::printf("  mean %.3f s, worst %.3f s\n", sum / double(times.size()), *std::max_element(times.begin(), times.end()));
   }
-  loop.finish();
+  loop->finish();
 }
 
 }  // namespace

@@ -5,7 +5,7 @@
 // same on any machine whatever the CPU renderer's speed, and the policies are compared without
 // noise. With --clock wall each frame samples the tour at the wall-clock time since the start
 // instead (the loader then runs in real time; results vary with the machine's load). Every frame
-// runs the whole streaming loop on the CPU:
+// runs the whole streaming loop on the CPU (loop::CpuFrameLoop):
 //   1. StreamScheduler::update(camera, playhead, frame) — priorities, requests, arrivals, slots,
 //      pre-render selection and the array-encoded SVO;
 //   2. each upload decoded into its CpuAtlas slot (CPU reference decoder);
@@ -31,6 +31,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -39,18 +40,20 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
-#include "volreel/cpu_render/cpu_atlas.hpp"
 #include "volreel/cpu_render/renderer.hpp"
 #include "volreel/cpu_render/tour.hpp"
 #include "volreel/datasets/prng.hpp"
 #include "volreel/datasets/series.hpp"
 #include "volreel/format/container.hpp"
 #include "volreel/format/decoder.hpp"
-#include "volreel/format/error.hpp"
 #include "volreel/psnr/metrics.hpp"
 #include "volreel/stream/scheduler.hpp"
-#include "volreel/vulkan_render/auto_transfer.hpp"
-#include "volreel/vulkan_render/loop_settings.hpp"
+#include "volreel/stream_bench/run_report.hpp"
+#include "volreel/stream_bench/run_summary.hpp"
+#include "volreel/stream_bench/tour_run.hpp"
+#include "volreel/loop/auto_transfer.hpp"
+#include "volreel/loop/cpu_frame_loop.hpp"
+#include "volreel/loop/loop_settings.hpp"
 
 namespace volreel::cli {
 
@@ -58,9 +61,10 @@ namespace {
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
-
-/// Image PSNR of identical images is infinite; means count such a frame as this many dB.
-constexpr double psnr_cap_db = 100.0;
+using stream_bench::GroundTruth;
+using stream_bench::psnr_cap_db;
+using stream_bench::RunResult;
+using stream_bench::RunSetup;
 
 struct BenchStreamOptions {
   std::string container, tour, series, out, transfer;
@@ -93,12 +97,6 @@ struct BenchStreamOptions {
 
 [[noreturn]] void bad(const std::string& option, const std::string& expected, const std::string& found) {
   throw InputError(option + ": expected " + expected + ", found '" + found + "'");
-}
-
-std::string mb(double bytes) {
-  char s[32];
-  std::snprintf(s, sizeof s, "%.2f MB", bytes * 1e-6);
-  return s;
 }
 
 std::string rate_text(double bytes_per_s) {
@@ -201,71 +199,8 @@ double bench_bandwidth(const std::string& text, double playback_bytes_per_s) {
       throw InputError("--bandwidth " + text + ": the tour never plays, so there is no playback data rate; give a rate such as 1MB/s");
     return *factor * playback_bytes_per_s;
   }
-  return vulkan_render::parse_bandwidth(text);
+  return loop::parse_bandwidth(text);
 }
-
-// ---------------------------------------------------------------------------------------------
-// Ground truth: the original series (or the container's finest-level decode).
-
-class GroundTruth {
- public:
-  GroundTruth(const format::Container& container, std::unique_ptr<datasets::SeriesReader> series)
-      : container_(container), series_(std::move(series)) {
-    const format::Manifest& m = container.manifest();
-    geometry_ = cpu_render::VolumeGeometry::of(m.dims);
-    if (series_) {
-      const auto& info = series_->info();
-      if (info.dims.x != m.dims[0] || info.dims.y != m.dims[1] || info.dims.z != m.dims[2])
-        throw InputError("--series " + info.source + ": the series is " + to_string(info.dims) + ", the container " +
-                         std::to_string(m.dims[0]) + "x" + std::to_string(m.dims[1]) + "x" + std::to_string(m.dims[2]));
-      if (info.frames < container.frame_count())
-        throw InputError("--series " + info.source + ": the series has " + std::to_string(info.frames) +
-                         " frames, the container " + std::to_string(container.frame_count()));
-    }
-  }
-
-  bool original() const { return series_ != nullptr; }
-  const cpu_render::VolumeGeometry& geometry() const { return geometry_; }
-
-  /// Frame t at the finest level. A few frames are kept; frame `keep` is never evicted, so a
-  /// reference to it stays valid.
-  const std::vector<float>& frame(std::size_t t, std::size_t keep = std::numeric_limits<std::size_t>::max()) {
-    auto it = cache_.find(t);
-    if (it != cache_.end()) return it->second;
-    while (cache_.size() >= 4) cache_.erase(cache_.begin()->first == keep ? std::next(cache_.begin()) : cache_.begin());
-    std::vector<float> values;
-    if (series_) {
-      const auto& d = series_->info().dims;
-      values.resize(d.voxels());
-      series_->read_frame(t, values);
-    } else {
-      const format::FrameFile file = container_.open_frame(t);
-      values = format::decode_level(file.view(), geometry_.levels - 1, container_.atoms()).data;
-    }
-    return cache_.emplace(t, std::move(values)).first->second;
-  }
-
-  /// The reference image at `playhead`: the two frames around it, blended linearly.
-  cpu_render::RgbaImage render(double playhead, const player::OrbitCamera& camera,
-                               const cpu_render::TransferFunction& tf, const cpu_render::RenderOptions& options) {
-    const std::size_t keyframes = container_.frame_count();
-    const double p = std::clamp(playhead, 0.0, static_cast<double>(keyframes - 1));
-    const auto t0 = static_cast<std::size_t>(std::floor(p));
-    const std::size_t t1 = std::min(t0 + 1, keyframes - 1);
-    const auto f = static_cast<float>(p - static_cast<double>(t0));
-    const std::uint32_t finest = geometry_.levels - 1;
-    const std::vector<float>& a = frame(t0);
-    const std::vector<float>& b = frame(t1, t0);
-    return cpu_render::render_reference({geometry_.dims, a, finest}, {geometry_.dims, b, finest}, f, geometry_,
-                                        camera, tf, options);
-  }
-
- private:
-  const format::Container& container_;
-  std::unique_ptr<datasets::SeriesReader> series_;
-  cpu_render::VolumeGeometry geometry_;
-  std::map<std::size_t, std::vector<float>> cache_;
-};
 
 /// The path inside a manifest's "source" ("raw series DIR", "raw file FILE (f32)", "HDF5 FILE
 /// (datasets …)") or the encoder's "series" field.
@@ -323,7 +258,7 @@ std::unique_ptr<datasets::SeriesReader> open_original(const BenchStreamOptions& 
 }
 
 /// --transfer: "tour" (the tour's own), "auto" (quantiles of the ground truth's middle frame), or
-/// what the player takes (a preset name or a JSON file: vulkan_render::transfer_from_spec).
+/// what the player takes (a preset name or a JSON file: loop::transfer_from_spec).
 std::optional<cpu_render::TransferFunction> bench_transfer(const std::string& spec, const format::Container& container,
                                                            GroundTruth& truth) {
   const format::Manifest& m = container.manifest();
@@ -331,455 +266,24 @@ std::optional<cpu_render::TransferFunction> bench_transfer(const std::string& sp
   if (spec == "auto")
     return cpu_render::TransferFunction::from_quantiles(truth.frame(container.frame_count() / 2),
                                                         static_cast<float>(m.value_min), static_cast<float>(m.value_max));
-  return vulkan_render::transfer_from_spec(spec, container, "--transfer");
+  return loop::transfer_from_spec(spec, container, "--transfer");
 }
 
 // ---------------------------------------------------------------------------------------------
 // One run of the tour with one priority policy.
 
-struct FrameRecord {
-  double time = 0, playhead = 0;
-  stream::StreamStats stats;
-  double update_ms = 0, decode_ms = 0, render_ms = 0, frame_ms = 0;
-  double measure_ms = 0;  ///< the bench's own bookkeeping (current_target_nodes)
-  bool root_resident = false;  ///< a root brick has arrived by this frame
-  std::uint32_t current_nodes = 0;   ///< target nodes at target LOD with the right keyframes
-  double fraction_current = 0;       ///< current_nodes / target nodes (1 when none)
-  std::uint64_t bytes_uploaded = 0;  ///< since the start: payload bytes decoded into the atlas
-  image::Image image;
-  double psnr = 0, ssim = 0;
-};
 
-struct SeekResult {
-  double time = 0, keyframe = 0;
-  /// Seconds until every target node is drawn as with everything loaded (target LOD and the
-  /// keyframes around the playhead); NaN: not reached before the next seek.
-  double to_full_quality = std::numeric_limits<double>::quiet_NaN();
-  /// Seconds until every target node is at its target LOD (StreamStats, whatever its keyframes).
-  double to_full_lod = std::numeric_limits<double>::quiet_NaN();
-};
-
-struct RunResult {
-  std::string name;
-  std::vector<FrameRecord> frames;
-  std::vector<SeekResult> seeks;
-  double wall_s = 0;
-  double first_root_s = std::numeric_limits<double>::quiet_NaN();
-  std::size_t errors = 0;
-  // Averages.
-  double mean_psnr = 0, mean_ssim = 0, min_psnr = 0, mean_fraction = 0, full_lod_share = 0;
-  double mean_current = 0, full_quality_share = 0;
-  std::size_t frames_with_holes_after_root = 0, hole_frames = 0;
-  std::uint32_t max_holes_after_root = 0;
-  double bytes_loaded = 0, bytes_uploaded = 0;
-  double mean_update_ms = 0, mean_decode_ms = 0, mean_render_ms = 0, mean_frame_ms = 0;
-};
-
-const char* policy_name(stream::PriorityPolicy p) {
-  return p == stream::PriorityPolicy::patent ? "patent" : "nearest";
-}
-
-struct RunSetup {
-  const format::Container* container = nullptr;
-  const stream::SpatialIndex* index = nullptr;  ///< built once, copied into each run's scheduler
-  std::size_t index_errors = 0;                 ///< frames the index left out (printed once)
-  const cpu_render::Tour* tour = nullptr;
-  std::optional<cpu_render::TransferFunction> transfer;
-  stream::SchedulerSettings settings;
-  cpu_render::RenderOptions render;
-  int width = 0, height = 0;
-  double simulated_fps = 0;  ///< > 0: the simulated clock at this frame rate; 0: the wall clock
-};
-
-double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
-
-cpu_render::TourFrame frame_at(const RunSetup& s, double time) {
-  cpu_render::TourFrame f = s.tour->at(time);
-  if (s.transfer) f.transfer = *s.transfer;
-  f.camera.width = s.width;
-  f.camera.height = s.height;
-  return f;
-}
-
-/// Whether frame t holds exact data for spatial node `node`: its own brick, or an ancestor that is
-/// a constant subtree at t.
-bool has_exact_data(const stream::SpatialIndex& index, std::uint32_t node, std::uint32_t t) {
-  if (index.find_keyframe(node, t) != stream::no_keyframe) return true;
-  for (std::uint32_t a = index.node(node).parent; a != stream::no_node; a = index.node(a).parent) {
-    const stream::KeyframeId k = index.find_keyframe(a, t);
-    if (k != stream::no_keyframe && index.keyframe(k).subtree_constant) return true;
-  }
-  return false;
-}
-
-/// Target nodes drawn exactly as with everything loaded: both picks at full detail and from the
-/// time steps with data nearest the playhead on each side. StreamStats::fraction_at_target counts
-/// spatial detail only — a node drawn from its own bricks of keyframes far from the playhead
-/// counts there (a stale frame after a seek), not here. Recomputed from the scheduler's atlas
-/// with the same view traversal and selection as its update().
-std::uint32_t current_target_nodes(const stream::StreamScheduler& scheduler, const player::OrbitCamera& camera,
-                                   double playhead, stream::ViewTraversal& view, stream::ResidentKeyframes& resident) {
-  const stream::SpatialIndex& index = scheduler.index();
-  if (index.node_count() == 0 || index.frame_count() == 0) return 0;
-  view.run(index, camera, scheduler.settings().priority.sse_target);
-  std::vector<stream::ResidentKeyframe> entries;
-  for (const std::uint32_t slot : scheduler.atlas().occupied_slots()) {
-    const auto key = scheduler.atlas().key(slot);
-    if (!key) continue;
-    const stream::KeyframeId id = index.find_keyframe(*key);
-    if (id != stream::no_keyframe) entries.push_back({id, slot});
-  }
-  resident.assign(index, entries);
-  const double p = std::clamp(playhead, 0.0, static_cast<double>(index.frame_count() - 1));
-  std::uint32_t current = 0;
-  for (const stream::ViewTraversal::Visit& v : view.visits()) {
-    if (v.refine) continue;
-    const stream::KeyframePair pair =
-        stream::select_keyframe_pair(index, v.node, p, resident, scheduler.settings().selection);
-    if (!pair.at_full_detail()) continue;
-    // The time steps with data nearest the playhead on each side (p itself when it has data).
-    std::int64_t before = static_cast<std::int64_t>(std::floor(p));
-    while (before >= 0 && !has_exact_data(index, v.node, static_cast<std::uint32_t>(before))) --before;
-    auto after = static_cast<std::int64_t>(std::ceil(p));
-    const auto frames = static_cast<std::int64_t>(index.frame_count());
-    while (after < frames && !has_exact_data(index, v.node, static_cast<std::uint32_t>(after))) ++after;
-    const bool a_ok = before < 0 ? true : pair.a.t == static_cast<std::uint32_t>(before);
-    const bool b_ok = after >= frames ? true : pair.b.t == static_cast<std::uint32_t>(after);
-    if (before < 0 && after >= frames) continue;
-    // With data on one side only, the selection takes the other side's nearest for both.
-    const bool ok = before < 0   ? pair.a.t == static_cast<std::uint32_t>(after) && b_ok
-                    : after >= frames ? pair.b.t == static_cast<std::uint32_t>(before) && a_ok
-                                      : a_ok && b_ok;
-    current += ok ? 1 : 0;
-  }
-  return current;
-}
-
-RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy) {
-  RunResult r;
-  r.name = policy_name(policy);
-  const format::Container& container = *s.container;
-  const format::Manifest& m = container.manifest();
-  const format::AtomTable atoms = container.atoms();
-  stream::SchedulerSettings settings = s.settings;
-  settings.priority.policy = policy;
-  double simulated_time = 0;
-  if (s.simulated_fps > 0) settings.loader.clock = [&simulated_time] { return simulated_time; };
-  // Indexing (frame files opened and validated) happened once, before the runs.
-  stream::StreamScheduler scheduler(*s.index, settings);
-  cpu_render::CpuAtlas atlas(settings.atlas_slots);
-  const cpu_render::VolumeGeometry geometry = cpu_render::VolumeGeometry::of(m.dims);
-  const double duration = s.tour->duration();
-
-  ProgressBar bar(std::string("streaming (") + r.name + ")", "s");
-  const auto start = Clock::now();
-  bool root = false;
-  std::uint64_t uploaded = 0;
-  stream::ViewTraversal view;
-  stream::ResidentKeyframes resident;
-  for (std::uint64_t frame = 1;; ++frame) {
-    const auto frame_start = Clock::now();
-    const double time =
-        std::min(s.simulated_fps > 0 ? static_cast<double>(frame - 1) / s.simulated_fps
-                                     : std::chrono::duration<double>(frame_start - start).count(),
-                 duration);
-    simulated_time = time;
-    const cpu_render::TourFrame tf = frame_at(s, time);
-    FrameRecord rec;
-    rec.time = time;
-    rec.playhead = tf.playhead;
-    // 1. The scheduler.
-    auto t = Clock::now();
-    stream::FrameUpdate update = scheduler.update(tf.camera, tf.playhead, frame);
-    rec.update_ms = ms_since(t);
-    for (const std::string& e : update.new_errors) std::fprintf(stderr, "\nvolreel: warning: %s\n", e.c_str());
-    // 2. Decode the uploads into their slots; a bad payload becomes the lowest value.
-    t = Clock::now();
-    for (const stream::BrickUpload& u : update.uploads) {
-      if (u.key.level == 0) root = true;
-      uploaded += u.payload.size();
-      try {
-        atlas.decode_into(u.slot, u.payload, m.codec, m.zfp_accuracy, atoms, u.file, u.offset);
-      } catch (const format::FormatError& e) {
-        scheduler.report_error(e.what());  // printed with the next frame's new_errors
-        const auto slot = atlas.slot(u.slot);
-        std::fill(slot.begin(), slot.end(), static_cast<float>(m.value_min));
-      }
-    }
-    rec.decode_ms = ms_since(t);
-    // 3. Render; 4. retire (rendering is synchronous).
-    t = Clock::now();
-    cpu_render::SvoView svo;
-    svo.nodes = update.svo_nodes;
-    svo.leaves = update.svo_leaves;
-    const cpu_render::RgbaImage image = cpu_render::render_svo(svo, atlas, geometry, tf.camera, tf.transfer, s.render);
-    rec.render_ms = ms_since(t);
-    scheduler.retire(frame);
-    rec.image = cpu_render::to_image(image);
-    rec.stats = update.stats;
-    rec.root_resident = root;
-    rec.bytes_uploaded = uploaded;
-    const auto t_current = Clock::now();
-    rec.current_nodes = current_target_nodes(scheduler, tf.camera, tf.playhead, view, resident);
-    rec.fraction_current = update.stats.target_nodes > 0
-                               ? static_cast<double>(rec.current_nodes) / static_cast<double>(update.stats.target_nodes)
-                               : 1.0;
-    rec.measure_ms = ms_since(t_current);
-    if (root && std::isnan(r.first_root_s)) r.first_root_s = time;
-    rec.frame_ms = ms_since(frame_start);
-    char status[96];
-    std::snprintf(status, sizeof status, "frame %llu, playhead %.2f, %.0f%% at target LOD",
-                  static_cast<unsigned long long>(frame), tf.playhead, 100 * update.stats.fraction_at_target);
-    bar.update({time, duration, status});
-    r.frames.push_back(std::move(rec));
-    if (time >= duration) break;
-  }
-  r.wall_s = std::chrono::duration<double>(Clock::now() - start).count();
-  r.errors = s.index_errors + scheduler.error_count();
-  bar.finish();
-  return r;
-}
-
-/// Ground truth for every frame of a run (after the timed loop), then the averages.
-void measure(RunResult& r, const RunSetup& s, GroundTruth& truth, const std::vector<std::pair<double, double>>& seeks,
-             const fs::path& out, std::size_t png_every) {
-  // 1. Frames in playhead order, so each original frame is read about once.
-  std::vector<std::size_t> order(r.frames.size());
-  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::stable_sort(order.begin(), order.end(),
-                   [&](std::size_t a, std::size_t b) { return r.frames[a].playhead < r.frames[b].playhead; });
-  // PNGs (streamed | ground truth side by side): every png_every-th frame, else the first frame
-  // after each seek, the first frame half a second after it, and the last frame.
-  std::vector<bool> png(r.frames.size(), false);
-  if (png_every > 0) {
-    for (std::size_t i = 0; i < png.size(); i += png_every) png[i] = true;
-  } else {
-    for (const auto& [time, keyframe] : seeks)
-      for (const double at : {time, time + 0.5}) {
-        const auto it = std::find_if(r.frames.begin(), r.frames.end(), [&](const FrameRecord& f) { return f.time >= at; });
-        if (it != r.frames.end()) png[static_cast<std::size_t>(it - r.frames.begin())] = true;
-      }
-  }
-  if (!png.empty()) png.back() = true;
-  const fs::path png_dir = out / ("frames_" + r.name);
-  {
-    ProgressBar bar(std::string("ground truth (") + r.name + ")", "frames");
-    std::size_t done = 0;
-    for (const std::size_t i : order) {
-      FrameRecord& f = r.frames[i];
-      const cpu_render::TourFrame tf = frame_at(s, f.time);
-      const image::Image reference = cpu_render::to_image(truth.render(f.playhead, tf.camera, tf.transfer, s.render));
-      const psnr::ImageComparison c = psnr::compare_images(reference, f.image);
-      f.psnr = c.psnr;
-      f.ssim = c.ssim;
-      if (png[i]) {
-        fs::create_directories(png_dir);
-        image::Image both;
-        both.width = 2 * f.image.width;
-        both.height = f.image.height;
-        both.channels = 3;
-        both.pixels.resize(static_cast<std::size_t>(both.width) * static_cast<std::size_t>(both.height) * 3);
-        const auto row = static_cast<std::size_t>(f.image.width) * 3;
-        for (std::size_t y = 0; y < static_cast<std::size_t>(f.image.height); ++y) {
-          std::copy_n(f.image.pixels.begin() + static_cast<std::ptrdiff_t>(y * row), row,
-                      both.pixels.begin() + static_cast<std::ptrdiff_t>(2 * y * row));
-          std::copy_n(reference.pixels.begin() + static_cast<std::ptrdiff_t>(y * row), row,
-                      both.pixels.begin() + static_cast<std::ptrdiff_t>((2 * y + 1) * row));
-        }
-        char name[48];
-        std::snprintf(name, sizeof name, "frame_%05zu.png", i);
-        image::write_png(png_dir / name, both);
-      }
-      bar.update({static_cast<double>(++done), static_cast<double>(order.size()), {}});
-    }
-    bar.finish();
-  }
-  // 2. Averages.
-  const double n = static_cast<double>(std::max<std::size_t>(r.frames.size(), 1));
-  r.min_psnr = std::numeric_limits<double>::infinity();
-  std::size_t full = 0, full_lod = 0;
-  for (const FrameRecord& f : r.frames) {
-    r.mean_psnr += std::min(f.psnr, psnr_cap_db);
-    r.min_psnr = std::min(r.min_psnr, f.psnr);
-    r.mean_ssim += f.ssim;
-    r.mean_fraction += f.stats.fraction_at_target;
-    r.mean_current += f.fraction_current;
-    full_lod += f.stats.at_target_nodes == f.stats.target_nodes ? 1 : 0;
-    full += f.current_nodes == f.stats.target_nodes ? 1 : 0;
-    r.hole_frames += f.stats.holes > 0 ? 1 : 0;
-    if (f.root_resident && f.stats.holes > 0) {
-      ++r.frames_with_holes_after_root;
-      r.max_holes_after_root = std::max(r.max_holes_after_root, f.stats.holes);
-    }
-    r.mean_update_ms += f.update_ms;
-    r.mean_decode_ms += f.decode_ms;
-    r.mean_render_ms += f.render_ms;
-    r.mean_frame_ms += f.frame_ms;
-  }
-  for (double* v : {&r.mean_psnr, &r.mean_ssim, &r.mean_fraction, &r.mean_current, &r.mean_update_ms, &r.mean_decode_ms,
-                    &r.mean_render_ms, &r.mean_frame_ms})
-    *v /= n;
-  r.full_quality_share = static_cast<double>(full) / n;
-  r.full_lod_share = static_cast<double>(full_lod) / n;
-  r.bytes_loaded = r.frames.empty() ? 0 : static_cast<double>(r.frames.back().stats.bytes_loaded);
-  r.bytes_uploaded = r.frames.empty() ? 0 : static_cast<double>(r.frames.back().bytes_uploaded);
-  // 3. Time to full quality after each seek: the first frame at or after the seek whose target
-  // nodes are all drawn as with everything loaded, before the next seek (and the same for the
-  // target LOD alone).
-  for (std::size_t k = 0; k < seeks.size(); ++k) {
-    SeekResult sr;
-    sr.time = seeks[k].first;
-    sr.keyframe = seeks[k].second;
-    const double next = k + 1 < seeks.size() ? seeks[k + 1].first : std::numeric_limits<double>::infinity();
-    for (const FrameRecord& f : r.frames) {
-      if (f.time < sr.time || f.time >= next) continue;
-      if (std::isnan(sr.to_full_lod) && f.stats.at_target_nodes == f.stats.target_nodes) sr.to_full_lod = f.time - sr.time;
-      if (std::isnan(sr.to_full_quality) && f.current_nodes == f.stats.target_nodes)
-        sr.to_full_quality = f.time - sr.time;
-    }
-    r.seeks.push_back(sr);
-  }
-}
-
-void write_csv(const fs::path& path, const RunResult& r, const std::vector<std::pair<double, double>>& seeks) {
-  std::ofstream csv(path);
-  if (!csv) throw InputError("cannot write " + path.string());
-  csv << "frame,time_s,playhead,seek,psnr_db,ssim,fraction_at_target,fraction_current,at_target_nodes,current_nodes,"
-         "target_nodes,holes,root_resident,bytes_loaded,bytes_uploaded_total,uploads,bytes_uploaded,requests_sent,"
-         "requests_in_flight,arrivals_discarded,atlas_occupied,selected,svo_nodes,svo_leaves,update_ms,decode_ms,"
-         "render_ms,measure_ms,frame_ms\n";
-  std::size_t next_seek = 0;
-  for (std::size_t i = 0; i < r.frames.size(); ++i) {
-    const FrameRecord& f = r.frames[i];
-    bool seek = false;
-    while (next_seek < seeks.size() && f.time >= seeks[next_seek].first) {
-      seek = true;
-      ++next_seek;
-    }
-    const auto& s = f.stats;
-    char row[512];
-    std::snprintf(row, sizeof row,
-                  "%zu,%.4f,%.4f,%d,%.4f,%.5f,%.5f,%.5f,%u,%u,%u,%u,%d,%llu,%llu,%zu,%llu,%zu,%zu,%zu,%u,%u,%u,%u,%.3f,%.3f,"
-                  "%.3f,%.3f,%.3f\n",
-                  i, f.time, f.playhead, seek ? 1 : 0, f.psnr, f.ssim, s.fraction_at_target, f.fraction_current,
-                  s.at_target_nodes, f.current_nodes, s.target_nodes, s.holes, f.root_resident ? 1 : 0,
-                  static_cast<unsigned long long>(s.bytes_loaded), static_cast<unsigned long long>(f.bytes_uploaded),
-                  s.uploads, static_cast<unsigned long long>(s.bytes_uploaded), s.requests_sent, s.requests_in_flight,
-                  s.arrivals_discarded, s.atlas_occupied, s.selected, s.svo_nodes, s.svo_leaves, f.update_ms,
-                  f.decode_ms, f.render_ms, f.measure_ms, f.frame_ms);
-    csv << row;
-  }
-  csv.close();
-  if (!csv) throw InputError("writing " + path.string() + " failed");
-}
-
-std::string seconds_or_dash(double s) {
-  if (std::isnan(s)) return "-";
-  char t[32];
-  std::snprintf(t, sizeof t, "%.2f s", s);
-  return t;
-}
-
-nlohmann::json summary_json(const RunResult& r) {
-  nlohmann::json seeks = nlohmann::json::array();
-  for (const SeekResult& s : r.seeks)
-    seeks.push_back({{"time_s", s.time},
-                     {"keyframe", s.keyframe},
-                     {"to_full_quality_s", std::isnan(s.to_full_quality) ? nlohmann::json(nullptr)
-                                                                          : nlohmann::json(s.to_full_quality)},
-                     {"to_full_lod_s", std::isnan(s.to_full_lod) ? nlohmann::json(nullptr) : nlohmann::json(s.to_full_lod)}});
-  const auto finite = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
-  return {{"policy", r.name},
-          {"frames", r.frames.size()},
-          {"wall_s", r.wall_s},
-          {"mean_psnr_db", r.mean_psnr},
-          {"min_psnr_db", finite(r.min_psnr)},
-          {"mean_ssim", r.mean_ssim},
-          {"mean_fraction_at_target", r.mean_fraction},
-          {"full_lod_frames_share", r.full_lod_share},
-          {"mean_fraction_current", r.mean_current},
-          {"full_quality_frames_share", r.full_quality_share},
-          {"first_root_brick_s", finite(r.first_root_s)},
-          {"frames_with_holes", r.hole_frames},
-          {"frames_with_holes_after_first_root", r.frames_with_holes_after_root},
-          {"max_holes_after_first_root", r.max_holes_after_root},
-          {"bytes_loaded", r.bytes_loaded},
-          {"bytes_uploaded", r.bytes_uploaded},
-          {"errors", r.errors},
-          {"mean_update_ms", r.mean_update_ms},
-          {"mean_decode_ms", r.mean_decode_ms},
-          {"mean_render_ms", r.mean_render_ms},
-          {"mean_frame_ms", r.mean_frame_ms},
-          {"seeks", seeks}};
-}
-
-void print_side_by_side(const std::vector<RunResult>& runs) {
-  const auto row = [&](const char* label, auto&& cell) {
-    std::printf("  %-40s", label);
-    for (const RunResult& r : runs) std::printf(" %22s", cell(r).c_str());
-    std::printf("\n");
-  };
-  const auto num = [](const char* fmt, double v) {
-    char s[64];
-    std::snprintf(s, sizeof s, fmt, v);
-    return std::string(s);
-  };
-  std::printf("\n  %-40s", "");
-  for (const RunResult& r : runs)
-    std::printf(" %22s", r.name == "patent" ? "patent [0045]" : "nearest-keyframe-first");
-  std::printf("\n");
-  row("frames rendered", [&](const RunResult& r) { return std::to_string(r.frames.size()); });
-  row("mean frame time (update/decode/render)", [&](const RunResult& r) {
-    char s[64];
-    std::snprintf(s, sizeof s, "%.0f (%.1f/%.1f/%.0f) ms", r.mean_frame_ms, r.mean_update_ms, r.mean_decode_ms,
-                  r.mean_render_ms);
-    return std::string(s);
-  });
-  row("mean image PSNR", [&](const RunResult& r) { return num("%.2f dB", r.mean_psnr); });
-  row("min image PSNR", [&](const RunResult& r) { return num("%.2f dB", r.min_psnr); });
-  row("mean image SSIM", [&](const RunResult& r) { return num("%.4f", r.mean_ssim); });
-  row("mean fraction of nodes at target LOD", [&](const RunResult& r) { return num("%.3f", r.mean_fraction); });
-  row("frames entirely at target LOD", [&](const RunResult& r) { return num("%.1f %%", 100 * r.full_lod_share); });
-  row("mean fraction at target LOD and time", [&](const RunResult& r) { return num("%.3f", r.mean_current); });
-  row("frames at full quality (LOD and time)", [&](const RunResult& r) { return num("%.1f %%", 100 * r.full_quality_share); });
-  row("first root brick drawn at", [&](const RunResult& r) { return seconds_or_dash(r.first_root_s); });
-  row("frames with holes (all)", [&](const RunResult& r) { return std::to_string(r.hole_frames); });
-  row("frames with holes after first root", [&](const RunResult& r) {
-    return std::to_string(r.frames_with_holes_after_root) + " (max " + std::to_string(r.max_holes_after_root) + ")";
-  });
-  row("bytes loaded (read by the loader)", [&](const RunResult& r) { return mb(r.bytes_loaded); });
-  row("bytes uploaded (decoded into the atlas)", [&](const RunResult& r) { return mb(r.bytes_uploaded); });
-  const std::size_t seeks = runs.empty() ? 0 : runs.front().seeks.size();
-  for (std::size_t k = 0; k < seeks; ++k) {
-    char label[64];
-    std::snprintf(label, sizeof label, "seek %zu (%.1f s -> %.2f): full LOD, quality", k + 1, runs.front().seeks[k].time,
-                  runs.front().seeks[k].keyframe);
-    row(label, [&](const RunResult& r) {
-      return seconds_or_dash(r.seeks[k].to_full_lod) + ", " + seconds_or_dash(r.seeks[k].to_full_quality);
-    });
-  }
-  if (seeks > 0)
-    row("mean time to full quality (reached)", [&](const RunResult& r) {
-      double sum = 0;
-      std::size_t n = 0;
-      for (const SeekResult& s : r.seeks)
-        if (!std::isnan(s.to_full_quality)) sum += s.to_full_quality, ++n;
-      return n ? num("%.2f s", sum / static_cast<double>(n)) + " (" + std::to_string(n) + "/" +
-                     std::to_string(r.seeks.size()) + ")"
-               : std::string("not reached");
-    });
-  row("errors", [&](const RunResult& r) { return std::to_string(r.errors); });
-  std::printf("  (at target LOD: both keyframes from the node's own bricks, whichever keyframes they are; full quality:\n"
-              "   also the keyframes around the playhead, as with everything loaded; '-': not reached before the next\n"
-              "   seek; seek times have the resolution of one rendered frame)\n");
+/// Progress of a stream_bench step shown on `bar`.
+stream_bench::Progress progress_of(ProgressBar& bar) {
+  return [&bar](double done, double total, const std::string& status) { bar.update({done, total, status}); };
 }
 
 void run_bench_stream(const BenchStreamOptions& o) {
   // 1. Options (all checked before any work).
-  const auto [width, height] = vulkan_render::parse_size(o.size);
+  const auto [width, height] = loop::parse_size(o.size);
   if (o.bandwidth.empty() || (o.bandwidth.back() != 'x' && o.bandwidth.back() != 'X'))
     bench_bandwidth(o.bandwidth, 0);  // a malformed rate is reported before any work
-  const double latency = vulkan_render::parse_latency(o.latency);
+  const double latency = loop::parse_latency(o.latency);
   if (!(o.duration > 0) || o.duration > 3600) bad("--duration", "seconds in (0, 3600]", std::to_string(o.duration));
   if (o.clock != "simulated" && o.clock != "wall") bad("--clock", "simulated or wall", o.clock);
   if (!(o.fps > 0) || o.fps > 240) bad("--fps", "frames per second in (0, 240]", std::to_string(o.fps));
@@ -883,7 +387,7 @@ void run_bench_stream(const BenchStreamOptions& o) {
   std::printf("volreel bench stream\nmachine: %s\n", describe_machine().c_str());
   std::printf("input:   %s: %ux%ux%u, %zu frames, %u levels, %s, %s in all (mean brick %.0f bytes)\n", o.container.c_str(),
               m.dims[0], m.dims[1], m.dims[2], container.frame_count(), truth.geometry().levels,
-              m.codec == format::Codec::ksvd ? "ksvd" : "zfp", mb(static_cast<double>(container.total_bytes())).c_str(),
+              m.codec == format::Codec::ksvd ? "ksvd" : "zfp", stream_bench::mb_text(static_cast<double>(container.total_bytes())).c_str(),
               brick_bytes);
   std::printf("truth:   %s\n", truth.original() ? ("the original series (" + truth_note + ")").c_str() : truth_note.c_str());
   char clock_text[96];
@@ -941,14 +445,22 @@ void run_bench_stream(const BenchStreamOptions& o) {
     setup.tour = &tour_i;
     const auto tour_seeks_i = tour_seeks(tour_i);
     for (const stream::PriorityPolicy p : policies) {
-      tr.runs.push_back(run_tour(setup, p));
-      measure(tr.runs.back(), setup, truth, tour_seeks_i, dir, o.png_every);
-      write_csv(dir / ("stream_" + tr.runs.back().name + ".csv"), tr.runs.back(), tour_seeks_i);
+      {
+        ProgressBar bar(std::string("streaming (") + stream_bench::policy_name(p) + ")", "s");
+        tr.runs.push_back(stream_bench::run_tour(setup, p, progress_of(bar)));
+        bar.finish();
+      }
+      {
+        ProgressBar bar(std::string("ground truth (") + tr.runs.back().name + ")", "frames");
+        stream_bench::measure(tr.runs.back(), setup, truth, tour_seeks_i, dir, o.png_every, progress_of(bar));
+        bar.finish();
+      }
+      stream_bench::write_csv(dir / ("stream_" + tr.runs.back().name + ".csv"), tr.runs.back(), tour_seeks_i);
     }
     setup.tour = nullptr;
     if (o.seeds > 1) {
       std::printf("\ntour seed %llu:\n", static_cast<unsigned long long>(tr.seed));
-      print_side_by_side(tr.runs);
+      stream_bench::print_side_by_side(tr.runs);
     }
   }
   const std::vector<RunResult>& runs = tours.front().runs;
@@ -957,7 +469,7 @@ void run_bench_stream(const BenchStreamOptions& o) {
   std::printf("\nimage PSNR = 10*log10(255^2/MSE) over 8-bit RGB against the ground truth (frames identical to it count "
               "as %.0f dB); SSIM: per channel, averaged\n",
               psnr_cap_db);
-  if (o.seeds == 1) print_side_by_side(runs);
+  if (o.seeds == 1) stream_bench::print_side_by_side(runs);
   nlohmann::json summary = {{"container", o.container},
                             {"bandwidth_bytes_per_s", bandwidth},
                             {"latency_s", latency},
@@ -978,12 +490,12 @@ void run_bench_stream(const BenchStreamOptions& o) {
                             {"ground_truth", truth.original() ? "original series" : "container finest level"}};
   if (o.seeds == 1) {
     summary["runs"] = nlohmann::json::array();
-    for (const RunResult& r : runs) summary["runs"].push_back(summary_json(r));
+    for (const RunResult& r : runs) summary["runs"].push_back(stream_bench::summary_json(r));
   } else {
     summary["tours"] = nlohmann::json::array();
     for (const TourRuns& tr : tours) {
       nlohmann::json t = {{"seed", tr.seed}, {"runs", nlohmann::json::array()}};
-      for (const RunResult& r : tr.runs) t["runs"].push_back(summary_json(r));
+      for (const RunResult& r : tr.runs) t["runs"].push_back(stream_bench::summary_json(r));
       summary["tours"].push_back(t);
     }
   }

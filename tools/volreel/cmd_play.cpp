@@ -11,7 +11,7 @@
 #include "commands.hpp"
 #include "volreel/app/player.hpp"
 #include "volreel/vulkan/error.hpp"
-#include "volreel/vulkan_render/loop_settings.hpp"
+#include "volreel/loop/loop_settings.hpp"
 
 namespace volreel::cli {
 
@@ -29,7 +29,7 @@ struct PlayCommandOptions {
 void run_play(PlayCommandOptions& o) {
   app::PlayerOptions& p = o.player;
   {
-    const auto [w, h] = vulkan_render::parse_size(o.size);
+    const auto [w, h] = loop::parse_size(o.size);
     if (w < 64 || h < 64)
       throw InputError("--size: a window needs at least 64x64 pixels, found '" + o.size + "'");
     p.width = w;
@@ -39,8 +39,8 @@ void run_play(PlayCommandOptions& o) {
   p.atlas_bytes = static_cast<std::uint64_t>(o.atlas_mb * 1024 * 1024);
   p.upload_bytes =
       std::max<std::uint64_t>(static_cast<std::uint64_t>(o.upload_mb * 1024 * 1024), 1);
-  p.bandwidth_bytes_per_s = vulkan_render::parse_bandwidth(o.bandwidth);
-  p.latency_s = vulkan_render::parse_latency(o.latency);
+  p.bandwidth_bytes_per_s = loop::parse_bandwidth(o.bandwidth);
+  p.latency_s = loop::parse_latency(o.latency);
   p.renderer = o.renderer == "cpu"      ? app::RendererKind::cpu
                : o.renderer == "vulkan" ? app::RendererKind::vulkan
                                         : app::RendererKind::automatic;

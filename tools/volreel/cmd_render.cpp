@@ -22,7 +22,6 @@
 #include <vector>
 
 #include "commands.hpp"
-#include "either_loop.hpp"
 #include "loop_options.hpp"
 #include "progress.hpp"
 #include "volreel/cpu_render/renderer.hpp"
@@ -30,12 +29,10 @@
 #include "volreel/datasets/series.hpp"
 #include "volreel/format/container.hpp"
 #include "volreel/psnr/metrics.hpp"
-#include "volreel/vulkan/context.hpp"
-#include "volreel/vulkan/error.hpp"
-#include "volreel/vulkan_render/auto_transfer.hpp"
-#include "volreel/vulkan_render/cpu_frame_loop.hpp"
-#include "volreel/vulkan_render/frame_loop.hpp"
-#include "volreel/vulkan_render/loop_settings.hpp"
+#include "volreel/loop/auto_transfer.hpp"
+#include "volreel/loop/frame_loop.hpp"
+#include "volreel/loop/loop_settings.hpp"
+#include "volreel/vulkan_render/open_frame_loop.hpp"
 
 namespace volreel::cli {
 
@@ -48,7 +45,7 @@ struct RenderCommandOptions {
   std::string container, tour, out, video, compare, transfer;
   bool cpu = false, realtime = false;
   std::size_t max_frames = 0;
-  vulkan_render::LoopSettings loop;
+  loop::LoopSettings loop;
   ReaderOptions reader;
 };
 
@@ -145,12 +142,12 @@ void run_render(const RenderCommandOptions& o) {
   if (fs::exists(out) && !fs::is_directory(out))
     throw InputError("--out " + o.out + ": exists and is not a directory");
   fs::create_directories(out);
-  vulkan_render::FrameLoopOptions options;
-  options.raycaster.width = tour.width();
-  options.raycaster.height = tour.height();
+  loop::FrameLoopOptions options;
+  options.width = tour.width();
+  options.height = tour.height();
   options.render.background = {0.06f, 0.06f, 0.08f};
   try {
-    vulkan_render::apply(o.loop, options);
+    loop::apply(o.loop, options);
   } catch (const std::invalid_argument& e) {
     throw InputError(e.what());
   }
@@ -158,22 +155,23 @@ void run_render(const RenderCommandOptions& o) {
   // default tour's cool-warm over the whole range leaves turbulence pressure an opaque haze).
   const std::string transfer_spec = !o.transfer.empty() ? o.transfer : o.tour.empty() ? "auto" : "";
   std::optional<cpu_render::TransferFunction> transfer;
-  if (!transfer_spec.empty()) transfer = vulkan_render::transfer_from_spec(transfer_spec, container);
+  if (!transfer_spec.empty()) transfer = loop::transfer_from_spec(transfer_spec, container);
   std::optional<GroundTruth> truth;
   if (!o.compare.empty()) truth.emplace(o.compare, o.reader, m);
 
   // 2. The renderer: Vulkan, or the CPU where there is no device.
   // Vulkan frames with readback (serial: the time split is exact), or the CPU loop.
-  EitherLoop renderer = open_loop(container, options, o.cpu, NoDevice::use_cpu, "");
+  const std::unique_ptr<loop::FrameLoop> renderer =
+      vulkan_render::open_frame_loop(container, options, o.cpu, vulkan_render::NoDevice::use_cpu, "");
   const std::size_t frames = o.max_frames ? std::min(o.max_frames, tour.frame_count()) : tour.frame_count();
   std::printf("volreel render\nmachine: %s\ndevice:  %s\ninput:   %s: %ux%ux%u, %zu frames, %s\n", describe_machine().c_str(),
-              renderer.device.c_str(), o.container.c_str(), m.dims[0], m.dims[1], m.dims[2], container.frame_count(),
+              renderer->describe().c_str(), o.container.c_str(), m.dims[0], m.dims[1], m.dims[2], container.frame_count(),
               m.codec == format::Codec::ksvd ? "ksvd" : "zfp");
   std::printf("transfer function: %s\n", transfer_spec.empty() ? "the tour's" : transfer_spec.c_str());
   std::printf("tour:    %s, %.1f s at %.0f fps, %zu frames, %dx%d\natlas:   %u slots (%.0f MiB), upload budget %.0f MiB/frame, "
               "bandwidth %s, latency %s, SSE target %g\n",
-              o.tour.empty() ? "default tour" : o.tour.c_str(), tour.duration(), tour.fps(), frames, options.raycaster.width,
-              options.raycaster.height, renderer.slots(), o.loop.atlas_mb, o.loop.upload_budget_mb,
+              o.tour.empty() ? "default tour" : o.tour.c_str(), tour.duration(), tour.fps(), frames, options.width,
+              options.height, renderer->slot_count(), o.loop.atlas_mb, o.loop.upload_budget_mb,
               options.scheduler.loader.bandwidth_bytes_per_s > 0 ? o.loop.bandwidth.c_str() : "unlimited",
               o.loop.latency.c_str(), o.loop.sse_target);
   std::fflush(stdout);
@@ -189,7 +187,7 @@ void run_render(const RenderCommandOptions& o) {
   double sum_ms[5] = {0, 0, 0, 0, 0};
   double sum_psnr = 0, sum_ssim = 0;
   std::size_t compared = 0, errors = 0;
-  vulkan_render::FrameReport last;
+  loop::FrameReport last;
   const auto start = Clock::now();
   {
     ProgressBar bar("rendering", "frames");
@@ -198,11 +196,11 @@ void run_render(const RenderCommandOptions& o) {
       if (o.realtime) std::this_thread::sleep_until(start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(time)));
       cpu_render::TourFrame tf = tour.at(time);
       if (transfer) tf.transfer = *transfer;
-      tf.camera.width = options.raycaster.width;
-      tf.camera.height = options.raycaster.height;
-      const vulkan_render::FrameReport report = renderer.frame(tf.camera, tf.playhead, tf.transfer, true);
+      tf.camera.width = options.width;
+      tf.camera.height = options.height;
+      const loop::FrameReport report = renderer->frame(tf.camera, tf.playhead, tf.transfer, true);
       const auto read_start = Clock::now();
-      cpu_render::RgbaImage image = renderer.image(report.ticket);
+      cpu_render::RgbaImage image = renderer->read_back(report.ticket);
       const double readback_ms = std::chrono::duration<double, std::milli>(Clock::now() - read_start).count();
       for (const std::string& e : report.new_errors) std::fprintf(stderr, "\nvolreel: warning: %s\n", e.c_str());
       errors += report.new_errors.size();

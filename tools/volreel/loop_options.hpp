@@ -4,13 +4,13 @@
 
 #include <CLI/CLI.hpp>
 
-#include "volreel/vulkan_render/loop_settings.hpp"
+#include "volreel/loop/loop_settings.hpp"
 
 namespace volreel::cli {
 
 /// --atlas-mb, --bandwidth, --latency, --sse-target, --upload-budget, --step,
 /// --max-step-doublings, --no-culling.
-inline void add_loop_options(CLI::App& cmd, vulkan_render::LoopSettings& loop) {
+inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
   cmd.add_option("--atlas-mb", loop.atlas_mb, "Brick atlas memory, MiB (93 312 bytes per slot)")->capture_default_str();
   cmd.add_option("--bandwidth", loop.bandwidth, "Simulated read bandwidth, e.g. 20MB/s (0: unlimited)")
       ->capture_default_str();

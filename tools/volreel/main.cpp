@@ -19,7 +19,7 @@ int main(int argc, char** argv) {
   volreel::cli::add_bench_command(app);
   volreel::cli::add_train_command(app);
   volreel::cli::add_encode_command(app);
-#ifdef VOLREEL_HAVE_PLAYER
+#ifdef VOLREEL_HAVE_VULKAN
   volreel::cli::add_play_command(app);
   volreel::cli::add_render_command(app);
 #endif

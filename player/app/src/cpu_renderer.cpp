@@ -1,15 +1,14 @@
-// cpu_renderer.cpp: the player's CPU path (volume_renderer.hpp) — bricks decoded by the CPU
-// reference decoder into a CpuAtlas, the frame ray cast by cpu_render::render_svo, and the 8-bit
-// image copied through a host-visible staging buffer (one per frame slot) into a device image.
-// Slow, but independent of the GPU ray caster: a reference to compare the window against.
+// cpu_renderer.cpp: the player's CPU path (volume_renderer.hpp) over loop::CpuFrameLoop — bricks
+// decoded by the CPU reference decoder into a CpuAtlas, the frame ray cast by
+// cpu_render::render_svo, and the 8-bit image copied through a host-visible staging buffer (one
+// per frame slot) into a device image. Slow, but independent of the GPU ray caster: a reference
+// to compare the window against.
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <exception>
 #include <vector>
 
-#include "volreel/cpu_render/cpu_atlas.hpp"
-#include "volreel/cpu_render/renderer.hpp"
+#include "volreel/loop/cpu_frame_loop.hpp"
 #include "volreel/vulkan/resources.hpp"
 #include "volume_renderer.hpp"
 
@@ -17,44 +16,38 @@ namespace volreel::app::detail {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
-std::uint32_t cpu_slots(const RendererSetup& setup) {
-  const std::uint64_t slot_bytes = cpu_render::CpuAtlas::slot_values * sizeof(float);
-  return static_cast<std::uint32_t>(
-      std::clamp<std::uint64_t>(setup.atlas_bytes / slot_bytes, 1, 1u << 16));
-}
-
-stream::SchedulerSettings with_slots(stream::SchedulerSettings s, std::uint32_t slots) {
-  s.atlas_slots = slots;
-  return s;
+/// The loop's options: the CPU atlas stores float32 voxels, so `atlas_bytes` holds half as many
+/// slots as a 16-bit GPU atlas of the same memory (the loop counts 16-bit slots), at most 2^16.
+loop::FrameLoopOptions cpu_options(const RendererSetup& setup) {
+  loop::FrameLoopOptions o;
+  o.scheduler = setup.scheduler;
+  o.atlas_bytes = std::min<std::uint64_t>(setup.atlas_bytes / 2,
+                                          (1u << 16) * loop::CpuFrameLoop::gpu_slot_bytes);
+  o.width = static_cast<int>(setup.width);
+  o.height = static_cast<int>(setup.height);
+  return o;
 }
 
 class CpuRenderer final : public VolumeRenderer {
  public:
   explicit CpuRenderer(const RendererSetup& setup)
       : context_(*setup.context),
-        container_(*setup.container),
-        atlas_(cpu_slots(setup)),
-        scheduler_(container_, with_slots(setup.scheduler, atlas_.slot_count())),
-        geometry_(cpu_render::VolumeGeometry::of(container_.manifest().dims)),
+        loop_(*setup.container, cpu_options(setup)),
         staging_(setup.frames_in_flight) {
     resize(setup.width, setup.height);
   }
 
   std::string name() const override { return "CPU reference renderer"; }
-  stream::StreamScheduler& scheduler() override { return scheduler_; }
+  stream::StreamScheduler& scheduler() override { return loop_.scheduler(); }
   VkImage image() const override { return image_.handle(); }
   VkImageLayout image_layout() const override { return VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL; }
   VkExtent2D extent() const override { return {width_, height_}; }
-  void retired(std::uint64_t gpu_frame) override { scheduler_.retire(gpu_frame); }
+  void retired(std::uint64_t) override {}  // the loop retires each frame once it is rendered
 
   void resize(std::uint32_t width, std::uint32_t height) override {
     width_ = std::max(width, 1u);
     height_ = std::max(height, 1u);
+    loop_.resize(static_cast<int>(width_), static_cast<int>(height_));
     vulkan::ImageDesc desc;
     desc.type = VK_IMAGE_TYPE_2D;
     desc.format = VK_FORMAT_R8G8B8A8_UNORM;
@@ -71,57 +64,39 @@ class CpuRenderer final : public VolumeRenderer {
 
   FrameOutput frame(const FrameInputs& in) override {
     FrameOutput out;
-    // 1. The scheduler.
-    auto t0 = Clock::now();
-    stream::FrameUpdate update = scheduler_.update(in.camera, in.playhead, in.gpu_frame);
-    out.times.schedule = ms_since(t0);
-    out.new_errors = std::move(update.new_errors);
-    // 2. Decode this frame's uploads into their slots; a bad payload is a HUD message and its
-    //    slot shows the lowest value.
-    t0 = Clock::now();
-    const format::Manifest& m = container_.manifest();
-    for (const stream::BrickUpload& u : update.uploads) {
-      try {
-        atlas_.decode_into(u.slot, u.payload, m.codec, m.zfp_accuracy, container_.atoms(), u.file,
-                           u.offset);
-      } catch (const std::exception& e) {
-        scheduler_.report_error(e.what());
-        out.new_errors.emplace_back(e.what());
-        std::fill(atlas_.slot(u.slot).begin(), atlas_.slot(u.slot).end(),
-                  static_cast<float>(m.value_min));
-      }
-    }
-    out.times.decode = ms_since(t0);
-    // 3. Ray cast the SVO.
-    t0 = Clock::now();
-    cpu_render::RgbaImage image;
+    // 1. The loop: scheduler, decode (a bad payload is a HUD message and its slot shows the
+    //    lowest value), ray casting of the SVO.
     player::OrbitCamera camera = in.camera;
     camera.width = static_cast<int>(width_);
     camera.height = static_cast<int>(height_);
+    const cpu_render::RgbaImage* image = nullptr;
     try {
-      cpu_render::RenderOptions options;
-      image = cpu_render::render_svo({update.svo_nodes, update.svo_leaves}, atlas_, geometry_,
-                                     camera, *in.transfer, options);
+      loop::FrameReport report = loop_.frame(camera, in.playhead, *in.transfer);
+      out.stats = report.stats;
+      out.new_errors = std::move(report.new_errors);
+      out.times.schedule = report.timings.schedule_ms;
+      out.times.decode = report.timings.decode_ms;
+      out.times.render = report.timings.render_ms;
+      image = &loop_.last_image(report.ticket);
     } catch (const std::exception& e) {
       std::string message = std::string("render: ") + e.what();
-      scheduler_.report_error(message);
+      loop_.scheduler().report_error(message);
       out.new_errors.push_back(std::move(message));
     }
-    // 4. To 8-bit RGBA in the slot's staging buffer.
+    // 2. To 8-bit RGBA in the slot's staging buffer.
     std::byte* pixels = staging_[in.slot].mapped();
     const std::size_t count = std::size_t{width_} * height_;
-    if (image.width == static_cast<int>(width_) && image.height == static_cast<int>(height_)) {
+    if (image && image->width == static_cast<int>(width_) &&
+        image->height == static_cast<int>(height_)) {
       for (std::size_t i = 0; i < count; ++i)
         for (std::size_t c = 0; c < 4; ++c) {
-          const float v = c == 3 ? 1.0f : image.rgba[4 * i + c];
+          const float v = c == 3 ? 1.0f : image->rgba[4 * i + c];
           pixels[4 * i + c] =
               static_cast<std::byte>(std::lround(std::clamp(v, 0.0f, 1.0f) * 255.0f));
         }
     } else {
       std::fill(pixels, pixels + 4 * count, std::byte{0});
     }
-    out.times.render = ms_since(t0);
-    out.stats = update.stats;
     return out;
   }
 
@@ -142,10 +117,7 @@ class CpuRenderer final : public VolumeRenderer {
 
  private:
   const vulkan::Context& context_;
-  const format::Container& container_;
-  cpu_render::CpuAtlas atlas_;
-  stream::StreamScheduler scheduler_;
-  cpu_render::VolumeGeometry geometry_;
+  loop::CpuFrameLoop loop_;
   std::uint32_t width_ = 0, height_ = 0;
   std::vector<vulkan::Buffer> staging_;  // destroyed before the image; both before the context
   vulkan::Image image_;

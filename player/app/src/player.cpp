@@ -36,7 +36,7 @@
 
 #include "volreel/image/image.hpp"
 #include "volreel/vulkan/error.hpp"
-#include "volreel/vulkan_render/auto_transfer.hpp"
+#include "volreel/loop/auto_transfer.hpp"
 
 namespace volreel::app {
 namespace detail {
@@ -134,7 +134,7 @@ Player::Player(const PlayerOptions& options)
   if (auto it = std::find(names.begin(), names.end(), options.transfer); it != names.end()) {
     apply_preset(*it);
   } else {
-    transfer_ = vulkan_render::transfer_from_spec(options.transfer, container_, "--transfer");
+    transfer_ = loop::transfer_from_spec(options.transfer, container_, "--transfer");
     points_ = transfer_.points();
     range_lo_ = transfer_.lo();
     range_hi_ = transfer_.hi();

@@ -1,10 +1,10 @@
 // volume_renderer.hpp: the player's "stream and render the volume into an image" step behind one
 // interface, so the window loop does not care which renderer draws:
-//   - the Vulkan ray caster (vulkan_render::FrameLoop: scheduler → GPU decode into the atlas →
-//     ray casting into a storage image, submitted on the context's queue);
-//   - the CPU reference renderer (scheduler → CPU decode into a CpuAtlas → cpu_render::render_svo;
-//     the image is uploaded through a staging buffer per frame slot).
-// Either owns the stream scheduler, so its atlas decides the slot count.
+//   - the Vulkan ray caster (vulkan_render::VulkanFrameLoop: scheduler → GPU decode into the
+//     atlas → ray casting into a storage image, submitted on the context's queue);
+//   - the CPU reference renderer (loop::CpuFrameLoop: scheduler → CPU decode into a CpuAtlas →
+//     cpu_render::render_svo; the image is uploaded through a staging buffer per frame slot).
+// Either's frame loop owns the stream scheduler, so its atlas decides the slot count.
 //
 // Per frame, on frame slot s ∈ [0, frames in flight) whose previous frame has retired:
 //   1. frame(): the scheduler's update and the renderer's work for the frame (CPU work, plus the

@@ -11,7 +11,7 @@
 #include "volreel/cpu_render/transfer_function.hpp"
 #include "volreel/format/container.hpp"
 
-namespace volreel::vulkan_render {
+namespace volreel::loop {
 
 /// Quantiles of the values of up to `max_bricks` finest-level bricks (evenly spread) of the
 /// middle frame (or the nearest readable frame when that one is damaged), decoded on the CPU;
@@ -26,4 +26,4 @@ cpu_render::TransferFunction transfer_from_spec(const std::string& spec,
                                                 const format::Container& container,
                                                 const std::string& option = "--transfer");
 
-}  // namespace volreel::vulkan_render
+}  // namespace volreel::loop

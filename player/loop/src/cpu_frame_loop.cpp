@@ -1,16 +1,16 @@
 // cpu_frame_loop.cpp: the streaming loop on the CPU (see cpu_frame_loop.hpp).
-#include "volreel/vulkan_render/cpu_frame_loop.hpp"
+#include "volreel/loop/cpu_frame_loop.hpp"
 
 #include <algorithm>
 #include <chrono>
-#include <cstring>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "volreel/format/error.hpp"
 
-namespace volreel::vulkan_render {
+namespace volreel::loop {
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -18,23 +18,32 @@ double ms_since(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
-constexpr std::uint64_t gpu_slot_bytes = std::uint64_t{VR_ATLAS_SLOT_SIZE} * VR_ATLAS_SLOT_SIZE *
-                                         VR_ATLAS_SLOT_SIZE * 2;
-
 }  // namespace
+
+std::uint32_t CpuFrameLoop::slots_for(const FrameLoopOptions& options) {
+  return static_cast<std::uint32_t>(
+      std::clamp<std::uint64_t>(options.atlas_bytes / gpu_slot_bytes, 1, 1u << 20));
+}
 
 CpuFrameLoop::CpuFrameLoop(const format::Container& container, const FrameLoopOptions& options)
     : container_(container), options_(options) {
   geometry_ = cpu_render::VolumeGeometry::of(container.manifest().dims);
-  const auto slots = static_cast<std::uint32_t>(
-      std::clamp<std::uint64_t>(options.atlas_bytes / gpu_slot_bytes, 1, 1u << 20));
-  atlas_ = std::make_unique<cpu_render::CpuAtlas>(slots);
-  options_.scheduler.atlas_slots = slots;
+  atlas_ = std::make_unique<cpu_render::CpuAtlas>(slots_for(options));
+  options_.scheduler.atlas_slots = atlas_->slot_count();
   scheduler_ = std::make_unique<stream::StreamScheduler>(container, options_.scheduler);
 }
 
+CpuFrameLoop::CpuFrameLoop(const format::Container& container, stream::SpatialIndex index,
+                           const FrameLoopOptions& options)
+    : container_(container), options_(options) {
+  geometry_ = cpu_render::VolumeGeometry::of(container.manifest().dims);
+  atlas_ = std::make_unique<cpu_render::CpuAtlas>(slots_for(options));
+  options_.scheduler.atlas_slots = atlas_->slot_count();
+  scheduler_ = std::make_unique<stream::StreamScheduler>(std::move(index), options_.scheduler);
+}
+
 FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhead,
-                                const cpu_render::TransferFunction& transfer) {
+                                const cpu_render::TransferFunction& transfer, bool) {
   const auto start = Clock::now();
   FrameReport report;
   report.ticket = ++ticket_;
@@ -42,7 +51,7 @@ FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhe
   auto t = Clock::now();
   stream::FrameUpdate update = scheduler_->update(camera, playhead, report.ticket);
   report.timings.schedule_ms = ms_since(t);
-  report.new_errors = std::move(update.new_errors);
+  report.new_errors = update.new_errors;
   // 2. Decode the arrived bricks into their slots; a bad one becomes the lowest value.
   t = Clock::now();
   const format::Manifest& m = container_.manifest();
@@ -61,19 +70,33 @@ FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhe
   report.timings.decode_ms = ms_since(t);
   // 3. Render.
   t = Clock::now();
-  image_ = cpu_render::render_svo({update.svo_nodes, update.svo_leaves}, *atlas_, geometry_,
-                                  camera, transfer, options_.render);
+  cpu_render::SvoView svo;
+  svo.nodes = update.svo_nodes;
+  svo.leaves = update.svo_leaves;
+  image_ = cpu_render::render_svo(svo, *atlas_, geometry_, camera, transfer, options_.render);
   report.timings.render_ms = ms_since(t);
+  // 4. Retire: nothing reads the atlas after render_svo returned.
   scheduler_->retire(report.ticket);
   report.stats = update.stats;
+  last_update_ = std::move(update);
   report.timings.frame_ms = ms_since(start);
   return report;
 }
 
-const cpu_render::RgbaImage& CpuFrameLoop::read_back(Ticket ticket) const {
+const cpu_render::RgbaImage& CpuFrameLoop::last_image(Ticket ticket) const {
   if (ticket != ticket_ || ticket == 0)
     throw std::invalid_argument("CpuFrameLoop::read_back: only the last frame's image is kept");
   return image_;
 }
 
-}  // namespace volreel::vulkan_render
+void CpuFrameLoop::resize(int width, int height) {
+  options_.width = std::max(width, 1);
+  options_.height = std::max(height, 1);
+}
+
+std::string CpuFrameLoop::describe() const {
+  return "CPU reference renderer (" + std::to_string(std::thread::hardware_concurrency()) +
+         " threads)";
+}
+
+}  // namespace volreel::loop

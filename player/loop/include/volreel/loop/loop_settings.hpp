@@ -7,20 +7,21 @@
 #include <string>
 #include <utility>
 
-#include "volreel/vulkan_render/frame_loop.hpp"
+#include "volreel/loop/frame_loop.hpp"
 
-namespace volreel::vulkan_render {
+namespace volreel::loop {
 
 struct LoopSettings {
-  std::string size;               ///< "WxH" (empty: keep the options' size)
-  double atlas_mb = 256;          ///< atlas memory, MiB (16-bit voxels: 93 312 bytes per slot)
-  std::string bandwidth = "0";    ///< "20MB/s", "500kB/s", "1GB/s", a number (MB/s); 0: unlimited
-  std::string latency = "0";      ///< "50ms", "0.2s", a number (ms)
-  double sse_target = 1.0;        ///< pixels per voxel at which a node is detailed enough
-  double upload_budget_mb = 64;   ///< compressed bytes uploaded per frame at most, MiB
-  double step = 0.5;              ///< ray step, finest voxels
-  std::uint32_t max_step_doublings = 3;  ///< coarse leaves step up to 2^this times longer (0: fixed)
-  bool no_culling = false;        ///< no transfer-function culling
+  std::string size;              ///< "WxH" (empty: keep the options' size)
+  double atlas_mb = 256;         ///< atlas memory, MiB (16-bit voxels: 93 312 bytes per slot)
+  std::string bandwidth = "0";   ///< "20MB/s", "500kB/s", "1GB/s", a number (MB/s); 0: unlimited
+  std::string latency = "0";     ///< "50ms", "0.2s", a number (ms)
+  double sse_target = 1.0;       ///< pixels per voxel at which a node is detailed enough
+  double upload_budget_mb = 64;  ///< compressed bytes uploaded per frame at most, MiB
+  double step = 0.5;             ///< ray step, finest voxels
+  /// Coarse leaves step up to 2^this times longer (0: a fixed step).
+  std::uint32_t max_step_doublings = 3;
+  bool no_culling = false;  ///< no transfer-function culling
 };
 
 /// "512x512" -> {512, 512} (1..16384 each). Throws std::invalid_argument naming `option`.
@@ -34,4 +35,4 @@ double parse_latency(const std::string& text, const std::string& option = "--lat
 /// culling). Throws std::invalid_argument naming the option on a bad value.
 void apply(const LoopSettings& settings, FrameLoopOptions& options);
 
-}  // namespace volreel::vulkan_render
+}  // namespace volreel::loop

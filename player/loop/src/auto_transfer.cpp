@@ -1,5 +1,5 @@
 // auto_transfer.cpp: a transfer function at quantiles of the data (see auto_transfer.hpp).
-#include "volreel/vulkan_render/auto_transfer.hpp"
+#include "volreel/loop/auto_transfer.hpp"
 
 #include <algorithm>
 #include <filesystem>
@@ -14,7 +14,7 @@
 #include "volreel/format/decoder.hpp"
 #include "volreel/format/error.hpp"
 
-namespace volreel::vulkan_render {
+namespace volreel::loop {
 
 namespace {
 
@@ -89,4 +89,4 @@ cpu_render::TransferFunction transfer_from_spec(const std::string& spec,
   return cpu_render::TransferFunction::from_json(json, range, spec);
 }
 
-}  // namespace volreel::vulkan_render
+}  // namespace volreel::loop

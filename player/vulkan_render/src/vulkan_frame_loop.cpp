@@ -1,5 +1,5 @@
-// frame_loop.cpp: the per-frame streaming loop on the GPU (see frame_loop.hpp).
-#include "volreel/vulkan_render/frame_loop.hpp"
+// vulkan_frame_loop.cpp: the per-frame streaming loop on the GPU (see vulkan_frame_loop.hpp).
+#include "volreel/vulkan_render/vulkan_frame_loop.hpp"
 
 #include <bit>
 #include <chrono>
@@ -42,14 +42,27 @@ void leaf_histograms(std::span<const std::uint32_t> svo_leaves,
   }
 }
 
-FrameLoop::FrameLoop(const vulkan::Context& context, const format::Container& container,
-                     const FrameLoopOptions& options)
-    : context_(context), container_(container), options_(options) {
+VulkanFrameLoop::VulkanFrameLoop(const vulkan::Context& context, const format::Container& container,
+                                 const loop::FrameLoopOptions& options)
+    : VulkanFrameLoop(nullptr, context, container, options) {}
+
+VulkanFrameLoop::VulkanFrameLoop(std::unique_ptr<vulkan::Context> context,
+                                 const format::Container& container,
+                                 const loop::FrameLoopOptions& options)
+    : VulkanFrameLoop(std::move(context), *context, container, options) {}
+
+VulkanFrameLoop::VulkanFrameLoop(std::unique_ptr<vulkan::Context>&& owned,
+                                 const vulkan::Context& context, const format::Container& container,
+                                 const loop::FrameLoopOptions& options)
+    : owned_context_(std::move(owned)),
+      context_(context),
+      container_(container),
+      options_(options) {
   const format::Manifest& m = container.manifest();
   geometry_ = cpu_render::VolumeGeometry::of(m.dims);
   // 1. The atlas over the sequence's value range with a margin (decoded values overshoot it).
   vulkan::AtlasOptions ao;
-  ao.format = options.atlas_format;
+  ao.format = vulkan::AtlasFormat::r16_unorm;
   ao.memory_budget_bytes = options.atlas_bytes;
   const double range = m.value_max - m.value_min;
   const double margin = 0.01 * (range > 0 ? range : 1.0);
@@ -58,17 +71,21 @@ FrameLoop::FrameLoop(const vulkan::Context& context, const format::Container& co
   atlas_ = std::make_unique<vulkan::Atlas>(context, ao);
   // 2. The decoder, the ray caster, the scheduler with one heap entry per atlas slot ([0036]).
   vulkan::DecoderOptions dopt;
-  dopt.upload_budget_bytes = options.staging_bytes;
+  dopt.upload_budget_bytes = options.gpu.staging_bytes;
   dopt.ring_size = 3;
   decoder_ = std::make_unique<vulkan::AtlasDecoder>(context, *atlas_, dopt);
   if (m.codec == format::Codec::ksvd) decoder_->set_dictionary(container.atoms());
-  raycaster_ = std::make_unique<Raycaster>(context, *atlas_, options.raycaster);
+  RaycasterOptions ro;
+  ro.width = options.width;
+  ro.height = options.height;
+  ro.frames_in_flight = options.gpu.frames_in_flight;
+  raycaster_ = std::make_unique<Raycaster>(context, *atlas_, ro);
   options_.scheduler.atlas_slots = atlas_->slot_count();
   scheduler_ = std::make_unique<stream::StreamScheduler>(container, options_.scheduler);
   slot_histograms_.assign(atlas_->slot_count(), 0);
 }
 
-FrameLoop::~FrameLoop() {
+VulkanFrameLoop::~VulkanFrameLoop() {
   try {
     finish();
   } catch (...) {
@@ -76,26 +93,26 @@ FrameLoop::~FrameLoop() {
   }
 }
 
-void FrameLoop::retire_completed() {
+void VulkanFrameLoop::retire_completed() {
   while (retired_ < raycaster_->last_ticket() && raycaster_->poll(retired_ + 1)) ++retired_;
   if (retired_ > 0) scheduler_->retire(retired_);
 }
 
-void FrameLoop::finish() {
+void VulkanFrameLoop::finish() {
   raycaster_->wait_all();
   decoder_->wait_all();
   retired_ = raycaster_->last_ticket();
   if (retired_ > 0) scheduler_->retire(retired_);
 }
 
-std::uint64_t FrameLoop::histogram_of(const stream::KeyframeKey& key) const {
+std::uint64_t VulkanFrameLoop::histogram_of(const stream::KeyframeKey& key) const {
   // Read with the node table when the index was built; 0 (never culled) for an unknown key.
   const stream::KeyframeId id = scheduler_->index().find_keyframe(key);
   return id == stream::no_keyframe ? 0 : scheduler_->index().keyframe(id).histogram;
 }
 
-void FrameLoop::decode_uploads(const std::vector<stream::BrickUpload>& uploads,
-                               std::vector<std::string>& errors) {
+void VulkanFrameLoop::decode_uploads(const std::vector<stream::BrickUpload>& uploads,
+                                     std::vector<std::string>& errors) {
   if (uploads.empty()) return;
   const format::Manifest& m = container_.manifest();
   const auto to_decoder = [&](const stream::BrickUpload& u) {
@@ -128,10 +145,11 @@ void FrameLoop::decode_uploads(const std::vector<stream::BrickUpload>& uploads,
   }
 }
 
-FrameReport FrameLoop::frame(const player::OrbitCamera& camera, double playhead,
-                             const cpu_render::TransferFunction& transfer, bool readback) {
+loop::FrameReport VulkanFrameLoop::frame(const player::OrbitCamera& camera, double playhead,
+                                         const cpu_render::TransferFunction& transfer,
+                                         bool readback) {
   const auto start = Clock::now();
-  FrameReport report;
+  loop::FrameReport report;
   // 1. Retire finished frames: their slots may be overwritten now.
   retire_completed();
   // 2. The scheduler: arrivals, priorities, requests, slots, the SVO ([0029]–[0075]).
@@ -172,7 +190,7 @@ FrameReport FrameLoop::frame(const player::OrbitCamera& camera, double playhead,
   t = Clock::now();
   report.ticket = raycaster_->render(input, readback);
   if (gpu_frame != report.ticket)
-    throw std::logic_error("FrameLoop: the ray caster's frame numbers went out of step");
+    throw std::logic_error("VulkanFrameLoop: the ray caster's frame numbers went out of step");
   if (!options_.pipelined) {
     raycaster_->wait(report.ticket);
     const double wall = ms_since(t);
@@ -183,6 +201,12 @@ FrameReport FrameLoop::frame(const player::OrbitCamera& camera, double playhead,
   last_update_ = std::move(update);
   report.timings.frame_ms = ms_since(start);
   return report;
+}
+
+void VulkanFrameLoop::resize(int width, int height) {
+  raycaster_->resize(width, height);
+  options_.width = raycaster_->width();
+  options_.height = raycaster_->height();
 }
 
 }  // namespace volreel::vulkan_render

@@ -1,12 +1,12 @@
 // loop_settings.cpp: parsing of the frame loop's user settings (see loop_settings.hpp).
-#include "volreel/vulkan_render/loop_settings.hpp"
+#include "volreel/loop/loop_settings.hpp"
 
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
 #include <stdexcept>
 
-namespace volreel::vulkan_render {
+namespace volreel::loop {
 namespace {
 
 [[noreturn]] void bad(const std::string& option, const std::string& expected,
@@ -74,8 +74,8 @@ double parse_latency(const std::string& text, const std::string& option) {
 void apply(const LoopSettings& s, FrameLoopOptions& o) {
   if (!s.size.empty()) {
     const auto [w, h] = parse_size(s.size);
-    o.raycaster.width = w;
-    o.raycaster.height = h;
+    o.width = w;
+    o.height = h;
   }
   if (!(s.atlas_mb > 0) || s.atlas_mb > 1e6)
     bad("--atlas-mb", "a size in MiB > 0", std::to_string(s.atlas_mb));
@@ -97,4 +97,4 @@ void apply(const LoopSettings& s, FrameLoopOptions& o) {
   o.transfer_culling = !s.no_culling;
 }
 
-}  // namespace volreel::vulkan_render
+}  // namespace volreel::loop

@@ -1,0 +1,92 @@
+// frame_loop.hpp: volreel's per-frame streaming loop behind one interface (docs/design.md,
+// "Streaming", steps 1–7): for every rendered frame, the stream scheduler's update (priorities,
+// requests, arrivals, atlas slots, the array-encoded SVO), the decode of the arrived bricks into
+// their atlas slots (a bad brick's slot filled with the sequence's lowest value, so it shows as
+// background), the rendering, and the retirement of finished frames. Two implementations:
+//   - loop::CpuFrameLoop (cpu_frame_loop.hpp): CPU reference decoder and renderer, no Vulkan;
+//   - vulkan_render::VulkanFrameLoop: GPU decode into the atlas and the Vulkan ray caster
+//     (vulkan_render::open_frame_loop opens either).
+// `volreel render`, `volreel bench play`, `volreel bench stream` and the player window drive it.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "volreel/cpu_render/renderer.hpp"
+#include "volreel/cpu_render/transfer_function.hpp"
+#include "volreel/player/camera.hpp"
+#include "volreel/stream/scheduler.hpp"
+
+namespace volreel::loop {
+
+/// A rendered frame's number (from 1): the scheduler's frame number and the read_back() handle.
+using Ticket = std::uint64_t;
+
+struct FrameLoopOptions {
+  /// Scheduler settings; atlas_slots is replaced by the atlas's slot count.
+  stream::SchedulerSettings scheduler;
+  std::uint64_t atlas_bytes = std::uint64_t{256} << 20;  ///< atlas memory (16-bit voxels)
+  int width = 512, height = 512;     ///< output image size, pixels (≥ 1; resize() changes it)
+  cpu_render::RenderOptions render;  ///< step, background, termination
+  /// Skip what the transfer function hides: leaf regions (histograms) and atlas blocks (ranges).
+  bool transfer_culling = true;
+  bool pipelined = false;  ///< overlap the next frame's CPU work with this frame's GPU work
+
+  /// Read by the Vulkan loop only.
+  struct Gpu {
+    std::uint64_t staging_bytes = std::uint64_t{8} << 20;  ///< one decoder staging buffer
+    std::uint32_t frames_in_flight = 2;                    ///< ray caster ring entries (≥ 1)
+  } gpu;
+};
+
+/// Where one frame's time went, milliseconds.
+struct FrameTimings {
+  double schedule_ms = 0;  ///< StreamScheduler::update (CPU)
+  double upload_ms = 0;    ///< staging and submitting the decode batch (CPU; 0 on the CPU loop)
+  double decode_ms = 0;    ///< decoding the bricks (CPU), or waiting for the GPU decode (0 when
+                           ///< pipelined)
+  double render_ms = 0;    ///< rendering (CPU; GPU timestamps, or wall time where the queue has
+                           ///< none; 0 when pipelined)
+  double frame_ms = 0;     ///< the whole frame() call
+};
+
+struct FrameReport {
+  Ticket ticket = 0;
+  stream::StreamStats stats;
+  FrameTimings timings;
+  std::vector<std::string> new_errors;  ///< scheduler and decode problems of this frame
+};
+
+class FrameLoop {
+ public:
+  virtual ~FrameLoop() = default;
+
+  /// One frame at `playhead` (keyframe units) seen by `camera` (its size must be the output's)
+  /// through `transfer`. With `readback`, read_back(report.ticket) gives the image (the CPU loop
+  /// always keeps the last one).
+  virtual FrameReport frame(const player::OrbitCamera& camera, double playhead,
+                            const cpu_render::TransferFunction& transfer,
+                            bool readback = false) = 0;
+  /// The image of a recent frame rendered with readback (waits for it). Throws
+  /// std::invalid_argument for a frame whose image is not kept.
+  virtual cpu_render::RgbaImage read_back(Ticket ticket) const = 0;
+  /// Waits for every frame and retires it.
+  virtual void finish() = 0;
+  /// Whether frames can overlap (set_pipelined); the CPU loop is serial.
+  virtual bool can_pipeline() const = 0;
+  /// Overlap the next frame's CPU work with this frame's GPU work (no effect where serial).
+  virtual void set_pipelined(bool on) = 0;
+  /// Changes the output size, pixels (waits for every frame first).
+  virtual void resize(int width, int height) = 0;
+  /// What renders, for report headers: the Vulkan device, or the CPU renderer and its threads.
+  virtual std::string describe() const = 0;
+
+  virtual std::uint32_t slot_count() const = 0;  ///< atlas slots
+  virtual stream::StreamScheduler& scheduler() = 0;
+  virtual const stream::StreamScheduler& scheduler() const = 0;
+  virtual const cpu_render::VolumeGeometry& geometry() const = 0;
+  virtual const FrameLoopOptions& options() const = 0;
+};
+
+}  // namespace volreel::loop
