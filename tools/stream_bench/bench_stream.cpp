@@ -1,0 +1,457 @@
+// bench_stream.cpp: the built-in bench tour, tour analysis, the link, the original series, the
+// settings of `volreel bench stream` and the loop over its tours and policies.
+#include "volreel/stream_bench/bench_stream.hpp"
+
+#include <stdlib.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <limits>
+
+#include "volreel/datasets/prng.hpp"
+#include "volreel/datasets/volume.hpp"
+#include "volreel/loop/auto_transfer.hpp"
+#include "volreel/loop/loop_settings.hpp"
+#include "volreel/stream_bench/run_report.hpp"
+
+namespace volreel::stream_bench {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+[[noreturn]] void bad(const std::string& option, const std::string& expected,
+                      const std::string& found) {
+  throw InputError(option + ": expected " + expected + ", found '" + found + "'");
+}
+
+/// A finite number > 0 and nothing else; nullopt otherwise.
+std::optional<double> positive_number(const std::string& text) {
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v) || !(v > 0))
+    return std::nullopt;
+  return v;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// The tour, the link, the original series and the transfer function.
+
+cpu_render::Tour bench_tour(const cpu_render::TourContext& context, double duration,
+                            std::uint64_t seed, int width, int height) {
+  const double last = static_cast<double>(std::max<std::size_t>(context.keyframes, 1) - 1);
+  const double d = duration;
+  const double speed = std::max(0.5 * last / (0.25 * d), 0.25);
+  SplitMix64 rng(seed);
+  double playhead = 0;
+  const auto seek_target = [&] {
+    double r = playhead;
+    for (int tries = 0; tries < 100; ++tries) {
+      r = std::round(rng.uniform(0, last) * 4) / 4;  // quarter keyframes
+      if (std::abs(r - playhead) >= 0.25 * last) break;
+    }
+    playhead = r;
+    return r;
+  };
+  nlohmann::json segments = nlohmann::json::array();
+  const auto play = [&](double seconds, double v, bool forward) {
+    segments.push_back({{forward ? "play" : "reverse", seconds}, {"speed", v}});
+    playhead = std::clamp(playhead + (forward ? v : -v) * seconds, 0.0, last);
+  };
+  const auto pause = [&](double seconds) { segments.push_back({{"pause", seconds}}); };
+  const auto seek = [&] { segments.push_back({{"seek", seek_target()}}); };
+  play(0.25 * d, speed, true);
+  play(0.15 * d, speed, false);
+  seek();
+  pause(0.10 * d);
+  seek();
+  play(0.15 * d, 0.5 * speed, true);
+  seek();
+  pause(0.10 * d);
+  seek();
+  play(0.15 * d, std::min(1.0, speed), true);  // slow: states between keyframes
+  seek();
+  pause(0.10 * d);
+
+  const player::OrbitCamera f = player::OrbitCamera::framing(
+      glm::dvec3(context.dims[0], context.dims[1], context.dims[2]), width, height);
+  const double az = glm::degrees(f.azimuth), el = glm::degrees(f.elevation);
+  struct Key {
+    double at, elevation, zoom;
+  };
+  const Key keys[] = {{0, 0, 1},       {0.25, 15, 1},   {0.5, -10, 1},
+                      {0.6, -10, 0.6}, {0.75, 10, 0.6}, {1, 0, 1}};
+  nlohmann::json camera = nlohmann::json::array();
+  for (const Key& k : keys)
+    camera.push_back({{"t", k.at * d},
+                      {"azimuth", az + 360.0 * k.at},
+                      {"elevation", el + k.elevation},
+                      {"distance", f.distance * k.zoom},
+                      {"target", {f.target.x, f.target.y, f.target.z}},
+                      {"fov", glm::degrees(f.fov_y)}});
+  const nlohmann::json json = {
+      {"duration", d},           {"fps", 30},
+      {"size", {width, height}}, {"camera", camera},
+      {"segments", segments},    {"transfer", {{{"t", 0}, {"preset", "cool-warm"}}}}};
+  return cpu_render::Tour::from_json(json, context, "bench tour");
+}
+
+std::vector<std::pair<double, double>> tour_seeks(const cpu_render::Tour& tour) {
+  std::vector<std::pair<double, double>> seeks;
+  const auto& keys = tour.playhead_keys();
+  for (std::size_t i = 1; i < keys.size(); ++i)
+    if (keys[i].time == keys[i - 1].time && keys[i].keyframe != keys[i - 1].keyframe)
+      seeks.emplace_back(keys[i].time, keys[i].keyframe);
+  return seeks;
+}
+
+double tour_play_speed(const cpu_render::Tour& tour) {
+  double speed = 0;
+  const auto& keys = tour.playhead_keys();
+  for (std::size_t i = 1; i < keys.size(); ++i)
+    if (keys[i].time > keys[i - 1].time)
+      speed = std::max(speed, std::abs(keys[i].keyframe - keys[i - 1].keyframe) /
+                                  (keys[i].time - keys[i - 1].time));
+  return speed;
+}
+
+double bench_bandwidth(const std::string& text, double playback_bytes_per_s) {
+  if (text == "unlimited") return 0;
+  if (!text.empty() && (text.back() == 'x' || text.back() == 'X')) {
+    const std::optional<double> factor = positive_number(text.substr(0, text.size() - 1));
+    if (!factor)
+      bad("--bandwidth",
+          "a multiple of the playback data rate such as 0.5x, or a rate such as 20MB/s", text);
+    if (!(playback_bytes_per_s > 0))
+      throw InputError(
+          "--bandwidth " + text +
+          ": the tour never plays, so there is no playback data rate; give a rate such as 1MB/s");
+    return *factor * playback_bytes_per_s;
+  }
+  return loop::parse_bandwidth(text);
+}
+
+/// The path inside a manifest's "source" ("raw series DIR", "raw file FILE (f32)", "HDF5 FILE
+/// (datasets …)") or the encoder's "series" field.
+std::vector<std::string> source_candidates(const format::Manifest& m) {
+  std::vector<std::string> out;
+  std::string s = m.source;
+  for (const char* prefix : {"raw series ", "raw file ", "HDF5 "})
+    if (s.rfind(prefix, 0) == 0) {
+      s = s.substr(std::string(prefix).size());
+      const std::size_t paren = s.rfind(" (");
+      if (paren != std::string::npos && s.back() == ')') s.resize(paren);
+      break;
+    }
+  if (!s.empty()) out.push_back(s);
+  if (m.encoder.is_object() && m.encoder.contains("series") && m.encoder["series"].is_string())
+    out.push_back(m.encoder["series"].get<std::string>());
+  return out;
+}
+
+/// Opens the original series: --series, else the manifest's source if that path exists (as
+/// given, or relative to the container's folder and its parent). nullptr: none found (`note`
+/// says why).
+std::unique_ptr<datasets::SeriesReader> open_original(const std::string& series,
+                                                      datasets::OpenOptions options,
+                                                      const format::Container& container,
+                                                      std::string& note) {
+  const format::Manifest& m = container.manifest();
+  if (!options.dims) options.dims = Dims{m.dims[0], m.dims[1], m.dims[2]};
+  if (!series.empty()) {
+    if (!fs::exists(series)) throw InputError("--series " + series + ": no such file or folder");
+    note = "--series " + series;
+    return datasets::open_series(series, options);
+  }
+  const fs::path dir = fs::absolute(container.directory()).lexically_normal();
+  for (const std::string& c : source_candidates(m)) {
+    std::vector<fs::path> tries = {fs::path(c)};
+    if (fs::path(c).is_relative()) {
+      tries.push_back(dir.parent_path() / c);
+      tries.push_back(dir.parent_path().parent_path() / c);
+    }
+    for (const fs::path& p : tries) {
+      if (!fs::exists(p)) continue;
+      try {
+        auto reader = datasets::open_series(p, options);
+        note = "the manifest's source " + p.string();
+        return reader;
+      } catch (const InputError& e) {
+        note = "the manifest's source " + p.string() + " could not be opened (" + e.what() + ")";
+      }
+    }
+  }
+  if (note.empty()) note = "the manifest's source '" + m.source + "' was not found";
+  note = "the container's own finest-level decode (" + note +
+         "; pass --series ORIGINAL to measure against the original data)";
+  return nullptr;
+}
+
+/// --transfer: "tour" (the tour's own), "auto" (quantiles of the ground truth's middle frame), or
+/// what the player takes (a preset name or a JSON file: loop::transfer_from_spec).
+std::optional<cpu_render::TransferFunction> bench_transfer(const std::string& spec,
+                                                           const format::Container& container,
+                                                           GroundTruth& truth) {
+  const format::Manifest& m = container.manifest();
+  if (spec == "tour") return std::nullopt;
+  if (spec == "auto")
+    return cpu_render::TransferFunction::from_quantiles(truth.frame(container.frame_count() / 2),
+                                                        static_cast<float>(m.value_min),
+                                                        static_cast<float>(m.value_max));
+  return loop::transfer_from_spec(spec, container, "--transfer");
+}
+
+std::string rate_text(double bytes_per_s) {
+  if (!(bytes_per_s > 0)) return "unlimited";
+  char s[32];
+  std::snprintf(s, sizeof s, "%g MB/s", bytes_per_s * 1e-6);
+  return s;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The settings.
+
+void BenchStreamSettings::check() const {
+  const BenchStreamSettings& o = *this;
+  loop::parse_size(o.size);
+  if (o.bandwidth.empty() || (o.bandwidth.back() != 'x' && o.bandwidth.back() != 'X'))
+    bench_bandwidth(o.bandwidth, 0);  // a malformed rate is reported before any work
+  loop::parse_latency(o.latency);
+  if (!(o.duration > 0) || o.duration > 3600)
+    bad("--duration", "seconds in (0, 3600]", std::to_string(o.duration));
+  if (o.clock != "simulated" && o.clock != "wall") bad("--clock", "simulated or wall", o.clock);
+  if (!(o.fps > 0) || o.fps > 240)
+    bad("--fps", "frames per second in (0, 240]", std::to_string(o.fps));
+  if (!(o.sse_target > 0) || !std::isfinite(o.sse_target))
+    bad("--sse-target", "pixels per voxel > 0", std::to_string(o.sse_target));
+  if (!(o.sse_weight >= 0) || !std::isfinite(o.sse_weight))
+    bad("--sse-weight", "a weight >= 0", std::to_string(o.sse_weight));
+  if (!(o.temporal_exponent > 0) || o.temporal_exponent > 64)
+    bad("--temporal-exponent", "an exponent in (0, 64]", std::to_string(o.temporal_exponent));
+  if (!(o.temporal_lerp_min >= 0 && o.temporal_lerp_min <= 1))
+    bad("--temporal-lerp-min", "a weight in [0, 1]", std::to_string(o.temporal_lerp_min));
+  if (!(o.ancestor_handicap >= 0) || o.ancestor_handicap > 64)
+    bad("--ancestor-handicap", "an exponent in [0, 64]", std::to_string(o.ancestor_handicap));
+  if (!(o.speculative_link >= 0) || o.speculative_link > 60)
+    bad("--speculative-link", "seconds in [0, 60]", std::to_string(o.speculative_link));
+  if (!(o.lookahead >= 0) || o.lookahead > 60)
+    bad("--lookahead", "seconds in [0, 60]", std::to_string(o.lookahead));
+  if (!(o.step > 0) || !std::isfinite(o.step))
+    bad("--step", "a ray step in voxels > 0", std::to_string(o.step));
+  if (o.atlas_slots < 1 || o.atlas_slots > (1u << 16))
+    bad("--atlas-slots", "1..65536 slots", std::to_string(o.atlas_slots));
+  if (!(o.upload_budget_mb > 0))
+    bad("--upload-budget", "MB per frame > 0", std::to_string(o.upload_budget_mb));
+  if (o.io_threads < 1 || o.io_threads > 64)
+    bad("--io-threads", "1..64", std::to_string(o.io_threads));
+  if (o.seeds < 1 || o.seeds > 100) bad("--seeds", "1..100 tours", std::to_string(o.seeds));
+  if (o.seeds > 1 && !o.tour.empty())
+    throw InputError("--seeds " + std::to_string(o.seeds) +
+                     ": several seeds vary the built-in tour; drop --tour or --seeds");
+  policies();
+}
+
+std::pair<int, int> BenchStreamSettings::image_size() const {
+  return loop::parse_size(size);
+}
+
+double BenchStreamSettings::latency_s() const {
+  return loop::parse_latency(latency);
+}
+
+std::vector<stream::PriorityPolicy> BenchStreamSettings::policies() const {
+  if (policy == "both")
+    return {stream::PriorityPolicy::patent, stream::PriorityPolicy::nearest_keyframe_first};
+  if (policy == "patent") return {stream::PriorityPolicy::patent};
+  if (policy == "nearest") return {stream::PriorityPolicy::nearest_keyframe_first};
+  bad("--policy", "both, patent or nearest", policy);
+}
+
+std::string BenchStreamSettings::transfer_spec() const {
+  return !transfer.empty() ? transfer : tour.empty() ? "auto" : "tour";
+}
+
+fs::path bench_out_dir(const std::string& out) {
+  if (out.empty()) {
+    char pattern[] = "/tmp/volreel-bench-stream-XXXXXX";
+    if (!::mkdtemp(pattern)) throw InputError("cannot create a temporary folder in /tmp");
+    return pattern;
+  }
+  if (fs::exists(out) && !fs::is_directory(out))
+    throw InputError("--out " + out + ": exists and is not a folder");
+  fs::create_directories(out);
+  return out;
+}
+
+SchedulerSetup scheduler_setup(const BenchStreamSettings& o, double bandwidth, double latency,
+                               const stream::SpatialIndex& index) {
+  SchedulerSetup r;
+  stream::SchedulerSettings& ss = r.settings;
+  ss.atlas_slots = o.atlas_slots;
+  ss.priority.sse_target = o.sse_target;
+  ss.priority.sse_weight = o.sse_weight;
+  ss.priority.temporal_lerp_min = o.temporal_lerp_min;
+  ss.priority.temporal_exponent = o.temporal_exponent;
+  ss.priority.due_window = o.due_window;
+  ss.priority.sse_scope =
+      o.sse_priority == "node" ? stream::SseScope::node : stream::SseScope::level;
+  ss.priority.lookahead_s = o.lookahead;
+  ss.speculative_link_s = o.speculative_link;
+  ss.selection.ancestor_handicap = o.ancestor_handicap;
+  ss.upload_budget_bytes = static_cast<std::uint64_t>(o.upload_budget_mb * 1e6);
+  ss.loader.bandwidth_bytes_per_s = bandwidth;
+  ss.loader.latency_s = latency;
+  ss.loader.threads = o.io_threads;
+  const std::size_t keyframe_nodes = index.keyframe_count();
+  {
+    std::uint64_t total = 0;
+    for (std::size_t k = 0; k < keyframe_nodes; ++k)
+      total += index.keyframe(static_cast<stream::KeyframeId>(k)).bytes;
+    if (keyframe_nodes > 0)
+      r.brick_bytes = static_cast<double>(total) / static_cast<double>(keyframe_nodes);
+  }
+  r.atlas_capped = keyframe_nodes > 0 && ss.atlas_slots > keyframe_nodes;
+  if (r.atlas_capped) ss.atlas_slots = static_cast<std::uint32_t>(keyframe_nodes);
+  ss.loader.max_in_flight = o.max_in_flight > 0 ? o.max_in_flight
+                            : bandwidth > 0
+                                ? static_cast<std::size_t>(std::clamp(
+                                      bandwidth * (latency + 0.5) / r.brick_bytes, 32.0, 4096.0))
+                                : 1024;
+  return r;
+}
+
+RunSetup run_setup(const BenchStreamSettings& o, const format::Container& container,
+                   const stream::SpatialIndex& index, std::size_t index_errors,
+                   const stream::SchedulerSettings& scheduler, int width, int height,
+                   std::optional<cpu_render::TransferFunction> transfer) {
+  RunSetup setup;
+  setup.container = &container;
+  setup.index = &index;
+  setup.index_errors = index_errors;
+  setup.width = width;
+  setup.height = height;
+  setup.transfer = std::move(transfer);
+  setup.render.step = o.step;
+  setup.simulated_fps = o.clock == "simulated" ? o.fps : 0;
+  setup.render.background = {0.06f, 0.06f, 0.08f};
+  setup.settings = scheduler;
+  return setup;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The runs.
+
+std::vector<TourRuns> run_tours(const BenchStreamSettings& o, RunSetup setup,
+                                const cpu_render::Tour& first,
+                                const cpu_render::TourContext& context, GroundTruth& truth,
+                                const fs::path& out, const StageRunner& stage,
+                                const std::function<void(const TourRuns&)>& tour_done) {
+  const auto [width, height] = std::pair{setup.width, setup.height};
+  std::vector<TourRuns> tours;
+  for (unsigned i = 0; i < o.seeds; ++i) {
+    TourRuns& tr = tours.emplace_back();
+    tr.seed = o.seed + i;
+    const cpu_render::Tour tour_i =
+        i == 0 ? first : bench_tour(context, o.duration, tr.seed, width, height);
+    const fs::path dir = o.seeds > 1 ? out / ("seed_" + std::to_string(tr.seed)) : out;
+    fs::create_directories(dir);
+    {
+      std::ofstream t(dir / "tour.json");
+      t << tour_i.to_json().dump(1) << '\n';
+      if (!t) throw InputError("writing " + (dir / "tour.json").string() + " failed");
+    }
+    setup.tour = &tour_i;
+    const auto tour_seeks_i = tour_seeks(tour_i);
+    for (const stream::PriorityPolicy p : o.policies()) {
+      stage(std::string("streaming (") + policy_name(p) + ")", "s",
+            [&](const Progress& progress) { tr.runs.push_back(run_tour(setup, p, progress)); });
+      stage("ground truth (" + tr.runs.back().name + ")", "frames", [&](const Progress& progress) {
+        measure(tr.runs.back(), setup, truth, tour_seeks_i, dir, o.png_every, progress);
+      });
+      write_csv(dir / ("stream_" + tr.runs.back().name + ".csv"), tr.runs.back(), tour_seeks_i);
+    }
+    setup.tour = nullptr;
+    if (tour_done) tour_done(tr);
+  }
+  return tours;
+}
+
+std::optional<PolicyTotals> policy_totals(const std::vector<TourRuns>& tours,
+                                          const std::string& name) {
+  PolicyTotals t;
+  std::size_t n = 0;
+  for (const TourRuns& tr : tours)
+    for (const RunResult& r : tr.runs)
+      if (r.name == name) {
+        t.mean_psnr += r.mean_psnr;
+        t.holes += r.frames_with_holes_after_root;
+        t.frames += r.frames.size();
+        t.roots = t.roots && !std::isnan(r.first_root_s);
+        ++n;
+      }
+  if (n == 0) return std::nullopt;
+  t.mean_psnr /= static_cast<double>(n);
+  return t;
+}
+
+nlohmann::json bench_summary_json(const BenchStreamSettings& o, const std::string& container,
+                                  const RunSetup& setup, const BenchLink& link, bool original_truth,
+                                  const std::vector<TourRuns>& tours) {
+  const stream::SchedulerSettings& ss = setup.settings;
+  nlohmann::json summary = {
+      {"container", container},
+      {"bandwidth_bytes_per_s", link.bandwidth_bytes_per_s},
+      {"latency_s", link.latency_s},
+      {"playback_bytes_per_s", link.playback_bytes_per_s},
+      {"clock", o.clock},
+      {"fps", setup.simulated_fps > 0 ? nlohmann::json(setup.simulated_fps) : nlohmann::json()},
+      {"atlas_slots", ss.atlas_slots},
+      {"max_in_flight", ss.loader.max_in_flight},
+      {"sse_weight", o.sse_weight},
+      {"temporal_lerp_min", o.temporal_lerp_min},
+      {"temporal_exponent", o.temporal_exponent},
+      {"due_window", o.due_window},
+      {"sse_priority", o.sse_priority},
+      {"lookahead_s", o.lookahead},
+      {"speculative_link_s", o.speculative_link},
+      {"ancestor_handicap", o.ancestor_handicap},
+      {"size", {setup.width, setup.height}},
+      {"ground_truth", original_truth ? "original series" : "container finest level"}};
+  if (tours.size() == 1) {
+    summary["runs"] = nlohmann::json::array();
+    for (const RunResult& r : tours.front().runs) summary["runs"].push_back(summary_json(r));
+  } else {
+    summary["tours"] = nlohmann::json::array();
+    for (const TourRuns& tr : tours) {
+      nlohmann::json t = {{"seed", tr.seed}, {"runs", nlohmann::json::array()}};
+      for (const RunResult& r : tr.runs) t["runs"].push_back(summary_json(r));
+      summary["tours"].push_back(t);
+    }
+  }
+  return summary;
+}
+
+void print_tour_table(const std::vector<TourRuns>& tours, const std::optional<PolicyTotals>& patent,
+                      const std::optional<PolicyTotals>& nearest) {
+  std::printf("\n  %-10s %16s %24s %12s\n", "tour seed", "patent [0045]", "nearest-keyframe-first",
+              "difference");
+  for (const TourRuns& tr : tours) {
+    std::printf("  %-10llu", static_cast<unsigned long long>(tr.seed));
+    double p = std::nan(""), n = std::nan("");
+    for (const RunResult& r : tr.runs) (r.name == "patent" ? p : n) = r.mean_psnr;
+    std::printf(" %13.2f dB %21.2f dB", p, n);
+    if (patent && nearest) std::printf(" %+9.2f dB", p - n);
+    std::printf("\n");
+  }
+  std::printf("  %-10s %13.2f dB %21.2f dB", "mean", patent ? patent->mean_psnr : std::nan(""),
+              nearest ? nearest->mean_psnr : std::nan(""));
+  if (patent && nearest) std::printf(" %+9.2f dB", patent->mean_psnr - nearest->mean_psnr);
+  std::printf("   (mean image PSNR of each tour)\n");
+}
+
+}  // namespace volreel::stream_bench
