@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <limits>
+#include <tuple>
 
 #include "volreel/datasets/prng.hpp"
 #include "volreel/datasets/volume.hpp"
@@ -343,6 +344,45 @@ RunSetup run_setup(const BenchStreamSettings& o, const format::Container& contai
   return setup;
 }
 
+BenchPlan prepare_bench(const BenchStreamSettings& s, const std::string& container_path,
+                        const std::string& series, const datasets::OpenOptions& options,
+                        const std::string& out) {
+  s.check();
+  BenchPlan plan;
+  std::tie(plan.width, plan.height) = s.image_size();
+  plan.link.latency_s = s.latency_s();
+  if (!fs::is_directory(container_path))
+    throw InputError(container_path + ": not a container folder (NAME.vreel)");
+  plan.container = std::make_unique<format::Container>(container_path);
+  const format::Container& container = *plan.container;
+  if (container.frame_count() == 0)
+    throw InputError(container_path + ": the container has no frames");
+  plan.context = cpu_render::TourContext::of(container.manifest());
+  plan.tour = std::make_unique<cpu_render::Tour>(
+      s.tour.empty() ? bench_tour(plan.context, s.duration, s.seed, plan.width, plan.height)
+                     : cpu_render::Tour::load(s.tour, plan.context));
+  // Playing every brick of the volume at the tour's fastest speed needs this many bytes per second.
+  plan.play_speed = tour_play_speed(*plan.tour);
+  plan.link.playback_bytes_per_s = static_cast<double>(container.total_bytes()) /
+                                   static_cast<double>(container.frame_count()) * plan.play_speed;
+  plan.link.bandwidth_bytes_per_s = bench_bandwidth(s.bandwidth, plan.link.playback_bytes_per_s);
+  plan.out = bench_out_dir(out);
+  plan.truth = std::make_unique<GroundTruth>(
+      container, open_original(series, options, container, plan.truth_note));
+  plan.transfer_spec = s.transfer_spec();
+  auto transfer = bench_transfer(plan.transfer_spec, container, *plan.truth);
+  std::vector<std::string> index_errors;
+  plan.index =
+      std::make_unique<stream::SpatialIndex>(stream::build_spatial_index(container, &index_errors));
+  for (const std::string& e : index_errors)
+    std::fprintf(stderr, "volreel: warning: %s\n", e.c_str());
+  plan.scheduler =
+      scheduler_setup(s, plan.link.bandwidth_bytes_per_s, plan.link.latency_s, *plan.index);
+  plan.setup = run_setup(s, container, *plan.index, index_errors.size(), plan.scheduler.settings,
+                         plan.width, plan.height, std::move(transfer));
+  return plan;
+}
+
 // ---------------------------------------------------------------------------------------------
 // The runs.
 
@@ -434,6 +474,32 @@ nlohmann::json bench_summary_json(const BenchStreamSettings& o, const std::strin
     }
   }
   return summary;
+}
+
+void print_checks(nlohmann::json& summary, const std::optional<PolicyTotals>& patent,
+                  const std::optional<PolicyTotals>& nearest, bool several, bool original_truth) {
+  const char* over = several ? " (mean over the tours)" : "";
+  std::printf("\nchecks:\n");
+  if (patent && nearest) {
+    const bool higher = patent->mean_psnr > nearest->mean_psnr;
+    std::printf(
+        "  patent's mean image PSNR higher than nearest-keyframe-first%s: %s (%.2f vs %.2f dB, "
+        "%+.2f dB)\n",
+        over, higher ? "yes" : "NO", patent->mean_psnr, nearest->mean_psnr,
+        patent->mean_psnr - nearest->mean_psnr);
+    summary["target_higher_psnr"] = higher;
+  }
+  if (patent) {
+    const bool no_holes = patent->holes == 0 && patent->roots;
+    std::printf(
+        "  patent: no frame with a hole after the first root brick arrived: %s (%zu of %zu frames "
+        "have holes)\n",
+        no_holes ? "yes" : "NO", patent->holes, patent->frames);
+    summary["target_no_holes"] = no_holes;
+  }
+  if (!original_truth)
+    std::printf(
+        "  (ground truth is the container's own decode, so PSNR measures streaming loss only)\n");
 }
 
 void print_tour_table(const std::vector<TourRuns>& tours, const std::optional<PolicyTotals>& patent,

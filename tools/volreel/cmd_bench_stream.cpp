@@ -1,23 +1,11 @@
 // cmd_bench_stream.cpp: `volreel bench stream NAME.vreel` — the streaming benchmark of the player
-// (docs/design.md, "Streaming"). A scripted tour (play forward, reverse, random seeks, camera
-// moves) is replayed against a player's clock, by default a simulated one: frame k is drawn at tour
-// time k/fps and the loader's link (bandwidth, latency) runs on the same clock, so a run is the
-// same on any machine whatever the CPU renderer's speed, and the policies are compared without
-// noise. With --clock wall each frame samples the tour at the wall-clock time since the start
-// instead (the loader then runs in real time; results vary with the machine's load). Every frame
-// runs the whole streaming loop on the CPU (loop::CpuFrameLoop):
-//   1. StreamScheduler::update(camera, playhead, frame) — priorities, requests, arrivals, slots,
-//      pre-render selection and the array-encoded SVO;
-//   2. each upload decoded into its CpuAtlas slot (CPU reference decoder);
-//   3. cpu_render::render_svo with the frame's SVO;
-//   4. the frame retired.
-// The timed loop only records the frame's image, camera, playhead and statistics; the ground truth
-// (cpu_render::render_reference of the original series, the two frames around the playhead
-// interpolated in time) is rendered after the run, and each frame's image PSNR and SSIM measured
-// against it. The same tour runs with the patent's priorities and with the nearest-keyframe-first
-// baseline at the same bandwidth, printed side by side, with two checks: the patent's policy draws
-// better images than the baseline, and no frame has a hole once the root brick arrived.
+// (docs/design.md, "Streaming"; the library: volreel/stream_bench/bench_stream.hpp). Its options,
+// then prepare_bench and run_tours, then the header, the side-by-side tables, the checks and the
+// files written.
+#include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -60,38 +48,17 @@ void stage(const std::string& title, const std::string& unit,
 void run_bench_stream(const BenchStreamOptions& o) {
   // 1. Settings (all checked before any work), the container, the tour, the link, the truth.
   const sb::BenchStreamSettings& s = o.s;
-  s.check();
-  const auto [width, height] = s.image_size();
-  const double latency = s.latency_s();
-  if (!fs::is_directory(o.container))
-    throw InputError(o.container + ": not a container folder (NAME.vreel)");
-  const format::Container container(o.container);
+  const sb::BenchPlan plan =
+      sb::prepare_bench(s, o.container, o.series, o.reader.to_open_options(), o.out);
+  const format::Container& container = *plan.container;
   const format::Manifest& m = container.manifest();
-  if (container.frame_count() == 0) throw InputError(o.container + ": the container has no frames");
-  const cpu_render::TourContext context = cpu_render::TourContext::of(m);
-  const cpu_render::Tour tour = s.tour.empty()
-                                    ? sb::bench_tour(context, s.duration, s.seed, width, height)
-                                    : cpu_render::Tour::load(s.tour, context);
-  // Playing every brick of the volume at the tour's fastest speed needs this many bytes per second.
-  const double play_speed = sb::tour_play_speed(tour);
-  const double playback_rate = static_cast<double>(container.total_bytes()) /
-                               static_cast<double>(container.frame_count()) * play_speed;
-  const double bandwidth = sb::bench_bandwidth(s.bandwidth, playback_rate);
-  const fs::path out = sb::bench_out_dir(o.out);
-  std::string truth_note;
-  sb::GroundTruth truth(
-      container, sb::open_original(o.series, o.reader.to_open_options(), container, truth_note));
-  const std::string transfer_spec = s.transfer_spec();
-  auto transfer = sb::bench_transfer(transfer_spec, container, truth);
-  std::vector<std::string> index_errors;
-  const stream::SpatialIndex index = stream::build_spatial_index(container, &index_errors);
-  for (const std::string& e : index_errors)
-    std::fprintf(stderr, "volreel: warning: %s\n", e.c_str());
-  const sb::SchedulerSetup sched = sb::scheduler_setup(s, bandwidth, latency, index);
-  const sb::RunSetup setup = sb::run_setup(s, container, index, index_errors.size(), sched.settings,
-                                           width, height, std::move(transfer));
+  const cpu_render::Tour& tour = *plan.tour;
+  const sb::RunSetup& setup = plan.setup;
   const stream::SchedulerSettings& ss = setup.settings;
-
+  const auto [bandwidth, latency, playback_rate] = plan.link;
+  const double play_speed = plan.play_speed;
+  const sb::GroundTruth& truth = *plan.truth;
+  const std::string& transfer_spec = plan.transfer_spec;
   const auto seeks = sb::tour_seeks(tour);
   std::printf("volreel bench stream\nmachine: %s\n", describe_machine().c_str());
   std::printf(
@@ -99,10 +66,10 @@ void run_bench_stream(const BenchStreamOptions& o) {
       o.container.c_str(), m.dims[0], m.dims[1], m.dims[2], container.frame_count(),
       truth.geometry().levels, m.codec == format::Codec::ksvd ? "ksvd" : "zfp",
       stream_bench::mb_text(static_cast<double>(container.total_bytes())).c_str(),
-      sched.brick_bytes);
+      plan.scheduler.brick_bytes);
   std::printf("truth:   %s\n", truth.original()
-                                   ? ("the original series (" + truth_note + ")").c_str()
-                                   : truth_note.c_str());
+                                   ? ("the original series (" + plan.truth_note + ")").c_str()
+                                   : plan.truth_note.c_str());
   char clock_text[96];
   if (setup.simulated_fps > 0)
     std::snprintf(clock_text, sizeof clock_text, "simulated clock, %g frames per tour second",
@@ -121,14 +88,14 @@ void run_bench_stream(const BenchStreamOptions& o) {
         s.seeds, static_cast<unsigned long long>(s.seed),
         static_cast<unsigned long long>(s.seed + s.seeds - 1));
   std::printf(
-      "render:  CPU ray caster, %dx%d, step %g voxel, transfer function: %s\n", width, height,
-      s.step,
+      "render:  CPU ray caster, %dx%d, step %g voxel, transfer function: %s\n", plan.width,
+      plan.height, s.step,
       transfer_spec == "auto" ? "auto (quantiles of the middle frame)" : transfer_spec.c_str());
   std::printf(
       "stream:  bandwidth %s, latency %g ms, %zu requests in flight at most, %u atlas slots%s, SSE "
       "target %g px\n",
       sb::rate_text(bandwidth).c_str(), latency * 1e3, ss.loader.max_in_flight, ss.atlas_slots,
-      sched.atlas_capped ? " (every brick of the container)" : "", s.sse_target);
+      plan.scheduler.atlas_capped ? " (every brick of the container)" : "", s.sse_target);
   if (playback_rate > 0)
     std::printf(
         "         playing the whole volume at the tour's fastest speed (%.3g keyframes/s) needs "
@@ -158,8 +125,8 @@ void run_bench_stream(const BenchStreamOptions& o) {
   std::fflush(stdout);
   // 2. The runs (timed), then the ground truth of each; with --seeds, once per tour, each tour's
   //    files in OUT/seed_S.
-  const std::vector<sb::TourRuns> tours =
-      sb::run_tours(s, setup, tour, context, truth, out, stage, [&](const sb::TourRuns& tr) {
+  const std::vector<sb::TourRuns> tours = sb::run_tours(
+      s, setup, tour, plan.context, *plan.truth, plan.out, stage, [&](const sb::TourRuns& tr) {
         if (s.seeds == 1) return;
         std::printf("\ntour seed %llu:\n", static_cast<unsigned long long>(tr.seed));
         sb::print_side_by_side(tr.runs);
@@ -171,43 +138,22 @@ void run_bench_stream(const BenchStreamOptions& o) {
       "identical to it count as %.0f dB); SSIM: per channel, averaged\n",
       sb::psnr_cap_db);
   if (s.seeds == 1) sb::print_side_by_side(tours.front().runs);
-  nlohmann::json summary = sb::bench_summary_json(
-      s, o.container, setup, {bandwidth, latency, playback_rate}, truth.original(), tours);
+  nlohmann::json summary =
+      sb::bench_summary_json(s, o.container, setup, plan.link, truth.original(), tours);
   const auto patent = sb::policy_totals(tours, "patent");
   const auto nearest = sb::policy_totals(tours, "nearest");
   if (s.seeds > 1) sb::print_tour_table(tours, patent, nearest);
-  const char* over = s.seeds > 1 ? " (mean over the tours)" : "";
-  std::printf("\nchecks:\n");
-  if (patent && nearest) {
-    const bool higher = patent->mean_psnr > nearest->mean_psnr;
-    std::printf(
-        "  patent's mean image PSNR higher than nearest-keyframe-first%s: %s (%.2f vs %.2f dB, "
-        "%+.2f dB)\n",
-        over, higher ? "yes" : "NO", patent->mean_psnr, nearest->mean_psnr,
-        patent->mean_psnr - nearest->mean_psnr);
-    summary["target_higher_psnr"] = higher;
-  }
-  if (patent) {
-    const bool no_holes = patent->holes == 0 && patent->roots;
-    std::printf(
-        "  patent: no frame with a hole after the first root brick arrived: %s (%zu of %zu frames "
-        "have holes)\n",
-        no_holes ? "yes" : "NO", patent->holes, patent->frames);
-    summary["target_no_holes"] = no_holes;
-  }
-  if (!truth.original())
-    std::printf(
-        "  (ground truth is the container's own decode, so PSNR measures streaming loss only)\n");
+  sb::print_checks(summary, patent, nearest, s.seeds > 1, truth.original());
   {
-    std::ofstream js(out / "summary.json");
+    std::ofstream js(plan.out / "summary.json");
     js << summary.dump(1) << '\n';
-    if (!js) throw InputError("writing " + (out / "summary.json").string() + " failed");
+    if (!js) throw InputError("writing " + (plan.out / "summary.json").string() + " failed");
   }
   std::printf(
       "\nwrote %s: %sstream_<policy>.csv (per frame), summary.json, %stour.json, "
       "%sframes_<policy>/frame_NNNNN.png "
       "(streamed | ground truth)\n",
-      out.c_str(), s.seeds > 1 ? "seed_S/" : "", s.seeds > 1 ? "seed_S/" : "",
+      plan.out.c_str(), s.seeds > 1 ? "seed_S/" : "", s.seeds > 1 ? "seed_S/" : "",
       s.seeds > 1 ? "seed_S/" : "");
 }
 

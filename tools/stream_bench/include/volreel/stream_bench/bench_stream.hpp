@@ -4,6 +4,25 @@
 // checks, the RunSetup and scheduler settings made from them (the atlas-slot cap and the rule for
 // requests in flight), the loop over tours and policies, the per-policy totals over the tours and
 // the summary JSON. CPU only.
+//
+// `volreel bench stream` (docs/design.md, "Streaming"): a scripted tour (play forward, reverse,
+// random seeks, camera moves) is replayed against a player's clock, by default a simulated one:
+// frame k is drawn at tour time k/fps and the loader's link (bandwidth, latency) runs on the same
+// clock, so a run is the same on any machine whatever the CPU renderer's speed, and the policies
+// are compared without noise. With --clock wall each frame samples the tour at the wall-clock time
+// since the start instead (the loader then runs in real time; results vary with the machine's
+// load). Every frame runs the whole streaming loop on the CPU (loop::CpuFrameLoop):
+//   1. StreamScheduler::update(camera, playhead, frame) — priorities, requests, arrivals, slots,
+//      pre-render selection and the array-encoded SVO;
+//   2. each upload decoded into its CpuAtlas slot (CPU reference decoder);
+//   3. cpu_render::render_svo with the frame's SVO;
+//   4. the frame retired.
+// The timed loop only records the frame's image, camera, playhead and statistics; the ground truth
+// (cpu_render::render_reference of the original series, the two frames around the playhead
+// interpolated in time) is rendered after the run, and each frame's image PSNR and SSIM measured
+// against it. The same tour runs with the patent's priorities and with the nearest-keyframe-first
+// baseline at the same bandwidth, printed side by side, with two checks: the patent's policy draws
+// better images than the baseline, and no frame has a hole once the root brick arrived.
 #pragma once
 
 #include <cstddef>
@@ -139,6 +158,36 @@ RunSetup run_setup(const BenchStreamSettings& settings, const format::Container&
                    const stream::SchedulerSettings& scheduler, int width, int height,
                    std::optional<cpu_render::TransferFunction> transfer);
 
+/// The run's link and data rates.
+struct BenchLink {
+  double bandwidth_bytes_per_s = 0, latency_s = 0, playback_bytes_per_s = 0;
+};
+
+/// Everything a benchmark runs with, prepared from its settings (prepare_bench).
+struct BenchPlan {
+  std::unique_ptr<format::Container> container;
+  cpu_render::TourContext context;
+  std::unique_ptr<cpu_render::Tour> tour;  ///< the first tour (--tour, or the built-in one)
+  int width = 0, height = 0;
+  double play_speed = 0;  ///< the tour's fastest playback, keyframes per second
+  BenchLink link;         ///< playback_bytes_per_s: every brick at play_speed
+  std::filesystem::path out;
+  std::unique_ptr<GroundTruth> truth;
+  std::string truth_note;  ///< where the ground truth comes from
+  std::string transfer_spec;
+  std::unique_ptr<stream::SpatialIndex> index;
+  SchedulerSetup scheduler;
+  RunSetup setup;  ///< without its tour (run_tours sets each)
+};
+
+/// Checks `settings`, opens the container (InputError unless a container folder with frames), makes
+/// the first tour, the link, the output folder (bench_out_dir), the ground truth (open_original
+/// with `series` and `options`), the transfer function, the spatial index (its warnings on stderr)
+/// and the RunSetup.
+BenchPlan prepare_bench(const BenchStreamSettings& settings, const std::string& container,
+                        const std::string& series, const datasets::OpenOptions& options,
+                        const std::string& out);
+
 // ---------------------------------------------------------------------------------------------
 // The runs.
 
@@ -173,16 +222,17 @@ struct PolicyTotals {
 std::optional<PolicyTotals> policy_totals(const std::vector<TourRuns>& tours,
                                           const std::string& name);
 
-/// The run's link and data rates.
-struct BenchLink {
-  double bandwidth_bytes_per_s = 0, latency_s = 0, playback_bytes_per_s = 0;
-};
-
 /// summary.json without the targets: the settings, the runs ("runs" with one tour, "tours" with
 /// several).
 nlohmann::json bench_summary_json(const BenchStreamSettings& settings, const std::string& container,
                                   const RunSetup& setup, const BenchLink& link, bool original_truth,
                                   const std::vector<TourRuns>& tours);
+
+/// The checks: the patent's mean image PSNR above the baseline's, no hole after the first root
+/// brick (printed, and set as summary's target_higher_psnr and target_no_holes); `several`: over
+/// several tours.
+void print_checks(nlohmann::json& summary, const std::optional<PolicyTotals>& patent,
+                  const std::optional<PolicyTotals>& nearest, bool several, bool original_truth);
 
 /// With several tours: each tour's mean image PSNR per policy, their difference, and the means.
 void print_tour_table(const std::vector<TourRuns>& tours, const std::optional<PolicyTotals>& patent,
