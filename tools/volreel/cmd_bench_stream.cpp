@@ -2,7 +2,6 @@
 // (docs/design.md, "Streaming"; the library: volreel/stream_bench/bench_stream.hpp). Its options,
 // then prepare_bench and run_tours, then the header, the side-by-side tables, the checks and the
 // files written.
-#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <functional>
@@ -14,19 +13,14 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
-#include "volreel/cpu_render/tour.hpp"
-#include "volreel/format/container.hpp"
-#include "volreel/stream/scheduler.hpp"
 #include "volreel/stream_bench/bench_stream.hpp"
 #include "volreel/stream_bench/run_report.hpp"
-#include "volreel/stream_bench/run_summary.hpp"
 #include "volreel/stream_bench/tour_run.hpp"
 
 namespace volreel::cli {
 
 namespace {
 
-namespace fs = std::filesystem;
 namespace sb = stream_bench;
 
 struct BenchStreamOptions {
@@ -50,87 +44,19 @@ void run_bench_stream(const BenchStreamOptions& o) {
   const sb::BenchStreamSettings& s = o.s;
   const sb::BenchPlan plan =
       sb::prepare_bench(s, o.container, o.series, o.reader.to_open_options(), o.out);
-  const format::Container& container = *plan.container;
-  const format::Manifest& m = container.manifest();
-  const cpu_render::Tour& tour = *plan.tour;
   const sb::RunSetup& setup = plan.setup;
-  const stream::SchedulerSettings& ss = setup.settings;
-  const auto [bandwidth, latency, playback_rate] = plan.link;
-  const double play_speed = plan.play_speed;
   const sb::GroundTruth& truth = *plan.truth;
-  const std::string& transfer_spec = plan.transfer_spec;
-  const auto seeks = sb::tour_seeks(tour);
-  std::printf("volreel bench stream\nmachine: %s\n", describe_machine().c_str());
-  std::printf(
-      "input:   %s: %ux%ux%u, %zu frames, %u levels, %s, %s in all (mean brick %.0f bytes)\n",
-      o.container.c_str(), m.dims[0], m.dims[1], m.dims[2], container.frame_count(),
-      truth.geometry().levels, m.codec == format::Codec::ksvd ? "ksvd" : "zfp",
-      stream_bench::mb_text(static_cast<double>(container.total_bytes())).c_str(),
-      plan.scheduler.brick_bytes);
-  std::printf("truth:   %s\n", truth.original()
-                                   ? ("the original series (" + plan.truth_note + ")").c_str()
-                                   : plan.truth_note.c_str());
-  char clock_text[96];
-  if (setup.simulated_fps > 0)
-    std::snprintf(clock_text, sizeof clock_text, "simulated clock, %g frames per tour second",
-                  setup.simulated_fps);
-  else
-    std::snprintf(clock_text, sizeof clock_text, "wall clock (tour time = seconds since start)");
-  std::printf(
-      "tour:    %s, %.1f s, %zu seeks; %s\n",
-      s.tour.empty()
-          ? "built-in bench tour (play, reverse, 5 random seeks, pauses, slow motion, orbit, zoom)"
-          : s.tour.c_str(),
-      tour.duration(), seeks.size(), clock_text);
-  if (s.seeds > 1)
-    std::printf(
-        "         %u tours, seeds %llu to %llu (their seeks differ), each run with both policies\n",
-        s.seeds, static_cast<unsigned long long>(s.seed),
-        static_cast<unsigned long long>(s.seed + s.seeds - 1));
-  std::printf(
-      "render:  CPU ray caster, %dx%d, step %g voxel, transfer function: %s\n", plan.width,
-      plan.height, s.step,
-      transfer_spec == "auto" ? "auto (quantiles of the middle frame)" : transfer_spec.c_str());
-  std::printf(
-      "stream:  bandwidth %s, latency %g ms, %zu requests in flight at most, %u atlas slots%s, SSE "
-      "target %g px\n",
-      sb::rate_text(bandwidth).c_str(), latency * 1e3, ss.loader.max_in_flight, ss.atlas_slots,
-      plan.scheduler.atlas_capped ? " (every brick of the container)" : "", s.sse_target);
-  if (playback_rate > 0)
-    std::printf(
-        "         playing the whole volume at the tour's fastest speed (%.3g keyframes/s) needs "
-        "%s: the link "
-        "carries %s of it\n",
-        play_speed, sb::rate_text(playback_rate).c_str(),
-        bandwidth > 0
-            ? (std::to_string(static_cast<int>(std::lround(100 * bandwidth / playback_rate))) +
-               " %")
-                  .c_str()
-            : "all");
-  std::printf(
-      "patent:  priority = %g*SSE/(1+SSE) + lerp(random, temporal, lerp(%g, 1, temporal)), "
-      "temporal exponent %g;\n"
-      "         SSE of %s\n",
-      s.sse_weight, s.temporal_lerp_min, ss.priority.temporal_exponent,
-      s.sse_priority == "node" ? "the node ([0042])"
-                               : "the node's level (the largest of its visible nodes)");
-  if (s.due_window)
-    std::printf(
-        "         due window first: the keyframes around the playhead and those it reaches within "
-        "%g s; the\n"
-        "         rest ([0045] order) holds at most %g s of the link in flight\n",
-        s.lookahead, s.speculative_link);
-  else
-    std::printf("         no due window (--due-window off): every keyframe node by [0045] alone\n");
+  sb::print_bench_header(plan, s, o.container, describe_machine());
   std::fflush(stdout);
   // 2. The runs (timed), then the ground truth of each; with --seeds, once per tour, each tour's
   //    files in OUT/seed_S.
-  const std::vector<sb::TourRuns> tours = sb::run_tours(
-      s, setup, tour, plan.context, *plan.truth, plan.out, stage, [&](const sb::TourRuns& tr) {
-        if (s.seeds == 1) return;
-        std::printf("\ntour seed %llu:\n", static_cast<unsigned long long>(tr.seed));
-        sb::print_side_by_side(tr.runs);
-      });
+  const std::vector<sb::TourRuns> tours =
+      sb::run_tours(s, setup, *plan.tour, plan.context, *plan.truth, plan.out, stage,
+                    [&](const sb::TourRuns& tr) {
+                      if (s.seeds == 1) return;
+                      std::printf("\ntour seed %llu:\n", static_cast<unsigned long long>(tr.seed));
+                      sb::print_side_by_side(tr.runs);
+                    });
 
   // 3. Side by side, the targets, the files.
   std::printf(

@@ -228,6 +228,11 @@ nlohmann::json bench_summary_json(const BenchStreamSettings& settings, const std
                                   const RunSetup& setup, const BenchLink& link, bool original_truth,
                                   const std::vector<TourRuns>& tours);
 
+/// The header of a run on stdout: the machine, the input, the ground truth, the tour and clock, the
+/// renderer, the link, the patent policy's settings.
+void print_bench_header(const BenchPlan& plan, const BenchStreamSettings& settings,
+                        const std::string& container, const std::string& machine);
+
 /// The checks: the patent's mean image PSNR above the baseline's, no hole after the first root
 /// brick (printed, and set as summary's target_higher_psnr and target_no_holes); `several`: over
 /// several tours.
