@@ -392,13 +392,12 @@ std::vector<TourRuns> run_tours(const BenchStreamSettings& o, RunSetup setup,
                                 const cpu_render::TourContext& context, GroundTruth& truth,
                                 const fs::path& out, const StageRunner& stage,
                                 const std::function<void(const TourRuns&)>& tour_done) {
-  const auto [width, height] = std::pair{setup.width, setup.height};
   std::vector<TourRuns> tours;
   for (unsigned i = 0; i < o.seeds; ++i) {
     TourRuns& tr = tours.emplace_back();
     tr.seed = o.seed + i;
     const cpu_render::Tour tour_i =
-        i == 0 ? first : bench_tour(context, o.duration, tr.seed, width, height);
+        i == 0 ? first : bench_tour(context, o.duration, tr.seed, setup.width, setup.height);
     const fs::path dir = o.seeds > 1 ? out / ("seed_" + std::to_string(tr.seed)) : out;
     fs::create_directories(dir);
     {
