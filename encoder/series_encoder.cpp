@@ -272,6 +272,16 @@ void add_frame(const FrameStats& st, EncodeSummary& summary) {
 
 }  // namespace
 
+double EncodeSummary::quantization_loss_db() const {
+  if (!(unquantized_squared_error > 0)) return 0;
+  return 10 * std::log10(quantized_squared_error / unquantized_squared_error);
+}
+
+std::optional<double> EncodeSummary::finest_owned_codes_bps() const {
+  if (skipped != 0 || container_bytes == 0) return std::nullopt;
+  return bps * breakdown.finest_owned_codes / static_cast<double>(container_bytes);
+}
+
 std::pair<double, double> value_range(const datasets::SeriesReader& series, std::size_t frames,
                                       const Progress& progress) {
   const std::size_t n = frames ? std::min(frames, series.info().frames) : series.info().frames;

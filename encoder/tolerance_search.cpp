@@ -1,5 +1,6 @@
-// tolerance_search.cpp: rate control for a size target: bracket ε in log space with trial encodes
-// of sample frames, then bisect geometrically (search_tolerance).
+// tolerance_search.cpp: choosing ε — the order of the sources (choose_tolerance), and rate
+// control for a size target: bracket ε in log space with trial encodes of sample frames, then
+// bisect geometrically (search_tolerance).
 #include "volreel/encoder/tolerance.hpp"
 
 #include <algorithm>
@@ -80,6 +81,43 @@ RateSearch search_tolerance(const datasets::SeriesReader& series,
                     "eps " + std::to_string(mid) + " -> " + std::to_string(bps) + " bps");
   }
   return r;
+}
+
+ToleranceChoice choose_tolerance(const datasets::SeriesReader& series,
+                                 const format::DictionaryFile& dictionary,
+                                 std::uint64_t dictionary_bytes, const CodingSettings& settings,
+                                 std::size_t frames, const ToleranceRequest& request,
+                                 const Progress& progress) {
+  const double range = settings.value_max - settings.value_min;
+  ToleranceChoice choice;
+  if (settings.fixed_sparsity > 0) {
+    choice.source = ToleranceSource::fixed_rate;
+  } else if (request.tolerance) {
+    choice.source = ToleranceSource::tolerance;
+    choice.tolerance = *request.tolerance;
+  } else if (request.psnr) {
+    choice.source = ToleranceSource::psnr;
+    choice.tolerance = dictionary::tolerance_for_psnr(*request.psnr, range);
+  } else if (request.bps) {
+    choice.source = ToleranceSource::bps;
+    choice.rate_search = search_tolerance(
+        series, dictionary::from_file(dictionary), dictionary_bytes, settings, *request.bps, frames,
+        request.rate_sample_frames, request.rate_relative, progress);
+    choice.tolerance = choice.rate_search.tolerance;
+  } else if (dictionary.training.tolerance > 0) {
+    choice.source = ToleranceSource::dictionary_training;
+    choice.tolerance = dictionary.training.tolerance;
+  } else {
+    choice.source = ToleranceSource::default_psnr;
+    choice.tolerance = dictionary::tolerance_for_psnr(dictionary::default_encoding_psnr, range);
+  }
+  return choice;
+}
+
+double tolerance_to_train_at(const ToleranceRequest& request, double value_range) {
+  if (request.tolerance) return *request.tolerance;
+  return dictionary::tolerance_for_psnr(
+      request.psnr ? *request.psnr : dictionary::default_encoding_psnr, value_range);
 }
 
 }  // namespace volreel::encoder

@@ -75,6 +75,13 @@ double tolerance_for_psnr(double psnr_db, double value_range);
 /// The inverse: 20·log10(range/ε).
 double psnr_for_tolerance(double tolerance, double value_range);
 
+/// The PSNR targets (dB) that set ε where neither ε nor a PSNR is given; they differ, one per job.
+/// Training (volreel train): at this ε nearly every block meets ε within Smax atoms.
+inline constexpr double default_training_psnr = 50.0;
+/// Encoding (volreel encode): the container's quality where neither the options nor the
+/// dictionary (the ε it was trained at, which volreel train records) give ε.
+inline constexpr double default_encoding_psnr = 55.0;
+
 /// Sparse codes of n blocks, with max_atoms slots per block (slots past count(i) are unused).
 struct SparseCodes {
   int max_atoms = 0;

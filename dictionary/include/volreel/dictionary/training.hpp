@@ -21,10 +21,12 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <optional>
 
 #include "volreel/dictionary/coreset.hpp"
 #include "volreel/dictionary/dictionary.hpp"
 #include "volreel/dictionary/omp.hpp"
+#include "volreel/format/dictionary_file.hpp"
 
 namespace volreel::dictionary {
 
@@ -78,5 +80,19 @@ struct TrainingResult {
 /// Throws InputError if the largest level is empty (every training block flat) or on bad options.
 TrainingResult train_dictionary(const CoresetHierarchy& coresets, const TrainingOptions& options,
                                 const TrainingCallback& callback = {});
+
+/// ε for training on `coresets`: `tolerance` when given, else tolerance_for_psnr(psnr) over the
+/// value range of the training frames. Throws InputError if the tolerance given is not positive,
+/// or if none is given and the training frames are constant.
+double training_tolerance(std::optional<double> tolerance, double psnr,
+                          const CoresetHierarchy& coresets);
+
+/// What the dictionary file records of its training (format::DictionaryTraining): ε, Smax, the
+/// coreset's size and levels, seed and flat mode from the options; the value range and frame
+/// count from the hierarchy; iterations, RMS error and atoms per block from the result.
+format::DictionaryTraining training_provenance(const CoresetOptions& coreset,
+                                               const TrainingOptions& training,
+                                               const CoresetHierarchy& coresets,
+                                               const TrainingResult& result);
 
 }  // namespace volreel::dictionary

@@ -2,6 +2,8 @@
 // rule that spends atoms, the pursuit, the quantization of block means and coefficients.
 #pragma once
 
+#include <string>
+
 #include "volreel/datasets/volume.hpp"
 #include "volreel/dictionary/omp.hpp"
 #include "volreel/format/frame_file.hpp"
@@ -20,10 +22,19 @@ enum class VariableRateRule {
   tolerance,
 };
 
-/// The names volreel uses for a rule (manifests): "lagrangian" and "tolerance".
+/// The names volreel uses for a rule (command lines, manifests): "lagrangian" and "tolerance".
 const char* rate_rule_name(VariableRateRule rule);
-/// The names of the codecs (manifest comparisons): "ksvd" and "zfp".
+/// The inverse; throws InputError naming --rate-rule and the value on another name.
+VariableRateRule rate_rule_from_name(const std::string& name);
+
+/// The names of the codecs (command lines, manifest comparisons): "ksvd" and "zfp".
 const char* codec_name(format::Codec codec);
+/// The inverse; throws InputError naming --codec and the value on another name.
+format::Codec codec_from_name(const std::string& name);
+
+/// CodingSettings::mean_bits from its command-line text: "auto" (-1) or a whole number 0..12;
+/// throws InputError naming --mean-bits and the text otherwise.
+int mean_bits_from_text(const std::string& text);
 
 /// How bricks are coded.
 struct CodingSettings {

@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <utility>
 
 #include <nlohmann/json.hpp>
@@ -43,6 +44,12 @@ struct EncodeSummary {
   std::array<std::size_t, 13> mean_bits_histogram{};                  ///< FrameStats', summed
   double seconds_pyramid = 0, seconds_bricks = 0, seconds_omp = 0, seconds_quantize = 0;
 
+  /// The PSNR lost to quantization over the frames encoded, 10·log10(quantized / unquantized
+  /// squared error), in dB; 0 when no block was sparse-coded.
+  double quantization_loss_db() const;
+  /// ByteBreakdown::finest_owned_codes in bits per voxel of the container, when this run wrote
+  /// every frame (the container's bytes are then all accounted for); std::nullopt otherwise.
+  std::optional<double> finest_owned_codes_bps() const;
 };
 /// Writes OUT (a NAME.vreel directory). Frames go to temporary names renamed when complete; the
 /// manifest is rewritten after each frame. Progress: frames done, total, status with MVoxel/s.
