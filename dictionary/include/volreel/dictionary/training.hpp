@@ -11,11 +11,9 @@
 //    min(Smax, t + 1) atoms per block, so training starts as gain-shape vector quantization; the
 //    last stage always codes with Smax.
 // Error-constrained K-SVD started from data samples otherwise settles in poor local minima where
-// blocks use many weak atoms. On volumes built from 48 planted atoms (3 per block, noise just below
-// ε), with Smax = 15, 4 levels × 10 iterations, over 8 seeds: without the schedules 0–1 of the 48
-// atoms are recovered (within 5°), with them 26–35; with Smax = 4 both recover 40–44. On the
-// turbulence dataset the schedules are neutral at 50 dB and save about 0.2 atoms per block at
-// 55 dB (bench train, --coarse-tolerance 1 --no-sparsity-ramp to compare).
+// blocks use many weak atoms: with Smax far above the true sparsity, the schedules recover many
+// more planted atoms than plain K-SVD (docs/benchmarks.md has the figures, and the schedules'
+// effect on turbulence; bench train, --coarse-tolerance 1 --no-sparsity-ramp to compare).
 #pragma once
 
 #include <cstddef>

@@ -1,5 +1,6 @@
 // coding_settings.hpp: how the encoder codes bricks — the codec, variable or fixed rate and the
 // rule that spends atoms, the pursuit, the quantization of block means and coefficients.
+// docs/benchmarks.md has the measurements behind the defaults.
 #pragma once
 
 #include <string>
@@ -42,9 +43,9 @@ struct CodingSettings {
   double tolerance = 0;  ///< ksvd variable rate: ε (data units), see VariableRateRule
   VariableRateRule rule = VariableRateRule::lagrangian;
   /// Lagrangian rule: the minimum gain of an atom, as a fraction of m·ε² (> 0). Only the product
-  /// with ε² matters, so this sets what ε means: at 0.25, on turbulence-128 between 0.26 and
-  /// 0.6 bps, the PSNR at a given ε is about that of the ε rule and above 20·log10(range/ε), so
-  /// that --psnr keeps its meaning (the ε rule's bound per block no longer holds).
+  /// with ε² matters, so this sets what ε means: the default keeps the PSNR at a given ε about
+  /// that of the ε rule and above 20·log10(range/ε), so that --psnr keeps its meaning (the ε
+  /// rule's bound per block no longer holds).
   double lagrangian_factor = 0.25;
   /// Lagrangian rule: weigh each block's atom gains by the share of its voxels that the decoder
   /// takes from it (its brick's interior, inside the level). The rest are the apron, a copy of a
@@ -54,21 +55,18 @@ struct CodingSettings {
   /// Lagrangian rule: the levels above the finest are coded to ε·F^d, d levels up (their atom
   /// gains weigh 1/F^(2d), their means' step grows by F^d). A coarse level is drawn only where its
   /// voxels, 2^d times as wide, are too small on screen for the finer one to matter, and it already
-  /// differs from the full-resolution data by its downsampling: on turbulence-128 by 2.5·ε one level
-  /// up and 5.2·ε two up (ε = 0.018, RMS against the full-resolution frame). At F = 2 the coding
-  /// error grows with that difference and stays below it; the coarse levels' share of the bytes
-  /// falls from 24 % to 14 % (10 % smaller containers, the finest level unchanged), and bench stream's
-  /// image PSNR is unchanged on a fast link and higher on slow ones, where smaller coarse bricks
-  /// arrive sooner. 1: every level to ε. (Measured for d ≤ 2: turbulence-128 has three levels;
-  /// on a self-similar field the downsampling difference keeps doubling per level.) The ε rule and
-  /// fixed rate ignore it.
+  /// differs from the full-resolution data by its downsampling, by several ε. At F = 2 the coding
+  /// error grows with that difference and stays below it, the coarse levels take a smaller share
+  /// of the bytes (the finest level unchanged), and smaller coarse bricks arrive sooner on slow
+  /// links. 1: every level to ε. On a self-similar field the downsampling difference keeps
+  /// doubling per level. The ε rule and fixed rate ignore it.
   double level_tolerance_factor = 2.0;
   int fixed_sparsity =
       0;               ///< ksvd fixed rate: exactly min(S, needed) atoms per block (0: variable)
   int max_atoms = 15;  ///< Smax ≤ 15 (4-bit field)
   /// ksvd: which atom each pursuit step adds (both rates). ORMP (the atom that lowers the block's
   /// squared error most) needs fewer atoms than OMP (the most correlated one) for the same error;
-  /// see dictionary::AtomSelection for the measured gain.
+  /// see dictionary::AtomSelection.
   dictionary::AtomSelection selection = dictionary::AtomSelection::error;
   /// ksvd: the bits b of each brick's quantized block means (format/SPEC.md, word 4). -1: variable
   /// rate gives each brick the fewest bits (0..12) whose step over the span of its block means is
@@ -77,18 +75,17 @@ struct CodingSettings {
   int mean_bits = -1;
   /// The mean step as a fraction of ε. A mean off by e adds 216·e² to its block's squared error,
   /// so halving the step gains 13.5·step² for one more bit per block; the Lagrangian rule buys
-  /// 0.25·216·ε² per 16-bit code, and the two slopes are equal at a step of ε/2. Measured on
-  /// turbulence-128 (8 frames, ε = 0.0897 and 0.0224): against the PSNR that ε buys for the same
-  /// bytes, 0.25, 0.35, 0.7 and 1 all lose to 0.5 (by 0.05 to 0.3 dB).
+  /// 0.25·216·ε² per 16-bit code, and the two slopes are equal at a step of ε/2: of the factors
+  /// measured, 0.5 gives the most PSNR for the same bytes.
   double mean_step_factor = 0.5;
   double zfp_accuracy = 0;  ///< zfp fixed-accuracy tolerance (data units)
   /// Quantize coefficients one at a time, re-solving the least-squares fit of the block's later
   /// coefficients against the error of the ones already quantized ("quantize inside the pursuit").
   bool refit_quantization = true;
-  /// Variable rate, ε rule: while a block's quantized error exceeds ε, add the atom most correlated with
-  /// the quantized residual (up to Smax) and quantize again ("quantization inside the pursuit").
-  /// Off by default: on turbulence it recovers 0.26 dB of the quantization loss for 6.7 % more
-  /// bytes (about neutral at equal bps) and halves the encoding speed.
+  /// Variable rate, ε rule: while a block's quantized error exceeds ε, add the atom most correlated
+  /// with the quantized residual (up to Smax) and quantize again ("quantization inside the
+  /// pursuit"). Off by default: it recovers part of the quantization loss for more bytes (about
+  /// neutral at equal bps) and slows the encoding.
   bool extend_pursuit = false;
   /// Choose each brick's 6-bit coefficient interval by least squared error (clipping up to 8
   /// extreme coefficients at either end) instead of [min, max].

@@ -24,8 +24,8 @@ struct EncodeJob {
   CodingSettings coding;                  ///< value range filled in by encode_series if both are 0
   std::filesystem::path dictionary_file;  ///< ksvd: copied into the container as dictionary.bin
   /// ksvd: store the atoms in the container as binary16 (half the dictionary's bytes) and code
-  /// against the rounded atoms, so the decoder's atoms are the encoder's. On turbulence-128 (K =
-  /// 1024, 64 frames) this saves 0.026 bps and changes the PSNR by less than 0.01 dB.
+  /// against the rounded atoms, so the decoder's atoms are the encoder's; the PSNR barely moves
+  /// (docs/benchmarks.md).
   bool half_atoms = true;
   bool resume = false;         ///< keep frames already written and valid
   bool overwrite = false;      ///< replace an existing complete container
