@@ -1,4 +1,5 @@
-// training.cpp: Algorithm 1 of MTV-Player (§3.1) — K-SVD refinement over the coreset hierarchy.
+// training.cpp: Algorithm 1 of MTV-Player (§3.1) — K-SVD refinement over the coreset hierarchy —
+// the tolerance it trains at, and the provenance a dictionary file records of it.
 #include "volreel/dictionary/training.hpp"
 
 #include <algorithm>
@@ -134,6 +135,38 @@ TrainingResult train_dictionary(const CoresetHierarchy& coresets, const Training
   result.final_stats.final = true;
   if (callback) callback(result.final_stats);
   return result;
+}
+
+double training_tolerance(std::optional<double> tolerance, double psnr,
+                          const CoresetHierarchy& coresets) {
+  if (tolerance) {
+    if (!(*tolerance > 0)) throw InputError("--tolerance must be positive");
+    return *tolerance;
+  }
+  const double range = coresets.value_max - coresets.value_min;
+  if (!(range > 0))
+    throw InputError("the training frames are constant: give --tolerance explicitly");
+  return tolerance_for_psnr(psnr, range);
+}
+
+format::DictionaryTraining training_provenance(const CoresetOptions& coreset,
+                                               const TrainingOptions& training,
+                                               const CoresetHierarchy& coresets,
+                                               const TrainingResult& result) {
+  format::DictionaryTraining t;
+  t.tolerance = training.coding.tolerance;
+  t.value_min = coresets.value_min;
+  t.value_max = coresets.value_max;
+  t.max_sparsity = static_cast<std::uint32_t>(training.coding.max_atoms);
+  t.coreset_voxels = coreset.coreset_voxels;
+  t.coreset_levels = static_cast<std::uint32_t>(coreset.levels);
+  t.iterations = static_cast<std::uint32_t>(result.total_iterations);
+  t.seed = training.seed;
+  t.flat = training.flat;
+  t.training_frames = static_cast<std::uint32_t>(coresets.frames.size());
+  t.rms_error = result.final_stats.rms_error;
+  t.mean_sparsity = result.final_stats.mean_sparsity;
+  return t;
 }
 
 }  // namespace volreel::dictionary

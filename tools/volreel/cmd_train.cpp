@@ -1,25 +1,14 @@
 // cmd_train.cpp: `volreel train` — learn a dictionary from a series (MTV-Player §3.1, Algorithm 1:
-// coreset hierarchy, batch-OMP, weighted approximate K-SVD) — and `volreel bench train`, which
-// compares hierarchical and flat training and measures batch-OMP throughput.
-#include <omp.h>
-
-#include <algorithm>
+// coreset hierarchy, batch-OMP, weighted approximate K-SVD) and write it with its provenance.
 #include <chrono>
-#include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <limits>
 #include <memory>
-#include <numeric>
 #include <string>
-#include <vector>
 
 #include "commands.hpp"
-#include "progress.hpp"
-#include "volreel/dictionary/blocks.hpp"
-#include "volreel/dictionary/coreset.hpp"
+#include "training_options.hpp"
 #include "volreel/dictionary/dictionary.hpp"
-#include "volreel/dictionary/omp.hpp"
 #include "volreel/dictionary/training.hpp"
 
 namespace volreel::cli {
@@ -27,180 +16,9 @@ namespace volreel::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
-
-// Defaults, measured on the default dataset (128³ × 64 frames of turbulence pressure) on 2 cores:
-// training takes about 10–15 s. At 50 dB held-out frames need about 4 atoms per block (97 % of
-// blocks meet ε); at 55 dB about 7 (90 %), at 60 dB about 11 (68 %: Smax = 15 is too few there).
-constexpr double default_psnr = 50.0;
-constexpr const char* default_coreset = "16M";
-constexpr int default_iterations = 8;
-
-/// "16M", "2G", "500k" or a plain count -> voxels (decimal prefixes).
-std::uint64_t parse_voxels(const std::string& text) {
-  std::size_t used = 0;
-  double value = 0;
-  try {
-    value = std::stod(text, &used);
-  } catch (const std::exception&) {
-    throw InputError("--coreset '" + text + "' is not a voxel count (e.g. 16M, 500k, 2G)");
-  }
-  const std::string suffix = text.substr(used);
-  double scale = 1;
-  if (suffix == "k" || suffix == "K") scale = 1e3;
-  else if (suffix == "M") scale = 1e6;
-  else if (suffix == "G") scale = 1e9;
-  else if (!suffix.empty()) throw InputError("--coreset '" + text + "': unknown suffix '" + suffix + "' (k, M or G)");
-  if (!(value > 0)) throw InputError("--coreset must be positive");
-  return static_cast<std::uint64_t>(value * scale);
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
 }
-
-std::string mvoxels(double voxels) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%.3g MVoxel", voxels / 1e6);
-  return text;
-}
-
-/// Options shared by `train` and `bench train`.
-struct TrainingCli {
-  std::string series;
-  ReaderOptions reader;
-  double tolerance = 0;
-  double psnr = default_psnr;
-  int atoms = 1024;
-  int block = 6;
-  int max_atoms = dictionary::default_max_atoms;
-  std::string coreset = default_coreset;
-  int levels = 6;
-  int iterations = default_iterations;
-  std::uint64_t seed = 1;
-  double coarse_tolerance = 2;
-  bool no_sparsity_ramp = false;
-  double convergence = 0.01;
-  CLI::Option* tolerance_option = nullptr;
-
-  void add_to(CLI::App& c) {
-    c.add_option("SERIES", series, "Raw series directory, HDF5 file or raw file")->required();
-    tolerance_option = c.add_option("--tolerance", tolerance,
-                                    "Error tolerance eps: RMS error per value of a block, in data units (a block is done when\n"
-                                    "sqrt(|y - D g|^2 / M^3) <= eps). Overrides --psnr");
-    c.add_option("--psnr", psnr,
-                 "Target PSNR in dB: eps = range * 10^(-PSNR/20), range = max - min of the training frames; PSNR is at\n"
-                 "least this if every block meets eps (usually higher, since many blocks fall below it)")
-        ->capture_default_str();
-    c.add_option("--atoms", atoms, "Dictionary size K")->capture_default_str();
-    c.add_option("--block", block, "Block size M (blocks of M^3 values)")->capture_default_str();
-    c.add_option("--max-atoms", max_atoms, "Smax: atoms per block at most")->capture_default_str();
-    c.add_option("--coreset", coreset,
-                 "Coreset size C in voxels (k, M, G suffixes, decimal): the largest level holds C/M^3 block draws;\n"
-                 "frames are chosen until they hold 16*C voxels. Memory for training is about 12 bytes * C")
-        ->capture_default_str();
-    c.add_option("--levels", levels, "Coreset levels below C: C, C/2, ..., C/2^levels")->capture_default_str();
-    c.add_option("--iterations", iterations, "K-SVD iterations per coreset level (Algorithm 1's N)")->capture_default_str();
-    c.add_option("--seed", seed, "Seed for coreset sampling and dictionary initialization")->capture_default_str();
-    c.add_option("--coarse-tolerance", coarse_tolerance,
-                 "Tolerance schedule: the first level codes at this many times eps, the next ones geometrically\n"
-                 "less, the last at eps (1: eps throughout, as in the paper)")
-        ->capture_default_str();
-    c.add_flag("--no-sparsity-ramp", no_sparsity_ramp,
-               "Allow Smax atoms per block from the first iteration (default: iteration t allows t+1)");
-    c.add_option("--convergence", convergence,
-                 "End a level before its N iterations when an iteration lowers the weighted objective by less than\n"
-                 "this fraction (0: always N; flat mode tests it in its last stage only). On the default dataset 0.01\n"
-                 "trains 2.4x faster than 0 for -0.1 dB and +5% atoms per block at eps")
-        ->capture_default_str();
-    reader.add_to(c);
-  }
-
-  dictionary::CoresetOptions coreset_options() const {
-    dictionary::CoresetOptions o;
-    o.block_size = block;
-    o.coreset_voxels = parse_voxels(coreset);
-    o.levels = levels;
-    o.seed = seed;
-    return o;
-  }
-
-  dictionary::TrainingOptions training_options(double eps, bool flat) const {
-    dictionary::TrainingOptions o;
-    o.atom_count = atoms;
-    o.coding = {.tolerance = eps, .max_atoms = max_atoms};
-    o.iterations = iterations;
-    o.flat = flat;
-    o.seed = seed;
-    o.coarse_tolerance_factor = coarse_tolerance;
-    o.sparsity_ramp = !no_sparsity_ramp;
-    o.convergence = convergence;
-    return o;
-  }
-
-  double tolerance_for(const dictionary::CoresetHierarchy& h) const {
-    if (tolerance_option && tolerance_option->count() > 0) {
-      if (!(tolerance > 0)) throw InputError("--tolerance must be positive");
-      return tolerance;
-    }
-    const double range = h.value_max - h.value_min;
-    if (!(range > 0)) throw InputError("the training frames are constant: give --tolerance explicitly");
-    return dictionary::tolerance_for_psnr(psnr, range);
-  }
-};
-
-dictionary::CoresetHierarchy build_coresets(const datasets::SeriesReader& series, const dictionary::CoresetOptions& o) {
-  ProgressBar bar("coreset", "frames");
-  auto h = dictionary::build_coreset_hierarchy(series, o, bar.progress());
-  bar.finish();
-  return h;
-}
-
-void print_coresets(const dictionary::CoresetHierarchy& h, const datasets::SeriesInfo& info, double seconds) {
-  const double m = std::pow(h.block_size, 3);
-  std::printf("coreset: %zu frames by Halton sampling (", h.frames.size());
-  for (std::size_t i = 0; i < h.frames.size(); ++i) {
-    if (i == 8) {
-      std::printf(", ...");
-      break;
-    }
-    std::printf("%s%zu", i ? ", " : "", h.frames[i]);
-  }
-  std::printf(") = %s in %.0f blocks of %d^3, drawn in %.1f s; value range [%.6g, %.6g]\n",
-              mvoxels(static_cast<double>(h.frames.size() * info.dims.voxels())).c_str(), h.population_blocks,
-              h.block_size, seconds, h.value_min, h.value_max);
-  std::printf("levels (draws -> distinct blocks):");
-  for (const auto& c : h.levels) std::printf(" %zu->%ld", c.draws, static_cast<long>(c.blocks.cols()));
-  std::printf("  (largest = %s)\n", mvoxels(static_cast<double>(h.largest().draws) * m).c_str());
-}
-
-void print_progress(const dictionary::TrainingProgress& p, double range, bool every_iteration) {
-  if (!every_iteration && !p.final && p.iteration != p.iterations) return;
-  if (p.final)
-    std::printf("final     ");
-  else
-    std::printf("level %d/%d iteration %2d/%d ", p.level, p.levels, p.iteration, p.iterations);
-  std::printf("[%6zu blocks, eps %.3g, Smax %2d]  RMS %.4g (PSNR %.2f dB)  atoms/block %.3f  met eps %.2f%%  replaced %4d  %7.1f s\n",
-              p.samples, p.tolerance, p.max_atoms, p.rms_error, 20 * std::log10(range / p.rms_error), p.mean_sparsity,
-              100 * p.fraction_met, p.replaced_atoms, p.elapsed_seconds);
-  std::fflush(stdout);
-}
-
-format::DictionaryTraining provenance(const TrainingCli& o, const dictionary::CoresetHierarchy& h, double eps, bool flat,
-                                      const dictionary::TrainingResult& r) {
-  format::DictionaryTraining t;
-  t.tolerance = eps;
-  t.value_min = h.value_min;
-  t.value_max = h.value_max;
-  t.max_sparsity = static_cast<std::uint32_t>(o.max_atoms);
-  t.coreset_voxels = parse_voxels(o.coreset);
-  t.coreset_levels = static_cast<std::uint32_t>(o.levels);
-  t.iterations = static_cast<std::uint32_t>(r.total_iterations);
-  t.seed = o.seed;
-  t.flat = flat;
-  t.training_frames = static_cast<std::uint32_t>(h.frames.size());
-  t.rms_error = r.final_stats.rms_error;
-  t.mean_sparsity = r.final_stats.mean_sparsity;
-  return t;
-}
-
-// ---- volreel train ----
 
 struct TrainCommandOptions {
   TrainingCli training;
@@ -211,238 +29,52 @@ struct TrainCommandOptions {
 void run_train(const TrainCommandOptions& o) {
   const auto series = datasets::open_series(o.training.series, o.training.reader.to_open_options());
   const auto& info = series->info();
-  std::printf("volreel train: %s, %s x %zu frames, variable '%s'\n", info.source.c_str(), to_string(info.dims).c_str(),
-              info.frames, info.variable.c_str());
-  const auto coreset_start = Clock::now();
-  const auto h = build_coresets(*series, o.training.coreset_options());
-  print_coresets(h, info, seconds_since(coreset_start));
-  const double eps = o.training.tolerance_for(h);
-  const double range = h.value_max - h.value_min;
-  std::printf("tolerance eps = %.4g (RMS error per value of a block; PSNR >= %.2f dB if every block meets it)\n", eps,
-              dictionary::psnr_for_tolerance(eps, range));
-  std::printf("training %s: K = %d atoms of %d^3, Smax = %d, %d iterations %s\n",
-              o.flat ? "flat (largest coreset only)" : "hierarchical (Algorithm 1)", o.training.atoms, o.training.block,
-              o.training.max_atoms, o.flat ? o.training.iterations * (o.training.levels + 1) : o.training.iterations,
-              o.flat ? "in all" : "per level");
-  const auto result = dictionary::train_dictionary(h, o.training.training_options(eps, o.flat),
-                                                   [&](const dictionary::TrainingProgress& p) { print_progress(p, range, true); });
-  dictionary::save_dictionary(o.out, result.dictionary, provenance(o.training, h, eps, o.flat, result));
-  std::printf("trained in %.1f s (%d iterations); wrote %s (%ju bytes)\n", result.seconds, result.total_iterations,
-              o.out.c_str(), static_cast<std::uintmax_t>(std::filesystem::file_size(o.out)));
-}
-
-// ---- volreel bench train ----
-
-struct BenchTrainOptions {
-  TrainingCli training;
-  int eval_frames = 4;
-  std::vector<int> flat_iterations;
-  std::vector<int> plain_iterations;
-  bool no_plain = false;
-};
-
-struct Evaluation {
-  double psnr = 0, rmse = 0;
-  double atoms_per_block = 0, fraction_met = 0;
-  double blocks = 0, voxels = 0;
-  double omp_seconds = 0, extract_seconds = 0;
-};
-
-/// Sparse-codes every block of the given frames (unquantized) and compares the reconstruction with
-/// the original: PSNR over all of them (range = max − min of the originals), atoms per block, and
-/// the time batch-OMP took.
-Evaluation evaluate(const datasets::SeriesReader& series, const std::vector<std::size_t>& frames,
-                    const dictionary::Dictionary& d, const dictionary::SparseCodingOptions& coding) {
-  const auto& info = series.info();
-  const dictionary::BlockGrid grid(info.dims, d.block_size);
-  const dictionary::BatchOmp omp(d.atoms, coding);
-  const double target = static_cast<double>(grid.block_length()) * coding.tolerance * coding.tolerance;
-  Evaluation e;
-  double squared_error = 0, atoms = 0, met = 0;
-  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-  Eigen::MatrixXf blocks;
-  std::vector<float> means;
-  dictionary::SparseCodes codes;
-  Volume reconstruction(info.dims);
-  std::vector<float> approx(static_cast<std::size_t>(grid.block_length()));
-  for (std::size_t t : frames) {
-    const Volume original = series.read_frame(t);
-    auto start = Clock::now();
-    dictionary::extract_blocks(grid, original.data, blocks, means);
-    e.extract_seconds += seconds_since(start);
-    start = Clock::now();
-    omp.encode(blocks, codes);
-    e.omp_seconds += seconds_since(start);
-    for (std::size_t b = 0; b < codes.size(); ++b) {
-      atoms += codes.count[b];
-      met += static_cast<double>(codes.residual_energy[b]) <= target * (1 + 1e-6) ? 1 : 0;
-      dictionary::reconstruct_block(d.atoms, codes, b, approx.data());
-      grid.store(reconstruction.data, b, means[b], approx.data());
-    }
-    for (std::size_t i = 0; i < original.data.size(); ++i) {
-      const double x = original.data[i];
-      const double diff = x - static_cast<double>(reconstruction.data[i]);
-      squared_error += diff * diff;
-      lo = std::min(lo, x);
-      hi = std::max(hi, x);
-    }
-    e.blocks += static_cast<double>(codes.size());
-    e.voxels += static_cast<double>(info.dims.voxels());
-  }
-  e.rmse = std::sqrt(squared_error / e.voxels);
-  e.psnr = 20 * std::log10((hi - lo) / e.rmse);
-  e.atoms_per_block = atoms / e.blocks;
-  e.fraction_met = met / e.blocks;
-  return e;
-}
-
-void run_bench_train(const BenchTrainOptions& o) {
-  const auto series = datasets::open_series(o.training.series, o.training.reader.to_open_options());
-  const auto& info = series->info();
-  std::printf("volreel bench train\nmachine: %s\ninput:   %s, %s, %zu frames, variable '%s'\n", describe_machine().c_str(),
-              info.source.c_str(), to_string(info.dims).c_str(), info.frames, info.variable.c_str());
-
-  // 1. Which frames train and which evaluate: the Halton choice for C, and evenly spaced frames
-  //    among the rest (if C takes every frame, the evaluation frames are held out first).
-  auto co = o.training.coreset_options();
-  std::vector<std::size_t> all(info.frames);
-  std::iota(all.begin(), all.end(), std::size_t{0});
-  const auto chosen = dictionary::halton_frames(all, info.dims.voxels(), co.frame_factor * static_cast<double>(co.coreset_voxels));
-  std::vector<std::size_t> rest;
-  for (std::size_t t : all)
-    if (std::find(chosen.begin(), chosen.end(), t) == chosen.end()) rest.push_back(t);
-  if (rest.empty()) {
-    rest = all;
-    std::printf("note: C = %s needs every frame; holding %d frames out of training anyway\n",
-                mvoxels(static_cast<double>(co.coreset_voxels)).c_str(), o.eval_frames);
-  }
-  std::vector<std::size_t> eval;
-  const auto wanted = std::min(rest.size(), static_cast<std::size_t>(std::max(1, o.eval_frames)));
-  for (std::size_t i = 0; i < wanted; ++i) eval.push_back(rest[(2 * i + 1) * rest.size() / (2 * wanted)]);
-  for (std::size_t t : all)
-    if (std::find(eval.begin(), eval.end(), t) == eval.end()) co.candidate_frames.push_back(t);
-  if (co.candidate_frames.empty()) throw InputError("the series needs at least 2 frames: one to train, one to evaluate");
-
+  std::printf("volreel train: %s, %s x %zu frames, variable '%s'\n", info.source.c_str(),
+              to_string(info.dims).c_str(), info.frames, info.variable.c_str());
+  const auto co = o.training.coreset_options();
   const auto coreset_start = Clock::now();
   const auto h = build_coresets(*series, co);
   print_coresets(h, info, seconds_since(coreset_start));
-  std::printf("evaluation frames (not used for training):");
-  for (std::size_t t : eval) std::printf(" %zu", t);
-  std::printf("\n");
   const double eps = o.training.tolerance_for(h);
   const double range = h.value_max - h.value_min;
-  std::printf("tolerance eps = %.4g (RMS per value of a block; PSNR >= %.2f dB if every block meets it); K = %d, M = %d, Smax = %d\n\n",
-              eps, dictionary::psnr_for_tolerance(eps, range), o.training.atoms, o.training.block, o.training.max_atoms);
-
-  // 2. Train hierarchically, then flat with the same number of iterations and with more, all at
-  //    the same ε on the same coreset.
-  //    "plain": without volreel's tolerance and sparsity schedules, i.e. K-SVD at ε on one coreset
-  //    as in the non-hierarchical training the paper compares with.
-  struct Run {
-    std::string name;
-    bool flat;
-    int flat_iterations;
-    bool plain;
-    dictionary::TrainingResult result;
-    Evaluation eval;
-  };
-  const int same_count = o.training.iterations * (o.training.levels + 1);
-  std::vector<Run> runs{{"hierarchical", false, 0, false, {}, {}}};
-  std::vector<int> flat_counts = o.flat_iterations;
-  if (flat_counts.empty()) flat_counts = {same_count};
-  for (int n : flat_counts) runs.push_back({"flat " + std::to_string(n), true, n, false, {}, {}});
-  std::vector<int> plain_counts = o.plain_iterations;
-  if (plain_counts.empty()) plain_counts = {same_count, 2 * same_count};
-  if (!o.no_plain)
-    for (int n : plain_counts) runs.push_back({"plain " + std::to_string(n), true, n, true, {}, {}});
-  for (Run& r : runs) {
-    auto options = o.training.training_options(eps, r.flat);
-    options.flat_iterations = r.flat_iterations;
-    if (r.plain) {
-      options.coarse_tolerance_factor = 1;
-      options.sparsity_ramp = false;
-    }
-    if (r.flat)
-      std::printf("training flat: %d iterations on the largest coreset%s\n", r.flat_iterations,
-                  r.plain ? ", at eps and Smax throughout (no schedules)" : "");
-    else
-      std::printf("training hierarchical: %d iterations on each of %d levels\n", o.training.iterations, o.training.levels + 1);
-    r.result = dictionary::train_dictionary(h, options, [&](const dictionary::TrainingProgress& p) { print_progress(p, range, false); });
-  }
-
-  // 3. Held-out frames: sparsity and PSNR of the unquantized sparse approximation, with all threads.
-  for (Run& r : runs) {
-    ProgressBar bar("evaluating " + r.name, "frames");
-    r.eval = evaluate(*series, eval, r.result.dictionary, {.tolerance = eps, .max_atoms = o.training.max_atoms});
-    bar.finish();
-  }
-
-  // 4. Batch-OMP throughput on one thread (all threads: from step 3).
-  const int threads = omp_get_max_threads();
-  omp_set_num_threads(1);
-  const Evaluation single = evaluate(*series, eval, runs[0].result.dictionary,
-                                     {.tolerance = eps, .max_atoms = o.training.max_atoms});
-  omp_set_num_threads(threads);
-
-  std::printf("\n%-13s %10s %10s %12s %12s %10s %10s\n", "training", "time (s)", "iters", "train RMS", "eval PSNR", "atoms/blk",
-              "met eps");
-  for (const Run& r : runs)
-    std::printf("%-13s %10.1f %10d %12.4g %9.2f dB %10.3f %9.2f%%\n", r.name.c_str(), r.result.seconds,
-                r.result.total_iterations, r.result.final_stats.rms_error, r.eval.psnr, r.eval.atoms_per_block,
-                100 * r.eval.fraction_met);
-  std::printf("\n");
-  for (std::size_t i = 1; i < runs.size(); ++i)
-    std::printf("hierarchical vs %-10s: %5.2fx faster, PSNR %+.2f dB, atoms/block %+.3f (targets: >= 4x, |dPSNR| <= 0.2 dB)\n",
-                runs[i].name.c_str(), runs[i].result.seconds / runs[0].result.seconds, runs[0].eval.psnr - runs[i].eval.psnr,
-                runs[0].eval.atoms_per_block - runs[i].eval.atoms_per_block);
-  const auto& e = runs[0].eval;
-  std::printf("batch-OMP (hierarchical dictionary, %.3f atoms/block, K = %d, Smax = %d), %.0f blocks of %d^3 from %zu frames:\n",
-              e.atoms_per_block, o.training.atoms, o.training.max_atoms, e.blocks, o.training.block, eval.size());
-  std::printf("  %2d threads: %9.0f blocks/s  %7.2f MVoxel/s  (with block extraction: %.2f MVoxel/s)\n", threads,
-              e.blocks / e.omp_seconds, e.voxels / e.omp_seconds / 1e6, e.voxels / (e.omp_seconds + e.extract_seconds) / 1e6);
-  std::printf("  %2d thread:  %9.0f blocks/s  %7.2f MVoxel/s  (with block extraction: %.2f MVoxel/s)\n", 1,
-              single.blocks / single.omp_seconds, single.voxels / single.omp_seconds / 1e6,
-              single.voxels / (single.omp_seconds + single.extract_seconds) / 1e6);
+  std::printf(
+      "tolerance eps = %.4g (RMS error per value of a block; PSNR >= %.2f dB if every block meets "
+      "it)\n",
+      eps, dictionary::psnr_for_tolerance(eps, range));
+  std::printf("training %s: K = %d atoms of %d^3, Smax = %d, %d iterations %s\n",
+              o.flat ? "flat (largest coreset only)" : "hierarchical (Algorithm 1)",
+              o.training.atoms, o.training.block, o.training.max_atoms,
+              o.flat ? o.training.iterations * (o.training.levels + 1) : o.training.iterations,
+              o.flat ? "in all" : "per level");
+  const auto to = o.training.training_options(eps, o.flat);
+  const auto result = dictionary::train_dictionary(
+      h, to, [&](const dictionary::TrainingProgress& p) { print_progress(p, range, true); });
+  dictionary::save_dictionary(o.out, result.dictionary,
+                              dictionary::training_provenance(co, to, h, result));
+  std::printf("trained in %.1f s (%d iterations); wrote %s (%ju bytes)\n", result.seconds,
+              result.total_iterations, o.out.c_str(),
+              static_cast<std::uintmax_t>(std::filesystem::file_size(o.out)));
 }
 
 }  // namespace
 
 void add_train_command(CLI::App& app) {
   auto o = std::make_shared<TrainCommandOptions>();
-  CLI::App* train = app.add_subcommand(
-      "train",
-      "Learn a dictionary of M^3 prototype blocks from a series (MTV-Player 3.1, Algorithm 1): pick frames by Halton\n"
-      "sampling, draw a coreset hierarchy C, C/2, ..., C/2^levels by importance (block energy) in one pass, then refine\n"
-      "the dictionary by weighted K-SVD (batch-OMP at tolerance eps) from the smallest coreset to the largest.\n"
-      "Prints a line per level and iteration: RMS error, atoms per block, fraction of blocks meeting eps, time.");
+  CLI::App* train = app.add_subcommand("train",
+                                       "Learn a dictionary of M^3 prototype blocks from a series "
+                                       "(MTV-Player 3.1, Algorithm 1): pick frames by Halton\n"
+                                       "sampling, draw a coreset hierarchy C, C/2, ..., C/2^levels "
+                                       "by importance (block energy) in one pass, then refine\n"
+                                       "the dictionary by weighted K-SVD (batch-OMP at tolerance "
+                                       "eps) from the smallest coreset to the largest.\n"
+                                       "Prints a line per level and iteration: RMS error, atoms "
+                                       "per block, fraction of blocks meeting eps, time.");
   o->training.add_to(*train);
   train->add_option("--out", o->out, "Dictionary file to write")->required();
-  train->add_flag("--flat", o->flat,
-                  "Train on the largest coreset only (iterations x (levels+1) iterations), for comparison");
+  train->add_flag(
+      "--flat", o->flat,
+      "Train on the largest coreset only (iterations x (levels+1) iterations), for comparison");
   train->callback([o] { run_train(*o); });
-}
-
-void add_bench_train_command(CLI::App& bench) {
-  auto o = std::make_shared<BenchTrainOptions>();
-  CLI::App* cmd = bench.add_subcommand(
-      "train",
-      "Dictionary training benchmark: trains hierarchically (Algorithm 1), flat (the largest coreset only, the same\n"
-      "number of iterations) and plain (flat without volreel's tolerance and sparsity schedules, i.e. K-SVD at eps as in\n"
-      "the paper's baseline; the same number of iterations and twice that), all at the same eps on the same coreset, then\n"
-      "codes frames held out of training with each dictionary\n"
-      "(unquantized) and prints training time, PSNR, atoms per block, blocks meeting eps, and batch-OMP throughput in\n"
-      "blocks/s and MVoxel/s on all threads and on one.");
-  o->training.add_to(*cmd);
-  cmd->add_option("--eval-frames", o->eval_frames, "Frames held out of training and coded for PSNR and speed")
-      ->capture_default_str();
-  cmd->add_option("--flat-iterations", o->flat_iterations,
-                  "Iteration counts of the flat runs to compare with (default: the hierarchical run's count,\n"
-                  "iterations x (levels+1))");
-  cmd->add_option("--plain-iterations", o->plain_iterations,
-                  "Iteration counts of the plain flat runs (default: the hierarchical run's count and twice that)");
-  cmd->add_flag("--no-plain", o->no_plain,
-                "Skip the flat run without tolerance and sparsity schedules (plain K-SVD at eps, as in the paper's baseline)");
-  cmd->callback([o] { run_bench_train(*o); });
 }
 
 }  // namespace volreel::cli

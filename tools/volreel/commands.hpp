@@ -14,9 +14,15 @@ void add_gen_command(CLI::App& app);
 void add_compare_command(CLI::App& app);
 void add_bench_command(CLI::App& app);
 void add_train_command(CLI::App& app);
-/// `encode`, `info`, `verify` and `decode` (cmd_encode.cpp).
+/// `encode` (cmd_encode.cpp): a series into a NAME.vreel container.
 void add_encode_command(CLI::App& app);
-/// `bench train`, registered by add_bench_command under `bench`.
+/// `info` (cmd_info.cpp): describe a container.
+void add_info_command(CLI::App& app);
+/// `verify` (cmd_verify.cpp): check a container's CRCs and structure.
+void add_verify_command(CLI::App& app);
+/// `decode` (cmd_decode.cpp): one frame at one level into a raw float32 file.
+void add_decode_command(CLI::App& app);
+/// `bench train` (cmd_bench_train.cpp), registered by add_bench_command under `bench`.
 void add_bench_train_command(CLI::App& bench);
 /// `bench decode` (cmd_bench_decode.cpp; needs the player's Vulkan decoder).
 void add_bench_decode_command(CLI::App& bench);

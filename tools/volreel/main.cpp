@@ -19,6 +19,9 @@ int main(int argc, char** argv) {
   volreel::cli::add_bench_command(app);
   volreel::cli::add_train_command(app);
   volreel::cli::add_encode_command(app);
+  volreel::cli::add_info_command(app);
+  volreel::cli::add_verify_command(app);
+  volreel::cli::add_decode_command(app);
 #ifdef VOLREEL_HAVE_VULKAN
   volreel::cli::add_play_command(app);
   volreel::cli::add_render_command(app);

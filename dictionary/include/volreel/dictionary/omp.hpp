@@ -31,7 +31,7 @@ inline constexpr int default_max_atoms = 15;
 ///     & Lowe 2002): the atom whose addition lowers ‖r‖² most, argmax (d_kᵀr)² / ‖P⊥d_k‖², with
 ///     P⊥ the projection orthogonal to the atoms already chosen. It costs the same O(K·s) per step
 ///     here (the projected norms are updated with the Gram–Schmidt rows of the support) and, at a
-///     given ε, needs fewer atoms (measured on turbulence-128 with K = 1024: 5 % fewer).
+///     given ε, needs fewer atoms (docs/benchmarks.md).
 ///     An atom mostly inside the span of the support is scored as if the fraction
 ///     ormp_projected_floor of its energy were outside it: such atoms take large, cancelling
 ///     coefficients, which a coarse quantizer codes poorly.
@@ -43,9 +43,8 @@ const char* pursuit_name(AtomSelection selection);
 AtomSelection pursuit_from_name(const std::string& name);
 
 /// ORMP's score is (d_kᵀr)² / max(‖P⊥d_k‖², floor·‖d_k‖²), in (0, 1]: near 0 it is exact ORMP, 1
-/// is OMP (for atoms of equal norm). Measured on turbulence-128 (16 frames, K = 1024, volreel encode's defaults): 0.3
-/// gives 0.05 dB more at the same size than ~0 and 19 % less PSNR lost to 6-bit quantization; 0.5
-/// and 0.7 give less, 1 (OMP) 0.19 dB less at 1.3 % more bytes.
+/// is OMP (for atoms of equal norm). Of the floors measured from near 0 to 1, 0.3 gives the most
+/// PSNR at the same size and loses the least to 6-bit quantization (docs/benchmarks.md).
 inline constexpr double ormp_projected_floor = 0.3;
 
 /// When the pursuit of a block stops: at the first of these that holds.
@@ -74,6 +73,13 @@ struct SparseCodingOptions {
 double tolerance_for_psnr(double psnr_db, double value_range);
 /// The inverse: 20·log10(range/ε).
 double psnr_for_tolerance(double tolerance, double value_range);
+
+/// The PSNR targets (dB) that set ε where neither ε nor a PSNR is given; they differ, one per job.
+/// Training (volreel train): at this ε nearly every block meets ε within Smax atoms.
+inline constexpr double default_training_psnr = 50.0;
+/// Encoding (volreel encode): the container's quality where neither the options nor the
+/// dictionary (the ε it was trained at, which volreel train records) give ε.
+inline constexpr double default_encoding_psnr = 55.0;
 
 /// Sparse codes of n blocks, with max_atoms slots per block (slots past count(i) are unused).
 struct SparseCodes {

@@ -11,20 +11,20 @@
 //    min(Smax, t + 1) atoms per block, so training starts as gain-shape vector quantization; the
 //    last stage always codes with Smax.
 // Error-constrained K-SVD started from data samples otherwise settles in poor local minima where
-// blocks use many weak atoms. On volumes built from 48 planted atoms (3 per block, noise just below
-// ε), with Smax = 15, 4 levels × 10 iterations, over 8 seeds: without the schedules 0–1 of the 48
-// atoms are recovered (within 5°), with them 26–35; with Smax = 4 both recover 40–44. On the
-// turbulence dataset the schedules are neutral at 50 dB and save about 0.2 atoms per block at
-// 55 dB (bench train, --coarse-tolerance 1 --no-sparsity-ramp to compare).
+// blocks use many weak atoms: with Smax far above the true sparsity, the schedules recover many
+// more planted atoms than plain K-SVD (docs/benchmarks.md has the figures, and the schedules'
+// effect on turbulence; bench train, --coarse-tolerance 1 --no-sparsity-ramp to compare).
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <optional>
 
 #include "volreel/dictionary/coreset.hpp"
 #include "volreel/dictionary/dictionary.hpp"
 #include "volreel/dictionary/omp.hpp"
+#include "volreel/format/dictionary_file.hpp"
 
 namespace volreel::dictionary {
 
@@ -78,5 +78,19 @@ struct TrainingResult {
 /// Throws InputError if the largest level is empty (every training block flat) or on bad options.
 TrainingResult train_dictionary(const CoresetHierarchy& coresets, const TrainingOptions& options,
                                 const TrainingCallback& callback = {});
+
+/// ε for training on `coresets`: `tolerance` when given, else tolerance_for_psnr(psnr) over the
+/// value range of the training frames. Throws InputError if the tolerance given is not positive,
+/// or if none is given and the training frames are constant.
+double training_tolerance(std::optional<double> tolerance, double psnr,
+                          const CoresetHierarchy& coresets);
+
+/// What the dictionary file records of its training (format::DictionaryTraining): ε, Smax, the
+/// coreset's size and levels, seed and flat mode from the options; the value range and frame
+/// count from the hierarchy; iterations, RMS error and atoms per block from the result.
+format::DictionaryTraining training_provenance(const CoresetOptions& coreset,
+                                               const TrainingOptions& training,
+                                               const CoresetHierarchy& coresets,
+                                               const TrainingResult& result);
 
 }  // namespace volreel::dictionary

@@ -1,0 +1,306 @@
+// brick_coding.cpp: one brick's payload — a constant, the ksvd payload (block means to b bits,
+// sparse codes quantized to 6 bits with a least-squares refit, optionally extending the pursuit
+// after quantization), or a zfp stream — and the blocks' owned shares that weigh their atoms.
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+
+#include "detail.hpp"
+#include "volreel/format/brick_decode.h"
+#include "volreel/format/decoder.hpp"
+#include "volreel/format/frame_file.hpp"
+#include "volreel/format/zfp_stream.hpp"
+
+namespace volreel::encoder::detail {
+
+using format::brick_interior;
+using format::brick_size;
+
+namespace {
+
+/// Linear quantizer over [lo, hi] with `levels`+1 steps: q = round((v − bias)/scale).
+struct Quantizer {
+  float bias = 0, scale = 0;
+  std::uint32_t levels = 0;
+  Quantizer(float lo, float hi, std::uint32_t n)
+      : bias(lo), scale(hi > lo ? (hi - lo) / static_cast<float>(n) : 0.0f), levels(n) {}
+  std::uint32_t quantize(double v) const {
+    if (!(scale > 0)) return 0;
+    const double q = std::round((v - static_cast<double>(bias)) / static_cast<double>(scale));
+    return static_cast<std::uint32_t>(std::clamp(q, 0.0, static_cast<double>(levels)));
+  }
+  float value(std::uint32_t q) const { return bias + scale * static_cast<float>(q); }
+};
+
+/// x_0 of the solution of the symmetric positive definite n×n system m·x = t (Cholesky, in place);
+/// NaN if m is not positive definite.
+double solve_first(double (&m)[15][15], double (&t)[15], int n) {
+  for (int j = 0; j < n; ++j) {
+    double d = m[j][j];
+    for (int k = 0; k < j; ++k) d -= m[j][k] * m[j][k];
+    if (!(d > 1e-12)) return std::nan("");
+    const double l = std::sqrt(d);
+    m[j][j] = l;
+    for (int i = j + 1; i < n; ++i) {
+      double v = m[i][j];
+      for (int k = 0; k < j; ++k) v -= m[i][k] * m[j][k];
+      m[i][j] = v / l;
+    }
+  }
+  for (int i = 0; i < n; ++i) {  // L z = t
+    for (int k = 0; k < i; ++k) t[i] -= m[i][k] * t[k];
+    t[i] /= m[i][i];
+  }
+  for (int i = n - 1; i >= 0; --i) {  // Lᵀ x = z
+    for (int k = i + 1; k < n; ++k) t[i] -= m[k][i] * t[k];
+    t[i] /= m[i][i];
+  }
+  return t[0];
+}
+
+/// r[v] −= c·atom[v] over a block (out of line, so that it is vectorized, not interchanged).
+[[gnu::noinline]] void subtract_scaled(float* __restrict r, const float* __restrict atom, float c) {
+#pragma omp simd
+  for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) r[v] -= c * atom[v];
+}
+
+/// Quantized coefficients of one block on support a[0..s) (in order). Without refit each OMP
+/// coefficient is rounded; with refit step k solves the trailing (s−k)×(s−k) normal equations
+/// G x = Dᵀy with the first k coefficients fixed at their quantized values, and rounds x_0, so
+/// later coefficients absorb the rounding error of earlier ones. Returns the squared error of the
+/// quantized block (mean error included) and fills q.
+double quantize_block(const float* y, float mean_error, const std::int32_t* a, const float* c,
+                      int s, const Eigen::MatrixXf& atoms, const Quantizer& cq, bool refit,
+                      std::uint32_t* q) {
+  if (!refit || s <= 1) {
+    for (int k = 0; k < s; ++k) q[k] = cq.quantize(static_cast<double>(c[k]));
+  } else {
+    double g[15][15], rhs[15], fixed[15];
+    for (int r = 0; r < s; ++r) {
+      const float* d = atoms.col(a[r]).data();
+      float dot = 0;
+#pragma omp simd reduction(+ : dot)
+      for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) dot += d[v] * y[v];
+      rhs[r] = static_cast<double>(dot);
+      // DᵀD of the support from the atoms themselves: the K×K Gram matrix is too large for the
+      // cache, and s² random reads from it cost more than s²/2 short dot products.
+      for (int k = 0; k <= r; ++k) {
+        const float* e = atoms.col(a[k]).data();
+        float gd = 0;
+#pragma omp simd reduction(+ : gd)
+        for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) gd += d[v] * e[v];
+        g[r][k] = g[k][r] = static_cast<double>(gd);
+      }
+    }
+    for (int k = 0; k < s; ++k) {
+      const int n = s - k;
+      double m[15][15], t[15];
+      for (int r = 0; r < n; ++r) {
+        t[r] = rhs[k + r];
+        for (int j = 0; j < k; ++j) t[r] -= g[k + r][j] * fixed[j];
+        for (int j = 0; j < n; ++j) m[r][j] = g[k + r][k + j];
+      }
+      const double value = solve_first(m, t, n);
+      q[k] = cq.quantize(std::isfinite(value) ? value : static_cast<double>(c[k]));
+      fixed[k] = static_cast<double>(cq.value(q[k]));
+    }
+  }
+  // The residual atom by atom (contiguous columns, vectorizable), then its energy.
+  alignas(64) float r[VR_BLOCK_LENGTH];
+  for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) r[v] = y[v] + mean_error;
+  for (int k = 0; k < s; ++k) subtract_scaled(r, atoms.col(a[k]).data(), cq.value(q[k]));
+  double e = 0;
+  for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v)
+    e += static_cast<double>(r[v]) * static_cast<double>(r[v]);
+  return e;
+}
+
+/// The mean bits of a brick whose block means span [lo, hi]: `forced` when ≥ 0, else the fewest
+/// bits b (0..12) whose quantization step (hi − lo)/(2^b − 1) is at most `step` (b = 0: the one
+/// level is the midpoint, so a span up to `step` suffices), and 12 when step ≤ 0.
+std::uint32_t choose_mean_bits(float lo, float hi, double step, int forced) {
+  if (forced >= 0) return static_cast<std::uint32_t>(forced);
+  if (!(step > 0)) return VR_MEAN_BITS;
+  const double span = static_cast<double>(hi) - static_cast<double>(lo);
+  for (std::uint32_t b = 0; b < VR_MEAN_BITS; ++b)
+    if (span <= step * static_cast<double>(b == 0 ? 1u : (1u << b) - 1u)) return b;
+  return VR_MEAN_BITS;
+}
+
+}  // namespace
+
+std::vector<std::byte> constant_payload(float v) {
+  std::vector<std::byte> p(4);
+  std::memcpy(p.data(), &v, 4);
+  return p;
+}
+
+void brick_to_blocks(const float* brick, float* columns, float* means) {
+  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    float* col = columns + std::size_t{b} * VR_BLOCK_LENGTH;
+    double sum = 0;
+    for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) {
+      col[v] = brick[vr_brick_voxel(b, v)];
+      sum += static_cast<double>(col[v]);
+    }
+    const auto mean = static_cast<float>(sum / VR_BLOCK_LENGTH);
+    for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) col[v] -= mean;
+    means[b] = mean;
+  }
+}
+
+void owned_block_shares(std::uint32_t x, std::uint32_t y, std::uint32_t z,
+                        const std::array<std::uint32_t, 3>& dims, float* shares) {
+  const std::uint32_t position[3] = {x, y, z};
+  float owned[3][VR_BLOCKS_PER_AXIS];  // owned voxels of block column c on axis a
+  for (std::size_t a = 0; a < 3; ++a) {
+    // Stored index i holds level voxel 34·p − 1 + i: owned for 1 ≤ i ≤ 34 and 34·p − 1 + i < dim.
+    const std::int64_t end = std::min<std::int64_t>(
+        brick_interior + 1, std::int64_t{dims[a]} - std::int64_t{brick_interior} * position[a] + 1);
+    for (std::uint32_t c = 0; c < VR_BLOCKS_PER_AXIS; ++c) {
+      const std::int64_t lo = std::max<std::int64_t>(1, c * VR_BLOCK_SIZE),
+                         hi = std::min<std::int64_t>(end, (c + 1) * VR_BLOCK_SIZE);
+      owned[a][c] = static_cast<float>(std::max<std::int64_t>(0, hi - lo)) / VR_BLOCK_SIZE;
+    }
+  }
+  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+    shares[b] = owned[0][b % VR_BLOCKS_PER_AXIS] *
+                owned[1][(b / VR_BLOCKS_PER_AXIS) % VR_BLOCKS_PER_AXIS] *
+                owned[2][b / (VR_BLOCKS_PER_AXIS * VR_BLOCKS_PER_AXIS)];
+}
+
+void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
+                         const std::array<std::uint32_t, 3>& dims, float* weights) {
+  owned_block_shares(x, y, z, dims, weights);
+  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+    weights[b] = std::max(weights[b], 1.0f / VR_BLOCK_LENGTH);
+}
+
+/// Step 1: means to b bits over [min, max] of the brick's block means, b the fewest bits whose
+/// step is at most options.mean_step (choose_mean_bits). Step 2: coefficients to 6 bits over
+/// [min, max] of the brick's coefficients, block by block (quantize_block). Step 3
+/// ("quantization inside the pursuit"): while a block's quantized error exceeds m·ε² and it has
+/// fewer than Smax atoms, add the atom most correlated with the quantized residual and quantize
+/// again; keep it only if the error falls.
+std::vector<std::byte> quantize_brick(const float* columns, const float* means,
+                                      const dictionary::SparseCodes& codes, std::size_t first_block,
+                                      const Eigen::MatrixXf& atoms, const QuantizeOptions& options,
+                                      double* squared_error, std::size_t* code_count) {
+  float mean_lo = means[0], mean_hi = means[0];
+  for (std::uint32_t b = 1; b < VR_BLOCKS_PER_BRICK; ++b) {
+    mean_lo = std::min(mean_lo, means[b]);
+    mean_hi = std::max(mean_hi, means[b]);
+  }
+  float coef_lo = std::numeric_limits<float>::infinity(), coef_hi = -coef_lo;
+  std::size_t total = 0;
+  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    const std::size_t i = first_block + b;
+    for (int k = 0; k < codes.count[i]; ++k) {
+      coef_lo = std::min(coef_lo, codes.coefficients_of(i)[k]);
+      coef_hi = std::max(coef_hi, codes.coefficients_of(i)[k]);
+    }
+    total += codes.count[i];
+  }
+  if (total == 0) coef_lo = coef_hi = 0;
+  // The 6-bit interval: [min, max] of the coefficients, or narrower when clipping a few extreme
+  // coefficients costs less than the coarser step costs all the others (sum of squared rounding
+  // and clipping errors over the brick's coefficients, tried for the k smallest and j largest
+  // clipped, k, j ∈ {0, 1, 2, 4, 8}).
+  if (options.optimize_interval && total > 16) {
+    std::vector<float> all;
+    all.reserve(total);
+    for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+      const std::size_t i = first_block + b;
+      all.insert(all.end(), codes.coefficients_of(i), codes.coefficients_of(i) + codes.count[i]);
+    }
+    std::sort(all.begin(), all.end());
+    double best = std::numeric_limits<double>::infinity();
+    for (std::size_t k : {0u, 1u, 2u, 4u, 8u})
+      for (std::size_t j : {0u, 1u, 2u, 4u, 8u}) {
+        if (k + j + 2 > all.size()) continue;
+        const Quantizer trial(all[k], all[all.size() - 1 - j], VR_COEF_LEVELS);
+        double cost = 0;
+        for (float c : all) {
+          const double d = static_cast<double>(c) -
+                           static_cast<double>(trial.value(trial.quantize(static_cast<double>(c))));
+          cost += d * d;
+        }
+        if (cost < best) {
+          best = cost;
+          coef_lo = all[k];
+          coef_hi = all[all.size() - 1 - j];
+        }
+      }
+  }
+  format::KsvdPayloadParts parts;
+  parts.mean_bits = choose_mean_bits(mean_lo, mean_hi, options.mean_step, options.mean_bits);
+  const float mean_mid = mean_lo + (mean_hi - mean_lo) / 2;
+  const Quantizer mq = parts.mean_bits == 0
+                           ? Quantizer(mean_mid, mean_mid, 0)
+                           : Quantizer(mean_lo, mean_hi, (1u << parts.mean_bits) - 1u);
+  const Quantizer cq(coef_lo, coef_hi, VR_COEF_LEVELS);
+  std::vector<std::uint16_t>& code_words = parts.codes;
+  code_words.reserve(total + 64);
+  Eigen::VectorXf residual(VR_BLOCK_LENGTH), correlation;
+  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    const std::size_t i = first_block + b;
+    int s = codes.count[i];
+    std::int32_t a[15];
+    float c[15];
+    std::copy_n(codes.atoms_of(i), s, a);
+    std::copy_n(codes.coefficients_of(i), s, c);
+    const float* y = columns + std::size_t{b} * VR_BLOCK_LENGTH;
+    const std::uint32_t qmean = mq.quantize(static_cast<double>(means[b]));
+    const float mean_error = means[b] - mq.value(qmean);
+    std::uint32_t q[15];
+    double e = quantize_block(y, mean_error, a, c, s, atoms, cq, options.refit, q);
+    while (options.target_energy >= 0 && e > options.target_energy && s < options.max_atoms &&
+           cq.scale > 0) {
+      // The quantized residual, its best new atom, and a fresh quantization with it.
+      for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) {
+        float r = y[v] + mean_error;
+        for (int k = 0; k < s; ++k) r -= cq.value(q[k]) * atoms(static_cast<Eigen::Index>(v), a[k]);
+        residual(static_cast<Eigen::Index>(v)) = r;
+      }
+      correlation.noalias() = atoms.transpose() * residual;
+      for (int k = 0; k < s; ++k) correlation(a[k]) = 0;
+      Eigen::Index best = 0;
+      correlation.cwiseAbs().maxCoeff(&best);
+      a[s] = static_cast<std::int32_t>(best);
+      c[s] = correlation(best);
+      std::uint32_t q2[15];
+      const double e2 = quantize_block(y, mean_error, a, c, s + 1, atoms, cq, options.refit, q2);
+      if (!(e2 < e)) break;
+      ++s;
+      e = e2;
+      std::copy_n(q2, s, q);
+    }
+    parts.sparsity[b] = static_cast<std::uint32_t>(s);
+    parts.mean[b] = qmean;
+    for (int k = 0; k < s; ++k)
+      code_words.push_back(
+          static_cast<std::uint16_t>((static_cast<std::uint32_t>(a[k]) << 6) | q[k]));
+    *squared_error += e;
+  }
+  *code_count += code_words.size();
+  parts.dequantization[0] = mq.bias;
+  parts.dequantization[1] = mq.scale;
+  parts.dequantization[2] = cq.bias;
+  parts.dequantization[3] = cq.scale;
+  return format::pack_ksvd_payload(parts);
+}
+
+std::vector<std::byte> zfp_payload(const float* brick, double accuracy) {
+  format::ZfpStream zfp(format::ZfpMode::accuracy(accuracy), brick_size, brick_size, brick_size);
+  std::vector<std::byte> buffer(zfp.maximum_size());
+  const std::size_t size = zfp.compress(brick, buffer.data(), buffer.size());
+  if (size == 0) throw std::runtime_error("zfp_compress failed");
+  buffer.resize((size + 3) / 4 * 4);
+  // A zfp stream of 4 bytes would read as a constant brick; never happens for 36³ (≥ 729 blocks).
+  if (buffer.size() == 4) buffer.resize(8);
+  return buffer;
+}
+
+}  // namespace volreel::encoder::detail

@@ -1,0 +1,73 @@
+// detail.hpp: what the encoder's source files share — brick coding (brick_coding.cpp) used by the
+// frame encoder, timing, and the sample frames of size estimates (tolerance_search.cpp); not part
+// of the public interface.
+#pragma once
+
+#include <array>
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "volreel/datasets/series.hpp"
+#include "volreel/datasets/volume.hpp"
+#include "volreel/dictionary/omp.hpp"
+
+namespace volreel::encoder::detail {
+
+using Clock = std::chrono::steady_clock;
+inline double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+/// How a brick's codes are quantized.
+struct QuantizeOptions {
+  bool refit = true;  ///< sequential least-squares refit (see quantize_block)
+  double target_energy =
+      -1;  ///< m·ε²: extend the pursuit while the quantized error exceeds it (< 0: never)
+  int max_atoms = 15;
+  bool optimize_interval =
+      true;  ///< choose the 6-bit interval by squared error (may clip extremes)
+  /// The largest step of a brick's quantized block means: each brick takes the fewest bits
+  /// (0..12) whose step over its means' range is at most this. 0: always 12 bits.
+  double mean_step = 0;
+  int mean_bits = -1;  ///< ≥ 0: every brick takes exactly this many mean bits (overrides mean_step)
+};
+
+/// A constant brick's payload: its one value (4 bytes).
+std::vector<std::byte> constant_payload(float v);
+
+/// Copies the 216 blocks of a 36³ brick into 216 columns of `columns` (m × 216, zero-mean) and
+/// their means into `means`.
+void brick_to_blocks(const float* brick, float* columns, float* means);
+
+/// Share of each of the 216 blocks of brick (x, y, z) of a level of size `dims` that the decoder
+/// reads: voxels of the brick's interior (stored index 1..34 on each axis) inside the level.
+void owned_block_shares(std::uint32_t x, std::uint32_t y, std::uint32_t z,
+                        const std::array<std::uint32_t, 3>& dims, float* shares);
+
+/// The shares as weights of the Lagrangian rule: at least 1/216 (one voxel), so that as ε → 0
+/// every block is still coded up to Smax.
+void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
+                         const std::array<std::uint32_t, 3>& dims, float* weights);
+
+/// Quantizes one brick's sparse codes (blocks first_block .. first_block + 215 of `codes`) into
+/// its ksvd payload (brick_decode.h's layout); see brick_coding.cpp for the steps. Adds the
+/// squared error of the quantized blocks to *squared_error and their codes to *code_count.
+std::vector<std::byte> quantize_brick(const float* columns, const float* means,
+                                      const dictionary::SparseCodes& codes, std::size_t first_block,
+                                      const Eigen::MatrixXf& atoms, const QuantizeOptions& options,
+                                      double* squared_error, std::size_t* code_count);
+
+/// A 36³ brick as a zfp fixed-accuracy stream, padded to a multiple of 4 bytes (never 4 bytes,
+/// which would read as a constant brick). Throws std::runtime_error if zfp fails.
+std::vector<std::byte> zfp_payload(const float* brick, double accuracy);
+
+/// `count` frames of the first `frames`, evenly spaced (the middle one if count is 1), read into
+/// memory: the samples that size estimates encode.
+std::vector<Volume> evenly_spaced_frames(const datasets::SeriesReader& series, std::size_t frames,
+                                         std::size_t count);
+
+}  // namespace volreel::encoder::detail

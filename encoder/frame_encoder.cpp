@@ -1,0 +1,464 @@
+// frame_encoder.cpp: one frame -> its frame file, in four steps (FrameEncoder::encode): the cells
+// of the full octree, every brick coded in chunks, histograms and constant subtrees bottom-up,
+// and the node table of the nodes kept.
+#include "volreel/encoder/frame_encoder.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
+#include "detail.hpp"
+#include "volreel/encoder/pyramid.hpp"
+#include "volreel/format/brick_decode.h"
+
+namespace volreel::encoder {
+
+using detail::Clock;
+using detail::QuantizeOptions;
+using detail::seconds_since;
+using format::brick_voxels;
+
+namespace {
+
+constexpr std::size_t chunk_bricks =
+    32;  ///< bricks coded per batch-OMP call (memory: 32·36³ floats ×2)
+
+/// One node of the full octree while encoding.
+struct Cell {
+  std::uint32_t level = 0, x = 0, y = 0, z = 0;
+  std::uint64_t morton = 0;
+  std::vector<std::byte> payload;
+  std::size_t codes = 0;  ///< ksvd codes in the payload
+  std::uint64_t histogram = 0;
+  bool constant = false, subtree_constant = false;
+  float value = 0;
+};
+
+/// The full octree's cells, level by level: level_begin[l] is the first cell of level l and
+/// level_begin[levels] the cell count.
+struct OctreeCells {
+  std::vector<Cell> cells;
+  std::vector<std::size_t> level_begin;
+};
+
+/// What coding the bricks of a frame needs: the settings, and for ksvd the pursuit, the atoms, the
+/// quantization and the Lagrangian rule's block weights.
+struct BrickCoding {
+  const CodingSettings& settings;
+  const dictionary::BatchOmp* omp = nullptr;  ///< ksvd
+  const Eigen::MatrixXf* atoms = nullptr;     ///< ksvd
+  QuantizeOptions quantize;
+  double atom_gain_threshold = 0;
+  std::size_t levels = 0;
+  /// Lagrangian rule: each block's atom gains are weighed by the share of its voxels the decoder
+  /// reads and by its level's 1/F^(2d) (coded to ε·F^d, d levels above the finest).
+  bool weighted = false;
+
+  bool ksvd() const { return settings.codec == format::Codec::ksvd; }
+  /// F^d for a brick of `level`: the factor on its level's ε (1 unless the Lagrangian rule).
+  double level_scale(std::uint32_t level) const {
+    return atom_gain_threshold > 0
+               ? std::pow(settings.level_tolerance_factor, static_cast<double>(levels - 1 - level))
+               : 1.0;
+  }
+};
+
+/// Batch-OMP's inputs and outputs for one chunk, reused from chunk to chunk.
+struct ChunkWorkspace {
+  std::vector<float> bricks = std::vector<float>(chunk_bricks * brick_voxels);
+  Eigen::MatrixXf columns;
+  std::vector<float> means, weights;
+  dictionary::SparseCodes codes;
+};
+
+/// Adds a stored brick's payload to the byte breakdown and sparsity histogram of a frame.
+void add_to_breakdown(const Cell& c, const std::array<std::uint32_t, 3>& level_dims, bool coarse,
+                      bool ksvd, FrameStats& st) {
+  ByteBreakdown& b = st.breakdown;
+  const std::size_t size = c.payload.size();
+  float shares[VR_BLOCKS_PER_BRICK];  // of each block, the voxels that are the level's own
+  detail::owned_block_shares(c.x, c.y, c.z, level_dims, shares);
+  if (c.constant) {
+    b.constant_bricks += size;
+  } else if (!ksvd) {
+    b.zfp_streams += size;
+  } else {
+    vr_uint words[VR_MAX_PAYLOAD_WORDS] = {};
+    std::memcpy(words, c.payload.data(), std::min(size, sizeof words));
+    const vr_uint entry_bits = vr_entry_bits(vr_mean_bits(words));
+    b.brick_headers += 4 * VR_HEADER_WORDS;
+    b.block_entries += 2 * vr_entry_units(entry_bits);
+    b.codes += 2 * c.codes;
+    b.alignment += size - vr_payload_bytes(entry_bits, static_cast<vr_uint>(c.codes));
+    ++st.mean_bits_histogram[vr_mean_bits(words)];
+    for (std::uint32_t k = 0; k < VR_BLOCKS_PER_BRICK; ++k) {
+      const vr_uint sparsity = vr_entry_sparsity(vr_block_entry(words, entry_bits, k));
+      ++st.sparsity_histogram[sparsity];
+      if (!coarse) b.finest_owned_codes += 2.0 * sparsity * static_cast<double>(shares[k]);
+    }
+  }
+  if (coarse) b.coarse_levels += size;
+  // The blocks' owned shares average to the brick's interior voxels inside the level: the rest of
+  // the 36³ are apron or padding.
+  double owned = 0;
+  for (float share : shares) owned += static_cast<double>(share);
+  b.aprons_and_padding += static_cast<double>(size) * (1 - owned / VR_BLOCKS_PER_BRICK);
+}
+
+/// Step 1: every cell of every level, breadth-first, Morton order inside a level.
+OctreeCells octree_cells(const Pyramid& pyramid) {
+  const std::size_t levels = pyramid.geometry.size();
+  OctreeCells octree;
+  std::vector<Cell>& cells = octree.cells;
+  octree.level_begin.assign(levels + 1, 0);
+  for (std::size_t l = 0; l < levels; ++l) {
+    octree.level_begin[l] = cells.size();
+    const auto& g = pyramid.geometry[l].grid;
+    for (std::uint32_t z = 0; z < g[2]; ++z)
+      for (std::uint32_t y = 0; y < g[1]; ++y)
+        for (std::uint32_t x = 0; x < g[0]; ++x) {
+          Cell c;
+          c.level = static_cast<std::uint32_t>(l);
+          c.x = x, c.y = y, c.z = z;
+          c.morton = format::morton3(x, y, z);
+          cells.push_back(std::move(c));
+        }
+    std::sort(cells.begin() + static_cast<std::ptrdiff_t>(octree.level_begin[l]), cells.end(),
+              [](const Cell& a, const Cell& b) { return a.morton < b.morton; });
+  }
+  octree.level_begin[levels] = cells.size();
+  return octree;
+}
+
+/// Step 2a: the stored voxels of each cell of a chunk into `bricks`, its histogram over
+/// [lo, hi], the constant test; constant bricks and (zfp) every brick get their payload here.
+void extract_chunk(const Pyramid& pyramid, std::span<Cell> chunk, float* bricks, float lo, float hi,
+                   const BrickCoding& coding) {
+  const bool ksvd = coding.ksvd();
+#pragma omp parallel for schedule(dynamic, 1)
+  for (std::ptrdiff_t j = 0; j < static_cast<std::ptrdiff_t>(chunk.size()); ++j) {
+    Cell& c = chunk[static_cast<std::size_t>(j)];
+    float* brick = bricks + static_cast<std::size_t>(j) * brick_voxels;
+    extract_brick(pyramid, c.level, c.x, c.y, c.z, {brick, brick_voxels});
+    float mn = brick[0], mx = brick[0];
+    std::uint64_t hist = 0;
+    for (std::uint32_t v = 0; v < brick_voxels; ++v) {
+      mn = std::min(mn, brick[v]);
+      mx = std::max(mx, brick[v]);
+      hist |= std::uint64_t{1} << format::histogram_bin(brick[v], lo, hi);
+    }
+    c.histogram = hist;
+    c.constant = mn == mx;
+    c.value = mn;
+    if (c.constant)
+      c.payload = detail::constant_payload(mn);
+    else if (!ksvd)
+      c.payload = detail::zfp_payload(brick, coding.settings.zfp_accuracy);
+  }
+}
+
+/// Step 2b (ksvd): the blocks of the chunk's non-constant bricks (`coded`, indices into the chunk)
+/// and their weights, batch-OMP on all of them at once, then each brick quantized into its
+/// payload. `part` is when the chunk's extraction began (its time counts as brick extraction).
+void code_ksvd_chunk(const Pyramid& pyramid, std::span<Cell> chunk,
+                     const std::vector<std::size_t>& coded, const BrickCoding& coding,
+                     ChunkWorkspace& work, Clock::time_point part, FrameStats& st) {
+  const auto blocks = static_cast<Eigen::Index>(coded.size() * VR_BLOCKS_PER_BRICK);
+  work.columns.resize(VR_BLOCK_LENGTH, blocks);
+  work.means.resize(static_cast<std::size_t>(blocks));
+  work.weights.resize(coding.weighted ? static_cast<std::size_t>(blocks) : 0);
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(coded.size()); ++k) {
+    const auto kk = static_cast<std::size_t>(k);
+    detail::brick_to_blocks(work.bricks.data() + coded[kk] * brick_voxels,
+                            work.columns.data() + kk * VR_BLOCKS_PER_BRICK * VR_BLOCK_LENGTH,
+                            work.means.data() + kk * VR_BLOCKS_PER_BRICK);
+    if (coding.weighted) {
+      const Cell& c = chunk[coded[kk]];
+      float* w = work.weights.data() + kk * VR_BLOCKS_PER_BRICK;
+      if (coding.settings.weight_owned_voxels)
+        detail::owned_block_weights(c.x, c.y, c.z, pyramid.geometry[c.level].dims, w);
+      else
+        std::fill(w, w + VR_BLOCKS_PER_BRICK, 1.0f);
+      const double scale = coding.level_scale(c.level);
+      for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+        w[b] = static_cast<float>(static_cast<double>(w[b]) / (scale * scale));
+    }
+  }
+  st.seconds_bricks += seconds_since(part);
+  part = Clock::now();
+  coding.omp->encode(work.columns, work.codes, work.weights);
+  st.seconds_omp += seconds_since(part);
+  part = Clock::now();
+  double quantized_error = 0;
+  std::size_t code_count = 0;
+  const QuantizeOptions& qo = coding.quantize;
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : quantized_error, code_count)
+  for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(coded.size()); ++k) {
+    const auto kk = static_cast<std::size_t>(k);
+    Cell& cell = chunk[coded[kk]];
+    QuantizeOptions brick_qo = qo;  // the means' step follows the level's ε
+    brick_qo.mean_step *= coding.level_scale(cell.level);
+    cell.payload = detail::quantize_brick(
+        work.columns.data() + kk * VR_BLOCKS_PER_BRICK * VR_BLOCK_LENGTH,
+        work.means.data() + kk * VR_BLOCKS_PER_BRICK, work.codes, kk * VR_BLOCKS_PER_BRICK,
+        *coding.atoms, brick_qo, &quantized_error, &cell.codes);
+    code_count += cell.codes;
+  }
+  st.codes += code_count;
+  st.quantized_squared_error += quantized_error;
+  st.seconds_quantize += seconds_since(part);
+  for (std::size_t i = 0; i < work.codes.size(); ++i)
+    st.unquantized_squared_error += static_cast<double>(work.codes.residual_energy[i]);
+  st.blocks += static_cast<std::size_t>(blocks);
+}
+
+/// Step 2: bricks in chunks: extract, histogram, constant test; then code the non-constant ones.
+void code_bricks(const Pyramid& pyramid, std::vector<Cell>& cells, float lo, float hi,
+                 const BrickCoding& coding, FrameStats& st) {
+  ChunkWorkspace work;
+  for (std::size_t begin = 0; begin < cells.size(); begin += chunk_bricks) {
+    const std::span<Cell> chunk(cells.data() + begin, std::min(chunk_bricks, cells.size() - begin));
+    const auto part = Clock::now();
+    extract_chunk(pyramid, chunk, work.bricks.data(), lo, hi, coding);
+    if (!coding.ksvd()) {
+      st.seconds_bricks += seconds_since(part);
+      continue;
+    }
+    std::vector<std::size_t> coded;
+    for (std::size_t j = 0; j < chunk.size(); ++j)
+      if (!chunk[j].constant) coded.push_back(j);
+    if (coded.empty()) continue;
+    code_ksvd_chunk(pyramid, chunk, coded, coding, work, part, st);
+  }
+}
+
+/// Step 3: bottom-up, histograms OR'ed into parents; a subtree is constant when the node and all
+/// its children are constant subtrees of one value. Children of cell (x,y,z) are found by Morton
+/// code: 8·morton + d within the next level. Returns the children of every cell.
+std::vector<std::vector<std::size_t>> merge_subtrees(OctreeCells& octree) {
+  std::vector<Cell>& cells = octree.cells;
+  const std::vector<std::size_t>& level_begin = octree.level_begin;
+  const std::size_t levels = level_begin.size() - 1;
+  std::vector<std::vector<std::size_t>> children(cells.size());
+  for (std::size_t l = 0; l + 1 < levels; ++l) {
+    std::size_t p = level_begin[l];
+    for (std::size_t i = level_begin[l + 1]; i < level_begin[l + 2]; ++i) {
+      while (cells[p].morton != cells[i].morton >> 3) ++p;  // both sorted by Morton code
+      children[p].push_back(i);
+    }
+  }
+  for (std::size_t i = cells.size(); i-- > 0;) {
+    Cell& c = cells[i];
+    c.subtree_constant = c.constant;
+    for (std::size_t k : children[i]) {
+      c.histogram |= cells[k].histogram;
+      if (!cells[k].subtree_constant || cells[k].value != c.value) c.subtree_constant = false;
+    }
+  }
+  return children;
+}
+
+/// Step 4: keep the nodes not under an empty node; number them breadth-first; link first
+/// children. Moves the kept cells' payloads into `out` and counts their bytes in `st`.
+void build_node_table(const Pyramid& pyramid, OctreeCells& octree,
+                      const std::vector<std::vector<std::size_t>>& children, bool ksvd,
+                      format::FrameContents& out, FrameStats& st) {
+  std::vector<Cell>& cells = octree.cells;
+  const std::vector<std::size_t>& level_begin = octree.level_begin;
+  const std::size_t levels = level_begin.size() - 1;
+  std::vector<char> kept(cells.size(), 0);
+  if (kept.empty()) throw std::logic_error("a frame has at least one brick");
+  kept.front() = 1;
+  std::vector<std::uint32_t> index(cells.size(), 0);
+  for (std::size_t l = 0; l < levels; ++l) {
+    format::LevelEntry e{};
+    e.first_node = static_cast<std::uint32_t>(out.nodes.size());
+    for (std::size_t i = level_begin[l]; i < level_begin[l + 1]; ++i) {
+      if (!kept[i]) continue;
+      index[i] = static_cast<std::uint32_t>(out.nodes.size());
+      format::Node node{};
+      node.brick = index[i];
+      node.histogram = cells[i].histogram;
+      out.nodes.push_back(node);
+      add_to_breakdown(cells[i], pyramid.geometry[l].dims, l + 1 < levels, ksvd, st);
+      out.payloads.push_back(std::move(cells[i].payload));
+      ++st.bricks;
+      if (cells[i].constant) ++st.constant_bricks;
+    }
+    e.node_count = static_cast<std::uint32_t>(out.nodes.size()) - e.first_node;
+    out.levels.push_back(e);
+    // Children of kept inner nodes are kept; their first child is the next index in the level
+    // below.
+    std::uint32_t next = static_cast<std::uint32_t>(out.nodes.size());
+    for (std::size_t i = level_begin[l]; i < level_begin[l + 1]; ++i) {
+      if (!kept[i]) continue;
+      format::NodeType type;
+      if (cells[i].subtree_constant)
+        type = format::NodeType::empty, ++st.empty_nodes;
+      else if (l + 1 == levels)
+        type = format::NodeType::leaf;
+      else
+        type = format::NodeType::inner;
+      std::uint32_t first = 0;
+      if (type == format::NodeType::inner) {
+        first = next;
+        for (std::size_t k : children[i]) kept[k] = 1;
+        next += static_cast<std::uint32_t>(children[i].size());
+      }
+      out.nodes[index[i]].child_and_type = first | (static_cast<std::uint32_t>(type) << 30);
+    }
+  }
+}
+
+}  // namespace
+
+ByteBreakdown& ByteBreakdown::operator+=(const ByteBreakdown& o) {
+  frame_tables += o.frame_tables;
+  constant_bricks += o.constant_bricks;
+  brick_headers += o.brick_headers;
+  block_entries += o.block_entries;
+  codes += o.codes;
+  alignment += o.alignment;
+  zfp_streams += o.zfp_streams;
+  coarse_levels += o.coarse_levels;
+  aprons_and_padding += o.aprons_and_padding;
+  finest_owned_codes += o.finest_owned_codes;
+  return *this;
+}
+
+FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSettings settings)
+    : dictionary_(dictionary), settings_(settings) {
+  if (settings_.codec == format::Codec::ksvd) {
+    if (!dictionary_) throw InputError("the ksvd codec needs a dictionary");
+    if (dictionary_->block_size != 6 || dictionary_->block_length() != 216)
+      throw InputError("the dictionary has blocks of " + std::to_string(dictionary_->block_size) +
+                       "^3; volreel's bricks need 6^3");
+    if (dictionary_->atom_count() < 1 || dictionary_->atom_count() > 1024)
+      throw InputError("the dictionary has " + std::to_string(dictionary_->atom_count()) +
+                       " atoms; the 10-bit atom index allows 1..1024");
+    if (settings_.max_atoms < 1 || settings_.max_atoms > 15)
+      throw InputError("Smax must be in 1..15 (4-bit sparsity field)");
+    if (settings_.fixed_sparsity < 0 || settings_.fixed_sparsity > 15)
+      throw InputError("--fixed-sparsity must be in 1..15");
+    if (settings_.fixed_sparsity == 0 &&
+        !(settings_.tolerance > 0 && std::isfinite(settings_.tolerance)))
+      throw InputError("the tolerance must be positive and finite");
+    if (settings_.mean_bits < -1 || settings_.mean_bits > static_cast<int>(VR_MEAN_BITS))
+      throw InputError("--mean-bits must be auto or 0..12");
+    if (!(settings_.mean_step_factor > 0 && std::isfinite(settings_.mean_step_factor)))
+      throw InputError("the mean step factor must be positive and finite");
+    if (settings_.fixed_sparsity == 0 && settings_.rule == VariableRateRule::lagrangian &&
+        !(settings_.lagrangian_factor > 0 && std::isfinite(settings_.lagrangian_factor)))
+      throw InputError("the Lagrangian factor must be positive and finite");
+    if (!(settings_.level_tolerance_factor >= 1 && settings_.level_tolerance_factor <= 16))
+      throw InputError("the level tolerance factor must be in [1, 16]");
+    dictionary::SparseCodingOptions o;
+    o.selection = settings_.selection;
+    if (settings_.fixed_sparsity > 0) {
+      o.tolerance = 0;
+      o.max_atoms = settings_.fixed_sparsity;
+    } else if (settings_.rule == VariableRateRule::lagrangian) {
+      o.tolerance = 0;
+      o.max_atoms = settings_.max_atoms;
+      o.min_atom_gain = atom_gain_threshold();
+    } else {
+      o.tolerance = settings_.tolerance;
+      o.max_atoms = settings_.max_atoms;
+    }
+    omp_ = std::make_shared<dictionary::BatchOmp>(dictionary_->atoms, o);
+  } else if (!(settings_.zfp_accuracy > 0 && std::isfinite(settings_.zfp_accuracy))) {
+    throw InputError("--zfp-accuracy must be positive");
+  }
+}
+
+double FrameEncoder::atom_gain_threshold() const {
+  if (settings_.codec != format::Codec::ksvd || settings_.fixed_sparsity > 0 ||
+      settings_.rule != VariableRateRule::lagrangian)
+    return 0;
+  return settings_.lagrangian_factor * static_cast<double>(VR_BLOCK_LENGTH) * settings_.tolerance *
+         settings_.tolerance;
+}
+
+QuantizeOptions FrameEncoder::quantize_options() const {
+  QuantizeOptions o;
+  o.refit = settings_.refit_quantization;
+  o.optimize_interval = settings_.optimize_interval;
+  o.max_atoms = settings_.max_atoms;
+  o.mean_bits = settings_.mean_bits;
+  if (settings_.fixed_sparsity == 0) o.mean_step = settings_.mean_step_factor * settings_.tolerance;
+  if (settings_.extend_pursuit && settings_.fixed_sparsity == 0 &&
+      settings_.rule == VariableRateRule::tolerance)
+    o.target_energy =
+        static_cast<double>(VR_BLOCK_LENGTH) * settings_.tolerance * settings_.tolerance;
+  return o;
+}
+
+std::vector<std::byte> FrameEncoder::encode_brick(std::span<const float> brick) const {
+  if (brick.size() != brick_voxels) throw InputError("encode_brick needs 36^3 values");
+  const auto [mn, mx] = std::minmax_element(brick.begin(), brick.end());
+  if (*mn == *mx) return detail::constant_payload(*mn);
+  if (settings_.codec == format::Codec::zfp)
+    return detail::zfp_payload(brick.data(), settings_.zfp_accuracy);
+  Eigen::MatrixXf columns(VR_BLOCK_LENGTH, VR_BLOCKS_PER_BRICK);
+  std::vector<float> means(VR_BLOCKS_PER_BRICK);
+  detail::brick_to_blocks(brick.data(), columns.data(), means.data());
+  dictionary::SparseCodes codes;
+  omp_->encode(columns, codes);
+  double error = 0;
+  std::size_t code_count = 0;
+  return detail::quantize_brick(columns.data(), means.data(), codes, 0, dictionary_->atoms,
+                                quantize_options(), &error, &code_count);
+}
+
+std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
+                                            FrameStats* stats) const {
+  const auto start = Clock::now();
+  const Pyramid pyramid = build_pyramid(frame);
+  FrameStats st;
+  st.seconds_pyramid = seconds_since(start);
+  const auto lo = static_cast<float>(settings_.value_min),
+             hi = static_cast<float>(settings_.value_max);
+  const bool ksvd = settings_.codec == format::Codec::ksvd;
+
+  OctreeCells octree = octree_cells(pyramid);  // 1.
+
+  BrickCoding coding{settings_,  // 2.
+                     omp_.get(),
+                     ksvd ? &dictionary_->atoms : nullptr,
+                     quantize_options(),
+                     atom_gain_threshold(),
+                     pyramid.geometry.size(),
+                     false};
+  coding.weighted = ksvd && coding.atom_gain_threshold > 0 &&
+                    (settings_.weight_owned_voxels || settings_.level_tolerance_factor != 1);
+  code_bricks(pyramid, octree.cells, lo, hi, coding, st);
+
+  const auto children = merge_subtrees(octree);  // 3.
+
+  format::FrameContents out;  // 4.
+  out.header.codec = static_cast<std::uint32_t>(settings_.codec);
+  out.header.frame_index = static_cast<std::uint32_t>(t);
+  out.header.dims[0] = static_cast<std::uint32_t>(frame.dims.x);
+  out.header.dims[1] = static_cast<std::uint32_t>(frame.dims.y);
+  out.header.dims[2] = static_cast<std::uint32_t>(frame.dims.z);
+  out.header.block_size = ksvd ? 6 : 0;
+  out.header.atom_count = ksvd ? static_cast<std::uint32_t>(dictionary_->atom_count()) : 0;
+  out.header.value_min = lo;
+  out.header.value_max = hi;
+  out.header.codec_parameter =
+      ksvd ? (settings_.fixed_sparsity > 0 ? 0.0 : settings_.tolerance) : settings_.zfp_accuracy;
+  out.header.fixed_sparsity = static_cast<std::uint32_t>(settings_.fixed_sparsity);
+  build_node_table(pyramid, octree, children, ksvd, out, st);
+
+  std::vector<std::byte> bytes = format::serialize_frame(out);
+  st.bytes = bytes.size();
+  st.breakdown.frame_tables = st.bytes - st.breakdown.total();  // what is not a brick payload
+  st.seconds = seconds_since(start);
+  if (stats) *stats = st;
+  return bytes;
+}
+
+}  // namespace volreel::encoder

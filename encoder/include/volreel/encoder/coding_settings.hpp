@@ -1,0 +1,96 @@
+// coding_settings.hpp: how the encoder codes bricks — the codec, variable or fixed rate and the
+// rule that spends atoms, the pursuit, the quantization of block means and coefficients.
+// docs/benchmarks.md has the measurements behind the defaults.
+#pragma once
+
+#include <string>
+
+#include "volreel/datasets/volume.hpp"
+#include "volreel/dictionary/omp.hpp"
+#include "volreel/format/frame_file.hpp"
+
+namespace volreel::encoder {
+
+/// How variable rate chooses the number of atoms of each block (both driven by ε).
+enum class VariableRateRule {
+  /// Rate-distortion optimal (Lagrangian): add the next atom while it lowers the block's squared
+  /// error by at least lagrangian_factor·m·ε² (m = 216 values). Every code costs the same 16 bits,
+  /// so this gives every block the same distortion-per-bit slope, which minimises the total
+  /// squared error (hence maximises PSNR) for the total size: smooth blocks get few atoms, rough
+  /// blocks many.
+  lagrangian,
+  /// Add atoms until the block's RMS error is at most ε (equal error per block; the paper's rule).
+  tolerance,
+};
+
+/// The names volreel uses for a rule (command lines, manifests): "lagrangian" and "tolerance".
+const char* rate_rule_name(VariableRateRule rule);
+/// The inverse; throws InputError naming --rate-rule and the value on another name.
+VariableRateRule rate_rule_from_name(const std::string& name);
+
+/// The names of the codecs (command lines, manifest comparisons): "ksvd" and "zfp".
+const char* codec_name(format::Codec codec);
+/// The inverse; throws InputError naming --codec and the value on another name.
+format::Codec codec_from_name(const std::string& name);
+
+/// CodingSettings::mean_bits from its command-line text: "auto" (-1) or a whole number 0..12;
+/// throws InputError naming --mean-bits and the text otherwise.
+int mean_bits_from_text(const std::string& text);
+
+/// How bricks are coded.
+struct CodingSettings {
+  format::Codec codec = format::Codec::ksvd;
+  double tolerance = 0;  ///< ksvd variable rate: ε (data units), see VariableRateRule
+  VariableRateRule rule = VariableRateRule::lagrangian;
+  /// Lagrangian rule: the minimum gain of an atom, as a fraction of m·ε² (> 0). Only the product
+  /// with ε² matters, so this sets what ε means: the default keeps the PSNR at a given ε about
+  /// that of the ε rule and above 20·log10(range/ε), so that --psnr keeps its meaning (the ε
+  /// rule's bound per block no longer holds).
+  double lagrangian_factor = 0.25;
+  /// Lagrangian rule: weigh each block's atom gains by the share of its voxels that the decoder
+  /// takes from it (its brick's interior, inside the level). The rest are the apron, a copy of a
+  /// neighbour's interior coded there, and padding outside the volume: a block of padding only
+  /// weighs as one voxel (1/216), so it gets atoms only where they are 216 times cheaper.
+  bool weight_owned_voxels = true;
+  /// Lagrangian rule: the levels above the finest are coded to ε·F^d, d levels up (their atom
+  /// gains weigh 1/F^(2d), their means' step grows by F^d). A coarse level is drawn only where its
+  /// voxels, 2^d times as wide, are too small on screen for the finer one to matter, and it already
+  /// differs from the full-resolution data by its downsampling, by several ε. At F = 2 the coding
+  /// error grows with that difference and stays below it, the coarse levels take a smaller share
+  /// of the bytes (the finest level unchanged), and smaller coarse bricks arrive sooner on slow
+  /// links. 1: every level to ε. On a self-similar field the downsampling difference keeps
+  /// doubling per level. The ε rule and fixed rate ignore it.
+  double level_tolerance_factor = 2.0;
+  int fixed_sparsity =
+      0;               ///< ksvd fixed rate: exactly min(S, needed) atoms per block (0: variable)
+  int max_atoms = 15;  ///< Smax ≤ 15 (4-bit field)
+  /// ksvd: which atom each pursuit step adds (both rates). ORMP (the atom that lowers the block's
+  /// squared error most) needs fewer atoms than OMP (the most correlated one) for the same error;
+  /// see dictionary::AtomSelection.
+  dictionary::AtomSelection selection = dictionary::AtomSelection::error;
+  /// ksvd: the bits b of each brick's quantized block means (format/SPEC.md, word 4). -1: variable
+  /// rate gives each brick the fewest bits (0..12) whose step over the span of its block means is
+  /// at most mean_step_factor·ε_l (ε_l: the brick's level's tolerance, see level_tolerance_factor),
+  /// fixed rate (no ε) 12 bits; 0..12: every brick exactly b bits.
+  int mean_bits = -1;
+  /// The mean step as a fraction of ε. A mean off by e adds 216·e² to its block's squared error,
+  /// so halving the step gains 13.5·step² for one more bit per block; the Lagrangian rule buys
+  /// 0.25·216·ε² per 16-bit code, and the two slopes are equal at a step of ε/2: of the factors
+  /// measured, 0.5 gives the most PSNR for the same bytes.
+  double mean_step_factor = 0.5;
+  double zfp_accuracy = 0;  ///< zfp fixed-accuracy tolerance (data units)
+  /// Quantize coefficients one at a time, re-solving the least-squares fit of the block's later
+  /// coefficients against the error of the ones already quantized ("quantize inside the pursuit").
+  bool refit_quantization = true;
+  /// Variable rate, ε rule: while a block's quantized error exceeds ε, add the atom most correlated
+  /// with the quantized residual (up to Smax) and quantize again ("quantization inside the
+  /// pursuit"). Off by default: it recovers part of the quantization loss for more bytes (about
+  /// neutral at equal bps) and slows the encoding.
+  bool extend_pursuit = false;
+  /// Choose each brick's 6-bit coefficient interval by least squared error (clipping up to 8
+  /// extreme coefficients at either end) instead of [min, max].
+  bool optimize_interval = true;
+  double value_min = 0, value_max = 0;  ///< the sequence's value range, for node histograms
+};
+
+}  // namespace volreel::encoder

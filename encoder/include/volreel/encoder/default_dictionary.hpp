@@ -1,0 +1,66 @@
+// default_dictionary.hpp: the dictionary an encode trains when it is given none — Algorithm 1
+// (dictionary/training.hpp) with the library's default options at the ε of the encode, and, since
+// the dictionary counts in the container's size, K chosen by the container size it gives.
+#pragma once
+
+#include <cstddef>
+#include <functional>
+#include <vector>
+
+#include "volreel/datasets/series.hpp"
+#include "volreel/datasets/volume.hpp"
+#include "volreel/dictionary/coreset.hpp"
+#include "volreel/dictionary/dictionary.hpp"
+#include "volreel/encoder/coding_settings.hpp"
+#include "volreel/format/dictionary_file.hpp"
+
+namespace volreel::encoder {
+
+struct DefaultDictionaryOptions {
+  double tolerance = 0;  ///< ε to train at and (choosing K) to code the sample frames at, > 0
+  /// K of the dictionary; 0: train one for each of candidate_atoms and keep the K whose estimated
+  /// container (sample frames' mean size × frames + dictionary file) is the smallest.
+  int atoms = 0;
+  std::vector<int> candidate_atoms = {1024, 512, 256, 128};
+  std::size_t frames = 0;         ///< frames the container will hold (0: all of the series)
+  std::size_t sample_frames = 3;  ///< choosing K: frames coded with each dictionary, evenly spaced
+  /// The container stores the atoms in binary16: dictionary sizes and sample frames count them so.
+  bool half_atoms = true;
+  /// How the sample frames are coded (value range set); variable rate at `tolerance` whatever its
+  /// tolerance and fixed_sparsity say.
+  CodingSettings coding;
+  /// The coreset hierarchy trained on. Training takes dictionary::TrainingOptions' defaults
+  /// (volreel train's, except that every level runs its N iterations: no convergence test).
+  dictionary::CoresetOptions coreset;
+};
+
+/// One K tried, reported as soon as its dictionary is trained (and, choosing K, measured).
+struct DictionaryCandidate {
+  int atoms = 0;                ///< K
+  double train_seconds = 0;     ///< training time (the coreset is built once, before)
+  double dictionary_bytes = 0;  ///< its file, the atoms stored as the container stores them
+  double estimated_bytes = 0;   ///< choosing K: the estimated container; 0 when K was given
+};
+using DictionaryCandidateCallback = std::function<void(const DictionaryCandidate&)>;
+
+struct DefaultDictionary {
+  dictionary::Dictionary dictionary;    ///< the chosen one, float32 atoms as trained
+  format::DictionaryTraining training;  ///< its provenance (dictionary::training_provenance)
+  std::vector<DictionaryCandidate> candidates;  ///< every K tried, in order
+};
+
+/// Trains a dictionary on `coresets` (built from `series` with options.coreset) at
+/// options.tolerance for options.atoms or each candidate K, reporting each K to on_candidate, and
+/// returns the one chosen. Throws InputError when K is to be chosen without a candidate or a
+/// sample frame, and where training and the frame encoder do.
+DefaultDictionary train_default_dictionary(const datasets::SeriesReader& series,
+                                           const dictionary::CoresetHierarchy& coresets,
+                                           const DefaultDictionaryOptions& options,
+                                           const DictionaryCandidateCallback& on_candidate = {});
+/// The same, building the coreset hierarchy first (reporting to coreset_progress).
+DefaultDictionary train_default_dictionary(const datasets::SeriesReader& series,
+                                           const DefaultDictionaryOptions& options,
+                                           const Progress& coreset_progress = {},
+                                           const DictionaryCandidateCallback& on_candidate = {});
+
+}  // namespace volreel::encoder

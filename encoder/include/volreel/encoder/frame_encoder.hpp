@@ -1,0 +1,88 @@
+// frame_encoder.hpp: one frame -> a frame file (MTV-Player §3.2): every brick of the hierarchy
+// (pyramid.hpp) coded by its CodingSettings — sparse coding of its 6³ blocks against the
+// dictionary with quantization, or zfp — and the node table with bottom-up histograms.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "volreel/datasets/volume.hpp"
+#include "volreel/dictionary/dictionary.hpp"
+#include "volreel/dictionary/omp.hpp"
+#include "volreel/encoder/coding_settings.hpp"
+
+namespace volreel::encoder {
+
+namespace detail {
+struct QuantizeOptions;
+}
+
+/// Where a frame file's bytes go. The parts from frame_tables to zfp_streams sum to the file's
+/// size; the last three are shares of the payload parts.
+struct ByteBreakdown {
+  std::size_t frame_tables = 0;     ///< header, level table, node table, brick offsets
+  std::size_t constant_bricks = 0;  ///< 4-byte values
+  std::size_t brick_headers = 0;    ///< ksvd: 20 bytes per coded brick (dequantization, mean bits)
+  std::size_t block_entries = 0;    ///< ksvd: 4 + b bits per block (b-bit mean, 4-bit sparsity)
+  std::size_t codes = 0;            ///< ksvd: 2 bytes per code (10-bit atom, 6-bit value)
+  std::size_t alignment = 0;        ///< ksvd: payloads padded to a multiple of 4 bytes
+  std::size_t zfp_streams = 0;      ///< zfp bricks
+  std::size_t coarse_levels = 0;    ///< payload bytes of the levels above the finest
+  /// Payload bytes in proportion to the stored voxels that are aprons or padding (outside the
+  /// level), brick by brick: an estimate of what the brick layout costs.
+  double aprons_and_padding = 0;
+  /// Code bytes of the finest level, each block's weighted by the share of its voxels that are
+  /// the level's own (interior, inside the volume): all a frame would cost if block means, tables,
+  /// coarse levels, aprons and padding were free, at the same codes.
+  double finest_owned_codes = 0;
+  ByteBreakdown& operator+=(const ByteBreakdown& o);
+  std::size_t total() const {
+    return frame_tables + constant_bricks + brick_headers + block_entries + codes + alignment +
+           zfp_streams;
+  }
+};
+
+struct FrameStats {
+  std::size_t bricks = 0, constant_bricks = 0, empty_nodes = 0;
+  std::size_t blocks = 0, codes = 0;  ///< coded blocks and coefficients (ksvd)
+  std::size_t bytes = 0;
+  double seconds = 0;
+  double seconds_pyramid = 0, seconds_bricks = 0, seconds_omp = 0,
+         seconds_quantize = 0;  ///< parts of seconds
+  /// Squared error summed over every value of every coded block (all levels, aprons included):
+  /// of the unquantized sparse approximation, and of what the payload decodes to. Their ratio is
+  /// the PSNR lost to quantization: 10·log10(quantized / unquantized).
+  double unquantized_squared_error = 0, quantized_squared_error = 0;
+  ByteBreakdown breakdown;
+  std::array<std::size_t, 16> sparsity_histogram{};   ///< coded blocks (ksvd) by atom count
+  std::array<std::size_t, 13> mean_bits_histogram{};  ///< coded bricks (ksvd) by mean bits
+};
+
+/// Encodes frames with fixed settings and dictionary; safe to use from one thread at a time
+/// (it parallelizes inside with OpenMP).
+class FrameEncoder {
+ public:
+  /// dictionary: required for ksvd (K ≤ 1024, M = 6). Throws InputError on bad settings.
+  FrameEncoder(const dictionary::Dictionary* dictionary, CodingSettings settings);
+  /// Frame t -> the frame file's bytes.
+  std::vector<std::byte> encode(std::size_t t, const Volume& frame,
+                                FrameStats* stats = nullptr) const;
+  /// One stored brick (36³ values, x fastest) -> its payload: a 4-byte constant, a ksvd payload
+  /// or a zfp stream (the same coding encode() applies to every brick).
+  std::vector<std::byte> encode_brick(std::span<const float> brick) const;
+  const CodingSettings& settings() const { return settings_; }
+  /// The Lagrangian rule's minimum atom gain, lagrangian_factor·m·ε² (data units²); 0 for the
+  /// other rules and codecs.
+  double atom_gain_threshold() const;
+
+ private:
+  const dictionary::Dictionary* dictionary_;
+  CodingSettings settings_;
+  std::shared_ptr<const dictionary::BatchOmp> omp_;
+  detail::QuantizeOptions quantize_options() const;
+};
+
+}  // namespace volreel::encoder

@@ -1,0 +1,64 @@
+// series_encoder.hpp: a whole series -> a container (a NAME.vreel directory, format/SPEC.md):
+// the manifest, the dictionary, and every frame (frame_encoder.hpp), resumable after an
+// interruption.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <utility>
+
+#include <nlohmann/json.hpp>
+
+#include "volreel/datasets/series.hpp"
+#include "volreel/datasets/volume.hpp"
+#include "volreel/encoder/coding_settings.hpp"
+#include "volreel/encoder/frame_encoder.hpp"
+
+namespace volreel::encoder {
+
+/// The whole series into a container.
+struct EncodeJob {
+  CodingSettings coding;                  ///< value range filled in by encode_series if both are 0
+  std::filesystem::path dictionary_file;  ///< ksvd: copied into the container as dictionary.bin
+  /// ksvd: store the atoms in the container as binary16 (half the dictionary's bytes) and code
+  /// against the rounded atoms, so the decoder's atoms are the encoder's; the PSNR barely moves
+  /// (docs/benchmarks.md).
+  bool half_atoms = true;
+  bool resume = false;         ///< keep frames already written and valid
+  bool overwrite = false;      ///< replace an existing complete container
+  std::size_t max_frames = 0;  ///< 0: every frame
+  nlohmann::json provenance;   ///< stored under "encoder" in the manifest
+};
+struct EncodeSummary {
+  std::size_t frames = 0, encoded = 0, skipped = 0;
+  std::uint64_t container_bytes = 0;
+  double bps = 0;
+  double seconds = 0;  ///< encoding only (skipped frames excluded)
+  double mvoxels_per_s = 0;
+  double unquantized_squared_error = 0, quantized_squared_error = 0;  ///< FrameStats', summed
+  ByteBreakdown breakdown;                                            ///< of the frames encoded
+  std::array<std::size_t, 16> sparsity_histogram{};                   ///< FrameStats', summed
+  std::array<std::size_t, 13> mean_bits_histogram{};                  ///< FrameStats', summed
+  double seconds_pyramid = 0, seconds_bricks = 0, seconds_omp = 0, seconds_quantize = 0;
+
+  /// The PSNR lost to quantization over the frames encoded, 10·log10(quantized / unquantized
+  /// squared error), in dB; 0 when no block was sparse-coded.
+  double quantization_loss_db() const;
+  /// ByteBreakdown::finest_owned_codes in bits per voxel of the container, when this run wrote
+  /// every frame (the container's bytes are then all accounted for); std::nullopt otherwise.
+  std::optional<double> finest_owned_codes_bps() const;
+};
+/// Writes OUT (a NAME.vreel directory). Frames go to temporary names renamed when complete; the
+/// manifest is rewritten after each frame. Progress: frames done, total, status with MVoxel/s.
+/// Throws InputError/FormatError.
+EncodeSummary encode_series(const datasets::SeriesReader& series, const std::filesystem::path& out,
+                            const EncodeJob& job, const Progress& progress = {});
+
+/// Value range of the first `frames` frames (0: all).
+std::pair<double, double> value_range(const datasets::SeriesReader& series, std::size_t frames,
+                                      const Progress& progress = {});
+
+}  // namespace volreel::encoder

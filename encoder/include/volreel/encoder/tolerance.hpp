@@ -1,0 +1,67 @@
+// tolerance.hpp: choosing ε, the tolerance of variable rate — given, from a PSNR, from a target
+// size in bits per voxel (rate control: trial encodes of sample frames), or the ε the dictionary
+// was trained at.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+
+#include "volreel/datasets/series.hpp"
+#include "volreel/datasets/volume.hpp"
+#include "volreel/dictionary/dictionary.hpp"
+#include "volreel/encoder/coding_settings.hpp"
+#include "volreel/format/dictionary_file.hpp"
+
+namespace volreel::encoder {
+
+/// Rate control for --bps: ε such that the container's bps, estimated from `sample_frames` evenly
+/// spaced frames (encoded in memory) plus the dictionary, is within `relative` of target_bps.
+/// Returns ε and the estimated bps.
+struct RateSearch {
+  double tolerance = 0, estimated_bps = 0;
+  int iterations = 0;
+};
+RateSearch search_tolerance(const datasets::SeriesReader& series,
+                            const dictionary::Dictionary& dictionary,
+                            std::uint64_t dictionary_bytes, CodingSettings settings,
+                            double target_bps, std::size_t frames, std::size_t sample_frames = 3,
+                            double relative = 0.03, const Progress& progress = {});
+
+/// What ε is asked to be: at most one of tolerance, psnr and bps is set (none: the dictionary's
+/// training ε, else dictionary::default_encoding_psnr).
+struct ToleranceRequest {
+  std::optional<double> tolerance;     ///< ε itself, data units
+  std::optional<double> psnr;          ///< dB: ε = range·10^(−psnr/20)
+  std::optional<double> bps;           ///< the whole container's bits per voxel (> 0)
+  std::size_t rate_sample_frames = 3;  ///< bps: frames encoded per trial
+  double rate_relative = 0.03;         ///< bps: how close to the target the search stops
+};
+
+/// Where choose_tolerance took ε from.
+enum class ToleranceSource { fixed_rate, tolerance, psnr, bps, dictionary_training, default_psnr };
+
+struct ToleranceChoice {
+  double tolerance = 0;  ///< ε, data units (0 at fixed rate)
+  ToleranceSource source = ToleranceSource::default_psnr;
+  RateSearch rate_search;  ///< source bps: the search that found ε
+};
+
+/// ε for coding the first `frames` frames of `series` with `settings` (value range set) against
+/// `dictionary`, as the container will store it (`dictionary_bytes`: its file's size): none at
+/// fixed rate (settings.fixed_sparsity > 0); else, in this order, request.tolerance,
+/// request.psnr over the value range, request.bps by search_tolerance, the tolerance the
+/// dictionary was trained at, and dictionary::default_encoding_psnr. Throws InputError where
+/// search_tolerance does (a target below what the dictionary and manifest alone take).
+ToleranceChoice choose_tolerance(const datasets::SeriesReader& series,
+                                 const format::DictionaryFile& dictionary,
+                                 std::uint64_t dictionary_bytes, const CodingSettings& settings,
+                                 std::size_t frames, const ToleranceRequest& request,
+                                 const Progress& progress = {});
+
+/// ε at which to train a dictionary for the encode when none is given, over `value_range` (max −
+/// min of the frames): request.tolerance, else request.psnr, else (also for a bps target, which
+/// needs a dictionary to search with) dictionary::default_encoding_psnr.
+double tolerance_to_train_at(const ToleranceRequest& request, double value_range);
+
+}  // namespace volreel::encoder

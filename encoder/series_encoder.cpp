@@ -1,0 +1,367 @@
+// series_encoder.cpp: the series-to-container loop — the manifest with the coding choices a
+// resumed encode must repeat, the dictionary as the container stores it, resume (frames already
+// written and valid are kept) and the frame loop.
+#include "volreel/encoder/series_encoder.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <set>
+#include <string>
+
+#include "detail.hpp"
+#include "volreel/dictionary/dictionary.hpp"
+#include "volreel/format/container.hpp"
+#include "volreel/format/crc32c.hpp"
+#include "volreel/format/dictionary_file.hpp"
+#include "volreel/format/error.hpp"
+
+namespace volreel::encoder {
+
+namespace fs = std::filesystem;
+using detail::Clock;
+using detail::seconds_since;
+
+namespace {
+
+std::vector<std::byte> read_file_bytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw format::FormatError(path, "cannot open");
+  std::vector<char> chars((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::vector<std::byte> bytes(chars.size());
+  if (!chars.empty()) std::memcpy(bytes.data(), chars.data(), chars.size());
+  return bytes;
+}
+
+/// The coding choices recorded in a manifest's provenance, with the values containers written
+/// before a field existed used: the pursuit, the mean bits, and the variable-rate rule ("tolerance"
+/// when absent) with its parameters.
+nlohmann::json coding_choices_of(const format::Manifest& m) {
+  nlohmann::json r = nlohmann::json::object();
+  if (m.codec != format::Codec::ksvd) return r;
+  // Containers written before the field existed all used OMP.
+  r["pursuit"] =
+      m.encoder.is_object() && m.encoder.contains("pursuit")
+          ? m.encoder["pursuit"]
+          : nlohmann::json(dictionary::pursuit_name(dictionary::AtomSelection::correlation));
+  for (const char* key : {"mean_bits", "mean_step_factor"})
+    if (m.encoder.is_object() && m.encoder.contains(key)) r[key] = m.encoder[key];
+  if (m.fixed_sparsity != 0) return r;
+  const bool has = m.encoder.is_object() && m.encoder.contains("rate_rule");
+  r["rate_rule"] =
+      has ? m.encoder["rate_rule"] : nlohmann::json(rate_rule_name(VariableRateRule::tolerance));
+  for (const char* key : {"lagrangian_factor", "weight_owned_voxels"})
+    if (m.encoder.is_object() && m.encoder.contains(key)) r[key] = m.encoder[key];
+  // Containers written before the field existed coded every level to ε.
+  if (r["rate_rule"] == rate_rule_name(VariableRateRule::lagrangian))
+    r["level_tolerance_factor"] =
+        m.encoder.is_object() && m.encoder.contains("level_tolerance_factor")
+            ? m.encoder["level_tolerance_factor"]
+            : nlohmann::json(1.0);
+  return r;
+}
+
+/// The settings that differ between an existing container's manifest and this run's, as
+/// "name old (this run: new)" joined by "; " (empty: the same, so --resume may continue it).
+std::string settings_difference(const format::Manifest& old, const format::Manifest& now) {
+  std::vector<std::string> out;
+  const auto differ = [&](const std::string& name, const nlohmann::json& a,
+                          const nlohmann::json& b) {
+    if (a != b) out.push_back(name + " " + a.dump() + " (this run: " + b.dump() + ")");
+  };
+  const auto text = [](const auto& v) { return nlohmann::json(v); };
+  const auto codec = [](format::Codec c) { return nlohmann::json(codec_name(c)); };
+  differ("dims", text(old.dims), text(now.dims));
+  differ("codec", codec(old.codec), codec(now.codec));
+  differ("tolerance", text(old.tolerance), text(now.tolerance));
+  differ("fixed sparsity", text(old.fixed_sparsity), text(now.fixed_sparsity));
+  differ("zfp accuracy", text(old.zfp_accuracy), text(now.zfp_accuracy));
+  differ("value range", text(std::vector<double>{old.value_min, old.value_max}),
+         text(std::vector<double>{now.value_min, now.value_max}));
+  differ("frames", text(old.frames.size()), text(now.frames.size()));
+  const auto dictionary = [](const format::Manifest& m) {
+    return m.dictionary
+               ? nlohmann::json{{"crc32c", m.dictionary->crc32c}, {"bytes", m.dictionary->bytes}}
+               : nlohmann::json(nullptr);
+  };
+  differ("dictionary", dictionary(old), dictionary(now));
+  // The coding choices recorded in the provenance (pursuit, mean bits, rate rule and its
+  // parameters).
+  const nlohmann::json a = coding_choices_of(old), b = coding_choices_of(now);
+  std::set<std::string> keys;
+  for (const auto& [key, value] : a.items()) keys.insert(key);
+  for (const auto& [key, value] : b.items()) keys.insert(key);
+  for (const auto& key : keys)
+    differ(key, a.contains(key) ? a[key] : nlohmann::json(nullptr),
+           b.contains(key) ? b[key] : nlohmann::json(nullptr));
+  std::string joined;
+  for (const auto& d : out) joined += (joined.empty() ? "" : "; ") + d;
+  return joined;
+}
+
+/// The manifest of a new, incomplete container of the first `frames` frames of a series coded
+/// with `coding` (its value range set): the volume, the codec and its parameters, and the
+/// provenance with the coding choices a resumed encode must repeat.
+format::Manifest new_manifest(const datasets::SeriesInfo& info, std::size_t frames,
+                              const CodingSettings& coding, const nlohmann::json& provenance) {
+  format::Manifest m;
+  m.program_version = VOLREEL_VERSION;
+  m.dims = {static_cast<std::uint32_t>(info.dims.x), static_cast<std::uint32_t>(info.dims.y),
+            static_cast<std::uint32_t>(info.dims.z)};
+  m.spacing = info.spacing;
+  m.variable = info.variable;
+  m.source = info.source;
+  m.timestamps.assign(info.timestamps.begin(),
+                      info.timestamps.begin() +
+                          static_cast<std::ptrdiff_t>(std::min(frames, info.timestamps.size())));
+  while (m.timestamps.size() < frames)
+    m.timestamps.push_back(static_cast<double>(m.timestamps.size()));
+  m.levels = static_cast<std::uint32_t>(format::level_geometry(m.dims).size());
+  m.codec = coding.codec;
+  m.block_size = coding.codec == format::Codec::ksvd ? 6 : 0;
+  m.tolerance =
+      coding.codec == format::Codec::ksvd && coding.fixed_sparsity == 0 ? coding.tolerance : 0;
+  m.fixed_sparsity = static_cast<std::uint32_t>(coding.fixed_sparsity);
+  m.zfp_accuracy = coding.codec == format::Codec::zfp ? coding.zfp_accuracy : 0;
+  m.value_min = coding.value_min;
+  m.value_max = coding.value_max;
+  m.frames.assign(frames, std::nullopt);
+  m.encoder = provenance;
+  if (!m.encoder.is_object()) m.encoder = nlohmann::json::object();
+  if (coding.codec == format::Codec::ksvd) {
+    // How each block chose its atoms and each brick its mean bits: a resumed encode must choose
+    // them the same way.
+    m.encoder["pursuit"] = dictionary::pursuit_name(coding.selection);
+    m.encoder["mean_bits"] =
+        coding.mean_bits >= 0 ? nlohmann::json(coding.mean_bits) : nlohmann::json("auto");
+    if (coding.mean_bits < 0 && coding.fixed_sparsity == 0)
+      m.encoder["mean_step_factor"] = coding.mean_step_factor;
+  }
+  if (coding.codec == format::Codec::ksvd && coding.fixed_sparsity == 0) {
+    // How variable rate spent its atoms: a resumed encode must spend them the same way.
+    m.encoder["rate_rule"] = rate_rule_name(coding.rule);
+    if (coding.rule == VariableRateRule::lagrangian) {
+      m.encoder["lagrangian_factor"] = coding.lagrangian_factor;
+      m.encoder["weight_owned_voxels"] = coding.weight_owned_voxels;
+      m.encoder["level_tolerance_factor"] = coding.level_tolerance_factor;
+    }
+  }
+  return m;
+}
+
+/// The dictionary file as the container stores it, and the dictionary the frames are coded
+/// against (its atoms as stored).
+struct StoredDictionary {
+  std::vector<std::byte> bytes;
+  dictionary::Dictionary dictionary;
+};
+
+/// Reads and validates the job's dictionary file, its atoms rounded to binary16 if the job asks.
+StoredDictionary stored_dictionary(const EncodeJob& job) {
+  if (job.dictionary_file.empty()) throw InputError("the ksvd codec needs a dictionary file");
+  StoredDictionary d;
+  d.bytes = read_file_bytes(job.dictionary_file);
+  auto file = format::parse_dictionary_file(d.bytes, job.dictionary_file);  // validates it
+  if (job.half_atoms && !file.half_atoms) {
+    file = format::with_half_atoms(std::move(file));
+    d.bytes = format::serialize_dictionary_file(file);
+  }
+  d.dictionary = dictionary::from_file(file);
+  return d;
+}
+
+/// An existing container at `out`: resume it (the same settings; its frame list goes into m) or
+/// refuse unless told to overwrite. Then the frames directory without leftover temporaries, and
+/// the dictionary file. Returns whether the encode resumes.
+bool prepare_container(const fs::path& out, const EncodeJob& job, format::Manifest& m,
+                       const std::vector<std::byte>& dictionary_bytes) {
+  const fs::path manifest_path = out / "manifest.json";
+  bool resuming = false;
+  if (fs::exists(manifest_path)) {
+    if (job.resume) {
+      const format::Container old(out, true);
+      if (const std::string d = settings_difference(old.manifest(), m); !d.empty())
+        throw InputError("'" + out.string() + "' was encoded with other settings: " + d +
+                         "; cannot --resume it: give the same options (pursuit: --pursuit, "
+                         "level_tolerance_factor: --level-factor, mean_bits: --mean-bits, "
+                         "rate_rule: --rate-rule) or --overwrite to start again");
+      m.frames = old.manifest().frames;
+      resuming = true;
+    } else if (!job.overwrite) {
+      throw InputError(
+          "'" + out.string() +
+          "' already holds a container: give --resume to continue it or --overwrite to replace it");
+    }
+  }
+  if (!resuming && fs::exists(out)) {
+    std::error_code ec;
+    fs::remove_all(out / "frames", ec);
+    fs::remove(manifest_path, ec);
+    fs::remove(out / "dictionary.bin", ec);
+  }
+  fs::create_directories(out / "frames");
+  // Leftover temporaries of an interrupted run.
+  for (const auto& entry : fs::directory_iterator(out / "frames"))
+    if (entry.path().filename().string().find(".tmp-") != std::string::npos)
+      fs::remove(entry.path());
+  if (m.dictionary) {
+    bool present = false;
+    if (resuming && fs::exists(out / "dictionary.bin")) {
+      const auto existing = read_file_bytes(out / "dictionary.bin");
+      present = existing == dictionary_bytes;
+    }
+    if (!present) format::write_container_file(out, "dictionary.bin", dictionary_bytes);
+  }
+  return resuming;
+}
+
+/// Which frames of a resumed container are already there and valid: the manifest's CRC, or
+/// (written but not yet in the manifest) a full structural and CRC check. Updates m's frame list
+/// (valid frames in, the rest out) and returns a flag per frame.
+std::vector<char> frames_already_written(const fs::path& out, format::Codec codec,
+                                         format::Manifest& m) {
+  const std::size_t frames = m.frames.size();
+  std::vector<char> done(frames, 0);
+  for (std::size_t t = 0; t < frames; ++t) {
+    const fs::path path = out / format::frame_file_name(t);
+    if (!fs::exists(path)) {
+      m.frames[t].reset();
+      continue;
+    }
+    try {
+      const format::FrameFile f(path);
+      f.view().check_payload_crc();
+      const std::uint32_t crc = format::manifest_crc(f.view().bytes());
+      const auto& h = f.view().header();
+      const bool matches = h.frame_index == t && h.codec == static_cast<std::uint32_t>(codec) &&
+                           (!m.frames[t] || (m.frames[t]->crc32c == crc &&
+                                             m.frames[t]->bytes == f.view().bytes().size()));
+      if (matches) {
+        m.frames[t] =
+            format::ManifestFrame{format::frame_file_name(t), f.view().bytes().size(), crc};
+        done[t] = 1;
+      } else {
+        m.frames[t].reset();
+      }
+    } catch (const format::FormatError&) {
+      m.frames[t].reset();
+    }
+  }
+  return done;
+}
+
+/// Adds one encoded frame's statistics to the summary.
+void add_frame(const FrameStats& st, EncodeSummary& summary) {
+  ++summary.encoded;
+  summary.unquantized_squared_error += st.unquantized_squared_error;
+  summary.quantized_squared_error += st.quantized_squared_error;
+  summary.seconds_pyramid += st.seconds_pyramid;
+  summary.seconds_bricks += st.seconds_bricks;
+  summary.seconds_omp += st.seconds_omp;
+  summary.seconds_quantize += st.seconds_quantize;
+  summary.breakdown += st.breakdown;
+  for (std::size_t k = 0; k < st.sparsity_histogram.size(); ++k)
+    summary.sparsity_histogram[k] += st.sparsity_histogram[k];
+  for (std::size_t k = 0; k < st.mean_bits_histogram.size(); ++k)
+    summary.mean_bits_histogram[k] += st.mean_bits_histogram[k];
+}
+
+}  // namespace
+
+double EncodeSummary::quantization_loss_db() const {
+  if (!(unquantized_squared_error > 0)) return 0;
+  return 10 * std::log10(quantized_squared_error / unquantized_squared_error);
+}
+
+std::optional<double> EncodeSummary::finest_owned_codes_bps() const {
+  if (skipped != 0 || container_bytes == 0) return std::nullopt;
+  return bps * breakdown.finest_owned_codes / static_cast<double>(container_bytes);
+}
+
+std::pair<double, double> value_range(const datasets::SeriesReader& series, std::size_t frames,
+                                      const Progress& progress) {
+  const std::size_t n = frames ? std::min(frames, series.info().frames) : series.info().frames;
+  std::vector<float> frame(series.info().dims.voxels());
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (std::size_t t = 0; t < n; ++t) {
+    series.read_frame(t, frame);
+    const auto [mn, mx] = std::minmax_element(frame.begin(), frame.end());
+    lo = std::min(lo, static_cast<double>(*mn));
+    hi = std::max(hi, static_cast<double>(*mx));
+    progress.report(static_cast<double>(t + 1), static_cast<double>(n), "value range");
+  }
+  return {lo, hi};
+}
+
+EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path& out,
+                            const EncodeJob& job, const Progress& progress) {
+  const auto& info = series.info();
+  const std::size_t frames = job.max_frames ? std::min(job.max_frames, info.frames) : info.frames;
+  if (frames == 0) throw InputError("the series has no frames");
+  CodingSettings coding = job.coding;
+  if (coding.value_min == 0 && coding.value_max == 0)
+    std::tie(coding.value_min, coding.value_max) = value_range(series, frames);
+
+  format::Manifest m = new_manifest(info, frames, coding, job.provenance);
+  std::optional<StoredDictionary> dict;
+  if (coding.codec == format::Codec::ksvd) {
+    dict = stored_dictionary(job);
+    m.dictionary = format::ManifestDictionary{
+        "dictionary.bin", dict->bytes.size(), format::manifest_crc(dict->bytes),
+        static_cast<std::uint32_t>(dict->dictionary.atom_count())};
+  }
+  const FrameEncoder encoder(dict ? &dict->dictionary : nullptr, coding);
+
+  // 1. An existing container: resume (same settings) or refuse unless told to overwrite.
+  const std::vector<std::byte> no_dictionary;
+  const bool resuming = prepare_container(out, job, m, dict ? dict->bytes : no_dictionary);
+
+  // 2. Which frames are already there and valid.
+  EncodeSummary summary;
+  summary.frames = frames;
+  std::vector<char> done(frames, 0);
+  if (resuming) {
+    done = frames_already_written(out, coding.codec, m);
+    summary.skipped = static_cast<std::size_t>(std::count(done.begin(), done.end(), 1));
+  }
+  m.complete = false;
+  format::write_manifest(out, m);
+
+  // 3. Encode the rest, one frame in memory at a time.
+  Volume frame(info.dims);
+  const double voxels = static_cast<double>(info.dims.voxels());
+  for (std::size_t t = 0; t < frames; ++t) {
+    if (done[t]) continue;
+    series.read_frame(t, frame.data);
+    FrameStats st;
+    const auto start = Clock::now();
+    const std::vector<std::byte> bytes = encoder.encode(t, frame, &st);
+    summary.seconds += seconds_since(start);
+    format::write_container_file(out, format::frame_file_name(t), bytes);
+    m.frames[t] = format::ManifestFrame{format::frame_file_name(t), bytes.size(),
+                                        format::manifest_crc(bytes)};
+    format::write_manifest(out, m);
+    add_frame(st, summary);
+    char status[64];
+    std::snprintf(status, sizeof status, "%.1f MVoxel/s",
+                  voxels * static_cast<double>(summary.encoded) / 1e6 / summary.seconds);
+    progress.report(static_cast<double>(summary.skipped + summary.encoded),
+                    static_cast<double>(frames), status);
+  }
+  m.complete = true;
+  format::write_manifest(out, m);
+  const format::Container written(out);
+  summary.container_bytes = written.total_bytes();
+  summary.bps =
+      8.0 * static_cast<double>(summary.container_bytes) / (voxels * static_cast<double>(frames));
+  summary.mvoxels_per_s =
+      summary.seconds > 0 ? voxels * static_cast<double>(summary.encoded) / 1e6 / summary.seconds
+                          : 0;
+  return summary;
+}
+
+}  // namespace volreel::encoder

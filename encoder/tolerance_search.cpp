@@ -1,0 +1,123 @@
+// tolerance_search.cpp: choosing ε — the order of the sources (choose_tolerance), and rate
+// control for a size target: bracket ε in log space with trial encodes of sample frames, then
+// bisect geometrically (search_tolerance).
+#include "volreel/encoder/tolerance.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "detail.hpp"
+#include "volreel/encoder/frame_encoder.hpp"
+
+namespace volreel::encoder {
+
+namespace {
+
+/// Manifest bytes are counted in bps; before it exists, estimate them.
+double manifest_estimate(std::size_t frames) {
+  return 900.0 + 70.0 * static_cast<double>(frames);
+}
+
+}  // namespace
+
+std::vector<Volume> detail::evenly_spaced_frames(const datasets::SeriesReader& series,
+                                                 std::size_t frames, std::size_t count) {
+  std::vector<Volume> samples;
+  const std::size_t n = std::min(count, frames);
+  for (std::size_t i = 0; i < n; ++i)
+    samples.push_back(series.read_frame(n == 1 ? frames / 2 : i * (frames - 1) / (n - 1)));
+  return samples;
+}
+
+RateSearch search_tolerance(const datasets::SeriesReader& series,
+                            const dictionary::Dictionary& dictionary,
+                            std::uint64_t dictionary_bytes, CodingSettings settings,
+                            double target_bps, std::size_t frames, std::size_t sample_frames,
+                            double relative, const Progress& progress) {
+  const auto& info = series.info();
+  if (frames == 0) frames = info.frames;
+  const double voxels = static_cast<double>(info.dims.voxels()) * static_cast<double>(frames);
+  const double fixed_bytes = static_cast<double>(dictionary_bytes) + manifest_estimate(frames);
+  const double floor_bps = 8 * fixed_bytes / voxels;
+  if (!(target_bps > floor_bps))
+    throw InputError("--bps " + std::to_string(target_bps) +
+                     " is below what the dictionary and manifest alone take (" +
+                     std::to_string(floor_bps) +
+                     " bps): use a smaller dictionary (volreel train --atoms) or more frames");
+  // 1. Sample frames, evenly spaced, in memory.
+  const std::vector<Volume> samples = detail::evenly_spaced_frames(series, frames, sample_frames);
+  const double range = settings.value_max - settings.value_min;
+  settings.fixed_sparsity = 0;
+  const auto estimate = [&](double eps) {
+    settings.tolerance = eps;
+    const FrameEncoder encoder(&dictionary, settings);
+    double bytes = 0;
+    for (std::size_t i = 0; i < samples.size(); ++i)
+      bytes += static_cast<double>(encoder.encode(i, samples[i]).size());
+    return 8 *
+           (bytes / static_cast<double>(samples.size()) * static_cast<double>(frames) +
+            fixed_bytes) /
+           voxels;
+  };
+  // 2. Bracket in log ε (bps falls as ε grows), then bisect geometrically.
+  RateSearch r;
+  double lo = range * 1e-4, hi = range * 1e-2;
+  double bps_lo = estimate(lo), bps_hi = estimate(hi);
+  r.iterations = 2;
+  while (bps_lo < target_bps && lo > range * 1e-9) lo /= 4, bps_lo = estimate(lo), ++r.iterations;
+  while (bps_hi > target_bps && hi < range) hi *= 4, bps_hi = estimate(hi), ++r.iterations;
+  r.tolerance = std::abs(bps_lo - target_bps) < std::abs(bps_hi - target_bps) ? lo : hi;
+  r.estimated_bps = r.tolerance == lo ? bps_lo : bps_hi;
+  for (int i = 0; i < 30 && std::abs(r.estimated_bps - target_bps) > relative * target_bps; ++i) {
+    const double mid = std::sqrt(lo * hi);
+    const double bps = estimate(mid);
+    ++r.iterations;
+    r.tolerance = mid;
+    r.estimated_bps = bps;
+    (bps > target_bps ? lo : hi) = mid;
+    progress.report(i + 1, 30,
+                    "eps " + std::to_string(mid) + " -> " + std::to_string(bps) + " bps");
+  }
+  return r;
+}
+
+ToleranceChoice choose_tolerance(const datasets::SeriesReader& series,
+                                 const format::DictionaryFile& dictionary,
+                                 std::uint64_t dictionary_bytes, const CodingSettings& settings,
+                                 std::size_t frames, const ToleranceRequest& request,
+                                 const Progress& progress) {
+  const double range = settings.value_max - settings.value_min;
+  ToleranceChoice choice;
+  if (settings.fixed_sparsity > 0) {
+    choice.source = ToleranceSource::fixed_rate;
+  } else if (request.tolerance) {
+    choice.source = ToleranceSource::tolerance;
+    choice.tolerance = *request.tolerance;
+  } else if (request.psnr) {
+    choice.source = ToleranceSource::psnr;
+    choice.tolerance = dictionary::tolerance_for_psnr(*request.psnr, range);
+  } else if (request.bps) {
+    choice.source = ToleranceSource::bps;
+    choice.rate_search = search_tolerance(
+        series, dictionary::from_file(dictionary), dictionary_bytes, settings, *request.bps, frames,
+        request.rate_sample_frames, request.rate_relative, progress);
+    choice.tolerance = choice.rate_search.tolerance;
+  } else if (dictionary.training.tolerance > 0) {
+    choice.source = ToleranceSource::dictionary_training;
+    choice.tolerance = dictionary.training.tolerance;
+  } else {
+    choice.source = ToleranceSource::default_psnr;
+    choice.tolerance = dictionary::tolerance_for_psnr(dictionary::default_encoding_psnr, range);
+  }
+  return choice;
+}
+
+double tolerance_to_train_at(const ToleranceRequest& request, double value_range) {
+  if (request.tolerance) return *request.tolerance;
+  return dictionary::tolerance_for_psnr(
+      request.psnr ? *request.psnr : dictionary::default_encoding_psnr, value_range);
+}
+
+}  // namespace volreel::encoder

@@ -1,0 +1,101 @@
+// default_dictionary_test.cpp: the dictionary an encode trains when it is given none
+// (encoder/default_dictionary.hpp) — K chosen by the estimated container size, each K reported,
+// the provenance of the one kept — on a tiny generated series.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <string>
+#include <vector>
+
+#include "test_util.hpp"
+#include "volreel/datasets/analytic.hpp"
+#include "volreel/datasets/series.hpp"
+#include "volreel/dictionary/coreset.hpp"
+#include "volreel/dictionary/dictionary.hpp"
+#include "volreel/encoder/encoder.hpp"
+
+namespace volreel {
+namespace {
+
+class DefaultDictionary : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    datasets::AnalyticParams p;
+    p.field = datasets::AnalyticField::blobs;
+    p.dims = {40, 36, 30};
+    p.frames = 3;
+    {
+      datasets::RawSeriesWriter w(dir_ / "series", p.dims, "blobs");
+      datasets::generate_analytic(p, w);
+    }
+    series_ = datasets::open_series(dir_ / "series");
+    options_.coding.value_min = 0;
+    options_.coding.value_max = 1.5;
+    options_.tolerance = 0.01;
+    options_.candidate_atoms = {64, 32};
+    options_.sample_frames = 2;
+    options_.coreset.coreset_voxels = 216 * 2000;
+    options_.coreset.levels = 2;
+  }
+
+  test::TempDir dir_{"default-dictionary"};
+  std::unique_ptr<datasets::SeriesReader> series_;
+  encoder::DefaultDictionaryOptions options_;
+};
+
+TEST_F(DefaultDictionary, KeepsTheSizeThatGivesTheSmallestContainer) {
+  std::vector<encoder::DictionaryCandidate> reported;
+  const auto chosen = encoder::train_default_dictionary(
+      *series_, options_, {},
+      [&](const encoder::DictionaryCandidate& c) { reported.push_back(c); });
+  ASSERT_EQ(chosen.candidates.size(), 2u);
+  ASSERT_EQ(reported.size(), 2u);
+  for (std::size_t i = 0; i < 2; ++i) {
+    const auto& c = chosen.candidates[i];
+    EXPECT_EQ(c.atoms, options_.candidate_atoms[i]);
+    EXPECT_EQ(reported[i].atoms, c.atoms);
+    EXPECT_EQ(reported[i].estimated_bytes, c.estimated_bytes);
+    // Atoms stored in binary16, as the container stores them, and the frames' bytes on top.
+    EXPECT_EQ(c.dictionary_bytes, static_cast<double>(format::dictionary_file_size(
+                                      static_cast<std::uint64_t>(c.atoms), 216, true)));
+    EXPECT_GT(c.estimated_bytes, c.dictionary_bytes);
+  }
+  const auto best = std::min_element(
+      chosen.candidates.begin(), chosen.candidates.end(),
+      [](const auto& a, const auto& b) { return a.estimated_bytes < b.estimated_bytes; });
+  EXPECT_EQ(chosen.dictionary.atom_count(), best->atoms);
+  EXPECT_EQ(chosen.dictionary.block_length(), 216);
+  // The provenance records how it was trained.
+  EXPECT_EQ(chosen.training.tolerance, options_.tolerance);
+  EXPECT_EQ(chosen.training.coreset_voxels, options_.coreset.coreset_voxels);
+  EXPECT_EQ(chosen.training.coreset_levels, 2u);
+  EXPECT_EQ(chosen.training.training_frames, 3u);
+  EXPECT_GT(chosen.training.iterations, 0u);
+  EXPECT_FALSE(chosen.training.flat);
+  // The dictionary codes the series' frames: a frame encoder accepts it.
+  auto coding = options_.coding;
+  coding.tolerance = options_.tolerance;
+  EXPECT_GT(
+      encoder::FrameEncoder(&chosen.dictionary, coding).encode(0, series_->read_frame(0)).size(),
+      0u);
+}
+
+TEST_F(DefaultDictionary, AGivenSizeIsTrainedWithoutEstimates) {
+  options_.atoms = 32;
+  const auto chosen = encoder::train_default_dictionary(*series_, options_);
+  ASSERT_EQ(chosen.candidates.size(), 1u);
+  EXPECT_EQ(chosen.candidates[0].atoms, 32);
+  EXPECT_EQ(chosen.candidates[0].estimated_bytes, 0);
+  EXPECT_EQ(chosen.dictionary.atom_count(), 32);
+}
+
+TEST_F(DefaultDictionary, ChoosingNeedsACandidateAndASampleFrame) {
+  options_.candidate_atoms.clear();
+  EXPECT_THROW(encoder::train_default_dictionary(*series_, options_), InputError);
+  options_.candidate_atoms = {32};
+  options_.sample_frames = 0;
+  EXPECT_THROW(encoder::train_default_dictionary(*series_, options_), InputError);
+}
+
+}  // namespace
+}  // namespace volreel

@@ -1,0 +1,157 @@
+// tolerance_test.cpp: choosing ε (encoder/tolerance.hpp) — the order of its sources, the ε a
+// dictionary is trained at when an encode is given none, rate control to a size target — and the
+// names and figures around an encode: rate rules, codecs, mean bits, the summary's derived figures.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "dictionary_test_data.hpp"
+#include "test_util.hpp"
+#include "volreel/datasets/analytic.hpp"
+#include "volreel/datasets/series.hpp"
+#include "volreel/dictionary/dictionary.hpp"
+#include "volreel/dictionary/omp.hpp"
+#include "volreel/encoder/encoder.hpp"
+
+namespace volreel {
+namespace {
+
+/// A small series on disk (blobs, 40×36×30, 3 frames) and its reader.
+class SmallSeries : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    datasets::AnalyticParams p;
+    p.field = datasets::AnalyticField::blobs;
+    p.dims = {40, 36, 30};
+    p.frames = 3;
+    {
+      datasets::RawSeriesWriter w(dir_ / "series", p.dims, "blobs");
+      datasets::generate_analytic(p, w);
+    }
+    series_ = datasets::open_series(dir_ / "series");
+    std::tie(coding_.value_min, coding_.value_max) = encoder::value_range(*series_, 0);
+  }
+  double range() const { return coding_.value_max - coding_.value_min; }
+
+  test::TempDir dir_{"tolerance"};
+  std::unique_ptr<datasets::SeriesReader> series_;
+  encoder::CodingSettings coding_;
+};
+
+TEST_F(SmallSeries, ToleranceComesFromTheFirstSourceGiven) {
+  auto file = dictionary::to_file(test::random_dictionary(64, 3), format::DictionaryTraining{});
+  encoder::ToleranceRequest request;
+  // Nothing asked and no training ε in the dictionary: the encoding default PSNR.
+  auto choice = encoder::choose_tolerance(*series_, file, 0, coding_, 3, request);
+  EXPECT_EQ(choice.source, encoder::ToleranceSource::default_psnr);
+  EXPECT_DOUBLE_EQ(choice.tolerance,
+                   dictionary::tolerance_for_psnr(dictionary::default_encoding_psnr, range()));
+  // The ε the dictionary was trained at comes before the default.
+  file.training.tolerance = 0.0123;
+  choice = encoder::choose_tolerance(*series_, file, 0, coding_, 3, request);
+  EXPECT_EQ(choice.source, encoder::ToleranceSource::dictionary_training);
+  EXPECT_EQ(choice.tolerance, 0.0123);
+  // A PSNR, then a tolerance, come before the dictionary's.
+  request.psnr = 40;
+  choice = encoder::choose_tolerance(*series_, file, 0, coding_, 3, request);
+  EXPECT_EQ(choice.source, encoder::ToleranceSource::psnr);
+  EXPECT_DOUBLE_EQ(choice.tolerance, dictionary::tolerance_for_psnr(40, range()));
+  request.tolerance = 0.005;
+  choice = encoder::choose_tolerance(*series_, file, 0, coding_, 3, request);
+  EXPECT_EQ(choice.source, encoder::ToleranceSource::tolerance);
+  EXPECT_EQ(choice.tolerance, 0.005);
+  // Fixed rate needs none.
+  auto fixed = coding_;
+  fixed.fixed_sparsity = 3;
+  choice = encoder::choose_tolerance(*series_, file, 0, fixed, 3, request);
+  EXPECT_EQ(choice.source, encoder::ToleranceSource::fixed_rate);
+  EXPECT_EQ(choice.tolerance, 0);
+}
+
+TEST_F(SmallSeries, ABitsPerVoxelTargetIsMetByTheRateSearch) {
+  const auto d = test::random_dictionary(64, 5);
+  const auto file = dictionary::to_file(d, format::DictionaryTraining{});
+  const std::uint64_t dictionary_bytes = format::dictionary_file_size(64, 216, false);
+  encoder::ToleranceRequest request;
+  request.bps = 6;
+  const auto choice =
+      encoder::choose_tolerance(*series_, file, dictionary_bytes, coding_, 3, request);
+  EXPECT_EQ(choice.source, encoder::ToleranceSource::bps);
+  EXPECT_EQ(choice.tolerance, choice.rate_search.tolerance);
+  EXPECT_GT(choice.rate_search.iterations, 1);
+  EXPECT_NEAR(choice.rate_search.estimated_bps, 6, 0.03 * 6);
+  // The same search called directly finds the same ε.
+  const auto direct =
+      encoder::search_tolerance(*series_, d, dictionary_bytes, coding_, 6, 3, 3, 0.03);
+  EXPECT_EQ(direct.tolerance, choice.tolerance);
+  // Below what the dictionary and manifest alone take: refused, naming --bps.
+  request.bps = 0.01;
+  try {
+    encoder::choose_tolerance(*series_, file, dictionary_bytes, coding_, 3, request);
+    ADD_FAILURE() << "a target below the dictionary's own bits was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("--bps"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Tolerance, ADictionaryIsTrainedAtTheToleranceOrPsnrAskedElseTheEncodingDefault) {
+  encoder::ToleranceRequest request;
+  EXPECT_DOUBLE_EQ(encoder::tolerance_to_train_at(request, 2.0),
+                   dictionary::tolerance_for_psnr(dictionary::default_encoding_psnr, 2.0));
+  request.bps = 0.4;  // the search needs a dictionary first: it is trained at the default
+  EXPECT_DOUBLE_EQ(encoder::tolerance_to_train_at(request, 2.0),
+                   dictionary::tolerance_for_psnr(dictionary::default_encoding_psnr, 2.0));
+  request.bps.reset();
+  request.psnr = 42;
+  EXPECT_DOUBLE_EQ(encoder::tolerance_to_train_at(request, 2.0),
+                   dictionary::tolerance_for_psnr(42, 2.0));
+  request.tolerance = 0.07;
+  EXPECT_EQ(encoder::tolerance_to_train_at(request, 2.0), 0.07);
+}
+
+TEST(CodingNames, RoundTripAndBadNamesNameTheirOption) {
+  for (auto rule : {encoder::VariableRateRule::lagrangian, encoder::VariableRateRule::tolerance})
+    EXPECT_EQ(encoder::rate_rule_from_name(encoder::rate_rule_name(rule)), rule);
+  EXPECT_STREQ(encoder::rate_rule_name(encoder::VariableRateRule::lagrangian), "lagrangian");
+  for (auto codec : {format::Codec::ksvd, format::Codec::zfp})
+    EXPECT_EQ(encoder::codec_from_name(encoder::codec_name(codec)), codec);
+  EXPECT_EQ(encoder::mean_bits_from_text("auto"), -1);
+  EXPECT_EQ(encoder::mean_bits_from_text("0"), 0);
+  EXPECT_EQ(encoder::mean_bits_from_text("12"), 12);
+  const auto message = [](auto&& call) {
+    try {
+      call();
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(message([] { encoder::rate_rule_from_name("rd"); }).find("--rate-rule"),
+            std::string::npos);
+  EXPECT_NE(message([] { encoder::codec_from_name("jpeg"); }).find("--codec"), std::string::npos);
+  for (const char* bad : {"13", "-1", "7x", ""})
+    EXPECT_NE(message([&] { encoder::mean_bits_from_text(bad); }).find("--mean-bits"),
+              std::string::npos)
+        << "'" << bad << "'";
+}
+
+TEST(EncodeSummary, DerivedFigures) {
+  encoder::EncodeSummary s;
+  EXPECT_EQ(s.quantization_loss_db(), 0);  // nothing sparse-coded
+  s.unquantized_squared_error = 2;
+  s.quantized_squared_error = 4;
+  EXPECT_NEAR(s.quantization_loss_db(), 10 * std::log10(2.0), 1e-12);
+  // The finest level's own codes in bps: only when every frame's bytes were counted.
+  EXPECT_FALSE(s.finest_owned_codes_bps());
+  s.container_bytes = 1000;
+  s.bps = 0.5;
+  s.breakdown.finest_owned_codes = 400;
+  ASSERT_TRUE(s.finest_owned_codes_bps());
+  EXPECT_DOUBLE_EQ(*s.finest_owned_codes_bps(), 0.2);
+  s.skipped = 1;
+  EXPECT_FALSE(s.finest_owned_codes_bps());
+}
+
+}  // namespace
+}  // namespace volreel

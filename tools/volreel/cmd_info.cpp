@@ -1,0 +1,90 @@
+// cmd_info.cpp: `volreel info` — describe a NAME.vreel container: the volume, the codec and its
+// parameters, the levels of frame 0, the size and bps; or all of it as JSON.
+#include <algorithm>
+#include <cstdint>
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "commands.hpp"
+#include "volreel/format/container.hpp"
+
+namespace volreel::cli {
+
+namespace {
+
+void run_info(const std::string& dir, bool json) {
+  const format::Container c(dir, true);
+  const auto& m = c.manifest();
+  const double voxels = static_cast<double>(m.dims[0]) * m.dims[1] * m.dims[2];
+  std::size_t written = 0;
+  for (const auto& f : m.frames) written += f ? 1u : 0u;
+  const std::uint64_t bytes = c.total_bytes();
+  const double bps = 8.0 * static_cast<double>(bytes) /
+                     (voxels * static_cast<double>(std::max<std::size_t>(written, 1)));
+  nlohmann::json levels = nlohmann::json::array();
+  if (written > 0 && m.frames[0]) {
+    const auto f = c.open_frame(0);
+    for (std::uint32_t l = 0; l < f.view().level_count(); ++l) {
+      const auto& e = f.view().level(l);
+      levels.push_back({{"level", l},
+                        {"dims", e.dims},
+                        {"grid", e.grid},
+                        {"nodes", e.node_count},
+                        {"payload_bytes", f.view().payload_end_for_depth(l + 1) -
+                                              f.view().payload_end_for_depth(l)}});
+    }
+  }
+  if (json) {
+    nlohmann::json j = format::manifest_to_json(m);
+    j["total_bytes"] = bytes;
+    j["bps"] = bps;
+    j["frames_written"] = written;
+    j["frame0_levels"] = levels;
+    std::cout << j.dump(2) << '\n';
+    return;
+  }
+  std::printf("%s: volreel container, format version %u, written by volreel %s%s\n", dir.c_str(),
+              m.format_version, m.program_version.c_str(),
+              m.complete ? "" : " (INCOMPLETE: resume with volreel encode --resume)");
+  std::printf("volume   %ux%ux%u, spacing %g %g %g, variable '%s', %zu frames (%zu written)\n",
+              m.dims[0], m.dims[1], m.dims[2], m.spacing[0], m.spacing[1], m.spacing[2],
+              m.variable.c_str(), m.frames.size(), written);
+  std::printf("octree   %u levels, bricks of %u^3 (%u interior + %u apron)\n", m.levels,
+              m.brick_size, m.brick_size - 2 * m.brick_apron, m.brick_apron);
+  if (m.codec == format::Codec::ksvd) {
+    std::printf("codec    ksvd (sparse coding, blocks of %u^3), ", m.block_size);
+    if (m.fixed_sparsity)
+      std::printf("fixed rate S = %u\n", m.fixed_sparsity);
+    else
+      std::printf("variable rate, eps = %.6g\n", m.tolerance);
+    std::printf("dictionary %s: %u atoms, %ju bytes\n", m.dictionary->file.c_str(),
+                m.dictionary->atom_count, static_cast<std::uintmax_t>(m.dictionary->bytes));
+  } else {
+    std::printf("codec    zfp fixed accuracy %.6g\n", m.zfp_accuracy);
+  }
+  std::printf("values   [%.6g, %.6g]\n", m.value_min, m.value_max);
+  std::printf("size     %ju bytes, %.4f bps (all files, over the %zu frames written)\n",
+              static_cast<std::uintmax_t>(bytes), bps, written);
+  for (const auto& l : levels)
+    std::printf("frame 0 level %d: %s voxels, %d nodes, %ju payload bytes\n", l["level"].get<int>(),
+                l["dims"].dump().c_str(), l["nodes"].get<int>(),
+                static_cast<std::uintmax_t>(l["payload_bytes"].get<std::uint64_t>()));
+}
+
+}  // namespace
+
+void add_info_command(CLI::App& app) {
+  auto info_dir = std::make_shared<std::string>();
+  auto info_json = std::make_shared<bool>(false);
+  CLI::App* info = app.add_subcommand(
+      "info", "Describe a NAME.vreel container: volume, codec, levels, sizes and bps");
+  info->add_option("CONTAINER", *info_dir, "NAME.vreel directory")->required();
+  info->add_flag("--json", *info_json, "Print JSON (the manifest plus totals)");
+  info->callback([info_dir, info_json] { run_info(*info_dir, *info_json); });
+}
+
+}  // namespace volreel::cli

@@ -1,0 +1,118 @@
+// encode_report.cpp: what `volreel encode` prints about its tolerance and its result.
+#include "encode_report.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <utility>
+
+namespace volreel::cli {
+
+namespace {
+
+/// Where the frame files' bytes went, and the atoms per block (ksvd).
+void print_breakdown(const encoder::EncodeSummary& s) {
+  const encoder::ByteBreakdown& b = s.breakdown;
+  const double total = static_cast<double>(b.total());
+  if (!(total > 0)) return;
+  const auto share = [&](double bytes) { return 100.0 * bytes / total; };
+  std::printf("frame bytes (%zu frames encoded): ", s.encoded);
+  const std::pair<const char*, std::size_t> parts[] = {{"frame tables", b.frame_tables},
+                                                       {"constant bricks", b.constant_bricks},
+                                                       {"brick headers", b.brick_headers},
+                                                       {"block means+counts", b.block_entries},
+                                                       {"codes", b.codes},
+                                                       {"alignment", b.alignment},
+                                                       {"zfp streams", b.zfp_streams}};
+  bool first = true;
+  for (const auto& [name, bytes] : parts) {
+    if (bytes == 0) continue;
+    std::printf("%s%s %.1f%%", first ? "" : ", ", name, share(static_cast<double>(bytes)));
+    first = false;
+  }
+  std::printf("; coarse levels %.1f%%, aprons and padding about %.1f%% (of all frame bytes)\n",
+              share(static_cast<double>(b.coarse_levels)), share(b.aprons_and_padding));
+  if (b.codes > 0) {
+    std::printf(
+        "codes of the finest level's own voxels (interior, inside the volume): %.1f%% of the frame "
+        "bytes",
+        share(b.finest_owned_codes));
+    if (const auto bps = s.finest_owned_codes_bps()) std::printf(", %.4f bps", *bps);
+    std::printf("\n");
+  }
+  std::size_t blocks = 0, codes = 0;
+  for (std::size_t k = 0; k < s.sparsity_histogram.size(); ++k)
+    blocks += s.sparsity_histogram[k], codes += k * s.sparsity_histogram[k];
+  if (blocks == 0) return;
+  std::printf("atoms per block: mean %.2f; blocks with 0..15 atoms (%%):",
+              static_cast<double>(codes) / static_cast<double>(blocks));
+  for (std::size_t count : s.sparsity_histogram)
+    std::printf(" %.1f", 100.0 * static_cast<double>(count) / static_cast<double>(blocks));
+  std::size_t bricks = 0, bits = 0;
+  for (std::size_t k = 0; k < s.mean_bits_histogram.size(); ++k)
+    bricks += s.mean_bits_histogram[k], bits += k * s.mean_bits_histogram[k];
+  const double brick_count = static_cast<double>(std::max<std::size_t>(bricks, 1));
+  std::printf("\nmean bits per brick: mean %.2f; bricks with 0..12 bits (%%):",
+              static_cast<double>(bits) / brick_count);
+  for (std::size_t count : s.mean_bits_histogram)
+    std::printf(" %.1f", 100.0 * static_cast<double>(count) / brick_count);
+  std::printf("\n");
+}
+
+}  // namespace
+
+void print_tolerance_choice(const encoder::ToleranceChoice& e, const encoder::CodingSettings& c,
+                            double target_bps, std::size_t sample_frames, double range,
+                            std::uint32_t atoms) {
+  using Source = encoder::ToleranceSource;
+  if (e.source == Source::fixed_rate)
+    std::printf("fixed rate: %d atoms per block\n", c.fixed_sparsity);
+  if (e.source == Source::bps)
+    std::printf(
+        "rate control: eps %.4g gives an estimated %.4f bps (target %.4f) after %d trial encodes "
+        "of %zu frames\n",
+        e.rate_search.tolerance, e.rate_search.estimated_bps, target_bps, e.rate_search.iterations,
+        sample_frames);
+  if (e.source == Source::dictionary_training)
+    std::printf("tolerance from the dictionary's training: ");
+  if (c.fixed_sparsity == 0 && c.rule == encoder::VariableRateRule::tolerance)
+    std::printf(
+        "tolerance eps %.4g, eps rule (PSNR >= %.2f dB before quantization if every block meets "
+        "it), K = %u\n",
+        c.tolerance, dictionary::psnr_for_tolerance(c.tolerance, range), atoms);
+  else if (c.fixed_sparsity == 0)
+    std::printf(
+        "tolerance eps %.4g, Lagrangian rule: a block keeps an atom if it lowers its squared "
+        "error by >= %.3g (%g*216*eps^2; nominal PSNR %.2f dB), K = %u\n",
+        c.tolerance, c.lagrangian_factor * 216 * c.tolerance * c.tolerance, c.lagrangian_factor,
+        dictionary::psnr_for_tolerance(c.tolerance, range), atoms);
+}
+
+void print_encode_summary(const encoder::EncodeSummary& s, const encoder::CodingSettings& c,
+                          const std::string& out) {
+  std::printf(
+      "encoding time: pyramid %.2f s, brick extraction + histograms %.2f s, batch-OMP %.2f s, "
+      "quantization %.2f s, "
+      "other (reading excluded) %.2f s\n",
+      s.seconds_pyramid, s.seconds_bricks, s.seconds_omp, s.seconds_quantize,
+      s.seconds - s.seconds_pyramid - s.seconds_bricks - s.seconds_omp - s.seconds_quantize);
+  if (s.unquantized_squared_error > 0)
+    std::printf(
+        "quantization: %.3f dB lost against the unquantized sparse approximation (squared error "
+        "over all coded blocks, "
+        "every level; refit %s, optimized interval %s, pursuit extension %s)\n",
+        s.quantization_loss_db(), c.refit_quantization ? "on" : "off",
+        c.optimize_interval ? "on" : "off",
+        c.extend_pursuit && c.fixed_sparsity == 0 && c.rule == encoder::VariableRateRule::tolerance
+            ? "on"
+            : "off");
+  print_breakdown(s);
+  std::printf(
+      "wrote %s: %zu frames (%zu encoded, %zu already there), %ju bytes, %.4f bps; encoding %.1f "
+      "s, %.2f MVoxel/s on %d threads\n",
+      out.c_str(), s.frames, s.encoded, s.skipped, static_cast<std::uintmax_t>(s.container_bytes),
+      s.bps, s.seconds, s.mvoxels_per_s, omp_get_max_threads());
+}
+
+}  // namespace volreel::cli
