@@ -20,9 +20,12 @@ AnalyticField parse_analytic_field(const std::string& name) {
 
 std::string to_string(AnalyticField field) {
   switch (field) {
-    case AnalyticField::blobs: return "blobs";
-    case AnalyticField::rotating: return "rotating";
-    case AnalyticField::noise: return "noise";
+    case AnalyticField::blobs:
+      return "blobs";
+    case AnalyticField::rotating:
+      return "rotating";
+    case AnalyticField::noise:
+      return "noise";
   }
   return "?";
 }
@@ -57,7 +60,9 @@ void blobs(const AnalyticParams& p, double phase, std::span<float> out) {
   std::array<std::array<double, 3>, count> centres;
   for (std::size_t n = 0; n < list.size(); ++n)
     for (std::size_t a = 0; a < 3; ++a)
-      centres[n][a] = list[n].centre[a] + list[n].amplitude_of_path[a] * std::sin(list[n].frequency[a] * phase + list[n].offset[a]);
+      centres[n][a] =
+          list[n].centre[a] +
+          list[n].amplitude_of_path[a] * std::sin(list[n].frequency[a] * phase + list[n].offset[a]);
   const Dims d = p.dims;
 #pragma omp parallel for schedule(static)
   for (std::int64_t k = 0; k < d.z; ++k)
@@ -67,7 +72,8 @@ void blobs(const AnalyticParams& p, double phase, std::span<float> out) {
         double v = 0;
         for (std::size_t n = 0; n < list.size(); ++n) {
           const double dx = x - centres[n][0], dy = y - centres[n][1], dz = z - centres[n][2];
-          v += list[n].weight * std::exp(-(dx * dx + dy * dy + dz * dz) / (2 * list[n].radius * list[n].radius));
+          v += list[n].weight *
+               std::exp(-(dx * dx + dy * dy + dz * dz) / (2 * list[n].radius * list[n].radius));
         }
         out[d.index(i, j, k)] = static_cast<float>(v);
       }
@@ -84,11 +90,13 @@ void rotating(const AnalyticParams& p, double phase, std::span<float> out) {
   for (std::int64_t k = 0; k < d.z; ++k)
     for (std::int64_t j = 0; j < d.y; ++j)
       for (std::int64_t i = 0; i < d.x; ++i) {
-        const double x = coordinate(i, d.x) - 0.5, y = coordinate(j, d.y) - 0.5, z = coordinate(k, d.z) - 0.5;
+        const double x = coordinate(i, d.x) - 0.5, y = coordinate(j, d.y) - 0.5,
+                     z = coordinate(k, d.z) - 0.5;
         const double u = c * x - s * y;
         const double r = std::sqrt(x * x + y * y + z * z);
-        const double v = 0.7 * std::sin(two_pi * bands * u + twist * two_pi * z) * std::exp(-4 * r * r) +
-                         0.3 * std::cos(two_pi * 2 * r - 0.5 * phase);
+        const double v =
+            0.7 * std::sin(two_pi * bands * u + twist * two_pi * z) * std::exp(-4 * r * r) +
+            0.3 * std::cos(two_pi * 2 * r - 0.5 * phase);
         out[d.index(i, j, k)] = static_cast<float>(v);
       }
 }
@@ -96,11 +104,14 @@ void rotating(const AnalyticParams& p, double phase, std::span<float> out) {
 /// Reproducible lattice value in [-1, 1] for integer coordinates (hash through SplitMix64).
 double lattice(std::uint64_t seed, std::int64_t i, std::int64_t j, std::int64_t k, std::int64_t t) {
   std::uint64_t h = seed;
-  for (std::int64_t c : {i, j, k, t}) h = SplitMix64(h ^ static_cast<std::uint64_t>(c) * 0x9E3779B97F4A7C15ull).next();
+  for (std::int64_t c : {i, j, k, t})
+    h = SplitMix64(h ^ static_cast<std::uint64_t>(c) * 0x9E3779B97F4A7C15ull).next();
   return static_cast<double>(h >> 11) * 0x1.0p-52 - 1.0;
 }
 
-double smooth(double f) { return f * f * (3 - 2 * f); }
+double smooth(double f) {
+  return f * f * (3 - 2 * f);
+}
 
 void noise(const AnalyticParams& p, double time, std::span<float> out) {
   const Dims d = p.dims;
@@ -114,15 +125,18 @@ void noise(const AnalyticParams& p, double time, std::span<float> out) {
         double v = 0, amplitude = 0.5;
         for (int octave = 0; octave < 4; ++octave) {
           const double cells = 4.0 * std::pow(2.0, octave);
-          const double x = coordinate(i, d.x) * cells, y = coordinate(j, d.y) * cells, z = coordinate(k, d.z) * cells;
+          const double x = coordinate(i, d.x) * cells, y = coordinate(j, d.y) * cells,
+                       z = coordinate(k, d.z) * cells;
           const double fx = std::floor(x), fy = std::floor(y), fz = std::floor(z);
-          const auto ix = static_cast<std::int64_t>(fx), iy = static_cast<std::int64_t>(fy), iz = static_cast<std::int64_t>(fz);
+          const auto ix = static_cast<std::int64_t>(fx), iy = static_cast<std::int64_t>(fy),
+                     iz = static_cast<std::int64_t>(fz);
           const double wx = smooth(x - fx), wy = smooth(y - fy), wz = smooth(z - fz);
           const std::uint64_t seed = p.seed * 131 + static_cast<std::uint64_t>(octave);
           double sum = 0;
           for (int corner = 0; corner < 16; ++corner) {
             const int a = corner & 1, b = (corner >> 1) & 1, c = (corner >> 2) & 1, e = corner >> 3;
-            const double w = (a ? wx : 1 - wx) * (b ? wy : 1 - wy) * (c ? wz : 1 - wz) * (e ? tw : 1 - tw);
+            const double w =
+                (a ? wx : 1 - wx) * (b ? wy : 1 - wy) * (c ? wz : 1 - wz) * (e ? tw : 1 - tw);
             sum += w * lattice(seed, ix + a, iy + b, iz + c, t0 + e);
           }
           v += amplitude * sum;
@@ -135,23 +149,35 @@ void noise(const AnalyticParams& p, double time, std::span<float> out) {
 }  // namespace
 
 void analytic_frame(const AnalyticParams& params, std::size_t t, std::span<float> out) {
-  if (out.size() != params.dims.voxels()) throw InputError("analytic_frame: output has the wrong size");
-  const double fraction = params.frames > 0 ? static_cast<double>(t) / static_cast<double>(params.frames) : 0.0;
+  if (out.size() != params.dims.voxels())
+    throw InputError("analytic_frame: output has the wrong size");
+  const double fraction =
+      params.frames > 0 ? static_cast<double>(t) / static_cast<double>(params.frames) : 0.0;
   switch (params.field) {
-    case AnalyticField::blobs: blobs(params, two_pi * fraction, out); break;
-    case AnalyticField::rotating: rotating(params, two_pi * fraction, out); break;
-    case AnalyticField::noise: noise(params, 0.25 * static_cast<double>(t), out); break;
+    case AnalyticField::blobs:
+      blobs(params, two_pi * fraction, out);
+      break;
+    case AnalyticField::rotating:
+      rotating(params, two_pi * fraction, out);
+      break;
+    case AnalyticField::noise:
+      noise(params, 0.25 * static_cast<double>(t), out);
+      break;
   }
 }
 
-void generate_analytic(const AnalyticParams& params, RawSeriesWriter& writer, const Progress& progress) {
+void generate_analytic(const AnalyticParams& params, RawSeriesWriter& writer,
+                       const Progress& progress) {
   std::vector<float> frame(params.dims.voxels());
   for (std::size_t t = 0; t < params.frames; ++t) {
     analytic_frame(params, t, frame);
     writer.write_frame(t, static_cast<double>(t) / static_cast<double>(params.frames), frame);
-    progress.report(static_cast<double>(t + 1), static_cast<double>(params.frames), "frame " + std::to_string(t + 1));
+    progress.report(static_cast<double>(t + 1), static_cast<double>(params.frames),
+                    "frame " + std::to_string(t + 1));
   }
-  writer.set_generator({{"method", "analytic"}, {"field", to_string(params.field)}, {"seed", params.seed},
+  writer.set_generator({{"method", "analytic"},
+                        {"field", to_string(params.field)},
+                        {"seed", params.seed},
                         {"frames", params.frames}});
   writer.finish();
 }

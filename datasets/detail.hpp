@@ -21,10 +21,14 @@ void convert_to_float(const unsigned char* bytes, Dtype dtype, std::span<float> 
 
 /// Read exactly out.size_bytes() bytes at `offset` of `file`; InputError naming the file,
 /// the offset and how many bytes were expected and found.
-void read_exact(const std::filesystem::path& file, std::uint64_t offset, std::span<unsigned char> out);
+void read_exact(const std::filesystem::path& file, std::uint64_t offset,
+                std::span<unsigned char> out);
 
-std::unique_ptr<SeriesReader> open_raw_series(const std::filesystem::path& dir, const OpenOptions& options);
-std::unique_ptr<SeriesReader> open_raw_file(const std::filesystem::path& file, const OpenOptions& options);
-std::unique_ptr<SeriesReader> open_hdf5(const std::filesystem::path& file, const OpenOptions& options);
+std::unique_ptr<SeriesReader> open_raw_series(const std::filesystem::path& dir,
+                                              const OpenOptions& options);
+std::unique_ptr<SeriesReader> open_raw_file(const std::filesystem::path& file,
+                                            const OpenOptions& options);
+std::unique_ptr<SeriesReader> open_hdf5(const std::filesystem::path& file,
+                                        const OpenOptions& options);
 
 }  // namespace volreel::datasets::detail

@@ -55,14 +55,19 @@ bool matches(const std::string& pattern, const std::string& name, long long& num
   number = -1;
   if (hash == std::string::npos && star == std::string::npos) return pattern == name;
   const auto pos = hash != std::string::npos ? hash : star;
-  const auto run_end = hash != std::string::npos ? std::min(pattern.find_first_not_of('#', hash), pattern.size()) : star + 1;
+  const auto run_end = hash != std::string::npos
+                           ? std::min(pattern.find_first_not_of('#', hash), pattern.size())
+                           : star + 1;
   const std::string prefix = pattern.substr(0, pos);
   const std::string suffix = pattern.substr(run_end);
   if (name.size() < prefix.size() + suffix.size()) return false;
   if (name.compare(0, prefix.size(), prefix) != 0) return false;
   if (name.compare(name.size() - suffix.size(), suffix.size(), suffix) != 0) return false;
-  const std::string middle = name.substr(prefix.size(), name.size() - prefix.size() - suffix.size());
-  const bool all_digits = !middle.empty() && std::all_of(middle.begin(), middle.end(), [](unsigned char c) { return std::isdigit(c) != 0; });
+  const std::string middle =
+      name.substr(prefix.size(), name.size() - prefix.size() - suffix.size());
+  const bool all_digits =
+      !middle.empty() && std::all_of(middle.begin(), middle.end(),
+                                     [](unsigned char c) { return std::isdigit(c) != 0; });
   if (hash != std::string::npos && (!all_digits || middle.size() != run_end - hash)) return false;
   if (all_digits && middle.size() < 18) number = std::stoll(middle);
   return true;
@@ -77,7 +82,8 @@ herr_t collect_dataset(hid_t group, const char* name, const H5L_info_t*, void* d
 
 class Hdf5Reader final : public SeriesReader {
  public:
-  Hdf5Reader(fs::path file, const OpenOptions& options) : file_(std::move(file)), replace_nan_(options.replace_nan) {
+  Hdf5Reader(fs::path file, const OpenOptions& options)
+      : file_(std::move(file)), replace_nan_(options.replace_nan) {
     std::lock_guard lock(hdf5_mutex());
     H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // errors are reported by us, not printed by HDF5
     Handle f(H5Fopen(file_.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
@@ -93,9 +99,10 @@ class Hdf5Reader final : public SeriesReader {
       } else {
         std::string list;
         for (std::size_t i = 0; i < names.size() && i < 8; ++i) list += (i ? ", " : "") + names[i];
-        throw InputError("'" + file_.string() + "' holds " + std::to_string(names.size()) + " datasets (" + list +
-                         (names.size() > 8 ? ", ..." : "") +
-                         "): choose with --dataset NAME (one 4D dataset) or a pattern such as --dataset 'Pressure_####'");
+        throw InputError("'" + file_.string() + "' holds " + std::to_string(names.size()) +
+                         " datasets (" + list + (names.size() > 8 ? ", ..." : "") +
+                         "): choose with --dataset NAME (one 4D dataset) or a pattern such as "
+                         "--dataset 'Pressure_####'");
       }
     }
     std::vector<std::pair<long long, std::string>> matched;
@@ -103,14 +110,17 @@ class Hdf5Reader final : public SeriesReader {
       long long number;
       if (matches(pattern, name, number)) matched.emplace_back(number, name);
     }
-    if (matched.empty()) throw InputError("'" + file_.string() + "': no dataset matches '" + pattern + "'");
+    if (matched.empty())
+      throw InputError("'" + file_.string() + "': no dataset matches '" + pattern + "'");
     std::sort(matched.begin(), matched.end());
 
     for (const auto& [number, name] : matched) {
       Handle ds(H5Dopen2(f.get(), name.c_str(), H5P_DEFAULT), H5Dclose);
       Handle space(H5Dget_space(ds.get()), H5Sclose);
       const int rank = H5Sget_simple_extent_ndims(space.get());
-      if (rank < 3 || rank > 4) throw InputError(where(name) + "has rank " + std::to_string(rank) + ", expected 3 ([z][y][x]) or 4");
+      if (rank < 3 || rank > 4)
+        throw InputError(where(name) + "has rank " + std::to_string(rank) +
+                         ", expected 3 ([z][y][x]) or 4");
       hsize_t shape[4] = {0, 0, 0, 1};
       H5Sget_simple_extent_dims(space.get(), shape, nullptr);
       Handle type(H5Dget_type(ds.get()), H5Tclose);
@@ -118,31 +128,42 @@ class Hdf5Reader final : public SeriesReader {
       if (cls != H5T_FLOAT && cls != H5T_INTEGER) throw InputError(where(name) + "is not numeric");
       // [z][y][x][1] (a cutout with one component) is one frame; other 4D shapes are [t][z][y][x].
       const bool single_4d = rank == 4 && shape[3] != 1;
-      const Dims dims = single_4d ? Dims{static_cast<std::int64_t>(shape[3]), static_cast<std::int64_t>(shape[2]), static_cast<std::int64_t>(shape[1])}
-                                  : Dims{static_cast<std::int64_t>(shape[2]), static_cast<std::int64_t>(shape[1]), static_cast<std::int64_t>(shape[0])};
+      const Dims dims =
+          single_4d ? Dims{static_cast<std::int64_t>(shape[3]), static_cast<std::int64_t>(shape[2]),
+                           static_cast<std::int64_t>(shape[1])}
+                    : Dims{static_cast<std::int64_t>(shape[2]), static_cast<std::int64_t>(shape[1]),
+                           static_cast<std::int64_t>(shape[0])};
       if (dims.voxels() == 0) throw InputError(where(name) + "is empty");
       if (frames_.empty()) {
         info_.dims = dims;
       } else if (dims != info_.dims) {
-        throw InputError(where(name) + "is " + to_string(dims) + " but earlier frames are " + to_string(info_.dims));
+        throw InputError(where(name) + "is " + to_string(dims) + " but earlier frames are " +
+                         to_string(info_.dims));
       }
       if (single_4d) {
-        if (matched.size() != 1) throw InputError(where(name) + "is 4D but the pattern matched several datasets");
+        if (matched.size() != 1)
+          throw InputError(where(name) + "is 4D but the pattern matched several datasets");
         four_d_ = true;
         for (hsize_t t = 0; t < shape[0]; ++t) frames_.push_back({name, t, static_cast<double>(t)});
       } else {
-        frames_.push_back({name, 0, number >= 0 ? static_cast<double>(number) : static_cast<double>(frames_.size())});
+        frames_.push_back(
+            {name, 0,
+             number >= 0 ? static_cast<double>(number) : static_cast<double>(frames_.size())});
       }
     }
     info_.frames = frames_.size();
     for (const auto& frame : frames_) info_.timestamps.push_back(frame.timestamp);
     info_.variable = four_d_ ? matched.front().second : pattern;
-    info_.source = "HDF5 " + file_.string() + " (" + (four_d_ ? "4D dataset " : "datasets ") + pattern + ")";
+    info_.source =
+        "HDF5 " + file_.string() + " (" + (four_d_ ? "4D dataset " : "datasets ") + pattern + ")";
   }
 
   void read_frame(std::size_t t, std::span<float> out) const override {
-    if (t >= info_.frames) throw InputError("frame " + std::to_string(t) + " is out of range: " + info_.source + " has " + std::to_string(info_.frames) + " frames");
-    if (out.size() != info_.dims.voxels()) throw InputError("read_frame: output has the wrong size");
+    if (t >= info_.frames)
+      throw InputError("frame " + std::to_string(t) + " is out of range: " + info_.source +
+                       " has " + std::to_string(info_.frames) + " frames");
+    if (out.size() != info_.dims.voxels())
+      throw InputError("read_frame: output has the wrong size");
     const FrameSource& frame = frames_[t];
     {
       std::lock_guard lock(hdf5_mutex());
@@ -154,20 +175,27 @@ class Hdf5Reader final : public SeriesReader {
       if (four_d_) {
         Handle file_space(H5Dget_space(ds.get()), H5Sclose);
         const hsize_t start[4] = {frame.index, 0, 0, 0};
-        const hsize_t count[4] = {1, static_cast<hsize_t>(info_.dims.z), static_cast<hsize_t>(info_.dims.y), static_cast<hsize_t>(info_.dims.x)};
+        const hsize_t count[4] = {1, static_cast<hsize_t>(info_.dims.z),
+                                  static_cast<hsize_t>(info_.dims.y),
+                                  static_cast<hsize_t>(info_.dims.x)};
         H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start, nullptr, count, nullptr);
         Handle memory_space(H5Screate_simple(4, count, nullptr), H5Sclose);
-        status = H5Dread(ds.get(), H5T_NATIVE_FLOAT, memory_space.get(), file_space.get(), H5P_DEFAULT, out.data());
+        status = H5Dread(ds.get(), H5T_NATIVE_FLOAT, memory_space.get(), file_space.get(),
+                         H5P_DEFAULT, out.data());
       } else {
         status = H5Dread(ds.get(), H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data());
       }
-      if (status < 0) throw InputError(where(frame.dataset) + "could not be read (corrupt or truncated file?)");
+      if (status < 0)
+        throw InputError(where(frame.dataset) + "could not be read (corrupt or truncated file?)");
     }
-    check_finite(out, info_.dims, where(frame.dataset) + "frame " + std::to_string(t), replace_nan_);
+    check_finite(out, info_.dims, where(frame.dataset) + "frame " + std::to_string(t),
+                 replace_nan_);
   }
 
  private:
-  std::string where(const std::string& dataset) const { return "'" + file_.string() + "' dataset '" + dataset + "' "; }
+  std::string where(const std::string& dataset) const {
+    return "'" + file_.string() + "' dataset '" + dataset + "' ";
+  }
 
   fs::path file_;
   std::vector<FrameSource> frames_;

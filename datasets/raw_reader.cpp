@@ -14,10 +14,14 @@ namespace {
 
 class RawSeriesReader final : public SeriesReader {
  public:
-  RawSeriesReader(fs::path dir, const OpenOptions& options) : dir_(std::move(dir)), replace_nan_(options.replace_nan) {
+  RawSeriesReader(fs::path dir, const OpenOptions& options)
+      : dir_(std::move(dir)), replace_nan_(options.replace_nan) {
     const fs::path manifest = dir_ / "series.json";
     std::ifstream in(manifest);
-    if (!in) throw InputError("'" + dir_.string() + "' has no series.json: not a raw series directory (for a single raw file pass the file and --dims)");
+    if (!in)
+      throw InputError("'" + dir_.string() +
+                       "' has no series.json: not a raw series directory (for a single raw file "
+                       "pass the file and --dims)");
     json j;
     try {
       j = json::parse(in);
@@ -28,18 +32,23 @@ class RawSeriesReader final : public SeriesReader {
       throw InputError("'" + manifest.string() + "': " + what);
     };
     try {
-      if (j.value("format", "") != "volreel-raw-series") fail("\"format\" is not \"volreel-raw-series\"");
-      if (j.value("version", 0) != 1) fail("unsupported \"version\" (this volreel reads version 1)");
+      if (j.value("format", "") != "volreel-raw-series")
+        fail("\"format\" is not \"volreel-raw-series\"");
+      if (j.value("version", 0) != 1)
+        fail("unsupported \"version\" (this volreel reads version 1)");
       const auto& d = j.at("dims");
       if (!d.is_array() || d.size() != 3) fail("\"dims\" must be [x, y, z]");
-      info_.dims = Dims{d[0].get<std::int64_t>(), d[1].get<std::int64_t>(), d[2].get<std::int64_t>()};
-      if (info_.dims.x <= 0 || info_.dims.y <= 0 || info_.dims.z <= 0) fail("\"dims\" must be positive");
+      info_.dims =
+          Dims{d[0].get<std::int64_t>(), d[1].get<std::int64_t>(), d[2].get<std::int64_t>()};
+      if (info_.dims.x <= 0 || info_.dims.y <= 0 || info_.dims.z <= 0)
+        fail("\"dims\" must be positive");
       if (j.value("dtype", "f32") != "f32") fail("\"dtype\" must be \"f32\"");
       frame_files_ = j.at("frames").get<std::vector<std::string>>();
       info_.timestamps = j.at("timestamps").get<std::vector<double>>();
       if (frame_files_.empty()) fail("\"frames\" is empty");
       if (info_.timestamps.size() != frame_files_.size())
-        fail("\"timestamps\" has " + std::to_string(info_.timestamps.size()) + " entries but \"frames\" has " + std::to_string(frame_files_.size()));
+        fail("\"timestamps\" has " + std::to_string(info_.timestamps.size()) +
+             " entries but \"frames\" has " + std::to_string(frame_files_.size()));
       if (j.contains("spacing")) info_.spacing = j.at("spacing").get<std::array<double, 3>>();
       info_.variable = j.value("variable", "");
       if (j.contains("generator")) info_.generator = j.at("generator");
@@ -57,13 +66,17 @@ class RawSeriesReader final : public SeriesReader {
       if (ec) fail("frame " + std::to_string(t) + ": '" + file.string() + "' is missing");
       if (size != expected)
         fail("frame " + std::to_string(t) + ": '" + file.string() + "' is " + std::to_string(size) +
-             " bytes, expected " + std::to_string(expected) + " (" + to_string(info_.dims) + " float32)");
+             " bytes, expected " + std::to_string(expected) + " (" + to_string(info_.dims) +
+             " float32)");
     }
   }
 
   void read_frame(std::size_t t, std::span<float> out) const override {
-    if (t >= info_.frames) throw InputError("frame " + std::to_string(t) + " is out of range: " + info_.source + " has " + std::to_string(info_.frames) + " frames");
-    if (out.size() != info_.dims.voxels()) throw InputError("read_frame: output has the wrong size");
+    if (t >= info_.frames)
+      throw InputError("frame " + std::to_string(t) + " is out of range: " + info_.source +
+                       " has " + std::to_string(info_.frames) + " frames");
+    if (out.size() != info_.dims.voxels())
+      throw InputError("read_frame: output has the wrong size");
     const fs::path file = dir_ / frame_files_[t];
     read_exact(file, 0, {reinterpret_cast<unsigned char*>(out.data()), out.size_bytes()});
     check_finite(out, info_.dims, "'" + file.string() + "'", replace_nan_);
@@ -78,9 +91,13 @@ class RawSeriesReader final : public SeriesReader {
 class RawFileReader final : public SeriesReader {
  public:
   RawFileReader(fs::path file, const OpenOptions& options)
-      : file_(std::move(file)), dtype_(options.dtype.value_or(Dtype::f32)), replace_nan_(options.replace_nan) {
+      : file_(std::move(file)),
+        dtype_(options.dtype.value_or(Dtype::f32)),
+        replace_nan_(options.replace_nan) {
     if (!options.dims)
-      throw InputError("'" + file_.string() + "' is a raw file: say its size with --dims XxYxZ (and --dtype, --frames if not f32 and 1)");
+      throw InputError("'" + file_.string() +
+                       "' is a raw file: say its size with --dims XxYxZ (and --dtype, --frames if "
+                       "not f32 and 1)");
     info_.dims = *options.dims;
     info_.frames = options.frames.value_or(1);
     if (info_.frames == 0) throw InputError("--frames must be at least 1");
@@ -89,21 +106,29 @@ class RawFileReader final : public SeriesReader {
     const auto size = fs::file_size(file_, ec);
     if (ec) throw InputError("cannot read the size of '" + file_.string() + "': " + ec.message());
     if (size != frame_bytes_ * info_.frames)
-      throw InputError("'" + file_.string() + "' is " + std::to_string(size) + " bytes, but --dims " +
-                       to_string(info_.dims) + " --dtype " + to_string(dtype_) + " --frames " +
-                       std::to_string(info_.frames) + " needs " + std::to_string(frame_bytes_ * info_.frames) +
-                       (size % frame_bytes_ == 0 ? " (it holds " + std::to_string(size / frame_bytes_) + " such frames: pass --frames)" : ""));
-    for (std::size_t t = 0; t < info_.frames; ++t) info_.timestamps.push_back(static_cast<double>(t));
+      throw InputError(
+          "'" + file_.string() + "' is " + std::to_string(size) + " bytes, but --dims " +
+          to_string(info_.dims) + " --dtype " + to_string(dtype_) + " --frames " +
+          std::to_string(info_.frames) + " needs " + std::to_string(frame_bytes_ * info_.frames) +
+          (size % frame_bytes_ == 0 ? " (it holds " + std::to_string(size / frame_bytes_) +
+                                          " such frames: pass --frames)"
+                                    : ""));
+    for (std::size_t t = 0; t < info_.frames; ++t)
+      info_.timestamps.push_back(static_cast<double>(t));
     info_.source = "raw file " + file_.string() + " (" + to_string(dtype_) + ")";
   }
 
   void read_frame(std::size_t t, std::span<float> out) const override {
-    if (t >= info_.frames) throw InputError("frame " + std::to_string(t) + " is out of range: " + info_.source + " has " + std::to_string(info_.frames) + " frames");
-    if (out.size() != info_.dims.voxels()) throw InputError("read_frame: output has the wrong size");
+    if (t >= info_.frames)
+      throw InputError("frame " + std::to_string(t) + " is out of range: " + info_.source +
+                       " has " + std::to_string(info_.frames) + " frames");
+    if (out.size() != info_.dims.voxels())
+      throw InputError("read_frame: output has the wrong size");
     std::vector<unsigned char> bytes(frame_bytes_);
     read_exact(file_, t * frame_bytes_, bytes);
     convert_to_float(bytes.data(), dtype_, out);
-    check_finite(out, info_.dims, "'" + file_.string() + "' frame " + std::to_string(t), replace_nan_);
+    check_finite(out, info_.dims, "'" + file_.string() + "' frame " + std::to_string(t),
+                 replace_nan_);
   }
 
  private:

@@ -4,9 +4,9 @@
 #include <algorithm>
 #include <bit>
 #include <cctype>
-#include <cstring>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <limits>
 
@@ -27,20 +27,28 @@ Dtype parse_dtype(const std::string& text) {
 
 std::string to_string(Dtype dtype) {
   switch (dtype) {
-    case Dtype::f32: return "f32";
-    case Dtype::f64: return "f64";
-    case Dtype::u8: return "u8";
-    case Dtype::u16: return "u16";
+    case Dtype::f32:
+      return "f32";
+    case Dtype::f64:
+      return "f64";
+    case Dtype::u8:
+      return "u8";
+    case Dtype::u16:
+      return "u16";
   }
   return "?";
 }
 
 std::size_t dtype_size(Dtype dtype) {
   switch (dtype) {
-    case Dtype::f32: return 4;
-    case Dtype::f64: return 8;
-    case Dtype::u8: return 1;
-    case Dtype::u16: return 2;
+    case Dtype::f32:
+      return 4;
+    case Dtype::f64:
+      return 8;
+    case Dtype::u8:
+      return 1;
+    case Dtype::u16:
+      return 2;
   }
   return 0;
 }
@@ -59,12 +67,12 @@ Volume SeriesReader::read_frame(std::size_t t) const {
 
 std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOptions& options) {
   std::error_code ec;
-  if (!fs::exists(path, ec))
-    throw InputError("'" + path.string() + "' does not exist");
+  if (!fs::exists(path, ec)) throw InputError("'" + path.string() + "' does not exist");
   if (fs::is_directory(path, ec)) return detail::open_raw_series(path, options);
   if (path.filename() == "series.json") return detail::open_raw_series(path.parent_path(), options);
   std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   if (ext == ".h5" || ext == ".hdf5" || ext == ".hdf" || ext == ".he5")
     return detail::open_hdf5(path, options);
   return detail::open_raw_file(path, options);
@@ -171,11 +179,14 @@ void RawSeriesWriter::finish() {
   j["variable"] = variable_;
   nlohmann::json times = nlohmann::json::array(), names = nlohmann::json::array();
   for (std::size_t t = 0; t < timestamps_.size(); ++t) {
-    if (!timestamps_[t]) throw InputError("series '" + dir_.string() + "': frame " + std::to_string(t) + " was never written");
+    if (!timestamps_[t])
+      throw InputError("series '" + dir_.string() + "': frame " + std::to_string(t) +
+                       " was never written");
     times.push_back(*timestamps_[t]);
     names.push_back(raw_frame_name(t));
   }
-  if (timestamps_.empty()) throw InputError("series '" + dir_.string() + "': no frames were written");
+  if (timestamps_.empty())
+    throw InputError("series '" + dir_.string() + "': no frames were written");
   j["timestamps"] = times;
   j["frames"] = names;
   if (!generator_.is_null()) j["generator"] = generator_;

@@ -11,7 +11,8 @@ Dims parse_dims(const std::string& text) {
   const char* end = text.data() + text.size();
   for (int axis = 0; axis < 3; ++axis) {
     auto [next, ec] = std::from_chars(p, end, values[axis]);
-    const bool separator_ok = axis == 2 ? next == end : (next != end && (*next == 'x' || *next == 'X'));
+    const bool separator_ok =
+        axis == 2 ? next == end : (next != end && (*next == 'x' || *next == 'X'));
     if (ec != std::errc() || !separator_ok || values[axis] <= 0 || values[axis] > (1 << 20))
       throw InputError("dimensions '" + text +
                        "' are not of the form XxYxZ with positive integers (e.g. 256x256x128)");

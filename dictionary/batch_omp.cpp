@@ -14,11 +14,17 @@
 
 namespace volreel::dictionary {
 
-double tolerance_for_psnr(double psnr_db, double value_range) { return value_range * std::pow(10.0, -psnr_db / 20.0); }
+double tolerance_for_psnr(double psnr_db, double value_range) {
+  return value_range * std::pow(10.0, -psnr_db / 20.0);
+}
 
-double psnr_for_tolerance(double tolerance, double value_range) { return 20.0 * std::log10(value_range / tolerance); }
+double psnr_for_tolerance(double tolerance, double value_range) {
+  return 20.0 * std::log10(value_range / tolerance);
+}
 
-const char* pursuit_name(AtomSelection selection) { return selection == AtomSelection::error ? "ormp" : "omp"; }
+const char* pursuit_name(AtomSelection selection) {
+  return selection == AtomSelection::error ? "ormp" : "omp";
+}
 
 AtomSelection pursuit_from_name(const std::string& name) {
   if (name == "ormp") return AtomSelection::error;
@@ -49,14 +55,15 @@ void check_options(const SparseCodingOptions& options, Eigen::Index block_length
                                 std::to_string(options.max_error));
   if (options.max_atoms < 1 || options.max_atoms > 255 || options.max_atoms > block_length)
     throw std::invalid_argument("maximum atoms per block must be in 1.." +
-                                std::to_string(std::min<Eigen::Index>(255, block_length)) + ", not " +
-                                std::to_string(options.max_atoms));
+                                std::to_string(std::min<Eigen::Index>(255, block_length)) +
+                                ", not " + std::to_string(options.max_atoms));
 }
 
 /// m·max_error², or +∞ without a bound (max_error = 0).
 double bound_energy(const SparseCodingOptions& options, Eigen::Index block_length) {
-  return options.max_error > 0 ? static_cast<double>(block_length) * options.max_error * options.max_error
-                               : std::numeric_limits<double>::infinity();
+  return options.max_error > 0
+             ? static_cast<double>(block_length) * options.max_error * options.max_error
+             : std::numeric_limits<double>::infinity();
 }
 
 /// Correlations are updated and searched in chunks of this many values, held in registers.
@@ -65,20 +72,27 @@ using Chunk = Eigen::Matrix<float, chunk, 1>;
 
 /// Scratch space of one thread, sized once.
 struct OmpWorkspace {
-  Eigen::VectorXf alpha;     // K: Dᵀr, the residual's correlations
-  Eigen::MatrixXf lower;     // S × S: Cholesky factor L of G_II (lower triangle)
+  Eigen::VectorXf alpha;  // K: Dᵀr, the residual's correlations
+  Eigen::MatrixXf lower;  // S × S: Cholesky factor L of G_II (lower triangle)
   Eigen::VectorXf w, z, gamma, alpha0_support;
   std::vector<int> support;
   std::vector<const float*> columns;  // G's columns of the support
   std::vector<float> chunk_max;       // largest |α| per chunk of α
   // ORMP only:
-  Eigen::VectorXf projected;          // K: ‖P⊥d_k‖², the atoms' squared norms orthogonal to the support
-  std::vector<float> rows;            // S × K: row j = (L⁻¹ G_{I,:})_j, the support's Gram–Schmidt rows
+  Eigen::VectorXf projected;  // K: ‖P⊥d_k‖², the atoms' squared norms orthogonal to the support
+  std::vector<float> rows;  // S × K: row j = (L⁻¹ G_{I,:})_j, the support's Gram–Schmidt rows
 
   OmpWorkspace(Eigen::Index atoms, int slots, bool ormp)
-      : alpha(atoms), lower(slots, slots), w(slots), z(slots), gamma(slots), alpha0_support(slots),
-        support(static_cast<std::size_t>(slots)), columns(static_cast<std::size_t>(slots)),
-        chunk_max(static_cast<std::size_t>(atoms / chunk + 1)), projected(ormp ? atoms : 0),
+      : alpha(atoms),
+        lower(slots, slots),
+        w(slots),
+        z(slots),
+        gamma(slots),
+        alpha0_support(slots),
+        support(static_cast<std::size_t>(slots)),
+        columns(static_cast<std::size_t>(slots)),
+        chunk_max(static_cast<std::size_t>(atoms / chunk + 1)),
+        projected(ormp ? atoms : 0),
         rows(ormp ? static_cast<std::size_t>(atoms) * static_cast<std::size_t>(slots) : 0) {}
 };
 
@@ -86,13 +100,15 @@ struct OmpWorkspace {
 /// atom: α = α⁰ − Σ_j γ_j·G_{:,I_j} (s = 0: α = α⁰), then α_I = 0, and returns argmax_k |α_k|
 /// (the first on ties). Each chunk of α is accumulated over all support columns before it is
 /// stored, and its largest |α| is kept, so that the search scans a single chunk.
-Eigen::Index update_correlations(float* alpha, const float* alpha0, const float* const* columns, const float* gamma,
-                                 const int* support, int s, Eigen::Index K, float* chunk_max) {
+Eigen::Index update_correlations(float* alpha, const float* alpha0, const float* const* columns,
+                                 const float* gamma, const int* support, int s, Eigen::Index K,
+                                 float* chunk_max) {
   const Eigen::Index full = K / chunk;
   for (Eigen::Index c = 0; c < full; ++c) {
     const Eigen::Index at = c * chunk;
     Chunk acc = Eigen::Map<const Chunk>(alpha0 + at);
-    for (int j = 0; j < s; ++j) acc.noalias() -= gamma[j] * Eigen::Map<const Chunk>(columns[j] + at);
+    for (int j = 0; j < s; ++j)
+      acc.noalias() -= gamma[j] * Eigen::Map<const Chunk>(columns[j] + at);
     Eigen::Map<Chunk>(alpha + at) = acc;
     chunk_max[c] = acc.cwiseAbs().maxCoeff();
   }
@@ -136,8 +152,9 @@ struct StopRule {
 /// Error-constrained OMP-Cholesky for one block, from α⁰ = Dᵀy and ‖y‖² (RZE08, algorithm 5),
 /// with the rate-distortion stop. Writes the support, coefficients and ‖r‖²; returns the number
 /// of atoms.
-int code_one_block(const float* alpha0, double energy, const Eigen::MatrixXf& gram, const StopRule& rule,
-                   OmpWorkspace& ws, std::int32_t* atoms_out, float* coefficients_out, float* residual_out) {
+int code_one_block(const float* alpha0, double energy, const Eigen::MatrixXf& gram,
+                   const StopRule& rule, OmpWorkspace& ws, std::int32_t* atoms_out,
+                   float* coefficients_out, float* residual_out) {
   const int max_atoms = rule.max_atoms;
   const double target = rule.target;
   const Eigen::Index K = gram.rows();
@@ -148,8 +165,8 @@ int code_one_block(const float* alpha0, double energy, const Eigen::MatrixXf& gr
   // 1. The atom most correlated with the residual, k = argmax |α|, starting from α = α⁰.
   Eigen::Index k = 0;
   if (residual > target)
-    k = update_correlations(alpha, alpha0, ws.columns.data(), ws.gamma.data(), ws.support.data(), 0, K,
-                            ws.chunk_max.data());
+    k = update_correlations(alpha, alpha0, ws.columns.data(), ws.gamma.data(), ws.support.data(), 0,
+                            K, ws.chunk_max.data());
   while (residual > target && s < max_atoms) {
     if (!(std::abs(alpha[k]) > 0)) break;  // the residual is orthogonal to every atom
 
@@ -169,7 +186,8 @@ int code_one_block(const float* alpha0, double energy, const Eigen::MatrixXf& gr
     }
     // 2b. Rate-distortion stop: atom k would lower ‖r‖² by (d_kᵀr)² / ‖P⊥d_k‖² = α_k² / pivot.
     if (rule.min_gain > 0 && residual <= rule.bound) {
-      const double gain = static_cast<double>(alpha[k]) * static_cast<double>(alpha[k]) / static_cast<double>(pivot);
+      const double gain = static_cast<double>(alpha[k]) * static_cast<double>(alpha[k]) /
+                          static_cast<double>(pivot);
       if (gain < rule.min_gain) break;
     }
     for (int c = 0; c < s; ++c) L(s, c) = ws.w[c];
@@ -194,12 +212,13 @@ int code_one_block(const float* alpha0, double energy, const Eigen::MatrixXf& gr
     //    telescoped: δ_n = γ_Iᵀ β_I = γ_Iᵀ α⁰_I because G_II γ_I = α⁰_I).
     //    α is only needed (with step 1 for the next round, k = argmax |α|) if there is one.
     double delta = 0;
-    for (int j = 0; j < s; ++j) delta += static_cast<double>(ws.gamma[j]) * static_cast<double>(ws.alpha0_support[j]);
+    for (int j = 0; j < s; ++j)
+      delta += static_cast<double>(ws.gamma[j]) * static_cast<double>(ws.alpha0_support[j]);
     residual = std::max(energy - delta, 0.0);
     ws.columns[static_cast<std::size_t>(s - 1)] = g_k;
     if (residual > target && s < max_atoms)
-      k = update_correlations(alpha, alpha0, ws.columns.data(), ws.gamma.data(), ws.support.data(), s, K,
-                              ws.chunk_max.data());
+      k = update_correlations(alpha, alpha0, ws.columns.data(), ws.gamma.data(), ws.support.data(),
+                              s, K, ws.chunk_max.data());
   }
   for (int j = 0; j < s; ++j) {
     atoms_out[j] = ws.support[static_cast<std::size_t>(j)];
@@ -216,13 +235,14 @@ static_assert(ormp_projected_floor > 0 && ormp_projected_floor <= 1);
 /// argmax_k α_k² / max(‖P⊥d_k‖², f·‖d_k‖²), the ORMP score (f = ormp_projected_floor; floored
 /// holds f·G_kk), the first on ties, searched like update_correlations: the scores of each chunk
 /// are computed vectorized and their maximum kept, then only the best chunk is scanned.
-Eigen::Index ormp_best(const float* alpha, const float* projected, const float* floored, Eigen::Index K,
-                       float* chunk_max) {
+Eigen::Index ormp_best(const float* alpha, const float* projected, const float* floored,
+                       Eigen::Index K, float* chunk_max) {
   using Array = Eigen::Array<float, Eigen::Dynamic, 1>;
   using Scores = Eigen::Array<float, Eigen::Dynamic, 1, Eigen::ColMajor, chunk, 1>;  // no heap
   const auto scores = [&](Eigen::Index at, Eigen::Index n) -> Scores {
     const auto a = Eigen::Map<const Array>(alpha + at, n);
-    return a * a / Eigen::Map<const Array>(projected + at, n).max(Eigen::Map<const Array>(floored + at, n));
+    return a * a /
+           Eigen::Map<const Array>(projected + at, n).max(Eigen::Map<const Array>(floored + at, n));
   };
   const Eigen::Index chunks = (K + chunk - 1) / chunk;
   Eigen::Index best_chunk = 0;
@@ -243,8 +263,9 @@ Eigen::Index ormp_best(const float* alpha, const float* projected, const float* 
 /// Cholesky factor of G_II), the residual's new correlations α ← α − z·q with z = α_k/√p (the
 /// residual's coordinate on the new orthonormal direction, so ‖r‖² falls by z²), and the projected
 /// norms ‖P⊥d‖² ← ‖P⊥d‖² − q². The coefficients solve Lᵀγ = z at the end.
-int code_one_block_ormp(const float* alpha0, double energy, const Eigen::MatrixXf& gram, const float* gram_diagonal,
-                        const float* floored, const StopRule& rule, OmpWorkspace& ws, std::int32_t* atoms_out, float* coefficients_out,
+int code_one_block_ormp(const float* alpha0, double energy, const Eigen::MatrixXf& gram,
+                        const float* gram_diagonal, const float* floored, const StopRule& rule,
+                        OmpWorkspace& ws, std::int32_t* atoms_out, float* coefficients_out,
                         float* residual_out) {
   const Eigen::Index K = gram.rows();
   const auto Ku = static_cast<std::size_t>(K);
@@ -263,23 +284,29 @@ int code_one_block_ormp(const float* alpha0, double energy, const Eigen::MatrixX
     const float root = std::sqrt(pivot);
     const float z = alpha[k] / root;
     // 2. Rate-distortion stop: atom k would lower ‖r‖² by z².
-    if (rule.min_gain > 0 && residual <= rule.bound && static_cast<double>(z) * static_cast<double>(z) < rule.min_gain) break;
+    if (rule.min_gain > 0 && residual <= rule.bound &&
+        static_cast<double>(z) * static_cast<double>(z) < rule.min_gain)
+      break;
     // 3. The Cholesky row and the Gram–Schmidt row of atom k; α and ‖P⊥d‖² updated.
     float* q = ws.rows.data() + static_cast<std::size_t>(s) * Ku;
     const float* g_k = gram.col(k).data();
-    for (int c = 0; c < s; ++c) L(s, c) = ws.rows[static_cast<std::size_t>(c) * Ku + static_cast<std::size_t>(k)];
+    for (int c = 0; c < s; ++c)
+      L(s, c) = ws.rows[static_cast<std::size_t>(c) * Ku + static_cast<std::size_t>(k)];
     L(s, s) = root;
     Eigen::Map<Eigen::VectorXf> row(q, K);
     row = Eigen::Map<const Eigen::VectorXf>(g_k, K);
     for (int c = 0; c < s; ++c)
-      row.noalias() -= L(s, c) * Eigen::Map<const Eigen::VectorXf>(ws.rows.data() + static_cast<std::size_t>(c) * Ku, K);
+      row.noalias() -= L(s, c) * Eigen::Map<const Eigen::VectorXf>(
+                                     ws.rows.data() + static_cast<std::size_t>(c) * Ku, K);
     row *= 1.0f / root;
     Eigen::Map<Eigen::VectorXf>(alpha, K).noalias() -= z * row;
     Eigen::Map<Eigen::VectorXf>(projected, K).array() -= row.array().square();
     ws.support[static_cast<std::size_t>(s)] = static_cast<int>(k);
     ws.z[s] = z;
     ++s;
-    for (int j = 0; j < s; ++j) alpha[ws.support[static_cast<std::size_t>(j)]] = 0, projected[ws.support[static_cast<std::size_t>(j)]] = 0;
+    for (int j = 0; j < s; ++j)
+      alpha[ws.support[static_cast<std::size_t>(j)]] = 0,
+      projected[ws.support[static_cast<std::size_t>(j)]] = 0;
     residual = std::max(residual - static_cast<double>(z) * static_cast<double>(z), 0.0);
   }
   // 4. γ from Lᵀγ = z (back substitution).
@@ -305,7 +332,8 @@ BatchOmp::BatchOmp(const Eigen::MatrixXf& atoms, SparseCodingOptions options)
   gram_.noalias() = atoms_.transpose() * atoms_;
   gram_diagonal_ = gram_.diagonal();
   // At least the smallest pivot: a zero atom (α = 0, ‖P⊥d‖² = 0) then scores 0, not 0/0.
-  floored_diagonal_ = (gram_diagonal_ * static_cast<float>(ormp_projected_floor)).cwiseMax(min_pivot);
+  floored_diagonal_ =
+      (gram_diagonal_ * static_cast<float>(ormp_projected_floor)).cwiseMax(min_pivot);
   target_energy_ = static_cast<double>(atoms.rows()) * options.tolerance * options.tolerance;
   bound_energy_ = bound_energy(options, atoms.rows());
 }
@@ -337,26 +365,30 @@ void BatchOmp::encode(const Eigen::Ref<const Eigen::MatrixXf>& blocks, SparseCod
       correlations.leftCols(cols).noalias() = atoms_.transpose() * blocks.middleCols(first, cols);
       for (Eigen::Index j = 0; j < cols; ++j) {
         const auto i = static_cast<std::size_t>(first + j);
-        // ‖y‖² in float, vectorized (sixteen partial sums: the error is of the order of that in α⁰).
+        // ‖y‖² in float, vectorized (sixteen partial sums: the error is of the order of that in
+        // α⁰).
         const auto energy = static_cast<double>(blocks.col(first + j).squaredNorm());
         const std::size_t slot = i * static_cast<std::size_t>(S);
         StopRule block_rule = rule;
         if (!gain_weights.empty() && rule.min_gain > 0)  // gain·w < min_gain ⇔ gain < min_gain / w
-          block_rule.min_gain = gain_weights[i] > 0 ? rule.min_gain / static_cast<double>(gain_weights[i])
-                                                    : std::numeric_limits<double>::infinity();
+          block_rule.min_gain = gain_weights[i] > 0
+                                    ? rule.min_gain / static_cast<double>(gain_weights[i])
+                                    : std::numeric_limits<double>::infinity();
         codes.count[i] = static_cast<std::uint8_t>(
-            ormp ? code_one_block_ormp(correlations.col(j).data(), energy, gram_, gram_diagonal_.data(),
-                                       floored_diagonal_.data(), block_rule, ws,
-                                       codes.atom.data() + slot, codes.coefficient.data() + slot,
-                                       codes.residual_energy.data() + i)
-                 : code_one_block(correlations.col(j).data(), energy, gram_, block_rule, ws, codes.atom.data() + slot,
-                                  codes.coefficient.data() + slot, codes.residual_energy.data() + i));
+            ormp ? code_one_block_ormp(
+                       correlations.col(j).data(), energy, gram_, gram_diagonal_.data(),
+                       floored_diagonal_.data(), block_rule, ws, codes.atom.data() + slot,
+                       codes.coefficient.data() + slot, codes.residual_energy.data() + i)
+                 : code_one_block(correlations.col(j).data(), energy, gram_, block_rule, ws,
+                                  codes.atom.data() + slot, codes.coefficient.data() + slot,
+                                  codes.residual_energy.data() + i));
       }
     }
   }
 }
 
-ReferenceCode reference_omp(const Eigen::MatrixXf& atoms, const Eigen::VectorXf& block, SparseCodingOptions options) {
+ReferenceCode reference_omp(const Eigen::MatrixXf& atoms, const Eigen::VectorXf& block,
+                            SparseCodingOptions options) {
   check_options(options, atoms.rows());
   const Eigen::MatrixXd D = atoms.cast<double>();
   const Eigen::VectorXd y = block.cast<double>();
@@ -374,12 +406,17 @@ ReferenceCode reference_omp(const Eigen::MatrixXf& atoms, const Eigen::VectorXf&
       Eigen::MatrixXd projected = D;
       if (!code.atoms.empty()) {
         Eigen::MatrixXd DI(D.rows(), static_cast<Eigen::Index>(code.atoms.size()));
-        for (std::size_t j = 0; j < code.atoms.size(); ++j) DI.col(static_cast<Eigen::Index>(j)) = D.col(code.atoms[j]);
-        projected -= DI * DI.householderQr().solve(D);  // the part of each atom in the support's span
+        for (std::size_t j = 0; j < code.atoms.size(); ++j)
+          DI.col(static_cast<Eigen::Index>(j)) = D.col(code.atoms[j]);
+        projected -=
+            DI * DI.householderQr().solve(D);  // the part of each atom in the support's span
       }
       const Eigen::VectorXd norms = D.colwise().squaredNorm().transpose();
-      c = c.cwiseProduct(c).cwiseQuotient(
-          projected.colwise().squaredNorm().transpose().cwiseMax(ormp_projected_floor * norms).cwiseMax(1e-12));
+      c = c.cwiseProduct(c).cwiseQuotient(projected.colwise()
+                                              .squaredNorm()
+                                              .transpose()
+                                              .cwiseMax(ormp_projected_floor * norms)
+                                              .cwiseMax(1e-12));
     }
     for (int k : code.atoms) c[k] = -1;
     Eigen::Index k = 0;
@@ -390,7 +427,8 @@ ReferenceCode reference_omp(const Eigen::MatrixXf& atoms, const Eigen::VectorXf&
     code.atoms.push_back(static_cast<int>(k));
     // 2. Least squares on the support, from scratch.
     Eigen::MatrixXd DI(D.rows(), static_cast<Eigen::Index>(code.atoms.size()));
-    for (std::size_t j = 0; j < code.atoms.size(); ++j) DI.col(static_cast<Eigen::Index>(j)) = D.col(code.atoms[j]);
+    for (std::size_t j = 0; j < code.atoms.size(); ++j)
+      DI.col(static_cast<Eigen::Index>(j)) = D.col(code.atoms[j]);
     const Eigen::VectorXd trial = DI.colPivHouseholderQr().solve(y);
     const Eigen::VectorXd trial_r = y - DI * trial;
     // 3. Rate-distortion stop: the atom is not kept if it lowers ‖r‖² by less than min_atom_gain.
@@ -408,7 +446,8 @@ ReferenceCode reference_omp(const Eigen::MatrixXf& atoms, const Eigen::VectorXf&
   return code;
 }
 
-void reconstruct_block(const Eigen::MatrixXf& atoms, const SparseCodes& codes, std::size_t i, float* out) {
+void reconstruct_block(const Eigen::MatrixXf& atoms, const SparseCodes& codes, std::size_t i,
+                       float* out) {
   Eigen::Map<Eigen::VectorXf> result(out, atoms.rows());
   result.setZero();
   const std::int32_t* a = codes.atoms_of(i);

@@ -9,7 +9,8 @@ namespace volreel::dictionary {
 BlockGrid::BlockGrid(Dims dims, int block_size) : dims_(dims), block_size_(block_size) {
   if (block_size < 1 || block_size > 64)
     throw InputError("block size " + std::to_string(block_size) + " is outside 1..64");
-  if (dims.x < 1 || dims.y < 1 || dims.z < 1) throw InputError("cannot cut an empty volume " + to_string(dims) + " into blocks");
+  if (dims.x < 1 || dims.y < 1 || dims.z < 1)
+    throw InputError("cannot cut an empty volume " + to_string(dims) + " into blocks");
   nx_ = (dims.x + block_size - 1) / block_size;
   ny_ = (dims.y + block_size - 1) / block_size;
   nz_ = (dims.z + block_size - 1) / block_size;
@@ -40,7 +41,8 @@ float BlockGrid::extract(std::span<const float> volume, std::size_t b, float* ou
   return mean;
 }
 
-void BlockGrid::store(std::span<float> volume, std::size_t b, float mean, const float* values) const {
+void BlockGrid::store(std::span<float> volume, std::size_t b, float mean,
+                      const float* values) const {
   const auto bi = static_cast<std::int64_t>(b);
   const std::int64_t M = block_size_;
   const std::int64_t x0 = bi % nx_ * M, y0 = bi / nx_ % ny_ * M, z0 = bi / (nx_ * ny_) * M;
@@ -48,7 +50,8 @@ void BlockGrid::store(std::span<float> volume, std::size_t b, float mean, const 
     for (std::int64_t j = 0; j < M; ++j)
       for (std::int64_t i = 0; i < M; ++i) {
         const float v = mean + values[(k * M + j) * M + i];
-        if (x0 + i < dims_.x && y0 + j < dims_.y && z0 + k < dims_.z) volume[dims_.index(x0 + i, y0 + j, z0 + k)] = v;
+        if (x0 + i < dims_.x && y0 + j < dims_.y && z0 + k < dims_.z)
+          volume[dims_.index(x0 + i, y0 + j, z0 + k)] = v;
       }
 }
 
@@ -59,7 +62,8 @@ void extract_blocks(const BlockGrid& grid, std::span<const float> volume, Eigen:
   means.resize(static_cast<std::size_t>(count));
 #pragma omp parallel for schedule(static)
   for (std::int64_t b = 0; b < count; ++b)
-    means[static_cast<std::size_t>(b)] = grid.extract(volume, static_cast<std::size_t>(b), blocks.col(b).data());
+    means[static_cast<std::size_t>(b)] =
+        grid.extract(volume, static_cast<std::size_t>(b), blocks.col(b).data());
 }
 
 }  // namespace volreel::dictionary

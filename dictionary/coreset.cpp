@@ -120,8 +120,9 @@ class StreamingSampler {
       const std::size_t n_l = slots_ >> (levels - l);
       std::vector<std::size_t> order(n_l);
       std::iota(order.begin(), order.end(), std::size_t{0});
-      std::stable_sort(order.begin(), order.end(),
-                       [&](std::size_t a, std::size_t b) { return slot_block_[a] < slot_block_[b]; });
+      std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+        return slot_block_[a] < slot_block_[b];
+      });
       std::vector<std::size_t> first_slot;
       std::vector<std::size_t> copies;
       for (std::size_t i = 0; i < n_l; ++i) {
@@ -138,10 +139,12 @@ class StreamingSampler {
       c.weights.resize(first_slot.size());
       for (std::size_t j = 0; j < first_slot.size(); ++j) {
         const std::size_t s = first_slot[j];
-        std::copy_n(slot_values_.data() + s * m_, m_, c.blocks.col(static_cast<Eigen::Index>(j)).data());
+        std::copy_n(slot_values_.data() + s * m_, m_,
+                    c.blocks.col(static_cast<Eigen::Index>(j)).data());
         // Hansen–Hurwitz: copies / (n_l · p_b) with p_b = e_b / E.
-        c.weights[j] = static_cast<float>(static_cast<double>(copies[j]) * population_energy_ /
-                                          (static_cast<double>(n_l) * static_cast<double>(slot_energy_[s])));
+        c.weights[j] =
+            static_cast<float>(static_cast<double>(copies[j]) * population_energy_ /
+                               (static_cast<double>(n_l) * static_cast<double>(slot_energy_[s])));
       }
     }
     return h;
@@ -150,7 +153,7 @@ class StreamingSampler {
  private:
   int block_size_;
   std::size_t m_, slots_;
-  std::vector<float> slot_values_;         // slots × m
+  std::vector<float> slot_values_;  // slots × m
   std::vector<float> slot_energy_;
   std::vector<std::uint64_t> slot_block_;  // frame << 40 | block: identifies the block in a slot
   std::vector<float> energy_;              // scratch: energies of the current frame's blocks
@@ -167,30 +170,33 @@ std::size_t slot_count(const CoresetOptions& options) {
     throw InputError("block size " + std::to_string(options.block_size) + " is outside 1..64");
   if (options.levels < 0 || options.levels > 30)
     throw InputError("coreset levels " + std::to_string(options.levels) + " is outside 0..30");
-  const auto m = static_cast<std::uint64_t>(options.block_size) * static_cast<std::uint64_t>(options.block_size) *
+  const auto m = static_cast<std::uint64_t>(options.block_size) *
+                 static_cast<std::uint64_t>(options.block_size) *
                  static_cast<std::uint64_t>(options.block_size);
   const std::uint64_t slots = options.coreset_voxels / m;
   if (slots < (std::uint64_t{1} << options.levels))
     throw InputError("coreset size " + std::to_string(options.coreset_voxels) + " voxels holds " +
-                     std::to_string(slots) + " blocks of " + std::to_string(m) + " voxels, fewer than the 2^" +
-                     std::to_string(options.levels) + " needed for " + std::to_string(options.levels) +
-                     " levels of halving");
+                     std::to_string(slots) + " blocks of " + std::to_string(m) +
+                     " voxels, fewer than the 2^" + std::to_string(options.levels) +
+                     " needed for " + std::to_string(options.levels) + " levels of halving");
   return static_cast<std::size_t>(slots);
 }
 
 }  // namespace
 
-std::vector<std::size_t> halton_frames(const std::vector<std::size_t>& candidates, std::size_t voxels_per_frame,
-                                       double min_voxels) {
+std::vector<std::size_t> halton_frames(const std::vector<std::size_t>& candidates,
+                                       std::size_t voxels_per_frame, double min_voxels) {
   const std::size_t T = candidates.size();
   std::vector<std::size_t> chosen;
   std::vector<bool> used(T, false);
   double voxels = 0;
-  // The first 2^(ceil(log2 T) + 1) points of the sequence hit every frame's interval [t/T, (t+1)/T).
+  // The first 2^(ceil(log2 T) + 1) points of the sequence hit every frame's interval [t/T,
+  // (t+1)/T).
   std::uint64_t limit = 4;
   while (limit < 2 * static_cast<std::uint64_t>(T)) limit *= 2;
   for (std::uint64_t i = 1; i <= 2 * limit && voxels < min_voxels && chosen.size() < T; ++i) {
-    const auto t = std::min(T - 1, static_cast<std::size_t>(radical_inverse_base2(i) * static_cast<double>(T)));
+    const auto t = std::min(
+        T - 1, static_cast<std::size_t>(radical_inverse_base2(i) * static_cast<double>(T)));
     if (used[t]) continue;
     used[t] = true;
     chosen.push_back(candidates[t]);
@@ -205,8 +211,8 @@ std::vector<std::size_t> halton_frames(const std::vector<std::size_t>& candidate
   return chosen;
 }
 
-CoresetHierarchy build_coreset_hierarchy(const datasets::SeriesReader& series, const CoresetOptions& options,
-                                         const Progress& progress) {
+CoresetHierarchy build_coreset_hierarchy(const datasets::SeriesReader& series,
+                                         const CoresetOptions& options, const Progress& progress) {
   const std::size_t slots = slot_count(options);
   const auto& info = series.info();
   std::vector<std::size_t> candidates = options.candidate_frames;
@@ -218,12 +224,14 @@ CoresetHierarchy build_coreset_hierarchy(const datasets::SeriesReader& series, c
     if (t >= info.frames)
       throw InputError("frame " + std::to_string(t) + " asked for, but " + info.source + " has " +
                        std::to_string(info.frames) + " frames");
-  const auto frames = halton_frames(candidates, info.dims.voxels(),
-                                    options.frame_factor * static_cast<double>(options.coreset_voxels));
+  const auto frames =
+      halton_frames(candidates, info.dims.voxels(),
+                    options.frame_factor * static_cast<double>(options.coreset_voxels));
   StreamingSampler sampler(options.block_size, slots, options.seed);
   std::vector<float> volume(info.dims.voxels());
   for (std::size_t i = 0; i < frames.size(); ++i) {
-    progress.report(static_cast<double>(i), static_cast<double>(frames.size()), "frame " + std::to_string(frames[i]));
+    progress.report(static_cast<double>(i), static_cast<double>(frames.size()),
+                    "frame " + std::to_string(frames[i]));
     series.read_frame(frames[i], volume);
     sampler.add_frame(volume, info.dims);
   }
@@ -233,7 +241,8 @@ CoresetHierarchy build_coreset_hierarchy(const datasets::SeriesReader& series, c
   return h;
 }
 
-CoresetHierarchy build_coreset_hierarchy(const std::vector<Volume>& frames, const CoresetOptions& options) {
+CoresetHierarchy build_coreset_hierarchy(const std::vector<Volume>& frames,
+                                         const CoresetOptions& options) {
   StreamingSampler sampler(options.block_size, slot_count(options), options.seed);
   for (const Volume& v : frames) sampler.add_frame(v.data, v.dims);
   CoresetHierarchy h = sampler.finish(options.levels);

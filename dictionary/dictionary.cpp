@@ -20,7 +20,8 @@ void normalize_atoms(Eigen::MatrixXf& atoms) {
   }
 }
 
-format::DictionaryFile to_file(const Dictionary& dictionary, const format::DictionaryTraining& training) {
+format::DictionaryFile to_file(const Dictionary& dictionary,
+                               const format::DictionaryTraining& training) {
   format::DictionaryFile file;
   file.block_size = static_cast<std::uint32_t>(dictionary.block_size);
   file.atom_count = static_cast<std::uint32_t>(dictionary.atom_count());
@@ -34,7 +35,8 @@ Dictionary from_file(const format::DictionaryFile& file) {
   Dictionary dictionary;
   dictionary.block_size = static_cast<int>(file.block_size);
   const auto m = static_cast<Eigen::Index>(file.block_size) * file.block_size * file.block_size;
-  dictionary.atoms = Eigen::Map<const Eigen::MatrixXf>(file.atoms.data(), m, static_cast<Eigen::Index>(file.atom_count));
+  dictionary.atoms = Eigen::Map<const Eigen::MatrixXf>(file.atoms.data(), m,
+                                                       static_cast<Eigen::Index>(file.atom_count));
   return dictionary;
 }
 
@@ -43,6 +45,8 @@ void save_dictionary(const std::filesystem::path& path, const Dictionary& dictio
   format::write_dictionary_file(path, to_file(dictionary, training));
 }
 
-Dictionary load_dictionary(const std::filesystem::path& path) { return from_file(format::read_dictionary_file(path)); }
+Dictionary load_dictionary(const std::filesystem::path& path) {
+  return from_file(format::read_dictionary_file(path));
+}
 
 }  // namespace volreel::dictionary

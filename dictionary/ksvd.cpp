@@ -12,13 +12,14 @@ namespace volreel::dictionary {
 
 namespace {
 
-void check_inputs(const Eigen::MatrixXf& atoms, const Eigen::MatrixXf& samples, std::span<const float> weights) {
+void check_inputs(const Eigen::MatrixXf& atoms, const Eigen::MatrixXf& samples,
+                  std::span<const float> weights) {
   if (samples.rows() != atoms.rows())
-    throw std::invalid_argument("samples have " + std::to_string(samples.rows()) + " values, atoms " +
-                                std::to_string(atoms.rows()));
+    throw std::invalid_argument("samples have " + std::to_string(samples.rows()) +
+                                " values, atoms " + std::to_string(atoms.rows()));
   if (weights.size() != static_cast<std::size_t>(samples.cols()))
-    throw std::invalid_argument(std::to_string(weights.size()) + " weights for " + std::to_string(samples.cols()) +
-                                " samples");
+    throw std::invalid_argument(std::to_string(weights.size()) + " weights for " +
+                                std::to_string(samples.cols()) + " samples");
 }
 
 /// (A residual counts as meeting ε up to float rounding of the stored residual: 1e-6 relative.)
@@ -40,8 +41,8 @@ double target_energy(const Eigen::MatrixXf& atoms, const SparseCodingOptions& co
 
 }  // namespace
 
-CodingStats measure_coding(const Eigen::MatrixXf& atoms, const Eigen::MatrixXf& samples, std::span<const float> weights,
-                           const SparseCodingOptions& coding) {
+CodingStats measure_coding(const Eigen::MatrixXf& atoms, const Eigen::MatrixXf& samples,
+                           std::span<const float> weights, const SparseCodingOptions& coding) {
   check_inputs(atoms, samples, weights);
   SparseCodes codes;
   BatchOmp(atoms, coding).encode(samples, codes);
@@ -49,7 +50,8 @@ CodingStats measure_coding(const Eigen::MatrixXf& atoms, const Eigen::MatrixXf& 
 }
 
 KsvdIterationStats ksvd_iteration(Eigen::MatrixXf& atoms, const Eigen::MatrixXf& samples,
-                                  std::span<const float> weights, const KsvdOptions& options, SplitMix64& rng) {
+                                  std::span<const float> weights, const KsvdOptions& options,
+                                  SplitMix64& rng) {
   check_inputs(atoms, samples, weights);
   const Eigen::Index m = atoms.rows();
   const Eigen::Index K = atoms.cols();
@@ -78,7 +80,8 @@ KsvdIterationStats ksvd_iteration(Eigen::MatrixXf& atoms, const Eigen::MatrixXf&
   const auto S = static_cast<std::size_t>(codes.max_atoms);
   std::vector<std::size_t> start(static_cast<std::size_t>(K) + 1, 0);
   for (std::size_t i = 0; i < codes.size(); ++i)
-    for (std::size_t j = 0; j < codes.count[i]; ++j) ++start[static_cast<std::size_t>(codes.atom[i * S + j]) + 1];
+    for (std::size_t j = 0; j < codes.count[i]; ++j)
+      ++start[static_cast<std::size_t>(codes.atom[i * S + j]) + 1];
   std::partial_sum(start.begin(), start.end(), start.begin());
   std::vector<std::size_t> users(start.back());
   {
@@ -89,14 +92,16 @@ KsvdIterationStats ksvd_iteration(Eigen::MatrixXf& atoms, const Eigen::MatrixXf&
   }
   std::size_t most_users = 0;
   for (Eigen::Index k = 0; k < K; ++k)
-    most_users = std::max(most_users, start[static_cast<std::size_t>(k) + 1] - start[static_cast<std::size_t>(k)]);
+    most_users = std::max(
+        most_users, start[static_cast<std::size_t>(k) + 1] - start[static_cast<std::size_t>(k)]);
 
   // 2. Atom updates in a random order (Fisher–Yates with our PRNG).
   std::vector<Eigen::Index> order(static_cast<std::size_t>(K));
   std::iota(order.begin(), order.end(), Eigen::Index{0});
   for (std::size_t i = order.size(); i > 1; --i) std::swap(order[i - 1], order[rng.below(i)]);
   Eigen::MatrixXf E(m, static_cast<Eigen::Index>(most_users));
-  Eigen::VectorXf g(static_cast<Eigen::Index>(most_users)), wg(static_cast<Eigen::Index>(most_users));
+  Eigen::VectorXf g(static_cast<Eigen::Index>(most_users)),
+      wg(static_cast<Eigen::Index>(most_users));
   Eigen::VectorXf d(m);
   std::vector<bool> used(static_cast<std::size_t>(K), false);
   for (const Eigen::Index k : order) {
@@ -117,7 +122,8 @@ KsvdIterationStats ksvd_iteration(Eigen::MatrixXf& atoms, const Eigen::MatrixXf&
     d.noalias() = Ek * wg.head(count);
     d.array() -= d.mean();
     const float norm = d.norm();
-    if (!(norm > 1e-30f)) continue;  // users' weighted contribution vanishes: keep the atom as it is
+    if (!(norm > 1e-30f))
+      continue;  // users' weighted contribution vanishes: keep the atom as it is
     d /= norm;
     // 2c. g = Eᵀd; residuals become E − d gᵀ.
     g.head(count).noalias() = Ek.transpose() * d;
@@ -132,7 +138,8 @@ KsvdIterationStats ksvd_iteration(Eigen::MatrixXf& atoms, const Eigen::MatrixXf&
   std::vector<double> weighted_error(static_cast<std::size_t>(n));
   for (Eigen::Index i = 0; i < n; ++i) {
     weighted_error[static_cast<std::size_t>(i)] =
-        static_cast<double>(weights[static_cast<std::size_t>(i)]) * static_cast<double>(residual.col(i).squaredNorm());
+        static_cast<double>(weights[static_cast<std::size_t>(i)]) *
+        static_cast<double>(residual.col(i).squaredNorm());
     stats.objective_updated += weighted_error[static_cast<std::size_t>(i)];
   }
   for (bool u : used) stats.unused_atoms += u ? 0 : 1;
@@ -147,7 +154,8 @@ KsvdIterationStats ksvd_iteration(Eigen::MatrixXf& atoms, const Eigen::MatrixXf&
       continue;
     }
     for (Eigen::Index i = 0; i < k; ++i)
-      if (!replace[static_cast<std::size_t>(i)] && static_cast<double>(std::abs(gram(i, k))) > options.duplicate_threshold) {
+      if (!replace[static_cast<std::size_t>(i)] &&
+          static_cast<double>(std::abs(gram(i, k))) > options.duplicate_threshold) {
         replace[static_cast<std::size_t>(k)] = true;
         break;
       }
@@ -158,7 +166,9 @@ KsvdIterationStats ksvd_iteration(Eigen::MatrixXf& atoms, const Eigen::MatrixXf&
   const std::size_t take = std::min(wanted, worst.size());
   std::partial_sort(worst.begin(), worst.begin() + static_cast<std::ptrdiff_t>(take), worst.end(),
                     [&](std::size_t a, std::size_t b) {
-                      return weighted_error[a] != weighted_error[b] ? weighted_error[a] > weighted_error[b] : a < b;
+                      return weighted_error[a] != weighted_error[b]
+                                 ? weighted_error[a] > weighted_error[b]
+                                 : a < b;
                     });
   std::size_t next = 0;
   for (Eigen::Index k = 0; k < K && next < take; ++k) {

@@ -24,7 +24,8 @@ Eigen::MatrixXf initial_atoms(const Coreset& first, int m, int K, SplitMix64& rn
   std::vector<std::size_t> pick(static_cast<std::size_t>(first.blocks.cols()));
   std::iota(pick.begin(), pick.end(), std::size_t{0});
   const std::size_t from_samples = std::min(pick.size(), static_cast<std::size_t>(K));
-  for (std::size_t i = 0; i < from_samples; ++i) std::swap(pick[i], pick[i + rng.below(pick.size() - i)]);
+  for (std::size_t i = 0; i < from_samples; ++i)
+    std::swap(pick[i], pick[i + rng.below(pick.size() - i)]);
   for (Eigen::Index k = 0; k < K; ++k) {
     if (static_cast<std::size_t>(k) < from_samples)
       atoms.col(k) = first.blocks.col(static_cast<Eigen::Index>(pick[static_cast<std::size_t>(k)]));
@@ -40,29 +41,35 @@ Eigen::MatrixXf initial_atoms(const Coreset& first, int m, int K, SplitMix64& rn
 TrainingResult train_dictionary(const CoresetHierarchy& coresets, const TrainingOptions& options,
                                 const TrainingCallback& callback) {
   if (coresets.levels.empty() || coresets.largest().blocks.cols() == 0)
-    throw InputError("every block of the training frames is flat (constant): there is nothing to learn a dictionary from");
+    throw InputError(
+        "every block of the training frames is flat (constant): there is nothing to learn a "
+        "dictionary from");
   if (options.atom_count < 1 || options.atom_count > 65536)
     throw InputError("atom count " + std::to_string(options.atom_count) + " is outside 1..65536");
   if (options.iterations < 1) throw InputError("iterations per level must be at least 1");
   if (!(options.coarse_tolerance_factor >= 1))
     throw InputError("the coarse tolerance factor must be at least 1");
   const auto start = std::chrono::steady_clock::now();
-  const auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
+  const auto elapsed = [&] {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
   const int m = coresets.block_size * coresets.block_size * coresets.block_size;
   const double blocks = coresets.population_blocks;
   SplitMix64 rng(options.seed ^ 0x6B5D1C7A3E2F9081ull);
 
   const int level_count = static_cast<int>(coresets.levels.size());
   const int first_level = options.flat ? level_count - 1 : 0;
-  const int iterations = options.flat ? (options.flat_iterations > 0 ? options.flat_iterations
-                                                                     : options.iterations * level_count)
-                                      : options.iterations;
+  const int iterations = options.flat
+                             ? (options.flat_iterations > 0 ? options.flat_iterations
+                                                            : options.iterations * level_count)
+                             : options.iterations;
   TrainingResult result;
   result.dictionary.block_size = coresets.block_size;
   // The first level may be empty only if the data is nearly all flat; start from the largest then.
-  const Coreset& seed_level = coresets.levels[static_cast<std::size_t>(first_level)].blocks.cols() > 0
-                                  ? coresets.levels[static_cast<std::size_t>(first_level)]
-                                  : coresets.largest();
+  const Coreset& seed_level =
+      coresets.levels[static_cast<std::size_t>(first_level)].blocks.cols() > 0
+          ? coresets.levels[static_cast<std::size_t>(first_level)]
+          : coresets.largest();
   Eigen::MatrixXf& atoms = result.dictionary.atoms;
   atoms = initial_atoms(seed_level, m, options.atom_count, rng);
 
@@ -88,20 +95,25 @@ TrainingResult train_dictionary(const CoresetHierarchy& coresets, const Training
     double previous_objective = 0;
     int previous_stage = -1, previous_atoms = -1;
     for (int it = 0; it < iterations; ++it, ++t) {
-      const int stage = options.flat ? stages - 1 - (iterations - 1 - t) * stages / iterations : level;
-      const double coarse = stages > 1 ? static_cast<double>(stages - 1 - stage) / (stages - 1) : 0.0;
-      ksvd.coding.tolerance = options.coding.tolerance * std::pow(options.coarse_tolerance_factor, coarse);
+      const int stage =
+          options.flat ? stages - 1 - (iterations - 1 - t) * stages / iterations : level;
+      const double coarse =
+          stages > 1 ? static_cast<double>(stages - 1 - stage) / (stages - 1) : 0.0;
+      ksvd.coding.tolerance =
+          options.coding.tolerance * std::pow(options.coarse_tolerance_factor, coarse);
       // The ramp never holds back the last stage, however few iterations came before it.
       const bool last_stage = stage == stages - 1;
-      ksvd.coding.max_atoms = options.sparsity_ramp && !last_stage ? std::min(options.coding.max_atoms, t + 1)
-                                                                   : options.coding.max_atoms;
+      ksvd.coding.max_atoms = options.sparsity_ramp && !last_stage
+                                  ? std::min(options.coding.max_atoms, t + 1)
+                                  : options.coding.max_atoms;
       const KsvdIterationStats s = ksvd_iteration(atoms, c.blocks, c.weights, ksvd, rng);
       ++result.total_iterations;
       // The objective is measured by the coding step, before this iteration's update: stop when the
       // previous update (at the same ε and Smax) gained less than the threshold.
       const bool comparable = stage == previous_stage && ksvd.coding.max_atoms == previous_atoms;
-      const bool converged = options.convergence > 0 && comparable && (options.flat ? last_stage : true) &&
-                             previous_objective - s.coded.objective < options.convergence * previous_objective;
+      const bool converged =
+          options.convergence > 0 && comparable && (options.flat ? last_stage : true) &&
+          previous_objective - s.coded.objective < options.convergence * previous_objective;
       previous_objective = s.coded.objective;
       previous_stage = stage;
       previous_atoms = ksvd.coding.max_atoms;
@@ -125,7 +137,8 @@ TrainingResult train_dictionary(const CoresetHierarchy& coresets, const Training
   result.seconds = elapsed();
   // The trained dictionary against the largest level (not counted in the training time).
   const Coreset& largest = coresets.largest();
-  result.final_stats = progress_of(measure_coding(atoms, largest.blocks, largest.weights, options.coding));
+  result.final_stats =
+      progress_of(measure_coding(atoms, largest.blocks, largest.weights, options.coding));
   result.final_stats.level = result.final_stats.levels = level_count - first_level;
   result.final_stats.samples = static_cast<std::size_t>(largest.blocks.cols());
   result.final_stats.draws = largest.draws;

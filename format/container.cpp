@@ -6,9 +6,9 @@
 #include <cstring>
 #include <string>
 
-#include "volreel/format/file_io.hpp"
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/error.hpp"
+#include "volreel/format/file_io.hpp"
 
 namespace volreel::format {
 

@@ -47,8 +47,9 @@ std::uint32_t crc32c(std::span<const std::byte> bytes, std::uint32_t crc) noexce
       hi = __builtin_bswap32(hi);
     }
     lo ^= c;
-    c = tables[7][lo & 0xFFu] ^ tables[6][(lo >> 8) & 0xFFu] ^ tables[5][(lo >> 16) & 0xFFu] ^ tables[4][lo >> 24] ^
-        tables[3][hi & 0xFFu] ^ tables[2][(hi >> 8) & 0xFFu] ^ tables[1][(hi >> 16) & 0xFFu] ^ tables[0][hi >> 24];
+    c = tables[7][lo & 0xFFu] ^ tables[6][(lo >> 8) & 0xFFu] ^ tables[5][(lo >> 16) & 0xFFu] ^
+        tables[4][lo >> 24] ^ tables[3][hi & 0xFFu] ^ tables[2][(hi >> 8) & 0xFFu] ^
+        tables[1][(hi >> 16) & 0xFFu] ^ tables[0][hi >> 24];
     p += 8;
     n -= 8;
   }

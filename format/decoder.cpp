@@ -35,7 +35,8 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
   std::memcpy(payload_words.data(), bytes.data(), payload_words.size() * 4);
   const vr_uint* payload = payload_words.data();
   // 1. Structure, dequantization values and atom indices.
-  const KsvdPayloadLayout layout = check_ksvd_payload(payload_words, bytes.size(), atoms.count, name, at);
+  const KsvdPayloadLayout layout =
+      check_ksvd_payload(payload_words, bytes.size(), atoms.count, name, at);
   // 2. Prefix sum of sparsities = first code of each block.
   vr_uint first_code[VR_BLOCKS_PER_BRICK + 1];
   first_code[0] = 0;
@@ -140,8 +141,9 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::
   layout.entry_bits = vr_entry_bits(layout.mean_bits);
   // 2. The entries, then the length their sparsities give.
   if (bytes < vr_payload_bytes(layout.entry_bits, 0))
-    fail(0, "of at least " + str(vr_payload_bytes(layout.entry_bits, 0)) + " bytes for " +
-                str(layout.entry_bits) + "-bit block entries",
+    fail(0,
+         "of at least " + str(vr_payload_bytes(layout.entry_bits, 0)) + " bytes for " +
+             str(layout.entry_bits) + "-bit block entries",
          str(bytes) + " bytes");
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
     layout.codes += vr_entry_sparsity(vr_block_entry(words.data(), layout.entry_bits, b));

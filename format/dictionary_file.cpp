@@ -7,9 +7,9 @@
 #include <cstdio>
 #include <cstring>
 
-#include "volreel/format/file_io.hpp"
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/error.hpp"
+#include "volreel/format/file_io.hpp"
 
 namespace volreel::format {
 
@@ -62,10 +62,12 @@ std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& d) {
     throw FormatError(memory, "atom count " + std::to_string(d.atom_count) + " is outside 1.." +
                                   std::to_string(dictionary_max_atoms));
   if (d.atoms.size() != d.atom_count * m)
-    throw FormatError(memory, std::to_string(d.atoms.size()) + " atom values for " + std::to_string(d.atom_count) +
-                                  " atoms of " + std::to_string(m) + " values");
+    throw FormatError(memory, std::to_string(d.atoms.size()) + " atom values for " +
+                                  std::to_string(d.atom_count) + " atoms of " + std::to_string(m) +
+                                  " values");
   if (d.program_version.size() > 15)
-    throw FormatError(memory, "program version '" + d.program_version + "' is longer than 15 characters");
+    throw FormatError(memory,
+                      "program version '" + d.program_version + "' is longer than 15 characters");
 
   DictionaryFileHeader h{};
   std::memcpy(h.magic, dictionary_magic.data(), sizeof h.magic);
@@ -82,7 +84,8 @@ std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& d) {
   h.coreset_levels = d.training.coreset_levels;
   h.iterations = d.training.iterations;
   h.seed = d.training.seed;
-  h.flags = (d.training.flat ? dictionary_flag_flat : 0u) | (d.half_atoms ? dictionary_flag_half : 0u);
+  h.flags =
+      (d.training.flat ? dictionary_flag_flat : 0u) | (d.half_atoms ? dictionary_flag_half : 0u);
   h.training_frames = d.training.training_frames;
   h.rms_error = d.training.rms_error;
   h.mean_sparsity = d.training.mean_sparsity;
@@ -104,42 +107,50 @@ std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& d) {
   return bytes;
 }
 
-DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes, const std::filesystem::path& name) {
+DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes,
+                                     const std::filesystem::path& name) {
   // 1. The header must be there before any field is looked at.
   const std::uint64_t minimum = dictionary_file_size(1, 1);
   if (bytes.size() < sizeof(DictionaryFileHeader))
-    throw FormatError(name, bytes.size(), "a dictionary file of at least " + std::to_string(minimum) + " bytes",
+    throw FormatError(name, bytes.size(),
+                      "a dictionary file of at least " + std::to_string(minimum) + " bytes",
                       "end of file (truncated: " + std::to_string(bytes.size()) + " bytes)");
   DictionaryFileHeader h;
   std::memcpy(&h, bytes.data(), sizeof h);
 
   // 2. Identity and version.
   if (std::memcmp(h.magic, dictionary_magic.data(), sizeof h.magic) != 0)
-    throw FormatError(name, 0, "magic " + quoted_bytes(dictionary_magic.data(), 8) + " (a volreel dictionary file)",
-                      quoted_bytes(h.magic, 8));
+    throw FormatError(
+        name, 0,
+        "magic " + quoted_bytes(dictionary_magic.data(), 8) + " (a volreel dictionary file)",
+        quoted_bytes(h.magic, 8));
   if (h.format_version != dictionary_format_version)
     throw FormatError(name, offsetof(DictionaryFileHeader, format_version),
                       "dictionary format version " + std::to_string(dictionary_format_version),
                       "version " + std::to_string(h.format_version));
   if (h.header_bytes != sizeof(DictionaryFileHeader))
     throw FormatError(name, offsetof(DictionaryFileHeader, header_bytes),
-                      "header size " + std::to_string(sizeof(DictionaryFileHeader)), std::to_string(h.header_bytes));
+                      "header size " + std::to_string(sizeof(DictionaryFileHeader)),
+                      std::to_string(h.header_bytes));
 
   // 3. Header consistency, before sizes derived from it are trusted.
   if (h.atom_count == 0 || h.atom_count > dictionary_max_atoms)
     throw FormatError(name, offsetof(DictionaryFileHeader, atom_count),
-                      "atom count in 1.." + std::to_string(dictionary_max_atoms), std::to_string(h.atom_count));
+                      "atom count in 1.." + std::to_string(dictionary_max_atoms),
+                      std::to_string(h.atom_count));
   if (h.block_size == 0 || h.block_size > dictionary_max_block_size)
     throw FormatError(name, offsetof(DictionaryFileHeader, block_size),
-                      "block size in 1.." + std::to_string(dictionary_max_block_size), std::to_string(h.block_size));
+                      "block size in 1.." + std::to_string(dictionary_max_block_size),
+                      std::to_string(h.block_size));
   const std::uint64_t m = std::uint64_t{h.block_size} * h.block_size * h.block_size;
   if (h.atom_length != m)
     throw FormatError(name, offsetof(DictionaryFileHeader, atom_length),
-                      "atom length " + std::to_string(m) + " (block size " + std::to_string(h.block_size) + " cubed)",
+                      "atom length " + std::to_string(m) + " (block size " +
+                          std::to_string(h.block_size) + " cubed)",
                       std::to_string(h.atom_length));
   if ((h.flags & ~(dictionary_flag_flat | dictionary_flag_half)) != 0)
-    throw FormatError(name, offsetof(DictionaryFileHeader, flags), "flags with only bits 0 and 1 defined",
-                      hex32(h.flags));
+    throw FormatError(name, offsetof(DictionaryFileHeader, flags),
+                      "flags with only bits 0 and 1 defined", hex32(h.flags));
   const bool half = (h.flags & dictionary_flag_half) != 0;
   const std::size_t value_bytes = half ? 2 : sizeof(float);
 
@@ -148,8 +159,9 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes, const std
   const char* const value_type = half ? "binary16" : "float32";
   if (bytes.size() < expected)
     throw FormatError(name, bytes.size(),
-                      std::to_string(expected) + " bytes (128-byte header, " + std::to_string(h.atom_count) + " atoms of " +
-                          std::to_string(m) + " " + value_type + ", 4-byte CRC)",
+                      std::to_string(expected) + " bytes (128-byte header, " +
+                          std::to_string(h.atom_count) + " atoms of " + std::to_string(m) + " " +
+                          value_type + ", 4-byte CRC)",
                       "end of file (truncated: " + std::to_string(bytes.size()) + " bytes)");
   if (bytes.size() > expected)
     throw FormatError(name, expected, "end of file after " + std::to_string(expected) + " bytes",
@@ -161,8 +173,10 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes, const std
   std::memcpy(&stored, bytes.data() + crc_offset, sizeof stored);
   const std::uint32_t computed = crc32c(bytes.first(crc_offset));
   if (stored != computed)
-    throw FormatError(name, crc_offset, "CRC-32C " + hex32(computed) + " of bytes 0.." + std::to_string(crc_offset - 1),
-                      "stored " + hex32(stored) + " (the file is corrupt)");
+    throw FormatError(
+        name, crc_offset,
+        "CRC-32C " + hex32(computed) + " of bytes 0.." + std::to_string(crc_offset - 1),
+        "stored " + hex32(stored) + " (the file is corrupt)");
 
   // 6. Atoms, which must be finite (a CRC does not catch a writer that wrote NaN).
   DictionaryFile d;
@@ -182,7 +196,8 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes, const std
   for (std::size_t i = 0; i < d.atoms.size(); ++i)
     if (!std::isfinite(d.atoms[i]))
       throw FormatError(name, sizeof h + i * value_bytes,
-                        std::string("a finite ") + value_type + " (atom " + std::to_string(i / m) + ", value " + std::to_string(i % m) + ")",
+                        std::string("a finite ") + value_type + " (atom " + std::to_string(i / m) +
+                            ", value " + std::to_string(i % m) + ")",
                         std::to_string(d.atoms[i]));
 
   d.training.tolerance = h.tolerance;

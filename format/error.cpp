@@ -3,10 +3,12 @@
 
 namespace volreel::format {
 
-FormatError::FormatError(const std::filesystem::path& file, std::uint64_t offset, const std::string& expected,
-                         const std::string& found)
-    : std::runtime_error(file.string() + (offset == no_offset ? std::string() : ": offset " + std::to_string(offset)) +
-                         ": expected " + expected + ", found " + found),
+FormatError::FormatError(const std::filesystem::path& file, std::uint64_t offset,
+                         const std::string& expected, const std::string& found)
+    : std::runtime_error(
+          file.string() +
+          (offset == no_offset ? std::string() : ": offset " + std::to_string(offset)) +
+          ": expected " + expected + ", found " + found),
       file_(file),
       offset_(offset) {}
 

@@ -26,7 +26,8 @@ std::vector<std::byte> read_whole_file(const fs::path& path) {
   }
   const bool failed = std::ferror(f) != 0;
   std::fclose(f);
-  if (failed) throw FormatError(path, "read error after " + std::to_string(bytes.size()) + " bytes");
+  if (failed)
+    throw FormatError(path, "read error after " + std::to_string(bytes.size()) + " bytes");
   return bytes;
 }
 
@@ -40,8 +41,8 @@ void write_file_atomically(const fs::path& path, std::span<const std::byte> byte
   std::error_code ec;
   if (put != bytes.size() || !flushed || !closed) {
     fs::remove(tmp, ec);
-    throw FormatError(tmp, "write failed after " + std::to_string(put) + " of " + std::to_string(bytes.size()) +
-                               " bytes (disk full?)");
+    throw FormatError(tmp, "write failed after " + std::to_string(put) + " of " +
+                               std::to_string(bytes.size()) + " bytes (disk full?)");
   }
   fs::rename(tmp, path, ec);
   if (ec) {

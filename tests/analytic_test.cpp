@@ -38,7 +38,8 @@ TEST_P(AnalyticFields, DeterministicBoundedAndMoving) {
 }
 
 INSTANTIATE_TEST_SUITE_P(All, AnalyticFields,
-                         ::testing::Values(vd::AnalyticField::blobs, vd::AnalyticField::rotating, vd::AnalyticField::noise),
+                         ::testing::Values(vd::AnalyticField::blobs, vd::AnalyticField::rotating,
+                                           vd::AnalyticField::noise),
                          [](const auto& param_info) { return vd::to_string(param_info.param); });
 
 TEST(Analytic, GenerateWritesAReadableSeries) {

@@ -1,6 +1,7 @@
 // coreset_test.cpp: the coreset hierarchy — Halton frame choice, importance sampling that keeps
 // weighted sums unbiased (energy exactly, second moments within a stated tolerance), nested
-// levels of the right sizes, no flat blocks, determinism, and the same result from a series on disk.
+// levels of the right sizes, no flat blocks, determinism, and the same result from a series on
+// disk.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -21,7 +22,8 @@ using namespace volreel::dictionary;
 
 std::vector<Volume> frames(int count, Dims dims) {
   std::vector<Volume> v;
-  for (int t = 0; t < count; ++t) v.push_back(test::wavy_volume(dims, 100 + static_cast<std::uint64_t>(t)));
+  for (int t = 0; t < count; ++t)
+    v.push_back(test::wavy_volume(dims, 100 + static_cast<std::uint64_t>(t)));
   return v;
 }
 
@@ -115,7 +117,8 @@ TEST(Coreset, WeightedSumsMatchTheFullData) {
     const Eigen::MatrixXd estimate = Y * w.asDiagonal() * Y.transpose();
     const double error = (estimate - second_moment).norm() / second_moment.norm();
     const double s_norm = second_moment.norm() / energy;
-    const double expected = std::sqrt((1 - s_norm * s_norm) / static_cast<double>(c.draws)) / s_norm;
+    const double expected =
+        std::sqrt((1 - s_norm * s_norm) / static_cast<double>(c.draws)) / s_norm;
     EXPECT_LT(error, 1.5 * expected) << "level " << l;
     EXPECT_GT(error, 0.3 * expected) << "level " << l << ": suspiciously exact";
   }
@@ -144,7 +147,8 @@ TEST(Coreset, FlatBlocksAreNeverKept) {
   const CoresetHierarchy h = build_coreset_hierarchy(std::vector<Volume>{v}, o);
   EXPECT_EQ(h.population_blocks, 512.0);
   for (const Coreset& c : h.levels)
-    for (Eigen::Index i = 0; i < c.blocks.cols(); ++i) EXPECT_GT(c.blocks.col(i).squaredNorm(), 0.0f);
+    for (Eigen::Index i = 0; i < c.blocks.cols(); ++i)
+      EXPECT_GT(c.blocks.col(i).squaredNorm(), 0.0f);
   // An all-flat input gives empty levels, not a crash.
   const Volume flat(Dims{16, 16, 16});
   const CoresetHierarchy none = build_coreset_hierarchy(std::vector<Volume>{flat}, o);
@@ -164,7 +168,8 @@ TEST(Coreset, DeterministicForASeedAndTooSmallIsRefused) {
   const auto c = build_coreset_hierarchy(volumes, o);
   EXPECT_EQ(a.largest().blocks, b.largest().blocks);
   EXPECT_EQ(a.largest().weights, b.largest().weights);
-  EXPECT_FALSE(a.largest().blocks.cols() == c.largest().blocks.cols() && a.largest().blocks == c.largest().blocks);
+  EXPECT_FALSE(a.largest().blocks.cols() == c.largest().blocks.cols() &&
+               a.largest().blocks == c.largest().blocks);
   o.coreset_voxels = 3 * 64;  // 3 blocks cannot halve twice
   EXPECT_THROW(build_coreset_hierarchy(volumes, o), InputError);
 }
@@ -174,7 +179,8 @@ TEST(Coreset, FromASeriesOnDiskMatchesInMemory) {
   const Dims dims{20, 20, 20};
   const auto volumes = frames(8, dims);
   datasets::RawSeriesWriter writer(dir.path(), dims, "test");
-  for (std::size_t t = 0; t < volumes.size(); ++t) writer.write_frame(t, static_cast<double>(t), volumes[t].data);
+  for (std::size_t t = 0; t < volumes.size(); ++t)
+    writer.write_frame(t, static_cast<double>(t), volumes[t].data);
   writer.finish();
   const auto series = datasets::open_series(dir.path());
   CoresetOptions o;
@@ -184,7 +190,8 @@ TEST(Coreset, FromASeriesOnDiskMatchesInMemory) {
   o.frame_factor = 3 * 8000.0 / static_cast<double>(o.coreset_voxels);  // three frames' worth
   const CoresetHierarchy from_disk = build_coreset_hierarchy(*series, o);
   ASSERT_EQ(from_disk.frames, (std::vector<std::size_t>{4, 2, 6}));
-  const CoresetHierarchy in_memory = build_coreset_hierarchy(std::vector<Volume>{volumes[4], volumes[2], volumes[6]}, o);
+  const CoresetHierarchy in_memory =
+      build_coreset_hierarchy(std::vector<Volume>{volumes[4], volumes[2], volumes[6]}, o);
   for (std::size_t l = 0; l < in_memory.levels.size(); ++l) {
     EXPECT_EQ(from_disk.levels[l].blocks, in_memory.levels[l].blocks);
     EXPECT_EQ(from_disk.levels[l].weights, in_memory.levels[l].weights);

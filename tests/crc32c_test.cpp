@@ -52,7 +52,8 @@ TEST(Crc32c, MatchesBitwiseOnEveryLengthAndAlignment) {
   for (std::size_t offset = 0; offset < 8; ++offset)
     for (std::size_t n = 0; n + offset <= data.size(); n += (n < 40 ? 1 : 13)) {
       const auto bytes = std::as_bytes(std::span(data.data() + offset, n));
-      ASSERT_EQ(crc32c(bytes), bitwise_crc32c(data.data() + offset, n)) << "offset " << offset << " length " << n;
+      ASSERT_EQ(crc32c(bytes), bitwise_crc32c(data.data() + offset, n))
+          << "offset " << offset << " length " << n;
     }
 }
 
@@ -62,7 +63,8 @@ TEST(Crc32c, ContinuesAcrossPieces) {
   for (auto& b : data) b = static_cast<std::uint8_t>(rng.next());
   const auto all = std::as_bytes(std::span(data.data(), data.size()));
   for (std::size_t split : {0u, 1u, 7u, 8u, 9u, 500u, 999u, 1000u})
-    EXPECT_EQ(crc32c(all.subspan(split), crc32c(all.first(split))), crc32c(all)) << "split at " << split;
+    EXPECT_EQ(crc32c(all.subspan(split), crc32c(all.first(split))), crc32c(all))
+        << "split at " << split;
 }
 
 }  // namespace

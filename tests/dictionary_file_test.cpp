@@ -43,11 +43,14 @@ DictionaryFile small_dictionary(std::uint32_t M = 2, std::uint32_t K = 3) {
 }
 
 std::uint32_t u32_at(const std::vector<std::byte>& b, std::size_t offset) {
-  return std::to_integer<std::uint32_t>(b[offset]) | std::to_integer<std::uint32_t>(b[offset + 1]) << 8 |
-         std::to_integer<std::uint32_t>(b[offset + 2]) << 16 | std::to_integer<std::uint32_t>(b[offset + 3]) << 24;
+  return std::to_integer<std::uint32_t>(b[offset]) |
+         std::to_integer<std::uint32_t>(b[offset + 1]) << 8 |
+         std::to_integer<std::uint32_t>(b[offset + 2]) << 16 |
+         std::to_integer<std::uint32_t>(b[offset + 3]) << 24;
 }
 
-/// Expects parse to throw a FormatError whose message contains `fragment`; returns the error's offset.
+/// Expects parse to throw a FormatError whose message contains `fragment`; returns the error's
+/// offset.
 std::uint64_t expect_error(const std::vector<std::byte>& bytes, const std::string& fragment) {
   try {
     parse_dictionary_file(bytes, "test.bin");
@@ -71,7 +74,8 @@ TEST(DictionaryFile, RoundTripsThroughAFile) {
   volreel::test::TempDir dir("dictfile");
   const DictionaryFile d = small_dictionary();
   write_dictionary_file(dir / "dictionary.bin", d);
-  EXPECT_FALSE(std::filesystem::exists(dir.path() / ("dictionary.bin.tmp-" + std::to_string(getpid()))));
+  EXPECT_FALSE(
+      std::filesystem::exists(dir.path() / ("dictionary.bin.tmp-" + std::to_string(getpid()))));
   const DictionaryFile r = read_dictionary_file(dir / "dictionary.bin");
   EXPECT_EQ(r.block_size, d.block_size);
   EXPECT_EQ(r.atom_count, d.atom_count);
@@ -97,15 +101,15 @@ TEST(DictionaryFile, IsLittleEndianWithTheSpecifiedLayout) {
   const auto b = serialize_dictionary_file(d);
   ASSERT_EQ(b.size(), 128u + 3 * 8 * 4 + 4);
   EXPECT_EQ(std::memcmp(b.data(), "VREELDIC", 8), 0);
-  EXPECT_EQ(u32_at(b, 8), 1u);     // format version
-  EXPECT_EQ(u32_at(b, 12), 128u);  // header bytes
-  EXPECT_EQ(u32_at(b, 16), 3u);    // K
-  EXPECT_EQ(u32_at(b, 20), 2u);    // M
-  EXPECT_EQ(u32_at(b, 24), 8u);    // m
-  EXPECT_EQ(u32_at(b, 28), 15u);   // Smax
+  EXPECT_EQ(u32_at(b, 8), 1u);            // format version
+  EXPECT_EQ(u32_at(b, 12), 128u);         // header bytes
+  EXPECT_EQ(u32_at(b, 16), 3u);           // K
+  EXPECT_EQ(u32_at(b, 20), 2u);           // M
+  EXPECT_EQ(u32_at(b, 24), 8u);           // m
+  EXPECT_EQ(u32_at(b, 28), 15u);          // Smax
   EXPECT_EQ(u32_at(b, 72), 0x89ABCDEFu);  // seed, low word first
   EXPECT_EQ(u32_at(b, 76), 0x01234567u);
-  EXPECT_EQ(u32_at(b, 80), 1u);    // flags: flat
+  EXPECT_EQ(u32_at(b, 80), 1u);                   // flags: flat
   EXPECT_EQ(std::to_integer<char>(b[104]), '0');  // program version
   std::uint32_t first_atom_bits;
   std::memcpy(&first_atom_bits, &d.atoms[0], 4);
@@ -154,8 +158,8 @@ TEST(DictionaryFile, HalfAtomsRoundTripAndTakeHalfTheBytes) {
     EXPECT_LE(std::abs(half.atoms[i] - original.atoms[i]), std::abs(original.atoms[i]) * 0x1p-11f)
         << i;
   }
-  EXPECT_NE(half.atoms, original.atoms);                 // something was rounded
-  EXPECT_EQ(with_half_atoms(half).atoms, half.atoms);    // and rounding again changes nothing
+  EXPECT_NE(half.atoms, original.atoms);               // something was rounded
+  EXPECT_EQ(with_half_atoms(half).atoms, half.atoms);  // and rounding again changes nothing
   const auto bytes = serialize_dictionary_file(half);
   EXPECT_EQ(bytes.size(), dictionary_file_size(4, 27, true));
   EXPECT_EQ(bytes.size(), 128u + 2 * 4 * 27 + 4);
@@ -169,7 +173,12 @@ TEST(DictionaryFile, HalfAtomsRoundTripAndTakeHalfTheBytes) {
   EXPECT_EQ(serialize_dictionary_file(flagged), bytes);
   // Damage: every truncation and every flipped byte is an error; the flag off makes the size wrong.
   for (std::size_t n = 0; n < bytes.size(); ++n)
-    EXPECT_THROW(parse_dictionary_file(std::vector<std::byte>(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(n)), "half.bin"), FormatError) << n;
+    EXPECT_THROW(
+        parse_dictionary_file(
+            std::vector<std::byte>(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(n)),
+            "half.bin"),
+        FormatError)
+        << n;
   for (std::size_t i = 0; i < bytes.size(); ++i) {
     auto bad = bytes;
     bad[i] ^= std::byte{0x40};
@@ -225,7 +234,8 @@ TEST(DictionaryFile, BadFieldsNameTheirOffset) {
 TEST(DictionaryFile, MissingFileAndBadWritesAreErrors) {
   volreel::test::TempDir dir("dictfile-missing");
   EXPECT_THROW(read_dictionary_file(dir / "nope.bin"), FormatError);
-  EXPECT_THROW(write_dictionary_file(dir / "no-such-dir" / "d.bin", small_dictionary()), FormatError);
+  EXPECT_THROW(write_dictionary_file(dir / "no-such-dir" / "d.bin", small_dictionary()),
+               FormatError);
   DictionaryFile inconsistent = small_dictionary();
   inconsistent.atoms.pop_back();
   EXPECT_THROW(serialize_dictionary_file(inconsistent), FormatError);

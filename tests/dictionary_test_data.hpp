@@ -26,11 +26,12 @@ inline dictionary::Dictionary random_dictionary(int atoms, std::uint64_t seed) {
   return d;
 }
 
-
 /// A smooth multi-scale field (a few random plane waves) with some noise; no two frames alike.
 inline Volume wavy_volume(Dims dims, std::uint64_t seed) {
   SplitMix64 rng(seed);
-  struct Wave { double kx, ky, kz, phase, amplitude; };
+  struct Wave {
+    double kx, ky, kz, phase, amplitude;
+  };
   std::vector<Wave> waves;
   for (int w = 0; w < 12; ++w) {
     const double scale = 0.05 + 0.5 * rng.uniform();
@@ -43,8 +44,9 @@ inline Volume wavy_volume(Dims dims, std::uint64_t seed) {
       for (std::int64_t i = 0; i < dims.x; ++i) {
         double value = 0.02 * rng.normal();
         for (const Wave& w : waves)
-          value += w.amplitude * std::sin(w.kx * static_cast<double>(i) + w.ky * static_cast<double>(j) +
-                                          w.kz * static_cast<double>(k) + w.phase);
+          value +=
+              w.amplitude * std::sin(w.kx * static_cast<double>(i) + w.ky * static_cast<double>(j) +
+                                     w.kz * static_cast<double>(k) + w.phase);
         v.at(i, j, k) = static_cast<float>(value);
       }
   return v;
@@ -60,8 +62,8 @@ inline Eigen::MatrixXf planted_atoms(Eigen::Index m, Eigen::Index K, std::uint64
 }
 
 /// A volume whose every M³ block is mean + Σ (sparsity atoms of D) · coefficient + noise.
-inline Volume planted_volume(Dims dims, int block_size, const Eigen::MatrixXf& atoms, int sparsity, double noise,
-                             std::uint64_t seed) {
+inline Volume planted_volume(Dims dims, int block_size, const Eigen::MatrixXf& atoms, int sparsity,
+                             double noise, std::uint64_t seed) {
   SplitMix64 rng(seed);
   const dictionary::BlockGrid grid(dims, block_size);
   Volume v(dims);
@@ -70,9 +72,11 @@ inline Volume planted_volume(Dims dims, int block_size, const Eigen::MatrixXf& a
     block.setZero();
     for (int s = 0; s < sparsity; ++s) {
       const auto k = static_cast<Eigen::Index>(rng.below(static_cast<std::uint64_t>(atoms.cols())));
-      block += static_cast<float>((rng.uniform() < 0.5 ? -1 : 1) * rng.uniform(1.0, 3.0)) * atoms.col(k);
+      block +=
+          static_cast<float>((rng.uniform() < 0.5 ? -1 : 1) * rng.uniform(1.0, 3.0)) * atoms.col(k);
     }
-    for (Eigen::Index i = 0; i < block.size(); ++i) block[i] += static_cast<float>(noise * rng.normal());
+    for (Eigen::Index i = 0; i < block.size(); ++i)
+      block[i] += static_cast<float>(noise * rng.normal());
     grid.store(v.data, b, static_cast<float>(rng.uniform(-5, 5)), block.data());
   }
   return v;

@@ -276,7 +276,8 @@ TEST(Encoder, LagrangianRuleBeatsTheToleranceRuleAtEqualSize) {
     // The Lagrangian rule at the smallest ε (bisection in log ε) that is no larger.
     s.rule = encoder::VariableRateRule::lagrangian;
     double lo = range * 1e-4, hi = range * 0.5;
-    std::vector<std::byte> lagrangian_bytes = encoder::FrameEncoder(&d, ksvd_settings(hi, v)).encode(0, v);
+    std::vector<std::byte> lagrangian_bytes =
+        encoder::FrameEncoder(&d, ksvd_settings(hi, v)).encode(0, v);
     for (int step = 0; step < 16; ++step) {
       s.tolerance = std::sqrt(lo * hi);
       auto bytes = encoder::FrameEncoder(&d, s).encode(0, v);
@@ -311,7 +312,8 @@ TEST(Encoder, PaddingBlocksGetNoAtomsUnderTheLagrangianRule) {  // (at this ε: 
   // and padding, so its blocks with x index ≥ 2 (stored 12..35) are padding only.
   const Volume v = analytic_volume(datasets::AnalyticField::noise, {40, 34, 34});
   const auto d = random_dictionary(64, 13);
-  for (const auto rule : {encoder::VariableRateRule::lagrangian, encoder::VariableRateRule::tolerance}) {
+  for (const auto rule :
+       {encoder::VariableRateRule::lagrangian, encoder::VariableRateRule::tolerance}) {
     auto s = ksvd_settings(1e-2, v);
     s.rule = rule;
     const auto bytes = encoder::FrameEncoder(&d, s).encode(0, v);
@@ -321,7 +323,8 @@ TEST(Encoder, PaddingBlocksGetNoAtomsUnderTheLagrangianRule) {  // (at this ε: 
       const std::vector<vr_uint> atoms = block_sparsities(f, i);
       ASSERT_EQ(atoms.size(), VR_BLOCKS_PER_BRICK);
       for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
-        (f.position(i).x == 1 && b % VR_BLOCKS_PER_AXIS >= 2 ? padding_codes : other_codes) += atoms[b];
+        (f.position(i).x == 1 && b % VR_BLOCKS_PER_AXIS >= 2 ? padding_codes : other_codes) +=
+            atoms[b];
     }
     EXPECT_GT(other_codes, 0u);
     if (rule == encoder::VariableRateRule::lagrangian)
@@ -369,8 +372,8 @@ TEST(Encoder, FinestOwnedCodesCountEachBlockByItsOwnVoxels) {
 /// Mean bits and the block means' decoded errors of every coded brick of a frame file: the largest
 /// |decoded mean − true mean| over blocks relative to the brick's step bound, and the bits used.
 struct MeanCheck {
-  std::vector<std::uint32_t> bits;  ///< per coded brick
-  double worst_error = 0;           ///< the largest |decoded − exact block mean|
+  std::vector<std::uint32_t> bits;     ///< per coded brick
+  double worst_error = 0;              ///< the largest |decoded − exact block mean|
   std::vector<double> worst_by_level;  ///< the same per level (0 = the root)
 };
 MeanCheck check_means(const std::vector<std::byte>& bytes, const encoder::Pyramid& pyramid) {
@@ -397,7 +400,8 @@ MeanCheck check_means(const std::vector<std::byte>& bytes, const encoder::Pyrami
       const double decoded = static_cast<double>(vr_as_float(words[0])) +
                              static_cast<double>(vr_as_float(words[1])) * q;
       out.worst_error = std::max(out.worst_error, std::abs(decoded - exact));
-      out.worst_by_level[p.level] = std::max(out.worst_by_level[p.level], std::abs(decoded - exact));
+      out.worst_by_level[p.level] =
+          std::max(out.worst_by_level[p.level], std::abs(decoded - exact));
     }
   }
   return out;
@@ -470,7 +474,8 @@ TEST(Encoder, LevelFactorCodesCoarseLevelsToAWiderToleranceAndLeavesTheFinestAlo
       EXPECT_TRUE(std::equal(pa.begin(), pa.end(), pb.begin())) << "node " << i;
     }
   }
-  for (std::size_t level : {0u, 1u}) EXPECT_LT(bytes_grown[level], bytes_flat[level]) << "level " << level;
+  for (std::size_t level : {0u, 1u})
+    EXPECT_LT(bytes_grown[level], bytes_flat[level]) << "level " << level;
   // The means' step follows the level's tolerance ε·2^d: at most ε·2^d/2, so errors ≤ ε·2^d/4,
   // and coarser than at F = 1 (whose steps are at most ε/2 on every level).
   const MeanCheck mf = check_means(flat, pyramid), mg = check_means(grown, pyramid);
@@ -502,7 +507,8 @@ TEST(Encoder, LevelFactorCodesCoarseLevelsToAWiderToleranceAndLeavesTheFinestAlo
     o.level_tolerance_factor = 1;
     const auto one = encoder::FrameEncoder(&d, o).encode(0, v);
     o.level_tolerance_factor = 4;
-    EXPECT_EQ(encoder::FrameEncoder(&d, o).encode(0, v), one) << (variant == 0 ? "eps rule" : "fixed rate");
+    EXPECT_EQ(encoder::FrameEncoder(&d, o).encode(0, v), one)
+        << (variant == 0 ? "eps rule" : "fixed rate");
   }
   for (double bad : {0.5, 17.0, std::nan("")}) {
     s.level_tolerance_factor = bad;
@@ -652,7 +658,8 @@ TEST(Encoder, RegressionChecksums) {
                       lagrangian_crc = format::manifest_crc(lagrangian);
   if (std::getenv("VOLREEL_PRINT_CHECKSUMS"))
     std::printf(
-        "ksvd (eps rule): %zu bytes, crc 0x%08x; ksvd (Lagrangian): %zu bytes, crc 0x%08x; zfp: %zu "
+        "ksvd (eps rule): %zu bytes, crc 0x%08x; ksvd (Lagrangian): %zu bytes, crc 0x%08x; zfp: "
+        "%zu "
         "bytes, crc 0x%08x\n",
         ksvd.size(), ksvd_crc, lagrangian.size(), lagrangian_crc, zfp.size(), zfp_crc);
 #ifdef VOLREEL_KSVD_CHECKSUM_EXACT
@@ -764,7 +771,8 @@ TEST(Container, EncodeResumeVerifyAndDecode) {
   } catch (const InputError& e) {
     const std::string message = e.what();
     EXPECT_NE(message.find("pursuit \"omp\" (this run: \"ormp\")"), std::string::npos) << message;
-    EXPECT_NE(message.find("level_tolerance_factor 1.0 (this run: 2.0)"), std::string::npos) << message;
+    EXPECT_NE(message.find("level_tolerance_factor 1.0 (this run: 2.0)"), std::string::npos)
+        << message;
     EXPECT_NE(message.find("--level-factor"), std::string::npos) << message;
   }
   job.coding.selection = dictionary::AtomSelection::correlation;

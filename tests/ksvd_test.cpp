@@ -17,12 +17,14 @@ using namespace volreel;
 using namespace volreel::dictionary;
 
 /// n samples of m values, each a sparse combination of `sparsity` planted atoms plus noise.
-Eigen::MatrixXf planted_samples(const Eigen::MatrixXf& D, Eigen::Index n, int sparsity, double noise, std::uint64_t seed) {
+Eigen::MatrixXf planted_samples(const Eigen::MatrixXf& D, Eigen::Index n, int sparsity,
+                                double noise, std::uint64_t seed) {
   SplitMix64 rng(seed);
   Eigen::MatrixXf Y = Eigen::MatrixXf::Zero(D.rows(), n);
   for (Eigen::Index i = 0; i < n; ++i) {
     for (int s = 0; s < sparsity; ++s)
-      Y.col(i) += static_cast<float>(rng.uniform(-3, 3)) * D.col(static_cast<Eigen::Index>(rng.below(static_cast<std::uint64_t>(D.cols()))));
+      Y.col(i) += static_cast<float>(rng.uniform(-3, 3)) *
+                  D.col(static_cast<Eigen::Index>(rng.below(static_cast<std::uint64_t>(D.cols()))));
     for (Eigen::Index r = 0; r < D.rows(); ++r) Y(r, i) += static_cast<float>(noise * rng.normal());
     Y.col(i).array() -= Y.col(i).mean();
   }
@@ -30,7 +32,8 @@ Eigen::MatrixXf planted_samples(const Eigen::MatrixXf& D, Eigen::Index n, int sp
 }
 
 /// How many planted atoms have a learned atom within `max_angle_deg` (sign ignored).
-int recovered_atoms(const Eigen::MatrixXf& planted, const Eigen::MatrixXf& learned, double max_angle_deg) {
+int recovered_atoms(const Eigen::MatrixXf& planted, const Eigen::MatrixXf& learned,
+                    double max_angle_deg) {
   const Eigen::MatrixXf cosines = (planted.transpose() * learned).cwiseAbs();
   const double threshold = std::cos(max_angle_deg * 3.14159265358979 / 180);
   int found = 0;
@@ -61,7 +64,8 @@ TEST(Ksvd, UpdateNeverRaisesTheWeightedObjective) {
   // Over the iterations the coded objective falls a long way (sparse coding is greedy, so single
   // iterations may tick up slightly after atoms are replaced).
   EXPECT_LT(objectives.back(), 0.2 * objectives.front());
-  for (std::size_t i = 1; i < objectives.size(); ++i) EXPECT_LT(objectives[i], objectives[i - 1] * 1.1) << i;
+  for (std::size_t i = 1; i < objectives.size(); ++i)
+    EXPECT_LT(objectives[i], objectives[i - 1] * 1.1) << i;
 }
 
 TEST(Ksvd, FixedSparsityObjectiveDecreasesMonotonically) {
@@ -99,7 +103,8 @@ TEST(Ksvd, IntegerWeightsEqualRepeatedSamples) {
   Eigen::MatrixXf expanded(Y.rows(), expanded_count);
   Eigen::Index at = 0;
   for (Eigen::Index i = 0; i < Y.cols(); ++i)
-    for (int c = 0; c < static_cast<int>(weights[static_cast<std::size_t>(i)]); ++c) expanded.col(at++) = Y.col(i);
+    for (int c = 0; c < static_cast<int>(weights[static_cast<std::size_t>(i)]); ++c)
+      expanded.col(at++) = Y.col(i);
   const std::vector<float> ones(static_cast<std::size_t>(expanded_count), 1.0f);
 
   KsvdOptions options;
@@ -135,7 +140,8 @@ TEST(Ksvd, ReplacesUnusedAndDuplicateAtoms) {
   EXPECT_GE(s.replaced_atoms, 1);
   const Eigen::MatrixXf gram = atoms.transpose() * atoms;
   for (Eigen::Index i = 0; i < gram.rows(); ++i)
-    for (Eigen::Index j = 0; j < i; ++j) EXPECT_LT(std::abs(gram(i, j)), 0.99f + 1e-4f) << i << "," << j;
+    for (Eigen::Index j = 0; j < i; ++j)
+      EXPECT_LT(std::abs(gram(i, j)), 0.99f + 1e-4f) << i << "," << j;
 }
 
 class PlantedDictionary : public ::testing::TestWithParam<bool> {};
@@ -151,7 +157,8 @@ TEST_P(PlantedDictionary, TrainingRecoversMostAtoms) {
   const Eigen::MatrixXf planted = test::planted_atoms(64, 48, 21);
   std::vector<Volume> volumes;
   for (int t = 0; t < 2; ++t)
-    volumes.push_back(test::planted_volume({64, 64, 64}, M, planted, 3, 0.02, 30 + static_cast<std::uint64_t>(t)));
+    volumes.push_back(test::planted_volume({64, 64, 64}, M, planted, 3, 0.02,
+                                           30 + static_cast<std::uint64_t>(t)));
   CoresetOptions co;
   co.block_size = M;
   co.coreset_voxels = 6144 * 64;
@@ -168,7 +175,8 @@ TEST_P(PlantedDictionary, TrainingRecoversMostAtoms) {
   for (std::uint64_t seed : {23u, 24u, 25u}) {
     to.seed = seed;
     reports.clear();
-    const TrainingResult r = train_dictionary(h, to, [&](const TrainingProgress& p) { reports.push_back(p); });
+    const TrainingResult r =
+        train_dictionary(h, to, [&](const TrainingProgress& p) { reports.push_back(p); });
     found.push_back(recovered_atoms(planted, r.dictionary.atoms, 5.0));
     EXPECT_GE(found.back(), 24) << "seed " << seed << ": under half of the planted atoms";
     EXPECT_LT(r.final_stats.mean_sparsity, 4.0) << "seed " << seed;
@@ -180,7 +188,8 @@ TEST_P(PlantedDictionary, TrainingRecoversMostAtoms) {
   // Progress: one report per iteration (flat: 4 × 10 on the largest level, the same count as
   // 4 levels × 10), levels from small to large, the schedule ending at ε and Smax, then the final.
   ASSERT_EQ(reports.size(), 4u * 10u + 1u);
-  for (std::size_t i = 1; i + 1 < reports.size(); ++i) EXPECT_GE(reports[i].samples, reports[i - 1].samples);
+  for (std::size_t i = 1; i + 1 < reports.size(); ++i)
+    EXPECT_GE(reports[i].samples, reports[i - 1].samples);
   EXPECT_EQ(reports.front().max_atoms, 1);
   EXPECT_NEAR(reports.front().tolerance, 0.05, 1e-12);  // coarse_tolerance_factor 2
   EXPECT_EQ(reports[reports.size() - 2].max_atoms, 4);
@@ -207,7 +216,8 @@ TEST(Training, ConvergenceEndsALevelWhenTheObjectiveStopsFalling) {
   to.seed = 23;
   to.convergence = 0.02;
   std::vector<TrainingProgress> reports;
-  const TrainingResult r = train_dictionary(h, to, [&](const TrainingProgress& p) { reports.push_back(p); });
+  const TrainingResult r =
+      train_dictionary(h, to, [&](const TrainingProgress& p) { reports.push_back(p); });
   ASSERT_FALSE(reports.empty());
   reports.pop_back();  // the final evaluation
   EXPECT_LT(r.total_iterations, 4 * 10) << "no level converged early";
@@ -222,17 +232,22 @@ TEST(Training, ConvergenceEndsALevelWhenTheObjectiveStopsFalling) {
           << "level " << reports[i].level << " ended without a comparable pair of iterations";
       continue;
     }
-    const double gain = (objective(reports[i - 1]) - objective(reports[i])) / objective(reports[i - 1]);
+    const double gain =
+        (objective(reports[i - 1]) - objective(reports[i])) / objective(reports[i - 1]);
     if (last_of_level && reports[i].iteration < reports[i].iterations) {
-      EXPECT_LT(gain, to.convergence) << "level " << reports[i].level << " ended while still improving";
+      EXPECT_LT(gain, to.convergence)
+          << "level " << reports[i].level << " ended while still improving";
     } else if (!last_of_level) {
-      EXPECT_GE(gain, to.convergence) << "level " << reports[i].level << " went on after converging";
+      EXPECT_GE(gain, to.convergence)
+          << "level " << reports[i].level << " went on after converging";
     }
   }
   EXPECT_GE(recovered_atoms(planted, r.dictionary.atoms, 5.0), 24);
 }
 
 INSTANTIATE_TEST_SUITE_P(HierarchicalAndFlat, PlantedDictionary, ::testing::Values(false, true),
-                         [](const auto& test_info) { return test_info.param ? "Flat" : "Hierarchical"; });
+                         [](const auto& test_info) {
+                           return test_info.param ? "Flat" : "Hierarchical";
+                         });
 
 }  // namespace

@@ -35,7 +35,8 @@ Eigen::MatrixXf random_signals(Eigen::Index m, Eigen::Index n, std::uint64_t see
   return Y;
 }
 
-double explicit_residual(const Eigen::MatrixXf& D, const Eigen::MatrixXf& Y, const SparseCodes& codes, std::size_t i) {
+double explicit_residual(const Eigen::MatrixXf& D, const Eigen::MatrixXf& Y,
+                         const SparseCodes& codes, std::size_t i) {
   Eigen::VectorXf approx(D.rows());
   reconstruct_block(D, codes, i, approx.data());
   return (Y.col(static_cast<Eigen::Index>(i)) - approx).cast<double>().squaredNorm();
@@ -64,22 +65,27 @@ TEST(BatchOmp, RecoversPlantedSupportAndCoefficients) {
   for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
     ASSERT_EQ(codes.count[i], s) << "block " << i;
     std::vector<std::pair<int, float>> found;
-    for (int j = 0; j < s; ++j) found.emplace_back(codes.atoms_of(i)[j], codes.coefficients_of(i)[j]);
+    for (int j = 0; j < s; ++j)
+      found.emplace_back(codes.atoms_of(i)[j], codes.coefficients_of(i)[j]);
     std::sort(found.begin(), found.end());
     for (int j = 0; j < s; ++j) {
-      ASSERT_EQ(found[static_cast<std::size_t>(j)].first, truth[i][static_cast<std::size_t>(j)].first) << "block " << i;
-      EXPECT_NEAR(found[static_cast<std::size_t>(j)].second, truth[i][static_cast<std::size_t>(j)].second, 1e-4)
+      ASSERT_EQ(found[static_cast<std::size_t>(j)].first,
+                truth[i][static_cast<std::size_t>(j)].first)
+          << "block " << i;
+      EXPECT_NEAR(found[static_cast<std::size_t>(j)].second,
+                  truth[i][static_cast<std::size_t>(j)].second, 1e-4)
           << "block " << i;
     }
-    EXPECT_LT(codes.residual_energy[i], 1e-5f * Y.col(static_cast<Eigen::Index>(i)).squaredNorm());  // float rounding
+    EXPECT_LT(codes.residual_energy[i],
+              1e-5f * Y.col(static_cast<Eigen::Index>(i)).squaredNorm());  // float rounding
   }
 }
 
 /// The reference pursuit of every column of Y whose every greedy choice is clear-cut (selection
 /// margin at least 1e-3): float and double may break near-ties differently, which says nothing
 /// about correctness. Pairs of (column, reference code).
-std::vector<std::pair<std::size_t, ReferenceCode>> clear_cut_references(const Eigen::MatrixXf& D, const Eigen::MatrixXf& Y,
-                                                                        const SparseCodingOptions& options) {
+std::vector<std::pair<std::size_t, ReferenceCode>> clear_cut_references(
+    const Eigen::MatrixXf& D, const Eigen::MatrixXf& Y, const SparseCodingOptions& options) {
   std::vector<std::pair<std::size_t, ReferenceCode>> out;
   for (std::size_t i = 0; i < static_cast<std::size_t>(Y.cols()); ++i) {
     ReferenceCode ref = reference_omp(D, Y.col(static_cast<Eigen::Index>(i)), options);
@@ -100,9 +106,11 @@ TEST(BatchOmp, AgreesWithReferenceOmp) {
     ASSERT_EQ(codes.count[i], ref.atoms.size()) << "block " << i;
     for (std::size_t j = 0; j < ref.atoms.size(); ++j) {
       ASSERT_EQ(codes.atoms_of(i)[j], ref.atoms[j]) << "block " << i << " step " << j;
-      EXPECT_NEAR(codes.coefficients_of(i)[j], ref.coefficients[j], 1e-4 * (1 + std::abs(ref.coefficients[j])));
+      EXPECT_NEAR(codes.coefficients_of(i)[j], ref.coefficients[j],
+                  1e-4 * (1 + std::abs(ref.coefficients[j])));
     }
-    EXPECT_NEAR(codes.residual_energy[i], ref.residual_energy, 1e-4 * static_cast<double>(Y.col(static_cast<Eigen::Index>(i)).squaredNorm()));
+    EXPECT_NEAR(codes.residual_energy[i], ref.residual_energy,
+                1e-4 * static_cast<double>(Y.col(static_cast<Eigen::Index>(i)).squaredNorm()));
   }
   EXPECT_GT(references.size(), static_cast<std::size_t>(n * 8 / 10));
 }
@@ -113,7 +121,8 @@ TEST(BatchOmp, StopsAtToleranceWithTheFewestAtoms) {
   const Eigen::MatrixXf Y = random_signals(m, n, 6);  // RMS ≈ 1 per value
   // Residual after s greedy steps, for every s: ε = 0 runs with Smax = s follow the same path.
   std::vector<SparseCodes> prefix(16);
-  for (int s = 1; s <= 15; ++s) BatchOmp(D, {.tolerance = 0, .max_atoms = s}).encode(Y, prefix[static_cast<std::size_t>(s)]);
+  for (int s = 1; s <= 15; ++s)
+    BatchOmp(D, {.tolerance = 0, .max_atoms = s}).encode(Y, prefix[static_cast<std::size_t>(s)]);
   for (double tolerance : {0.95, 0.9, 0.85}) {
     const SparseCodingOptions options{.tolerance = tolerance, .max_atoms = 15};
     SparseCodes codes;
@@ -129,8 +138,9 @@ TEST(BatchOmp, StopsAtToleranceWithTheFewestAtoms) {
         EXPECT_LE(residual, target * (1 + 1e-5)) << "block " << i;
       }
       // One atom fewer would not have met ε: OMP stopped at the first step that did.
-      const double before = c > 1 ? static_cast<double>(prefix[static_cast<std::size_t>(c - 1)].residual_energy[i])
-                                  : static_cast<double>(Y.col(static_cast<Eigen::Index>(i)).squaredNorm());
+      const double before =
+          c > 1 ? static_cast<double>(prefix[static_cast<std::size_t>(c - 1)].residual_energy[i])
+                : static_cast<double>(Y.col(static_cast<Eigen::Index>(i)).squaredNorm());
       if (c >= 1) {
         EXPECT_GT(before, target * (1 - 1e-5)) << "block " << i << " used " << c << " atoms";
       }
@@ -144,22 +154,23 @@ TEST(BatchOmp, StopsAtMaxAtoms) {
   const Eigen::MatrixXf D = random_dictionary(m, K, 7);
   const Eigen::MatrixXf Y = random_signals(m, n, 8);
   for (const auto selection : {AtomSelection::correlation, AtomSelection::error})
-  for (int smax : {1, 5, 15}) {
-    SparseCodes codes;
-    BatchOmp(D, {.tolerance = 0, .max_atoms = smax, .selection = selection}).encode(Y, codes);
-    for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
-      ASSERT_EQ(codes.count[i], smax);
-      std::set<int> distinct(codes.atoms_of(i), codes.atoms_of(i) + smax);
-      EXPECT_EQ(static_cast<int>(distinct.size()), smax);
+    for (int smax : {1, 5, 15}) {
+      SparseCodes codes;
+      BatchOmp(D, {.tolerance = 0, .max_atoms = smax, .selection = selection}).encode(Y, codes);
+      for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
+        ASSERT_EQ(codes.count[i], smax);
+        std::set<int> distinct(codes.atoms_of(i), codes.atoms_of(i) + smax);
+        EXPECT_EQ(static_cast<int>(distinct.size()), smax);
+      }
     }
-  }
 }
 
 TEST(BatchOmp, ZeroBlocksNeedNoAtomsAndBadOptionsAreRefused) {
   const Eigen::MatrixXf D = random_dictionary(27, 40, 9);
   SparseCodes codes;
   for (const auto selection : {AtomSelection::correlation, AtomSelection::error}) {
-    BatchOmp(D, {.tolerance = 0, .max_atoms = 5, .selection = selection}).encode(Eigen::MatrixXf::Zero(27, 3), codes);
+    BatchOmp(D, {.tolerance = 0, .max_atoms = 5, .selection = selection})
+        .encode(Eigen::MatrixXf::Zero(27, 3), codes);
     for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(codes.count[i], 0);
   }
   EXPECT_THROW(BatchOmp(D, {.tolerance = -1, .max_atoms = 5}), std::invalid_argument);
@@ -170,13 +181,16 @@ TEST(BatchOmp, ZeroBlocksNeedNoAtomsAndBadOptionsAreRefused) {
 /// ‖r‖² after j greedy steps of every block, j = 0..15 (ε = 0 runs with Smax = j follow the same
 /// path as any stopping rule).
 std::vector<std::vector<double>> greedy_path(const Eigen::MatrixXf& D, const Eigen::MatrixXf& Y) {
-  std::vector<std::vector<double>> path(16, std::vector<double>(static_cast<std::size_t>(Y.cols())));
-  for (Eigen::Index i = 0; i < Y.cols(); ++i) path[0][static_cast<std::size_t>(i)] = Y.col(i).cast<double>().squaredNorm();
+  std::vector<std::vector<double>> path(16,
+                                        std::vector<double>(static_cast<std::size_t>(Y.cols())));
+  for (Eigen::Index i = 0; i < Y.cols(); ++i)
+    path[0][static_cast<std::size_t>(i)] = Y.col(i).cast<double>().squaredNorm();
   for (int s = 1; s <= 15; ++s) {
     SparseCodes codes;
     BatchOmp(D, {.tolerance = 0, .max_atoms = s}).encode(Y, codes);
     for (std::size_t i = 0; i < codes.size(); ++i)
-      path[static_cast<std::size_t>(s)][i] = codes.count[i] == s ? static_cast<double>(codes.residual_energy[i]) : 0.0;
+      path[static_cast<std::size_t>(s)][i] =
+          codes.count[i] == s ? static_cast<double>(codes.residual_energy[i]) : 0.0;
   }
   return path;
 }
@@ -209,17 +223,22 @@ TEST(BatchOmp, RateDistortionStopAgreesWithReferenceOmp) {
   const Eigen::Index m = 64, K = 200, n = 300;
   const Eigen::MatrixXf D = random_dictionary(m, K, 23);
   const Eigen::MatrixXf Y = random_signals(m, n, 24);
-  for (const SparseCodingOptions options : {SparseCodingOptions{.tolerance = 0, .max_atoms = 12, .min_atom_gain = 2.0},
-                                            SparseCodingOptions{.tolerance = 0.3, .max_atoms = 12, .min_atom_gain = 1.5},
-                                            SparseCodingOptions{.tolerance = 0, .max_atoms = 12, .min_atom_gain = 3.0, .max_error = 0.8}}) {
+  for (const SparseCodingOptions options :
+       {SparseCodingOptions{.tolerance = 0, .max_atoms = 12, .min_atom_gain = 2.0},
+        SparseCodingOptions{.tolerance = 0.3, .max_atoms = 12, .min_atom_gain = 1.5},
+        SparseCodingOptions{
+            .tolerance = 0, .max_atoms = 12, .min_atom_gain = 3.0, .max_error = 0.8}}) {
     SparseCodes codes;
     BatchOmp(D, options).encode(Y, codes);
     const auto references = clear_cut_references(D, Y, options);
     for (const auto& [i, ref] : references) {
-      ASSERT_EQ(codes.count[i], ref.atoms.size()) << "block " << i << " gain " << options.min_atom_gain;
-      for (std::size_t j = 0; j < ref.atoms.size(); ++j) ASSERT_EQ(codes.atoms_of(i)[j], ref.atoms[j]);
+      ASSERT_EQ(codes.count[i], ref.atoms.size())
+          << "block " << i << " gain " << options.min_atom_gain;
+      for (std::size_t j = 0; j < ref.atoms.size(); ++j)
+        ASSERT_EQ(codes.atoms_of(i)[j], ref.atoms[j]);
       if (options.max_error > 0 && ref.atoms.size() < 12) {  // the bound holds whatever the gains
-        EXPECT_LE(ref.residual_energy, static_cast<double>(m) * options.max_error * options.max_error * (1 + 1e-6));
+        EXPECT_LE(ref.residual_energy,
+                  static_cast<double>(m) * options.max_error * options.max_error * (1 + 1e-6));
       }
     }
     EXPECT_GT(references.size(), static_cast<std::size_t>(n * 7 / 10));
@@ -231,18 +250,21 @@ TEST(BatchOmp, VanishingAtomGainReproducesThePursuitToSmaxOrTolerance) {
   const Eigen::MatrixXf D = random_dictionary(m, K, 25);
   const Eigen::MatrixXf Y = random_signals(m, n, 26);
   for (const auto selection : {AtomSelection::correlation, AtomSelection::error})
-  for (double tolerance : {0.0, 0.9}) {
-    SparseCodes plain, lagrangian;
-    BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15, .selection = selection}).encode(Y, plain);
-    BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15, .min_atom_gain = 1e-9, .selection = selection})
-        .encode(Y, lagrangian);
-    EXPECT_EQ(plain.count, lagrangian.count);
-    EXPECT_EQ(plain.atom, lagrangian.atom);
-    EXPECT_EQ(plain.coefficient, lagrangian.coefficient);
-    if (tolerance == 0) {
-      for (std::uint8_t c : lagrangian.count) ASSERT_EQ(c, 15);
+    for (double tolerance : {0.0, 0.9}) {
+      SparseCodes plain, lagrangian;
+      BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15, .selection = selection})
+          .encode(Y, plain);
+      BatchOmp(
+          D,
+          {.tolerance = tolerance, .max_atoms = 15, .min_atom_gain = 1e-9, .selection = selection})
+          .encode(Y, lagrangian);
+      EXPECT_EQ(plain.count, lagrangian.count);
+      EXPECT_EQ(plain.atom, lagrangian.atom);
+      EXPECT_EQ(plain.coefficient, lagrangian.coefficient);
+      if (tolerance == 0) {
+        for (std::uint8_t c : lagrangian.count) ASSERT_EQ(c, 15);
+      }
     }
-  }
 }
 
 TEST(BatchOmp, GainWeightsScaleTheRateDistortionStop) {
@@ -263,19 +285,23 @@ TEST(BatchOmp, GainWeightsScaleTheRateDistortionStop) {
       EXPECT_EQ(weighted.count[i], 0) << "block " << i;
   }
   EXPECT_THROW(omp.encode(Y, weighted, std::vector<float>(3, 1.0f)), std::invalid_argument);
-  EXPECT_THROW(BatchOmp(D, {.tolerance = 0, .max_atoms = 5, .min_atom_gain = -1}), std::invalid_argument);
-  EXPECT_THROW(BatchOmp(D, {.tolerance = 0, .max_atoms = 5, .max_error = -1}), std::invalid_argument);
+  EXPECT_THROW(BatchOmp(D, {.tolerance = 0, .max_atoms = 5, .min_atom_gain = -1}),
+               std::invalid_argument);
+  EXPECT_THROW(BatchOmp(D, {.tolerance = 0, .max_atoms = 5, .max_error = -1}),
+               std::invalid_argument);
 }
 
 /// Blocks of two kinds: noise (‖y‖² ≈ 216, each atom buys ≈ 5 % of what is left) and sparse
 /// blocks of 10 atoms with coefficients ±6 (each atom buys ≈ 36) over noise of RMS 0.5.
-Eigen::MatrixXf smooth_and_rough_blocks(const Eigen::MatrixXf& D, Eigen::Index n, std::uint64_t seed) {
+Eigen::MatrixXf smooth_and_rough_blocks(const Eigen::MatrixXf& D, Eigen::Index n,
+                                        std::uint64_t seed) {
   Eigen::MatrixXf Y = random_signals(D.rows(), n, seed);
   SplitMix64 rng(seed + 1);
   for (Eigen::Index i = 0; i < n; i += 2) {
     Y.col(i) *= 0.5f;
     std::set<int> support;
-    while (support.size() < 10) support.insert(static_cast<int>(rng.below(static_cast<std::uint64_t>(D.cols()))));
+    while (support.size() < 10)
+      support.insert(static_cast<int>(rng.below(static_cast<std::uint64_t>(D.cols()))));
     for (int k : support) Y.col(i) += static_cast<float>(rng.uniform() < 0.5 ? -6 : 6) * D.col(k);
   }
   return Y;
@@ -290,11 +316,13 @@ TEST(BatchOmp, LagrangianAllocationBeatsToleranceAtEqualCodeCount) {
     BatchOmp(D, options).encode(Y, codes);
     std::size_t count = 0;
     double error = 0;
-    for (std::size_t i = 0; i < codes.size(); ++i) count += codes.count[i], error += explicit_residual(D, Y, codes, i);
+    for (std::size_t i = 0; i < codes.size(); ++i)
+      count += codes.count[i], error += explicit_residual(D, Y, codes, i);
     return std::pair{count, error};
   };
   for (double tolerance : {0.75, 0.9}) {
-    const auto [tolerance_codes, tolerance_error] = total({.tolerance = tolerance, .max_atoms = 15});
+    const auto [tolerance_codes, tolerance_error] =
+        total({.tolerance = tolerance, .max_atoms = 15});
     // About the smallest atom gain that uses no more codes than the ε rule (bisection in log gain;
     // the code count falls as the gain grows).
     double lo = 1e-2, hi = 1e3;
@@ -311,8 +339,9 @@ TEST(BatchOmp, LagrangianAllocationBeatsToleranceAtEqualCodeCount) {
     ASSERT_LE(lagrangian.first, tolerance_codes);
     // Measured: 20 % and 24 % less squared error for the same number of codes.
     EXPECT_LT(lagrangian.second, 0.85 * tolerance_error)
-        << "eps " << tolerance << ": " << tolerance_codes << " codes, error " << tolerance_error << " (eps rule), "
-        << lagrangian.first << " codes, error " << lagrangian.second << " (Lagrangian, gain " << gain << ")";
+        << "eps " << tolerance << ": " << tolerance_codes << " codes, error " << tolerance_error
+        << " (eps rule), " << lagrangian.first << " codes, error " << lagrangian.second
+        << " (Lagrangian, gain " << gain << ")";
   }
 }
 
@@ -325,14 +354,18 @@ TEST(BatchOmp, OrmpRecoversPlantedSupport) {
   for (Eigen::Index i = 0; i < n; ++i) {
     auto& support = truth[static_cast<std::size_t>(i)];
     while (support.size() < 5) support.insert(static_cast<int>(rng.below(K)));
-    for (int k : support) Y.col(i) += static_cast<float>((rng.uniform() < 0.5 ? -1 : 1) * rng.uniform(1.0, 2.0)) * D.col(k);
+    for (int k : support)
+      Y.col(i) +=
+          static_cast<float>((rng.uniform() < 0.5 ? -1 : 1) * rng.uniform(1.0, 2.0)) * D.col(k);
   }
   SparseCodes codes;
-  BatchOmp(D, {.tolerance = 1e-3, .max_atoms = 15, .selection = AtomSelection::error}).encode(Y, codes);
+  BatchOmp(D, {.tolerance = 1e-3, .max_atoms = 15, .selection = AtomSelection::error})
+      .encode(Y, codes);
   for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
     ASSERT_EQ(codes.count[i], 5) << "block " << i;
     EXPECT_EQ(std::set<int>(codes.atoms_of(i), codes.atoms_of(i) + 5), truth[i]) << "block " << i;
-    EXPECT_NEAR(codes.residual_energy[i], explicit_residual(D, Y, codes, i), 1e-4 * static_cast<double>(Y.col(static_cast<Eigen::Index>(i)).squaredNorm()));
+    EXPECT_NEAR(codes.residual_energy[i], explicit_residual(D, Y, codes, i),
+                1e-4 * static_cast<double>(Y.col(static_cast<Eigen::Index>(i)).squaredNorm()));
   }
 }
 
@@ -342,17 +375,25 @@ TEST(BatchOmp, OrmpAgreesWithReferenceOrmp) {
   const Eigen::MatrixXf Y = random_signals(m, n, 34);
   for (const SparseCodingOptions options :
        {SparseCodingOptions{.tolerance = 0.45, .max_atoms = 12, .selection = AtomSelection::error},
-        SparseCodingOptions{.tolerance = 0, .max_atoms = 12, .min_atom_gain = 2.0, .selection = AtomSelection::error},
-        SparseCodingOptions{.tolerance = 0, .max_atoms = 12, .min_atom_gain = 3.0, .max_error = 0.8,
-                            .selection = AtomSelection::error}}) {
+        SparseCodingOptions{.tolerance = 0,
+        .max_atoms = 12,
+        .min_atom_gain = 2.0,
+        .selection = AtomSelection::error},
+        SparseCodingOptions{.tolerance = 0,
+        .max_atoms = 12,
+        .min_atom_gain = 3.0,
+        .max_error = 0.8,
+        .selection = AtomSelection::error}}) {
     SparseCodes codes;
     BatchOmp(D, options).encode(Y, codes);
     const auto references = clear_cut_references(D, Y, options);
     for (const auto& [i, ref] : references) {
-      ASSERT_EQ(codes.count[i], ref.atoms.size()) << "block " << i << " gain " << options.min_atom_gain;
+      ASSERT_EQ(codes.count[i], ref.atoms.size())
+          << "block " << i << " gain " << options.min_atom_gain;
       for (std::size_t j = 0; j < ref.atoms.size(); ++j) {
         ASSERT_EQ(codes.atoms_of(i)[j], ref.atoms[j]) << "block " << i << " step " << j;
-        EXPECT_NEAR(codes.coefficients_of(i)[j], ref.coefficients[j], 1e-4 * (1 + std::abs(ref.coefficients[j])));
+        EXPECT_NEAR(codes.coefficients_of(i)[j], ref.coefficients[j],
+                    1e-4 * (1 + std::abs(ref.coefficients[j])));
       }
       EXPECT_NEAR(codes.residual_energy[i], ref.residual_energy,
                   1e-4 * static_cast<double>(Y.col(static_cast<Eigen::Index>(i)).squaredNorm()));
@@ -371,18 +412,21 @@ TEST(BatchOmp, OrmpFloorsTheProjectedNormOfAtomsMostlyInTheSpanOfTheSupport) {
   for (Eigen::Index k = 0; k < K / 2; ++k) {
     const Eigen::Index of = (k / 4) * 4;  // atoms 4c+1..4c+3 near atom 4c
     if (k == of) continue;
-    for (Eigen::Index v = 0; v < m; ++v) D(v, k) = D(v, of) + 0.35f * static_cast<float>(rng.normal()) / 8.0f;
+    for (Eigen::Index v = 0; v < m; ++v)
+      D(v, k) = D(v, of) + 0.35f * static_cast<float>(rng.normal()) / 8.0f;
   }
   normalize_atoms(D);
   D.col(K - 1).setZero();
   const Eigen::MatrixXf Y = random_signals(m, n, 39);
-  const SparseCodingOptions options{.tolerance = 0.5, .max_atoms = 8, .selection = AtomSelection::error};
+  const SparseCodingOptions options{
+      .tolerance = 0.5, .max_atoms = 8, .selection = AtomSelection::error};
   SparseCodes codes;
   BatchOmp(D, options).encode(Y, codes);
   const auto references = clear_cut_references(D, Y, options);
   for (const auto& [i, ref] : references) {
     ASSERT_EQ(codes.count[i], ref.atoms.size()) << "block " << i;
-    for (std::size_t j = 0; j < ref.atoms.size(); ++j) ASSERT_EQ(codes.atoms_of(i)[j], ref.atoms[j]) << "block " << i << " step " << j;
+    for (std::size_t j = 0; j < ref.atoms.size(); ++j)
+      ASSERT_EQ(codes.atoms_of(i)[j], ref.atoms[j]) << "block " << i << " step " << j;
   }
   // The floor binds: in some blocks the second atom differs from exact ORMP's (argmax of the
   // unfloored score after the same first atom), and batch ORMP took the floored choice.
@@ -410,7 +454,8 @@ TEST(BatchOmp, OrmpFloorsTheProjectedNormOfAtomsMostlyInTheSpanOfTheSupport) {
   EXPECT_GT(differs, 0);
   EXPECT_GT(references.size(), static_cast<std::size_t>(n / 2));
   for (std::size_t i = 0; i < codes.size(); ++i)
-    for (int j = 0; j < codes.count[i]; ++j) ASSERT_NE(codes.atoms_of(i)[j], K - 1) << "block " << i;
+    for (int j = 0; j < codes.count[i]; ++j)
+      ASSERT_NE(codes.atoms_of(i)[j], K - 1) << "block " << i;
 }
 
 TEST(BatchOmp, OrmpStepsLowerTheErrorAtLeastAsMuchAsOmpAndMeetToleranceWithFewerAtoms) {
@@ -423,7 +468,8 @@ TEST(BatchOmp, OrmpStepsLowerTheErrorAtLeastAsMuchAsOmpAndMeetToleranceWithFewer
   for (Eigen::Index k = 0; k < K; ++k) scaled.col(k) *= 0.5f + static_cast<float>(k % 7) * 0.25f;
   SparseCodes omp1, ormp1;
   BatchOmp(scaled, {.tolerance = 0, .max_atoms = 1}).encode(Y, omp1);
-  BatchOmp(scaled, {.tolerance = 0, .max_atoms = 1, .selection = AtomSelection::error}).encode(Y, ormp1);
+  BatchOmp(scaled, {.tolerance = 0, .max_atoms = 1, .selection = AtomSelection::error})
+      .encode(Y, ormp1);
   int better = 0;
   for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
     EXPECT_LE(ormp1.residual_energy[i], omp1.residual_energy[i] * (1 + 1e-5f)) << "block " << i;
@@ -435,11 +481,13 @@ TEST(BatchOmp, OrmpStepsLowerTheErrorAtLeastAsMuchAsOmpAndMeetToleranceWithFewer
   for (double tolerance : {0.9, 0.85}) {
     SparseCodes omp, ormp;
     BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15}).encode(Y, omp);
-    BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15, .selection = AtomSelection::error}).encode(Y, ormp);
+    BatchOmp(D, {.tolerance = tolerance, .max_atoms = 15, .selection = AtomSelection::error})
+        .encode(Y, ormp);
     for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
       omp_atoms += omp.count[i], ormp_atoms += ormp.count[i];
       if (ormp.count[i] < 15) {
-        EXPECT_LE(explicit_residual(D, Y, ormp, i), static_cast<double>(m) * tolerance * tolerance * (1 + 1e-5));
+        EXPECT_LE(explicit_residual(D, Y, ormp, i),
+                  static_cast<double>(m) * tolerance * tolerance * (1 + 1e-5));
       }
     }
   }

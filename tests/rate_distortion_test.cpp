@@ -31,7 +31,9 @@ class MemorySeries final : public vd::SeriesReader {
     params_.frames = frames;
   }
   using vd::SeriesReader::read_frame;
-  void read_frame(std::size_t t, std::span<float> out) const override { vd::analytic_frame(params_, t, out); }
+  void read_frame(std::size_t t, std::span<float> out) const override {
+    vd::analytic_frame(params_, t, out);
+  }
 
  private:
   vd::AnalyticParams params_;
@@ -79,7 +81,8 @@ TEST(ZfpCodec, FixedRateGivesExactSize) {
     auto codec = vp::make_zfp_rate(rate);
     std::vector<std::uint8_t> stream;
     codec->compress(d, frame.data, stream);
-    EXPECT_EQ(stream.size(), static_cast<std::size_t>(rate * static_cast<double>(d.voxels()) / 8)) << codec->setting();
+    EXPECT_EQ(stream.size(), static_cast<std::size_t>(rate * static_cast<double>(d.voxels()) / 8))
+        << codec->setting();
   }
 }
 
@@ -182,7 +185,8 @@ TEST(RateDistortion, PsnrAtBpsInterpolatesWithinOneFamilyOnly) {
   EXPECT_NEAR(*vp::psnr_at_bps(points, "b", 0.3), 90.0, 1e-12);
   EXPECT_FALSE(vp::psnr_at_bps(points, "b", 0.31));
   // Two settings at the same bps: the better one.
-  const std::vector<vp::RdPoint> tied = {rd_point("t", 0.5, 41), rd_point("t", 0.5, 43), rd_point("t", 0.7, 45)};
+  const std::vector<vp::RdPoint> tied = {rd_point("t", 0.5, 41), rd_point("t", 0.5, 43),
+                                         rd_point("t", 0.7, 45)};
   EXPECT_NEAR(*vp::psnr_at_bps(tied, "t", 0.5), 43.0, 1e-12);
   EXPECT_NEAR(*vp::psnr_at_bps(tied, "t", 0.6), 44.0, 1e-12);
 }
@@ -190,9 +194,12 @@ TEST(RateDistortion, PsnrAtBpsInterpolatesWithinOneFamilyOnly) {
 TEST(RateDistortion, EqualBpsTableComparesWithVariableRate) {
   const std::string ref = "volreel variable-rate";
   const std::string long_name = "volreel variable-rate eps-rule";  // longer than the default column
-  const std::vector<vp::RdPoint> points = {rd_point("zfp fixed-accuracy", 0.2, 40), rd_point("zfp fixed-accuracy", 0.8, 46),
-                                           rd_point(ref, 0.3, 50), rd_point(ref, 0.5, 52),
-                                           rd_point(long_name, 0.3, 47.5), rd_point(long_name, 0.5, 49.5)};
+  const std::vector<vp::RdPoint> points = {rd_point("zfp fixed-accuracy", 0.2, 40),
+                                           rd_point("zfp fixed-accuracy", 0.8, 46),
+                                           rd_point(ref, 0.3, 50),
+                                           rd_point(ref, 0.5, 52),
+                                           rd_point(long_name, 0.3, 47.5),
+                                           rd_point(long_name, 0.5, 49.5)};
   const std::vector<double> bps = {0.3, 0.4, 0.6};
   const vp::EqualBpsTable t = vp::equal_bps_table(points, bps);
   ASSERT_EQ(t.families.size(), 3u);
@@ -211,7 +218,7 @@ TEST(RateDistortion, EqualBpsTableComparesWithVariableRate) {
   EXPECT_NE(s.find("42.00 ( +9.00)"), std::string::npos) << s;  // 0.4 bps: 51 - 42
   EXPECT_NE(s.find("44.00"), std::string::npos) << s;
   EXPECT_EQ(s.find("44.00 ("), std::string::npos) << s;  // 0.6 bps: no variable rate to compare
-  EXPECT_NE(s.find(long_name), std::string::npos) << s;    // names are never cut
+  EXPECT_NE(s.find(long_name), std::string::npos) << s;  // names are never cut
   EXPECT_NE(s.find("48.50 ( +2.50)"), std::string::npos) << s;
 
   const volreel::test::TempDir dir("equal_bps");
@@ -223,8 +230,12 @@ TEST(RateDistortion, EqualBpsTableComparesWithVariableRate) {
   int rows = 0;
   while (std::getline(csv, line)) ++rows, all += line + '\n';
   EXPECT_EQ(rows, 9);
-  EXPECT_NE(all.find("0.4,\"zfp fixed-accuracy\",42,\"volreel variable-rate\",9\n"), std::string::npos) << all;
-  EXPECT_NE(all.find("0.6,\"volreel variable-rate\",,\"volreel variable-rate\",\n"), std::string::npos) << all;
+  EXPECT_NE(all.find("0.4,\"zfp fixed-accuracy\",42,\"volreel variable-rate\",9\n"),
+            std::string::npos)
+      << all;
+  EXPECT_NE(all.find("0.6,\"volreel variable-rate\",,\"volreel variable-rate\",\n"),
+            std::string::npos)
+      << all;
   EXPECT_FALSE(std::filesystem::exists(dir / "e.csv.tmp"));
 
   // Without volreel's variable rate there is nothing to compare with.

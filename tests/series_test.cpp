@@ -31,7 +31,9 @@ void expect_error(F&& f, std::initializer_list<std::string> needles) {
     f();
     ADD_FAILURE() << "expected an InputError";
   } catch (const InputError& e) {
-    for (const auto& needle : needles) EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << "message: " << e.what() << "\nlacks: " << needle;
+    for (const auto& needle : needles)
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos)
+          << "message: " << e.what() << "\nlacks: " << needle;
   }
 }
 
@@ -43,7 +45,8 @@ void write_bytes(const fs::path& path, const void* data, std::size_t size) {
 fs::path write_series(const TempDir& dir, Dims d, int frames) {
   const fs::path path = dir / "series";
   vd::RawSeriesWriter w(path, d, "pressure");
-  for (int t = frames - 1; t >= 0; --t) w.write_frame(static_cast<std::size_t>(t), 0.25 * t, ramp(d, static_cast<float>(t)));
+  for (int t = frames - 1; t >= 0; --t)
+    w.write_frame(static_cast<std::size_t>(t), 0.25 * t, ramp(d, static_cast<float>(t)));
   w.set_generator({{"method", "test"}});
   w.finish();
   return path;
@@ -54,7 +57,8 @@ fs::path write_series(const TempDir& dir, Dims d, int frames) {
 TEST(Dims, ParsesAndRejects) {
   EXPECT_EQ(volreel::parse_dims("256x256x128"), (Dims{256, 256, 128}));
   EXPECT_EQ(volreel::to_string(Dims{3, 4, 5}), "3x4x5");
-  for (const char* bad : {"", "256x256", "0x1x1", "1x1x-1", "axbxc", "1x2x3x", "1x2x3 "}) expect_error([&] { volreel::parse_dims(bad); }, {"dimensions"});
+  for (const char* bad : {"", "256x256", "0x1x1", "1x1x-1", "axbxc", "1x2x3x", "1x2x3 "})
+    expect_error([&] { volreel::parse_dims(bad); }, {"dimensions"});
 }
 
 TEST(Dtype, ParsesAndRejects) {
@@ -83,7 +87,8 @@ TEST(RawSeries, WriterRefusesToOverwriteAndToFinishWithGaps) {
   TempDir dir("series-writer");
   const Dims d{2, 2, 2};
   write_series(dir, d, 1);
-  expect_error([&] { vd::RawSeriesWriter w(dir / "series", d, "p"); }, {"already holds a series", "--overwrite"});
+  expect_error([&] { vd::RawSeriesWriter w(dir / "series", d, "p"); },
+               {"already holds a series", "--overwrite"});
   vd::RawSeriesWriter w(dir / "gaps", d, "p");
   w.write_frame(1, 0.0, ramp(d, 0));
   expect_error([&] { w.finish(); }, {"frame 0 was never written"});
@@ -104,13 +109,16 @@ TEST(RawSeries, MissingAndShortFramesAreNamed) {
 TEST(RawSeries, MalformedManifestsAreRejected) {
   TempDir dir("series-manifest");
   const fs::path path = write_series(dir, Dims{2, 2, 2}, 2);
-  const auto put = [&](const std::string& text) { write_bytes(path / "series.json", text.data(), text.size()); };
+  const auto put = [&](const std::string& text) {
+    write_bytes(path / "series.json", text.data(), text.size());
+  };
   put("{ not json");
   expect_error([&] { vd::open_series(path); }, {"series.json", "not valid JSON"});
   put(R"({"format":"volreel-raw-series","version":1,"dims":[2,2],"frames":["000000.f32"],"timestamps":[0]})");
   expect_error([&] { vd::open_series(path); }, {"\"dims\""});
   put(R"({"format":"volreel-raw-series","version":1,"dims":[2,2,2],"frames":["000000.f32","000001.f32"],"timestamps":[0]})");
-  expect_error([&] { vd::open_series(path); }, {"\"timestamps\" has 1 entries but \"frames\" has 2"});
+  expect_error([&] { vd::open_series(path); },
+               {"\"timestamps\" has 1 entries but \"frames\" has 2"});
   put(R"({"format":"volreel-raw-series","version":7,"dims":[2,2,2],"frames":["000000.f32"],"timestamps":[0]})");
   expect_error([&] { vd::open_series(path); }, {"version"});
   put(R"({"format":"volreel-raw-series","version":1,"dims":[2,2,2],"frames":"x","timestamps":[0]})");
@@ -127,7 +135,8 @@ TEST(RawSeries, NonFiniteValuesRefusedOrReplaced) {
   vd::RawSeriesWriter w(dir / "s", d, "p");
   w.write_frame(0, 0, data);
   w.finish();
-  expect_error([&] { vd::open_series(dir / "s")->read_frame(0); }, {"000000.f32", "voxel (2, 0, 0)", "not finite", "--replace-nan"});
+  expect_error([&] { vd::open_series(dir / "s")->read_frame(0); },
+               {"000000.f32", "voxel (2, 0, 0)", "not finite", "--replace-nan"});
   vd::OpenOptions o;
   o.replace_nan = -1.0f;
   const auto v = vd::open_series(dir / "s", o)->read_frame(0);
@@ -158,14 +167,16 @@ TEST(RawFile, AllDtypesConvert) {
     EXPECT_EQ(s->info().frames, 2u);
     EXPECT_EQ(s->read_frame(1).data[1], 13000.0f);
     o.frames.reset();
-    expect_error([&] { vd::open_series(dir / "u16.raw", o); }, {"u16.raw", "is 48 bytes", "needs 24", "holds 2 such frames"});
+    expect_error([&] { vd::open_series(dir / "u16.raw", o); },
+                 {"u16.raw", "is 48 bytes", "needs 24", "holds 2 such frames"});
   }
   {
     std::vector<double> v(d.voxels(), 0.125);
     v[7] = 1e300;  // becomes +inf in float32
     write_bytes(dir / "f64.raw", v.data(), v.size() * 8);
     o.dtype = vd::Dtype::f64;
-    expect_error([&] { vd::open_series(dir / "f64.raw", o)->read_frame(0); }, {"f64.raw", "not finite"});
+    expect_error([&] { vd::open_series(dir / "f64.raw", o)->read_frame(0); },
+                 {"f64.raw", "not finite"});
   }
   vd::OpenOptions no_dims;
   expect_error([&] { vd::open_series(dir / "u8.raw", no_dims); }, {"--dims"});
@@ -173,9 +184,11 @@ TEST(RawFile, AllDtypesConvert) {
 
 namespace {
 
-void h5_write(hid_t file, const std::string& name, const std::vector<hsize_t>& shape, const std::vector<double>& data) {
+void h5_write(hid_t file, const std::string& name, const std::vector<hsize_t>& shape,
+              const std::vector<double>& data) {
   const hid_t space = H5Screate_simple(static_cast<int>(shape.size()), shape.data(), nullptr);
-  const hid_t ds = H5Dcreate2(file, name.c_str(), H5T_IEEE_F64LE, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  const hid_t ds =
+      H5Dcreate2(file, name.c_str(), H5T_IEEE_F64LE, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
   H5Dwrite(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data());
   H5Dclose(ds);
   H5Sclose(space);

@@ -12,7 +12,8 @@ namespace volreel::test {
 class TempDir {
  public:
   explicit TempDir(const std::string& name) {
-    path_ = std::filesystem::temp_directory_path() / ("volreel-test-" + name + "-" + std::to_string(getpid()));
+    path_ = std::filesystem::temp_directory_path() /
+            ("volreel-test-" + name + "-" + std::to_string(getpid()));
     std::filesystem::remove_all(path_);
     std::filesystem::create_directories(path_);
   }

@@ -219,8 +219,10 @@ std::map<std::uint32_t, int> resident_leaves(const format::Container& c, SseScop
   for (std::uint32_t slot = 0; slot < slots; ++slot) {
     const auto key = s.atlas().key(slot);
     if (!key || s.atlas().state(slot) != AtlasSlots::State::occupied) continue;
-    if (key->level == 0) ++*roots;
-    else ++leaves[key->t];
+    if (key->level == 0)
+      ++*roots;
+    else
+      ++leaves[key->t];
   }
   return leaves;
 }
@@ -242,7 +244,8 @@ TEST(StreamScheduler, TheSseOfALevelKeepsWholeKeyframesWhenTheAtlasIsFull) {
   EXPECT_EQ(total, 36);
   // One SSE per level: whole keyframes nearest the playhead (4, 5, 3, 6), half of the next (2).
   EXPECT_LE(partial(level), 1);
-  for (const std::uint32_t t : {3u, 4u, 5u, 6u}) EXPECT_EQ(level.count(t) ? level.at(t) : 0, 8) << t;
+  for (const std::uint32_t t : {3u, 4u, 5u, 6u})
+    EXPECT_EQ(level.count(t) ? level.at(t) : 0, 8) << t;
   // Each node's own SSE: the leaves nearer the camera of many time steps, few of them whole.
   const auto node = resident_leaves(c, SseScope::node, 45, &roots);
   EXPECT_EQ(roots, 9);

@@ -38,7 +38,8 @@ inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t
     parts.dequantization[1] = -std::abs(parts.dequantization[1]);
     parts.dequantization[3] = -std::abs(parts.dequantization[3]);
   }
-  parts.mean_bits = style == 3 ? VR_MEAN_BITS : static_cast<std::uint32_t>(rng.below(VR_MEAN_BITS + 1));
+  parts.mean_bits =
+      style == 3 ? VR_MEAN_BITS : static_cast<std::uint32_t>(rng.below(VR_MEAN_BITS + 1));
   for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     std::uint32_t s = static_cast<std::uint32_t>(rng.below(16));
     std::uint32_t mean = static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << parts.mean_bits));

@@ -252,7 +252,7 @@ INSTANTIATE_TEST_SUITE_P(
                        ::testing::Values(Kernel::image_store, Kernel::buffer_copy)),
     [](const ::testing::TestParamInfo<std::tuple<AtlasFormat, Kernel>>& param) {
       return std::string(std::get<0>(param.param) == AtlasFormat::r16_unorm ? "R16Unorm"
-                                                                             : "R16Sfloat") +
+                                                                            : "R16Sfloat") +
              (std::get<1>(param.param) == Kernel::image_store ? "ImageStore" : "BufferCopy");
     });
 

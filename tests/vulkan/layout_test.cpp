@@ -64,10 +64,21 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
   const vr_uint* p = payload.data();
   const float* a = atoms.data();
   const std::uint32_t constants[16] = {
-      VR_BRICK_SIZE,      VR_BRICK_INTERIOR,   VR_BLOCK_SIZE,    VR_BLOCK_LENGTH,
-      VR_BLOCKS_PER_AXIS, VR_BLOCKS_PER_BRICK, VR_HEADER_WORDS,  VR_MEAN_BITS,
-      VR_COEF_BITS,       VR_ATOM_BITS,        VR_MAX_SPARSITY,  VR_MAX_PAYLOAD_WORDS,
-      VR_COEF_LEVELS,     VR_ATLAS_SLOT_SIZE,  VR_ATLAS_NO_SLOT,
+      VR_BRICK_SIZE,
+      VR_BRICK_INTERIOR,
+      VR_BLOCK_SIZE,
+      VR_BLOCK_LENGTH,
+      VR_BLOCKS_PER_AXIS,
+      VR_BLOCKS_PER_BRICK,
+      VR_HEADER_WORDS,
+      VR_MEAN_BITS,
+      VR_COEF_BITS,
+      VR_ATOM_BITS,
+      VR_MAX_SPARSITY,
+      VR_MAX_PAYLOAD_WORDS,
+      VR_COEF_LEVELS,
+      VR_ATLAS_SLOT_SIZE,
+      VR_ATLAS_NO_SLOT,
       vr_mean_bits(p) | (vr_entry_bits(vr_mean_bits(p)) << 8) | (VR_SPARSITY_BITS << 16)};
   for (std::uint32_t k = 0; k < 16; ++k)
     EXPECT_EQ(gpu[8 * N + k], constants[k]) << "constant " << k;

@@ -38,8 +38,8 @@
 #include "volreel/psnr/metrics.hpp"
 #include "volreel/vulkan/atlas.hpp"
 #include "volreel/vulkan/atlas_decoder.hpp"
-#include "volreel/vulkan_render/vulkan_frame_loop.hpp"
 #include "volreel/vulkan_render/raycaster.hpp"
+#include "volreel/vulkan_render/vulkan_frame_loop.hpp"
 
 namespace volreel {
 namespace {
@@ -70,7 +70,7 @@ struct Scene {
   std::array<format::FrameView, 2> views;
   std::vector<std::uint32_t> level_first;
   std::uint32_t bricks_per_frame = 0;
-  float lo = 0, hi = 0;           // range of the decoded values
+  float lo = 0, hi = 0;            // range of the decoded values
   float data_lo = 0, data_hi = 0;  // range of the original values (histogram bins)
   std::unique_ptr<CpuAtlas> cpu_atlas;
 
@@ -180,10 +180,9 @@ psnr::ImageComparison compare(const RgbaImage& a, const RgbaImage& b) {
 /// Copies the CPU atlas's slots into the GPU atlas (16-bit unorm over the atlas's range).
 void upload_cpu_atlas(vulkan::Context& context, const vulkan::Atlas& atlas, const CpuAtlas& cpu) {
   const std::size_t voxels = CpuAtlas::slot_values;
-  const vulkan::Buffer staging(context, cpu.slot_count() * voxels * 2,
-                               VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
-                               VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT |
-                                   VK_MEMORY_PROPERTY_HOST_COHERENT_BIT);
+  const vulkan::Buffer staging(
+      context, cpu.slot_count() * voxels * 2, VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
+      VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT);
   auto* texels = reinterpret_cast<std::uint16_t*>(staging.mapped());
   const float lo = atlas.value_min(), range = atlas.value_max() - atlas.value_min();
   std::vector<VkBufferImageCopy> regions;
@@ -307,18 +306,18 @@ TEST_P(FullyLoaded, MatchesTheCpuReferenceRenderer) {
   const std::uint32_t finest = s.geometry.levels - 1;
   ASSERT_GE(s.geometry.levels, 4u);
   const auto svo = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
-    return LeafSpec{s.slot(0, l, c), s.slot(1, l - d, {c[0] >> d, c[1] >> d, c[2] >> d}), 0, d,
-                    f};
+    return LeafSpec{s.slot(0, l, c), s.slot(1, l - d, {c[0] >> d, c[1] >> d, c[2] >> d}), 0, d, f};
   });
   const TransferFunction tf = test_transfer(s);
   const auto camera = test_camera();
-  const RgbaImage want = cpu_render::render_svo({svo.nodes, svo.leaves}, *s.cpu_atlas, s.geometry,
-                                                camera, tf);
+  const RgbaImage want =
+      cpu_render::render_svo({svo.nodes, svo.leaves}, *s.cpu_atlas, s.geometry, camera, tf);
   ASSERT_GT(drawn_fraction(want), 0.15);
   GpuScene& g = gpu_scene(context());
   const FrameInput in = frame_input(s, svo, tf, camera);
   for (const vulkan::Atlas* atlas : {g.from_cpu.get(), g.from_gpu.get()})
-    for (const auto filter : {vulkan_render::AtlasFilter::sampler, vulkan_render::AtlasFilter::fetch}) {
+    for (const auto filter :
+         {vulkan_render::AtlasFilter::sampler, vulkan_render::AtlasFilter::fetch}) {
       const std::string which =
           std::string(atlas == g.from_cpu.get() ? "CPU-decoded atlas" : "GPU-decoded atlas") +
           (filter == vulkan_render::AtlasFilter::sampler ? ", sampler" : ", fetches");
@@ -337,15 +336,15 @@ TEST_P(FullyLoaded, MatchesTheCpuReferenceRenderer) {
     }
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    LodDifferenceAndFactor, FullyLoaded,
-    ::testing::Values(Case{0, 0.0f}, Case{0, 0.5f}, Case{0, 1.0f}, Case{1, 0.0f}, Case{1, 0.5f},
-                      Case{1, 1.0f}, Case{2, 0.0f}, Case{2, 0.5f}, Case{2, 1.0f}, Case{3, 0.0f},
-                      Case{3, 0.5f}, Case{3, 1.0f}),
-    [](const ::testing::TestParamInfo<Case>& param) {
-      return "d" + std::to_string(param.param.d) + "_f" +
-             std::to_string(static_cast<int>(param.param.f * 10));
-    });
+INSTANTIATE_TEST_SUITE_P(LodDifferenceAndFactor, FullyLoaded,
+                         ::testing::Values(Case{0, 0.0f}, Case{0, 0.5f}, Case{0, 1.0f},
+                                           Case{1, 0.0f}, Case{1, 0.5f}, Case{1, 1.0f},
+                                           Case{2, 0.0f}, Case{2, 0.5f}, Case{2, 1.0f},
+                                           Case{3, 0.0f}, Case{3, 0.5f}, Case{3, 1.0f}),
+                         [](const ::testing::TestParamInfo<Case>& param) {
+                           return "d" + std::to_string(param.param.d) + "_f" +
+                                  std::to_string(static_cast<int>(param.param.f * 10));
+                         });
 
 TEST_F(VulkanRender, LodDifferenceAndFactorChangeTheImage) {
   // The cases above differ from each other: a shader that ignored d or f would fail them.
@@ -356,8 +355,8 @@ TEST_F(VulkanRender, LodDifferenceAndFactorChangeTheImage) {
   GpuScene& g = gpu_scene(context());
   const auto render = [&](std::uint32_t d, float f) {
     const auto svo = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
-      return LeafSpec{s.slot(0, l, c), s.slot(1, l - d, {c[0] >> d, c[1] >> d, c[2] >> d}), 0,
-                      d, f};
+      return LeafSpec{s.slot(0, l, c), s.slot(1, l - d, {c[0] >> d, c[1] >> d, c[2] >> d}), 0, d,
+                      f};
     });
     return render_gpu(context(), *g.from_gpu, frame_input(s, svo, tf, camera));
   };
@@ -381,8 +380,8 @@ TEST_F(VulkanRender, NodesDrawnAtEveryLevelThroughUpChildren) {
             return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
           },
           up);
-      const RgbaImage want = cpu_render::render_svo({svo.nodes, svo.leaves}, *s.cpu_atlas,
-                                                    s.geometry, camera, tf);
+      const RgbaImage want =
+          cpu_render::render_svo({svo.nodes, svo.leaves}, *s.cpu_atlas, s.geometry, camera, tf);
       const RgbaImage got = render_gpu(context(), *g.from_gpu, frame_input(s, svo, tf, camera));
       const psnr::ImageComparison c = compare(got, want);
       EXPECT_GE(c.psnr, min_psnr) << "level " << level << (up ? " (up)" : "");
@@ -405,8 +404,8 @@ TEST_F(VulkanRender, EmptyChildrenAndRgba8Output) {
                                                 camera, tf, options);
   FrameInput in = frame_input(s, svo, tf, camera);
   in.options = options;
-  const RgbaImage got = render_gpu(context(), *gpu_scene(context()).from_gpu, in,
-                                   OutputFormat::rgba8_unorm);
+  const RgbaImage got =
+      render_gpu(context(), *gpu_scene(context()).from_gpu, in, OutputFormat::rgba8_unorm);
   const psnr::ImageComparison c = compare(got, want);
   EXPECT_GE(c.psnr, min_psnr);
   EXPECT_GE(c.ssim, min_ssim);
@@ -475,10 +474,9 @@ TEST_F(VulkanRender, TransferFunctionCullingKeepsTheImage) {
   });
   // Values below 40 % of the range are invisible.
   const float cut = s.data_lo + 0.4f * (s.data_hi - s.data_lo);
-  const TransferFunction tf({{s.data_lo, 0, 0, 0, 0},
-                             {cut, 0.2f, 0.5f, 1.0f, 0.0f},
-                             {s.data_hi, 1.0f, 0.8f, 0.2f, 1.0f}},
-                            s.data_lo, s.data_hi);
+  const TransferFunction tf(
+      {{s.data_lo, 0, 0, 0, 0}, {cut, 0.2f, 0.5f, 1.0f, 0.0f}, {s.data_hi, 1.0f, 0.8f, 0.2f, 1.0f}},
+      s.data_lo, s.data_hi);
   // Each slot's histogram from its decoded values (apron included: the hull holds every value
   // trilinear filtering can produce there), 64 bins over the data range.
   std::vector<std::uint64_t> slot_histograms(s.slot_count(), 0);
@@ -512,11 +510,13 @@ TEST_F(VulkanRender, TransferFunctionCullingKeepsTheImage) {
   for (std::uint32_t i = 0; i < s.slot_count(); ++i) all_slots[i] = i;
   in.changed_slots = all_slots;
   in.skip_invisible_blocks = true;
-  for (const auto filter : {vulkan_render::AtlasFilter::sampler, vulkan_render::AtlasFilter::fetch}) {
+  for (const auto filter :
+       {vulkan_render::AtlasFilter::sampler, vulkan_render::AtlasFilter::fetch}) {
     FrameInput without = in;
     without.changed_slots = {};
     without.skip_invisible_blocks = false;
-    const RgbaImage reference = render_gpu(context(), atlas, without, OutputFormat::rgba16_sfloat, filter);
+    const RgbaImage reference =
+        render_gpu(context(), atlas, without, OutputFormat::rgba16_sfloat, filter);
     const RgbaImage blocks = render_gpu(context(), atlas, in, OutputFormat::rgba16_sfloat, filter);
     EXPECT_EQ(cpu_render::max_abs_difference(reference, blocks), 0.0)
         << (filter == vulkan_render::AtlasFilter::fetch ? "fetches" : "sampler");
@@ -549,7 +549,8 @@ TEST_F(VulkanRender, FramesInFlightKeepTheirOwnBuffers) {
   o.frames_in_flight = 3;
   Raycaster raycaster(context(), atlas, o);
   std::vector<vulkan_render::Ticket> tickets;
-  for (const auto& svo : svos) tickets.push_back(raycaster.render(frame_input(s, svo, tf, camera), true));
+  for (const auto& svo : svos)
+    tickets.push_back(raycaster.render(frame_input(s, svo, tf, camera), true));
   EXPECT_EQ(tickets, (std::vector<vulkan_render::Ticket>{1, 2, 3}));
   for (std::size_t i = 0; i < svos.size(); ++i) {
     const RgbaImage alone = render_gpu(context(), atlas, frame_input(s, svos[i], tf, camera),
@@ -570,7 +571,8 @@ TEST_F(VulkanRender, FramesInFlightKeepTheirOwnBuffers) {
   // Resizing keeps working.
   raycaster.resize(32, 24);
   const auto small = test_camera(32, 24);
-  const RgbaImage image = raycaster.read_back(raycaster.render(frame_input(s, svos[1], tf, small), true));
+  const RgbaImage image =
+      raycaster.read_back(raycaster.render(frame_input(s, svos[1], tf, small), true));
   EXPECT_EQ(image.width, 32);
   EXPECT_EQ(image.height, 24);
 }
@@ -668,9 +670,9 @@ TEST_F(VulkanRender, FrameLoopConvergesAndMatchesTheCpuRenderer) {
                          << ", holes " << report.stats.holes;
   EXPECT_GT(report.stats.atlas_occupied, 0u);
   const RgbaImage got = loop.read_back(report.ticket);
-  const RgbaImage want = cpu_render::render_svo(
-      {loop.last_update().svo_nodes, loop.last_update().svo_leaves}, mirror, loop.geometry(),
-      camera, tf, o.render);
+  const RgbaImage want =
+      cpu_render::render_svo({loop.last_update().svo_nodes, loop.last_update().svo_leaves}, mirror,
+                             loop.geometry(), camera, tf, o.render);
   EXPECT_GT(drawn_fraction(want), 0.1);
   const psnr::ImageComparison c = compare(got, want);
   std::printf("  frame loop: %u atlas slots occupied, PSNR %.1f dB, SSIM %.4f\n",

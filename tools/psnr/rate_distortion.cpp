@@ -53,8 +53,8 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 
 }  // namespace
 
-std::pair<double, double> series_range(const datasets::SeriesReader& series, const RdOptions& options,
-                                       const Progress& progress) {
+std::pair<double, double> series_range(const datasets::SeriesReader& series,
+                                       const RdOptions& options, const Progress& progress) {
   const std::size_t frames = frames_used(series, options);
   std::vector<float> frame(series.info().dims.voxels());
   double lo = INFINITY, hi = -INFINITY;
@@ -105,7 +105,8 @@ std::vector<RdPoint> run_rate_distortion(const datasets::SeriesReader& series,
       s.errors.add(frame, s.decoded);
       if (with_ssim) s.ssim_sum += ssim(dims, frame, s.decoded);
     }
-    progress.report(static_cast<double>(t + 1), static_cast<double>(frames), "frame " + std::to_string(t + 1));
+    progress.report(static_cast<double>(t + 1), static_cast<double>(frames),
+                    "frame " + std::to_string(t + 1));
   }
 
   std::vector<RdPoint> points;
@@ -124,7 +125,8 @@ std::vector<RdPoint> run_rate_distortion(const datasets::SeriesReader& series,
     p.rmse = e.rmse;
     p.max_abs_error = e.max_abs_error;
     p.ssim_frames = ssim_picks.size();
-    p.ssim = ssim_picks.empty() ? std::nan("") : s.ssim_sum / static_cast<double>(ssim_picks.size());
+    p.ssim =
+        ssim_picks.empty() ? std::nan("") : s.ssim_sum / static_cast<double>(ssim_picks.size());
     p.compress_mvoxels_per_s = voxels / 1e6 / std::max(s.compress_s, 1e-9);
     p.decompress_mvoxels_per_s = voxels / 1e6 / std::max(s.decompress_s, 1e-9);
     points.push_back(std::move(p));
@@ -137,38 +139,46 @@ std::vector<RdPoint> run_rate_distortion(const datasets::SeriesReader& series,
 
 void print_rd_table(std::ostream& out, std::span<const RdPoint> points) {
   char line[256];
-  std::snprintf(line, sizeof line, "%-20s %-14s %9s %9s %10s %8s %10s %10s %9s %9s\n", "codec", "setting", "bps",
-                "PSNR dB", "PSNRzfp dB", "SSIM", "RMSE", "max err", "enc MV/s", "dec MV/s");
+  std::snprintf(line, sizeof line, "%-20s %-14s %9s %9s %10s %8s %10s %10s %9s %9s\n", "codec",
+                "setting", "bps", "PSNR dB", "PSNRzfp dB", "SSIM", "RMSE", "max err", "enc MV/s",
+                "dec MV/s");
   out << line;
   for (const RdPoint& p : points) {
-    std::snprintf(line, sizeof line, "%-20s %-14s %9.4f %9.2f %10.2f %8.5f %10.3e %10.3e %9.1f %9.1f\n",
-                  p.family.c_str(), p.setting.c_str(), p.bps, p.psnr, p.psnr_zfp, p.ssim, p.rmse, p.max_abs_error,
-                  p.compress_mvoxels_per_s, p.decompress_mvoxels_per_s);
+    std::snprintf(line, sizeof line,
+                  "%-20s %-14s %9.4f %9.2f %10.2f %8.5f %10.3e %10.3e %9.1f %9.1f\n",
+                  p.family.c_str(), p.setting.c_str(), p.bps, p.psnr, p.psnr_zfp, p.ssim, p.rmse,
+                  p.max_abs_error, p.compress_mvoxels_per_s, p.decompress_mvoxels_per_s);
     out << line;
   }
   if (!points.empty())
     out << "PSNR = 10·log10(range²/MSE) over all " << points.front().frames
-        << " frames (MTV-Player); PSNRzfp = 20·log10(range/(2·RMSE)) (zfp's, 6.02 dB lower); SSIM = mean 3D SSIM of "
+        << " frames (MTV-Player); PSNRzfp = 20·log10(range/(2·RMSE)) (zfp's, 6.02 dB lower); SSIM "
+           "= mean 3D SSIM of "
         << points.front().ssim_frames << " evenly spaced frames; MV/s = MVoxel/s on one core.\n";
 }
 
 void write_rd_csv(const fs::path& path, std::span<const RdPoint> points) {
   std::ostringstream s;
-  s << "codec,setting,frames,bytes,bps,psnr_db,psnr_zfp_db,ssim,rmse,max_abs_error,encode_mvoxel_s,decode_mvoxel_s\n";
+  s << "codec,setting,frames,bytes,bps,psnr_db,psnr_zfp_db,ssim,rmse,max_abs_error,encode_mvoxel_s,"
+       "decode_mvoxel_s\n";
   s.precision(9);
   for (const RdPoint& p : points)
-    s << '"' << p.family << "\"," << '"' << p.setting << "\"," << p.frames << ',' << p.bytes << ',' << p.bps << ','
-      << p.psnr << ',' << p.psnr_zfp << ',' << p.ssim << ',' << p.rmse << ',' << p.max_abs_error << ','
-      << p.compress_mvoxels_per_s << ',' << p.decompress_mvoxels_per_s << '\n';
+    s << '"' << p.family << "\"," << '"' << p.setting << "\"," << p.frames << ',' << p.bytes << ','
+      << p.bps << ',' << p.psnr << ',' << p.psnr_zfp << ',' << p.ssim << ',' << p.rmse << ','
+      << p.max_abs_error << ',' << p.compress_mvoxels_per_s << ',' << p.decompress_mvoxels_per_s
+      << '\n';
   write_atomically(path, s.str());
 }
 
-std::optional<double> psnr_at_bps(std::span<const RdPoint> points, const std::string& family, double bps) {
+std::optional<double> psnr_at_bps(std::span<const RdPoint> points, const std::string& family,
+                                  double bps) {
   std::vector<const RdPoint*> curve;
   for (const RdPoint& p : points)
     if (p.family == family && std::isfinite(p.psnr) && std::isfinite(p.bps)) curve.push_back(&p);
-  std::stable_sort(curve.begin(), curve.end(), [](const RdPoint* a, const RdPoint* b) { return a->bps < b->bps; });
-  if (curve.empty() || !(bps >= curve.front()->bps && bps <= curve.back()->bps)) return std::nullopt;
+  std::stable_sort(curve.begin(), curve.end(),
+                   [](const RdPoint* a, const RdPoint* b) { return a->bps < b->bps; });
+  if (curve.empty() || !(bps >= curve.front()->bps && bps <= curve.back()->bps))
+    return std::nullopt;
   for (std::size_t i = 0; i + 1 < curve.size(); ++i) {
     const RdPoint &a = *curve[i], &b = *curve[i + 1];
     if (bps > b.bps) continue;
@@ -185,7 +195,8 @@ EqualBpsTable equal_bps_table(std::span<const RdPoint> points, std::span<const d
     if (p.family == reference) t.reference = reference;
   if (!t.reference.empty()) t.families.push_back(t.reference);
   for (const RdPoint& p : points)
-    if (std::find(t.families.begin(), t.families.end(), p.family) == t.families.end()) t.families.push_back(p.family);
+    if (std::find(t.families.begin(), t.families.end(), p.family) == t.families.end())
+      t.families.push_back(p.family);
   t.bps.assign(bps.begin(), bps.end());
   for (double b : t.bps) {
     auto& row = t.psnr.emplace_back();
@@ -205,9 +216,11 @@ double reference_psnr(const EqualBpsTable& t, std::size_t r) {
 }  // namespace
 
 void print_equal_bps_table(std::ostream& out, const EqualBpsTable& t) {
-  out << "At equal bps: PSNR dB, linear in bps between the two settings that bracket each value ('-': outside "
+  out << "At equal bps: PSNR dB, linear in bps between the two settings that bracket each value "
+         "('-': outside "
          "the settings measured)"
-      << (t.reference.empty() ? "" : "; in parentheses " + t.reference + " minus that codec") << ":\n";
+      << (t.reference.empty() ? "" : "; in parentheses " + t.reference + " minus that codec")
+      << ":\n";
   int width = 24;  // every column as wide as the longest codec name
   for (const std::string& f : t.families) width = std::max(width, static_cast<int>(f.size()));
   char cell[128];
@@ -284,12 +297,14 @@ std::string gnuplot_quote(const std::string& text) {
 
 void write_rd_plot(const fs::path& png, std::span<const RdPoint> points, const std::string& title) {
   if (!on_path("gnuplot"))
-    throw InputError("gnuplot is not installed, so no plot was drawn (the CSV has the numbers): "
-                     "apt-get install gnuplot-nox");
+    throw InputError(
+        "gnuplot is not installed, so no plot was drawn (the CSV has the numbers): "
+        "apt-get install gnuplot-nox");
   std::map<std::string, std::vector<const RdPoint*>> families;
   for (const RdPoint& p : points)
     if (std::isfinite(p.psnr)) families[p.family].push_back(&p);
-  const fs::path data = png.string() + ".dat", script = png.string() + ".gp", tmp = png.string() + ".tmp.png";
+  const fs::path data = png.string() + ".dat", script = png.string() + ".gp",
+                 tmp = png.string() + ".tmp.png";
   {
     std::ofstream d(data);
     for (const auto& [family, list] : families) {
@@ -301,7 +316,8 @@ void write_rd_plot(const fs::path& png, std::span<const RdPoint> points, const s
     g << "set terminal pngcairo size 960,640 enhanced font 'DejaVu Sans,11'\n"
       << "set output " << gnuplot_quote(tmp.string()) << "\n"
       << "set title " << gnuplot_quote(title) << "\n"
-      << "set xlabel 'bits per voxel (bps), all bytes counted'\nset ylabel 'PSNR (dB) = 10 log_{10}(range^2/MSE)'\n"
+      << "set xlabel 'bits per voxel (bps), all bytes counted'\nset ylabel 'PSNR (dB) = 10 "
+         "log_{10}(range^2/MSE)'\n"
       << "set logscale x 2\nset grid\nset key bottom right noenhanced\n";
     g << "plot ";
     int index = 0;

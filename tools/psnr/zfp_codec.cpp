@@ -16,7 +16,9 @@ class ZfpCodec final : public FrameCodec {
   enum class Mode { accuracy, rate };
   ZfpCodec(Mode mode, double parameter) : mode_(mode), parameter_(parameter) {}
 
-  std::string family() const override { return mode_ == Mode::accuracy ? "zfp fixed-accuracy" : "zfp fixed-rate"; }
+  std::string family() const override {
+    return mode_ == Mode::accuracy ? "zfp fixed-accuracy" : "zfp fixed-rate";
+  }
   std::string setting() const override {
     char text[48];
     if (mode_ == Mode::accuracy)
@@ -26,7 +28,8 @@ class ZfpCodec final : public FrameCodec {
     return text;
   }
 
-  void compress(Dims dims, std::span<const float> frame, std::vector<std::uint8_t>& stream) override {
+  void compress(Dims dims, std::span<const float> frame,
+                std::vector<std::uint8_t>& stream) override {
     format::ZfpStream zfp = open(dims);
     stream.resize(zfp.maximum_size());
     const std::size_t size = zfp.compress(frame.data(), stream.data(), stream.size());
@@ -42,9 +45,10 @@ class ZfpCodec final : public FrameCodec {
 
  private:
   format::ZfpStream open(Dims dims) const {
-    return format::ZfpStream(
-        mode_ == Mode::accuracy ? format::ZfpMode::accuracy(parameter_) : format::ZfpMode::rate(parameter_),
-        static_cast<std::size_t>(dims.x), static_cast<std::size_t>(dims.y), static_cast<std::size_t>(dims.z));
+    return format::ZfpStream(mode_ == Mode::accuracy ? format::ZfpMode::accuracy(parameter_)
+                                                     : format::ZfpMode::rate(parameter_),
+                             static_cast<std::size_t>(dims.x), static_cast<std::size_t>(dims.y),
+                             static_cast<std::size_t>(dims.z));
   }
 
   Mode mode_;

@@ -22,17 +22,19 @@ struct RdCommandOptions {
   ReaderOptions reader;
   psnr::RdOptions rd;
   bool no_plot = false;
-  std::string dictionary;                   ///< volreel's codecs need one; without it only zfp runs
-  std::string atom_storage = "f16";         ///< how the dictionary counts: as encode stores it
-  /// Octave steps, half-octave steps where turbulence at 128³ lands in 0.3–0.6 bps (the equal-bps rows).
-  std::vector<double> tolerances = {std::ldexp(1.0, -6),  std::ldexp(1.0, -7), std::exp2(-7.5), std::ldexp(1.0, -8),
-                                    std::exp2(-8.5),      std::ldexp(1.0, -9), std::ldexp(1.0, -10), std::ldexp(1.0, -11)};
+  std::string dictionary;            ///< volreel's codecs need one; without it only zfp runs
+  std::string atom_storage = "f16";  ///< how the dictionary counts: as encode stores it
+  /// Octave steps, half-octave steps where turbulence at 128³ lands in 0.3–0.6 bps (the equal-bps
+  /// rows).
+  std::vector<double> tolerances = {std::ldexp(1.0, -6),  std::ldexp(1.0, -7), std::exp2(-7.5),
+                                    std::ldexp(1.0, -8),  std::exp2(-8.5),     std::ldexp(1.0, -9),
+                                    std::ldexp(1.0, -10), std::ldexp(1.0, -11)};
   std::vector<int> sparsities = {1, 2, 3, 4, 5, 6, 7, 8};
   std::vector<double> lagrangian_factors = {encoder::CodingSettings{}.lagrangian_factor};
-  bool tolerance_rule = false;              ///< also variable rate with the ε rule
+  bool tolerance_rule = false;  ///< also variable rate with the ε rule
   std::string pursuit = dictionary::pursuit_name(encoder::CodingSettings{}.selection);
   double level_factor = encoder::CodingSettings{}.level_tolerance_factor;
-  std::vector<double> zfp_bricks;           ///< zfp inside the container, accuracy / range (default none)
+  std::vector<double> zfp_bricks;  ///< zfp inside the container, accuracy / range (default none)
   /// Rows of the equal-bps table: the span MTV-Player's Table 1 reports (0.3 to 0.6 bps).
   std::vector<double> at_bps = {0.30, 0.35, 0.40, 0.45, 0.50, 0.55, 0.60};
 };
@@ -41,8 +43,9 @@ void run_rd(const RdCommandOptions& o) {
   const auto series = datasets::open_series(o.series, o.reader.to_open_options());
   const auto& info = series->info();
   const std::size_t frames = o.rd.max_frames ? std::min(o.rd.max_frames, info.frames) : info.frames;
-  std::printf("volreel bench rd\nmachine: %s\ninput:   %s, %s, %zu of %zu frames, variable '%s'\n", describe_machine().c_str(),
-              info.source.c_str(), to_string(info.dims).c_str(), frames, info.frames, info.variable.c_str());
+  std::printf("volreel bench rd\nmachine: %s\ninput:   %s, %s, %zu of %zu frames, variable '%s'\n",
+              describe_machine().c_str(), info.source.c_str(), to_string(info.dims).c_str(), frames,
+              info.frames, info.variable.c_str());
   std::pair<double, double> range;
   {
     ProgressBar bar("reading", "frames");
@@ -55,18 +58,29 @@ void run_rd(const RdCommandOptions& o) {
     // The dictionary as volreel encode stores it in the container (binary16 atoms by default).
     auto file = format::read_dictionary_file(o.dictionary);
     if (o.atom_storage == "f16") file = format::with_half_atoms(std::move(file));
-    const auto bytes = static_cast<std::size_t>(format::dictionary_file_size(file.atom_count, file.atoms.size() / file.atom_count, file.half_atoms));
+    const auto bytes = static_cast<std::size_t>(format::dictionary_file_size(
+        file.atom_count, file.atoms.size() / file.atom_count, file.half_atoms));
     auto dict = std::make_shared<const dictionary::Dictionary>(dictionary::from_file(file));
-    std::printf("volreel codecs: dictionary %s (K = %d, atoms stored as %s, %zu bytes, counted once in bps)\n", o.dictionary.c_str(), dict->atom_count(), file.half_atoms ? "f16" : "f32", bytes);
+    std::printf(
+        "volreel codecs: dictionary %s (K = %d, atoms stored as %s, %zu bytes, counted once in "
+        "bps)\n",
+        o.dictionary.c_str(), dict->atom_count(), file.half_atoms ? "f16" : "f32", bytes);
     VolreelSweep sweep{o.tolerances, o.lagrangian_factors, o.tolerance_rule, o.sparsities, {}};
     sweep.selection = dictionary::pursuit_from_name(o.pursuit);
     sweep.level_tolerance_factor = o.level_factor;
-    std::printf("volreel pursuit %s; variable rate (Lagrangian rule) codes level d above the finest to eps*%g^d\n", o.pursuit.c_str(), o.level_factor);
-    for (auto& c : make_volreel_sweep(dict, bytes, range.first, range.second, sweep)) codecs.push_back(std::move(c));
+    std::printf(
+        "volreel pursuit %s; variable rate (Lagrangian rule) codes level d above the finest to "
+        "eps*%g^d\n",
+        o.pursuit.c_str(), o.level_factor);
+    for (auto& c : make_volreel_sweep(dict, bytes, range.first, range.second, sweep))
+      codecs.push_back(std::move(c));
   }
   if (!o.zfp_bricks.empty())
-    for (auto& c : make_volreel_sweep(nullptr, 0, range.first, range.second, {{}, {}, false, {}, o.zfp_bricks})) codecs.push_back(std::move(c));
-  if (o.dictionary.empty()) std::printf("no --dictionary: volreel's sparse codecs are skipped (zfp only)\n");
+    for (auto& c : make_volreel_sweep(nullptr, 0, range.first, range.second,
+                                      {{}, {}, false, {}, o.zfp_bricks}))
+      codecs.push_back(std::move(c));
+  if (o.dictionary.empty())
+    std::printf("no --dictionary: volreel's sparse codecs are skipped (zfp only)\n");
   std::vector<psnr::RdPoint> points;
   {
     ProgressBar bar("compressing", "frames");
@@ -87,7 +101,9 @@ void run_rd(const RdCommandOptions& o) {
   if (!o.no_plot) {
     const std::filesystem::path png = std::filesystem::path(o.out) / "rd.png";
     try {
-      psnr::write_rd_plot(png, points, "Rate-distortion: " + info.variable + " " + to_string(info.dims) + " x " + std::to_string(frames) + " frames");
+      psnr::write_rd_plot(png, points,
+                          "Rate-distortion: " + info.variable + " " + to_string(info.dims) + " x " +
+                              std::to_string(frames) + " frames");
       std::printf("wrote %s\n", png.c_str());
     } catch (const InputError& e) {
       std::fprintf(stderr, "volreel: warning: %s\n", e.what());
@@ -98,52 +114,75 @@ void run_rd(const RdCommandOptions& o) {
 }  // namespace
 
 void add_bench_command(CLI::App& app) {
-  CLI::App* bench = app.add_subcommand("bench", "Benchmarks: print measured figures with the machine, build and input");
+  CLI::App* bench = app.add_subcommand(
+      "bench", "Benchmarks: print measured figures with the machine, build and input");
   bench->require_subcommand(1);
 
   auto o = std::make_shared<RdCommandOptions>();
-  CLI::App* rd = bench->add_subcommand(
-      "rd",
-      "Rate-distortion of the codecs on a series: zfp fixed-accuracy (tolerances range*2^-k, k=-1,0,1,...,12) and\n"
-      "fixed-rate (0.125 to 8 bits/value). Prints bps, PSNR, SSIM, compression and decompression MVoxel/s per\n"
-      "setting, then every codec's PSNR at equal bps (--at-bps); writes OUT/rd.csv, OUT/rd_equal_bps.csv and\n"
-      "OUT/rd.png (PSNR vs bps, via gnuplot).");
+  CLI::App* rd =
+      bench->add_subcommand("rd",
+                            "Rate-distortion of the codecs on a series: zfp fixed-accuracy "
+                            "(tolerances range*2^-k, k=-1,0,1,...,12) and\n"
+                            "fixed-rate (0.125 to 8 bits/value). Prints bps, PSNR, SSIM, "
+                            "compression and decompression MVoxel/s per\n"
+                            "setting, then every codec's PSNR at equal bps (--at-bps); writes "
+                            "OUT/rd.csv, OUT/rd_equal_bps.csv and\n"
+                            "OUT/rd.png (PSNR vs bps, via gnuplot).");
   rd->add_option("SERIES", o->series, "Raw series directory, HDF5 file or raw file")->required();
   rd->add_option("--out", o->out, "Directory for rd.csv and rd.png")->capture_default_str();
-  rd->add_option("--max-frames", o->rd.max_frames, "Use only the first N frames (0: all)")->capture_default_str();
-  rd->add_option("--ssim-frames", o->rd.ssim_frames, "3D SSIM on this many evenly spaced frames (0: none)")->capture_default_str();
+  rd->add_option("--max-frames", o->rd.max_frames, "Use only the first N frames (0: all)")
+      ->capture_default_str();
+  rd->add_option("--ssim-frames", o->rd.ssim_frames,
+                 "3D SSIM on this many evenly spaced frames (0: none)")
+      ->capture_default_str();
   rd->add_flag("--no-plot", o->no_plot, "Write the CSV only");
   rd->add_option("--dictionary", o->dictionary,
-                 "Dictionary (volreel train): adds volreel variable rate (--tolerances) and fixed rate (--sparsities), each\n"
-                 "frame encoded into a frame file in memory and decoded by the CPU decoder; the dictionary counts in bps");
+                 "Dictionary (volreel train): adds volreel variable rate (--tolerances) and fixed "
+                 "rate (--sparsities), each\n"
+                 "frame encoded into a frame file in memory and decoded by the CPU decoder; the "
+                 "dictionary counts in bps");
   rd->add_option("--atom-storage", o->atom_storage,
-                 "How the dictionary's atoms are stored and counted: f16 (what volreel encode stores by default) or f32")
+                 "How the dictionary's atoms are stored and counted: f16 (what volreel encode "
+                 "stores by default) or f32")
       ->check(CLI::IsMember({"f16", "f32"}))
       ->capture_default_str();
   rd->add_option("--tolerances", o->tolerances,
-                 "Variable rate: eps as fractions of the value range; each block gets the atoms that lower its squared\n"
-                 "error by at least k*216*eps^2 (the rate-distortion optimal, Lagrangian rule)")->capture_default_str();
-  rd->add_option("--lagrangian-factors", o->lagrangian_factors, "Variable rate: k, one row per value and eps")->capture_default_str();
+                 "Variable rate: eps as fractions of the value range; each block gets the atoms "
+                 "that lower its squared\n"
+                 "error by at least k*216*eps^2 (the rate-distortion optimal, Lagrangian rule)")
+      ->capture_default_str();
+  rd->add_option("--lagrangian-factors", o->lagrangian_factors,
+                 "Variable rate: k, one row per value and eps")
+      ->capture_default_str();
   rd->add_flag("--tolerance-rule", o->tolerance_rule,
-               "Also variable rate with the eps rule (atoms until each block's RMS error <= eps), for comparison");
-  rd->add_option("--sparsities", o->sparsities, "Fixed rate: atoms per block")->capture_default_str();
-  rd->add_option("--pursuit", o->pursuit, "volreel's rows: ormp or omp (as volreel encode --pursuit)")
+               "Also variable rate with the eps rule (atoms until each block's RMS error <= eps), "
+               "for comparison");
+  rd->add_option("--sparsities", o->sparsities, "Fixed rate: atoms per block")
+      ->capture_default_str();
+  rd->add_option("--pursuit", o->pursuit,
+                 "volreel's rows: ormp or omp (as volreel encode --pursuit)")
       ->check(CLI::IsMember({"ormp", "omp"}))
       ->capture_default_str();
   rd->add_option("--level-factor", o->level_factor,
-                 "Variable rate: code level d above the finest to eps*F^d (as volreel encode --level-factor; the\n"
+                 "Variable rate: code level d above the finest to eps*F^d (as volreel encode "
+                 "--level-factor; the\n"
                  "finest level, which the table measures, is the same, so F changes only the bps)")
       ->check(CLI::Range(1.0, 16.0))
       ->capture_default_str();
   rd->add_option("--at-bps", o->at_bps,
-                 "Rows of the equal-bps table (OUT/rd_equal_bps.csv): each codec's PSNR at these bps, linear in bps\n"
-                 "between the two settings that bracket each value, never extrapolated, and volreel variable rate's\n"
+                 "Rows of the equal-bps table (OUT/rd_equal_bps.csv): each codec's PSNR at these "
+                 "bps, linear in bps\n"
+                 "between the two settings that bracket each value, never extrapolated, and "
+                 "volreel variable rate's\n"
                  "difference from each")
       ->check([](const std::string& text) {
-        return positive_number(text) ? std::string() : "expected bits per voxel > 0, e.g. 0.3, found '" + text + "'";
+        return positive_number(text)
+                   ? std::string()
+                   : "expected bits per voxel > 0, e.g. 0.3, found '" + text + "'";
       })
       ->capture_default_str();
-  rd->add_option("--zfp-bricks", o->zfp_bricks, "Also zfp per brick inside the container, accuracy as fractions of the range");
+  rd->add_option("--zfp-bricks", o->zfp_bricks,
+                 "Also zfp per brick inside the container, accuracy as fractions of the range");
   o->reader.add_to(*rd);
   rd->callback([o] { run_rd(*o); });
   add_bench_train_command(*bench);

@@ -27,14 +27,16 @@ namespace volreel::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
 
 struct BenchPlayOptions {
   std::string container;
   loop::LoopSettings loop;
   std::size_t frames_per_phase = 60;
   std::size_t seeks = 5;
-  double speed = 10;  ///< keyframes per second of playback
+  double speed = 10;           ///< keyframes per second of playback
   double frame_dt = 1.0 / 30;  ///< playback time per rendered frame, seconds
   double timeout = 60;         ///< seconds a seek may take to reach full quality
   std::string transfer = "auto";
@@ -45,7 +47,8 @@ struct BenchPlayOptions {
 /// Per-phase sums.
 struct PhaseStats {
   std::size_t frames = 0;
-  double wall_s = 0, schedule = 0, upload = 0, decode = 0, render = 0, at_target = 0, min_at_target = 1;
+  double wall_s = 0, schedule = 0, upload = 0, decode = 0, render = 0, at_target = 0,
+         min_at_target = 1;
   std::uint64_t loaded_before = 0, loaded_after = 0;
   void add(const loop::FrameReport& r) {
     ++frames;
@@ -59,9 +62,10 @@ struct PhaseStats {
   }
   void print(const char* name) const {
     const double n = static_cast<double>(std::max<std::size_t>(frames, 1));
-    std::printf("%-18s %6zu %8.2f %9.1f %9.2f %8.2f %8.2f %8.1f %9.1f %8.0f%% %7.0f%%\n", name, frames, n / wall_s,
-                1000 * wall_s / n, schedule / n, upload / n, decode / n, render / n,
-                double(loaded_after - loaded_before) * 1e-6, 100 * at_target / n, 100 * min_at_target);
+    std::printf("%-18s %6zu %8.2f %9.1f %9.2f %8.2f %8.2f %8.1f %9.1f %8.0f%% %7.0f%%\n", name,
+                frames, n / wall_s, 1000 * wall_s / n, schedule / n, upload / n, decode / n,
+                render / n, double(loaded_after - loaded_before) * 1e-6, 100 * at_target / n,
+                100 * min_at_target);
   }
 };
 
@@ -76,30 +80,36 @@ void run_bench_play(const BenchPlayOptions& o) {
   } catch (const std::invalid_argument& e) {
     throw InputError(e.what());
   }
-  const std::unique_ptr<loop::FrameLoop> loop =
-      vulkan_render::open_frame_loop(container, options, o.cpu, vulkan_render::NoDevice::fail,
-                                     "(bench play measures the Vulkan player; --cpu measures the CPU renderer)");
+  const std::unique_ptr<loop::FrameLoop> loop = vulkan_render::open_frame_loop(
+      container, options, o.cpu, vulkan_render::NoDevice::fail,
+      "(bench play measures the Vulkan player; --cpu measures the CPU renderer)");
   const std::string device = loop->describe();
   const std::uint32_t slots = loop->slot_count();
   const std::size_t keyframes = container.frame_count();
   const double last = static_cast<double>(keyframes - 1);
   const cpu_render::TransferFunction tf = loop::transfer_from_spec(o.transfer, container);
-  std::printf("volreel bench play\nmachine: %s\ndevice:  %s\n", describe_machine().c_str(), device.c_str());
-  std::printf("input:   %s: %ux%ux%u, %zu frames, %s, %u octree levels\n", o.container.c_str(), m.dims[0], m.dims[1],
-              m.dims[2], keyframes, m.codec == format::Codec::ksvd ? "ksvd" : "zfp", m.levels);
-  std::printf("view:    %dx%d, transfer function '%s', ray step %g voxels, SSE target %g px, culling %s\n",
-              options.width, options.height, o.transfer.c_str(), options.render.step,
-              options.scheduler.priority.sse_target, options.transfer_culling ? "on" : "off");
-  std::printf("atlas:   %u slots (%.0f MiB), upload budget %.0f MiB/frame, bandwidth %s, latency %s\n", slots,
-              o.loop.atlas_mb, o.loop.upload_budget_mb,
-              options.scheduler.loader.bandwidth_bytes_per_s > 0 ? o.loop.bandwidth.c_str() : "unlimited",
-              o.loop.latency.c_str());
-  std::printf("script:  playback %g keyframes/s, %.4f s of playback per frame, camera orbiting 1 degree per frame, "
-              "%zu frames per phase\n\n",
-              o.speed, o.frame_dt, o.frames_per_phase);
+  std::printf("volreel bench play\nmachine: %s\ndevice:  %s\n", describe_machine().c_str(),
+              device.c_str());
+  std::printf("input:   %s: %ux%ux%u, %zu frames, %s, %u octree levels\n", o.container.c_str(),
+              m.dims[0], m.dims[1], m.dims[2], keyframes,
+              m.codec == format::Codec::ksvd ? "ksvd" : "zfp", m.levels);
+  std::printf(
+      "view:    %dx%d, transfer function '%s', ray step %g voxels, SSE target %g px, culling %s\n",
+      options.width, options.height, o.transfer.c_str(), options.render.step,
+      options.scheduler.priority.sse_target, options.transfer_culling ? "on" : "off");
+  std::printf(
+      "atlas:   %u slots (%.0f MiB), upload budget %.0f MiB/frame, bandwidth %s, latency %s\n",
+      slots, o.loop.atlas_mb, o.loop.upload_budget_mb,
+      options.scheduler.loader.bandwidth_bytes_per_s > 0 ? o.loop.bandwidth.c_str() : "unlimited",
+      o.loop.latency.c_str());
+  std::printf(
+      "script:  playback %g keyframes/s, %.4f s of playback per frame, camera orbiting 1 degree "
+      "per frame, "
+      "%zu frames per phase\n\n",
+      o.speed, o.frame_dt, o.frames_per_phase);
 
-  auto camera = player::OrbitCamera::framing({double(m.dims[0]), double(m.dims[1]), double(m.dims[2])},
-                                             options.width, options.height);
+  auto camera = player::OrbitCamera::framing(
+      {double(m.dims[0]), double(m.dims[1]), double(m.dims[2])}, options.width, options.height);
   const double azimuth0 = camera.azimuth;
   std::size_t frame_number = 0;
   const auto next_camera = [&] {
@@ -117,18 +127,22 @@ void run_bench_play(const BenchPlayOptions& o) {
       r = loop->frame(camera, playhead, tf);
       ++frames;
     } while (r.stats.fraction_at_target < 1.0 && seconds_since(start) < o.timeout);
-    std::printf("cold start to full quality: %.2f s, %zu frames (%.0f%% at target, %.1f MB loaded)\n\n", seconds_since(start),
-                frames, 100 * r.stats.fraction_at_target, double(r.stats.bytes_loaded) * 1e-6);
+    std::printf(
+        "cold start to full quality: %.2f s, %zu frames (%.0f%% at target, %.1f MB loaded)\n\n",
+        seconds_since(start), frames, 100 * r.stats.fraction_at_target,
+        double(r.stats.bytes_loaded) * 1e-6);
   }
 
   // 3. Phases along the script; serial frames give the exact time split.
-  std::printf("%-18s %6s %8s %9s %9s %8s %8s %8s %9s %9s %8s\n", "phase", "frames", "fps", "frame ms", "schedule",
-              "upload", "decode", "render", "MB read", "at target", "worst");
+  std::printf("%-18s %6s %8s %9s %9s %8s %8s %8s %9s %9s %8s\n", "phase", "frames", "fps",
+              "frame ms", "schedule", "upload", "decode", "render", "MB read", "at target",
+              "worst");
   SplitMix64 rng(o.seed);
   const auto run_phase = [&](const char* name, auto&& advance, bool pipelined) {
     PhaseStats s;
     loop->set_pipelined(pipelined);
-    loop::FrameReport r = loop->frame(next_camera(), playhead, tf);  // not counted: settles the mode
+    loop::FrameReport r =
+        loop->frame(next_camera(), playhead, tf);  // not counted: settles the mode
     s.loaded_before = r.stats.bytes_loaded;
     const auto start = Clock::now();
     for (std::size_t i = 0; i < o.frames_per_phase; ++i) {
@@ -140,14 +154,21 @@ void run_bench_play(const BenchPlayOptions& o) {
     s.print(name);
   };
   const double step = o.speed * o.frame_dt;
-  run_phase("forward", [&](std::size_t) { return playhead + step; }, false);
-  run_phase("reverse", [&](std::size_t) { return playhead - step; }, false);
-  run_phase("seek every 10th", [&](std::size_t i) { return i % 10 == 0 ? rng.uniform(0, last) : playhead + step; }, false);
+  run_phase(
+      "forward", [&](std::size_t) { return playhead + step; }, false);
+  run_phase(
+      "reverse", [&](std::size_t) { return playhead - step; }, false);
+  run_phase(
+      "seek every 10th",
+      [&](std::size_t i) { return i % 10 == 0 ? rng.uniform(0, last) : playhead + step; }, false);
   playhead = 0;
   if (loop->can_pipeline()) {
-    run_phase("forward, overlapped", [&](std::size_t) { return playhead + step; }, true);
-    std::printf("(overlapped: the CPU work of a frame runs while the GPU renders the previous one; its decode and\n"
-                " render columns are not measured per frame)\n");
+    run_phase(
+        "forward, overlapped", [&](std::size_t) { return playhead + step; }, true);
+    std::printf(
+        "(overlapped: the CPU work of a frame runs while the GPU renders the previous one; its "
+        "decode and\n"
+        " render columns are not measured per frame)\n");
   }
   loop->set_pipelined(false);
 
@@ -167,13 +188,15 @@ void run_bench_play(const BenchPlayOptions& o) {
     } while (r.stats.fraction_at_target < 1.0 && seconds_since(start) < o.timeout);
     const double t = seconds_since(start);
     times.push_back(t);
-    std::printf("  seek to keyframe %7.2f: %.3f s, %4zu frames, %.1f MB read%s\n", playhead, t, frames,
-                double(r.stats.bytes_loaded - before) * 1e-6, r.stats.fraction_at_target < 1.0 ? " (timed out)" : "");
+    std::printf("  seek to keyframe %7.2f: %.3f s, %4zu frames, %.1f MB read%s\n", playhead, t,
+                frames, double(r.stats.bytes_loaded - before) * 1e-6,
+                r.stats.fraction_at_target < 1.0 ? " (timed out)" : "");
   }
   if (!times.empty()) {
     double sum = 0;
     for (double t : times) sum += t;
-    std::printf("  mean %.3f s, worst %.3f s\n", sum / double(times.size()), *std::max_element(times.begin(), times.end()));
+    std::printf("  mean %.3f s, worst %.3f s\n", sum / double(times.size()),
+                *std::max_element(times.begin(), times.end()));
   }
   loop->finish();
 }
@@ -182,18 +205,23 @@ void run_bench_play(const BenchPlayOptions& o) {
 
 void add_bench_play_command(CLI::App& bench) {
   auto o = std::make_shared<BenchPlayOptions>();
-  CLI::App* cmd = bench.add_subcommand(
-      "play",
-      "Player frame rate and frame-time split while playing forward, reversing and seeking, and the time from a "
-      "random seek to full quality (Vulkan; --cpu for the CPU renderer)");
+  CLI::App* cmd =
+      bench.add_subcommand("play",
+                           "Player frame rate and frame-time split while playing forward, "
+                           "reversing and seeking, and the time from a "
+                           "random seek to full quality (Vulkan; --cpu for the CPU renderer)");
   o->loop.size = "512x512";
   cmd->add_option("CONTAINER", o->container, "The container directory NAME.vreel")->required();
   cmd->add_option("--size", o->loop.size, "Image size WxH")->capture_default_str();
-  cmd->add_option("--frames-per-phase", o->frames_per_phase, "Frames measured per phase")->capture_default_str();
+  cmd->add_option("--frames-per-phase", o->frames_per_phase, "Frames measured per phase")
+      ->capture_default_str();
   cmd->add_option("--seeks", o->seeks, "Random seeks timed to full quality")->capture_default_str();
-  cmd->add_option("--speed", o->speed, "Playback rate, keyframes per second")->capture_default_str();
-  cmd->add_option("--timeout", o->timeout, "Seconds a seek may take to reach full quality")->capture_default_str();
-  cmd->add_option("--transfer", o->transfer, "Transfer function: auto (data quantiles), a preset or a JSON file")
+  cmd->add_option("--speed", o->speed, "Playback rate, keyframes per second")
+      ->capture_default_str();
+  cmd->add_option("--timeout", o->timeout, "Seconds a seek may take to reach full quality")
+      ->capture_default_str();
+  cmd->add_option("--transfer", o->transfer,
+                  "Transfer function: auto (data quantiles), a preset or a JSON file")
       ->capture_default_str();
   add_loop_options(*cmd, o->loop);
   cmd->add_flag("--cpu", o->cpu, "Measure the CPU reference renderer instead of Vulkan");

@@ -35,23 +35,35 @@ std::string ssim_text(double ssim) {
 }
 
 /// JSON has no infinity: a perfect match is written as null.
-nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
+nlohmann::json number(double v) {
+  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+}
 
 void compare_images(const CompareOptions& o) {
   const image::Image a = image::read_png(o.a), b = image::read_png(o.b);
   const psnr::ImageComparison c = psnr::compare_images(a, b);
   if (o.json) {
-    nlohmann::json j{{"a", o.a}, {"b", o.b}, {"width", a.width}, {"height", a.height}, {"channels", a.channels},
-                     {"psnr", number(c.psnr)}, {"ssim", c.ssim}, {"mse", c.mse},
-                     {"definitions", {{"psnr", "10*log10(255^2/MSE) over all channels"},
-                                      {"ssim", "Gaussian-window SSIM (sigma 1.5) per channel, averaged"}}}};
+    nlohmann::json j{{"a", o.a},
+                     {"b", o.b},
+                     {"width", a.width},
+                     {"height", a.height},
+                     {"channels", a.channels},
+                     {"psnr", number(c.psnr)},
+                     {"ssim", c.ssim},
+                     {"mse", c.mse},
+                     {"definitions",
+                      {{"psnr", "10*log10(255^2/MSE) over all channels"},
+                       {"ssim", "Gaussian-window SSIM (sigma 1.5) per channel, averaged"}}}};
     std::cout << j.dump(2) << '\n';
   } else if (o.csv) {
-    std::printf("a,b,width,height,channels,psnr_db,ssim,mse\n\"%s\",\"%s\",%d,%d,%d,%.6f,%.6f,%.6f\n", o.a.c_str(), o.b.c_str(),
-                a.width, a.height, a.channels, c.psnr, c.ssim, c.mse);
+    std::printf(
+        "a,b,width,height,channels,psnr_db,ssim,mse\n\"%s\",\"%s\",%d,%d,%d,%.6f,%.6f,%.6f\n",
+        o.a.c_str(), o.b.c_str(), a.width, a.height, a.channels, c.psnr, c.ssim, c.mse);
   } else {
-    std::printf("images %dx%d, %d channel(s)\nPSNR  %.3f dB  (10*log10(255^2/MSE))\nSSIM  %.5f  (per channel, averaged)\nMSE   %.4f\n",
-                a.width, a.height, a.channels, c.psnr, c.ssim, c.mse);
+    std::printf(
+        "images %dx%d, %d channel(s)\nPSNR  %.3f dB  (10*log10(255^2/MSE))\nSSIM  %.5f  (per "
+        "channel, averaged)\nMSE   %.4f\n",
+        a.width, a.height, a.channels, c.psnr, c.ssim, c.mse);
   }
 }
 
@@ -73,14 +85,17 @@ void compare_series(const CompareOptions& o) {
   // bps of a container: all its bytes over the voxels of all its frames (docs/design.md,
   // "Metrics").
   const double bps = container ? 8.0 * static_cast<double>(container->container().total_bytes()) /
-                                     (static_cast<double>(ia.dims.voxels()) * static_cast<double>(container->info().frames))
+                                     (static_cast<double>(ia.dims.voxels()) *
+                                      static_cast<double>(container->info().frames))
                                : std::nan("");
   if (ia.dims != ib.dims)
-    throw InputError("'" + o.a + "' is " + to_string(ia.dims) + " but '" + o.b + "' is " + to_string(ib.dims));
+    throw InputError("'" + o.a + "' is " + to_string(ia.dims) + " but '" + o.b + "' is " +
+                     to_string(ib.dims));
   // A container encoded from the first frames of A (encode --max-frames) compares with those.
   const std::size_t frames = container ? std::min(ia.frames, ib.frames) : ia.frames;
   if (!container && ia.frames != ib.frames)
-    throw InputError("'" + o.a + "' has " + std::to_string(ia.frames) + " frames but '" + o.b + "' has " + std::to_string(ib.frames));
+    throw InputError("'" + o.a + "' has " + std::to_string(ia.frames) + " frames but '" + o.b +
+                     "' has " + std::to_string(ib.frames));
 
   struct Row {
     psnr::ErrorStats e;
@@ -111,49 +126,76 @@ void compare_series(const CompareOptions& o) {
     nlohmann::json frame_rows = nlohmann::json::array();
     for (std::size_t t = 0; t < rows.size(); ++t) {
       const auto& e = rows[t].e;
-      frame_rows.push_back({{"frame", t}, {"psnr", number(e.psnr)}, {"psnr_zfp", number(e.psnr_zfp)}, {"rmse", e.rmse},
-                        {"max_abs_error", e.max_abs_error}, {"ssim", number(rows[t].ssim)}, {"range", e.range()}});
+      frame_rows.push_back({{"frame", t},
+                            {"psnr", number(e.psnr)},
+                            {"psnr_zfp", number(e.psnr_zfp)},
+                            {"rmse", e.rmse},
+                            {"max_abs_error", e.max_abs_error},
+                            {"ssim", number(rows[t].ssim)},
+                            {"range", e.range()}});
     }
-    nlohmann::json j{{"a", o.a}, {"b", o.b}, {"dims", {ia.dims.x, ia.dims.y, ia.dims.z}}, {"frames", frame_rows},
-                     {"sequence", {{"psnr", number(total.psnr)}, {"psnr_zfp", number(total.psnr_zfp)}, {"rmse", total.rmse},
-                                   {"max_abs_error", total.max_abs_error}, {"ssim", number(mean_ssim)}, {"range", total.range()}}},
-                     {"bps", number(bps)},
-                     {"definitions", {{"psnr", "10*log10(range^2/MSE), range of the first input (MTV-Player)"},
-                                      {"psnr_zfp", "20*log10(range/(2*RMSE)) (zfp's definition)"},
-                                      {"ssim", "3D Gaussian-window SSIM (sigma 1.5), data range of the first input"}}}};
+    nlohmann::json j{
+        {"a", o.a},
+        {"b", o.b},
+        {"dims", {ia.dims.x, ia.dims.y, ia.dims.z}},
+        {"frames", frame_rows},
+        {"sequence",
+         {{"psnr", number(total.psnr)},
+          {"psnr_zfp", number(total.psnr_zfp)},
+          {"rmse", total.rmse},
+          {"max_abs_error", total.max_abs_error},
+          {"ssim", number(mean_ssim)},
+          {"range", total.range()}}},
+        {"bps", number(bps)},
+        {"definitions",
+         {{"psnr", "10*log10(range^2/MSE), range of the first input (MTV-Player)"},
+          {"psnr_zfp", "20*log10(range/(2*RMSE)) (zfp's definition)"},
+          {"ssim", "3D Gaussian-window SSIM (sigma 1.5), data range of the first input"}}}};
     std::cout << j.dump(2) << '\n';
     return;
   }
   if (o.csv) {
     std::printf("frame,psnr_db,psnr_zfp_db,rmse,max_abs_error,ssim\n");
     for (std::size_t t = 0; t < rows.size(); ++t)
-      std::printf("%zu,%.6f,%.6f,%.6e,%.6e,%.6f\n", t, rows[t].e.psnr, rows[t].e.psnr_zfp, rows[t].e.rmse, rows[t].e.max_abs_error, rows[t].ssim);
-    std::printf("all,%.6f,%.6f,%.6e,%.6e,%.6f\n", total.psnr, total.psnr_zfp, total.rmse, total.max_abs_error, mean_ssim);
+      std::printf("%zu,%.6f,%.6f,%.6e,%.6e,%.6f\n", t, rows[t].e.psnr, rows[t].e.psnr_zfp,
+                  rows[t].e.rmse, rows[t].e.max_abs_error, rows[t].ssim);
+    std::printf("all,%.6f,%.6f,%.6e,%.6e,%.6f\n", total.psnr, total.psnr_zfp, total.rmse,
+                total.max_abs_error, mean_ssim);
     if (container) std::printf("# bps,%.6f\n", bps);
     return;
   }
-  std::printf("A: %s\nB: %s\n%s, %zu frame(s)\n", ia.source.c_str(), ib.source.c_str(), to_string(ia.dims).c_str(), frames);
-  std::printf("%7s %10s %12s %12s %12s %9s\n", "frame", "PSNR dB", "PSNRzfp dB", "RMSE", "max err", "SSIM");
+  std::printf("A: %s\nB: %s\n%s, %zu frame(s)\n", ia.source.c_str(), ib.source.c_str(),
+              to_string(ia.dims).c_str(), frames);
+  std::printf("%7s %10s %12s %12s %12s %9s\n", "frame", "PSNR dB", "PSNRzfp dB", "RMSE", "max err",
+              "SSIM");
   for (std::size_t t = 0; t < rows.size(); ++t)
-    std::printf("%7zu %10.3f %12.3f %12.4e %12.4e %9s\n", t, rows[t].e.psnr, rows[t].e.psnr_zfp, rows[t].e.rmse,
-                rows[t].e.max_abs_error, ssim_text(rows[t].ssim).c_str());
-  std::printf("%7s %10.3f %12.3f %12.4e %12.4e %9s\n", "all", total.psnr, total.psnr_zfp, total.rmse, total.max_abs_error,
-              ssim_text(mean_ssim).c_str());
+    std::printf("%7zu %10.3f %12.3f %12.4e %12.4e %9s\n", t, rows[t].e.psnr, rows[t].e.psnr_zfp,
+                rows[t].e.rmse, rows[t].e.max_abs_error, ssim_text(rows[t].ssim).c_str());
+  std::printf("%7s %10.3f %12.3f %12.4e %12.4e %9s\n", "all", total.psnr, total.psnr_zfp,
+              total.rmse, total.max_abs_error, ssim_text(mean_ssim).c_str());
   if (container)
-    std::printf("B is a volreel container: %.4f bps (8 * all its bytes / (voxels per frame * frames))\n", bps);
-  std::printf("PSNR = 10*log10(range^2/MSE), range = max-min of A (per frame; 'all' uses the whole sequence).\n"
-              "PSNRzfp = 20*log10(range/(2*RMSE)), zfp's definition (6.02 dB lower). SSIM: 3D, Gaussian window sigma 1.5.\n");
+    std::printf(
+        "B is a volreel container: %.4f bps (8 * all its bytes / (voxels per frame * frames))\n",
+        bps);
+  std::printf(
+      "PSNR = 10*log10(range^2/MSE), range = max-min of A (per frame; 'all' uses the whole "
+      "sequence).\n"
+      "PSNRzfp = 20*log10(range/(2*RMSE)), zfp's definition (6.02 dB lower). SSIM: 3D, Gaussian "
+      "window sigma 1.5.\n");
 }
 
 }  // namespace
 
 void add_compare_command(CLI::App& app) {
   auto o = std::make_shared<CompareOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "compare",
-      "Error metrics between an original A and a reconstruction B: two series (raw series directories, HDF5 or raw\n"
-      "files) or two PNG images. Volumes: PSNR (MTV: 10*log10(range^2/MSE)) and zfp's PSNR, RMSE, max error, 3D SSIM,\n"
-      "per frame and over the sequence. Images: PSNR (range 255) and SSIM per colour channel, averaged.");
+  CLI::App* cmd =
+      app.add_subcommand("compare",
+                         "Error metrics between an original A and a reconstruction B: two series "
+                         "(raw series directories, HDF5 or raw\n"
+                         "files) or two PNG images. Volumes: PSNR (MTV: 10*log10(range^2/MSE)) and "
+                         "zfp's PSNR, RMSE, max error, 3D SSIM,\n"
+                         "per frame and over the sequence. Images: PSNR (range 255) and SSIM per "
+                         "colour channel, averaged.");
   cmd->add_option("A", o->a, "The original")->required();
   cmd->add_option("B", o->b, "The reconstruction")->required();
   o->reader.add_to(*cmd);
@@ -162,7 +204,9 @@ void add_compare_command(CLI::App& app) {
   cmd->add_flag("--no-ssim", o->no_ssim, "Skip SSIM (faster on large volumes)");
   cmd->callback([o] {
     const bool a_png = is_png(o->a), b_png = is_png(o->b);
-    if (a_png != b_png) throw InputError("cannot compare an image with a volume: give two PNG files or two volumes/series");
+    if (a_png != b_png)
+      throw InputError(
+          "cannot compare an image with a volume: give two PNG files or two volumes/series");
     if (a_png)
       compare_images(*o);
     else

@@ -10,8 +10,8 @@
 
 #include "commands.hpp"
 #include "volreel/app/player.hpp"
-#include "volreel/vulkan/error.hpp"
 #include "volreel/loop/loop_settings.hpp"
+#include "volreel/vulkan/error.hpp"
 
 namespace volreel::cli {
 
@@ -91,7 +91,8 @@ void add_play_command(CLI::App& app) {
                   "Limit brick reads to this rate, e.g. 20MB/s, 500kB/s or 1GB/s (a bare number: "
                   "MB/s; 0: unlimited)")
       ->capture_default_str();
-  cmd->add_option("--latency", o->latency, "Add this latency to every brick read, e.g. 50ms or 0.2s (a bare number: ms)")
+  cmd->add_option("--latency", o->latency,
+                  "Add this latency to every brick read, e.g. 50ms or 0.2s (a bare number: ms)")
       ->capture_default_str();
   cmd->add_option("--upload-mb", o->upload_mb,
                   "Compressed brick data decoded per frame at most, MiB")

@@ -28,10 +28,10 @@
 #include "volreel/cpu_render/tour.hpp"
 #include "volreel/datasets/series.hpp"
 #include "volreel/format/container.hpp"
-#include "volreel/psnr/metrics.hpp"
 #include "volreel/loop/auto_transfer.hpp"
 #include "volreel/loop/frame_loop.hpp"
 #include "volreel/loop/loop_settings.hpp"
+#include "volreel/psnr/metrics.hpp"
 #include "volreel/vulkan_render/open_frame_loop.hpp"
 
 namespace volreel::cli {
@@ -57,7 +57,8 @@ std::string find_on_path(const std::string& name) {
   std::size_t start = 0;
   while (start <= dirs.size()) {
     const std::size_t end = dirs.find(':', start);
-    const std::string dir = dirs.substr(start, end == std::string::npos ? std::string::npos : end - start);
+    const std::string dir =
+        dirs.substr(start, end == std::string::npos ? std::string::npos : end - start);
     if (!dir.empty()) {
       const fs::path candidate = fs::path(dir) / name;
       if (::access(candidate.c_str(), X_OK) == 0) return candidate.string();
@@ -88,8 +89,9 @@ class GroundTruth {
       : series_(datasets::open_series(path, reader.to_open_options())) {
     const auto& info = series_->info();
     if (info.dims.x != m.dims[0] || info.dims.y != m.dims[1] || info.dims.z != m.dims[2])
-      throw InputError("--compare " + path + ": the series is " + to_string(info.dims) + ", the container " +
-                       std::to_string(m.dims[0]) + "x" + std::to_string(m.dims[1]) + "x" + std::to_string(m.dims[2]));
+      throw InputError("--compare " + path + ": the series is " + to_string(info.dims) +
+                       ", the container " + std::to_string(m.dims[0]) + "x" +
+                       std::to_string(m.dims[1]) + "x" + std::to_string(m.dims[2]));
     if (info.frames < m.frames.size())
       throw InputError("--compare " + path + ": the series has " + std::to_string(info.frames) +
                        " frames, the container " + std::to_string(m.frames.size()));
@@ -97,14 +99,17 @@ class GroundTruth {
   }
 
   /// The reference image at `playhead`: the finest level of both neighbouring frames, blended.
-  cpu_render::RgbaImage render(double playhead, std::size_t keyframes, const player::OrbitCamera& camera,
-                               const cpu_render::TransferFunction& tf, const cpu_render::RenderOptions& options) {
+  cpu_render::RgbaImage render(double playhead, std::size_t keyframes,
+                               const player::OrbitCamera& camera,
+                               const cpu_render::TransferFunction& tf,
+                               const cpu_render::RenderOptions& options) {
     const double p = std::clamp(playhead, 0.0, static_cast<double>(keyframes - 1));
     const auto t0 = static_cast<std::size_t>(std::floor(p));
     const std::size_t t1 = std::min(t0 + 1, keyframes - 1);
     const auto f = static_cast<float>(p - static_cast<double>(t0));
     const std::uint32_t finest = geometry_.levels - 1;
-    for (auto it = cache_.begin(); it != cache_.end();) it = it->first == t0 || it->first == t1 ? std::next(it) : cache_.erase(it);
+    for (auto it = cache_.begin(); it != cache_.end();)
+      it = it->first == t0 || it->first == t1 ? std::next(it) : cache_.erase(it);
     const auto level = [&](std::size_t t) {
       return cpu_render::DenseLevel{geometry_.dims, frame(t).data, finest};
     };
@@ -126,17 +131,20 @@ void run_render(const RenderCommandOptions& o) {
   // 1. Input, tour, output folder; ffmpeg is checked before any work.
   const format::Container container(o.container);
   const format::Manifest& m = container.manifest();
-  const cpu_render::TourContext tour_context{m.dims, container.frame_count(),
-                                             {static_cast<float>(m.value_min), static_cast<float>(m.value_max)}};
+  const cpu_render::TourContext tour_context{
+      m.dims,
+      container.frame_count(),
+      {static_cast<float>(m.value_min), static_cast<float>(m.value_max)}};
   const cpu_render::Tour tour = o.tour.empty() ? cpu_render::Tour::default_for(tour_context)
                                                : cpu_render::Tour::load(o.tour, tour_context);
   std::string ffmpeg;
   if (!o.video.empty()) {
     ffmpeg = find_on_path("ffmpeg");
     if (ffmpeg.empty())
-      throw InputError("--video " + o.video +
-                       ": needs ffmpeg, which is not installed or not on PATH (Debian: apt-get install ffmpeg); "
-                       "nothing was rendered: install it, or run without --video to write the PNG frames only");
+      throw InputError(
+          "--video " + o.video +
+          ": needs ffmpeg, which is not installed or not on PATH (Debian: apt-get install ffmpeg); "
+          "nothing was rendered: install it, or run without --video to write the PNG frames only");
   }
   const fs::path out = o.out;
   if (fs::exists(out) && !fs::is_directory(out))
@@ -161,26 +169,34 @@ void run_render(const RenderCommandOptions& o) {
 
   // 2. The renderer: Vulkan, or the CPU where there is no device.
   // Vulkan frames with readback (serial: the time split is exact), or the CPU loop.
-  const std::unique_ptr<loop::FrameLoop> renderer =
-      vulkan_render::open_frame_loop(container, options, o.cpu, vulkan_render::NoDevice::use_cpu, "");
-  const std::size_t frames = o.max_frames ? std::min(o.max_frames, tour.frame_count()) : tour.frame_count();
-  std::printf("volreel render\nmachine: %s\ndevice:  %s\ninput:   %s: %ux%ux%u, %zu frames, %s\n", describe_machine().c_str(),
-              renderer->describe().c_str(), o.container.c_str(), m.dims[0], m.dims[1], m.dims[2], container.frame_count(),
+  const std::unique_ptr<loop::FrameLoop> renderer = vulkan_render::open_frame_loop(
+      container, options, o.cpu, vulkan_render::NoDevice::use_cpu, "");
+  const std::size_t frames =
+      o.max_frames ? std::min(o.max_frames, tour.frame_count()) : tour.frame_count();
+  std::printf("volreel render\nmachine: %s\ndevice:  %s\ninput:   %s: %ux%ux%u, %zu frames, %s\n",
+              describe_machine().c_str(), renderer->describe().c_str(), o.container.c_str(),
+              m.dims[0], m.dims[1], m.dims[2], container.frame_count(),
               m.codec == format::Codec::ksvd ? "ksvd" : "zfp");
-  std::printf("transfer function: %s\n", transfer_spec.empty() ? "the tour's" : transfer_spec.c_str());
-  std::printf("tour:    %s, %.1f s at %.0f fps, %zu frames, %dx%d\natlas:   %u slots (%.0f MiB), upload budget %.0f MiB/frame, "
-              "bandwidth %s, latency %s, SSE target %g\n",
-              o.tour.empty() ? "default tour" : o.tour.c_str(), tour.duration(), tour.fps(), frames, options.width,
-              options.height, renderer->slot_count(), o.loop.atlas_mb, o.loop.upload_budget_mb,
-              options.scheduler.loader.bandwidth_bytes_per_s > 0 ? o.loop.bandwidth.c_str() : "unlimited",
-              o.loop.latency.c_str(), o.loop.sse_target);
+  std::printf("transfer function: %s\n",
+              transfer_spec.empty() ? "the tour's" : transfer_spec.c_str());
+  std::printf(
+      "tour:    %s, %.1f s at %.0f fps, %zu frames, %dx%d\natlas:   %u slots (%.0f MiB), upload "
+      "budget %.0f MiB/frame, "
+      "bandwidth %s, latency %s, SSE target %g\n",
+      o.tour.empty() ? "default tour" : o.tour.c_str(), tour.duration(), tour.fps(), frames,
+      options.width, options.height, renderer->slot_count(), o.loop.atlas_mb,
+      o.loop.upload_budget_mb,
+      options.scheduler.loader.bandwidth_bytes_per_s > 0 ? o.loop.bandwidth.c_str() : "unlimited",
+      o.loop.latency.c_str(), o.loop.sse_target);
   std::fflush(stdout);
 
   // 3. Frames: render, write the PNG on a worker thread while the next frame renders.
   std::ofstream csv(out / "metrics.csv");
   if (!csv) throw InputError("cannot write " + (out / "metrics.csv").string());
-  csv << "frame,time_s,playhead,frame_ms,fps,schedule_ms,upload_ms,decode_ms,render_ms,readback_ms,atlas_occupied,"
-         "atlas_capacity,atlas_occupancy,requests_in_flight,requests_sent,uploads,mb_uploaded,mb_loaded,"
+  csv << "frame,time_s,playhead,frame_ms,fps,schedule_ms,upload_ms,decode_ms,render_ms,readback_ms,"
+         "atlas_occupied,"
+         "atlas_capacity,atlas_occupancy,requests_in_flight,requests_sent,uploads,mb_uploaded,mb_"
+         "loaded,"
          "fraction_at_target,holes,svo_nodes,svo_leaves,errors"
       << (truth ? ",psnr_db,ssim" : "") << '\n';
   std::future<void> writing;
@@ -193,7 +209,9 @@ void run_render(const RenderCommandOptions& o) {
     ProgressBar bar("rendering", "frames");
     for (std::size_t i = 0; i < frames; ++i) {
       const double time = tour.frame_time(i);
-      if (o.realtime) std::this_thread::sleep_until(start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(time)));
+      if (o.realtime)
+        std::this_thread::sleep_until(start + std::chrono::duration_cast<Clock::duration>(
+                                                  std::chrono::duration<double>(time)));
       cpu_render::TourFrame tf = tour.at(time);
       if (transfer) tf.transfer = *transfer;
       tf.camera.width = options.width;
@@ -201,13 +219,17 @@ void run_render(const RenderCommandOptions& o) {
       const loop::FrameReport report = renderer->frame(tf.camera, tf.playhead, tf.transfer, true);
       const auto read_start = Clock::now();
       cpu_render::RgbaImage image = renderer->read_back(report.ticket);
-      const double readback_ms = std::chrono::duration<double, std::milli>(Clock::now() - read_start).count();
-      for (const std::string& e : report.new_errors) std::fprintf(stderr, "\nvolreel: warning: %s\n", e.c_str());
+      const double readback_ms =
+          std::chrono::duration<double, std::milli>(Clock::now() - read_start).count();
+      for (const std::string& e : report.new_errors)
+        std::fprintf(stderr, "\nvolreel: warning: %s\n", e.c_str());
       errors += report.new_errors.size();
       std::optional<psnr::ImageComparison> quality;
       if (truth) {
-        const auto reference = truth->render(tf.playhead, container.frame_count(), tf.camera, tf.transfer, options.render);
-        quality = psnr::compare_images(cpu_render::to_image(reference), cpu_render::to_image(image));
+        const auto reference = truth->render(tf.playhead, container.frame_count(), tf.camera,
+                                             tf.transfer, options.render);
+        quality =
+            psnr::compare_images(cpu_render::to_image(reference), cpu_render::to_image(image));
         sum_psnr += quality->psnr;
         sum_ssim += quality->ssim;
         ++compared;
@@ -215,7 +237,9 @@ void run_render(const RenderCommandOptions& o) {
       if (writing.valid()) writing.get();
       char name[32];
       std::snprintf(name, sizeof name, "frame_%05zu.png", i);
-      writing = std::async(std::launch::async, [path = out / name, img = std::move(image)] { cpu_render::write_png(path, img); });
+      writing = std::async(std::launch::async, [path = out / name, img = std::move(image)] {
+        cpu_render::write_png(path, img);
+      });
       const auto& s = report.stats;
       const auto& t = report.timings;
       const double frame_ms = t.frame_ms + readback_ms;
@@ -223,17 +247,21 @@ void run_render(const RenderCommandOptions& o) {
       for (int k = 0; k < 5; ++k) sum_ms[k] += values[k];
       char row[512];
       std::snprintf(row, sizeof row,
-                    "%zu,%.4f,%.4f,%.3f,%.2f,%.3f,%.3f,%.3f,%.3f,%.3f,%u,%u,%.4f,%zu,%zu,%zu,%.4f,%.4f,%.4f,%u,%u,%u,%zu", i,
-                    time, tf.playhead, frame_ms, 1000.0 / frame_ms, t.schedule_ms, t.upload_ms, t.decode_ms, t.render_ms,
-                    readback_ms, s.atlas_occupied, s.atlas_capacity,
-                    s.atlas_capacity ? double(s.atlas_occupied) / double(s.atlas_capacity) : 0.0, s.requests_in_flight,
-                    s.requests_sent, s.uploads, double(s.bytes_uploaded) * 1e-6, double(s.bytes_loaded) * 1e-6,
-                    s.fraction_at_target, s.holes, s.svo_nodes, s.svo_leaves, report.new_errors.size());
+                    "%zu,%.4f,%.4f,%.3f,%.2f,%.3f,%.3f,%.3f,%.3f,%.3f,%u,%u,%.4f,%zu,%zu,%zu,%.4f,%"
+                    ".4f,%.4f,%u,%u,%u,%zu",
+                    i, time, tf.playhead, frame_ms, 1000.0 / frame_ms, t.schedule_ms, t.upload_ms,
+                    t.decode_ms, t.render_ms, readback_ms, s.atlas_occupied, s.atlas_capacity,
+                    s.atlas_capacity ? double(s.atlas_occupied) / double(s.atlas_capacity) : 0.0,
+                    s.requests_in_flight, s.requests_sent, s.uploads,
+                    double(s.bytes_uploaded) * 1e-6, double(s.bytes_loaded) * 1e-6,
+                    s.fraction_at_target, s.holes, s.svo_nodes, s.svo_leaves,
+                    report.new_errors.size());
       csv << row;
       if (quality) csv << ',' << quality->psnr << ',' << quality->ssim;
       csv << '\n';
       char status[96];
-      std::snprintf(status, sizeof status, "%.1f fps, %.0f%% at target LOD", 1000.0 / frame_ms, 100 * s.fraction_at_target);
+      std::snprintf(status, sizeof status, "%.1f fps, %.0f%% at target LOD", 1000.0 / frame_ms,
+                    100 * s.fraction_at_target);
       bar.update({static_cast<double>(i + 1), static_cast<double>(frames), status});
       last = report;
     }
@@ -245,33 +273,45 @@ void run_render(const RenderCommandOptions& o) {
 
   // 4. Summary, video.
   const double n = static_cast<double>(std::max<std::size_t>(frames, 1));
-  std::printf("\n%zu frames in %s: mean frame %.1f ms (%.1f fps): schedule %.1f, upload %.1f, decode %.1f, render %.1f ms\n",
-              frames, format_duration(std::chrono::duration<double>(Clock::now() - start).count()).c_str(), sum_ms[0] / n,
-              1000.0 * n / sum_ms[0], sum_ms[1] / n, sum_ms[2] / n, sum_ms[3] / n, sum_ms[4] / n);
-  std::printf("last frame: %.0f%% of the visible nodes at their target LOD, atlas %u of %u slots, %.1f MB loaded\n",
-              100 * last.stats.fraction_at_target, last.stats.atlas_occupied, last.stats.atlas_capacity,
-              double(last.stats.bytes_loaded) * 1e-6);
+  std::printf(
+      "\n%zu frames in %s: mean frame %.1f ms (%.1f fps): schedule %.1f, upload %.1f, decode %.1f, "
+      "render %.1f ms\n",
+      frames, format_duration(std::chrono::duration<double>(Clock::now() - start).count()).c_str(),
+      sum_ms[0] / n, 1000.0 * n / sum_ms[0], sum_ms[1] / n, sum_ms[2] / n, sum_ms[3] / n,
+      sum_ms[4] / n);
+  std::printf(
+      "last frame: %.0f%% of the visible nodes at their target LOD, atlas %u of %u slots, %.1f MB "
+      "loaded\n",
+      100 * last.stats.fraction_at_target, last.stats.atlas_occupied, last.stats.atlas_capacity,
+      double(last.stats.bytes_loaded) * 1e-6);
   if (errors) std::printf("%zu errors (see the warnings above)\n", errors);
   if (compared)
-    std::printf("image quality against the original series (CPU render_reference, time-interpolated): mean PSNR %.2f dB "
-                "(10*log10(255^2/MSE), 8-bit RGB), mean SSIM %.4f over %zu frames\n",
-                sum_psnr / double(compared), sum_ssim / double(compared), compared);
-  std::printf("wrote %s/frame_00000.png .. frame_%05zu.png and %s\n", out.c_str(), frames ? frames - 1 : 0,
-              (out / "metrics.csv").c_str());
+    std::printf(
+        "image quality against the original series (CPU render_reference, time-interpolated): mean "
+        "PSNR %.2f dB "
+        "(10*log10(255^2/MSE), 8-bit RGB), mean SSIM %.4f over %zu frames\n",
+        sum_psnr / double(compared), sum_ssim / double(compared), compared);
+  std::printf("wrote %s/frame_00000.png .. frame_%05zu.png and %s\n", out.c_str(),
+              frames ? frames - 1 : 0, (out / "metrics.csv").c_str());
   if (!ffmpeg.empty()) {
     // Exactly this run's frames (-frames:v: the folder may hold more frame_NNNNN.png from an
     // earlier, longer run); '%' in the folder name escaped for ffmpeg's image-sequence pattern;
     // -nostdin: ffmpeg must not read the terminal (it stops a `volreel render ... &` job).
     std::string pattern;
-    for (const char c : (out / "frame_").string()) pattern += c == '%' ? std::string("%%") : std::string(1, c);
+    for (const char c : (out / "frame_").string())
+      pattern += c == '%' ? std::string("%%") : std::string(1, c);
     pattern += "%05d.png";
-    if (const fs::path parent = fs::path(o.video).parent_path(); !parent.empty()) fs::create_directories(parent);
+    if (const fs::path parent = fs::path(o.video).parent_path(); !parent.empty())
+      fs::create_directories(parent);
     const int status =
-        run_program(ffmpeg, {"-nostdin", "-y", "-loglevel", "error", "-framerate", std::to_string(tour.fps()),
-                             "-start_number", "0", "-i", pattern, "-frames:v", std::to_string(frames), "-c:v",
-                             "libx264", "-pix_fmt", "yuv420p", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", o.video});
+        run_program(ffmpeg, {"-nostdin", "-y", "-loglevel", "error", "-framerate",
+                             std::to_string(tour.fps()), "-start_number", "0", "-i", pattern,
+                             "-frames:v", std::to_string(frames), "-c:v", "libx264", "-pix_fmt",
+                             "yuv420p", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", o.video});
     if (status < 0) throw InputError("could not run " + ffmpeg + " to encode " + o.video);
-    if (status != 0) throw InputError("ffmpeg failed (exit status " + std::to_string(status) + ") encoding " + o.video);
+    if (status != 0)
+      throw InputError("ffmpeg failed (exit status " + std::to_string(status) + ") encoding " +
+                       o.video);
     std::printf("wrote %s (%zu frames, H.264)\n", o.video.c_str(), frames);
   }
 }
@@ -280,29 +320,36 @@ void run_render(const RenderCommandOptions& o) {
 
 void add_render_command(CLI::App& app) {
   auto o = std::make_shared<RenderCommandOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "render",
-      "Render a tour of a container headlessly (no window or display): PNG frames and per-frame metrics, on the "
-      "Vulkan device or, where there is none, on the CPU");
+  CLI::App* cmd = app.add_subcommand("render",
+                                     "Render a tour of a container headlessly (no window or "
+                                     "display): PNG frames and per-frame metrics, on the "
+                                     "Vulkan device or, where there is none, on the CPU");
   cmd->add_option("CONTAINER", o->container, "The container directory NAME.vreel")->required();
-  cmd->add_option("--tour", o->tour,
-                  "Tour JSON (camera, playhead and transfer-function keys; see player/cpu_render tour.hpp); "
-                  "default: the built-in tour (play, reverse, seek, slow motion, one orbit)");
+  cmd->add_option(
+      "--tour", o->tour,
+      "Tour JSON (camera, playhead and transfer-function keys; see player/cpu_render tour.hpp); "
+      "default: the built-in tour (play, reverse, seek, slow motion, one orbit)");
   cmd->add_option("--out", o->out, "Output folder for frame_NNNNN.png and metrics.csv")->required();
   cmd->add_option("--size", o->loop.size, "Image size WxH (default: the tour's, 512x512)");
-  cmd->add_option("--transfer", o->transfer,
-                  "Transfer function for every frame: auto (from the data's quantiles), a preset (grayscale, "
-                  "cool-warm, fire, turbulence) or a JSON file; default: the tour's, or auto without --tour");
-  cmd->add_option("--video", o->video, "Also encode the frames into this video with ffmpeg (H.264)");
-  cmd->add_flag("--cpu", o->cpu, "Render on the CPU (CPU atlas and reference ray caster) instead of Vulkan");
+  cmd->add_option(
+      "--transfer", o->transfer,
+      "Transfer function for every frame: auto (from the data's quantiles), a preset (grayscale, "
+      "cool-warm, fire, turbulence) or a JSON file; default: the tour's, or auto without --tour");
+  cmd->add_option("--video", o->video,
+                  "Also encode the frames into this video with ffmpeg (H.264)");
+  cmd->add_flag("--cpu", o->cpu,
+                "Render on the CPU (CPU atlas and reference ray caster) instead of Vulkan");
   add_loop_options(*cmd, o->loop);
   cmd->add_flag("--realtime", o->realtime,
-                "Start frame i no earlier than i/fps seconds in, so streaming (which runs in wall-clock time) keeps "
+                "Start frame i no earlier than i/fps seconds in, so streaming (which runs in "
+                "wall-clock time) keeps "
                 "the tour's pace; by default frames render as fast as they can");
   cmd->add_option("--max-frames", o->max_frames, "Render only the first N frames of the tour");
-  cmd->add_option("--compare", o->compare,
-                  "Original series (raw series directory, HDF5 or raw file): measure each frame's image PSNR/SSIM "
-                  "against a CPU render of the original data at that playhead, interpolated in time");
+  cmd->add_option(
+      "--compare", o->compare,
+      "Original series (raw series directory, HDF5 or raw file): measure each frame's image "
+      "PSNR/SSIM "
+      "against a CPU render of the original data at that playhead, interpolated in time");
   o->reader.add_to(*cmd);
   cmd->callback([o] { run_render(*o); });
 }

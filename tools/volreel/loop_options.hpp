@@ -11,19 +11,26 @@ namespace volreel::cli {
 /// --atlas-mb, --bandwidth, --latency, --sse-target, --upload-budget, --step,
 /// --max-step-doublings, --no-culling.
 inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
-  cmd.add_option("--atlas-mb", loop.atlas_mb, "Brick atlas memory, MiB (93 312 bytes per slot)")->capture_default_str();
-  cmd.add_option("--bandwidth", loop.bandwidth, "Simulated read bandwidth, e.g. 20MB/s (0: unlimited)")
+  cmd.add_option("--atlas-mb", loop.atlas_mb, "Brick atlas memory, MiB (93 312 bytes per slot)")
       ->capture_default_str();
-  cmd.add_option("--latency", loop.latency, "Simulated latency per request, e.g. 50ms")->capture_default_str();
-  cmd.add_option("--sse-target", loop.sse_target, "Screen-space error target, pixels per voxel")->capture_default_str();
-  cmd.add_option("--upload-budget", loop.upload_budget_mb, "Compressed bytes uploaded per frame at most, MiB")
+  cmd.add_option("--bandwidth", loop.bandwidth,
+                 "Simulated read bandwidth, e.g. 20MB/s (0: unlimited)")
+      ->capture_default_str();
+  cmd.add_option("--latency", loop.latency, "Simulated latency per request, e.g. 50ms")
+      ->capture_default_str();
+  cmd.add_option("--sse-target", loop.sse_target, "Screen-space error target, pixels per voxel")
+      ->capture_default_str();
+  cmd.add_option("--upload-budget", loop.upload_budget_mb,
+                 "Compressed bytes uploaded per frame at most, MiB")
       ->capture_default_str();
   cmd.add_option("--step", loop.step, "Ray step, finest voxels")->capture_default_str();
-  cmd.add_option("--max-step-doublings", loop.max_step_doublings,
-                 "A leaf e levels coarser than the finest is sampled every step*2^min(e, N) voxels, with\n"
-                 "opacity corrected for the longer step (0: the fixed step everywhere)")
+  cmd.add_option(
+         "--max-step-doublings", loop.max_step_doublings,
+         "A leaf e levels coarser than the finest is sampled every step*2^min(e, N) voxels, with\n"
+         "opacity corrected for the longer step (0: the fixed step everywhere)")
       ->capture_default_str();
-  cmd.add_flag("--no-culling", loop.no_culling, "Do not skip nodes the transfer function makes invisible");
+  cmd.add_flag("--no-culling", loop.no_culling,
+               "Do not skip nodes the transfer function makes invisible");
 }
 
 }  // namespace volreel::cli

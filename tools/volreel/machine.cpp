@@ -19,8 +19,9 @@ std::string describe_machine() {
     }
   std::string build = VOLREEL_BUILD_TYPE;
   if (!std::string(VOLREEL_SANITIZERS).empty()) build += " + sanitizers " VOLREEL_SANITIZERS;
-  return model + ", " + std::to_string(std::thread::hardware_concurrency()) + " hardware threads, " +
-         std::to_string(omp_get_max_threads()) + " OpenMP threads; volreel " VOLREEL_VERSION ", " + build + " build";
+  return model + ", " + std::to_string(std::thread::hardware_concurrency()) +
+         " hardware threads, " + std::to_string(omp_get_max_threads()) +
+         " OpenMP threads; volreel " VOLREEL_VERSION ", " + build + " build";
 }
 
 }  // namespace volreel::cli

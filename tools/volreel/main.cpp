@@ -8,10 +8,10 @@
 #include "commands.hpp"
 
 int main(int argc, char** argv) {
-  CLI::App app{
-      "volreel " VOLREEL_VERSION
-      ": encode time-varying simulation volumes into a compact, GPU-decodable form and explore them\n"
-      "like a video. Run `volreel COMMAND --help` for the options of each command."};
+  CLI::App app{"volreel " VOLREEL_VERSION
+               ": encode time-varying simulation volumes into a compact, GPU-decodable form and "
+               "explore them\n"
+               "like a video. Run `volreel COMMAND --help` for the options of each command."};
   app.require_subcommand(1);
   app.set_version_flag("--version", "volreel " VOLREEL_VERSION);
   volreel::cli::add_gen_command(app);

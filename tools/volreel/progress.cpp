@@ -23,15 +23,20 @@ std::string format_duration(double seconds) {
 }
 
 ProgressBar::ProgressBar(std::string label, std::string unit)
-    : label_(std::move(label)), unit_(std::move(unit)), terminal_(isatty(STDERR_FILENO) != 0),
-      start_(std::chrono::steady_clock::now()), last_draw_(start_) {}
+    : label_(std::move(label)),
+      unit_(std::move(unit)),
+      terminal_(isatty(STDERR_FILENO) != 0),
+      start_(std::chrono::steady_clock::now()),
+      last_draw_(start_) {}
 
 ProgressBar::~ProgressBar() {
   if (!finished_ && terminal_ && last_.total > 0) std::fputc('\n', stderr);
 }
 
 Progress ProgressBar::progress() {
-  return Progress{[](const ProgressUpdate& u, void* self) { static_cast<ProgressBar*>(self)->update(u); }, this};
+  return Progress{
+      [](const ProgressUpdate& u, void* self) { static_cast<ProgressBar*>(self)->update(u); },
+      this};
 }
 
 void ProgressBar::update(const ProgressUpdate& update) {
@@ -57,20 +62,24 @@ void ProgressBar::finish() {
 }
 
 void ProgressBar::draw(bool final) {
-  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  const double elapsed =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
   const double fraction = last_.total > 0 ? std::clamp(last_.done / last_.total, 0.0, 1.0) : 0.0;
   const double eta = fraction > 0 ? elapsed * (1 - fraction) / fraction : std::nan("");
   constexpr int width = 28;
   std::string bar(width, ' ');
-  for (int i = 0; i < static_cast<int>(fraction * width + 0.5); ++i) bar[static_cast<std::size_t>(i)] = '#';
+  for (int i = 0; i < static_cast<int>(fraction * width + 0.5); ++i)
+    bar[static_cast<std::size_t>(i)] = '#';
   char counts[64];
   if (last_.total == std::floor(last_.total))
     std::snprintf(counts, sizeof counts, "%.0f/%.0f %s", last_.done, last_.total, unit_.c_str());
   else
     std::snprintf(counts, sizeof counts, "%.2f/%.2f %s", last_.done, last_.total, unit_.c_str());
-  const std::string timing = final ? "in " + format_duration(elapsed) : "ETA " + format_duration(eta);
-  std::fprintf(stderr, "%s%s [%s] %3.0f%% %s  %s  %s%s", terminal_ ? "\r\033[K" : "", label_.c_str(), bar.c_str(),
-               fraction * 100, counts, last_.status.c_str(), timing.c_str(), terminal_ && !final ? "" : "\n");
+  const std::string timing =
+      final ? "in " + format_duration(elapsed) : "ETA " + format_duration(eta);
+  std::fprintf(stderr, "%s%s [%s] %3.0f%% %s  %s  %s%s", terminal_ ? "\r\033[K" : "",
+               label_.c_str(), bar.c_str(), fraction * 100, counts, last_.status.c_str(),
+               timing.c_str(), terminal_ && !final ? "" : "\n");
   std::fflush(stderr);
 }
 

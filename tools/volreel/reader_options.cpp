@@ -10,7 +10,8 @@ namespace volreel::cli {
 std::optional<double> positive_number(const std::string& text) {
   char* end = nullptr;
   const double v = std::strtod(text.c_str(), &end);
-  if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v) || !(v > 0)) return std::nullopt;
+  if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v) || !(v > 0))
+    return std::nullopt;
   return v;
 }
 
@@ -21,7 +22,9 @@ void ReaderOptions::add_to(CLI::App& command) {
   command.add_option("--dataset", dataset,
                      "HDF5: a 4D dataset [t][z][y][x], or one 3D dataset per step by pattern: "
                      "'Pressure_####' (# = a digit) or 'Pressure_*'");
-  command.add_option("--replace-nan", replace_nan, "Substitute NaN/Inf values with this value instead of refusing the input")
+  command
+      .add_option("--replace-nan", replace_nan,
+                  "Substitute NaN/Inf values with this value instead of refusing the input")
       ->each([this](const std::string&) { replace_nan_set = true; });
 }
 

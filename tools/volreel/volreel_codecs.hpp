@@ -16,7 +16,7 @@ struct VolreelSweep {
   /// Variable rate with the Lagrangian rule, once per factor (family "volreel variable-rate")
   std::vector<double> lagrangian_factors = {encoder::CodingSettings{}.lagrangian_factor};
   bool tolerance_rule = false;  ///< also with the ε rule (family "volreel variable-rate eps-rule")
-  std::vector<int> fixed_sparsities;        ///< fixed rate: S
+  std::vector<int> fixed_sparsities;  ///< fixed rate: S
   std::vector<double>
       zfp_relative_accuracies;  ///< zfp per brick in the container: accuracy / range
   /// Every ksvd row: the pursuit, and (variable rate, Lagrangian rule) the level factor.

@@ -35,8 +35,8 @@
 #include <vector>
 
 #include "volreel/image/image.hpp"
-#include "volreel/vulkan/error.hpp"
 #include "volreel/loop/auto_transfer.hpp"
+#include "volreel/vulkan/error.hpp"
 
 namespace volreel::app {
 namespace detail {

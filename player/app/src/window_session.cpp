@@ -20,7 +20,7 @@ void check_imgui_vk(VkResult result) {
 }  // namespace
 
 ImGuiSession::ImGuiSession(const vulkan::Context& context, GLFWwindow* window,
-                         const Swapchain& swapchain, std::uint32_t frames_in_flight) {
+                           const Swapchain& swapchain, std::uint32_t frames_in_flight) {
   const std::array<VkDescriptorPoolSize, 1> sizes{
       VkDescriptorPoolSize{VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 16}};
   pool_ = vulkan::DescriptorPool(context, sizes, 16);

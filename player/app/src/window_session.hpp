@@ -62,8 +62,8 @@ class ImGuiSession {
  public:
   /// Sets up ImGui for `window`, drawing in the swapchain's render pass with up to
   /// `frames_in_flight` frames in flight.
-  ImGuiSession(const vulkan::Context& context, GLFWwindow* window,
-               const Swapchain& swapchain, std::uint32_t frames_in_flight);
+  ImGuiSession(const vulkan::Context& context, GLFWwindow* window, const Swapchain& swapchain,
+               std::uint32_t frames_in_flight);
   ~ImGuiSession();
   ImGuiSession(const ImGuiSession&) = delete;
   ImGuiSession& operator=(const ImGuiSession&) = delete;

@@ -49,14 +49,22 @@ double parse_bandwidth(const std::string& text, const std::string& option) {
   if (!split_number(text, v, unit) || v < 0) bad(option, expected, text);
   if (unit.size() >= 2 && unit.substr(unit.size() - 2) == "/s") unit.resize(unit.size() - 2);
   double scale = 0;
-  if (unit.empty() || unit == "mb") scale = 1e6;
-  else if (unit == "b") scale = 1;
-  else if (unit == "kb") scale = 1e3;
-  else if (unit == "gb") scale = 1e9;
-  else if (unit == "kib") scale = 1024.0;
-  else if (unit == "mib") scale = 1048576.0;
-  else if (unit == "gib") scale = 1073741824.0;
-  else bad(option, expected, text);
+  if (unit.empty() || unit == "mb")
+    scale = 1e6;
+  else if (unit == "b")
+    scale = 1;
+  else if (unit == "kb")
+    scale = 1e3;
+  else if (unit == "gb")
+    scale = 1e9;
+  else if (unit == "kib")
+    scale = 1024.0;
+  else if (unit == "mib")
+    scale = 1048576.0;
+  else if (unit == "gib")
+    scale = 1073741824.0;
+  else
+    bad(option, expected, text);
   return v * scale;
 }
 

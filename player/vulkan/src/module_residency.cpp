@@ -39,7 +39,9 @@ void keep_modules_loaded_since(const std::vector<std::string>& before) {
 
 #else
 
-std::vector<std::string> loaded_modules() { return {}; }
+std::vector<std::string> loaded_modules() {
+  return {};
+}
 void keep_modules_loaded_since(const std::vector<std::string>&) {}
 
 #endif

@@ -9,9 +9,9 @@
 #include <string>
 
 #include "volreel/player/svo_layout.h"
+#include "volreel_block_ranges_spv.h"
 #include "volreel_raycast_rgba16f_spv.h"
 #include "volreel_raycast_rgba8_spv.h"
-#include "volreel_block_ranges_spv.h"
 
 namespace volreel::vulkan_render {
 namespace {
@@ -43,7 +43,9 @@ static_assert(sizeof(Params) == 160);
 VkFormat vk_format(OutputFormat f) {
   return f == OutputFormat::rgba8_unorm ? VK_FORMAT_R8G8B8A8_UNORM : VK_FORMAT_R16G16B16A16_SFLOAT;
 }
-std::uint32_t texel_bytes(OutputFormat f) { return f == OutputFormat::rgba8_unorm ? 4 : 8; }
+std::uint32_t texel_bytes(OutputFormat f) {
+  return f == OutputFormat::rgba8_unorm ? 4 : 8;
+}
 
 /// A host-visible buffer (device-local where the device offers such memory) of at least `bytes`.
 void ensure(const vulkan::Context& context, vulkan::Buffer& buffer, VkDeviceSize bytes,
@@ -60,7 +62,9 @@ void upload(const vulkan::Buffer& buffer, const void* data, std::size_t bytes) {
   buffer.flush(0, VK_WHOLE_SIZE);
 }
 
-std::string size_text(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
+std::string size_text(int w, int h) {
+  return std::to_string(w) + "x" + std::to_string(h);
+}
 
 }  // namespace
 
@@ -135,9 +139,9 @@ Raycaster::Raycaster(const vulkan::Context& context, const vulkan::Atlas& atlas,
   descriptor_pool_ = vulkan::DescriptorPool(context, sizes, 2 * ring);
   // Block ranges start as "anything" until a slot's ranges are computed.
   const VkDeviceSize range_bytes = VkDeviceSize{atlas.slot_count()} * blocks_per_slot * 8;
-  block_ranges_ = vulkan::Buffer(context, range_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT,
-                                 VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT,
-                                 VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+  block_ranges_ =
+      vulkan::Buffer(context, range_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT,
+                     VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
   {
     auto* ranges = reinterpret_cast<float*>(block_ranges_.mapped());
     for (VkDeviceSize i = 0; i < range_bytes / 8; ++i) {
@@ -190,7 +194,9 @@ Raycaster::~Raycaster() {
   if (timestamps_ != VK_NULL_HANDLE) vkDestroyQueryPool(context_.device(), timestamps_, nullptr);
 }
 
-VkFormat Raycaster::output_format() const { return vk_format(options_.output); }
+VkFormat Raycaster::output_format() const {
+  return vk_format(options_.output);
+}
 
 void Raycaster::create_output() {
   vulkan::ImageDesc desc;
@@ -198,8 +204,8 @@ void Raycaster::create_output() {
   desc.format = vk_format(options_.output);
   desc.extent = {static_cast<std::uint32_t>(options_.width),
                  static_cast<std::uint32_t>(options_.height), 1};
-  desc.usage = VK_IMAGE_USAGE_STORAGE_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT |
-               VK_IMAGE_USAGE_SAMPLED_BIT;
+  desc.usage =
+      VK_IMAGE_USAGE_STORAGE_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT | VK_IMAGE_USAGE_SAMPLED_BIT;
   output_ = vulkan::Image(context_, desc);
   const VkImage image = output_.handle();
   context_.submit_and_wait([&](VkCommandBuffer cb) {
@@ -230,7 +236,8 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
                                 size_text(camera.width, camera.height) + ", the output " +
                                 size_text(options_.width, options_.height) + " (resize first)");
   const cpu_render::RenderOptions& o = input.options;
-  if (!(o.step > 0 && std::isfinite(o.step)) || !(o.reference_step > 0 && std::isfinite(o.reference_step)))
+  if (!(o.step > 0 && std::isfinite(o.step)) ||
+      !(o.reference_step > 0 && std::isfinite(o.reference_step)))
     throw std::invalid_argument("Raycaster: expected step and reference step > 0, found " +
                                 std::to_string(o.step) + " and " +
                                 std::to_string(o.reference_step));
@@ -381,13 +388,12 @@ void Raycaster::record_commands(VkCommandBuffer cb, Entry& entry, bool readback)
   }
   // 3. One invocation per pixel.
   vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.handle());
-  vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.layout(), 0, 1,
-                          &entry.set, 0, nullptr);
+  vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.layout(), 0, 1, &entry.set,
+                          0, nullptr);
   vkCmdDispatch(cb, (static_cast<std::uint32_t>(entry.width) + local_size - 1) / local_size,
                 (static_cast<std::uint32_t>(entry.height) + local_size - 1) / local_size, 1);
   if (timed)
-    vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, timestamps_,
-                        2 * entry.index + 1);
+    vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, timestamps_, 2 * entry.index + 1);
   entry.timed = timed;
   // 4. The output's writes visible to copies and blits.
   vulkan::memory_barrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
@@ -408,8 +414,8 @@ void Raycaster::record_commands(VkCommandBuffer cb, Entry& entry, bool readback)
     vulkan::image_barrier(cb, image, VK_IMAGE_LAYOUT_GENERAL, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
                           VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
                           VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
-    vkCmdCopyImageToBuffer(cb, image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
-                           entry.readback.handle(), 1, &region);
+    vkCmdCopyImageToBuffer(cb, image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, entry.readback.handle(),
+                           1, &region);
     vulkan::image_barrier(cb, image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, VK_IMAGE_LAYOUT_GENERAL,
                           VK_PIPELINE_STAGE_TRANSFER_BIT, 0,
                           VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
@@ -483,8 +489,8 @@ cpu_render::RgbaImage Raycaster::read_back(Ticket ticket) const {
   cpu_render::RgbaImage image;
   image.width = entry.width;
   image.height = entry.height;
-  const std::size_t values = 4 * static_cast<std::size_t>(entry.width) *
-                             static_cast<std::size_t>(entry.height);
+  const std::size_t values =
+      4 * static_cast<std::size_t>(entry.width) * static_cast<std::size_t>(entry.height);
   image.rgba.resize(values);
   if (entry.format == OutputFormat::rgba8_unorm) {
     const auto* bytes = reinterpret_cast<const std::uint8_t*>(entry.readback.mapped());

@@ -32,6 +32,7 @@ struct AnalyticParams {
 void analytic_frame(const AnalyticParams& params, std::size_t t, std::span<float> out);
 
 /// Write every frame through writer and finish it; timestamps are t / frames.
-void generate_analytic(const AnalyticParams& params, RawSeriesWriter& writer, const Progress& progress = {});
+void generate_analytic(const AnalyticParams& params, RawSeriesWriter& writer,
+                       const Progress& progress = {});
 
 }  // namespace volreel::datasets

@@ -34,20 +34,20 @@ struct SeriesInfo {
   Dims dims;
   std::size_t frames = 0;
   std::array<double, 3> spacing{1.0, 1.0, 1.0};
-  std::vector<double> timestamps;   ///< one per frame
-  std::string variable;             ///< e.g. "pressure"
-  std::string source;               ///< human-readable description of where it came from
-  nlohmann::json generator;         ///< how it was made (raw series only; may be null)
+  std::vector<double> timestamps;  ///< one per frame
+  std::string variable;            ///< e.g. "pressure"
+  std::string source;              ///< human-readable description of where it came from
+  nlohmann::json generator;        ///< how it was made (raw series only; may be null)
 };
 
 /// How to open a series whose file does not describe itself.
 struct OpenOptions {
-  std::optional<Dims> dims;                ///< raw file: required
-  std::optional<Dtype> dtype;              ///< raw file: default f32
-  std::optional<std::size_t> frames;       ///< raw file: frames stored back to back (default 1)
-  std::string dataset;                     ///< HDF5: a 4D dataset name, or a pattern with one
-                                           ///< run of '#' (e.g. "Pressure_####") or '*'
-  std::optional<float> replace_nan;        ///< substitute NaN/Inf with this value instead of failing
+  std::optional<Dims> dims;           ///< raw file: required
+  std::optional<Dtype> dtype;         ///< raw file: default f32
+  std::optional<std::size_t> frames;  ///< raw file: frames stored back to back (default 1)
+  std::string dataset;                ///< HDF5: a 4D dataset name, or a pattern with one
+                                      ///< run of '#' (e.g. "Pressure_####") or '*'
+  std::optional<float> replace_nan;   ///< substitute NaN/Inf with this value instead of failing
 };
 
 /// Reads frames of a series. Implementations are safe to call from several threads at once.

@@ -26,14 +26,14 @@ TurbulenceVariable parse_turbulence_variable(const std::string& name);
 std::string to_string(TurbulenceVariable variable);
 
 struct TurbulenceParams {
-  int size = 128;                  ///< N: grid points per side, even, 16..1024
-  double forcing_power = 0.1;      ///< P: injected power per unit mass (constant)
-  double forcing_kf = 2.5;         ///< modes with 0 < |k| ≤ k_f are forced
-  double kmax_eta = 1.0;           ///< target resolution k_max·η; sets ν = (P·(kmax_eta/k_max)⁴)^(1/3)
-  double viscosity = 0.0;          ///< if > 0, overrides the value derived from kmax_eta
-  double cfl = 0.5;                ///< Courant number: dt ≤ cfl·dx / max|u_i|
-  double initial_energy = 0.5;     ///< kinetic energy of the random initial field (½⟨u·u⟩)
-  std::uint64_t seed = 1;          ///< seed of the random-phase initial field
+  int size = 128;              ///< N: grid points per side, even, 16..1024
+  double forcing_power = 0.1;  ///< P: injected power per unit mass (constant)
+  double forcing_kf = 2.5;     ///< modes with 0 < |k| ≤ k_f are forced
+  double kmax_eta = 1.0;  ///< target resolution k_max·η; sets ν = (P·(kmax_eta/k_max)⁴)^(1/3)
+  double viscosity = 0.0;       ///< if > 0, overrides the value derived from kmax_eta
+  double cfl = 0.5;             ///< Courant number: dt ≤ cfl·dx / max|u_i|
+  double initial_energy = 0.5;  ///< kinetic energy of the random initial field (½⟨u·u⟩)
+  std::uint64_t seed = 1;       ///< seed of the random-phase initial field
 };
 
 /// One running simulation. Not copyable (owns FFTW plans and large arrays). Not safe to use from
@@ -53,7 +53,8 @@ class TurbulenceSimulation {
   /// Turn forcing off (for decay tests) or on again (default on).
   void set_forcing(bool enabled);
 
-  /// Advance by one step of at most max_dt (and at most the CFL/viscous limit). Returns the dt taken.
+  /// Advance by one step of at most max_dt (and at most the CFL/viscous limit). Returns the dt
+  /// taken.
   double step(double max_dt);
   /// Advance exactly to simulated time t (last step shortened to land on it).
   void advance_to(double t);
@@ -61,12 +62,12 @@ class TurbulenceSimulation {
   double time() const;
   double viscosity() const;
   int size() const;
-  double kmax() const;                 ///< N/3
-  double kinetic_energy() const;       ///< ½⟨u·u⟩ (volume average)
-  double dissipation() const;          ///< ε = 2ν Σ_k k² E(k) = ν⟨|ω|²⟩
-  double injected_power() const;       ///< Σ Re(f̂·û*) at the current state (= P when forcing on)
-  double kolmogorov_eta() const;       ///< (ν³/ε)^(1/4)
-  double max_velocity() const;         ///< max over the grid of max(|u|,|v|,|w|) (physical space)
+  double kmax() const;            ///< N/3
+  double kinetic_energy() const;  ///< ½⟨u·u⟩ (volume average)
+  double dissipation() const;     ///< ε = 2ν Σ_k k² E(k) = ν⟨|ω|²⟩
+  double injected_power() const;  ///< Σ Re(f̂·û*) at the current state (= P when forcing on)
+  double kolmogorov_eta() const;  ///< (ν³/ε)^(1/4)
+  double max_velocity() const;    ///< max over the grid of max(|u|,|v|,|w|) (physical space)
   /// max |∇·u| over the grid divided by max |∂u_i/∂x_j|: round-off level for a solenoidal field.
   double relative_divergence() const;
   /// Large-eddy turnover time L/u' with L = (π/(2u'²))Σ E(k)/k, u' = sqrt(2E/3).
@@ -82,10 +83,10 @@ class TurbulenceSimulation {
 
 struct TurbulenceRun {
   TurbulenceParams params;
-  int frames = 64;                 ///< time steps to record
-  double frame_interval = 0.05;    ///< simulated time between records, in eddy-turnover times
-  double spinup = 7.0;             ///< simulated time before the first record, in eddy-turnover times
-                                   ///< (the start-up transient of ε settles after about 7)
+  int frames = 64;               ///< time steps to record
+  double frame_interval = 0.05;  ///< simulated time between records, in eddy-turnover times
+  double spinup = 7.0;           ///< simulated time before the first record, in eddy-turnover times
+                                 ///< (the start-up transient of ε settles after about 7)
   TurbulenceVariable variable = TurbulenceVariable::pressure;
 };
 

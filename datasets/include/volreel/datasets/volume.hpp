@@ -40,7 +40,9 @@ struct Volume {
   Volume() = default;
   explicit Volume(Dims d) : dims(d), data(d.voxels(), 0.0f) {}
   float& at(std::int64_t i, std::int64_t j, std::int64_t k) { return data[dims.index(i, j, k)]; }
-  float at(std::int64_t i, std::int64_t j, std::int64_t k) const { return data[dims.index(i, j, k)]; }
+  float at(std::int64_t i, std::int64_t j, std::int64_t k) const {
+    return data[dims.index(i, j, k)];
+  }
 };
 
 /// Progress of long work: done out of total units, plus a short status text (may be empty).

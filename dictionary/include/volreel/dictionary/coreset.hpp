@@ -33,10 +33,10 @@
 namespace volreel::dictionary {
 
 struct CoresetOptions {
-  int block_size = 6;                    ///< M
+  int block_size = 6;                         ///< M
   std::uint64_t coreset_voxels = 16'000'000;  ///< C: voxels in the largest level (C/M³ block slots)
-  int levels = 6;                        ///< L: halvings below C, giving L + 1 levels
-  double frame_factor = 16;              ///< choose frames until they hold ≥ frame_factor·C voxels
+  int levels = 6;                             ///< L: halvings below C, giving L + 1 levels
+  double frame_factor = 16;  ///< choose frames until they hold ≥ frame_factor·C voxels
   std::uint64_t seed = 1;
   /// Frames to choose from (empty: all frames of the series). The bench uses it to hold frames out.
   std::vector<std::size_t> candidate_frames;
@@ -44,33 +44,35 @@ struct CoresetOptions {
 
 /// One level: distinct zero-mean blocks with their weights.
 struct Coreset {
-  Eigen::MatrixXf blocks;          ///< m × n, zero-mean columns
-  std::vector<float> weights;      ///< n, positive
-  std::size_t draws = 0;           ///< slots this level took (≥ n; duplicates merged)
+  Eigen::MatrixXf blocks;      ///< m × n, zero-mean columns
+  std::vector<float> weights;  ///< n, positive
+  std::size_t draws = 0;       ///< slots this level took (≥ n; duplicates merged)
 };
 
 struct CoresetHierarchy {
   int block_size = 6;
-  std::vector<Coreset> levels;           ///< [0] the smallest (C/2^L) … [L] the largest (C)
-  std::vector<std::size_t> frames;       ///< frames the blocks were drawn from, in Halton order
-  double population_blocks = 0;          ///< blocks in those frames, flat ones included
-  double population_energy = 0;          ///< E = Σ e_b over those blocks
-  double value_min = 0, value_max = 0;   ///< value range over those frames
+  std::vector<Coreset> levels;          ///< [0] the smallest (C/2^L) … [L] the largest (C)
+  std::vector<std::size_t> frames;      ///< frames the blocks were drawn from, in Halton order
+  double population_blocks = 0;         ///< blocks in those frames, flat ones included
+  double population_energy = 0;         ///< E = Σ e_b over those blocks
+  double value_min = 0, value_max = 0;  ///< value range over those frames
 
   const Coreset& largest() const { return levels.back(); }
 };
 
 /// The frames Halton sampling picks from `candidates` (in that order) until they hold at least
 /// min_voxels voxels of voxels_per_frame each (all of them if there are too few).
-std::vector<std::size_t> halton_frames(const std::vector<std::size_t>& candidates, std::size_t voxels_per_frame,
-                                       double min_voxels);
+std::vector<std::size_t> halton_frames(const std::vector<std::size_t>& candidates,
+                                       std::size_t voxels_per_frame, double min_voxels);
 
 /// Builds the hierarchy in one pass over the chosen frames. Throws InputError if C is smaller
 /// than 2^L blocks or a frame cannot be read; the levels are empty if every block is flat.
-CoresetHierarchy build_coreset_hierarchy(const datasets::SeriesReader& series, const CoresetOptions& options,
+CoresetHierarchy build_coreset_hierarchy(const datasets::SeriesReader& series,
+                                         const CoresetOptions& options,
                                          const Progress& progress = {});
 
 /// The same from volumes already in memory (all of them are used; no frame selection).
-CoresetHierarchy build_coreset_hierarchy(const std::vector<Volume>& frames, const CoresetOptions& options);
+CoresetHierarchy build_coreset_hierarchy(const std::vector<Volume>& frames,
+                                         const CoresetOptions& options);
 
 }  // namespace volreel::dictionary

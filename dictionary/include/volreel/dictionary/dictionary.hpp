@@ -23,7 +23,8 @@ struct Dictionary {
 void normalize_atoms(Eigen::MatrixXf& atoms);
 
 /// Dictionary -> file contents, with the training parameters as provenance.
-format::DictionaryFile to_file(const Dictionary& dictionary, const format::DictionaryTraining& training);
+format::DictionaryFile to_file(const Dictionary& dictionary,
+                               const format::DictionaryTraining& training);
 /// File contents -> dictionary (atoms are used as stored).
 Dictionary from_file(const format::DictionaryFile& file);
 

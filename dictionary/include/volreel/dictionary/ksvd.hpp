@@ -36,26 +36,27 @@ struct KsvdOptions {
 
 /// Sparse coding statistics, weighted (Σ over samples of w_i times the quantity).
 struct CodingStats {
-  double objective = 0;        ///< Σ w‖y − Dγ‖²
-  double weighted_atoms = 0;   ///< Σ w·(atoms used)
-  double weighted_unmet = 0;   ///< Σ w over samples whose residual is above m·ε² (Smax reached)
-  double weight_sum = 0;       ///< Σ w
+  double objective = 0;       ///< Σ w‖y − Dγ‖²
+  double weighted_atoms = 0;  ///< Σ w·(atoms used)
+  double weighted_unmet = 0;  ///< Σ w over samples whose residual is above m·ε² (Smax reached)
+  double weight_sum = 0;      ///< Σ w
 };
 
 struct KsvdIterationStats {
-  CodingStats coded;               ///< after step 1, with the dictionary the iteration started from
-  double objective_updated = 0;    ///< Σ w‖r‖² after step 2 (same supports), before step 3
+  CodingStats coded;             ///< after step 1, with the dictionary the iteration started from
+  double objective_updated = 0;  ///< Σ w‖r‖² after step 2 (same supports), before step 3
   int unused_atoms = 0;
-  int replaced_atoms = 0;          ///< unused + duplicates that were replaced
+  int replaced_atoms = 0;  ///< unused + duplicates that were replaced
 };
 
 /// Sparse-codes samples (m × n) and measures the weighted statistics.
-CodingStats measure_coding(const Eigen::MatrixXf& atoms, const Eigen::MatrixXf& samples, std::span<const float> weights,
-                           const SparseCodingOptions& coding);
+CodingStats measure_coding(const Eigen::MatrixXf& atoms, const Eigen::MatrixXf& samples,
+                           std::span<const float> weights, const SparseCodingOptions& coding);
 
 /// One weighted approximate K-SVD iteration (steps 1–3 above) on samples (m × n, zero-mean) with
 /// positive weights; atoms (m × K) are updated in place. rng orders the atom updates.
 KsvdIterationStats ksvd_iteration(Eigen::MatrixXf& atoms, const Eigen::MatrixXf& samples,
-                                  std::span<const float> weights, const KsvdOptions& options, SplitMix64& rng);
+                                  std::span<const float> weights, const KsvdOptions& options,
+                                  SplitMix64& rng);
 
 }  // namespace volreel::dictionary

@@ -27,14 +27,14 @@ inline constexpr int default_max_atoms = 15;
 /// Which atom a pursuit step adds (the stopping rules are the same for both):
 ///   correlation — OMP: the atom most correlated with the residual, argmax |d_kᵀr|;
 ///   error — ORMP, order-recursive matching pursuit (Cotter, Adler, Rao, Kreutz-Delgado 1999,
-///     "Forward sequential algorithms for best basis selection"; also "optimized OMP", Rebollo-Neira
-///     & Lowe 2002): the atom whose addition lowers ‖r‖² most, argmax (d_kᵀr)² / ‖P⊥d_k‖², with
-///     P⊥ the projection orthogonal to the atoms already chosen. It costs the same O(K·s) per step
-///     here (the projected norms are updated with the Gram–Schmidt rows of the support) and, at a
-///     given ε, needs fewer atoms (docs/benchmarks.md).
-///     An atom mostly inside the span of the support is scored as if the fraction
-///     ormp_projected_floor of its energy were outside it: such atoms take large, cancelling
-///     coefficients, which a coarse quantizer codes poorly.
+///     "Forward sequential algorithms for best basis selection"; also "optimized OMP",
+///     Rebollo-Neira & Lowe 2002): the atom whose addition lowers ‖r‖² most, argmax (d_kᵀr)² /
+///     ‖P⊥d_k‖², with P⊥ the projection orthogonal to the atoms already chosen. It costs the same
+///     O(K·s) per step here (the projected norms are updated with the Gram–Schmidt rows of the
+///     support) and, at a given ε, needs fewer atoms (docs/benchmarks.md). An atom mostly inside
+///     the span of the support is scored as if the fraction ormp_projected_floor of its energy were
+///     outside it: such atoms take large, cancelling coefficients, which a coarse quantizer codes
+///     poorly.
 enum class AtomSelection { correlation, error };
 
 /// The names volreel uses for a selection (command lines, manifests): "omp" and "ormp".
@@ -62,10 +62,10 @@ inline constexpr double ormp_projected_floor = 0.3;
 /// with ‖P⊥d_k‖² the new Cholesky pivot G_kk − wᵀw. min_atom_gain = 0 is plain OMP (rules 1–2).
 
 struct SparseCodingOptions {
-  double tolerance = 0;                 ///< ε ≥ 0, RMS error per value of a block (see above)
-  int max_atoms = default_max_atoms;    ///< Smax ≥ 1: a block uses at most this many atoms
-  double min_atom_gain = 0;             ///< ≥ 0, data units² (squared error of the block): rule 3
-  double max_error = 0;                 ///< ≥ 0, RMS error per value: rule 3's bound (0: none)
+  double tolerance = 0;               ///< ε ≥ 0, RMS error per value of a block (see above)
+  int max_atoms = default_max_atoms;  ///< Smax ≥ 1: a block uses at most this many atoms
+  double min_atom_gain = 0;           ///< ≥ 0, data units² (squared error of the block): rule 3
+  double max_error = 0;               ///< ≥ 0, RMS error per value: rule 3's bound (0: none)
   AtomSelection selection = AtomSelection::correlation;  ///< OMP or ORMP
 };
 
@@ -84,14 +84,16 @@ inline constexpr double default_encoding_psnr = 55.0;
 /// Sparse codes of n blocks, with max_atoms slots per block (slots past count(i) are unused).
 struct SparseCodes {
   int max_atoms = 0;
-  std::vector<std::uint8_t> count;        ///< atoms used by block i
-  std::vector<std::int32_t> atom;         ///< n × max_atoms atom indices, in the order OMP chose them
-  std::vector<float> coefficient;         ///< n × max_atoms coefficients
-  std::vector<float> residual_energy;     ///< ‖y − Dγ‖₂² of block i (from OMP's update formula)
+  std::vector<std::uint8_t> count;     ///< atoms used by block i
+  std::vector<std::int32_t> atom;      ///< n × max_atoms atom indices, in the order OMP chose them
+  std::vector<float> coefficient;      ///< n × max_atoms coefficients
+  std::vector<float> residual_energy;  ///< ‖y − Dγ‖₂² of block i (from OMP's update formula)
 
   void resize(std::size_t blocks, int slots);
   std::size_t size() const { return count.size(); }
-  const std::int32_t* atoms_of(std::size_t i) const { return atom.data() + i * static_cast<std::size_t>(max_atoms); }
+  const std::int32_t* atoms_of(std::size_t i) const {
+    return atom.data() + i * static_cast<std::size_t>(max_atoms);
+  }
   const float* coefficients_of(std::size_t i) const {
     return coefficient.data() + i * static_cast<std::size_t>(max_atoms);
   }
@@ -118,20 +120,21 @@ class BatchOmp {
 
  private:
   Eigen::MatrixXf atoms_;
-  Eigen::MatrixXf gram_;   ///< K × K
+  Eigen::MatrixXf gram_;           ///< K × K
   Eigen::VectorXf gram_diagonal_;  ///< G_kk = ‖d_k‖²: ORMP's projected norms before any atom
   Eigen::VectorXf floored_diagonal_;  ///< ormp_projected_floor·G_kk
   SparseCodingOptions options_;
-  double target_energy_;   ///< m·ε²
-  double bound_energy_;    ///< m·max_error² (+∞ without a bound)
+  double target_energy_;  ///< m·ε²
+  double bound_energy_;   ///< m·max_error² (+∞ without a bound)
 };
 
 /// One block's code from the reference OMP.
 struct ReferenceCode {
-  std::vector<int> atoms;             ///< in the order chosen
+  std::vector<int> atoms;  ///< in the order chosen
   std::vector<double> coefficients;
-  double residual_energy = 0;         ///< ‖y − Dγ‖₂², computed from the residual itself
-  double min_selection_margin = 0;    ///< smallest relative gap, over the steps, between the best and the second-best score
+  double residual_energy = 0;  ///< ‖y − Dγ‖₂², computed from the residual itself
+  double min_selection_margin =
+      0;  ///< smallest relative gap, over the steps, between the best and the second-best score
 };
 
 /// Plain OMP (or ORMP) in double precision: at each step correlate the explicit residual with
@@ -140,9 +143,11 @@ struct ReferenceCode {
 /// Slow; the yardstick for tests. Same stopping rules as BatchOmp (‖r‖² ≤ m·ε², Smax atoms, or an
 /// atom's gain below min_atom_gain, measured here as the drop of the explicit ‖r‖²; such an atom
 /// is not kept). min_selection_margin compares the scores (|correlation| or gain).
-ReferenceCode reference_omp(const Eigen::MatrixXf& atoms, const Eigen::VectorXf& block, SparseCodingOptions options);
+ReferenceCode reference_omp(const Eigen::MatrixXf& atoms, const Eigen::VectorXf& block,
+                            SparseCodingOptions options);
 
 /// y ≈ Dγ for block i of codes, written into out (m values).
-void reconstruct_block(const Eigen::MatrixXf& atoms, const SparseCodes& codes, std::size_t i, float* out);
+void reconstruct_block(const Eigen::MatrixXf& atoms, const SparseCodes& codes, std::size_t i,
+                       float* out);
 
 }  // namespace volreel::dictionary

@@ -5,8 +5,9 @@
 // Two continuation schedules are added to the paper's algorithm (both on by default, both the same
 // in flat and hierarchical mode, so the comparison isolates the coreset hierarchy):
 //  - Coarse-to-fine tolerance: stage s = 0..L (one stage per level; in flat mode, equal shares of
-//    the iterations on the largest level) codes with ε_s = ε · F^((L−s)/L), F = coarse_tolerance_factor, so the
-//    smallest coresets learn the dominant structure and the last stage runs at ε itself.
+//    the iterations on the largest level) codes with ε_s = ε · F^((L−s)/L), F =
+//    coarse_tolerance_factor, so the smallest coresets learn the dominant structure and the last
+//    stage runs at ε itself.
 //  - Sparsity ramp: iteration t (counted from 0 over the whole run) codes with at most
 //    min(Smax, t + 1) atoms per block, so training starts as gain-shape vector quantization; the
 //    last stage always codes with Smax.
@@ -30,9 +31,9 @@ namespace volreel::dictionary {
 
 /// Algorithm 1's parameters.
 struct TrainingOptions {
-  int atom_count = 1024;              ///< K
-  SparseCodingOptions coding;         ///< ε and Smax, the same as for encoding
-  int iterations = 8;                 ///< N: K-SVD iterations per coreset level
+  int atom_count = 1024;       ///< K
+  SparseCodingOptions coding;  ///< ε and Smax, the same as for encoding
+  int iterations = 8;          ///< N: K-SVD iterations per coreset level
   /// Train on the largest coreset only, for comparison; then the iteration count is
   /// flat_iterations, or (0) N times the number of levels — the same number of iterations.
   bool flat = false;
@@ -61,15 +62,15 @@ struct TrainingProgress {
   double mean_sparsity = 0;           ///< atoms per block
   double fraction_met = 0;            ///< blocks that met ε
   int replaced_atoms = 0;
-  double elapsed_seconds = 0;         ///< since training started
-  bool final = false;                 ///< the closing evaluation on the largest level
+  double elapsed_seconds = 0;  ///< since training started
+  bool final = false;          ///< the closing evaluation on the largest level
 };
 using TrainingCallback = std::function<void(const TrainingProgress&)>;
 
 struct TrainingResult {
   Dictionary dictionary;
-  TrainingProgress final_stats;       ///< the trained dictionary coded against the largest level
-  double seconds = 0;                 ///< training time (the coreset is built before)
+  TrainingProgress final_stats;  ///< the trained dictionary coded against the largest level
+  double seconds = 0;            ///< training time (the coreset is built before)
   int total_iterations = 0;
 };
 

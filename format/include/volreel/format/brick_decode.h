@@ -31,7 +31,7 @@ typedef std::uint32_t vr_uint;
 /// Payload and dictionary accessors for the host: explicit pointer parameters.
 #define VR_PAYLOAD_PARAM const vr_uint *payload,
 #define VR_PAYLOAD_ARG payload,
-#define VR_PAYLOAD_PARAM_ONLY const vr_uint *payload
+#define VR_PAYLOAD_PARAM_ONLY const vr_uint* payload
 #define VR_PAYLOAD_ARG_ONLY payload
 #define VR_ATOMS_PARAM const float *atoms,
 #define VR_ATOMS_ARG atoms,
@@ -57,21 +57,21 @@ VR_INLINE float vr_as_float(vr_uint bits) {
 #endif
 
 /* Constants of format version 2 (SPEC.md). */
-#define VR_BRICK_SIZE 36u             /* stored voxels per axis: interior + 2·apron */
-#define VR_BRICK_INTERIOR 34u         /* interior voxels per axis */
-#define VR_BLOCK_SIZE 6u              /* M */
-#define VR_BLOCK_LENGTH 216u          /* m = M³ values per block */
-#define VR_BLOCKS_PER_AXIS 6u         /* blocks per brick axis */
-#define VR_BLOCKS_PER_BRICK 216u      /* 6³ blocks per brick, x fastest */
-#define VR_HEADER_WORDS 5u            /* the four f32 dequantization values and the mean bits */
-#define VR_MEAN_BITS 12u              /* the most bits of a quantized mean */
+#define VR_BRICK_SIZE 36u        /* stored voxels per axis: interior + 2·apron */
+#define VR_BRICK_INTERIOR 34u    /* interior voxels per axis */
+#define VR_BLOCK_SIZE 6u         /* M */
+#define VR_BLOCK_LENGTH 216u     /* m = M³ values per block */
+#define VR_BLOCKS_PER_AXIS 6u    /* blocks per brick axis */
+#define VR_BLOCKS_PER_BRICK 216u /* 6³ blocks per brick, x fastest */
+#define VR_HEADER_WORDS 5u       /* the four f32 dequantization values and the mean bits */
+#define VR_MEAN_BITS 12u         /* the most bits of a quantized mean */
 #define VR_SPARSITY_BITS 4u
 #define VR_COEF_BITS 6u
 #define VR_ATOM_BITS 10u
 #define VR_MAX_SPARSITY 15u
-#define VR_COEF_LEVELS 63u            /* quantized coefficients are 0..63 */
+#define VR_COEF_LEVELS 63u /* quantized coefficients are 0..63 */
 /* The longest payload in words: 16-bit entries and 15 codes in every block. */
-#define VR_MAX_PAYLOAD_WORDS 1733u    /* (20 + 2·216 + 2·216·15) / 4 */
+#define VR_MAX_PAYLOAD_WORDS 1733u /* (20 + 2·216 + 2·216·15) / 4 */
 
 /* 16-bit unit u of the payload, u counted from byte 0. */
 VR_INLINE vr_uint vr_load_u16(VR_PAYLOAD_PARAM vr_uint unit) {
@@ -81,8 +81,12 @@ VR_INLINE vr_uint vr_load_u16(VR_PAYLOAD_PARAM vr_uint unit) {
 
 /* Word 4: the bits b of each quantized mean (0..12; a reader checks the range and that bits
  * 4..31 are zero), and the width of a block entry, 4 + b (4..16). */
-VR_INLINE vr_uint vr_mean_bits(VR_PAYLOAD_PARAM_ONLY) { return VR_LOAD_WORD(4u) & 0xFu; }
-VR_INLINE vr_uint vr_entry_bits(vr_uint mean_bits) { return VR_SPARSITY_BITS + mean_bits; }
+VR_INLINE vr_uint vr_mean_bits(VR_PAYLOAD_PARAM_ONLY) {
+  return VR_LOAD_WORD(4u) & 0xFu;
+}
+VR_INLINE vr_uint vr_entry_bits(vr_uint mean_bits) {
+  return VR_SPARSITY_BITS + mean_bits;
+}
 
 /* Block entry b (0..215) of width w = vr_entry_bits(b): sparsity in bits 0..3, quantized mean
  * above. An entry spans at most two words (w ≤ 16). */
@@ -94,8 +98,12 @@ VR_INLINE vr_uint vr_block_entry(VR_PAYLOAD_PARAM vr_uint entry_bits, vr_uint bl
   if (shift + entry_bits > 32u) value |= VR_LOAD_WORD(word + 1u) << (32u - shift);
   return value & ((1u << entry_bits) - 1u);
 }
-VR_INLINE vr_uint vr_entry_sparsity(vr_uint entry) { return entry & 0xFu; }
-VR_INLINE vr_uint vr_entry_mean(vr_uint entry) { return entry >> VR_SPARSITY_BITS; }
+VR_INLINE vr_uint vr_entry_sparsity(vr_uint entry) {
+  return entry & 0xFu;
+}
+VR_INLINE vr_uint vr_entry_mean(vr_uint entry) {
+  return entry >> VR_SPARSITY_BITS;
+}
 
 /* 16-bit units of the 216 entries of width w, zero bits to the next unit included. */
 VR_INLINE vr_uint vr_entry_units(vr_uint entry_bits) {
@@ -106,8 +114,12 @@ VR_INLINE vr_uint vr_entry_units(vr_uint entry_bits) {
 VR_INLINE vr_uint vr_code_unit(vr_uint entry_bits, vr_uint code) {
   return 2u * VR_HEADER_WORDS + vr_entry_units(entry_bits) + code;
 }
-VR_INLINE vr_uint vr_code_atom(vr_uint code16) { return code16 >> 6u; }
-VR_INLINE vr_uint vr_code_value(vr_uint code16) { return code16 & 0x3Fu; }
+VR_INLINE vr_uint vr_code_atom(vr_uint code16) {
+  return code16 >> 6u;
+}
+VR_INLINE vr_uint vr_code_value(vr_uint code16) {
+  return code16 & 0x3Fu;
+}
 
 /* Payload bytes of a brick with entries of width w whose blocks hold `codes` coefficients in all
  * (before padding to 4). */
@@ -121,7 +133,8 @@ VR_INLINE vr_uint vr_payload_bytes(vr_uint entry_bits, vr_uint codes) {
  *  2. value = mean_bias + mean_scale·q;
  *  3. for each of the s codes: atom a, quantized coefficient c;
  *     value += (coef_bias + coef_scale·c) · atoms[a·216 + v]. */
-VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint block, vr_uint first_code, vr_uint v) {
+VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint block, vr_uint first_code,
+                                vr_uint v) {
   float mean_bias = vr_as_float(VR_LOAD_WORD(0u));
   float mean_scale = vr_as_float(VR_LOAD_WORD(1u));
   float coef_bias = vr_as_float(VR_LOAD_WORD(2u));
@@ -143,7 +156,8 @@ VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint block, v
 VR_INLINE vr_uint vr_brick_voxel(vr_uint block, vr_uint v) {
   vr_uint bx = block % VR_BLOCKS_PER_AXIS, by = (block / VR_BLOCKS_PER_AXIS) % VR_BLOCKS_PER_AXIS,
           bz = block / (VR_BLOCKS_PER_AXIS * VR_BLOCKS_PER_AXIS);
-  vr_uint x = bx * VR_BLOCK_SIZE + v % VR_BLOCK_SIZE, y = by * VR_BLOCK_SIZE + (v / VR_BLOCK_SIZE) % VR_BLOCK_SIZE,
+  vr_uint x = bx * VR_BLOCK_SIZE + v % VR_BLOCK_SIZE,
+          y = by * VR_BLOCK_SIZE + (v / VR_BLOCK_SIZE) % VR_BLOCK_SIZE,
           z = bz * VR_BLOCK_SIZE + v / (VR_BLOCK_SIZE * VR_BLOCK_SIZE);
   return (z * VR_BRICK_SIZE + y) * VR_BRICK_SIZE + x;
 }

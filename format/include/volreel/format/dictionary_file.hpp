@@ -26,18 +26,18 @@ inline constexpr std::uint32_t dictionary_format_version = 1;
 
 /// How a dictionary was trained. Provenance only: decoding needs the atoms, not these.
 struct DictionaryTraining {
-  double tolerance = 0;             ///< ε: RMS error per value of a block, in data units
-  double value_min = 0;             ///< value range of the training frames
+  double tolerance = 0;  ///< ε: RMS error per value of a block, in data units
+  double value_min = 0;  ///< value range of the training frames
   double value_max = 0;
-  std::uint32_t max_sparsity = 0;   ///< Smax, atoms per block at most
-  std::uint64_t coreset_voxels = 0; ///< C
-  std::uint32_t coreset_levels = 0; ///< halvings below C (the paper's 6)
-  std::uint32_t iterations = 0;     ///< K-SVD iterations per level (flat: in all)
+  std::uint32_t max_sparsity = 0;    ///< Smax, atoms per block at most
+  std::uint64_t coreset_voxels = 0;  ///< C
+  std::uint32_t coreset_levels = 0;  ///< halvings below C (the paper's 6)
+  std::uint32_t iterations = 0;      ///< K-SVD iterations per level (flat: in all)
   std::uint64_t seed = 0;
-  bool flat = false;                ///< trained on the largest coreset only
+  bool flat = false;  ///< trained on the largest coreset only
   std::uint32_t training_frames = 0;
-  double rms_error = 0;             ///< final RMS error per value, estimated over the training frames
-  double mean_sparsity = 0;         ///< final atoms per block, estimated over the training frames
+  double rms_error = 0;      ///< final RMS error per value, estimated over the training frames
+  double mean_sparsity = 0;  ///< final atoms per block, estimated over the training frames
 };
 
 /// A dictionary file in memory.
@@ -51,31 +51,31 @@ struct DictionaryFile {
   /// values a reader will see before coding with them.
   bool half_atoms = false;
   DictionaryTraining training;
-  std::string program_version;   ///< the volreel version that wrote it, at most 15 characters
+  std::string program_version;  ///< the volreel version that wrote it, at most 15 characters
 };
 
 /// On-disk header, 128 bytes, little-endian, at offset 0. Offsets in the comments.
 struct DictionaryFileHeader {
-  char magic[8];                     //   0  "VREELDIC"
-  std::uint32_t format_version;      //   8  dictionary_format_version
-  std::uint32_t header_bytes;        //  12  128 (sizeof this struct)
-  std::uint32_t atom_count;          //  16  K
-  std::uint32_t block_size;          //  20  M
-  std::uint32_t atom_length;         //  24  m = M³
-  std::uint32_t max_sparsity;        //  28  Smax
-  double tolerance;                  //  32  ε (RMS per value, data units)
-  double value_min;                  //  40
-  double value_max;                  //  48
-  std::uint64_t coreset_voxels;      //  56  C
-  std::uint32_t coreset_levels;      //  64
-  std::uint32_t iterations;          //  68
-  std::uint64_t seed;                //  72
-  std::uint32_t flags;               //  80  bit 0: flat training; other bits 0
-  std::uint32_t training_frames;     //  84
-  double rms_error;                  //  88
-  double mean_sparsity;              //  96
-  char program_version[16];          // 104  NUL-padded
-  std::uint64_t reserved;            // 120  0
+  char magic[8];                  //   0  "VREELDIC"
+  std::uint32_t format_version;   //   8  dictionary_format_version
+  std::uint32_t header_bytes;     //  12  128 (sizeof this struct)
+  std::uint32_t atom_count;       //  16  K
+  std::uint32_t block_size;       //  20  M
+  std::uint32_t atom_length;      //  24  m = M³
+  std::uint32_t max_sparsity;     //  28  Smax
+  double tolerance;               //  32  ε (RMS per value, data units)
+  double value_min;               //  40
+  double value_max;               //  48
+  std::uint64_t coreset_voxels;   //  56  C
+  std::uint32_t coreset_levels;   //  64
+  std::uint32_t iterations;       //  68
+  std::uint64_t seed;             //  72
+  std::uint32_t flags;            //  80  bit 0: flat training; other bits 0
+  std::uint32_t training_frames;  //  84
+  double rms_error;               //  88
+  double mean_sparsity;           //  96
+  char program_version[16];       // 104  NUL-padded
+  std::uint64_t reserved;         // 120  0
 };
 static_assert(sizeof(DictionaryFileHeader) == 128);
 static_assert(offsetof(DictionaryFileHeader, format_version) == 8);
@@ -112,8 +112,10 @@ std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& dictionar
 
 /// Parses a dictionary file's bytes; `name` is used in messages. Throws FormatError naming the
 /// offset and what was expected on a wrong magic, unknown version, inconsistent header,
-/// truncated or overlong file, CRC mismatch, or a non-finite atom value. Never crashes on bad input.
-DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes, const std::filesystem::path& name);
+/// truncated or overlong file, CRC mismatch, or a non-finite atom value. Never crashes on bad
+/// input.
+DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes,
+                                     const std::filesystem::path& name);
 
 /// Writes the file atomically (temporary name, then rename). Throws FormatError on failure.
 void write_dictionary_file(const std::filesystem::path& path, const DictionaryFile& dictionary);

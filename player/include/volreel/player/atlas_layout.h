@@ -18,11 +18,13 @@ typedef std::uint32_t vr_uint;
 #define VR_INLINE
 #endif
 
-#define VR_ATLAS_SLOT_SIZE 36u  /* voxels per slot axis: a whole stored brick */
+#define VR_ATLAS_SLOT_SIZE 36u /* voxels per slot axis: a whole stored brick */
 #define VR_ATLAS_NO_SLOT 0xFFFFFFFFu
 
 /* Grid cell of slot s along x, y and z; multiply by VR_ATLAS_SLOT_SIZE for the first voxel. */
-VR_INLINE vr_uint vr_atlas_cell_x(vr_uint slot, vr_uint grid_x) { return slot % grid_x; }
+VR_INLINE vr_uint vr_atlas_cell_x(vr_uint slot, vr_uint grid_x) {
+  return slot % grid_x;
+}
 VR_INLINE vr_uint vr_atlas_cell_y(vr_uint slot, vr_uint grid_x, vr_uint grid_y) {
   return (slot / grid_x) % grid_y;
 }

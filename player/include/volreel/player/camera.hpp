@@ -12,12 +12,12 @@
 namespace volreel::player {
 
 struct OrbitCamera {
-  glm::dvec3 target{0.0};            ///< the point orbited (usually the volume's centre)
-  double distance = 1.0;             ///< from target to eye, voxels
-  double azimuth = 0.6;              ///< radians, around +z
-  double elevation = 0.45;           ///< radians above the xy plane
+  glm::dvec3 target{0.0};             ///< the point orbited (usually the volume's centre)
+  double distance = 1.0;              ///< from target to eye, voxels
+  double azimuth = 0.6;               ///< radians, around +z
+  double elevation = 0.45;            ///< radians above the xy plane
   double fov_y = glm::radians(45.0);  ///< vertical field of view, radians
-  int width = 512, height = 512;     ///< viewport, pixels
+  int width = 512, height = 512;      ///< viewport, pixels
 
   /// A camera that frames a volume of `dims` voxels from the default direction.
   static OrbitCamera framing(glm::dvec3 dims, int width, int height) {

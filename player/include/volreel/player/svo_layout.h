@@ -28,7 +28,8 @@
 // Leaf records, VR_SVO_LEAF_WORDS words each:
 //   word 0        atlas slot of keyframe node A (atlas_layout.h)
 //   word 1        atlas slot of keyframe node B
-//   word 2        bits 0..7: LOD difference dA of A; bits 8..15: dB of B — how many levels above the
+//   word 2        bits 0..7: LOD difference dA of A; bits 8..15: dB of B — how many levels above
+//   the
 //                 spatial node the keyframe node's brick lies (0: the node's own brick)
 //   word 3        interpolation factor f (float bits): value = (1 − f)·A + f·B
 //
@@ -67,12 +68,24 @@ typedef std::uint32_t vr_uint;
 #define VR_SVO_CHILD_EMPTY 3u
 #define VR_SVO_INDEX_MASK 0x3FFFFFFFu
 
-VR_INLINE vr_uint vr_svo_child_word(vr_uint kind, vr_uint index) { return (kind << 30u) | (index & VR_SVO_INDEX_MASK); }
-VR_INLINE vr_uint vr_svo_child_kind(vr_uint word) { return word >> 30u; }
-VR_INLINE vr_uint vr_svo_child_index(vr_uint word) { return word & VR_SVO_INDEX_MASK; }
-VR_INLINE vr_uint vr_svo_lod_pack(vr_uint d_a, vr_uint d_b) { return (d_a & 0xFFu) | ((d_b & 0xFFu) << 8u); }
-VR_INLINE vr_uint vr_svo_lod_a(vr_uint packed) { return packed & 0xFFu; }
-VR_INLINE vr_uint vr_svo_lod_b(vr_uint packed) { return (packed >> 8u) & 0xFFu; }
+VR_INLINE vr_uint vr_svo_child_word(vr_uint kind, vr_uint index) {
+  return (kind << 30u) | (index & VR_SVO_INDEX_MASK);
+}
+VR_INLINE vr_uint vr_svo_child_kind(vr_uint word) {
+  return word >> 30u;
+}
+VR_INLINE vr_uint vr_svo_child_index(vr_uint word) {
+  return word & VR_SVO_INDEX_MASK;
+}
+VR_INLINE vr_uint vr_svo_lod_pack(vr_uint d_a, vr_uint d_b) {
+  return (d_a & 0xFFu) | ((d_b & 0xFFu) << 8u);
+}
+VR_INLINE vr_uint vr_svo_lod_a(vr_uint packed) {
+  return packed & 0xFFu;
+}
+VR_INLINE vr_uint vr_svo_lod_b(vr_uint packed) {
+  return (packed >> 8u) & 0xFFu;
+}
 
 /* One axis of u' = ((c mod 2^d) + u) / 2^d, for every d (not only d ≤ 1). */
 VR_INLINE float vr_svo_ancestor_local(vr_uint c, float u, vr_uint d) {
@@ -80,17 +93,20 @@ VR_INLINE float vr_svo_ancestor_local(vr_uint c, float u, vr_uint d) {
   return (float(c & (span - 1u)) + u) / float(span);
 }
 /* One axis of the stored voxel coordinate inside a slot (texel units) of brick-local u'. */
-VR_INLINE float vr_svo_slot_coord(float u_brick) { return 1.0f + 34.0f * u_brick; }
+VR_INLINE float vr_svo_slot_coord(float u_brick) {
+  return 1.0f + 34.0f * u_brick;
+}
 
 /* Ray step from the leaf's level (docs/design.md, "Streaming", step 7): how many times the base
    step may be doubled in the region of a leaf record — the levels between the finest level and the
    level of the finer brick the sample reads, at most `cap`:
-     e = min((levels − 1 − leaf_level) + d, cap),  d = dA when f = 0, dB when f = 1, else min(dA, dB)
-   where leaf_level is the level of the spatial node the record is relative to (a VR_SVO_CHILD_UP
-   region's node, a VR_SVO_CHILD_LEAF child). A brick of level k has voxels of 2^(levels−1−k) finest
-   voxels, so a step of base·2^e keeps the base step's samples per stored voxel. */
-VR_INLINE vr_uint vr_svo_step_doublings(vr_uint levels, vr_uint leaf_level, vr_uint packed_lods, float f,
-                                        vr_uint cap) {
+     e = min((levels − 1 − leaf_level) + d, cap),  d = dA when f = 0, dB when f = 1, else min(dA,
+   dB) where leaf_level is the level of the spatial node the record is relative to (a
+   VR_SVO_CHILD_UP region's node, a VR_SVO_CHILD_LEAF child). A brick of level k has voxels of
+   2^(levels−1−k) finest voxels, so a step of base·2^e keeps the base step's samples per stored
+   voxel. */
+VR_INLINE vr_uint vr_svo_step_doublings(vr_uint levels, vr_uint leaf_level, vr_uint packed_lods,
+                                        float f, vr_uint cap) {
   vr_uint d_a = vr_svo_lod_a(packed_lods), d_b = vr_svo_lod_b(packed_lods);
   vr_uint d = f == 0.0f ? d_a : (f == 1.0f ? d_b : (d_a < d_b ? d_a : d_b));
   vr_uint e = levels - 1u - leaf_level + d;

@@ -37,7 +37,7 @@ struct PlayerOptions {
   double latency_s = 0;                      ///< loader latency added to each request
   std::size_t max_requests = 128;            ///< brick requests in flight at most
   std::uint64_t upload_bytes = 8ull << 20;   ///< compressed brick bytes decoded per frame at most
-  std::string transfer = "auto";  ///< "auto" (quantiles of the data), a preset or a JSON file
+  std::string transfer = "auto";       ///< "auto" (quantiles of the data), a preset or a JSON file
   double sse_target = 1.0;             ///< pixels per voxel at which a node is detailed enough
   double keyframes_per_second = 10.0;  ///< playback rate at 1×
   bool loop = false;                   ///< wrap around at the ends of the timeline

@@ -49,9 +49,9 @@
 #include "volreel/cpu_render/cpu_atlas.hpp"
 #include "volreel/cpu_render/transfer_function.hpp"
 #include "volreel/format/decoder.hpp"
+#include "volreel/image/image.hpp"
 #include "volreel/player/camera.hpp"
 #include "volreel/player/svo_layout.h"
-#include "volreel/image/image.hpp"
 
 namespace volreel::cpu_render {
 

@@ -63,9 +63,9 @@ enum class SseScope {
 
 struct PrioritySettings {
   PriorityPolicy policy = PriorityPolicy::patent;
-  double sse_target = 1.0;          ///< pixels per voxel at which a node is detailed enough [0030]
-  double sse_weight = 10.0;         ///< factor of ssePriority in the combined priority
-  double temporal_exponent = 4.0;   ///< exponent of temporalPriority
+  double sse_target = 1.0;         ///< pixels per voxel at which a node is detailed enough [0030]
+  double sse_weight = 10.0;        ///< factor of ssePriority in the combined priority
+  double temporal_exponent = 4.0;  ///< exponent of temporalPriority
   /// lerp(min, 1, temporal): weight of temporal vs random. [0045] uses 0.15; volreel's default 1
   /// (the temporal priority alone, nearest in time first within a level): with the image metric,
   /// the partial or interpolated time steps the ruler keeps far from the playhead look little

@@ -52,9 +52,9 @@ enum class OutputFormat { rgba8_unorm, rgba16_sfloat };
 enum class AtlasFilter { automatic, sampler, fetch };
 
 struct RaycasterOptions {
-  int width = 512, height = 512;     ///< output image size, pixels (≥ 1; resize() changes it)
+  int width = 512, height = 512;  ///< output image size, pixels (≥ 1; resize() changes it)
   OutputFormat output = OutputFormat::rgba8_unorm;
-  std::uint32_t frames_in_flight = 2;  ///< ring entries (≥ 1)
+  std::uint32_t frames_in_flight = 2;           ///< ring entries (≥ 1)
   AtlasFilter filter = AtlasFilter::automatic;  ///< automatic: fetch on CPU devices, else sampler
 };
 

@@ -20,11 +20,11 @@
 namespace volreel::psnr {
 
 struct ErrorStats {
-  std::size_t count = 0;     ///< values compared
+  std::size_t count = 0;  ///< values compared
   double original_min = 0, original_max = 0;
   double mse = 0, rmse = 0, max_abs_error = 0;
-  double psnr = 0;           ///< MTV definition, dB; +inf when MSE = 0, −inf when range = 0 < MSE
-  double psnr_zfp = 0;       ///< zfp's definition, dB
+  double psnr = 0;      ///< MTV definition, dB; +inf when MSE = 0, −inf when range = 0 < MSE
+  double psnr_zfp = 0;  ///< zfp's definition, dB
   double range() const { return original_max - original_min; }
 };
 
@@ -46,9 +46,9 @@ ErrorStats compare(std::span<const float> original, std::span<const float> decod
 
 struct SsimOptions {
   double sigma = 1.5;
-  double truncate = 3.5;     ///< window radius = int(truncate·sigma + 0.5)
+  double truncate = 3.5;  ///< window radius = int(truncate·sigma + 0.5)
   double k1 = 0.01, k2 = 0.03;
-  double data_range = 0;     ///< L in C1 = (K1·L)²; 0 means max − min of the original (1 if 0)
+  double data_range = 0;  ///< L in C1 = (K1·L)²; 0 means max − min of the original (1 if 0)
 };
 
 /// SSIM of two arrays of shape dims (x fastest). Axes of extent 1 are neither filtered nor
@@ -59,8 +59,8 @@ double ssim(Dims dims, std::span<const float> original, std::span<const float> d
             const SsimOptions& options = {});
 
 struct ImageComparison {
-  double psnr = 0;   ///< 10·log10(255² / MSE) over all channels (8-bit data range)
-  double ssim = 0;   ///< grayscale SSIM of each channel with data range 255, averaged
+  double psnr = 0;  ///< 10·log10(255² / MSE) over all channels (8-bit data range)
+  double ssim = 0;  ///< grayscale SSIM of each channel with data range 255, averaged
   double mse = 0;
 };
 /// Images must have equal width, height and channels (InputError otherwise).

@@ -26,9 +26,11 @@ class FrameCodec {
   /// The setting within the family, e.g. "tol=1.2e-03".
   virtual std::string setting() const = 0;
   /// Compress one frame into stream (replacing its contents).
-  virtual void compress(Dims dims, std::span<const float> frame, std::vector<std::uint8_t>& stream) = 0;
+  virtual void compress(Dims dims, std::span<const float> frame,
+                        std::vector<std::uint8_t>& stream) = 0;
   /// Reconstruct the frame from stream into out (dims.voxels() values).
-  virtual void decompress(Dims dims, std::span<const std::uint8_t> stream, std::span<float> out) = 0;
+  virtual void decompress(Dims dims, std::span<const std::uint8_t> stream,
+                          std::span<float> out) = 0;
   /// Bytes stored once for the whole sequence (e.g. a dictionary); counted in bps.
   virtual std::size_t shared_bytes() const { return 0; }
 };
@@ -39,24 +41,24 @@ using CodecFactory = std::vector<std::unique_ptr<FrameCodec>> (*)(double value_r
 struct RdPoint {
   std::string family, setting;
   std::size_t frames = 0;
-  std::uint64_t bytes = 0;            ///< all frame streams + shared bytes
-  double bps = 0;                     ///< 8·bytes / (voxels per frame · frames)
-  double psnr = 0, psnr_zfp = 0;      ///< over the whole sequence (range of all original frames)
+  std::uint64_t bytes = 0;        ///< all frame streams + shared bytes
+  double bps = 0;                 ///< 8·bytes / (voxels per frame · frames)
+  double psnr = 0, psnr_zfp = 0;  ///< over the whole sequence (range of all original frames)
   double rmse = 0, max_abs_error = 0;
-  double ssim = 0;                    ///< mean 3D SSIM over the sampled frames
+  double ssim = 0;  ///< mean 3D SSIM over the sampled frames
   std::size_t ssim_frames = 0;
   double compress_mvoxels_per_s = 0;  ///< per thread
   double decompress_mvoxels_per_s = 0;
 };
 
 struct RdOptions {
-  std::size_t max_frames = 0;     ///< 0: every frame; else the first max_frames
-  std::size_t ssim_frames = 4;    ///< SSIM on this many evenly spaced frames (0: none)
+  std::size_t max_frames = 0;   ///< 0: every frame; else the first max_frames
+  std::size_t ssim_frames = 4;  ///< SSIM on this many evenly spaced frames (0: none)
 };
 
 /// Value range (min, max) of the frames the harness will use; reads every such frame once.
-std::pair<double, double> series_range(const datasets::SeriesReader& series, const RdOptions& options,
-                                       const Progress& progress = {});
+std::pair<double, double> series_range(const datasets::SeriesReader& series,
+                                       const RdOptions& options, const Progress& progress = {});
 
 /// Run every codec on every frame (frames read once; codecs in parallel, each on one thread).
 std::vector<RdPoint> run_rate_distortion(const datasets::SeriesReader& series,
@@ -73,7 +75,8 @@ std::unique_ptr<FrameCodec> make_zfp_rate(double bits_per_value);
 /// PSNR of one family at a bps, linear in bps between the two measured settings of the family
 /// that bracket it (settings sorted by bps; non-finite PSNRs skipped). std::nullopt outside the
 /// family's measured span: a curve is never extrapolated.
-std::optional<double> psnr_at_bps(std::span<const RdPoint> points, const std::string& family, double bps);
+std::optional<double> psnr_at_bps(std::span<const RdPoint> points, const std::string& family,
+                                  double bps);
 
 /// Every family's PSNR at the same bps values, for reading comparisons at equal bps.
 struct EqualBpsTable {
@@ -95,6 +98,7 @@ void write_equal_bps_csv(const std::filesystem::path& path, const EqualBpsTable&
 void write_rd_csv(const std::filesystem::path& path, std::span<const RdPoint> points);
 /// PSNR vs bps, one line per family, via gnuplot (pngcairo). Throws InputError with an
 /// installation hint when gnuplot is not on PATH.
-void write_rd_plot(const std::filesystem::path& png, std::span<const RdPoint> points, const std::string& title);
+void write_rd_plot(const std::filesystem::path& png, std::span<const RdPoint> points,
+                   const std::string& title);
 
 }  // namespace volreel::psnr
