@@ -3,10 +3,6 @@
 // the Vulkan device, or on the CPU where there is none (--cpu), and writes DIR/frame_NNNNN.png and
 // a row of DIR/metrics.csv; optionally encodes the frames with ffmpeg (--video) and measures each
 // frame against a ground-truth render of the original series (--compare).
-#include <spawn.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -23,7 +19,9 @@
 
 #include "commands.hpp"
 #include "loop_options.hpp"
+#include "process.hpp"
 #include "progress.hpp"
+#include "render_truth.hpp"
 #include "volreel/cpu_render/renderer.hpp"
 #include "volreel/cpu_render/tour.hpp"
 #include "volreel/datasets/series.hpp"
@@ -47,84 +45,6 @@ struct RenderCommandOptions {
   std::size_t max_frames = 0;
   loop::LoopSettings loop;
   ReaderOptions reader;
-};
-
-/// The executable's full path if `name` is on PATH, else empty.
-std::string find_on_path(const std::string& name) {
-  const char* path = std::getenv("PATH");
-  if (!path) return {};
-  std::string dirs = path;
-  std::size_t start = 0;
-  while (start <= dirs.size()) {
-    const std::size_t end = dirs.find(':', start);
-    const std::string dir =
-        dirs.substr(start, end == std::string::npos ? std::string::npos : end - start);
-    if (!dir.empty()) {
-      const fs::path candidate = fs::path(dir) / name;
-      if (::access(candidate.c_str(), X_OK) == 0) return candidate.string();
-    }
-    if (end == std::string::npos) break;
-    start = end + 1;
-  }
-  return {};
-}
-
-/// Runs a program with arguments (no shell); returns its exit status, or -1 if it did not start.
-int run_program(const std::string& program, const std::vector<std::string>& args) {
-  std::vector<char*> argv;
-  argv.push_back(const_cast<char*>(program.c_str()));
-  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
-  pid_t pid = 0;
-  if (posix_spawn(&pid, program.c_str(), nullptr, nullptr, argv.data(), environ) != 0) return -1;
-  int status = 0;
-  if (waitpid(pid, &status, 0) < 0) return -1;
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-/// The original series at a continuous playhead: frames ⌊p⌋ and ⌊p⌋ + 1 (two kept in memory).
-class GroundTruth {
- public:
-  GroundTruth(const std::string& path, const ReaderOptions& reader, const format::Manifest& m)
-      : series_(datasets::open_series(path, reader.to_open_options())) {
-    const auto& info = series_->info();
-    if (info.dims.x != m.dims[0] || info.dims.y != m.dims[1] || info.dims.z != m.dims[2])
-      throw InputError("--compare " + path + ": the series is " + to_string(info.dims) +
-                       ", the container " + std::to_string(m.dims[0]) + "x" +
-                       std::to_string(m.dims[1]) + "x" + std::to_string(m.dims[2]));
-    if (info.frames < m.frames.size())
-      throw InputError("--compare " + path + ": the series has " + std::to_string(info.frames) +
-                       " frames, the container " + std::to_string(m.frames.size()));
-    geometry_ = cpu_render::VolumeGeometry::of(m.dims);
-  }
-
-  /// The reference image at `playhead`: the finest level of both neighbouring frames, blended.
-  cpu_render::RgbaImage render(double playhead, std::size_t keyframes,
-                               const player::OrbitCamera& camera,
-                               const cpu_render::TransferFunction& tf,
-                               const cpu_render::RenderOptions& options) {
-    const double p = std::clamp(playhead, 0.0, static_cast<double>(keyframes - 1));
-    const auto t0 = static_cast<std::size_t>(std::floor(p));
-    const std::size_t t1 = std::min(t0 + 1, keyframes - 1);
-    const auto f = static_cast<float>(p - static_cast<double>(t0));
-    const std::uint32_t finest = geometry_.levels - 1;
-    for (auto it = cache_.begin(); it != cache_.end();)
-      it = it->first == t0 || it->first == t1 ? std::next(it) : cache_.erase(it);
-    const auto level = [&](std::size_t t) {
-      return cpu_render::DenseLevel{geometry_.dims, frame(t).data, finest};
-    };
-    return cpu_render::render_reference(level(t0), level(t1), f, geometry_, camera, tf, options);
-  }
-
- private:
-  const Volume& frame(std::size_t t) {
-    auto it = cache_.find(t);
-    if (it != cache_.end()) return it->second;
-    return cache_.emplace(t, series_->read_frame(t)).first->second;
-  }
-  std::unique_ptr<datasets::SeriesReader> series_;
-  cpu_render::VolumeGeometry geometry_;
-  std::map<std::size_t, Volume> cache_;
 };
 
 void run_render(const RenderCommandOptions& o) {
