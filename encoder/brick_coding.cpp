@@ -66,15 +66,17 @@ double solve_first(double (&m)[15][15], double (&t)[15], int n) {
   for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) r[v] -= c * atom[v];
 }
 
-/// Quantized coefficients of one block on support a[0..s) (in order). Without refit each OMP
-/// coefficient is rounded; with refit step k solves the trailing (s−k)×(s−k) normal equations
-/// G x = Dᵀy with the first k coefficients fixed at their quantized values, and rounds x_0, so
-/// later coefficients absorb the rounding error of earlier ones. Returns the squared error of the
-/// quantized block (mean error included) and fills q.
+/// Quantized coefficients of one block on support a[0..s) (in order). Without refit (or with more
+/// than max_refit_atoms atoms) each OMP coefficient is rounded; with refit step k solves the
+/// trailing (s−k)×(s−k) normal equations G x = Dᵀy with the first k coefficients fixed at their
+/// quantized values, and rounds x_0, so later coefficients absorb the rounding error of earlier
+/// ones. Returns the squared error of the quantized block (mean error included) and fills q.
+constexpr int max_refit_atoms = 15;  ///< beyond this many atoms, each coefficient is rounded
+
 double quantize_block(const float* y, float mean_error, const std::int32_t* a, const float* c,
                       int s, const Eigen::MatrixXf& atoms, const Quantizer& cq, bool refit,
                       std::uint32_t* q) {
-  if (!refit || s <= 1) {
+  if (!refit || s <= 1 || s > max_refit_atoms) {
     for (int k = 0; k < s; ++k) q[k] = cq.quantize(static_cast<double>(c[k]));
   } else {
     double g[15][15], rhs[15], fixed[15];
@@ -129,6 +131,62 @@ std::uint32_t choose_mean_bits(float lo, float hi, double step, int forced) {
   return VR_MEAN_BITS;
 }
 
+/// Largest |value| of a block's quantized residual.
+double max_abs_residual(const float* y, float mean_error, const std::int32_t* a,
+                        const std::uint32_t* q, int s, const Eigen::MatrixXf& atoms,
+                        const Quantizer& cq) {
+  alignas(64) float r[VR_BLOCK_LENGTH];
+  for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) r[v] = y[v] + mean_error;
+  for (int k = 0; k < s; ++k) subtract_scaled(r, atoms.col(a[k]).data(), cq.value(q[k]));
+  double m = 0;
+  for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v)
+    m = std::max(m, std::abs(static_cast<double>(r[v])));
+  return m;
+}
+
+/// The coefficient interval of a brick: [min, max] of its coefficients, or narrower when clipping
+/// a few extreme coefficients costs less than the coarser step costs all the others (sum of
+/// squared rounding and clipping errors over the brick's coefficients, tried for the k smallest
+/// and j largest clipped, k, j ∈ {0, 1, 2, 4, 8}) at `levels` + 1 levels.
+std::pair<float, float> coefficient_interval(std::vector<float> all, std::uint32_t levels,
+                                             bool optimize) {
+  if (all.empty()) return {0.0f, 0.0f};
+  std::sort(all.begin(), all.end());
+  float lo = all.front(), hi = all.back();
+  if (!optimize || all.size() <= 16) return {lo, hi};
+  double best = std::numeric_limits<double>::infinity();
+  for (std::size_t k : {0u, 1u, 2u, 4u, 8u})
+    for (std::size_t j : {0u, 1u, 2u, 4u, 8u}) {
+      if (k + j + 2 > all.size()) continue;
+      const Quantizer trial(all[k], all[all.size() - 1 - j], levels);
+      double cost = 0;
+      for (float c : all) {
+        const double d = static_cast<double>(c) -
+                         static_cast<double>(trial.value(trial.quantize(static_cast<double>(c))));
+        cost += d * d;
+      }
+      if (cost < best) {
+        best = cost;
+        lo = all[k];
+        hi = all[all.size() - 1 - j];
+      }
+    }
+  return {lo, hi};
+}
+
+/// The coefficient bits of a brick whose coefficients span [lo, hi]: `forced` when ≥ 1, else the
+/// fewest bits c (1..16) whose step (hi − lo)/(2^c − 1) is at most `step`, and `fallback` when
+/// step ≤ 0 (no ε: fixed rate).
+std::uint32_t choose_coef_bits(float lo, float hi, double step, int forced,
+                               std::uint32_t fallback) {
+  if (forced >= 1) return static_cast<std::uint32_t>(forced);
+  if (!(step > 0)) return fallback;
+  const double span = static_cast<double>(hi) - static_cast<double>(lo);
+  for (std::uint32_t c = 1; c < VR_MAX_COEF_BITS; ++c)
+    if (span <= step * static_cast<double>((1u << c) - 1u)) return c;
+  return VR_MAX_COEF_BITS;
+}
+
 }  // namespace
 
 std::vector<std::byte> constant_payload(float v) {
@@ -179,117 +237,119 @@ void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
 }
 
 /// Step 1: means to b bits over [min, max] of the brick's block means, b the fewest bits whose
-/// step is at most options.mean_step (choose_mean_bits). Step 2: coefficients to 6 bits over
-/// [min, max] of the brick's coefficients, block by block (quantize_block). Step 3
-/// ("quantization inside the pursuit"): while a block's quantized error exceeds m·ε² and it has
-/// fewer than Smax atoms, add the atom most correlated with the quantized residual and quantize
-/// again; keep it only if the error falls.
+/// step is at most options.mean_step (choose_mean_bits). Step 2: the coefficient interval and the
+/// fewest coefficient bits c whose step is at most options.coef_step (choose_coef_bits). Step 3:
+/// coefficients quantized block by block (quantize_block). Step 4 ("quantization inside the
+/// pursuit"): while a block's quantized error exceeds m·ε² (options.target_energy) or one of its
+/// values is off by more than options.max_abs_error, and it has fewer than Smax atoms, add the atom
+/// most correlated with the quantized residual and quantize again; keep it only if the error
+/// falls. Step 5 (pointwise bound only): if a block still misses the bound, code the brick again
+/// with one more coefficient bit, up to 16.
 std::vector<std::byte> quantize_brick(const float* columns, const float* means,
                                       const dictionary::SparseCodes& codes, std::size_t first_block,
                                       const Eigen::MatrixXf& atoms, const QuantizeOptions& options,
-                                      double* squared_error, std::size_t* code_count) {
+                                      BrickQuantization* result) {
   float mean_lo = means[0], mean_hi = means[0];
   for (std::uint32_t b = 1; b < VR_BLOCKS_PER_BRICK; ++b) {
     mean_lo = std::min(mean_lo, means[b]);
     mean_hi = std::max(mean_hi, means[b]);
   }
-  float coef_lo = std::numeric_limits<float>::infinity(), coef_hi = -coef_lo;
-  std::size_t total = 0;
+  std::vector<float> all;
   for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     const std::size_t i = first_block + b;
-    for (int k = 0; k < codes.count[i]; ++k) {
-      coef_lo = std::min(coef_lo, codes.coefficients_of(i)[k]);
-      coef_hi = std::max(coef_hi, codes.coefficients_of(i)[k]);
-    }
-    total += codes.count[i];
+    all.insert(all.end(), codes.coefficients_of(i), codes.coefficients_of(i) + codes.count[i]);
   }
-  if (total == 0) coef_lo = coef_hi = 0;
-  // The 6-bit interval: [min, max] of the coefficients, or narrower when clipping a few extreme
-  // coefficients costs less than the coarser step costs all the others (sum of squared rounding
-  // and clipping errors over the brick's coefficients, tried for the k smallest and j largest
-  // clipped, k, j ∈ {0, 1, 2, 4, 8}).
-  if (options.optimize_interval && total > 16) {
-    std::vector<float> all;
-    all.reserve(total);
-    for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
-      const std::size_t i = first_block + b;
-      all.insert(all.end(), codes.coefficients_of(i), codes.coefficients_of(i) + codes.count[i]);
-    }
-    std::sort(all.begin(), all.end());
-    double best = std::numeric_limits<double>::infinity();
-    for (std::size_t k : {0u, 1u, 2u, 4u, 8u})
-      for (std::size_t j : {0u, 1u, 2u, 4u, 8u}) {
-        if (k + j + 2 > all.size()) continue;
-        const Quantizer trial(all[k], all[all.size() - 1 - j], VR_COEF_LEVELS);
-        double cost = 0;
-        for (float c : all) {
-          const double d = static_cast<double>(c) -
-                           static_cast<double>(trial.value(trial.quantize(static_cast<double>(c))));
-          cost += d * d;
-        }
-        if (cost < best) {
-          best = cost;
-          coef_lo = all[k];
-          coef_hi = all[all.size() - 1 - j];
-        }
-      }
-  }
+  const auto [raw_lo, raw_hi] = coefficient_interval(all, 1, false);
+  const std::uint32_t first_bits = choose_coef_bits(raw_lo, raw_hi, options.coef_step,
+                                                    options.coef_bits, options.fixed_coef_bits);
+
   format::KsvdPayloadParts parts;
   parts.mean_bits = choose_mean_bits(mean_lo, mean_hi, options.mean_step, options.mean_bits);
+  parts.atom_bits =
+      std::max<std::uint32_t>(1, format::bits_for_count(static_cast<std::uint64_t>(atoms.cols())));
   const float mean_mid = mean_lo + (mean_hi - mean_lo) / 2;
   const Quantizer mq = parts.mean_bits == 0
                            ? Quantizer(mean_mid, mean_mid, 0)
                            : Quantizer(mean_lo, mean_hi, (1u << parts.mean_bits) - 1u);
-  const Quantizer cq(coef_lo, coef_hi, VR_COEF_LEVELS);
-  std::vector<std::uint16_t>& code_words = parts.codes;
-  code_words.reserve(total + 64);
+  const bool pointwise = options.max_abs_error > 0;
+  const int max_atoms = std::min<int>(options.max_atoms, (1 << VR_MAX_SPARSITY_BITS) - 1);
   Eigen::VectorXf residual(VR_BLOCK_LENGTH), correlation;
-  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
-    const std::size_t i = first_block + b;
-    int s = codes.count[i];
-    std::int32_t a[15];
-    float c[15];
-    std::copy_n(codes.atoms_of(i), s, a);
-    std::copy_n(codes.coefficients_of(i), s, c);
-    const float* y = columns + std::size_t{b} * VR_BLOCK_LENGTH;
-    const std::uint32_t qmean = mq.quantize(static_cast<double>(means[b]));
-    const float mean_error = means[b] - mq.value(qmean);
-    std::uint32_t q[15];
-    double e = quantize_block(y, mean_error, a, c, s, atoms, cq, options.refit, q);
-    while (options.target_energy >= 0 && e > options.target_energy && s < options.max_atoms &&
-           cq.scale > 0) {
-      // The quantized residual, its best new atom, and a fresh quantization with it.
-      for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) {
-        float r = y[v] + mean_error;
-        for (int k = 0; k < s; ++k) r -= cq.value(q[k]) * atoms(static_cast<Eigen::Index>(v), a[k]);
-        residual(static_cast<Eigen::Index>(v)) = r;
+  const std::size_t slots = static_cast<std::size_t>(std::max(max_atoms, codes.max_atoms)) + 1;
+  std::vector<std::int32_t> a(slots);
+  std::vector<float> c(slots);
+  std::vector<std::uint32_t> q(slots), q2(slots);
+  for (std::uint32_t bits = first_bits;; ++bits) {
+    const auto [coef_lo, coef_hi] =
+        coefficient_interval(all, (1u << bits) - 1u, options.optimize_interval);
+    const Quantizer cq(coef_lo, coef_hi, (1u << bits) - 1u);
+    parts.coef_bits = bits;
+    parts.atoms.clear();
+    parts.values.clear();
+    double brick_error = 0;
+    std::size_t missed = 0;
+    std::uint32_t most_atoms = 0;
+    for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+      const std::size_t i = first_block + b;
+      int s = codes.count[i];
+      std::copy_n(codes.atoms_of(i), s, a.data());
+      std::copy_n(codes.coefficients_of(i), s, c.data());
+      const float* y = columns + std::size_t{b} * VR_BLOCK_LENGTH;
+      const std::uint32_t qmean = mq.quantize(static_cast<double>(means[b]));
+      const float mean_error = means[b] - mq.value(qmean);
+      double e =
+          quantize_block(y, mean_error, a.data(), c.data(), s, atoms, cq, options.refit, q.data());
+      const auto misses = [&](double energy, const std::uint32_t* quantized, int n) {
+        if (options.target_energy >= 0 && energy > options.target_energy) return true;
+        return pointwise && max_abs_residual(y, mean_error, a.data(), quantized, n, atoms, cq) >
+                                options.max_abs_error;
+      };
+      bool miss = misses(e, q.data(), s);
+      while (miss && s < max_atoms && cq.scale > 0) {
+        // The quantized residual, its best new atom, and a fresh quantization with it.
+        for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) {
+          float r = y[v] + mean_error;
+          for (int k = 0; k < s; ++k)
+            r -= cq.value(q[static_cast<std::size_t>(k)]) *
+                 atoms(static_cast<Eigen::Index>(v), a[static_cast<std::size_t>(k)]);
+          residual(static_cast<Eigen::Index>(v)) = r;
+        }
+        correlation.noalias() = atoms.transpose() * residual;
+        for (int k = 0; k < s; ++k) correlation(a[static_cast<std::size_t>(k)]) = 0;
+        Eigen::Index best = 0;
+        correlation.cwiseAbs().maxCoeff(&best);
+        a[static_cast<std::size_t>(s)] = static_cast<std::int32_t>(best);
+        c[static_cast<std::size_t>(s)] = correlation(best);
+        const double e2 = quantize_block(y, mean_error, a.data(), c.data(), s + 1, atoms, cq,
+                                         options.refit, q2.data());
+        const bool miss2 = misses(e2, q2.data(), s + 1);
+        // Keep the atom when it lowers the squared error, or (pointwise) when it meets the bound.
+        if (!(e2 < e) && (!pointwise || miss2)) break;
+        ++s;
+        e = e2;
+        miss = miss2;
+        std::copy_n(q2.begin(), s, q.begin());
       }
-      correlation.noalias() = atoms.transpose() * residual;
-      for (int k = 0; k < s; ++k) correlation(a[k]) = 0;
-      Eigen::Index best = 0;
-      correlation.cwiseAbs().maxCoeff(&best);
-      a[s] = static_cast<std::int32_t>(best);
-      c[s] = correlation(best);
-      std::uint32_t q2[15];
-      const double e2 = quantize_block(y, mean_error, a, c, s + 1, atoms, cq, options.refit, q2);
-      if (!(e2 < e)) break;
-      ++s;
-      e = e2;
-      std::copy_n(q2, s, q);
+      if (miss && pointwise) ++missed;
+      parts.sparsity[b] = static_cast<std::uint32_t>(s);
+      parts.mean[b] = qmean;
+      most_atoms = std::max(most_atoms, static_cast<std::uint32_t>(s));
+      for (int k = 0; k < s; ++k) {
+        parts.atoms.push_back(static_cast<std::uint32_t>(a[static_cast<std::size_t>(k)]));
+        parts.values.push_back(q[static_cast<std::size_t>(k)]);
+      }
+      brick_error += e;
     }
-    parts.sparsity[b] = static_cast<std::uint32_t>(s);
-    parts.mean[b] = qmean;
-    for (int k = 0; k < s; ++k)
-      code_words.push_back(
-          static_cast<std::uint16_t>((static_cast<std::uint32_t>(a[k]) << 6) | q[k]));
-    *squared_error += e;
+    if (missed > 0 && bits < VR_MAX_COEF_BITS && options.coef_bits < 1) continue;
+    parts.sparsity_bits = format::bits_for_count(std::uint64_t{most_atoms} + 1);
+    parts.dequantization[0] = mq.bias;
+    parts.dequantization[1] = mq.scale;
+    parts.dequantization[2] = cq.bias;
+    parts.dequantization[3] = cq.scale;
+    result->squared_error += brick_error;
+    result->codes += parts.atoms.size();
+    result->blocks_over_bound += missed;
+    return format::pack_ksvd_payload(parts);
   }
-  *code_count += code_words.size();
-  parts.dequantization[0] = mq.bias;
-  parts.dequantization[1] = mq.scale;
-  parts.dequantization[2] = cq.bias;
-  parts.dequantization[3] = cq.scale;
-  return format::pack_ksvd_payload(parts);
 }
 
 std::vector<std::byte> zfp_payload(const float* brick, double accuracy) {

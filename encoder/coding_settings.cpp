@@ -25,13 +25,27 @@ format::Codec codec_from_name(const std::string& name) {
   throw InputError("--codec must be ksvd or zfp, not '" + name + "'");
 }
 
-int mean_bits_from_text(const std::string& text) {
+namespace {
+
+/// "auto" (-1) or a whole number lo..hi; throws InputError naming `option` otherwise.
+int bits_from_text(const std::string& text, const char* option, long lo, long hi) {
   if (text == "auto") return -1;
   char* end = nullptr;
   const long bits = std::strtol(text.c_str(), &end, 10);
-  if (text.empty() || *end != '\0' || bits < 0 || bits > 12)
-    throw InputError("--mean-bits must be auto or a whole number 0..12, not '" + text + "'");
+  if (text.empty() || *end != '\0' || bits < lo || bits > hi)
+    throw InputError(std::string(option) + " must be auto or a whole number " + std::to_string(lo) +
+                     ".." + std::to_string(hi) + ", not '" + text + "'");
   return static_cast<int>(bits);
+}
+
+}  // namespace
+
+int mean_bits_from_text(const std::string& text) {
+  return bits_from_text(text, "--mean-bits", 0, 12);
+}
+
+int coef_bits_from_text(const std::string& text) {
+  return bits_from_text(text, "--coef-bits", 1, 16);
 }
 
 }  // namespace volreel::encoder

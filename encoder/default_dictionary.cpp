@@ -39,15 +39,13 @@ DefaultDictionary train_default_dictionary(const datasets::SeriesReader& series,
     candidate.train_seconds = detail::seconds_since(start);
     candidate.dictionary_bytes = static_cast<double>(
         format::dictionary_file_size(static_cast<std::uint64_t>(k), 216, options.half_atoms));
+    const auto stored = dictionary::from_file(format::container_dictionary(
+        dictionary::to_file(r.dictionary, format::DictionaryTraining{}), options.half_atoms));
     double total = candidate.dictionary_bytes;
     if (choose) {
       auto c = options.coding;
       c.tolerance = options.tolerance;
       c.fixed_sparsity = 0;
-      auto stored = r.dictionary;
-      if (options.half_atoms)
-        stored = dictionary::from_file(format::with_half_atoms(
-            dictionary::to_file(r.dictionary, format::DictionaryTraining{})));
       const FrameEncoder enc(&stored, c);
       double bytes = 0;
       for (std::size_t i = 0; i < samples.size(); ++i)

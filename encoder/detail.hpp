@@ -27,9 +27,17 @@ struct QuantizeOptions {
   bool refit = true;  ///< sequential least-squares refit (see quantize_block)
   double target_energy =
       -1;  ///< m·ε²: extend the pursuit while the quantized error exceeds it (< 0: never)
+  /// > 0: extend the pursuit while a value of the block is off by more than this (data units),
+  /// and code the brick again with more coefficient bits if a block still misses it.
+  double max_abs_error = 0;
   int max_atoms = 15;
   bool optimize_interval =
-      true;  ///< choose the 6-bit interval by squared error (may clip extremes)
+      true;  ///< choose the coefficient interval by squared error (may clip extremes)
+  /// The largest step of a brick's quantized coefficients: each brick takes the fewest bits
+  /// (1..16) whose step over its coefficients' range is at most this. 0: fixed_coef_bits.
+  double coef_step = 0;
+  int coef_bits = -1;  ///< ≥ 1: every brick takes exactly this many coefficient bits
+  std::uint32_t fixed_coef_bits = 8;  ///< the bits where there is no step (fixed rate)
   /// The largest step of a brick's quantized block means: each brick takes the fewest bits
   /// (0..12) whose step over its means' range is at most this. 0: always 12 bits.
   double mean_step = 0;
@@ -53,13 +61,20 @@ void owned_block_shares(std::uint32_t x, std::uint32_t y, std::uint32_t z,
 void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
                          const std::array<std::uint32_t, 3>& dims, float* weights);
 
+/// What quantize_brick adds up over the bricks it codes.
+struct BrickQuantization {
+  double squared_error = 0;  ///< of the quantized blocks (all 216 of each brick)
+  std::size_t codes = 0;
+  std::size_t blocks_over_bound = 0;  ///< blocks that missed max_abs_error even at 16 bits
+};
+
 /// Quantizes one brick's sparse codes (blocks first_block .. first_block + 215 of `codes`) into
-/// its ksvd payload (brick_decode.h's layout); see brick_coding.cpp for the steps. Adds the
-/// squared error of the quantized blocks to *squared_error and their codes to *code_count.
+/// its ksvd payload (brick_decode.h's layout); see brick_coding.cpp for the steps. Adds to
+/// *result.
 std::vector<std::byte> quantize_brick(const float* columns, const float* means,
                                       const dictionary::SparseCodes& codes, std::size_t first_block,
                                       const Eigen::MatrixXf& atoms, const QuantizeOptions& options,
-                                      double* squared_error, std::size_t* code_count);
+                                      BrickQuantization* result);
 
 /// A 36³ brick as a zfp fixed-accuracy stream, padded to a multiple of 4 bytes (never 4 bytes,
 /// which would read as a constant brick). Throws std::runtime_error if zfp fails.

@@ -12,6 +12,7 @@
 #include "detail.hpp"
 #include "volreel/encoder/pyramid.hpp"
 #include "volreel/format/brick_decode.h"
+#include "volreel/format/dictionary_file.hpp"
 
 namespace volreel::encoder {
 
@@ -21,6 +22,12 @@ using detail::seconds_since;
 using format::brick_voxels;
 
 namespace {
+
+/// The most atoms a block may have: one per value of the block (the format's 8-bit sparsity
+/// field holds up to 255).
+constexpr int max_sparsity = static_cast<int>(VR_BLOCK_LENGTH);
+/// Coefficient bits of fixed rate, which has no ε to set a step from (--coef-bits overrides).
+constexpr std::uint32_t fixed_rate_coef_bits = 8;
 
 constexpr std::size_t chunk_bricks =
     32;  ///< bricks coded per batch-OMP call (memory: 32·36³ floats ×2)
@@ -85,18 +92,22 @@ void add_to_breakdown(const Cell& c, const std::array<std::uint32_t, 3>& level_d
   } else if (!ksvd) {
     b.zfp_streams += size;
   } else {
-    vr_uint words[VR_MAX_PAYLOAD_WORDS] = {};
-    std::memcpy(words, c.payload.data(), std::min(size, sizeof words));
-    const vr_uint entry_bits = vr_entry_bits(vr_mean_bits(words));
+    std::vector<vr_uint> words(std::max<std::size_t>(size / 4, VR_HEADER_WORDS));
+    std::memcpy(words.data(), c.payload.data(), size / 4 * 4);
+    const vr_uint layout = vr_layout_word(words.data());
+    const double code_bytes = vr_layout_code_bits(layout) / 8.0;
     b.brick_headers += 4 * VR_HEADER_WORDS;
-    b.block_entries += 2 * vr_entry_units(entry_bits);
-    b.codes += 2 * c.codes;
-    b.alignment += size - vr_payload_bytes(entry_bits, static_cast<vr_uint>(c.codes));
-    ++st.mean_bits_histogram[vr_mean_bits(words)];
+    b.block_entries += 4 * vr_entry_words(layout);
+    const auto exact_code_bytes =
+        static_cast<std::size_t>(static_cast<double>(c.codes) * code_bytes);
+    b.codes += exact_code_bytes;
+    b.alignment += size - 4 * vr_code_first_word(layout) - exact_code_bytes;
+    ++st.mean_bits_histogram[vr_layout_mean_bits(layout)];
+    ++st.coef_bits_histogram[vr_layout_coef_bits(layout)];
     for (std::uint32_t k = 0; k < VR_BLOCKS_PER_BRICK; ++k) {
-      const vr_uint sparsity = vr_entry_sparsity(vr_block_entry(words, entry_bits, k));
+      const vr_uint sparsity = vr_entry_sparsity(layout, vr_block_entry(words.data(), layout, k));
       ++st.sparsity_histogram[sparsity];
-      if (!coarse) b.finest_owned_codes += 2.0 * sparsity * static_cast<double>(shares[k]);
+      if (!coarse) b.finest_owned_codes += code_bytes * sparsity * static_cast<double>(shares[k]);
     }
   }
   if (coarse) b.coarse_levels += size;
@@ -193,21 +204,27 @@ void code_ksvd_chunk(const Pyramid& pyramid, std::span<Cell> chunk,
   st.seconds_omp += seconds_since(part);
   part = Clock::now();
   double quantized_error = 0;
-  std::size_t code_count = 0;
+  std::size_t code_count = 0, over_bound = 0;
   const QuantizeOptions& qo = coding.quantize;
-#pragma omp parallel for schedule(dynamic, 1) reduction(+ : quantized_error, code_count)
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : quantized_error, code_count, over_bound)
   for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(coded.size()); ++k) {
     const auto kk = static_cast<std::size_t>(k);
     Cell& cell = chunk[coded[kk]];
-    QuantizeOptions brick_qo = qo;  // the means' step follows the level's ε
+    QuantizeOptions brick_qo = qo;  // the means' and coefficients' steps follow the level's ε
     brick_qo.mean_step *= coding.level_scale(cell.level);
-    cell.payload = detail::quantize_brick(
-        work.columns.data() + kk * VR_BLOCKS_PER_BRICK * VR_BLOCK_LENGTH,
-        work.means.data() + kk * VR_BLOCKS_PER_BRICK, work.codes, kk * VR_BLOCKS_PER_BRICK,
-        *coding.atoms, brick_qo, &quantized_error, &cell.codes);
-    code_count += cell.codes;
+    brick_qo.coef_step *= coding.level_scale(cell.level);
+    detail::BrickQuantization result;
+    cell.payload =
+        detail::quantize_brick(work.columns.data() + kk * VR_BLOCKS_PER_BRICK * VR_BLOCK_LENGTH,
+                               work.means.data() + kk * VR_BLOCKS_PER_BRICK, work.codes,
+                               kk * VR_BLOCKS_PER_BRICK, *coding.atoms, brick_qo, &result);
+    cell.codes = result.codes;
+    code_count += result.codes;
+    quantized_error += result.squared_error;
+    over_bound += result.blocks_over_bound;
   }
   st.codes += code_count;
+  st.blocks_over_bound += over_bound;
   st.quantized_squared_error += quantized_error;
   st.seconds_quantize += seconds_since(part);
   for (std::size_t i = 0; i < work.codes.size(); ++i)
@@ -336,16 +353,26 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
     if (dictionary_->block_size != 6 || dictionary_->block_length() != 216)
       throw InputError("the dictionary has blocks of " + std::to_string(dictionary_->block_size) +
                        "^3; volreel's bricks need 6^3");
-    if (dictionary_->atom_count() < 1 || dictionary_->atom_count() > 1024)
+    if (dictionary_->atom_count() < 1 ||
+        static_cast<std::uint32_t>(dictionary_->atom_count()) > format::dictionary_max_atoms)
       throw InputError("the dictionary has " + std::to_string(dictionary_->atom_count()) +
-                       " atoms; the 10-bit atom index allows 1..1024");
-    if (settings_.max_atoms < 1 || settings_.max_atoms > 15)
-      throw InputError("Smax must be in 1..15 (4-bit sparsity field)");
-    if (settings_.fixed_sparsity < 0 || settings_.fixed_sparsity > 15)
-      throw InputError("--fixed-sparsity must be in 1..15");
+                       " atoms; the 16-bit atom index allows 1..65536");
+    if (settings_.max_atoms < 1 || settings_.max_atoms > max_sparsity)
+      throw InputError("--max-atoms must be in 1..216 (the values of a block), not " +
+                       std::to_string(settings_.max_atoms));
+    if (settings_.fixed_sparsity < 0 || settings_.fixed_sparsity > max_sparsity)
+      throw InputError("--fixed-sparsity must be in 1..216, not " +
+                       std::to_string(settings_.fixed_sparsity));
     if (settings_.fixed_sparsity == 0 &&
         !(settings_.tolerance > 0 && std::isfinite(settings_.tolerance)))
       throw InputError("the tolerance must be positive and finite");
+    if (settings_.coef_bits != -1 &&
+        (settings_.coef_bits < 1 || settings_.coef_bits > static_cast<int>(VR_MAX_COEF_BITS)))
+      throw InputError("--coef-bits must be auto or 1..16");
+    if (!(settings_.coef_step_factor > 0 && std::isfinite(settings_.coef_step_factor)))
+      throw InputError("the coefficient step factor must be positive and finite");
+    if (!(settings_.max_error >= 0 && std::isfinite(settings_.max_error)))
+      throw InputError("--max-error must be positive and finite");
     if (settings_.mean_bits < -1 || settings_.mean_bits > static_cast<int>(VR_MEAN_BITS))
       throw InputError("--mean-bits must be auto or 0..12");
     if (!(settings_.mean_step_factor > 0 && std::isfinite(settings_.mean_step_factor)))
@@ -388,7 +415,20 @@ QuantizeOptions FrameEncoder::quantize_options() const {
   o.optimize_interval = settings_.optimize_interval;
   o.max_atoms = settings_.max_atoms;
   o.mean_bits = settings_.mean_bits;
-  if (settings_.fixed_sparsity == 0) o.mean_step = settings_.mean_step_factor * settings_.tolerance;
+  o.coef_bits = settings_.coef_bits;
+  o.fixed_coef_bits = fixed_rate_coef_bits;
+  if (settings_.fixed_sparsity == 0) {
+    o.mean_step = settings_.mean_step_factor * settings_.tolerance;
+    o.coef_step = settings_.coef_step_factor * settings_.tolerance;
+  }
+  if (settings_.max_error > 0) {
+    // A value is off by at most its mean's error (half a step) plus what the atoms leave.
+    o.mean_step =
+        std::min(o.mean_step > 0 ? o.mean_step : settings_.max_error, settings_.max_error / 2);
+    // The encoder's residual and the decoder's sum round differently (float): keep a margin of
+    // 0.1 % of the bound for them.
+    o.max_abs_error = settings_.max_error * 0.999;
+  }
   if (settings_.extend_pursuit && settings_.fixed_sparsity == 0 &&
       settings_.rule == VariableRateRule::tolerance)
     o.target_energy =
@@ -407,10 +447,9 @@ std::vector<std::byte> FrameEncoder::encode_brick(std::span<const float> brick) 
   detail::brick_to_blocks(brick.data(), columns.data(), means.data());
   dictionary::SparseCodes codes;
   omp_->encode(columns, codes);
-  double error = 0;
-  std::size_t code_count = 0;
+  detail::BrickQuantization result;
   return detail::quantize_brick(columns.data(), means.data(), codes, 0, dictionary_->atoms,
-                                quantize_options(), &error, &code_count);
+                                quantize_options(), &result);
 }
 
 std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,

@@ -160,14 +160,15 @@ struct StoredDictionary {
   dictionary::Dictionary dictionary;
 };
 
-/// Reads and validates the job's dictionary file, its atoms rounded to binary16 if the job asks.
+/// Reads and validates the job's dictionary file, as the container stores it: its atoms rounded to
+/// binary16 if the job asks, the DCT basis appended (format::container_dictionary).
 StoredDictionary stored_dictionary(const EncodeJob& job) {
   if (job.dictionary_file.empty()) throw InputError("the ksvd codec needs a dictionary file");
   StoredDictionary d;
   d.bytes = read_file_bytes(job.dictionary_file);
   auto file = format::parse_dictionary_file(d.bytes, job.dictionary_file);  // validates it
-  if (job.half_atoms && !file.half_atoms) {
-    file = format::with_half_atoms(std::move(file));
+  if ((job.half_atoms && !file.half_atoms) || !file.dct_atoms) {
+    file = format::container_dictionary(std::move(file), job.half_atoms);
     d.bytes = format::serialize_dictionary_file(file);
   }
   d.dictionary = dictionary::from_file(file);
@@ -268,6 +269,9 @@ void add_frame(const FrameStats& st, EncodeSummary& summary) {
     summary.sparsity_histogram[k] += st.sparsity_histogram[k];
   for (std::size_t k = 0; k < st.mean_bits_histogram.size(); ++k)
     summary.mean_bits_histogram[k] += st.mean_bits_histogram[k];
+  for (std::size_t k = 0; k < st.coef_bits_histogram.size(); ++k)
+    summary.coef_bits_histogram[k] += st.coef_bits_histogram[k];
+  summary.blocks_over_bound += st.blocks_over_bound;
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "volreel/format/crc32c.hpp"
+#include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
 
@@ -165,8 +166,9 @@ Manifest manifest_from_json(const std::string& text, const fs::path& name) {
       fail("dictionary.crc32c", "a 32-bit integer", dict.value("crc32c", json()));
     if (!dict.contains("atom_count") || !dict["atom_count"].is_number_unsigned() ||
         dict["atom_count"].get<std::uint64_t>() == 0 ||
-        dict["atom_count"].get<std::uint64_t>() > 1024)
-      fail("dictionary.atom_count", "an integer in 1..1024", dict.value("atom_count", json()));
+        dict["atom_count"].get<std::uint64_t>() > dictionary_max_atoms)
+      fail("dictionary.atom_count", "an integer in 1.." + std::to_string(dictionary_max_atoms),
+           dict.value("atom_count", json()));
     d.bytes = dict["bytes"].get<std::uint64_t>();
     d.crc32c = dict["crc32c"].get<std::uint32_t>();
     d.atom_count = dict["atom_count"].get<std::uint32_t>();

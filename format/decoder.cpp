@@ -37,35 +37,29 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
   // 1. Structure, dequantization values and atom indices.
   const KsvdPayloadLayout layout =
       check_ksvd_payload(payload_words, bytes.size(), atoms.count, name, at);
-  // 2. Prefix sum of sparsities = first code of each block.
-  vr_uint first_code[VR_BLOCKS_PER_BRICK + 1];
-  first_code[0] = 0;
-  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
-    first_code[b + 1] =
-        first_code[b] + vr_entry_sparsity(vr_block_entry(payload, layout.entry_bits, b));
   if (atoms.values.size() < std::size_t{atoms.count} * VR_BLOCK_LENGTH)
     throw FormatError(
         name, "dictionary holds fewer than the " + str(atoms.count) + " atoms the frame needs");
-  // 3. Decode every value of every block (brick_decode.h's arithmetic, vectorized over the block:
-  //    the codes are unpacked first, then each atom is added to all 216 values at once).
+  // 2. Decode every value of every block (brick_decode.h's arithmetic, vectorized over the block:
+  //    the codes are read in order, each atom added to all 216 values at once).
   const float* atom_values = atoms.values.data();
   const float mean_bias = vr_as_float(payload[0]), mean_scale = vr_as_float(payload[1]);
   const float coef_bias = vr_as_float(payload[2]), coef_scale = vr_as_float(payload[3]);
+  vr_uint code = 0;  // first code of block b: the prefix sum of the sparsities
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
-    const vr_uint entry = vr_block_entry(payload, layout.entry_bits, b);
-    const vr_uint s = vr_entry_sparsity(entry);
-    const float mean = mean_bias + mean_scale * static_cast<float>(vr_entry_mean(entry));
+    const vr_uint entry = vr_block_entry(payload, layout.word, b);
+    const vr_uint s = vr_entry_sparsity(layout.word, entry);
+    const float mean =
+        mean_bias + mean_scale * static_cast<float>(vr_entry_mean(layout.word, entry));
     alignas(64) float block[VR_BLOCK_LENGTH];
     for (vr_uint v = 0; v < VR_BLOCK_LENGTH; ++v) block[v] = mean;
-    float coefficient[VR_MAX_SPARSITY];
-    const float* atom_of[VR_MAX_SPARSITY];
-    for (vr_uint k = 0; k < s; ++k) {
-      const vr_uint code16 =
-          vr_load_u16(payload, vr_code_unit(layout.entry_bits, first_code[b] + k));
-      coefficient[k] = coef_bias + coef_scale * static_cast<float>(vr_code_value(code16));
-      atom_of[k] = atom_values + std::size_t{vr_code_atom(code16)} * VR_BLOCK_LENGTH;
+    for (vr_uint k = 0; k < s; ++k, ++code) {
+      const vr_uint c = vr_code(payload, layout.word, code);
+      const float coefficient =
+          coef_bias + coef_scale * static_cast<float>(vr_code_value(layout.word, c));
+      add_scaled(block, atom_values + std::size_t{vr_code_atom(layout.word, c)} * VR_BLOCK_LENGTH,
+                 coefficient);
     }
-    for (vr_uint k = 0; k < s; ++k) add_scaled(block, atom_of[k], coefficient[k]);
     // Scatter the block into the brick, row by row.
     const vr_uint bx = b % 6, by = (b / 6) % 6, bz = b / 36;
     for (vr_uint z = 0; z < 6; ++z)
@@ -76,35 +70,59 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
   }
 }
 
+/// Writes `width` bits of `value` at bit `bit` of the stream starting at words[first].
+void write_bits(std::vector<vr_uint>& words, vr_uint first, std::uint64_t bit, vr_uint width,
+                vr_uint value) {
+  if (width == 0) return;
+  const std::size_t word = first + static_cast<std::size_t>(bit / 32);
+  const vr_uint shift = static_cast<vr_uint>(bit % 32);
+  words[word] |= value << shift;
+  if (shift + width > 32) words[word + 1] |= value >> (32 - shift);
+}
+
 }  // namespace
 
+std::uint32_t bits_for_count(std::uint64_t count) {
+  std::uint32_t bits = 0;
+  while (bits < 64 && (std::uint64_t{1} << bits) < count) ++bits;
+  return bits;
+}
+
 std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
-  if (parts.mean_bits > VR_MEAN_BITS)
-    throw std::invalid_argument("mean bits " + str(parts.mean_bits) + " > " + str(VR_MEAN_BITS));
-  const vr_uint entry_bits = vr_entry_bits(parts.mean_bits);
+  if (parts.mean_bits > VR_MEAN_BITS || parts.sparsity_bits > VR_MAX_SPARSITY_BITS ||
+      parts.coef_bits < 1 || parts.coef_bits > VR_MAX_COEF_BITS || parts.atom_bits < 1 ||
+      parts.atom_bits > VR_MAX_ATOM_BITS)
+    throw std::invalid_argument("payload widths out of range: mean " + str(parts.mean_bits) +
+                                ", sparsity " + str(parts.sparsity_bits) + ", coefficient " +
+                                str(parts.coef_bits) + ", atom " + str(parts.atom_bits) + " bits");
+  const vr_uint layout =
+      vr_make_layout(parts.mean_bits, parts.sparsity_bits, parts.coef_bits, parts.atom_bits);
   std::uint64_t codes = 0;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
-    if (parts.sparsity[b] > VR_MAX_SPARSITY || (parts.mean[b] >> parts.mean_bits) != 0)
+    if ((std::uint64_t{parts.sparsity[b]} >> parts.sparsity_bits) != 0 ||
+        (std::uint64_t{parts.mean[b]} >> parts.mean_bits) != 0)
       throw std::invalid_argument("block " + str(b) + ": sparsity " + str(parts.sparsity[b]) +
                                   " or mean " + str(parts.mean[b]) + " does not fit its bits");
     codes += parts.sparsity[b];
   }
-  if (codes != parts.codes.size())
-    throw std::invalid_argument(str(parts.codes.size()) + " codes for sparsities summing to " +
-                                str(codes));
-  const vr_uint bytes = vr_payload_bytes(entry_bits, static_cast<vr_uint>(codes));
-  std::vector<vr_uint> words((bytes + 3) / 4, 0u);
+  if (codes != parts.atoms.size() || codes != parts.values.size())
+    throw std::invalid_argument(str(parts.atoms.size()) + " atoms and " + str(parts.values.size()) +
+                                " values for sparsities summing to " + str(codes));
+  std::vector<vr_uint> words(vr_payload_words(layout, static_cast<vr_uint>(codes)), 0u);
   for (vr_uint w = 0; w < 4; ++w) std::memcpy(&words[w], &parts.dequantization[w], 4);
-  words[4] = parts.mean_bits;
-  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
-    const vr_uint entry = parts.sparsity[b] | (parts.mean[b] << VR_SPARSITY_BITS);
-    const vr_uint bit = b * entry_bits, word = VR_HEADER_WORDS + bit / 32, shift = bit % 32;
-    words[word] |= entry << shift;
-    if (shift + entry_bits > 32) words[word + 1] |= entry >> (32 - shift);
-  }
-  for (std::size_t k = 0; k < parts.codes.size(); ++k) {
-    const vr_uint unit = vr_code_unit(entry_bits, static_cast<vr_uint>(k));
-    words[unit / 2] |= vr_uint{parts.codes[k]} << (16 * (unit % 2));
+  words[4] = layout;
+  const vr_uint entry_bits = vr_layout_entry_bits(layout);
+  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+    write_bits(words, VR_HEADER_WORDS, std::uint64_t{b} * entry_bits, entry_bits,
+               parts.sparsity[b] | (parts.mean[b] << parts.sparsity_bits));
+  const vr_uint code_bits = vr_layout_code_bits(layout), first = vr_code_first_word(layout);
+  for (std::size_t k = 0; k < parts.atoms.size(); ++k) {
+    if ((std::uint64_t{parts.atoms[k]} >> parts.atom_bits) != 0 ||
+        (std::uint64_t{parts.values[k]} >> parts.coef_bits) != 0)
+      throw std::invalid_argument("code " + str(k) + ": atom " + str(parts.atoms[k]) +
+                                  " or value " + str(parts.values[k]) + " does not fit its bits");
+    write_bits(words, first, std::uint64_t{k} * code_bits, code_bits,
+               parts.values[k] | (parts.atoms[k] << parts.coef_bits));
   }
   std::vector<std::byte> payload(words.size() * 4);
   std::memcpy(payload.data(), words.data(), payload.size());
@@ -125,37 +143,52 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::
                         const std::string& found) {
     throw FormatError(name, at + offset, "brick payload " + expected, found);
   };
-  // 1. Header: four finite dequantization values and the mean bits.
+  // 1. Header: four finite dequantization values and the layout word.
   if (bytes < 4 * VR_HEADER_WORDS || bytes % 4 != 0 || words.size() != bytes / 4)
     fail(0, "of at least " + str(4 * VR_HEADER_WORDS) + " bytes, a multiple of 4",
          str(bytes) + " bytes");
   for (vr_uint w = 0; w < 4; ++w)
     if (!std::isfinite(vr_as_float(words[w])))
       fail(4 * w, "finite dequantization value", "NaN or infinity");
-  const vr_uint layout_word = words[4];
   KsvdPayloadLayout layout;
-  layout.mean_bits = layout_word & 0xFu;
-  if (layout.mean_bits > VR_MEAN_BITS || (layout_word >> 4) != 0)
-    fail(16, "mean bits 0.." + str(VR_MEAN_BITS) + " in bits 0..3 and zero bits 4..31",
-         "word " + str(layout_word));
-  layout.entry_bits = vr_entry_bits(layout.mean_bits);
+  layout.word = words[4];
+  layout.mean_bits = vr_layout_mean_bits(layout.word);
+  layout.sparsity_bits = vr_layout_sparsity_bits(layout.word);
+  layout.coef_bits = vr_layout_coef_bits(layout.word);
+  layout.atom_bits = vr_layout_atom_bits(layout.word);
+  if (layout.mean_bits > VR_MEAN_BITS || layout.sparsity_bits > VR_MAX_SPARSITY_BITS ||
+      layout.coef_bits < 1 || layout.coef_bits > VR_MAX_COEF_BITS || layout.atom_bits < 1 ||
+      layout.atom_bits > VR_MAX_ATOM_BITS || (layout.word >> 18) != 0)
+    fail(16,
+         "layout word with mean bits 0.." + str(VR_MEAN_BITS) + ", sparsity bits 0.." +
+             str(VR_MAX_SPARSITY_BITS) + ", coefficient bits 1.." + str(VR_MAX_COEF_BITS) +
+             ", atom bits 1.." + str(VR_MAX_ATOM_BITS) + " and zero bits 18..31",
+         "mean " + str(layout.mean_bits) + ", sparsity " + str(layout.sparsity_bits) +
+             ", coefficient " + str(layout.coef_bits) + ", atom " + str(layout.atom_bits) +
+             ", reserved " + str(layout.word >> 18));
   // 2. The entries, then the length their sparsities give.
-  if (bytes < vr_payload_bytes(layout.entry_bits, 0))
+  const std::uint64_t header_entries = 4 * std::uint64_t{vr_code_first_word(layout.word)};
+  if (bytes < header_entries)
     fail(0,
-         "of at least " + str(vr_payload_bytes(layout.entry_bits, 0)) + " bytes for " +
-             str(layout.entry_bits) + "-bit block entries",
+         "of at least " + str(header_entries) + " bytes for " +
+             str(vr_layout_entry_bits(layout.word)) + "-bit block entries",
          str(bytes) + " bytes");
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
-    layout.codes += vr_entry_sparsity(vr_block_entry(words.data(), layout.entry_bits, b));
-  const std::uint64_t need = vr_payload_bytes(layout.entry_bits, layout.codes);
-  if (bytes < need || bytes >= need + 4)
-    fail(0, str(need) + " bytes for " + str(layout.codes) + " codes (+ padding to 4)",
+    layout.codes += vr_entry_sparsity(layout.word, vr_block_entry(words.data(), layout.word, b));
+  const std::uint64_t need = 4 * std::uint64_t{vr_payload_words(layout.word, layout.codes)};
+  if (bytes != need)
+    fail(0,
+         str(need) + " bytes for " + str(layout.codes) + " codes of " +
+             str(vr_layout_code_bits(layout.word)) + " bits",
          str(bytes) + " bytes");
   // 3. Atom indices.
+  const vr_uint code_bits = vr_layout_code_bits(layout.word);
   for (vr_uint k = 0; k < layout.codes; ++k) {
-    const vr_uint unit = vr_code_unit(layout.entry_bits, k);
-    const vr_uint a = vr_code_atom(vr_load_u16(words.data(), unit));
-    if (a >= atom_count) fail(2u * unit, "atom index < " + str(atom_count), str(a));
+    const vr_uint a = vr_code_atom(layout.word, vr_code(words.data(), layout.word, k));
+    if (a >= atom_count)
+      fail(4 * std::uint64_t{vr_code_first_word(layout.word)} +
+               std::uint64_t{k} * code_bits / 32 * 4,
+           "atom index < " + str(atom_count) + " (code " + str(k) + ")", str(a));
   }
   return layout;
 }

@@ -3,9 +3,11 @@
 
 #include <Eigen/Core>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <numbers>
 
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/error.hpp"
@@ -48,7 +50,53 @@ float from_half_bits(std::uint16_t bits) {
 DictionaryFile with_half_atoms(DictionaryFile d) {
   if (d.half_atoms) return d;
   d.half_atoms = true;
-  for (float& a : d.atoms) a = from_half_bits(to_half_bits(a));
+  const std::size_t generated = d.dct_atoms ? block_dct_atoms(d.block_size).size() : std::size_t{0};
+  for (std::size_t i = 0; i + generated < d.atoms.size(); ++i)
+    d.atoms[i] = from_half_bits(to_half_bits(d.atoms[i]));
+  return d;
+}
+
+DictionaryFile container_dictionary(DictionaryFile d, bool half) {
+  if (half) d = with_half_atoms(std::move(d));
+  return with_dct_atoms(std::move(d));
+}
+
+std::vector<float> block_dct_atoms(std::uint32_t block_size) {
+  const std::uint32_t n = block_size;
+  const std::size_t m = std::size_t{n} * n * n;
+  // φ_u(x) for every frequency u and position x.
+  std::vector<double> phi(std::size_t{n} * n);
+  for (std::uint32_t u = 0; u < n; ++u)
+    for (std::uint32_t x = 0; x < n; ++x)
+      phi[u * n + x] = std::sqrt((u == 0 ? 1.0 : 2.0) / n) *
+                       std::cos(std::numbers::pi * (2.0 * x + 1.0) * u / (2.0 * n));
+  std::vector<float> atoms;
+  atoms.reserve(m > 0 ? (m - 1) * m : 0);
+  for (std::uint32_t total = 1; total <= 3 * (n - 1); ++total)
+    for (std::uint32_t w = 0; w < n; ++w)
+      for (std::uint32_t v = 0; v < n; ++v) {
+        if (w + v > total || total - w - v >= n) continue;
+        const std::uint32_t u = total - w - v;
+        for (std::uint32_t z = 0; z < n; ++z)
+          for (std::uint32_t y = 0; y < n; ++y)
+            for (std::uint32_t x = 0; x < n; ++x)
+              atoms.push_back(static_cast<float>(phi[u * n + x] * phi[v * n + y] * phi[w * n + z]));
+      }
+  return atoms;
+}
+
+DictionaryFile with_dct_atoms(DictionaryFile d) {
+  if (d.dct_atoms) return d;
+  const std::vector<float> dct = block_dct_atoms(d.block_size);
+  const std::uint64_t m = std::uint64_t{d.block_size} * d.block_size * d.block_size;
+  const std::uint64_t total = d.atom_count + (m > 0 ? m - 1 : 0);
+  if (total > dictionary_max_atoms)
+    throw FormatError("<memory>", "atom count " + std::to_string(total) +
+                                      " with the DCT basis is over " +
+                                      std::to_string(dictionary_max_atoms));
+  d.atoms.insert(d.atoms.end(), dct.begin(), dct.end());
+  d.atom_count = static_cast<std::uint32_t>(total);
+  d.dct_atoms = true;
   return d;
 }
 
@@ -65,6 +113,16 @@ std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& d) {
     throw FormatError(memory, std::to_string(d.atoms.size()) + " atom values for " +
                                   std::to_string(d.atom_count) + " atoms of " + std::to_string(m) +
                                   " values");
+  // The generated DCT atoms are not stored; a reader makes them again, so they must be exactly
+  // block_dct_atoms(M).
+  const std::vector<float> dct = d.dct_atoms ? block_dct_atoms(d.block_size) : std::vector<float>{};
+  const std::uint32_t stored = d.atom_count - static_cast<std::uint32_t>(dct.size() / m);
+  if (d.dct_atoms && (d.atom_count <= dct.size() / m ||
+                      !std::equal(dct.begin(), dct.end(),
+                                  d.atoms.end() - static_cast<std::ptrdiff_t>(dct.size()))))
+    throw FormatError(memory,
+                      "a dictionary marked with the DCT basis needs at least one learned "
+                      "atom followed by exactly block_dct_atoms(M)");
   if (d.program_version.size() > 15)
     throw FormatError(memory,
                       "program version '" + d.program_version + "' is longer than 15 characters");
@@ -73,7 +131,7 @@ std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& d) {
   std::memcpy(h.magic, dictionary_magic.data(), sizeof h.magic);
   h.format_version = dictionary_format_version;
   h.header_bytes = sizeof(DictionaryFileHeader);
-  h.atom_count = d.atom_count;
+  h.atom_count = stored;
   h.block_size = d.block_size;
   h.atom_length = static_cast<std::uint32_t>(m);
   h.max_sparsity = d.training.max_sparsity;
@@ -84,22 +142,23 @@ std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& d) {
   h.coreset_levels = d.training.coreset_levels;
   h.iterations = d.training.iterations;
   h.seed = d.training.seed;
-  h.flags =
-      (d.training.flat ? dictionary_flag_flat : 0u) | (d.half_atoms ? dictionary_flag_half : 0u);
+  h.flags = (d.training.flat ? dictionary_flag_flat : 0u) |
+            (d.half_atoms ? dictionary_flag_half : 0u) | (d.dct_atoms ? dictionary_flag_dct : 0u);
   h.training_frames = d.training.training_frames;
   h.rms_error = d.training.rms_error;
   h.mean_sparsity = d.training.mean_sparsity;
   std::memcpy(h.program_version, d.program_version.data(), d.program_version.size());
 
-  std::vector<std::byte> bytes(dictionary_file_size(d.atom_count, m, d.half_atoms));
+  std::vector<std::byte> bytes(dictionary_file_size(stored, m, d.half_atoms));
   std::memcpy(bytes.data(), &h, sizeof h);
+  const std::size_t stored_values = std::size_t{stored} * m;
   if (d.half_atoms) {
-    for (std::size_t i = 0; i < d.atoms.size(); ++i) {
+    for (std::size_t i = 0; i < stored_values; ++i) {
       const std::uint16_t bits = to_half_bits(d.atoms[i]);
       std::memcpy(bytes.data() + sizeof h + 2 * i, &bits, 2);
     }
   } else {
-    std::memcpy(bytes.data() + sizeof h, d.atoms.data(), d.atoms.size() * sizeof(float));
+    std::memcpy(bytes.data() + sizeof h, d.atoms.data(), stored_values * sizeof(float));
   }
   const std::size_t crc_offset = bytes.size() - sizeof(std::uint32_t);
   const std::uint32_t crc = crc32c(std::span(bytes.data(), crc_offset));
@@ -148,9 +207,9 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes,
                       "atom length " + std::to_string(m) + " (block size " +
                           std::to_string(h.block_size) + " cubed)",
                       std::to_string(h.atom_length));
-  if ((h.flags & ~(dictionary_flag_flat | dictionary_flag_half)) != 0)
+  if ((h.flags & ~(dictionary_flag_flat | dictionary_flag_half | dictionary_flag_dct)) != 0)
     throw FormatError(name, offsetof(DictionaryFileHeader, flags),
-                      "flags with only bits 0 and 1 defined", hex32(h.flags));
+                      "flags with only bits 0, 1 and 2 defined", hex32(h.flags));
   const bool half = (h.flags & dictionary_flag_half) != 0;
   const std::size_t value_bytes = half ? 2 : sizeof(float);
 
@@ -199,6 +258,8 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes,
                         std::string("a finite ") + value_type + " (atom " + std::to_string(i / m) +
                             ", value " + std::to_string(i % m) + ")",
                         std::to_string(d.atoms[i]));
+
+  if ((h.flags & dictionary_flag_dct) != 0) d = with_dct_atoms(std::move(d));
 
   d.training.tolerance = h.tolerance;
   d.training.value_min = h.value_min;

@@ -13,6 +13,7 @@
 #include <string>
 
 #include "volreel/format/crc32c.hpp"
+#include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/error.hpp"
 
 namespace volreel::format {
@@ -166,8 +167,9 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
   const bool ksvd = h.codec == static_cast<std::uint32_t>(Codec::ksvd);
   if (ksvd && h.block_size != 6)
     fail(offsetof(FrameHeader, block_size), "block size 6", str(h.block_size));
-  if (ksvd && (h.atom_count == 0 || h.atom_count > 1024))
-    fail(offsetof(FrameHeader, atom_count), "atom count in 1..1024", str(h.atom_count));
+  if (ksvd && (h.atom_count == 0 || h.atom_count > dictionary_max_atoms))
+    fail(offsetof(FrameHeader, atom_count), "atom count in 1.." + str(dictionary_max_atoms),
+         str(h.atom_count));
   if (h.fixed_sparsity > 15)
     fail(offsetof(FrameHeader, fixed_sparsity), "fixed sparsity 0..15", str(h.fixed_sparsity));
   if (!std::isfinite(h.value_min) || !std::isfinite(h.value_max) || h.value_min > h.value_max)

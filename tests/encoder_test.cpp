@@ -162,6 +162,7 @@ TEST(Encoder, RoundTripOfABrickBuiltFromAtoms) {
   s.tolerance = 1e-3;
   s.value_min = -3;
   s.value_max = 3;
+  s.coef_bits = 6;  // the coefficients' grid
   const encoder::FrameEncoder enc(&d, s);
   const auto payload = enc.encode_brick(brick);
   // One code per block, naming the atom the block was built from.
@@ -169,12 +170,11 @@ TEST(Encoder, RoundTripOfABrickBuiltFromAtoms) {
   std::memcpy(words.data(), payload.data(), payload.size());
   ASSERT_GE(words.size(), VR_HEADER_WORDS);
   ASSERT_NE(words.data(), nullptr);
-  const vr_uint entry_bits = vr_entry_bits(vr_mean_bits(words.data()));
-  ASSERT_EQ(payload.size(), (vr_payload_bytes(entry_bits, 216) + 3) / 4 * 4);
+  const vr_uint lw = vr_layout_word(words.data());
+  ASSERT_EQ(payload.size(), 4 * vr_payload_words(lw, 216));
   for (vr_uint b = 0, code = 0; b < 216; ++b) {
-    ASSERT_EQ(vr_entry_sparsity(vr_block_entry(words.data(), entry_bits, b)), 1u) << "block " << b;
-    ASSERT_EQ(vr_code_atom(vr_load_u16(words.data(), vr_code_unit(entry_bits, code++))),
-              static_cast<vr_uint>(chosen[b]));
+    ASSERT_EQ(vr_entry_sparsity(lw, vr_block_entry(words.data(), lw, b)), 1u) << "block " << b;
+    ASSERT_EQ(vr_code_atom(lw, vr_code(words.data(), lw, code++)), static_cast<vr_uint>(chosen[b]));
   }
   std::vector<float> out(brick_voxels);
   format::decode_payload(payload, format::Codec::ksvd, 0, atom_table(d), out, "<memory>", 0);
@@ -182,7 +182,7 @@ TEST(Encoder, RoundTripOfABrickBuiltFromAtoms) {
   for (std::size_t i = 0; i < brick_voxels; ++i)
     max_error = std::max(max_error, std::abs(static_cast<double>(out[i] - brick[i])));
   EXPECT_LT(max_error,
-            3e-4);  // half the 12-bit mean step 2.15/4095 (coefficients lie on their 6-bit grid)
+            3e-4);  // half the 12-bit mean step 2.15/4095 (coefficients lie on their grid)
   // The shared per-value decode of brick_decode.h agrees with the brick decoder.
   vr_uint first = 0;
   for (vr_uint b = 0; b < 216; b += 17) {
@@ -300,10 +300,10 @@ std::vector<vr_uint> block_sparsities(const format::FrameView& f, std::uint32_t 
   if (payload.size() <= 4) return {};
   std::vector<vr_uint> words(payload.size() / 4);
   std::memcpy(words.data(), payload.data(), payload.size());
-  const vr_uint entry_bits = vr_entry_bits(vr_mean_bits(words.data()));
+  const vr_uint lw = vr_layout_word(words.data());
   std::vector<vr_uint> atoms(VR_BLOCKS_PER_BRICK);
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
-    atoms[b] = vr_entry_sparsity(vr_block_entry(words.data(), entry_bits, b));
+    atoms[b] = vr_entry_sparsity(lw, vr_block_entry(words.data(), lw, b));
   return atoms;
 }
 
@@ -348,6 +348,9 @@ TEST(Encoder, FinestOwnedCodesCountEachBlockByItsOwnVoxels) {
   for (std::uint32_t i = f.level(f.level_count() - 1).first_node; i < f.node_count(); ++i) {
     const std::vector<vr_uint> sparsities = block_sparsities(f, i);
     ASSERT_EQ(sparsities.size(), VR_BLOCKS_PER_BRICK);
+    vr_uint lw;
+    std::memcpy(&lw, f.brick_bytes(i).data() + 16, 4);
+    const double code_bytes = vr_layout_code_bits(lw) / 8.0;
     const std::uint32_t pos[3] = {f.position(i).x, f.position(i).y, f.position(i).z};
     for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
       const vr_uint atoms = sparsities[b];
@@ -359,8 +362,8 @@ TEST(Encoder, FinestOwnedCodesCountEachBlockByItsOwnVoxels) {
           n += k >= 1 && k <= 34 && 34 * pos[a] + k - 1 < dims[a];
         owned *= n / 6.0;
       }
-      expected += 2.0 * atoms * owned;
-      finest_codes += 2.0 * atoms;
+      expected += code_bytes * atoms * owned;
+      finest_codes += code_bytes * atoms;
     }
   }
   EXPECT_NEAR(st.breakdown.finest_owned_codes, expected, 1e-6 * expected);
@@ -387,7 +390,7 @@ MeanCheck check_means(const std::vector<std::byte>& bytes, const encoder::Pyrami
     std::vector<vr_uint> words(payload.size() / 4);
     std::memcpy(words.data(), payload.data(), payload.size());
     if (words.size() < VR_HEADER_WORDS) throw std::logic_error("short payload");
-    const vr_uint bits = vr_mean_bits(words.data()), entry_bits = vr_entry_bits(bits);
+    const vr_uint lw = vr_layout_word(words.data()), bits = vr_layout_mean_bits(lw);
     out.bits.push_back(bits);
     const auto p = f.position(i);
     encoder::extract_brick(pyramid, p.level, p.x, p.y, p.z, brick);
@@ -396,7 +399,7 @@ MeanCheck check_means(const std::vector<std::byte>& bytes, const encoder::Pyrami
       for (vr_uint v = 0; v < VR_BLOCK_LENGTH; ++v)
         exact += static_cast<double>(brick[vr_brick_voxel(b, v)]);
       exact /= VR_BLOCK_LENGTH;
-      const vr_uint q = vr_entry_mean(vr_block_entry(words.data(), entry_bits, b));
+      const vr_uint q = vr_entry_mean(lw, vr_block_entry(words.data(), lw, b));
       const double decoded = static_cast<double>(vr_as_float(words[0])) +
                              static_cast<double>(vr_as_float(words[1])) * q;
       out.worst_error = std::max(out.worst_error, std::abs(decoded - exact));
@@ -516,8 +519,9 @@ TEST(Encoder, LevelFactorCodesCoarseLevelsToAWiderToleranceAndLeavesTheFinestAlo
   }
 }
 
-TEST(BrickPayload, PackedFieldsReadBackAtEveryMeanWidth) {
+TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
   SplitMix64 rng(17);
+  const std::uint32_t atom_count = 300;
   for (std::uint32_t bits = 0; bits <= VR_MEAN_BITS; ++bits) {
     format::KsvdPayloadParts parts;
     parts.dequantization[0] = 0.5f;
@@ -525,43 +529,64 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryMeanWidth) {
     parts.dequantization[2] = -1.0f;
     parts.dequantization[3] = 0.125f;
     parts.mean_bits = bits;
+    parts.sparsity_bits = bits % (VR_MAX_SPARSITY_BITS + 1);
+    parts.coef_bits = 1 + (bits * 5) % VR_MAX_COEF_BITS;
+    parts.atom_bits = 9 + bits % 8;  // K = 300 needs 9
     for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
-      parts.sparsity[b] = static_cast<std::uint32_t>(rng.below(16));
+      parts.sparsity[b] =
+          static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << parts.sparsity_bits));
       parts.mean[b] = static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << bits));
       if (b == 0) parts.mean[b] = (1u << bits) - 1u;  // the largest value of the width
-      for (std::uint32_t k = 0; k < parts.sparsity[b]; ++k)
-        parts.codes.push_back(static_cast<std::uint16_t>((rng.below(30) << 6) | rng.below(64)));
+      if (b == 1) parts.sparsity[b] = (1u << parts.sparsity_bits) - 1u;
+      for (std::uint32_t k = 0; k < parts.sparsity[b]; ++k) {
+        parts.atoms.push_back(static_cast<std::uint32_t>(rng.below(atom_count)));
+        parts.values.push_back(
+            static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << parts.coef_bits)));
+      }
     }
     const auto payload = format::pack_ksvd_payload(parts);
-    const auto layout = format::check_ksvd_payload(payload, 30, "p", 0);
+    const auto layout = format::check_ksvd_payload(payload, atom_count, "p", 0);
     ASSERT_EQ(layout.mean_bits, bits);
-    ASSERT_EQ(layout.codes, parts.codes.size());
-    ASSERT_EQ(payload.size(), (vr_payload_bytes(4 + bits, layout.codes) + 3) / 4 * 4);
+    ASSERT_EQ(layout.sparsity_bits, parts.sparsity_bits);
+    ASSERT_EQ(layout.coef_bits, parts.coef_bits);
+    ASSERT_EQ(layout.atom_bits, parts.atom_bits);
+    ASSERT_EQ(layout.codes, parts.atoms.size());
+    const std::uint64_t entry_words = (216u * (bits + parts.sparsity_bits) + 31) / 32;
+    const std::uint64_t code_words =
+        (std::uint64_t{layout.codes} * (parts.coef_bits + parts.atom_bits) + 31) / 32;
+    ASSERT_EQ(payload.size(), 4 * (VR_HEADER_WORDS + entry_words + code_words));
     std::vector<vr_uint> w(payload.size() / 4);
     std::memcpy(w.data(), payload.data(), payload.size());
     ASSERT_GE(w.size(), VR_HEADER_WORDS);
+    const vr_uint lw = vr_layout_word(w.data());
     for (std::uint32_t b = 0, code = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
-      const vr_uint entry = vr_block_entry(w.data(), 4 + bits, b);
-      ASSERT_EQ(vr_entry_sparsity(entry), parts.sparsity[b]) << bits << " bits, block " << b;
-      ASSERT_EQ(vr_entry_mean(entry), parts.mean[b]) << bits << " bits, block " << b;
-      for (std::uint32_t k = 0; k < parts.sparsity[b]; ++k, ++code)
-        ASSERT_EQ(vr_load_u16(w.data(), vr_code_unit(4 + bits, code)), parts.codes[code]);
+      const vr_uint entry = vr_block_entry(w.data(), lw, b);
+      ASSERT_EQ(vr_entry_sparsity(lw, entry), parts.sparsity[b]) << bits << " bits, block " << b;
+      ASSERT_EQ(vr_entry_mean(lw, entry), parts.mean[b]) << bits << " bits, block " << b;
+      for (std::uint32_t k = 0; k < parts.sparsity[b]; ++k, ++code) {
+        const vr_uint c = vr_code(w.data(), lw, code);
+        ASSERT_EQ(vr_code_atom(lw, c), parts.atoms[code]);
+        ASSERT_EQ(vr_code_value(lw, c), parts.values[code]);
+      }
     }
-    // Word 4 with a width past 12, or other bits set, and a short payload are refused.
-    for (vr_uint bad : {13u, 15u, bits | 0x100u}) {
+    // A layout word with a width out of range or reserved bits set, a short payload and an atom
+    // index past K are refused.
+    const vr_uint good = lw;
+    for (vr_uint bad :
+         {(good & ~0xFu) | 13u, (good & ~0xF0u) | (9u << 4), good & ~0x1F00u,
+          (good & ~(0x1Fu << 13)) | (17u << 13), good | (1u << 18), good | (1u << 31)}) {
       auto broken = payload;
       std::memcpy(broken.data() + 16, &bad, 4);
-      EXPECT_THROW(format::check_ksvd_payload(broken, 30, "p", 0), format::FormatError) << bad;
+      EXPECT_THROW(format::check_ksvd_payload(broken, atom_count, "p", 0), format::FormatError)
+          << bad;
     }
     const std::vector<std::byte> short_payload(payload.begin(), payload.end() - 4);
     if (layout.codes > 1) {
-      EXPECT_THROW(format::check_ksvd_payload(short_payload, 30, "p", 0), format::FormatError);
+      EXPECT_THROW(format::check_ksvd_payload(short_payload, atom_count, "p", 0),
+                   format::FormatError);
+      EXPECT_THROW(format::check_ksvd_payload(payload, 1, "p", 0), format::FormatError);
     }
   }
-  format::KsvdPayloadParts wide;
-  wide.mean_bits = 3;
-  wide.mean[7] = 8;  // does not fit 3 bits
-  EXPECT_THROW(format::pack_ksvd_payload(wide), std::invalid_argument);
 }
 
 TEST(Encoder, NodeTableIsBreadthFirstWithBottomUpHistograms) {
@@ -638,8 +663,8 @@ TEST(Encoder, FixedSparsityUsesAtMostSAtoms) {
 /// coding changes on purpose, print the new values with VOLREEL_PRINT_CHECKSUMS=1 and update them
 /// (KSVD_* and ZFP_* in tests/CMakeLists.txt: the ε rule and zfp; LAGRANGIAN_* below: the default
 /// variable rate).
-constexpr std::size_t LAGRANGIAN_BYTES = 3108;
-constexpr std::uint32_t LAGRANGIAN_CRC = 0xfd3e2d4cu;
+constexpr std::size_t LAGRANGIAN_BYTES = 2920;
+constexpr std::uint32_t LAGRANGIAN_CRC = 0xb9325051u;
 
 TEST(Encoder, RegressionChecksums) {
   const Volume v = analytic_volume(datasets::AnalyticField::blobs, {40, 36, 34}, 1);
@@ -707,7 +732,9 @@ TEST(Container, EncodeResumeVerifyAndDecode) {
     EXPECT_TRUE(stored.half_atoms);
     EXPECT_EQ(std::filesystem::file_size(out / "dictionary.bin"),
               format::dictionary_file_size(static_cast<std::uint64_t>(d.atom_count()), 216, true));
-    const auto half = format::with_half_atoms(dictionary::to_file(d, t));
+    const auto half = format::container_dictionary(dictionary::to_file(d, t), true);
+    EXPECT_TRUE(stored.dct_atoms);
+    EXPECT_EQ(stored.atom_count, static_cast<std::uint32_t>(d.atom_count()) + 215u);
     EXPECT_EQ(stored.atoms, half.atoms);
     auto f32_job = job;
     f32_job.half_atoms = false;
@@ -793,6 +820,121 @@ TEST(Container, EncodeResumeVerifyAndDecode) {
   const auto root = format::decode_level(frame.view(), 0, c.atoms());
   EXPECT_EQ(root.data.size(), std::size_t{20} * 18 * 15);
   EXPECT_THROW(c.open_frame(4), format::FormatError);
+}
+
+}  // namespace
+}  // namespace volreel
+
+namespace volreel {
+namespace {
+
+/// A dictionary as a container stores it: the learned atoms and the DCT basis.
+dictionary::Dictionary with_dct(const dictionary::Dictionary& d) {
+  return dictionary::from_file(
+      format::with_dct_atoms(dictionary::to_file(d, format::DictionaryTraining{})));
+}
+
+/// The finest level of an encoded frame against the original: {PSNR over the value range, the
+/// largest absolute error}.
+std::pair<double, double> finest_level_error(const std::vector<std::byte>& bytes,
+                                             const dictionary::Dictionary& d, const Volume& v) {
+  const format::FrameView f(bytes, "frame.vrf");
+  const auto decoded = format::decode_level(f, f.level_count() - 1, atom_table(d));
+  const auto [mn, mx] = std::minmax_element(v.data.begin(), v.data.end());
+  double squared = 0, worst = 0;
+  for (std::size_t i = 0; i < v.data.size(); ++i) {
+    const double e = static_cast<double>(decoded.data[i]) - static_cast<double>(v.data[i]);
+    squared += e * e;
+    worst = std::max(worst, std::abs(e));
+  }
+  const double range = static_cast<double>(*mx) - static_cast<double>(*mn);
+  return {10 * std::log10(range * range / (squared / static_cast<double>(v.data.size()))), worst};
+}
+
+TEST(DctAtoms, AreAnOrthonormalZeroMeanBasis) {
+  const std::vector<float> atoms = format::block_dct_atoms(6);
+  ASSERT_EQ(atoms.size(), 215u * 216u);
+  for (std::size_t a = 0; a < 215; ++a) {
+    double sum = 0;
+    for (std::size_t v = 0; v < 216; ++v) sum += static_cast<double>(atoms[a * 216 + v]);
+    EXPECT_NEAR(sum, 0.0, 1e-5) << "atom " << a;
+    for (std::size_t b = a; b < 215; b += 7) {  // a sample of the pairs
+      double dot = 0;
+      for (std::size_t v = 0; v < 216; ++v)
+        dot += static_cast<double>(atoms[a * 216 + v]) * static_cast<double>(atoms[b * 216 + v]);
+      EXPECT_NEAR(dot, a == b ? 1.0 : 0.0, 1e-5) << a << ", " << b;
+    }
+  }
+  // The lowest frequencies first: atom 0 varies along x only.
+  EXPECT_FLOAT_EQ(atoms[0], atoms[6]);
+  EXPECT_NE(atoms[0], atoms[1]);
+}
+
+TEST(DctAtoms, AreGeneratedByTheReaderNotStored) {
+  const auto d = random_dictionary(40, 3);
+  const auto file = format::with_dct_atoms(dictionary::to_file(d, format::DictionaryTraining{}));
+  EXPECT_EQ(file.atom_count, 40u + 215u);
+  const auto bytes = format::serialize_dictionary_file(file);
+  EXPECT_EQ(bytes.size(), format::dictionary_file_size(40, 216));
+  const auto back = format::parse_dictionary_file(bytes, "d.bin");
+  EXPECT_TRUE(back.dct_atoms);
+  EXPECT_EQ(back.atom_count, 255u);
+  EXPECT_EQ(back.atoms, file.atoms);
+  // binary16 storage rounds the learned atoms only.
+  const auto half = format::container_dictionary(dictionary::to_file(d, {}), true);
+  const auto half_back =
+      format::parse_dictionary_file(format::serialize_dictionary_file(half), "h.bin");
+  EXPECT_EQ(half_back.atoms, half.atoms);
+  EXPECT_TRUE(std::equal(half.atoms.end() - 215 * 216, half.atoms.end(),
+                         format::block_dct_atoms(6).begin()));
+  // Atoms that claim the flag but differ from the basis are refused.
+  auto bad = file;
+  bad.atoms.back() += 0.5f;
+  EXPECT_THROW(format::serialize_dictionary_file(bad), format::FormatError);
+}
+
+// The quality ceiling of 6-bit coefficients, 15 atoms and a dictionary that does not span the
+// blocks is gone: with the DCT part and coefficient bits that follow ε, the PSNR keeps rising as
+// ε falls, past 60 dB, on white noise, which no dictionary was trained on.
+TEST(Encoder, QualityKeepsRisingWithoutACeiling) {
+  const Volume v = analytic_volume(datasets::AnalyticField::noise, {40, 36, 34}, 2);
+  const auto d = with_dct(random_dictionary(64, 21));
+  const auto [mn, mx] = std::minmax_element(v.data.begin(), v.data.end());
+  const double range = static_cast<double>(*mx) - static_cast<double>(*mn);
+  double previous = 0;
+  std::size_t previous_bytes = 0;
+  for (double psnr : {40.0, 50.0, 60.0, 70.0}) {
+    auto s = ksvd_settings(dictionary::tolerance_for_psnr(psnr, range), v);
+    const auto bytes = encoder::FrameEncoder(&d, s).encode(0, v);
+    const double got = finest_level_error(bytes, d, v).first;
+    EXPECT_GT(got, previous + 4) << "nominal " << psnr << " dB";
+    EXPECT_GT(bytes.size(), previous_bytes);
+    previous = got;
+    previous_bytes = bytes.size();
+  }
+  EXPECT_GT(previous, 60.0);
+}
+
+// --max-error: every decoded value of the finest level within E, for several E and both a smooth
+// and a rough field. (Below about 1.2e-4 of a brick's span of block means, 12-bit means are too
+// coarse for the bound: such blocks are counted in blocks_over_bound and reported.)
+TEST(Encoder, PointwiseBoundHoldsForEveryValue) {
+  const auto d = with_dct(random_dictionary(64, 5));
+  for (auto field : {datasets::AnalyticField::blobs, datasets::AnalyticField::noise}) {
+    const Volume v = analytic_volume(field, {40, 36, 34}, 1);
+    const auto [mn, mx] = std::minmax_element(v.data.begin(), v.data.end());
+    const double range = static_cast<double>(*mx) - static_cast<double>(*mn);
+    for (double fraction : {1e-2, 1e-3, 3e-4}) {
+      auto s = ksvd_settings(fraction * range / 2, v);
+      s.rule = encoder::VariableRateRule::tolerance;
+      s.max_error = fraction * range;
+      encoder::FrameStats st;
+      const auto bytes = encoder::FrameEncoder(&d, s).encode(0, v, &st);
+      EXPECT_EQ(st.blocks_over_bound, 0u);
+      EXPECT_LE(finest_level_error(bytes, d, v).second, s.max_error)
+          << "E = " << fraction << " of the range";
+    }
+  }
 }
 
 }  // namespace

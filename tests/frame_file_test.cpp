@@ -86,7 +86,7 @@ TEST(FrameLayout, OffsetsAndGeometry) {
   const auto d = small_dictionary();
   const auto bytes = small_frame(format::Codec::ksvd, d);
   EXPECT_EQ(std::memcmp(bytes.data(), "VREELFRM", 8), 0);
-  EXPECT_EQ(static_cast<int>(bytes[8]), 2);
+  EXPECT_EQ(static_cast<int>(bytes[8]), 3);
   EXPECT_EQ(static_cast<int>(bytes[9]), 0);
 }
 
@@ -142,18 +142,15 @@ TEST(DamagedFrame, PayloadErrorsNameTheBrick) {
   const auto d = small_dictionary();
   auto bytes = small_frame(format::Codec::ksvd, d);
   const format::FrameView view(bytes, "x");
-  // An atom index past K in brick 0's first code: caught by payload validation (not the index CRC).
+  // A reserved bit of brick 0's layout word: caught by payload validation (not the index CRC).
   vr_uint layout_word;
-  std::memcpy(&layout_word, bytes.data() + view.brick_offset(0) + 16, 4);
-  const std::uint64_t code =
-      view.brick_offset(0) + 2 * vr_code_unit(vr_entry_bits(layout_word & 0xFu), 0);
-  std::uint16_t v;
-  std::memcpy(&v, bytes.data() + code, 2);
-  v = static_cast<std::uint16_t>(v | (1023u << 6));
-  std::memcpy(bytes.data() + code, &v, 2);
+  const std::uint64_t word = view.brick_offset(0) + 16;
+  std::memcpy(&layout_word, bytes.data() + word, 4);
+  layout_word |= 1u << 20;
+  std::memcpy(bytes.data() + word, &layout_word, 4);
   const std::string e = read_everything(bytes, d, false);
-  EXPECT_NE(e.find("atom index < 32"), std::string::npos) << e;
-  EXPECT_NE(e.find("offset " + std::to_string(code)), std::string::npos) << e;
+  EXPECT_NE(e.find("zero bits 18..31"), std::string::npos) << e;
+  EXPECT_NE(e.find("offset " + std::to_string(word)), std::string::npos) << e;
 }
 
 format::Manifest sample_manifest() {

@@ -37,12 +37,13 @@ float vr_load_atom(uint index) { return atom_quads[index >> 2u][index & 3u]; }
 #include "volreel/format/brick_decode.h"
 #include "volreel/player/atlas_layout.h"
 
-// The brick's payload, copied cooperatively.
-shared uint s_payload[VR_MAX_PAYLOAD_WORDS];
+// The brick's payload is read from the batch where it lies (a payload has no size limit that
+// would fit shared memory: up to 255 codes a block of up to 32 bits each).
 shared uint s_scan[VR_INVOCATIONS];
 shared uint s_first[216];
 
-uint vr_load_word(uint index) { return s_payload[index]; }
+uint g_base;  // word offset of the brick's payload in the batch
+uint vr_load_word(uint index) { return batch_words[g_base + index]; }
 
 void store_voxel(ivec3 origin, uint voxel, float value) {
   ivec3 p = origin + ivec3(int(voxel % VR_BRICK_SIZE), int((voxel / VR_BRICK_SIZE) % VR_BRICK_SIZE),
@@ -57,9 +58,9 @@ void main() {
   const uint t = gl_LocalInvocationIndex;
   const uint record = 4u * gl_WorkGroupID.x;
   const uint base = batch_words[record];
+  g_base = base;
   const uint slot = batch_words[record + 1u];
   const uint kind = batch_words[record + 2u];
-  const uint words = min(batch_words[record + 3u], VR_MAX_PAYLOAD_WORDS);
   const ivec3 origin = ivec3(vr_atlas_cell_x(slot, params.grid_x),
                              vr_atlas_cell_y(slot, params.grid_x, params.grid_y),
                              vr_atlas_cell_z(slot, params.grid_x, params.grid_y)) *
@@ -78,17 +79,13 @@ void main() {
     return;
   }
 
-  // 1. Fetch the payload (header, block entries, codes) into shared memory cooperatively.
-  for (uint w = t; w < words; w += VR_INVOCATIONS) s_payload[w] = batch_words[base + w];
-  barrier();
-
-  // 2. Block start offsets: prefix sum of the sparsities. Invocation t sums blocks 4t..4t+3, a
+  // 1. Block start offsets: prefix sum of the sparsities. Invocation t sums blocks 4t..4t+3, a
   //    Hillis–Steele scan over the 54 sums, then each writes the first code of its 4 blocks.
-  const uint entry_bits = vr_entry_bits(vr_mean_bits());
+  const uint layout_word = vr_layout_word();
   uint own[4];
   uint sum = 0u;
   for (uint i = 0u; i < 4u; ++i) {
-    own[i] = vr_entry_sparsity(vr_block_entry(entry_bits, 4u * t + i));
+    own[i] = vr_entry_sparsity(layout_word, vr_block_entry(layout_word, 4u * t + i));
     sum += own[i];
   }
   s_scan[t] = sum;
@@ -106,21 +103,21 @@ void main() {
   }
   barrier();
 
-  // 3. Block by block, invocation t reconstructs values 4t..4t+3 as vr_decode_value does:
+  // 2. Block by block, invocation t reconstructs values 4t..4t+3 as vr_decode_value does:
   //    mean_bias + mean_scale·q, plus (coef_bias + coef_scale·c)·atom[a][v] for each code.
   const float mean_bias = vr_as_float(vr_load_word(0u));
   const float mean_scale = vr_as_float(vr_load_word(1u));
   const float coef_bias = vr_as_float(vr_load_word(2u));
   const float coef_scale = vr_as_float(vr_load_word(3u));
   for (uint b = 0u; b < VR_BLOCKS_PER_BRICK; ++b) {
-    const uint entry = vr_block_entry(entry_bits, b);
-    const uint s = vr_entry_sparsity(entry);
+    const uint entry = vr_block_entry(layout_word, b);
+    const uint s = vr_entry_sparsity(layout_word, entry);
     const uint first_code = s_first[b];
-    vec4 value = vec4(mean_bias + mean_scale * float(vr_entry_mean(entry)));
+    vec4 value = vec4(mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry)));
     for (uint k = 0u; k < s; ++k) {
-      const uint code16 = vr_load_u16(vr_code_unit(entry_bits, first_code + k));
-      const float coefficient = coef_bias + coef_scale * float(vr_code_value(code16));
-      value += coefficient * atom_quads[vr_code_atom(code16) * (VR_BLOCK_LENGTH / 4u) + t];
+      const uint code = vr_code(layout_word, first_code + k);
+      const float coefficient = coef_bias + coef_scale * float(vr_code_value(layout_word, code));
+      value += coefficient * atom_quads[vr_code_atom(layout_word, code) * (VR_BLOCK_LENGTH / 4u) + t];
     }
     for (uint i = 0u; i < 4u; ++i) store_voxel(origin, vr_brick_voxel(b, 4u * t + i), value[i]);
   }

@@ -113,21 +113,21 @@ void main() {
   const float mean_scale = vr_as_float(vr_load_word(1u));
   const float coef_bias = vr_as_float(vr_load_word(2u));
   const float coef_scale = vr_as_float(vr_load_word(3u));
-  const uint entry_bits = vr_entry_bits(vr_mean_bits());
+  const uint layout_word = vr_layout_word();
   uint first_code = 0u;  // sum of the sparsities of the blocks before b
   uint b = 0u;
   for (uint bz = 0u; bz < VR_BLOCKS_PER_AXIS; ++bz)
     for (uint by = 0u; by < VR_BLOCKS_PER_AXIS; ++by)
       for (uint bx = 0u; bx < VR_BLOCKS_PER_AXIS; ++bx, ++b) {
-        const uint entry = vr_block_entry(entry_bits, b);
-        const uint s = vr_entry_sparsity(entry);
-        const float mean = mean_bias + mean_scale * float(vr_entry_mean(entry));
+        const uint entry = vr_block_entry(layout_word, b);
+        const uint s = vr_entry_sparsity(layout_word, entry);
+        const float mean = mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry));
         low0 = low1 = low2 = low3 = low4 = vec4(mean);
         high0 = high1 = high2 = high3 = high4 = vec2(mean);
         for (uint k = 0u; k < s; ++k) {
-          const uint code16 = vr_load_u16(vr_code_unit(entry_bits, first_code + k));
-          const float coefficient = coef_bias + coef_scale * float(vr_code_value(code16));
-          const int atom = int(vr_code_atom(code16) * VR_ATOM_TEXELS);
+          const uint code = vr_code(layout_word, first_code + k);
+          const float coefficient = coef_bias + coef_scale * float(vr_code_value(layout_word, code));
+          const int atom = int(vr_code_atom(layout_word, code) * VR_ATOM_TEXELS);
 #define VR_ACCUMULATE(r)                                                         \
   low##r += coefficient * texelFetch(atom_texels, atom + int(texel##r));         \
   high##r += coefficient * texelFetch(atom_texels, atom + int(texel##r) + 1).xy;

@@ -21,19 +21,27 @@ const uint N = 46656u;
 
 void main() {
   const uint b = gl_WorkGroupID.x, v = gl_LocalInvocationIndex, i = b * 216u + v;
-  const uint entry_bits = vr_entry_bits(vr_mean_bits());
-  uint first_code = 0u;
-  for (uint c = 0u; c < b; ++c) first_code += vr_entry_sparsity(vr_block_entry(entry_bits, c));
-  // Entries of every width 4..16 (the payload is long enough for 216 entries of 16 bits).
-  const uint entry = vr_block_entry(4u + (i / 216u) % 13u, i % VR_BLOCKS_PER_BRICK);
-  const uint width = 4u + i % 13u;
+  const uint layout_word = vr_layout_word();
+  uint first_code = 0u, codes = 0u;
+  for (uint c = 0u; c < VR_BLOCKS_PER_BRICK; ++c) {
+    const uint s = vr_entry_sparsity(layout_word, vr_block_entry(layout_word, c));
+    if (c < b) first_code += s;
+    codes += s;
+  }
+  // Layout words of every width (mean 0..12, sparsity 0..8, coefficient and atom 1..16).
+  const uint other = vr_make_layout(i % 13u, (i / 13u) % 9u, 1u + (i / 117u) % 16u,
+                                    1u + (i / 1872u) % 16u);
+  const uint entry = vr_block_entry(layout_word, i % VR_BLOCKS_PER_BRICK);
+  const uint code = vr_code(layout_word, codes == 0u ? 0u : i % codes);
   results[0u * N + i] = vr_brick_voxel(b, v);
   results[1u * N + i] = floatBitsToUint(vr_decode_value(b, first_code, v));
-  results[2u * N + i] = vr_load_u16(i % (2u * VR_HEADER_WORDS + VR_BLOCKS_PER_BRICK));
-  results[3u * N + i] = vr_entry_sparsity(entry) | (vr_entry_mean(entry) << 8u);
-  results[4u * N + i] = vr_code_atom(i & 0xFFFFu) | (vr_code_value(i & 0xFFFFu) << 16u);
-  results[5u * N + i] = vr_code_unit(width, i) ^ (vr_payload_bytes(width, i) << 12u) ^
-                        (vr_entry_units(width) << 24u);
+  results[2u * N + i] = vr_read_bits(0u, (i * 13u) % 1024u, i % 33u);
+  results[3u * N + i] = vr_entry_sparsity(layout_word, entry) |
+                        (vr_entry_mean(layout_word, entry) << 8u);
+  results[4u * N + i] = codes == 0u ? 0u : vr_code_atom(layout_word, code) |
+                                               (vr_code_value(layout_word, code) << 16u);
+  results[5u * N + i] = vr_layout_entry_bits(other) | (vr_layout_code_bits(other) << 5u) |
+                        (vr_entry_words(other) << 11u) ^ (vr_payload_words(other, i) << 8u);
   results[6u * N + i] = vr_atlas_cell_x(i, 7u) | (vr_atlas_cell_y(i, 7u, 5u) << 8u) |
                         (vr_atlas_cell_z(i, 7u, 5u) << 16u);
   results[7u * N + i] = vr_atlas_cell_x(i, 56u) | (vr_atlas_cell_y(i, 56u, 56u) << 8u) |
@@ -41,9 +49,9 @@ void main() {
   if (i == 0u) {
     const uint constants[16] = uint[16](
         VR_BRICK_SIZE, VR_BRICK_INTERIOR, VR_BLOCK_SIZE, VR_BLOCK_LENGTH, VR_BLOCKS_PER_AXIS,
-        VR_BLOCKS_PER_BRICK, VR_HEADER_WORDS, VR_MEAN_BITS, VR_COEF_BITS, VR_ATOM_BITS,
-        VR_MAX_SPARSITY, VR_MAX_PAYLOAD_WORDS, VR_COEF_LEVELS, VR_ATLAS_SLOT_SIZE, VR_ATLAS_NO_SLOT,
-        vr_mean_bits() | (vr_entry_bits(vr_mean_bits()) << 8u) | (VR_SPARSITY_BITS << 16u));
+        VR_BLOCKS_PER_BRICK, VR_HEADER_WORDS, VR_MEAN_BITS, VR_MAX_SPARSITY_BITS, VR_MAX_COEF_BITS,
+        VR_MAX_ATOM_BITS, VR_ATLAS_SLOT_SIZE, VR_ATLAS_NO_SLOT, layout_word, codes,
+        vr_code_first_word(layout_word));
     for (uint k = 0u; k < 16u; ++k) results[8u * N + k] = constants[k];
   }
 }

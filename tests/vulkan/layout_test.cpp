@@ -63,43 +63,47 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
   // 2. The same functions in C++.
   const vr_uint* p = payload.data();
   const float* a = atoms.data();
-  const std::uint32_t constants[16] = {
-      VR_BRICK_SIZE,
-      VR_BRICK_INTERIOR,
-      VR_BLOCK_SIZE,
-      VR_BLOCK_LENGTH,
-      VR_BLOCKS_PER_AXIS,
-      VR_BLOCKS_PER_BRICK,
-      VR_HEADER_WORDS,
-      VR_MEAN_BITS,
-      VR_COEF_BITS,
-      VR_ATOM_BITS,
-      VR_MAX_SPARSITY,
-      VR_MAX_PAYLOAD_WORDS,
-      VR_COEF_LEVELS,
-      VR_ATLAS_SLOT_SIZE,
-      VR_ATLAS_NO_SLOT,
-      vr_mean_bits(p) | (vr_entry_bits(vr_mean_bits(p)) << 8) | (VR_SPARSITY_BITS << 16)};
+  const vr_uint layout_word = vr_layout_word(p);
+  std::uint32_t codes = 0;
+  for (std::uint32_t c = 0; c < VR_BLOCKS_PER_BRICK; ++c)
+    codes += vr_entry_sparsity(layout_word, vr_block_entry(p, layout_word, c));
+  ASSERT_GT(codes, 0u);
+  ASSERT_GE(payload.size(), 33u) << "the probe reads bits 0..1055";
+  const std::uint32_t constants[16] = {VR_BRICK_SIZE,
+                                       VR_BRICK_INTERIOR,
+                                       VR_BLOCK_SIZE,
+                                       VR_BLOCK_LENGTH,
+                                       VR_BLOCKS_PER_AXIS,
+                                       VR_BLOCKS_PER_BRICK,
+                                       VR_HEADER_WORDS,
+                                       VR_MEAN_BITS,
+                                       VR_MAX_SPARSITY_BITS,
+                                       VR_MAX_COEF_BITS,
+                                       VR_MAX_ATOM_BITS,
+                                       VR_ATLAS_SLOT_SIZE,
+                                       VR_ATLAS_NO_SLOT,
+                                       layout_word,
+                                       codes,
+                                       vr_code_first_word(layout_word)};
   for (std::uint32_t k = 0; k < 16; ++k)
     EXPECT_EQ(gpu[8 * N + k], constants[k]) << "constant " << k;
-  EXPECT_EQ(VR_MAX_PAYLOAD_WORDS * 4, vr_payload_bytes(16, 216 * VR_MAX_SPARSITY));
-  const vr_uint entry_bits = vr_entry_bits(vr_mean_bits(p));
-  ASSERT_GE(payload.size(), VR_HEADER_WORDS + 108u) << "the probe reads 216 entries of 16 bits";
   std::uint32_t first_code = 0, mismatches = 0;
   float worst = 0;
   for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) {
       const std::uint32_t i = b * 216 + v;
-      const vr_uint entry = vr_block_entry(p, 4 + (i / 216) % 13, i % VR_BLOCKS_PER_BRICK);
-      const vr_uint width = 4 + i % 13;
+      const vr_uint other =
+          vr_make_layout(i % 13, (i / 13) % 9, 1 + (i / 117) % 16, 1 + (i / 1872) % 16);
+      const vr_uint entry = vr_block_entry(p, layout_word, i % VR_BLOCKS_PER_BRICK);
+      const vr_uint code = vr_code(p, layout_word, i % codes);
       const std::uint32_t expected[8] = {
           vr_brick_voxel(b, v),
           0,  // the decoded value, compared below
-          vr_load_u16(p, i % (2 * VR_HEADER_WORDS + VR_BLOCKS_PER_BRICK)),
-          vr_entry_sparsity(entry) | (vr_entry_mean(entry) << 8),
-          vr_code_atom(i & 0xFFFF) | (vr_code_value(i & 0xFFFF) << 16),
-          vr_code_unit(width, i) ^ (vr_payload_bytes(width, i) << 12) ^
-              (vr_entry_units(width) << 24),
+          vr_read_bits(p, 0, (i * 13) % 1024, i % 33),
+          vr_entry_sparsity(layout_word, entry) | (vr_entry_mean(layout_word, entry) << 8),
+          vr_code_atom(layout_word, code) | (vr_code_value(layout_word, code) << 16),
+          vr_layout_entry_bits(other) | (vr_layout_code_bits(other) << 5) |
+              ((vr_entry_words(other) << 11) ^ (vr_payload_words(other, i) << 8)),
           vr_atlas_cell_x(i, 7) | (vr_atlas_cell_y(i, 7, 5) << 8) |
               (vr_atlas_cell_z(i, 7, 5) << 16),
           vr_atlas_cell_x(i, 56) | (vr_atlas_cell_y(i, 56, 56) << 8) |
@@ -113,7 +117,7 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
       const float glsl = std::bit_cast<float>(gpu[N + i]);
       worst = std::max(worst, std::fabs(cpu - glsl) / std::max(1.0f, std::fabs(cpu)));
     }
-    first_code += vr_entry_sparsity(vr_block_entry(p, entry_bits, b));
+    first_code += vr_entry_sparsity(layout_word, vr_block_entry(p, layout_word, b));
   }
   EXPECT_EQ(mismatches, 0u);
   EXPECT_LT(worst, 1e-5f) << "largest relative difference of decoded values";

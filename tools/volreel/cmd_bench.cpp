@@ -57,9 +57,8 @@ void run_rd(const RdCommandOptions& o) {
   if (!o.dictionary.empty()) {
     // The dictionary as volreel encode stores it in the container (binary16 atoms by default).
     auto file = format::read_dictionary_file(o.dictionary);
-    if (o.atom_storage == "f16") file = format::with_half_atoms(std::move(file));
-    const auto bytes = static_cast<std::size_t>(format::dictionary_file_size(
-        file.atom_count, file.atoms.size() / file.atom_count, file.half_atoms));
+    file = format::container_dictionary(std::move(file), o.atom_storage == "f16");
+    const auto bytes = format::serialize_dictionary_file(file).size();
     auto dict = std::make_shared<const dictionary::Dictionary>(dictionary::from_file(file));
     std::printf(
         "volreel codecs: dictionary %s (K = %d, atoms stored as %s, %zu bytes, counted once in "

@@ -30,15 +30,17 @@ struct EncodeOptions {
   std::string series, dictionary, out,
       codec = "ksvd", rate_rule = "lagrangian",
       pursuit = dictionary::pursuit_name(encoder::CodingSettings{}.selection), mean_bits = "auto",
-      atom_storage = "f16";
+      coef_bits = "auto", atom_storage = "f16";
   ReaderOptions reader;
-  double tolerance = 0, psnr = 0, bps = 0, zfp_accuracy = 0,
-         level_factor = encoder::CodingSettings{}.level_tolerance_factor;
-  int fixed_sparsity = 0, max_atoms = 15, atoms = 0;
+  double tolerance = 0, psnr = 0, bps = 0, zfp_accuracy = 0, max_error = 0,
+         level_factor = encoder::CodingSettings{}.level_tolerance_factor,
+         coef_step_factor = encoder::CodingSettings{}.coef_step_factor;
+  int fixed_sparsity = 0, max_atoms = encoder::default_max_atoms, atoms = 0;
   std::size_t max_frames = 0, rate_sample_frames = 3;
   bool resume = false, overwrite = false, no_refit = false, no_interval = false, extend = false;
   CLI::Option *tolerance_opt = nullptr, *psnr_opt = nullptr, *bps_opt = nullptr, *zfp_opt = nullptr,
-              *level_factor_opt = nullptr;
+              *level_factor_opt = nullptr, *max_error_opt = nullptr, *max_atoms_opt = nullptr,
+              *rate_rule_opt = nullptr;
 };
 
 /// The options' coding settings (the value range and ε not yet set).
@@ -56,6 +58,18 @@ encoder::CodingSettings coding_settings(const EncodeOptions& o) {
   c.selection = dictionary::pursuit_from_name(o.pursuit);
   c.level_tolerance_factor = o.level_factor;
   c.mean_bits = encoder::mean_bits_from_text(o.mean_bits);
+  c.coef_bits = encoder::coef_bits_from_text(o.coef_bits);
+  c.coef_step_factor = o.coef_step_factor;
+  if (o.max_error_opt->count() > 0) {
+    // The pointwise bound: the tolerance rule at ε = E/2 (an RMS error never above the largest),
+    // then atoms and coefficient bits until every value holds (quantize_brick's steps 4 and 5).
+    if (c.fixed_sparsity > 0)
+      throw InputError("--max-error and --fixed-sparsity exclude each other");
+    if (o.rate_rule_opt->count() > 0 && c.rule != encoder::VariableRateRule::tolerance)
+      throw InputError("--max-error uses --rate-rule tolerance");
+    c.rule = encoder::VariableRateRule::tolerance;
+    c.max_error = o.max_error;
+  }
   c.refit_quantization = !o.no_refit;
   c.extend_pursuit = o.extend;
   c.optimize_interval = !o.no_interval;
@@ -65,6 +79,7 @@ encoder::CodingSettings coding_settings(const EncodeOptions& o) {
 encoder::ToleranceRequest tolerance_request(const EncodeOptions& o) {
   encoder::ToleranceRequest r;
   if (o.tolerance_opt->count()) r.tolerance = o.tolerance;
+  if (o.max_error_opt->count()) r.tolerance = o.max_error / 2;
   if (o.psnr_opt->count()) r.psnr = o.psnr;
   if (o.bps_opt->count()) r.bps = o.bps;
   r.rate_sample_frames = o.rate_sample_frames;
@@ -151,9 +166,9 @@ void run_encode(const EncodeOptions& o) {
     if (!trained.empty()) fs::remove(trained);
     job.dictionary_file = copy;
     auto file = format::read_dictionary_file(copy);
-    if (job.half_atoms && !file.half_atoms) {
+    if ((job.half_atoms && !file.half_atoms) || !file.dct_atoms) {
       // Stored as the container will store it, so that --bps measures what the encode writes.
-      file = format::with_half_atoms(std::move(file));
+      file = format::container_dictionary(std::move(file), job.half_atoms);
       format::write_dictionary_file(copy, file);
     }
     std::optional<ProgressBar> bar;
@@ -165,10 +180,15 @@ void run_encode(const EncodeOptions& o) {
     print_tolerance_choice(eps, c, o.bps, std::min(o.rate_sample_frames, frames), range,
                            file.atom_count);
   }
-  job.provenance = {
-      {"program", "volreel " VOLREEL_VERSION},      {"series", o.series},
-      {"refit_quantization", c.refit_quantization}, {"extend_pursuit", c.extend_pursuit},
-      {"optimize_interval", c.optimize_interval},   {"max_atoms", c.max_atoms}};
+  job.provenance = {{"program", "volreel " VOLREEL_VERSION},
+                    {"series", o.series},
+                    {"refit_quantization", c.refit_quantization},
+                    {"extend_pursuit", c.extend_pursuit},
+                    {"optimize_interval", c.optimize_interval},
+                    {"max_atoms", c.max_atoms},
+                    {"coef_bits", o.coef_bits},
+                    {"coef_step_factor", c.coef_step_factor},
+                    {"max_error", c.max_error}};
   // encode_series adds the variable-rate rule and its parameters.
   encoder::EncodeSummary s;
   {
@@ -208,19 +228,28 @@ void add_encode_command(CLI::App& app) {
   o->bps_opt = cmd->add_option(
       "--bps", o->bps,
       "Search eps so that the whole container takes this many bits per voxel (within 5%)");
-  o->tolerance_opt->excludes(o->psnr_opt)->excludes(o->bps_opt);
-  o->psnr_opt->excludes(o->bps_opt);
+  o->max_error_opt = cmd->add_option(
+      "--max-error", o->max_error,
+      "Pointwise bound E, data units: every decoded value of the finest level within E of the "
+      "original\n(blocks take atoms, bricks coefficient bits, until it holds; volreel compare "
+      "--max-error checks it)");
+  o->max_error_opt->check(CLI::PositiveNumber);
+  o->tolerance_opt->excludes(o->psnr_opt)->excludes(o->bps_opt)->excludes(o->max_error_opt);
+  o->psnr_opt->excludes(o->bps_opt)->excludes(o->max_error_opt);
+  o->bps_opt->excludes(o->max_error_opt);
   cmd->add_option("--fixed-sparsity", o->fixed_sparsity,
-                  "Fixed rate: S atoms per block (1..15) instead of a tolerance");
-  cmd->add_option("--max-atoms", o->max_atoms, "Smax for variable rate (1..15)")
-      ->capture_default_str();
-  cmd->add_option("--rate-rule", o->rate_rule,
-                  "Variable rate: lagrangian (equal distortion-per-bit slope in every block: the "
-                  "least squared error\n"
-                  "for the size; blocks of aprons and padding weigh by the voxels the decoder "
-                  "reads from them) or\n"
-                  "tolerance (every block's RMS error <= eps: equal error per block)")
-      ->capture_default_str();
+                  "Fixed rate: S atoms per block (1..216) instead of a tolerance");
+  o->max_atoms_opt = cmd->add_option("--max-atoms", o->max_atoms, "Smax for variable rate (1..216)")
+                         ->capture_default_str();
+  o->rate_rule_opt =
+      cmd->add_option(
+             "--rate-rule", o->rate_rule,
+             "Variable rate: lagrangian (equal distortion-per-bit slope in every block: the "
+             "least squared error\n"
+             "for the size; blocks of aprons and padding weigh by the voxels the decoder "
+             "reads from them) or\n"
+             "tolerance (every block's RMS error <= eps: equal error per block)")
+          ->capture_default_str();
   o->level_factor_opt = cmd->add_option("--level-factor", o->level_factor,
                                         "Lagrangian rule: code each coarser level to F times the "
                                         "eps of the level below (F^d, d levels above\nthe finest: "
@@ -239,6 +268,15 @@ void add_encode_command(CLI::App& app) {
                   "Bits of each brick's quantized block means: auto (variable rate: per brick the "
                   "fewest bits, 0..12,\n"
                   "whose step is at most eps/2; fixed rate: 12) or 0..12 for every brick")
+      ->capture_default_str();
+  cmd->add_option("--coef-bits", o->coef_bits,
+                  "Bits of each brick's quantized coefficients: auto (variable rate: per brick "
+                  "the fewest bits, 1..16,\nwhose step is at most --coef-step times eps; fixed "
+                  "rate: 8) or 1..16 for every brick")
+      ->capture_default_str();
+  cmd->add_option("--coef-step", o->coef_step_factor,
+                  "Variable rate: the largest coefficient step as a multiple of eps")
+      ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->add_option("--atom-storage", o->atom_storage,
                   "How the container stores the dictionary's atoms: f16 (IEEE half: half the "

@@ -41,14 +41,28 @@ void print_breakdown(const encoder::EncodeSummary& s) {
     if (const auto bps = s.finest_owned_codes_bps()) std::printf(", %.4f bps", *bps);
     std::printf("\n");
   }
-  std::size_t blocks = 0, codes = 0;
-  for (std::size_t k = 0; k < s.sparsity_histogram.size(); ++k)
+  std::size_t blocks = 0, codes = 0, most = 0;
+  for (std::size_t k = 0; k < s.sparsity_histogram.size(); ++k) {
     blocks += s.sparsity_histogram[k], codes += k * s.sparsity_histogram[k];
+    if (s.sparsity_histogram[k] > 0) most = k;
+  }
   if (blocks == 0) return;
-  std::printf("atoms per block: mean %.2f; blocks with 0..15 atoms (%%):",
-              static_cast<double>(codes) / static_cast<double>(blocks));
-  for (std::size_t count : s.sparsity_histogram)
+  std::printf(
+      "atoms per block: mean %.2f, most %zu; blocks with 0, 1-3, 4-7, 8-15, 16-31, 32-63, "
+      "64+ atoms (%%):",
+      static_cast<double>(codes) / static_cast<double>(blocks), most);
+  for (std::size_t lo : {0u, 1u, 4u, 8u, 16u, 32u, 64u}) {
+    const std::size_t hi = lo == 0 ? 1 : lo == 64 ? s.sparsity_histogram.size() : 2 * lo;
+    std::size_t count = 0;
+    for (std::size_t k = lo; k < hi; ++k) count += s.sparsity_histogram[k];
     std::printf(" %.1f", 100.0 * static_cast<double>(count) / static_cast<double>(blocks));
+  }
+  std::size_t coded_bricks = 0, coef_bits = 0;
+  for (std::size_t k = 0; k < s.coef_bits_histogram.size(); ++k)
+    coded_bricks += s.coef_bits_histogram[k], coef_bits += k * s.coef_bits_histogram[k];
+  std::printf(
+      "\ncoefficient bits per brick: mean %.2f",
+      static_cast<double>(coef_bits) / static_cast<double>(std::max<std::size_t>(coded_bricks, 1)));
   std::size_t bricks = 0, bits = 0;
   for (std::size_t k = 0; k < s.mean_bits_histogram.size(); ++k)
     bricks += s.mean_bits_histogram[k], bits += k * s.mean_bits_histogram[k];
@@ -91,6 +105,16 @@ void print_tolerance_choice(const encoder::ToleranceChoice& e, const encoder::Co
 
 void print_encode_summary(const encoder::EncodeSummary& s, const encoder::CodingSettings& c,
                           const std::string& out) {
+  if (c.max_error > 0) {
+    if (s.blocks_over_bound == 0)
+      std::printf("pointwise bound: every coded block within %.4g of the original\n", c.max_error);
+    else
+      std::fprintf(stderr,
+                   "warning: %zu blocks miss the pointwise bound %.4g even with 16-bit "
+                   "coefficients (12-bit block means are too coarse for it); volreel compare "
+                   "prints the largest error\n",
+                   s.blocks_over_bound, c.max_error);
+  }
   std::printf(
       "encoding time: pyramid %.2f s, brick extraction + histograms %.2f s, batch-OMP %.2f s, "
       "quantization %.2f s, "

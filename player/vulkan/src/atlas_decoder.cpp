@@ -27,7 +27,9 @@ constexpr std::uint32_t kind_ksvd = 0, kind_constant = 1, kind_raw = 2;
 constexpr std::uint64_t record_bytes = 16;  // {payload word offset, slot, kind, payload words}
 constexpr std::uint64_t raw_bytes = std::uint64_t{format::brick_voxels} * 4;
 constexpr std::uint32_t max_bricks_per_dispatch = 65535;  // maxComputeWorkGroupCount[0] minimum
-constexpr std::uint32_t max_payload_words = VR_MAX_PAYLOAD_WORDS;  // decode_bricks.comp's copy
+/// The most atoms the buffer_copy kernel's texel buffer holds: a learned dictionary of up to 1024
+/// atoms with its 215 DCT atoms, rounded up.
+constexpr std::uint32_t max_copy_atoms = 2048;
 // decode_bricks_rows.comp: a decoded brick is 6 columns (one per block x), each 36×36 rows of 8
 // texels (6 voxels and 2 unused), copied into the slot with bufferRowLength 8.
 constexpr std::uint32_t column_row_texels = 8;
@@ -113,17 +115,19 @@ AtlasDecoder::AtlasDecoder(const Context& context, const Atlas& atlas,
       options_.upload_budget_bytes, context.limits().maxStorageBufferRange / 4 * 4);
   // 2. Kernel and pipeline: batch, dictionary, atlas (image_store) or decoded bricks
   //    (buffer_copy).
-  //    buffer_copy reads the dictionary as a texel buffer of up to 1024 atoms · 72 texels.
+  //    buffer_copy reads the dictionary as a texel buffer of up to max_copy_atoms atoms · 72
+  //    texels.
   kernel_ = options_.kernel;
   const bool texels_fit =
-      context.limits().maxTexelBufferElements >= (1u << VR_ATOM_BITS) * copy_atom_floats / 4;
+      context.limits().maxTexelBufferElements >= max_copy_atoms * copy_atom_floats / 4;
   if (kernel_ == DecoderOptions::Kernel::automatic)
     kernel_ = context.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU && texels_fit
                   ? DecoderOptions::Kernel::buffer_copy
                   : DecoderOptions::Kernel::image_store;
   if (kernel_ == DecoderOptions::Kernel::buffer_copy && !texels_fit)
-    throw std::invalid_argument(
-        "AtlasDecoder: the buffer_copy kernel needs texel buffers of 73728 elements");
+    throw std::invalid_argument("AtlasDecoder: the buffer_copy kernel needs texel buffers of " +
+                                std::to_string(max_copy_atoms * copy_atom_floats / 4) +
+                                " elements");
   const bool copy = kernel_ == DecoderOptions::Kernel::buffer_copy;
   const bool unorm = atlas.format() == AtlasFormat::r16_unorm;
   const VkDescriptorType atoms_type =
@@ -223,7 +227,7 @@ void AtlasDecoder::write_descriptors(RingEntry& entry) const {
 
 void AtlasDecoder::make_atoms_view() {
   if (kernel_ != DecoderOptions::Kernel::buffer_copy) return;
-  // K·72 texels (rows padded to 8 floats): at most 73 728, checked against
+  // K·72 texels (rows padded to 8 floats): at most max_copy_atoms·72, checked against
   // maxTexelBufferElements when the kernel was chosen.
   VkBufferViewCreateInfo info{VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO};
   info.buffer = atoms_.handle();
@@ -243,8 +247,10 @@ void AtlasDecoder::set_dictionary(const format::AtomTable& atoms) {
     throw std::invalid_argument("AtlasDecoder::set_dictionary: " + std::to_string(atoms.count) +
                                 " atoms need " + std::to_string(values) +
                                 " values, the table has " + std::to_string(atoms.values.size()));
-  if (atoms.count > (1u << VR_ATOM_BITS))
-    throw std::invalid_argument("AtlasDecoder::set_dictionary: more atoms than 10-bit codes index");
+  if (atoms.count > (1u << VR_MAX_ATOM_BITS) || (copy && atoms.count > max_copy_atoms))
+    throw std::invalid_argument("AtlasDecoder::set_dictionary: " + std::to_string(atoms.count) +
+                                " atoms; the decoder holds at most " +
+                                std::to_string(copy ? max_copy_atoms : 1u << VR_MAX_ATOM_BITS));
   wait_all();
   Buffer staging(context_, 4 * floats, VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
                  VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT);
@@ -324,9 +330,7 @@ Ticket AtlasDecoder::submit(std::span<const BrickUpload> batch) {
         payload_words = format::brick_voxels;
         std::memcpy(words + cursor, zfp_scratch_.data(), raw_bytes);
       } else {
-        payload_words = static_cast<std::uint32_t>(brick.payload.size() / 4);
-        if (payload_words > max_payload_words)
-          payload_words = max_payload_words;  // validated above
+        payload_words = static_cast<std::uint32_t>(brick.payload.size() / 4);  // validated above
         std::memcpy(words + cursor, brick.payload.data(), 4 * std::size_t{payload_words});
       }
       words[4 * i + 0] = cursor;

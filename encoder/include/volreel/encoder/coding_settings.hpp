@@ -11,6 +11,10 @@
 
 namespace volreel::encoder {
 
+/// Smax where no option sets it: one atom per value of a block, so that no ε is out of reach (the
+/// rule stops each block's pursuit long before, except on noise-like blocks at small ε).
+inline constexpr int default_max_atoms = 216;
+
 /// How variable rate chooses the number of atoms of each block (both driven by ε).
 enum class VariableRateRule {
   /// Rate-distortion optimal (Lagrangian): add the next atom while it lowers the block's squared
@@ -36,6 +40,9 @@ format::Codec codec_from_name(const std::string& name);
 /// CodingSettings::mean_bits from its command-line text: "auto" (-1) or a whole number 0..12;
 /// throws InputError naming --mean-bits and the text otherwise.
 int mean_bits_from_text(const std::string& text);
+/// CodingSettings::coef_bits from its command-line text: "auto" (-1) or a whole number 1..16;
+/// throws InputError naming --coef-bits and the text otherwise.
+int coef_bits_from_text(const std::string& text);
 
 /// How bricks are coded.
 struct CodingSettings {
@@ -62,8 +69,10 @@ struct CodingSettings {
   /// doubling per level. The ε rule and fixed rate ignore it.
   double level_tolerance_factor = 2.0;
   int fixed_sparsity =
-      0;               ///< ksvd fixed rate: exactly min(S, needed) atoms per block (0: variable)
-  int max_atoms = 15;  ///< Smax ≤ 15 (4-bit field)
+      0;  ///< ksvd fixed rate: exactly min(S, needed) atoms per block (0: variable)
+  /// Smax ≤ 216, one atom per value of a block. The dictionary spans every block (its DCT part), so
+  /// a block needs more atoms only for more quality: the rule, not Smax, stops the pursuit.
+  int max_atoms = default_max_atoms;
   /// ksvd: which atom each pursuit step adds (both rates). ORMP (the atom that lowers the block's
   /// squared error most) needs fewer atoms than OMP (the most correlated one) for the same error;
   /// see dictionary::AtomSelection.
@@ -78,6 +87,18 @@ struct CodingSettings {
   /// 0.25·216·ε² per 16-bit code, and the two slopes are equal at a step of ε/2: of the factors
   /// measured, 0.5 gives the most PSNR for the same bytes.
   double mean_step_factor = 0.5;
+  /// ksvd: the bits c of each brick's quantized coefficients (format/SPEC.md, the layout word).
+  /// -1: variable rate gives each brick the fewest bits (1..16) whose step over the span of its
+  /// coefficients is at most coef_step_factor·ε_l, fixed rate 8 bits; 1..16: every brick c bits.
+  int coef_bits = -1;
+  /// The coefficient step as a fraction of ε (see coef_bits). A coefficient off by e adds e² to
+  /// its block's squared error (atoms have unit norm), against the m·ε² scale of the block's
+  /// coding error; docs/benchmarks.md has the factors measured.
+  double coef_step_factor = 2.0;
+  /// > 0: the pointwise bound E (data units): every decoded value of a coded block within E of
+  /// the original, checked after quantization; blocks take atoms (and bricks coefficient bits)
+  /// until it holds (volreel encode --max-error).
+  double max_error = 0;
   double zfp_accuracy = 0;  ///< zfp fixed-accuracy tolerance (data units)
   /// Quantize coefficients one at a time, re-solving the least-squares fit of the block's later
   /// coefficients against the error of the ones already quantized ("quantize inside the pursuit").

@@ -57,15 +57,19 @@ struct FrameStats {
   /// the PSNR lost to quantization: 10·log10(quantized / unquantized).
   double unquantized_squared_error = 0, quantized_squared_error = 0;
   ByteBreakdown breakdown;
-  std::array<std::size_t, 16> sparsity_histogram{};   ///< coded blocks (ksvd) by atom count
+  std::array<std::size_t, 256> sparsity_histogram{};  ///< coded blocks (ksvd) by atom count
   std::array<std::size_t, 13> mean_bits_histogram{};  ///< coded bricks (ksvd) by mean bits
+  std::array<std::size_t, 17> coef_bits_histogram{};  ///< coded bricks (ksvd) by coefficient bits
+  /// Blocks that missed the pointwise bound (CodingSettings::max_error) even with 16-bit
+  /// coefficients and Smax atoms: 0 whenever the bound holds.
+  std::size_t blocks_over_bound = 0;
 };
 
 /// Encodes frames with fixed settings and dictionary; safe to use from one thread at a time
 /// (it parallelizes inside with OpenMP).
 class FrameEncoder {
  public:
-  /// dictionary: required for ksvd (K ≤ 1024, M = 6). Throws InputError on bad settings.
+  /// dictionary: required for ksvd (K ≤ 65536, M = 6). Throws InputError on bad settings.
   FrameEncoder(const dictionary::Dictionary* dictionary, CodingSettings settings);
   /// Frame t -> the frame file's bytes.
   std::vector<std::byte> encode(std::size_t t, const Volume& frame,

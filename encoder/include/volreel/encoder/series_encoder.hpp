@@ -40,8 +40,10 @@ struct EncodeSummary {
   double mvoxels_per_s = 0;
   double unquantized_squared_error = 0, quantized_squared_error = 0;  ///< FrameStats', summed
   ByteBreakdown breakdown;                                            ///< of the frames encoded
-  std::array<std::size_t, 16> sparsity_histogram{};                   ///< FrameStats', summed
+  std::array<std::size_t, 256> sparsity_histogram{};                  ///< FrameStats', summed
   std::array<std::size_t, 13> mean_bits_histogram{};                  ///< FrameStats', summed
+  std::array<std::size_t, 17> coef_bits_histogram{};                  ///< FrameStats', summed
+  std::size_t blocks_over_bound = 0;                                  ///< FrameStats', summed
   double seconds_pyramid = 0, seconds_bricks = 0, seconds_omp = 0, seconds_quantize = 0;
 
   /// The PSNR lost to quantization over the frames encoded, 10·log10(quantized / unquantized

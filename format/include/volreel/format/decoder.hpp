@@ -20,15 +20,19 @@ struct AtomTable {
 
 /// The structure of a ksvd brick payload (brick_decode.h's layout), once checked.
 struct KsvdPayloadLayout {
-  std::uint32_t mean_bits = 0;   ///< b, 0..12
-  std::uint32_t entry_bits = 0;  ///< 4 + b
-  std::uint32_t codes = 0;       ///< Σ sparsities
+  std::uint32_t word = 0;           ///< the layout word (word 4)
+  std::uint32_t mean_bits = 0;      ///< b, 0..12
+  std::uint32_t sparsity_bits = 0;  ///< t, 0..8
+  std::uint32_t coef_bits = 0;      ///< c, 1..16
+  std::uint32_t atom_bits = 0;      ///< a, 1..16
+  std::uint32_t codes = 0;          ///< Σ sparsities
 };
 
 /// Checks a ksvd payload before anything decodes it (the CPU decoder here, or the GPU): the header
-/// and entries present, finite dequantization values, word 4 (mean bits ≤ 12, the other bits
-/// zero), the length = header + entries + 2·codes rounded up to 4, every atom index < atom_count.
-/// Throws FormatError naming `name` and the offset `at` + the bad field's offset in the payload.
+/// and entries present, finite dequantization values, the layout word (every width in range, the
+/// reserved bits zero, 2^a ≥ atom_count is not required but every atom index < atom_count), the
+/// length = the words of the header, entries and codes exactly. Throws FormatError naming `name`
+/// and the offset `at` + the bad field's offset in the payload.
 KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> payload, std::uint32_t atom_count,
                                      const std::filesystem::path& name, std::uint64_t at);
 /// The same on a payload already copied into 32-bit words (`bytes` long; bytes/4 words).
@@ -37,20 +41,26 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::
                                      std::uint64_t at);
 
 /// The parts of a ksvd brick payload before packing: the four dequantization values (mean_bias,
-/// mean_scale, coef_bias, coef_scale), the mean bits b (0..12), per block its sparsity (0..15) and
-/// quantized mean (0..2^b − 1), and the codes of all blocks in block order (bits 6..15 atom, 0..5
-/// value).
+/// mean_scale, coef_bias, coef_scale), the field widths (mean bits b 0..12, sparsity bits t 0..8,
+/// coefficient bits c 1..16, atom bits a 1..16), per block its sparsity (< 2^t) and quantized mean
+/// (< 2^b), and the codes of all blocks in block order (atom index, quantized value < 2^c).
 struct KsvdPayloadParts {
   float dequantization[4] = {0, 0, 0, 0};
   std::uint32_t mean_bits = 12;
+  std::uint32_t sparsity_bits = 4;
+  std::uint32_t coef_bits = 6;
+  std::uint32_t atom_bits = 10;
   std::array<std::uint32_t, 216> sparsity{};
   std::array<std::uint32_t, 216> mean{};
-  std::vector<std::uint16_t> codes;
+  std::vector<std::uint32_t> atoms;   ///< one per code
+  std::vector<std::uint32_t> values;  ///< one per code
 };
 
-/// Packs the parts into a payload of brick_decode.h's layout (entries of 4 + b bits, padded to 4
-/// bytes). Throws std::invalid_argument when a field does not fit its bits or the codes do not
-/// number Σ sparsity.
+/// The fewest bits that hold every value 0..count − 1 (0 for count ≤ 1).
+std::uint32_t bits_for_count(std::uint64_t count);
+
+/// Packs the parts into a payload of brick_decode.h's layout. Throws std::invalid_argument when a
+/// width is out of range, a field does not fit its bits or the codes do not number Σ sparsity.
 std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts);
 
 /// Decodes one brick payload (a 4-byte constant, a ksvd payload or a zfp stream of codec `codec`

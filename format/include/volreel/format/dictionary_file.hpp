@@ -50,6 +50,11 @@ struct DictionaryFile {
   /// bytes. serialize_dictionary_file rounds to the nearest half; use with_half_atoms to get the
   /// values a reader will see before coding with them.
   bool half_atoms = false;
+  /// The last M³ − 1 atoms are block_dct_atoms(M) (flag bit 2): the orthonormal 3D DCT-II basis
+  /// without its constant atom. They are not stored: a reader generates them, so that the
+  /// dictionary spans every zero-mean block at the cost of no bytes. atom_count and atoms include
+  /// them.
+  bool dct_atoms = false;
   DictionaryTraining training;
   std::string program_version;  ///< the volreel version that wrote it, at most 15 characters
 };
@@ -90,6 +95,7 @@ static_assert(offsetof(DictionaryFileHeader, reserved) == 120);
 
 inline constexpr std::uint32_t dictionary_flag_flat = 1u;
 inline constexpr std::uint32_t dictionary_flag_half = 2u;
+inline constexpr std::uint32_t dictionary_flag_dct = 4u;
 /// Limits a reader accepts (a header beyond them is corrupt, not merely large).
 inline constexpr std::uint32_t dictionary_max_block_size = 64;
 inline constexpr std::uint32_t dictionary_max_atoms = 1u << 16;
@@ -102,9 +108,26 @@ constexpr std::uint64_t dictionary_file_size(std::uint64_t atom_count, std::uint
 }
 
 /// The dictionary as it will be read back once stored in binary16: half_atoms set and every atom
-/// value rounded to the nearest binary16 (Eigen::half, round to nearest even). A dictionary that
-/// is already half comes back unchanged.
+/// value rounded to the nearest binary16 (Eigen::half, round to nearest even), except the
+/// generated DCT atoms, which a reader makes in float32. A dictionary that is already half comes
+/// back unchanged.
 DictionaryFile with_half_atoms(DictionaryFile dictionary);
+
+/// The orthonormal 3D DCT-II basis of an M³ block without the constant atom: M³ − 1 atoms of M³
+/// values (x fastest), zero-mean and of unit norm, ordered by u + v + w (the frequencies along x,
+/// y, z), then w, v, u. Atom (u, v, w) is φ_u(x)·φ_v(y)·φ_w(z), φ_u(x) = sqrt((u = 0 ? 1 : 2)/M) ·
+/// cos(π(2x + 1)u / 2M), computed in double and rounded to float once: every reader gets the same
+/// values.
+std::vector<float> block_dct_atoms(std::uint32_t block_size);
+
+/// The dictionary with the DCT basis appended (dct_atoms set); unchanged if it already has it.
+/// Throws FormatError if the total would exceed dictionary_max_atoms.
+DictionaryFile with_dct_atoms(DictionaryFile dictionary);
+
+/// The dictionary as volreel encode stores it in a container: atoms rounded to binary16 when
+/// `half` (with_half_atoms), then the DCT basis appended (with_dct_atoms). Frames are coded
+/// against exactly these atoms.
+DictionaryFile container_dictionary(DictionaryFile dictionary, bool half);
 
 /// The file's bytes. Throws FormatError (file "<memory>") if `dictionary` is inconsistent
 /// (atoms.size() != K·M³, K or M out of range, a version string over 15 characters).
