@@ -61,4 +61,15 @@ echo "$out" | json '1 if d["sequence"]["max_abs_error"] <= 1e-3 else exit(1)' > 
 bps=$("$volreel" info "$work/r.vreel" --json | json 'd["bps"]')
 /usr/bin/python3 -c "import sys; b=$bps; sys.exit(0 if abs(b-8)/8 <= 0.05 else 1)" || fail "--bps 8 gave $bps bps"
 
+# The pointwise bound: every value of the finest level within E (compare's max error), and a
+# container of format version 2 refused with the message to encode again.
+"$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/m.vreel" --max-error 2e-3 \
+  > "$work/max.txt" 2>&1 || fail "encode --max-error: $(cat "$work/max.txt")"
+grep -q "pointwise bound: every coded block within" "$work/max.txt" || fail "--max-error report: $(cat "$work/max.txt")"
+out=$("$volreel" compare "$work/s" "$work/m.vreel" --json --no-ssim 2>/dev/null)
+echo "$out" | json '1 if d["sequence"]["max_abs_error"] <= 2e-3 else exit(1)' > /dev/null ||
+  fail "--max-error 2e-3 gave a max error of $(echo "$out" | json 'd["sequence"]["max_abs_error"]')"
+sed -i 's/"format_version": 3/"format_version": 2/' "$work/m.vreel/manifest.json"
+expect_error "encode the series again" "$volreel" info "$work/m.vreel"
+
 echo "encode_cli_end_to_end: all checks passed"
