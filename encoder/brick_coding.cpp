@@ -278,9 +278,13 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
   std::vector<std::int32_t> a(slots);
   std::vector<float> c(slots);
   std::vector<std::uint32_t> q(slots), q2(slots);
+  // Atoms added after quantization (step 4) fit a small residual: their coefficients lie near 0,
+  // which the interval must then hold.
+  const bool extends = pointwise || options.target_energy >= 0;
   for (std::uint32_t bits = first_bits;; ++bits) {
-    const auto [coef_lo, coef_hi] =
+    auto [coef_lo, coef_hi] =
         coefficient_interval(all, (1u << bits) - 1u, options.optimize_interval);
+    if (extends) coef_lo = std::min(coef_lo, 0.0f), coef_hi = std::max(coef_hi, 0.0f);
     const Quantizer cq(coef_lo, coef_hi, (1u << bits) - 1u);
     parts.coef_bits = bits;
     parts.atoms.clear();
@@ -319,6 +323,11 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
         correlation.cwiseAbs().maxCoeff(&best);
         a[static_cast<std::size_t>(s)] = static_cast<std::int32_t>(best);
         c[static_cast<std::size_t>(s)] = correlation(best);
+        // Past max_refit_atoms each coefficient is rounded on its own: keep the ones already
+        // quantized where they are.
+        if (s + 1 > max_refit_atoms)
+          for (int k = 0; k < s; ++k)
+            c[static_cast<std::size_t>(k)] = cq.value(q[static_cast<std::size_t>(k)]);
         const double e2 = quantize_block(y, mean_error, a.data(), c.data(), s + 1, atoms, cq,
                                          options.refit, q2.data());
         const bool miss2 = misses(e2, q2.data(), s + 1);

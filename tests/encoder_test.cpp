@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 
 #include <nlohmann/json.hpp>
 
@@ -933,6 +934,64 @@ TEST(Encoder, PointwiseBoundHoldsForEveryValue) {
       EXPECT_EQ(st.blocks_over_bound, 0u);
       EXPECT_LE(finest_level_error(bytes, d, v).second, s.max_error)
           << "E = " << fraction << " of the range";
+    }
+  }
+}
+
+}  // namespace
+}  // namespace volreel
+
+namespace volreel {
+namespace {
+
+// --psnr P: every frame's finest level, decoded from the container as written, reaches P, on a
+// field and dictionary where the Lagrangian rule at ε(P) falls short of it.
+TEST(Container, PsnrTargetHoldsForEveryFrame) {
+  test::TempDir dir("psnr");
+  datasets::AnalyticParams p;
+  p.field = datasets::AnalyticField::noise;
+  p.dims = {40, 36, 30};
+  p.frames = 3;
+  {
+    datasets::RawSeriesWriter w(dir / "series", p.dims, "noise");
+    datasets::generate_analytic(p, w);
+  }
+  const auto series = datasets::open_series(dir / "series");
+  const auto d = random_dictionary(64, 9);
+  dictionary::save_dictionary(dir / "dict.bin", d, format::DictionaryTraining{});
+  const auto [lo, hi] = encoder::value_range(*series, 0);
+  for (double target : {45.0, 55.0}) {
+    encoder::EncodeJob job;
+    job.coding.tolerance = dictionary::tolerance_for_psnr(target, hi - lo);
+    job.dictionary_file = dir / "dict.bin";
+    job.psnr_target = target;
+    const auto out = dir / ("p" + std::to_string(static_cast<int>(target)) + ".vreel");
+    const auto summary = encoder::encode_series(*series, out, job);
+    EXPECT_GE(summary.delivered.worst_frame_psnr, target);
+    EXPECT_GE(summary.delivered.frames_coded_again, 1u) << "the first ε fell short";
+    // Independently: decode each frame file as written.
+    const auto stored = dictionary::from_file(format::read_dictionary_file(out / "dictionary.bin"));
+    for (std::size_t t = 0; t < p.frames; ++t) {
+      const Volume v = [&] {
+        Volume f(p.dims);
+        series->read_frame(t, f.data);
+        return f;
+      }();
+      std::ifstream in(out / format::frame_file_name(t), std::ios::binary);
+      const std::vector<char> raw((std::istreambuf_iterator<char>(in)),
+                                  std::istreambuf_iterator<char>());
+      std::vector<std::byte> bytes(raw.size());
+      std::memcpy(bytes.data(), raw.data(), raw.size());
+      const format::FrameView f(bytes, "frame.vrf");
+      const auto decoded = format::decode_level(f, f.level_count() - 1, atom_table(stored));
+      double squared = 0;
+      for (std::size_t i = 0; i < v.data.size(); ++i) {
+        const double e = static_cast<double>(decoded.data[i]) - static_cast<double>(v.data[i]);
+        squared += e * e;
+      }
+      const double psnr =
+          10 * std::log10((hi - lo) * (hi - lo) / (squared / static_cast<double>(v.data.size())));
+      EXPECT_GE(psnr, target) << "frame " << t;
     }
   }
 }

@@ -128,6 +128,7 @@ void run_encode(const EncodeOptions& o) {
   job.max_frames = frames;
   job.coding = coding_settings(o);
   job.half_atoms = o.atom_storage == "f16";
+  if (o.psnr_opt->count() > 0) job.psnr_target = o.psnr;
   auto& c = job.coding;
   {
     ProgressBar bar("value range", "frames");
@@ -197,7 +198,7 @@ void run_encode(const EncodeOptions& o) {
     bar.finish();
   }
   if (!job.dictionary_file.empty()) fs::remove(job.dictionary_file);
-  print_encode_summary(s, c, o.out);
+  print_encode_summary(s, c, o.out, job.psnr_target);
 }
 
 }  // namespace
@@ -224,7 +225,11 @@ void add_encode_command(CLI::App& app) {
       "--tolerance", o->tolerance,
       "eps, data units: an atom is kept if it lowers its block's squared error by at least\n"
       "0.25*216*eps^2 (--rate-rule tolerance: the RMS error per value of every block)");
-  o->psnr_opt = cmd->add_option("--psnr", o->psnr, "eps = range * 10^(-PSNR/20)");
+  o->psnr_opt = cmd->add_option(
+      "--psnr", o->psnr,
+      "Target PSNR in dB: eps = range * 10^(-PSNR/20) to start with; a frame whose finest level "
+      "falls short\n(measured after encoding) is coded again at a smaller eps, so that every "
+      "frame, and the sequence, reaches it");
   o->bps_opt = cmd->add_option(
       "--bps", o->bps,
       "Search eps so that the whole container takes this many bits per voxel (within 5%)");

@@ -103,6 +103,11 @@ void add_gen_command(CLI::App& app) {
       ->capture_default_str();
   turb->add_option("--seed", t->run.params.seed, "Seed of the random initial field")
       ->capture_default_str();
+  turb->add_flag(
+      "--decaying", t->run.decaying,
+      "Decaying flow: start from the smooth Taylor-Green vortex with the forcing off, so "
+      "that the frames go from\nsmooth to turbulent (use --spinup 0 and an --interval "
+      "of about 0.5 to see the transition)");
   turb->add_flag("--overwrite", t->overwrite, "Replace an existing series in --out");
   turb->callback([t] { run_turbulence(*t); });
 

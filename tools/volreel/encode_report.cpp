@@ -104,7 +104,7 @@ void print_tolerance_choice(const encoder::ToleranceChoice& e, const encoder::Co
 }
 
 void print_encode_summary(const encoder::EncodeSummary& s, const encoder::CodingSettings& c,
-                          const std::string& out) {
+                          const std::string& out, double psnr_target) {
   if (c.max_error > 0) {
     if (s.blocks_over_bound == 0)
       std::printf("pointwise bound: every coded block within %.4g of the original\n", c.max_error);
@@ -137,6 +137,24 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
       "s, %.2f MVoxel/s on %d threads\n",
       out.c_str(), s.frames, s.encoded, s.skipped, static_cast<std::uintmax_t>(s.container_bytes),
       s.bps, s.seconds, s.mvoxels_per_s, omp_get_max_threads());
+  const encoder::DeliveredQuality& q = s.delivered;
+  if (q.frames == 0) return;
+  const double range = c.value_max - c.value_min;
+  std::printf(
+      "delivered (finest level of the %zu frames encoded, decoded and compared): PSNR %.2f dB over "
+      "the sequence, worst frame %zu at %.2f dB, largest error %.4g\n",
+      q.frames, q.sequence_psnr(range), q.worst_frame, q.worst_frame_psnr, q.max_abs_error);
+  if (psnr_target > 0 && c.codec == format::Codec::ksvd && c.fixed_sparsity == 0) {
+    if (q.worst_frame_psnr >= psnr_target)
+      std::printf("target PSNR %.2f dB met by every frame", psnr_target);
+    else
+      std::fprintf(stderr,
+                   "warning: target PSNR %.2f dB missed: frame %zu reached %.2f dB after %d "
+                   "smaller tolerances",
+                   psnr_target, q.worst_frame, q.worst_frame_psnr, encoder::max_tolerance_retries);
+    std::printf("; %zu frames coded again at a smaller eps (last eps %.4g, %.3f of the first)\n",
+                q.frames_coded_again, c.tolerance * q.tolerance_scale, q.tolerance_scale);
+  }
 }
 
 }  // namespace volreel::cli

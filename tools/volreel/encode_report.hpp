@@ -19,7 +19,9 @@ void print_tolerance_choice(const encoder::ToleranceChoice& choice,
 
 /// The encode's times, quantization loss, byte breakdown, histograms and totals (written to
 /// `out`).
+/// psnr_target: the --psnr of the encode (0: none), reported as met or missed.
 void print_encode_summary(const encoder::EncodeSummary& summary,
-                          const encoder::CodingSettings& coding, const std::string& out);
+                          const encoder::CodingSettings& coding, const std::string& out,
+                          double psnr_target = 0);
 
 }  // namespace volreel::cli

@@ -88,6 +88,10 @@ struct TurbulenceRun {
   double spinup = 7.0;           ///< simulated time before the first record, in eddy-turnover times
                                  ///< (the start-up transient of ε settles after about 7)
   TurbulenceVariable variable = TurbulenceVariable::pressure;
+  /// Decaying instead of forced: start from the Taylor–Green vortex (smooth, one large scale, of
+  /// kinetic energy params.initial_energy) with the forcing off, so that the recorded flow goes
+  /// from smooth to turbulent and then decays. The viscosity is still the one params give.
+  bool decaying = false;
 };
 
 /// Summary printed at the end of a run and stored in series.json's "generator" object.

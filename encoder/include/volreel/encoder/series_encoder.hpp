@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <optional>
 #include <utility>
 
@@ -31,6 +32,29 @@ struct EncodeJob {
   bool overwrite = false;      ///< replace an existing complete container
   std::size_t max_frames = 0;  ///< 0: every frame
   nlohmann::json provenance;   ///< stored under "encoder" in the manifest
+  /// > 0 (dB, ksvd variable rate): every frame's finest-level PSNR over the sequence's value range
+  /// at least this (volreel encode --psnr). A frame that falls short is coded again at a smaller
+  /// ε (ε·10^(−shortfall/20), a little less), up to max_tolerance_retries times; the next frame
+  /// starts from the ε that sufficed.
+  double psnr_target = 0;
+};
+
+/// How often encode_series codes a frame again for EncodeJob::psnr_target.
+inline constexpr int max_tolerance_retries = 6;
+
+/// The delivered quality of the frames an encode wrote, measured on their finest level decoded by
+/// the CPU reference decoder against the frames read (the range: the sequence's value range).
+struct DeliveredQuality {
+  std::size_t frames = 0;
+  double squared_error = 0;  ///< summed over every voxel of every frame measured
+  double voxels = 0;
+  double max_abs_error = 0;
+  double worst_frame_psnr = std::numeric_limits<double>::infinity();
+  std::size_t worst_frame = 0;
+  std::size_t frames_coded_again = 0;  ///< frames coded more than once for psnr_target
+  double tolerance_scale = 1;          ///< of the last frame's ε against the job's
+  /// PSNR of all measured voxels together, 10·log10(range²/MSE) (∞ when lossless).
+  double sequence_psnr(double range) const;
 };
 struct EncodeSummary {
   std::size_t frames = 0, encoded = 0, skipped = 0;
@@ -52,6 +76,7 @@ struct EncodeSummary {
   /// ByteBreakdown::finest_owned_codes in bits per voxel of the container, when this run wrote
   /// every frame (the container's bytes are then all accounted for); std::nullopt otherwise.
   std::optional<double> finest_owned_codes_bps() const;
+  DeliveredQuality delivered;  ///< of the frames encoded (not of those already there)
 };
 /// Writes OUT (a NAME.vreel directory). Frames go to temporary names renamed when complete; the
 /// manifest is rewritten after each frame. Progress: frames done, total, status with MVoxel/s.
