@@ -85,6 +85,14 @@ std::vector<float> block_dct_atoms(std::uint32_t block_size) {
   return atoms;
 }
 
+DictionaryFile dct_dictionary(std::uint32_t block_size, const std::string& program_version) {
+  DictionaryFile d;
+  d.block_size = block_size;
+  d.atom_count = 0;
+  d.program_version = program_version;
+  return with_dct_atoms(std::move(d));
+}
+
 DictionaryFile with_dct_atoms(DictionaryFile d) {
   if (d.dct_atoms) return d;
   const std::vector<float> dct = block_dct_atoms(d.block_size);
@@ -117,12 +125,12 @@ std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& d) {
   // block_dct_atoms(M).
   const std::vector<float> dct = d.dct_atoms ? block_dct_atoms(d.block_size) : std::vector<float>{};
   const std::uint32_t stored = d.atom_count - static_cast<std::uint32_t>(dct.size() / m);
-  if (d.dct_atoms && (d.atom_count <= dct.size() / m ||
+  if (d.dct_atoms && (d.atom_count < dct.size() / m ||
                       !std::equal(dct.begin(), dct.end(),
                                   d.atoms.end() - static_cast<std::ptrdiff_t>(dct.size()))))
     throw FormatError(memory,
-                      "a dictionary marked with the DCT basis needs at least one learned "
-                      "atom followed by exactly block_dct_atoms(M)");
+                      "a dictionary marked with the DCT basis needs its learned atoms (none or "
+                      "more) followed by exactly block_dct_atoms(M)");
   if (d.program_version.size() > 15)
     throw FormatError(memory,
                       "program version '" + d.program_version + "' is longer than 15 characters");
@@ -193,9 +201,12 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes,
                       std::to_string(h.header_bytes));
 
   // 3. Header consistency, before sizes derived from it are trusted.
-  if (h.atom_count == 0 || h.atom_count > dictionary_max_atoms)
+  // No stored atom is allowed only with the DCT basis (a dictionary of generated atoms alone).
+  const bool dct_only_allowed = (h.flags & dictionary_flag_dct) != 0;
+  if ((h.atom_count == 0 && !dct_only_allowed) || h.atom_count > dictionary_max_atoms)
     throw FormatError(name, offsetof(DictionaryFileHeader, atom_count),
-                      "atom count in 1.." + std::to_string(dictionary_max_atoms),
+                      std::string("atom count in ") + (dct_only_allowed ? "0.." : "1..") +
+                          std::to_string(dictionary_max_atoms),
                       std::to_string(h.atom_count));
   if (h.block_size == 0 || h.block_size > dictionary_max_block_size)
     throw FormatError(name, offsetof(DictionaryFileHeader, block_size),

@@ -888,6 +888,20 @@ TEST(DctAtoms, AreGeneratedByTheReaderNotStored) {
   EXPECT_EQ(half_back.atoms, half.atoms);
   EXPECT_TRUE(std::equal(half.atoms.end() - 215 * 216, half.atoms.end(),
                          format::block_dct_atoms(6).begin()));
+  // The DCT basis alone: a header and a CRC, no stored atom; a file of no atom without the flag
+  // is refused.
+  const auto alone = format::dct_dictionary(6, "test");
+  const auto alone_bytes = format::serialize_dictionary_file(alone);
+  EXPECT_EQ(alone_bytes.size(), format::dictionary_file_size(0, 216));
+  const auto alone_back = format::parse_dictionary_file(alone_bytes, "dct.bin");
+  EXPECT_EQ(alone_back.atom_count, 215u);
+  EXPECT_EQ(alone_back.atoms, format::block_dct_atoms(6));
+  auto no_flag = alone_bytes;
+  std::uint32_t flags = 0;
+  std::memcpy(no_flag.data() + 80, &flags, 4);
+  const std::uint32_t crc = format::crc32c(std::span(no_flag.data(), no_flag.size() - 4));
+  std::memcpy(no_flag.data() + no_flag.size() - 4, &crc, 4);
+  EXPECT_THROW(format::parse_dictionary_file(no_flag, "x.bin"), format::FormatError);
   // Atoms that claim the flag but differ from the basis are refused.
   auto bad = file;
   bad.atoms.back() += 0.5f;

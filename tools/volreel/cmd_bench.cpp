@@ -56,7 +56,8 @@ void run_rd(const RdCommandOptions& o) {
   auto codecs = psnr::make_zfp_sweep(range.second - range.first);
   if (!o.dictionary.empty()) {
     // The dictionary as volreel encode stores it in the container (binary16 atoms by default).
-    auto file = format::read_dictionary_file(o.dictionary);
+    auto file = o.dictionary == "dct" ? format::dct_dictionary(6, VOLREEL_VERSION)
+                                      : format::read_dictionary_file(o.dictionary);
     file = format::container_dictionary(std::move(file), o.atom_storage == "f16");
     const auto bytes = format::serialize_dictionary_file(file).size();
     auto dict = std::make_shared<const dictionary::Dictionary>(dictionary::from_file(file));
@@ -136,7 +137,8 @@ void add_bench_command(CLI::App& app) {
       ->capture_default_str();
   rd->add_flag("--no-plot", o->no_plot, "Write the CSV only");
   rd->add_option("--dictionary", o->dictionary,
-                 "Dictionary (volreel train): adds volreel variable rate (--tolerances) and fixed "
+                 "Dictionary (volreel train, or 'dct' for the DCT basis alone): adds volreel "
+                 "variable rate (--tolerances) and fixed "
                  "rate (--sparsities), each\n"
                  "frame encoded into a frame file in memory and decoded by the CPU decoder; the "
                  "dictionary counts in bps");

@@ -20,6 +20,7 @@ struct CompareOptions {
   std::string a, b;
   ReaderOptions reader;
   bool json = false, csv = false, no_ssim = false;
+  double max_error = 0, min_psnr = 0;  ///< > 0: bounds the comparison must meet (exit status 1)
 };
 
 bool is_png(const std::string& path) {
@@ -121,6 +122,19 @@ void compare_series(const CompareOptions& o) {
   if (frames > 1) bar.finish();
   const psnr::ErrorStats total = sequence.result();
   const double mean_ssim = o.no_ssim ? std::nan("") : ssim_sum / static_cast<double>(frames);
+  // After the tables: the bounds asked for, as an error naming the worst frame.
+  const auto enforce_bounds = [&] {
+    std::size_t worst = 0;
+    for (std::size_t t = 1; t < rows.size(); ++t)
+      if (rows[t].e.max_abs_error > rows[worst].e.max_abs_error) worst = t;
+    if (o.max_error > 0 && total.max_abs_error > o.max_error)
+      throw InputError("the largest error " + std::to_string(total.max_abs_error) + " (frame " +
+                       std::to_string(worst) + ") exceeds --max-error " +
+                       std::to_string(o.max_error));
+    if (o.min_psnr > 0 && !(total.psnr >= o.min_psnr))
+      throw InputError("the sequence PSNR " + std::to_string(total.psnr) +
+                       " dB is below --min-psnr " + std::to_string(o.min_psnr));
+  };
 
   if (o.json) {
     nlohmann::json frame_rows = nlohmann::json::array();
@@ -152,6 +166,7 @@ void compare_series(const CompareOptions& o) {
           {"psnr_zfp", "20*log10(range/(2*RMSE)) (zfp's definition)"},
           {"ssim", "3D Gaussian-window SSIM (sigma 1.5), data range of the first input"}}}};
     std::cout << j.dump(2) << '\n';
+    enforce_bounds();
     return;
   }
   if (o.csv) {
@@ -162,6 +177,7 @@ void compare_series(const CompareOptions& o) {
     std::printf("all,%.6f,%.6f,%.6e,%.6e,%.6f\n", total.psnr, total.psnr_zfp, total.rmse,
                 total.max_abs_error, mean_ssim);
     if (container) std::printf("# bps,%.6f\n", bps);
+    enforce_bounds();
     return;
   }
   std::printf("A: %s\nB: %s\n%s, %zu frame(s)\n", ia.source.c_str(), ib.source.c_str(),
@@ -182,6 +198,7 @@ void compare_series(const CompareOptions& o) {
       "sequence).\n"
       "PSNRzfp = 20*log10(range/(2*RMSE)), zfp's definition (6.02 dB lower). SSIM: 3D, Gaussian "
       "window sigma 1.5.\n");
+  enforce_bounds();
 }
 
 }  // namespace
@@ -202,6 +219,13 @@ void add_compare_command(CLI::App& app) {
   auto* json = cmd->add_flag("--json", o->json, "Print JSON");
   cmd->add_flag("--csv", o->csv, "Print CSV")->excludes(json);
   cmd->add_flag("--no-ssim", o->no_ssim, "Skip SSIM (faster on large volumes)");
+  cmd->add_option("--max-error", o->max_error,
+                  "Volumes: fail (exit status 1, naming the worst frame) if any value of B is off "
+                  "by more than this\n(the bound of volreel encode --max-error)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--min-psnr", o->min_psnr,
+                  "Volumes: fail (exit status 1) if the sequence PSNR is below this (dB)")
+      ->check(CLI::PositiveNumber);
   cmd->callback([o] {
     const bool a_png = is_png(o->a), b_png = is_png(o->b);
     if (a_png != b_png)

@@ -163,7 +163,10 @@ void run_encode(const EncodeOptions& o) {
     // A copy, so that the container's own dictionary.bin can be used to resume.
     const fs::path copy = fs::temp_directory_path() /
                           ("volreel-dictionary-copy-" + std::to_string(::getpid()) + ".bin");
-    fs::copy_file(dict_path, copy, fs::copy_options::overwrite_existing);
+    if (dict_path == "dct")
+      format::write_dictionary_file(copy, format::dct_dictionary(6, VOLREEL_VERSION));
+    else
+      fs::copy_file(dict_path, copy, fs::copy_options::overwrite_existing);
     if (!trained.empty()) fs::remove(trained);
     job.dictionary_file = copy;
     auto file = format::read_dictionary_file(copy);
@@ -216,7 +219,9 @@ void add_encode_command(CLI::App& app) {
   cmd->add_option("SERIES", o->series, "Raw series directory, HDF5 file or raw file")->required();
   cmd->add_option("--out", o->out, "The container directory to write, e.g. turb.vreel")->required();
   cmd->add_option("--dictionary", o->dictionary,
-                  "Dictionary from volreel train (default: train one with its defaults)");
+                  "Dictionary from volreel train, or 'dct' for the DCT basis alone (no learned "
+                  "atoms: nothing to\ntrain or store; for series too small to pay for a "
+                  "dictionary). Default: train one with volreel train's defaults");
   cmd->add_option("--atoms", o->atoms,
                   "Without --dictionary: K of the dictionary trained here (default 0: try 1024, "
                   "512, 256, 128 and keep the K\n"

@@ -120,6 +120,10 @@ DictionaryFile with_half_atoms(DictionaryFile dictionary);
 /// values.
 std::vector<float> block_dct_atoms(std::uint32_t block_size);
 
+/// A dictionary of the DCT basis alone: no learned atom, nothing stored but the header (132 bytes).
+/// What a series too small to pay for a learned dictionary is coded against.
+DictionaryFile dct_dictionary(std::uint32_t block_size, const std::string& program_version);
+
 /// The dictionary with the DCT basis appended (dct_atoms set); unchanged if it already has it.
 /// Throws FormatError if the total would exceed dictionary_max_atoms.
 DictionaryFile with_dct_atoms(DictionaryFile dictionary);
