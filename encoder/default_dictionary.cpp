@@ -33,14 +33,18 @@ DefaultDictionary train_default_dictionary(const datasets::SeriesReader& series,
     to.atom_count = k;
     to.coding.tolerance = options.tolerance;
     const auto start = detail::Clock::now();
-    auto r = dictionary::train_dictionary(h, to);
+    dictionary::TrainingResult r;
+    if (k > 0) r = dictionary::train_dictionary(h, to);  // K = 0: the DCT basis alone
     DictionaryCandidate candidate;
     candidate.atoms = k;
     candidate.train_seconds = detail::seconds_since(start);
     candidate.dictionary_bytes = static_cast<double>(
         format::dictionary_file_size(static_cast<std::uint64_t>(k), 216, options.half_atoms));
-    const auto stored = dictionary::from_file(format::container_dictionary(
-        dictionary::to_file(r.dictionary, format::DictionaryTraining{}), options.half_atoms));
+    const auto stored = dictionary::from_file(
+        k > 0 ? format::container_dictionary(
+                    dictionary::to_file(r.dictionary, format::DictionaryTraining{}),
+                    options.half_atoms)
+              : format::dct_dictionary(6, ""));
     double total = candidate.dictionary_bytes;
     if (choose) {
       auto c = options.coding;
@@ -58,7 +62,9 @@ DefaultDictionary train_default_dictionary(const datasets::SeriesReader& series,
     // 3. The smallest estimated container wins (the first of equals).
     if (total < best_total) {
       best_total = total;
-      result.training = dictionary::training_provenance(options.coreset, to, h, r);
+      result.dct_only = k == 0;
+      result.training = k > 0 ? dictionary::training_provenance(options.coreset, to, h, r)
+                              : format::DictionaryTraining{};
       result.dictionary = std::move(r.dictionary);
     }
   }

@@ -80,6 +80,19 @@ TEST_F(DefaultDictionary, KeepsTheSizeThatGivesTheSmallestContainer) {
       0u);
 }
 
+TEST_F(DefaultDictionary, TheDctBasisAloneIsACandidate) {
+  options_.candidate_atoms = {32, 0};
+  const auto chosen = encoder::train_default_dictionary(*series_, options_);
+  ASSERT_EQ(chosen.candidates.size(), 2u);
+  const auto& dct = chosen.candidates[1];
+  EXPECT_EQ(dct.atoms, 0);
+  EXPECT_EQ(dct.dictionary_bytes, static_cast<double>(format::dictionary_file_size(0, 216)));
+  EXPECT_GT(dct.estimated_bytes, dct.dictionary_bytes);
+  const bool dct_smaller = dct.estimated_bytes < chosen.candidates[0].estimated_bytes;
+  EXPECT_EQ(chosen.dct_only, dct_smaller);
+  EXPECT_EQ(chosen.dictionary.atom_count(), dct_smaller ? 0 : 32);
+}
+
 TEST_F(DefaultDictionary, AGivenSizeIsTrainedWithoutEstimates) {
   options_.atoms = 32;
   const auto chosen = encoder::train_default_dictionary(*series_, options_);

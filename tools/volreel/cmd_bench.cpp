@@ -34,6 +34,7 @@ struct RdCommandOptions {
   bool tolerance_rule = false;  ///< also variable rate with the ε rule
   std::string pursuit = dictionary::pursuit_name(encoder::CodingSettings{}.selection);
   double level_factor = encoder::CodingSettings{}.level_tolerance_factor;
+  double coef_step = encoder::CodingSettings{}.coef_step_factor;
   std::vector<double> zfp_bricks;  ///< zfp inside the container, accuracy / range (default none)
   /// Rows of the equal-bps table: the span MTV-Player's Table 1 reports (0.3 to 0.6 bps).
   std::vector<double> at_bps = {0.30, 0.35, 0.40, 0.45, 0.50, 0.55, 0.60};
@@ -68,6 +69,7 @@ void run_rd(const RdCommandOptions& o) {
     VolreelSweep sweep{o.tolerances, o.lagrangian_factors, o.tolerance_rule, o.sparsities, {}};
     sweep.selection = dictionary::pursuit_from_name(o.pursuit);
     sweep.level_tolerance_factor = o.level_factor;
+    sweep.coef_step_factor = o.coef_step;
     std::printf(
         "volreel pursuit %s; variable rate (Lagrangian rule) codes level d above the finest to "
         "eps*%g^d\n",
@@ -169,6 +171,11 @@ void add_bench_command(CLI::App& app) {
                  "--level-factor; the\n"
                  "finest level, which the table measures, is the same, so F changes only the bps)")
       ->check(CLI::Range(1.0, 16.0))
+      ->capture_default_str();
+  rd->add_option("--coef-step", o->coef_step,
+                 "Variable rate: the largest coefficient step as a multiple of eps (as volreel "
+                 "encode --coef-step)")
+      ->check(CLI::PositiveNumber)
       ->capture_default_str();
   rd->add_option("--at-bps", o->at_bps,
                  "Rows of the equal-bps table (OUT/rd_equal_bps.csv): each codec's PSNR at these "

@@ -104,13 +104,21 @@ void train_dictionary(const datasets::SeriesReader& series, const EncodeOptions&
     bar.finish();
   }
   const auto chosen = encoder::train_default_dictionary(series, h, d, [&](const auto& k) {
-    if (d.atoms == 0)
+    if (d.atoms == 0 && k.atoms == 0)
+      std::printf("  the DCT basis alone: estimated container %.0f bytes (dictionary %.0f)\n",
+                  k.estimated_bytes, k.dictionary_bytes);
+    else if (d.atoms == 0)
       std::printf(
           "  K = %4d: trained in %.1f s; estimated container %.0f bytes (dictionary %.0f)\n",
           k.atoms, k.train_seconds, k.estimated_bytes, k.dictionary_bytes);
     else
       std::printf("  K = %4d: trained in %.1f s\n", k.atoms, k.train_seconds);
   });
+  if (chosen.dct_only) {
+    format::write_dictionary_file(path, format::dct_dictionary(6, VOLREEL_VERSION));
+    std::printf("using the DCT basis alone (eps %.4g)\n", eps);
+    return;
+  }
   dictionary::save_dictionary(path, chosen.dictionary, chosen.training);
   std::printf("using the dictionary of K = %d atoms (eps %.4g)\n", chosen.dictionary.atom_count(),
               eps);
@@ -224,8 +232,8 @@ void add_encode_command(CLI::App& app) {
                   "dictionary). Default: train one with volreel train's defaults");
   cmd->add_option("--atoms", o->atoms,
                   "Without --dictionary: K of the dictionary trained here (default 0: try 1024, "
-                  "512, 256, 128 and keep the K\n"
-                  "that gives the smallest container, dictionary included)");
+                  "512, 256, 128 and the DCT\nbasis alone, and keep the one that gives the "
+                  "smallest container, dictionary included)");
   o->tolerance_opt = cmd->add_option(
       "--tolerance", o->tolerance,
       "eps, data units: an atom is kept if it lowers its block's squared error by at least\n"

@@ -71,6 +71,7 @@ std::vector<std::unique_ptr<psnr::FrameCodec>> make_volreel_sweep(
   base.value_max = value_max;
   base.selection = sweep.selection;
   base.level_tolerance_factor = sweep.level_tolerance_factor;
+  base.coef_step_factor = sweep.coef_step_factor;
   for (double relative : sweep.relative_tolerances) {
     for (double factor : sweep.lagrangian_factors) {
       auto s = base;

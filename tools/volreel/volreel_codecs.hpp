@@ -22,6 +22,8 @@ struct VolreelSweep {
   /// Every ksvd row: the pursuit, and (variable rate, Lagrangian rule) the level factor.
   dictionary::AtomSelection selection = encoder::CodingSettings{}.selection;
   double level_tolerance_factor = encoder::CodingSettings{}.level_tolerance_factor;
+  /// Variable rate: the coefficient step as a multiple of ε (as volreel encode --coef-step).
+  double coef_step_factor = encoder::CodingSettings{}.coef_step_factor;
 };
 
 /// Codecs that encode each frame into an in-memory frame file and decode it with the CPU decoder.

@@ -91,10 +91,12 @@ struct CodingSettings {
   /// -1: variable rate gives each brick the fewest bits (1..16) whose step over the span of its
   /// coefficients is at most coef_step_factor·ε_l, fixed rate 8 bits; 1..16: every brick c bits.
   int coef_bits = -1;
-  /// The coefficient step as a fraction of ε (see coef_bits). A coefficient off by e adds e² to
+  /// The coefficient step as a multiple of ε (see coef_bits). A coefficient off by e adds e² to
   /// its block's squared error (atoms have unit norm), against the m·ε² scale of the block's
-  /// coding error; docs/benchmarks.md has the factors measured.
-  double coef_step_factor = 2.0;
+  /// coding error. Chosen on the rate-distortion suite (scripts/rd-suite; docs/benchmarks.md):
+  /// 4 gains PSNR at equal bps on every member over 1 and 2 and keeps the quantization loss under
+  /// 0.3 dB; 8 gains a little more at equal bps but loses more to quantization; 16 and 32 lose.
+  double coef_step_factor = 4.0;
   /// > 0: the pointwise bound E (data units): every decoded value of a coded block within E of
   /// the original, checked after quantization; blocks take atoms (and bricks coefficient bits)
   /// until it holds (volreel encode --max-error).

@@ -21,7 +21,9 @@ struct DefaultDictionaryOptions {
   /// K of the dictionary; 0: train one for each of candidate_atoms and keep the K whose estimated
   /// container (sample frames' mean size × frames + dictionary file) is the smallest.
   int atoms = 0;
-  std::vector<int> candidate_atoms = {1024, 512, 256, 128};
+  /// 0: the DCT basis alone (nothing trained; the file is the 132-byte header and CRC), which wins
+  /// on series too small to pay for learned atoms.
+  std::vector<int> candidate_atoms = {1024, 512, 256, 128, 0};
   std::size_t frames = 0;         ///< frames the container will hold (0: all of the series)
   std::size_t sample_frames = 3;  ///< choosing K: frames coded with each dictionary, evenly spaced
   /// The container stores the atoms in binary16: dictionary sizes and sample frames count them so.
@@ -44,6 +46,9 @@ struct DictionaryCandidate {
 using DictionaryCandidateCallback = std::function<void(const DictionaryCandidate&)>;
 
 struct DefaultDictionary {
+  /// The DCT basis alone won (candidate K = 0): `dictionary` and `training` are empty, and the
+  /// dictionary file to use is format::dct_dictionary.
+  bool dct_only = false;
   dictionary::Dictionary dictionary;    ///< the chosen one, float32 atoms as trained
   format::DictionaryTraining training;  ///< its provenance (dictionary::training_provenance)
   std::vector<DictionaryCandidate> candidates;  ///< every K tried, in order
