@@ -166,7 +166,8 @@ std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& d) {
       std::memcpy(bytes.data() + sizeof h + 2 * i, &bits, 2);
     }
   } else {
-    std::memcpy(bytes.data() + sizeof h, d.atoms.data(), stored_values * sizeof(float));
+    if (stored_values > 0)
+      std::memcpy(bytes.data() + sizeof h, d.atoms.data(), stored_values * sizeof(float));
   }
   const std::size_t crc_offset = bytes.size() - sizeof(std::uint32_t);
   const std::uint32_t crc = crc32c(std::span(bytes.data(), crc_offset));
@@ -260,7 +261,7 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes,
       std::memcpy(&bits, bytes.data() + sizeof h + 2 * i, 2);
       d.atoms[i] = from_half_bits(bits);
     }
-  } else {
+  } else if (!d.atoms.empty()) {  // none stored: the DCT basis alone
     std::memcpy(d.atoms.data(), bytes.data() + sizeof h, d.atoms.size() * sizeof(float));
   }
   for (std::size_t i = 0; i < d.atoms.size(); ++i)
