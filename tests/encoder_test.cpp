@@ -58,6 +58,21 @@ dictionary::Dictionary trained_dictionary(const Volume& v, double eps, int atoms
   return dictionary::train_dictionary(h, to).dictionary;
 }
 
+/// A raw series of an analytic field, 40×36×30, in dir/series, opened.
+std::unique_ptr<datasets::SeriesReader> analytic_series(const std::filesystem::path& dir,
+                                                        datasets::AnalyticField field,
+                                                        std::size_t frames, const char* variable) {
+  datasets::AnalyticParams p;
+  p.field = field;
+  p.dims = {40, 36, 30};
+  p.frames = frames;
+  {
+    datasets::RawSeriesWriter w(dir / "series", p.dims, variable);
+    datasets::generate_analytic(p, w);
+  }
+  return datasets::open_series(dir / "series");
+}
+
 encoder::CodingSettings ksvd_settings(double eps, const Volume& v) {
   encoder::CodingSettings s;
   s.tolerance = eps;
@@ -707,15 +722,7 @@ TEST(Encoder, RegressionChecksums) {
 
 TEST(Container, EncodeResumeVerifyAndDecode) {
   test::TempDir dir("container");
-  datasets::AnalyticParams p;
-  p.field = datasets::AnalyticField::blobs;
-  p.dims = {40, 36, 30};
-  p.frames = 4;
-  {
-    datasets::RawSeriesWriter w(dir / "series", p.dims, "blobs");
-    datasets::generate_analytic(p, w);
-  }
-  const auto series = datasets::open_series(dir / "series");
+  const auto series = analytic_series(dir.path(), datasets::AnalyticField::blobs, 4, "blobs");
   const auto d = trained_dictionary(series->read_frame(0), 0.02);
   format::DictionaryTraining t;
   t.tolerance = 0.02;
@@ -962,15 +969,7 @@ namespace {
 // field and dictionary where the Lagrangian rule at ε(P) falls short of it.
 TEST(Container, PsnrTargetHoldsForEveryFrame) {
   test::TempDir dir("psnr");
-  datasets::AnalyticParams p;
-  p.field = datasets::AnalyticField::noise;
-  p.dims = {40, 36, 30};
-  p.frames = 3;
-  {
-    datasets::RawSeriesWriter w(dir / "series", p.dims, "noise");
-    datasets::generate_analytic(p, w);
-  }
-  const auto series = datasets::open_series(dir / "series");
+  const auto series = analytic_series(dir.path(), datasets::AnalyticField::noise, 3, "noise");
   const auto d = random_dictionary(64, 9);
   dictionary::save_dictionary(dir / "dict.bin", d, format::DictionaryTraining{});
   const auto [lo, hi] = encoder::value_range(*series, 0);
@@ -985,9 +984,9 @@ TEST(Container, PsnrTargetHoldsForEveryFrame) {
     EXPECT_GE(summary.delivered.frames_coded_again, 1u) << "the first ε fell short";
     // Independently: decode each frame file as written.
     const auto stored = dictionary::from_file(format::read_dictionary_file(out / "dictionary.bin"));
-    for (std::size_t t = 0; t < p.frames; ++t) {
+    for (std::size_t t = 0; t < 3; ++t) {
       const Volume v = [&] {
-        Volume f(p.dims);
+        Volume f(series->info().dims);
         series->read_frame(t, f.data);
         return f;
       }();
