@@ -145,7 +145,7 @@ Manifest manifest_from_json(const std::string& text, const fs::path& name) {
     fail("codec", "\"ksvd\" or \"zfp\"", get("codec"));
   m.block_size = static_cast<std::uint32_t>(uint_field("block_size", 0, 64));
   m.tolerance = number_field("tolerance");
-  m.fixed_sparsity = static_cast<std::uint32_t>(uint_field("fixed_sparsity", 0, 15));
+  m.fixed_sparsity = static_cast<std::uint32_t>(uint_field("fixed_sparsity", 0, 216));
   m.zfp_accuracy = number_field("zfp_accuracy");
   const json& range = get("value_range");
   if (!range.is_array() || range.size() != 2 || !range[0].is_number() || !range[1].is_number() ||

@@ -170,8 +170,8 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
   if (ksvd && (h.atom_count == 0 || h.atom_count > dictionary_max_atoms))
     fail(offsetof(FrameHeader, atom_count), "atom count in 1.." + str(dictionary_max_atoms),
          str(h.atom_count));
-  if (h.fixed_sparsity > 15)
-    fail(offsetof(FrameHeader, fixed_sparsity), "fixed sparsity 0..15", str(h.fixed_sparsity));
+  if (h.fixed_sparsity > 216)  // at most one atom per value of a 6³ block
+    fail(offsetof(FrameHeader, fixed_sparsity), "fixed sparsity 0..216", str(h.fixed_sparsity));
   if (!std::isfinite(h.value_min) || !std::isfinite(h.value_max) || h.value_min > h.value_max)
     fail(offsetof(FrameHeader, value_min), "a finite value range min <= max",
          "[" + std::to_string(h.value_min) + ", " + std::to_string(h.value_max) + "]");

@@ -1011,3 +1011,26 @@ TEST(Container, PsnrTargetHoldsForEveryFrame) {
 
 }  // namespace
 }  // namespace volreel
+
+namespace volreel {
+namespace {
+
+// Fixed rate beyond the old 4-bit sparsity field: the frame file takes S up to 216 and reads back.
+TEST(Encoder, FixedRateBeyondFifteenAtomsReadsBack) {
+  const Volume v = analytic_volume(datasets::AnalyticField::noise, {40, 36, 34}, 1);
+  const auto d = with_dct(random_dictionary(64, 3));
+  auto s = ksvd_settings(0, v);
+  s.fixed_sparsity = 40;
+  const auto bytes = encoder::FrameEncoder(&d, s).encode(0, v);
+  const format::FrameView f(bytes, "fixed.vrf");
+  EXPECT_EQ(f.header().fixed_sparsity, 40u);
+  const std::vector<vr_uint> atoms = block_sparsities(f, f.node_count() - 1);
+  ASSERT_EQ(atoms.size(), VR_BLOCKS_PER_BRICK);
+  EXPECT_EQ(*std::max_element(atoms.begin(), atoms.end()), 40u);
+  EXPECT_GT(finest_level_error(bytes, d, v).first, 30.0);
+  s.fixed_sparsity = 217;
+  EXPECT_THROW(encoder::FrameEncoder(&d, s), InputError);
+}
+
+}  // namespace
+}  // namespace volreel

@@ -84,8 +84,8 @@ struct CodingSettings {
   int mean_bits = -1;
   /// The mean step as a fraction of ε. A mean off by e adds 216·e² to its block's squared error,
   /// so halving the step gains 13.5·step² for one more bit per block; the Lagrangian rule buys
-  /// 0.25·216·ε² per 16-bit code, and the two slopes are equal at a step of ε/2: of the factors
-  /// measured, 0.5 gives the most PSNR for the same bytes.
+  /// 0.25·216·ε² per code (16 bits when this was measured, format 2), and the two slopes are equal
+  /// at a step of ε/2: of the factors measured, 0.5 gives the most PSNR for the same bytes.
   double mean_step_factor = 0.5;
   /// ksvd: the bits c of each brick's quantized coefficients (format/SPEC.md, the layout word).
   /// -1: variable rate gives each brick the fewest bits (1..16) whose step over the span of its
@@ -110,7 +110,7 @@ struct CodingSettings {
   /// pursuit"). Off by default: it recovers part of the quantization loss for more bytes (about
   /// neutral at equal bps) and slows the encoding.
   bool extend_pursuit = false;
-  /// Choose each brick's 6-bit coefficient interval by least squared error (clipping up to 8
+  /// Choose each brick's coefficient interval by least squared error (clipping up to 8
   /// extreme coefficients at either end) instead of [min, max].
   bool optimize_interval = true;
   double value_min = 0, value_max = 0;  ///< the sequence's value range, for node histograms

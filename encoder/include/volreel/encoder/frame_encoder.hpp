@@ -25,10 +25,10 @@ struct QuantizeOptions;
 struct ByteBreakdown {
   std::size_t frame_tables = 0;     ///< header, level table, node table, brick offsets
   std::size_t constant_bricks = 0;  ///< 4-byte values
-  std::size_t brick_headers = 0;    ///< ksvd: 20 bytes per coded brick (dequantization, mean bits)
-  std::size_t block_entries = 0;    ///< ksvd: 4 + b bits per block (b-bit mean, 4-bit sparsity)
-  std::size_t codes = 0;            ///< ksvd: 2 bytes per code (10-bit atom, 6-bit value)
-  std::size_t alignment = 0;        ///< ksvd: payloads padded to a multiple of 4 bytes
+  std::size_t brick_headers = 0;    ///< ksvd: 20 bytes per coded brick (dequantization, layout)
+  std::size_t block_entries = 0;    ///< ksvd: t + b bits per block (sparsity, mean), to a word
+  std::size_t codes = 0;            ///< ksvd: a + c bits per code (atom index, value)
+  std::size_t alignment = 0;        ///< ksvd: the code stream padded to a word
   std::size_t zfp_streams = 0;      ///< zfp bricks
   std::size_t coarse_levels = 0;    ///< payload bytes of the levels above the finest
   /// Payload bytes in proportion to the stored voxels that are aprons or padding (outside the
