@@ -147,11 +147,10 @@ double max_abs_residual(const float* y, float mean_error, const std::int32_t* a,
 /// The coefficient interval of a brick: [min, max] of its coefficients, or narrower when clipping
 /// a few extreme coefficients costs less than the coarser step costs all the others (sum of
 /// squared rounding and clipping errors over the brick's coefficients, tried for the k smallest
-/// and j largest clipped, k, j ∈ {0, 1, 2, 4, 8}) at `levels` + 1 levels.
-std::pair<float, float> coefficient_interval(std::vector<float> all, std::uint32_t levels,
+/// and j largest clipped, k, j ∈ {0, 1, 2, 4, 8}) at `levels` + 1 levels. `all` is sorted.
+std::pair<float, float> coefficient_interval(const std::vector<float>& all, std::uint32_t levels,
                                              bool optimize) {
   if (all.empty()) return {0.0f, 0.0f};
-  std::sort(all.begin(), all.end());
   float lo = all.front(), hi = all.back();
   if (!optimize || all.size() <= 16) return {lo, hi};
   double best = std::numeric_limits<double>::infinity();
@@ -259,6 +258,7 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
     const std::size_t i = first_block + b;
     all.insert(all.end(), codes.coefficients_of(i), codes.coefficients_of(i) + codes.count[i]);
   }
+  std::sort(all.begin(), all.end());  // once: every interval tried below reads it sorted
   const auto [raw_lo, raw_hi] = coefficient_interval(all, 1, false);
   const std::uint32_t first_bits = choose_coef_bits(raw_lo, raw_hi, options.coef_step,
                                                     options.coef_bits, options.fixed_coef_bits);
