@@ -1,9 +1,11 @@
 // raw_reader.cpp: readers for raw series directories (series.json + one float32 file per frame)
 // and for single raw files described on the command line (--dims, --dtype, --frames).
-#include <fstream>
+#include <cmath>
 #include <vector>
 
 #include "detail.hpp"
+#include "volreel/format/error.hpp"
+#include "volreel/format/json_input.hpp"
 
 namespace volreel::datasets::detail {
 
@@ -12,58 +14,123 @@ using nlohmann::json;
 
 namespace {
 
+std::string kind_of(fs::file_type type) {
+  switch (type) {
+    case fs::file_type::directory:
+      return "a directory";
+    case fs::file_type::fifo:
+      return "a FIFO (named pipe)";
+    case fs::file_type::character:
+      return "a character device";
+    case fs::file_type::block:
+      return "a block device";
+    case fs::file_type::socket:
+      return "a socket";
+    default:
+      return "not a regular file";
+  }
+}
+
 class RawSeriesReader final : public SeriesReader {
  public:
   RawSeriesReader(fs::path dir, const OpenOptions& options)
       : dir_(std::move(dir)), replace_nan_(options.replace_nan) {
     const fs::path manifest = dir_ / "series.json";
-    std::ifstream in(manifest);
-    if (!in)
+    std::error_code ec;
+    if (!fs::exists(manifest, ec))
       throw InputError("'" + dir_.string() +
                        "' has no series.json: not a raw series directory (for a single raw file "
                        "pass the file and --dims)");
     json j;
     try {
-      j = json::parse(in);
-    } catch (const json::exception& e) {
-      throw InputError("'" + manifest.string() + "' is not valid JSON: " + e.what());
+      j = format::read_json_file(manifest);
+    } catch (const format::FormatError& e) {
+      throw InputError(std::string(e.what()) +
+                       " (series.json's fields: see volreel encode --help)");
     }
     const auto fail = [&](const std::string& what) {
       throw InputError("'" + manifest.string() + "': " + what);
     };
-    try {
-      if (j.value("format", "") != "volreel-raw-series")
-        fail("\"format\" is not \"volreel-raw-series\"");
-      if (j.value("version", 0) != 1)
-        fail("unsupported \"version\" (this volreel reads version 1)");
-      const auto& d = j.at("dims");
-      if (!d.is_array() || d.size() != 3) fail("\"dims\" must be [x, y, z]");
-      info_.dims =
-          Dims{d[0].get<std::int64_t>(), d[1].get<std::int64_t>(), d[2].get<std::int64_t>()};
-      if (info_.dims.x <= 0 || info_.dims.y <= 0 || info_.dims.z <= 0)
-        fail("\"dims\" must be positive");
-      if (j.value("dtype", "f32") != "f32") fail("\"dtype\" must be \"f32\"");
-      frame_files_ = j.at("frames").get<std::vector<std::string>>();
-      info_.timestamps = j.at("timestamps").get<std::vector<double>>();
-      if (frame_files_.empty()) fail("\"frames\" is empty");
-      if (info_.timestamps.size() != frame_files_.size())
-        fail("\"timestamps\" has " + std::to_string(info_.timestamps.size()) +
-             " entries but \"frames\" has " + std::to_string(frame_files_.size()));
-      if (j.contains("spacing")) info_.spacing = j.at("spacing").get<std::array<double, 3>>();
-      info_.variable = j.value("variable", "");
-      if (j.contains("generator")) info_.generator = j.at("generator");
-    } catch (const json::exception& e) {
-      fail(std::string("missing or malformed field: ") + e.what());
+    // Each field by name, with what was expected and what was found.
+    const auto field = [&](const char* name, bool required) -> const json* {
+      if (!j.is_object()) fail("expected a JSON object, found " + format::describe_json(j));
+      const auto it = j.find(name);
+      if (it == j.end()) {
+        if (required) fail("field \"" + std::string(name) + "\" is missing");
+        return nullptr;
+      }
+      return &*it;
+    };
+    const auto wrong = [&](const char* name, const std::string& expected, const json& found) {
+      fail("field \"" + std::string(name) + "\": expected " + expected + ", found " +
+           format::describe_json(found));
+    };
+    const json& fmt = *field("format", true);
+    if (fmt != "volreel-raw-series") wrong("format", "\"volreel-raw-series\"", fmt);
+    const json& version = *field("version", true);
+    if (version != 1) wrong("version", "1 (the version this volreel reads)", version);
+    const json& d = *field("dims", true);
+    if (!d.is_array() || d.size() != 3) wrong("dims", "[x, y, z]", d);
+    std::int64_t dims[3];
+    for (std::size_t a = 0; a < 3; ++a) {
+      if (!d[a].is_number_integer() || d[a].get<std::int64_t>() <= 0 ||
+          d[a].get<std::int64_t>() > (std::int64_t{1} << 24))
+        wrong("dims", "three integers in 1..16777216", d[a]);
+      dims[a] = d[a].get<std::int64_t>();
     }
+    info_.dims = Dims{dims[0], dims[1], dims[2]};
+    const json& dtype = *field("dtype", true);
+    if (dtype != "f32") wrong("dtype", "\"f32\" (32-bit floats, little-endian)", dtype);
+    const json& frames = *field("frames", true);
+    if (!frames.is_array() || frames.empty())
+      wrong("frames", "a non-empty array of file names", frames);
+    for (const json& f : frames) {
+      if (!f.is_string() || f.get_ref<const std::string&>().empty())
+        wrong("frames", "file names (strings)", f);
+      frame_files_.push_back(f.get<std::string>());
+    }
+    const json& times = *field("timestamps", true);
+    if (!times.is_array() || times.size() != frames.size())
+      wrong("timestamps",
+            "an array of " + std::to_string(frames.size()) + " numbers (one per frame)", times);
+    for (const json& t : times) {
+      if (!t.is_number() || !std::isfinite(t.get<double>()))
+        wrong("timestamps", "finite numbers", t);
+      if (!info_.timestamps.empty() && !(t.get<double>() > info_.timestamps.back()))
+        wrong("timestamps",
+              "increasing numbers (after " + std::to_string(info_.timestamps.back()) + ")", t);
+      info_.timestamps.push_back(t.get<double>());
+    }
+    if (const json* spacing = field("spacing", false)) {
+      if (!spacing->is_array() || spacing->size() != 3) wrong("spacing", "[sx, sy, sz]", *spacing);
+      for (std::size_t a = 0; a < 3; ++a) {
+        const json& v = (*spacing)[a];
+        if (!v.is_number() || !(v.get<double>() > 0) || !std::isfinite(v.get<double>()))
+          wrong("spacing", "three positive finite numbers", v);
+        info_.spacing[a] = v.get<double>();
+      }
+    }
+    if (const json* variable = field("variable", false)) {
+      if (!variable->is_string()) wrong("variable", "a string", *variable);
+      info_.variable = variable->get<std::string>();
+    }
+    if (const json* generator = field("generator", false)) info_.generator = *generator;
     info_.frames = frame_files_.size();
     info_.source = "raw series " + dir_.string();
     // Every frame must be there with the right size before anything is read.
     const std::uintmax_t expected = info_.dims.voxels() * sizeof(float);
     for (std::size_t t = 0; t < frame_files_.size(); ++t) {
       const fs::path file = dir_ / frame_files_[t];
-      std::error_code ec;
+      const fs::file_status status = fs::status(file, ec);
+      if (!fs::exists(status))
+        fail("frame " + std::to_string(t) + ": '" + file.string() + "' is missing");
+      if (!fs::is_regular_file(status))
+        fail("frame " + std::to_string(t) + ": '" + file.string() + "' is " +
+             kind_of(status.type()) + ", expected a regular file");
       const auto size = fs::file_size(file, ec);
-      if (ec) fail("frame " + std::to_string(t) + ": '" + file.string() + "' is missing");
+      if (ec)
+        fail("frame " + std::to_string(t) + ": cannot read the size of '" + file.string() +
+             "': " + ec.message());
       if (size != expected)
         fail("frame " + std::to_string(t) + ": '" + file.string() + "' is " + std::to_string(size) +
              " bytes, expected " + std::to_string(expected) + " (" + to_string(info_.dims) +

@@ -10,7 +10,12 @@
 #include <fstream>
 #include <limits>
 
+#include <unistd.h>
+
+#include <cerrno>
+
 #include "detail.hpp"
+#include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
 
 namespace volreel::datasets {
@@ -98,17 +103,30 @@ void check_finite(std::span<float> values, Dims dims, const std::string& what,
 }
 
 void read_exact(const fs::path& file, std::uint64_t offset, std::span<unsigned char> out) {
-  std::FILE* f = std::fopen(file.c_str(), "rb");
-  if (!f) throw InputError("cannot open '" + file.string() + "' for reading");
+  int fd = -1;
+  std::uint64_t size = 0;
+  try {
+    fd = format::detail::open_regular_file(file, size);
+  } catch (const format::FormatError& e) {
+    throw InputError(e.what());
+  }
   std::size_t got = 0;
-  if (std::fseek(f, static_cast<long>(offset), SEEK_SET) == 0)
-    got = std::fread(out.data(), 1, out.size(), f);
-  const bool failed = std::ferror(f) != 0;
-  std::fclose(f);
+  int error = 0;
+  while (got < out.size()) {
+    const ssize_t n =
+        ::pread(fd, out.data() + got, out.size() - got, static_cast<off_t>(offset + got));
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) error = errno;
+    if (n <= 0) break;
+    got += static_cast<std::size_t>(n);
+  }
+  ::close(fd);
   if (got != out.size())
     throw InputError("'" + file.string() + "': expected " + std::to_string(out.size()) +
                      " bytes at offset " + std::to_string(offset) + ", " +
-                     (failed ? "read error after " : "file ends after ") + std::to_string(got));
+                     (error != 0 ? std::string("read error (") + std::strerror(error) + ") after "
+                                 : "file ends after ") +
+                     std::to_string(got));
 }
 
 void convert_to_float(const unsigned char* bytes, Dtype dtype, std::span<float> out) {

@@ -20,6 +20,7 @@
 #include "volreel/format/decoder.hpp"
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/error.hpp"
+#include "volreel/format/file_io.hpp"
 
 namespace volreel::encoder {
 
@@ -30,12 +31,7 @@ using detail::seconds_since;
 namespace {
 
 std::vector<std::byte> read_file_bytes(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw format::FormatError(path, "cannot open");
-  std::vector<char> chars((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  std::vector<std::byte> bytes(chars.size());
-  if (!chars.empty()) std::memcpy(bytes.data(), chars.data(), chars.size());
-  return bytes;
+  return format::detail::read_whole_file(path, format::detail::max_dictionary_bytes);
 }
 
 /// The coding choices recorded in a manifest's provenance, with the values containers written

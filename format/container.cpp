@@ -10,6 +10,7 @@
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
+#include "volreel/format/json_input.hpp"
 
 namespace volreel::format {
 
@@ -61,15 +62,10 @@ json manifest_to_json(const Manifest& m) {
 }
 
 Manifest manifest_from_json(const std::string& text, const fs::path& name) {
-  json j;
-  try {
-    j = json::parse(text);
-  } catch (const json::exception& e) {
-    throw FormatError(name, "not valid JSON: " + std::string(e.what()));
-  }
+  const json j = parse_json_document(text, name, false);
   const auto fail = [&](const std::string& field, const std::string& expected, const json& found) {
     throw FormatError(name, FormatError::no_offset, "\"" + field + "\": " + expected,
-                      found.is_null() ? "nothing" : found.dump());
+                      found.is_null() ? "nothing" : describe_json(found));
   };
   if (!j.is_object()) fail("(top level)", "an object", j);
   const auto get = [&](const char* field) -> const json& {
@@ -223,7 +219,7 @@ Container::Container(fs::path dir, bool allow_incomplete) : dir_(std::move(dir))
   const fs::path manifest_path = dir_ / "manifest.json";
   if (!fs::is_directory(dir_))
     throw FormatError(dir_, "not a volreel container (no such directory)");
-  const auto bytes = detail::read_whole_file(manifest_path);
+  const auto bytes = detail::read_whole_file(manifest_path, detail::max_json_bytes);
   manifest_ = manifest_from_json(
       std::string(reinterpret_cast<const char*>(bytes.data()), bytes.size()), manifest_path);
   if (!manifest_.complete && !allow_incomplete)
@@ -298,7 +294,7 @@ std::vector<std::string> verify_container(const fs::path& dir,
   if (m.dictionary) {
     const fs::path p = dir / m.dictionary->file;
     try {
-      const auto bytes = detail::read_whole_file(p);
+      const auto bytes = detail::read_whole_file(p, detail::max_dictionary_bytes);
       if (bytes.size() != m.dictionary->bytes)
         problems.push_back(p.string() + ": expected " + std::to_string(m.dictionary->bytes) +
                            " bytes (manifest.json), found " + std::to_string(bytes.size()));

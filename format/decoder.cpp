@@ -166,6 +166,21 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::
          "mean " + str(layout.mean_bits) + ", sparsity " + str(layout.sparsity_bits) +
              ", coefficient " + str(layout.coef_bits) + ", atom " + str(layout.atom_bits) +
              ", reserved " + str(layout.word >> 18));
+  // Every decoded value is a mean plus at most 255 coefficients times atom values of magnitude at
+  // most 1 (unit-norm atoms), so this bound keeps every value finite, on the CPU and on the GPU.
+  const auto magnitude = [&](vr_uint w, vr_uint bits) {
+    return std::abs(static_cast<double>(vr_as_float(words[w]))) +
+           std::abs(static_cast<double>(vr_as_float(words[w + 1]))) *
+               static_cast<double>((std::uint64_t{1} << bits) - 1);
+  };
+  const double bound =
+      magnitude(0, layout.mean_bits) + static_cast<double>((1u << layout.sparsity_bits) - 1u) *
+                                           magnitude(2, layout.coef_bits) * max_atom_magnitude;
+  if (!(bound <= max_decoded_magnitude))
+    fail(0,
+         "dequantization values whose decoded values stay below " +
+             std::to_string(max_decoded_magnitude) + " in magnitude",
+         "values that reach " + std::to_string(bound));
   // 2. The entries, then the length their sparsities give.
   const std::uint64_t header_entries = 4 * std::uint64_t{vr_code_first_word(layout.word)};
   if (bytes < header_entries)

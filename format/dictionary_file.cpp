@@ -295,7 +295,7 @@ void write_dictionary_file(const std::filesystem::path& path, const DictionaryFi
 }
 
 DictionaryFile read_dictionary_file(const std::filesystem::path& path) {
-  const auto bytes = detail::read_whole_file(path);
+  const auto bytes = detail::read_whole_file(path, detail::max_dictionary_bytes);
   return parse_dictionary_file(bytes, path);
 }
 

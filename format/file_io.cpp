@@ -1,6 +1,8 @@
 // file_io.cpp: whole-file reads and atomic writes.
 #include "volreel/format/file_io.hpp"
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -14,20 +16,64 @@ namespace volreel::format::detail {
 
 namespace fs = std::filesystem;
 
-std::vector<std::byte> read_whole_file(const fs::path& path) {
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) throw FormatError(path, std::string("cannot open: ") + std::strerror(errno));
-  std::vector<std::byte> bytes;
-  std::byte chunk[1 << 16];
-  for (;;) {
-    const std::size_t got = std::fread(chunk, 1, sizeof chunk, f);
-    bytes.insert(bytes.end(), chunk, chunk + got);
-    if (got < sizeof chunk) break;
+const char* file_kind(unsigned mode) {
+  if (S_ISREG(mode)) return "a regular file";
+  if (S_ISDIR(mode)) return "a directory";
+  if (S_ISFIFO(mode)) return "a FIFO (named pipe)";
+  if (S_ISCHR(mode)) return "a character device";
+  if (S_ISBLK(mode)) return "a block device";
+  if (S_ISSOCK(mode)) return "a socket";
+  return "another kind of file";
+}
+
+int open_regular_file(const fs::path& path, std::uint64_t& size) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY);
+  if (fd < 0) throw FormatError(path, std::string("cannot open: ") + std::strerror(errno));
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) {
+    const int e = errno;
+    ::close(fd);
+    throw FormatError(path, std::string("cannot stat: ") + std::strerror(e));
   }
-  const bool failed = std::ferror(f) != 0;
-  std::fclose(f);
-  if (failed)
-    throw FormatError(path, "read error after " + std::to_string(bytes.size()) + " bytes");
+  if (!S_ISREG(st.st_mode)) {
+    ::close(fd);
+    throw FormatError(path, FormatError::no_offset, "a regular file",
+                      file_kind(static_cast<unsigned>(st.st_mode)));
+  }
+  const int flags = ::fcntl(fd, F_GETFL);
+  if (flags < 0 || ::fcntl(fd, F_SETFL, flags & ~O_NONBLOCK) != 0) {
+    const int e = errno;
+    ::close(fd);
+    throw FormatError(path, std::string("cannot set blocking reads: ") + std::strerror(e));
+  }
+  size = static_cast<std::uint64_t>(st.st_size);
+  return fd;
+}
+
+std::vector<std::byte> read_whole_file(const fs::path& path, std::uint64_t max_bytes) {
+  std::uint64_t size = 0;
+  const int fd = open_regular_file(path, size);
+  if (size > max_bytes) {
+    ::close(fd);
+    throw FormatError(path, FormatError::no_offset,
+                      "at most " + std::to_string(max_bytes) + " bytes",
+                      std::to_string(size) + " bytes");
+  }
+  std::vector<std::byte> bytes(static_cast<std::size_t>(size));
+  std::size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::read(fd, bytes.data() + done, bytes.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const int e = errno;
+      ::close(fd);
+      throw FormatError(path, done, std::to_string(size) + " bytes (its size)",
+                        n == 0 ? "the end of the file (it shrank while being read)"
+                               : std::string("a read error: ") + std::strerror(e));
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  ::close(fd);
   return bytes;
 }
 

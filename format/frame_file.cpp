@@ -15,6 +15,7 @@
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/error.hpp"
+#include "volreel/format/file_io.hpp"
 
 namespace volreel::format {
 
@@ -336,15 +337,9 @@ void FrameView::check_payload_crc() const {
 }
 
 MappedFile::MappedFile(const fs::path& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) throw FormatError(path, std::string("cannot open: ") + std::strerror(errno));
-  struct stat st {};
-  if (::fstat(fd, &st) != 0) {
-    const int e = errno;
-    ::close(fd);
-    throw FormatError(path, std::string("cannot stat: ") + std::strerror(e));
-  }
-  size_ = static_cast<std::size_t>(st.st_size);
+  std::uint64_t size = 0;
+  const int fd = detail::open_regular_file(path, size);
+  size_ = static_cast<std::size_t>(size);
   if (size_ > 0) {
     void* p = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd, 0);
     if (p == MAP_FAILED) {

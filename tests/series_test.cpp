@@ -1,5 +1,7 @@
 // series_test.cpp: the raw series format, raw files and HDF5 files read back what was written,
 // and bad input of every kind gives an InputError that says what was wrong.
+#include <sys/stat.h>
+
 #include <gtest/gtest.h>
 #include <hdf5.h>
 
@@ -114,16 +116,44 @@ TEST(RawSeries, MalformedManifestsAreRejected) {
   };
   put("{ not json");
   expect_error([&] { vd::open_series(path); }, {"series.json", "not valid JSON"});
-  put(R"({"format":"volreel-raw-series","version":1,"dims":[2,2],"frames":["000000.f32"],"timestamps":[0]})");
-  expect_error([&] { vd::open_series(path); }, {"\"dims\""});
-  put(R"({"format":"volreel-raw-series","version":1,"dims":[2,2,2],"frames":["000000.f32","000001.f32"],"timestamps":[0]})");
+  const std::string head = R"({"format":"volreel-raw-series","version":1,"dtype":"f32",)";
+  put(head + R"("dims":[2,2],"frames":["000000.f32"],"timestamps":[0]})");
+  expect_error([&] { vd::open_series(path); }, {"\"dims\"", "[x, y, z]", "an array of 2 values"});
+  put(head + R"("dims":[2,2,2],"frames":["000000.f32","000001.f32"],"timestamps":[0]})");
   expect_error([&] { vd::open_series(path); },
-               {"\"timestamps\" has 1 entries but \"frames\" has 2"});
-  put(R"({"format":"volreel-raw-series","version":7,"dims":[2,2,2],"frames":["000000.f32"],"timestamps":[0]})");
-  expect_error([&] { vd::open_series(path); }, {"version"});
-  put(R"({"format":"volreel-raw-series","version":1,"dims":[2,2,2],"frames":"x","timestamps":[0]})");
-  expect_error([&] { vd::open_series(path); }, {"malformed"});
+               {"\"timestamps\"", "an array of 2 numbers", "found an array of 1 value"});
+  put(R"({"format":"volreel-raw-series","version":7,"dtype":"f32","dims":[2,2,2],"frames":["000000.f32"],"timestamps":[0]})");
+  expect_error([&] { vd::open_series(path); }, {"\"version\"", "found 7"});
+  put(head + R"("dims":[2,2,2],"frames":"x","timestamps":[0]})");
+  expect_error([&] { vd::open_series(path); }, {"\"frames\"", "found \"x\""});
+  // A fractional size, a missing dtype and a mistyped field are named, never accepted.
+  put(head + R"("dims":[64.5,2,2],"frames":["000000.f32"],"timestamps":[0]})");
+  expect_error([&] { vd::open_series(path); }, {"\"dims\"", "integers", "found 64.5"});
+  put(R"({"format":"volreel-raw-series","version":1,"dims":[2,2,2],"frames":["000000.f32"],"timestamps":[0]})");
+  expect_error([&] { vd::open_series(path); }, {"field \"dtype\" is missing"});
+  put(head + R"("dims":[2,2,2],"frames":["000000.f32"],"timestamps":[0],"variable":7})");
+  expect_error([&] { vd::open_series(path); }, {"\"variable\"", "a string", "found 7"});
+  put(head + R"("dims":[2,2,2],"frames":["000000.f32","000001.f32"],"timestamps":[1,1]})");
+  expect_error([&] { vd::open_series(path); }, {"\"timestamps\"", "increasing"});
+  // Nesting deep enough to overflow a recursive walk is refused while parsing.
+  put(std::string(200000, '[') + std::string(200000, ']'));
+  expect_error([&] { vd::open_series(path); }, {"series.json", "nested at most 64"});
   expect_error([&] { vd::open_series(dir / "nowhere"); }, {"does not exist"});
+}
+
+TEST(RawSeries, FramesThatAreNotRegularFilesAreNamed) {
+  TempDir dir("series-kinds");
+  const fs::path path = write_series(dir, Dims{2, 2, 2}, 2);
+  fs::remove(path / "000001.f32");
+  fs::create_directory(path / "000001.f32");
+  expect_error([&] { vd::open_series(path); }, {"000001.f32", "is a directory"});
+  fs::remove(path / "000001.f32");
+  ASSERT_EQ(::mkfifo((path / "000001.f32").c_str(), 0600), 0);
+  expect_error([&] { vd::open_series(path); }, {"000001.f32", "FIFO"});
+  // series.json itself a FIFO: refused at once, never waits for a writer.
+  fs::remove(path / "series.json");
+  ASSERT_EQ(::mkfifo((path / "series.json").c_str(), 0600), 0);
+  expect_error([&] { vd::open_series(path); }, {"series.json", "FIFO"});
 }
 
 TEST(RawSeries, NonFiniteValuesRefusedOrReplaced) {

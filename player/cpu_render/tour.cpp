@@ -8,6 +8,9 @@
 
 #include "json_fields.hpp"
 #include "volreel/datasets/prng.hpp"
+#include "volreel/format/error.hpp"
+#include "volreel/format/file_io.hpp"
+#include "volreel/format/json_input.hpp"
 
 namespace volreel::cpu_render {
 namespace {
@@ -253,19 +256,22 @@ Tour Tour::from_json(const nlohmann::json& json, const TourContext& context,
 Tour Tour::parse(const std::string& text, const TourContext& context, const std::string& name) {
   nlohmann::json json;
   try {
-    json = nlohmann::json::parse(text);
-  } catch (const nlohmann::json::parse_error& e) {
-    throw InputError(name + ": not valid JSON (" + e.what() + ")");
+    json = format::parse_json_document(text, name);
+  } catch (const format::FormatError& e) {
+    throw InputError(e.what());
   }
   return from_json(json, context, name);
 }
 
 Tour Tour::load(const std::filesystem::path& path, const TourContext& context) {
-  std::ifstream in(path);
-  if (!in) throw InputError(path.string() + ": cannot open the tour file");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return parse(text.str(), context, path.string());
+  std::vector<std::byte> bytes;
+  try {
+    bytes = format::detail::read_whole_file(path, format::detail::max_json_bytes);
+  } catch (const format::FormatError& e) {
+    throw InputError(std::string(e.what()) + " (the tour file)");
+  }
+  return parse(std::string(reinterpret_cast<const char*>(bytes.data()), bytes.size()), context,
+               path.string());
 }
 
 Tour Tour::default_for(const TourContext& context, std::uint64_t seed) {

@@ -11,13 +11,22 @@
 #include <cstring>
 #include <utility>
 
+#include "volreel/format/error.hpp"
+#include "volreel/format/file_io.hpp"
+
 namespace volreel::stream {
 
 std::string read_byte_range(const std::filesystem::path& file, std::uint64_t offset,
                             std::uint32_t bytes, std::vector<std::byte>& out) {
   out.resize(bytes);
-  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return file.string() + ": cannot open: " + std::strerror(errno);
+  int fd = -1;
+  try {
+    std::uint64_t size = 0;
+    fd = format::detail::open_regular_file(file, size);
+  } catch (const format::FormatError& e) {
+    out.clear();
+    return e.what();
+  }
   std::size_t done = 0;
   std::string error;
   while (done < bytes) {

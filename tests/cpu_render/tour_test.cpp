@@ -110,6 +110,8 @@ TEST(CpuRenderTour, ValidationNamesTheField) {
         << "input " << text << " gave \"" << message << "\", expected it to mention " << needle;
   };
   expect(R"({"duration": 1,)", "tour.json: not valid JSON");
+  expect(std::string(100000, '[') + std::string(100000, ']'),
+         "tour.json: expected JSON nested at most 64");
   expect(R"({})", "tour.json: missing field \"duration\"");
   expect(R"({"duration": -1})", "tour.json.duration: expected seconds in (0, 1e6], found -1");
   expect(R"({"duration": 1, "durtion": 2})", "unknown field \"durtion\"");

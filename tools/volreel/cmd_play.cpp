@@ -10,6 +10,8 @@
 
 #include "commands.hpp"
 #include "volreel/app/player.hpp"
+#include "volreel/format/error.hpp"
+#include "volreel/format/file_io.hpp"
 #include "volreel/loop/loop_settings.hpp"
 #include "volreel/vulkan/error.hpp"
 
@@ -45,11 +47,13 @@ void run_play(PlayCommandOptions& o) {
                : o.renderer == "vulkan" ? app::RendererKind::vulkan
                                         : app::RendererKind::automatic;
   if (!o.script_file.empty()) {
-    std::ifstream in(o.script_file);
-    if (!in) throw InputError(o.script_file + ": cannot open the script");
-    std::stringstream text;
-    text << in.rdbuf();
-    p.script = text.str();
+    try {
+      const auto bytes =
+          format::detail::read_whole_file(o.script_file, format::detail::max_json_bytes);
+      p.script.assign(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+    } catch (const format::FormatError& e) {
+      throw InputError(std::string(e.what()) + " (the script)");
+    }
   }
   if (!o.script_inline.empty()) p.script += "\n" + o.script_inline;
   if (!o.screenshot_on_exit.empty()) p.screenshot_on_exit = o.screenshot_on_exit;

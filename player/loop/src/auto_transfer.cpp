@@ -13,6 +13,7 @@
 #include "volreel/datasets/volume.hpp"
 #include "volreel/format/decoder.hpp"
 #include "volreel/format/error.hpp"
+#include "volreel/format/json_input.hpp"
 
 namespace volreel::loop {
 
@@ -72,19 +73,16 @@ cpu_render::TransferFunction transfer_from_spec(const std::string& spec,
   const auto& presets = cpu_render::TransferFunction::preset_names();
   if (std::find(presets.begin(), presets.end(), spec) != presets.end())
     return cpu_render::TransferFunction::preset(spec, range[0], range[1]);
-  if (!std::filesystem::is_regular_file(spec)) {
+  if (!std::filesystem::exists(spec)) {
     std::string names = "auto";
     for (const std::string& p : presets) names += ", " + p;
     throw InputError(option + " " + spec + ": not a preset (" + names + ") nor a JSON file");
   }
-  std::ifstream in(spec);
-  std::stringstream text;
-  text << in.rdbuf();
   nlohmann::json json;
   try {
-    json = nlohmann::json::parse(text.str());
-  } catch (const nlohmann::json::exception& e) {
-    throw InputError(option + " " + spec + ": " + e.what());
+    json = format::read_json_file(spec);
+  } catch (const format::FormatError& e) {
+    throw InputError(option + " " + e.what());
   }
   return cpu_render::TransferFunction::from_json(json, range, spec);
 }

@@ -28,8 +28,14 @@ struct KsvdPayloadLayout {
   std::uint32_t codes = 0;          ///< Σ sparsities
 };
 
+/// The largest magnitude a decoded value may reach, and the largest magnitude of an atom value
+/// (atoms have unit norm; binary16 storage rounds them by less than 1e-3).
+constexpr double max_decoded_magnitude = 1e38;
+constexpr double max_atom_magnitude = 1.01;
+
 /// Checks a ksvd payload before anything decodes it (the CPU decoder here, or the GPU): the header
-/// and entries present, finite dequantization values, the layout word (every width in range, the
+/// and entries present, finite dequantization values that bound every decoded value by
+/// max_decoded_magnitude, the layout word (every width in range, the
 /// reserved bits zero, 2^a ≥ atom_count is not required but every atom index < atom_count), the
 /// length = the words of the header, entries and codes exactly. Throws FormatError naming `name`
 /// and the offset `at` + the bad field's offset in the payload.

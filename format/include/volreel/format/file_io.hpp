@@ -1,16 +1,35 @@
-// file_io.hpp: whole-file reads and atomic writes (temporary name, then rename) that report
-// failures as FormatError. Every volreel writer of files goes through write_file_atomically.
+// file_io.hpp: reads that open only regular files (never block on a FIFO, never read a device)
+// and refuse files over a size limit, and atomic writes (temporary name, then rename); failures
+// are FormatError naming the file. Every volreel reader of files opens them through
+// open_regular_file, every writer writes through write_file_atomically.
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <span>
 #include <vector>
 
 namespace volreel::format::detail {
 
-/// The whole file; throws FormatError naming the file if it cannot be opened or read.
-std::vector<std::byte> read_whole_file(const std::filesystem::path& path);
+/// What `path` is, for a message: "a directory", "a FIFO (named pipe)", "a character device",
+/// "a block device", "a socket", "a regular file" or "another kind of file" (mode from stat).
+const char* file_kind(unsigned mode);
+
+/// Opens `path` read-only without blocking (O_NONBLOCK, so that a FIFO cannot stall the open),
+/// refuses anything but a regular file ("is a FIFO (named pipe), expected a regular file"),
+/// and returns the descriptor (blocking again) with the file's size in `size`. The caller closes
+/// it. Throws FormatError naming the file.
+int open_regular_file(const std::filesystem::path& path, std::uint64_t& size);
+
+/// The whole regular file; throws FormatError naming the file if it cannot be opened or read, is
+/// not a regular file, or is larger than `max_bytes` (then nothing is read).
+std::vector<std::byte> read_whole_file(const std::filesystem::path& path, std::uint64_t max_bytes);
+
+/// Size limits of the files volreel reads whole: JSON documents (manifest, series.json, tours,
+/// transfer functions, scripts) and dictionaries.
+constexpr std::uint64_t max_json_bytes = std::uint64_t{256} << 20;
+constexpr std::uint64_t max_dictionary_bytes = std::uint64_t{1} << 30;
 
 /// Writes bytes to "PATH.tmp-PID" and renames it to PATH, so that a reader never sees a half
 /// written file; throws FormatError (and removes the temporary) on failure.
