@@ -313,6 +313,18 @@ std::pair<double, double> value_range(const datasets::SeriesReader& series, std:
   return {lo, hi};
 }
 
+void check_value_range(double value_min, double value_max) {
+  const double largest = std::max(std::abs(value_min), std::abs(value_max));
+  if (largest <= max_input_magnitude) return;
+  char text[200];
+  std::snprintf(text, sizeof text,
+                "the series holds values of magnitude up to %.4g; volreel codes values up to %.0e "
+                "(its decoders' sums must stay finite in float32): scale the data (divide it by a "
+                "power of ten) first",
+                largest, max_input_magnitude);
+  throw InputError(text);
+}
+
 EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path& out,
                             const EncodeJob& job, const Progress& progress) {
   const auto& info = series.info();
@@ -321,6 +333,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   CodingSettings coding = job.coding;
   if (coding.value_min == 0 && coding.value_max == 0)
     std::tie(coding.value_min, coding.value_max) = value_range(series, frames);
+  check_value_range(coding.value_min, coding.value_max);
 
   format::Manifest m = new_manifest(info, frames, coding, job.provenance);
   std::optional<StoredDictionary> dict;
@@ -386,6 +399,14 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       encoder.emplace(&dict->dictionary, smaller);
       bytes = encoder->encode(t, frame, &st);
       std::tie(squared, worst) = finest_level_error(bytes, atoms, frame, t);
+    }
+    // Never write a frame that a reader would refuse.
+    try {
+      format::validate_payloads(format::FrameView(bytes, format::frame_file_name(t)), atoms);
+    } catch (const format::FormatError& e) {
+      throw std::runtime_error("frame " + std::to_string(t) +
+                               " was coded into bytes that do not decode, so it was not written (" +
+                               e.what() + ")");
     }
     summary.seconds += seconds_since(start);
     DeliveredQuality& q = summary.delivered;

@@ -48,7 +48,7 @@ RateSearch search_tolerance(const datasets::SeriesReader& series,
                      " bps): use a smaller dictionary (volreel train --atoms) or more frames");
   // 1. Sample frames, evenly spaced, in memory.
   const std::vector<Volume> samples = detail::evenly_spaced_frames(series, frames, sample_frames);
-  const double range = settings.value_max - settings.value_min;
+  const double range = tolerance_range(settings.value_min, settings.value_max);
   settings.fixed_sparsity = 0;
   const auto estimate = [&](double eps) {
     settings.tolerance = eps;
@@ -88,7 +88,7 @@ ToleranceChoice choose_tolerance(const datasets::SeriesReader& series,
                                  std::uint64_t dictionary_bytes, const CodingSettings& settings,
                                  std::size_t frames, const ToleranceRequest& request,
                                  const Progress& progress) {
-  const double range = settings.value_max - settings.value_min;
+  const double range = tolerance_range(settings.value_min, settings.value_max);
   ToleranceChoice choice;
   if (settings.fixed_sparsity > 0) {
     choice.source = ToleranceSource::fixed_rate;
@@ -112,6 +112,11 @@ ToleranceChoice choose_tolerance(const datasets::SeriesReader& series,
     choice.tolerance = dictionary::tolerance_for_psnr(dictionary::default_encoding_psnr, range);
   }
   return choice;
+}
+
+double tolerance_range(double value_min, double value_max) {
+  const double range = value_max - value_min;
+  return range > 0 ? range : std::max(1.0, std::abs(value_max));
 }
 
 double tolerance_to_train_at(const ToleranceRequest& request, double value_range) {

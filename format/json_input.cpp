@@ -15,8 +15,7 @@ nlohmann::json parse_json_document(std::string_view text, const std::filesystem:
   // The callback sees every value as it is parsed, with its depth: refusing at the limit keeps
   // the document shallow, so that nothing that later walks it (dump, destruction) recurses far.
   const json::parser_callback_t limit = [&](int depth, json::parse_event_t event, json&) {
-    if ((event == json::parse_event_t::object_start ||
-         event == json::parse_event_t::array_start) &&
+    if ((event == json::parse_event_t::object_start || event == json::parse_event_t::array_start) &&
         depth >= max_json_depth)
       throw FormatError(name, FormatError::no_offset,
                         "JSON nested at most " + std::to_string(max_json_depth) + " levels deep",
@@ -29,18 +28,16 @@ nlohmann::json parse_json_document(std::string_view text, const std::filesystem:
     // e.what() reads "[json.exception.parse_error.101] parse error at line 1, column 4: ...".
     const std::string_view what = e.what();
     const std::size_t detail = what.find("] ");
-    throw FormatError(name, "not valid JSON at byte " + std::to_string(e.byte > 0 ? e.byte - 1 : 0) +
-                                ": " +
-                                std::string(detail == std::string_view::npos ? what
-                                                                             : what.substr(detail + 2)));
+    throw FormatError(
+        name, "not valid JSON at byte " + std::to_string(e.byte > 0 ? e.byte - 1 : 0) + ": " +
+                  std::string(detail == std::string_view::npos ? what : what.substr(detail + 2)));
   }
 }
 
 nlohmann::json read_json_file(const std::filesystem::path& path, bool allow_bom) {
   const auto bytes = detail::read_whole_file(path, detail::max_json_bytes);
   return parse_json_document(
-      std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()), path,
-      allow_bom);
+      std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()), path, allow_bom);
 }
 
 std::string describe_json(const nlohmann::json& value) {

@@ -143,8 +143,10 @@ void run_encode(const EncodeOptions& o) {
     std::tie(c.value_min, c.value_max) = encoder::value_range(*series, frames, bar.progress());
     bar.finish();
   }
-  const double range = c.value_max - c.value_min;
-  std::printf("value range [%.6g, %.6g]\n", c.value_min, c.value_max);
+  encoder::check_value_range(c.value_min, c.value_max);
+  const double range = encoder::tolerance_range(c.value_min, c.value_max);
+  std::printf("value range [%.6g, %.6g]%s\n", c.value_min, c.value_max,
+              c.value_max > c.value_min ? "" : " (constant: every brick is stored as the value)");
 
   if (c.codec == format::Codec::zfp) {
     c.zfp_accuracy = o.zfp_opt->count() ? o.zfp_accuracy : range * 1e-3;
@@ -156,6 +158,7 @@ void run_encode(const EncodeOptions& o) {
     fs::path trained;
     if (dict_path.empty() && o.resume && fs::exists(fs::path(o.out) / "dictionary.bin"))
       dict_path = fs::path(o.out) / "dictionary.bin";
+    if (dict_path.empty() && !(c.value_max > c.value_min)) dict_path = "dct";  // nothing to learn
     if (dict_path.empty()) {
       const double eps = encoder::tolerance_to_train_at(request, range);
       trained =

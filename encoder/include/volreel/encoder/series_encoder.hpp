@@ -42,6 +42,11 @@ struct EncodeJob {
 /// How often encode_series codes a frame again for EncodeJob::psnr_target.
 inline constexpr int max_tolerance_retries = 6;
 
+/// The largest magnitude of an input value: a decoded value is a block mean plus up to 255
+/// coefficients (each up to about 15 times the value range), and must stay below
+/// format::max_decoded_magnitude. Larger input is refused before anything is written.
+inline constexpr double max_input_magnitude = 1e33;
+
 /// The delivered quality of the frames an encode wrote, measured on their finest level decoded by
 /// the CPU reference decoder against the frames read (the range: the sequence's value range).
 struct DeliveredQuality {
@@ -85,6 +90,9 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const std::fil
                             const EncodeJob& job, const Progress& progress = {});
 
 /// Value range of the first `frames` frames (0: all).
+/// Throws InputError when a value of [value_min, value_max] is beyond max_input_magnitude.
+void check_value_range(double value_min, double value_max);
+
 std::pair<double, double> value_range(const datasets::SeriesReader& series, std::size_t frames,
                                       const Progress& progress = {});
 

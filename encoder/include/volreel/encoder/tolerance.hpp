@@ -62,6 +62,10 @@ ToleranceChoice choose_tolerance(const datasets::SeriesReader& series,
 /// ε at which to train a dictionary for the encode when none is given, over `value_range` (max −
 /// min of the frames): request.tolerance, else request.psnr, else (also for a bps target, which
 /// needs a dictionary to search with) dictionary::default_encoding_psnr.
+/// The range that PSNR targets and the tolerance search scale ε by: max − min, or for a constant
+/// series (max = min, every brick a constant) max(1, |value|), so that ε stays positive.
+double tolerance_range(double value_min, double value_max);
+
 double tolerance_to_train_at(const ToleranceRequest& request, double value_range);
 
 }  // namespace volreel::encoder
