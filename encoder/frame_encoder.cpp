@@ -490,6 +490,7 @@ std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
   out.header.codec_parameter =
       ksvd ? (settings_.fixed_sparsity > 0 ? 0.0 : settings_.tolerance) : settings_.zfp_accuracy;
   out.header.fixed_sparsity = static_cast<std::uint32_t>(settings_.fixed_sparsity);
+  out.header.container_id = settings_.container_id;
   build_node_table(pyramid, octree, children, ksvd, out, st);
 
   std::vector<std::byte> bytes = format::serialize_frame(out);

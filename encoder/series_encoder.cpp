@@ -153,6 +153,7 @@ format::Manifest new_manifest(const datasets::SeriesInfo& info, std::size_t fram
 /// The dictionary file as the container stores it, and the dictionary the frames are coded
 /// against (its atoms as stored).
 struct StoredDictionary {
+  format::DictionaryFile file;
   std::vector<std::byte> bytes;
   dictionary::Dictionary dictionary;
 };
@@ -162,13 +163,14 @@ struct StoredDictionary {
 StoredDictionary stored_dictionary(const EncodeJob& job) {
   if (job.dictionary_file.empty()) throw InputError("the ksvd codec needs a dictionary file");
   StoredDictionary d;
-  d.bytes = read_file_bytes(job.dictionary_file);
-  auto file = format::parse_dictionary_file(d.bytes, job.dictionary_file);  // validates it
-  if ((job.half_atoms && !file.half_atoms) || !file.dct_atoms) {
-    file = format::container_dictionary(std::move(file), job.half_atoms);
-    d.bytes = format::serialize_dictionary_file(file);
-  }
-  d.dictionary = dictionary::from_file(file);
+  d.file = format::parse_dictionary_file(read_file_bytes(job.dictionary_file),
+                                         job.dictionary_file);  // validates it
+  if ((job.half_atoms && !d.file.half_atoms) || !d.file.dct_atoms)
+    d.file = format::container_dictionary(std::move(d.file), job.half_atoms);
+  // As stored without an identifier (the container's comes in once it is known).
+  d.file.container_id = 0;
+  d.bytes = format::serialize_dictionary_file(d.file);
+  d.dictionary = dictionary::from_file(d.file);
   return d;
 }
 
@@ -236,6 +238,7 @@ std::vector<char> frames_already_written(const fs::path& out, format::Codec code
       const std::uint32_t crc = format::manifest_crc(f.view().bytes());
       const auto& h = f.view().header();
       const bool matches = h.frame_index == t && h.codec == static_cast<std::uint32_t>(codec) &&
+                           h.container_id == m.container_id &&
                            (!m.frames[t] || (m.frames[t]->crc32c == crc &&
                                              m.frames[t]->bytes == f.view().bytes().size()));
       if (matches) {
@@ -339,6 +342,14 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   std::optional<StoredDictionary> dict;
   if (coding.codec == format::Codec::ksvd) {
     dict = stored_dictionary(job);
+  }
+  // The identifier that binds the frames and the dictionary to this container.
+  m.container_id = format::container_identifier(
+      m, dict ? std::span<const std::byte>(dict->bytes) : std::span<const std::byte>());
+  coding.container_id = m.container_id;
+  if (dict) {
+    dict->file.container_id = m.container_id;
+    dict->bytes = format::serialize_dictionary_file(dict->file);
     m.dictionary = format::ManifestDictionary{
         "dictionary.bin", dict->bytes.size(), format::manifest_crc(dict->bytes),
         static_cast<std::uint32_t>(dict->dictionary.atom_count())};

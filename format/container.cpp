@@ -2,8 +2,10 @@
 #include "volreel/format/container.hpp"
 
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <string>
 
 #include "volreel/format/crc32c.hpp"
@@ -26,6 +28,23 @@ std::string frame_file_name(std::size_t t) {
   std::snprintf(name, sizeof name, "frames/%06zu.vrf", t);
   return name;
 }
+
+namespace {
+
+std::string id_text(std::uint64_t id) {
+  char text[17];
+  std::snprintf(text, sizeof text, "%016llx", static_cast<unsigned long long>(id));
+  return text;
+}
+
+/// The manifest's checksum: CRC-32C of its compact serialization without "manifest_crc32c" (the
+/// parser gives back the same numbers and strings, so the reader recomputes it exactly).
+std::uint32_t manifest_checksum(const json& j) {
+  const std::string text = j.dump(-1, ' ', false, json::error_handler_t::replace);
+  return crc32c(std::as_bytes(std::span(text.data(), text.size())));
+}
+
+}  // namespace
 
 json manifest_to_json(const Manifest& m) {
   json frames = json::array();
@@ -57,17 +76,56 @@ json manifest_to_json(const Manifest& m) {
                                      : json(nullptr)},
          {"frames", frames},
          {"complete", m.complete},
-         {"encoder", m.encoder}};
+         {"encoder", m.encoder},
+         {"container_id", id_text(m.container_id)}};
   return j;
 }
 
+std::uint64_t container_identifier(const Manifest& manifest,
+                                   std::span<const std::byte> dictionary_bytes_without_id) {
+  json j = manifest_to_json(manifest);
+  for (const char* field : {"frames", "complete", "container_id", "encoder", "program_version"})
+    j.erase(field);
+  const std::string text = j.dump(-1, ' ', false, json::error_handler_t::replace);
+  std::uint64_t h = 0xCBF29CE484222325u;  // FNV-1a, 64-bit
+  const auto mix = [&](std::span<const std::byte> bytes) {
+    for (std::byte b : bytes) h = (h ^ static_cast<std::uint64_t>(b)) * 0x100000001B3u;
+  };
+  mix(std::as_bytes(std::span(text.data(), text.size())));
+  mix(dictionary_bytes_without_id);
+  return h == 0 ? 1 : h;
+}
+
 Manifest manifest_from_json(const std::string& text, const fs::path& name) {
-  const json j = parse_json_document(text, name, false);
+  json j = parse_json_document(text, name, false);
   const auto fail = [&](const std::string& field, const std::string& expected, const json& found) {
     throw FormatError(name, FormatError::no_offset, "\"" + field + "\": " + expected,
                       found.is_null() ? "nothing" : describe_json(found));
   };
   if (!j.is_object()) fail("(top level)", "an object", j);
+  // The version first (an older container has no checksum), then the checksum over the rest.
+  {
+    const auto version = j.find("format_version");
+    if (version != j.end() && version->is_number_unsigned() &&
+        version->get<std::uint64_t>() < container_format_version)
+      fail("format_version",
+           std::to_string(container_format_version) +
+               " (a container of an older volreel: encode the series again)",
+           *version);
+    const auto stored = j.find("manifest_crc32c");
+    if (stored == j.end() || !stored->is_number_unsigned() ||
+        stored->get<std::uint64_t>() > 0xFFFFFFFFu)
+      fail("manifest_crc32c", "a 32-bit integer",
+           stored == j.end() ? json(nullptr) : json(*stored));
+    const auto expected = stored->get<std::uint32_t>();
+    j.erase("manifest_crc32c");
+    const std::uint32_t found = manifest_checksum(j);
+    if (found != expected)
+      throw FormatError(name, FormatError::no_offset,
+                        "\"manifest_crc32c\": " + std::to_string(expected) +
+                            ", the CRC-32C of the rest of the manifest",
+                        std::to_string(found) + " (manifest.json is corrupt or was edited)");
+  }
   const auto get = [&](const char* field) -> const json& {
     static const json null;
     auto it = j.find(field);
@@ -123,7 +181,9 @@ Manifest manifest_from_json(const std::string& text, const fs::path& name) {
     fail("timestamps", "an array of frame_count = " + std::to_string(frame_count) + " numbers",
          timestamps.is_array() ? json(timestamps.size()) : timestamps);
   for (const json& t : timestamps) {
-    if (!t.is_number()) fail("timestamps", "numbers", t);
+    if (!t.is_number() || !std::isfinite(t.get<double>())) fail("timestamps", "finite numbers", t);
+    if (!m.timestamps.empty() && !(t.get<double>() > m.timestamps.back()))
+      fail("timestamps", "increasing numbers", t);
     m.timestamps.push_back(t.get<double>());
   }
   m.brick_size = static_cast<std::uint32_t>(uint_field("brick_size", brick_size, brick_size));
@@ -139,14 +199,26 @@ Manifest manifest_from_json(const std::string& text, const fs::path& name) {
     m.codec = Codec::zfp;
   else
     fail("codec", "\"ksvd\" or \"zfp\"", get("codec"));
-  m.block_size = static_cast<std::uint32_t>(uint_field("block_size", 0, 64));
+  const bool ksvd = m.codec == Codec::ksvd;
+  m.block_size = static_cast<std::uint32_t>(ksvd ? uint_field("block_size", 6, 6)
+                                                 : uint_field("block_size", 0, 0));
+  m.fixed_sparsity = static_cast<std::uint32_t>(uint_field("fixed_sparsity", 0, ksvd ? 216 : 0));
   m.tolerance = number_field("tolerance");
-  m.fixed_sparsity = static_cast<std::uint32_t>(uint_field("fixed_sparsity", 0, 216));
+  if (ksvd && m.fixed_sparsity == 0 ? !(m.tolerance > 0) : m.tolerance != 0)
+    fail("tolerance",
+         ksvd && m.fixed_sparsity == 0 ? "a positive number (variable rate)"
+                                       : "0 (fixed rate or zfp)",
+         get("tolerance"));
   m.zfp_accuracy = number_field("zfp_accuracy");
+  if (ksvd ? m.zfp_accuracy != 0 : !(m.zfp_accuracy > 0))
+    fail("zfp_accuracy", ksvd ? "0 (ksvd codec)" : "a positive number", get("zfp_accuracy"));
   const json& range = get("value_range");
+  const double largest_float = static_cast<double>(std::numeric_limits<float>::max());
   if (!range.is_array() || range.size() != 2 || !range[0].is_number() || !range[1].is_number() ||
-      !(range[0].get<double>() <= range[1].get<double>()))
-    fail("value_range", "[min, max] with min <= max", range);
+      !(range[0].get<double>() <= range[1].get<double>()) ||
+      !(std::abs(range[0].get<double>()) <= largest_float) ||
+      !(std::abs(range[1].get<double>()) <= largest_float))
+    fail("value_range", "[min, max] with min <= max, both within float32's range", range);
   m.value_min = range[0].get<double>();
   m.value_max = range[1].get<double>();
   const json& dict = get("dictionary");
@@ -198,6 +270,14 @@ Manifest manifest_from_json(const std::string& text, const fs::path& name) {
   if (!complete.is_boolean()) fail("complete", "true or false", complete);
   m.complete = complete.get<bool>();
   m.encoder = get("encoder");
+  if (!m.encoder.is_object())
+    fail("encoder", "an object (how the container was encoded)", m.encoder);
+  const json& id = get("container_id");
+  if (!id.is_string() || id.get_ref<const std::string&>().size() != 16 ||
+      id.get_ref<const std::string&>().find_first_not_of("0123456789abcdef") != std::string::npos)
+    fail("container_id", "16 lowercase hexadecimal digits", id);
+  m.container_id = std::stoull(id.get<std::string>(), nullptr, 16);
+  if (m.container_id == 0) fail("container_id", "a nonzero identifier", id);
   return m;
 }
 
@@ -210,8 +290,14 @@ void write_container_file(const fs::path& dir, const std::string& relative,
   detail::write_file_atomically(path, bytes);
 }
 
+std::string manifest_text(json j) {
+  j.erase("manifest_crc32c");
+  j["manifest_crc32c"] = manifest_checksum(j);
+  return j.dump(1, ' ', false, json::error_handler_t::replace) + "\n";
+}
+
 void write_manifest(const fs::path& dir, const Manifest& manifest) {
-  const std::string text = manifest_to_json(manifest).dump(1) + "\n";
+  const std::string text = manifest_text(manifest_to_json(manifest));
   write_container_file(dir, "manifest.json", std::as_bytes(std::span(text.data(), text.size())));
 }
 
@@ -235,6 +321,11 @@ Container::Container(fs::path dir, bool allow_incomplete) : dir_(std::move(dir))
       throw FormatError(dict_path, 16,
                         std::to_string(manifest_.dictionary->atom_count) + " atoms (manifest.json)",
                         std::to_string(d.atom_count));
+    if (d.container_id != manifest_.container_id)
+      throw FormatError(
+          dict_path, offsetof(DictionaryFileHeader, container_id),
+          "container identifier " + id_text(manifest_.container_id) + " (manifest.json)",
+          id_text(d.container_id) + " (the dictionary of another container)");
     atoms_ = d.atoms;
     atom_count_ = d.atom_count;
   }
@@ -254,6 +345,11 @@ FrameFile Container::open_frame(std::size_t t) const {
     throw FormatError(path, FormatError::no_offset,
                       std::to_string(manifest_.frames[t]->bytes) + " bytes (manifest.json)",
                       std::to_string(file.view().bytes().size()));
+  if (h.container_id != manifest_.container_id)
+    throw FormatError(
+        path, offsetof(FrameHeader, container_id),
+        "container identifier " + id_text(manifest_.container_id) + " (manifest.json)",
+        id_text(h.container_id) + " (a frame of another container)");
   if (h.frame_index != t)
     throw FormatError(path, offsetof(FrameHeader, frame_index), "frame index " + std::to_string(t),
                       std::to_string(h.frame_index));
@@ -262,6 +358,36 @@ FrameFile Container::open_frame(std::size_t t) const {
     throw FormatError(path, offsetof(FrameHeader, dims), "the manifest's dims", "other dims");
   if (static_cast<Codec>(h.codec) != manifest_.codec)
     throw FormatError(path, offsetof(FrameHeader, codec), "the manifest's codec", "another");
+  if (h.value_min != static_cast<float>(manifest_.value_min) ||
+      h.value_max != static_cast<float>(manifest_.value_max))
+    throw FormatError(path, offsetof(FrameHeader, value_min),
+                      "the manifest's value range [" + std::to_string(manifest_.value_min) + ", " +
+                          std::to_string(manifest_.value_max) + "]",
+                      "[" + std::to_string(h.value_min) + ", " + std::to_string(h.value_max) + "]");
+  if (h.fixed_sparsity != manifest_.fixed_sparsity)
+    throw FormatError(
+        path, offsetof(FrameHeader, fixed_sparsity),
+        "fixed sparsity " + std::to_string(manifest_.fixed_sparsity) + " (manifest.json)",
+        std::to_string(h.fixed_sparsity));
+  if (h.block_size != manifest_.block_size)
+    throw FormatError(path, offsetof(FrameHeader, block_size),
+                      "block size " + std::to_string(manifest_.block_size) + " (manifest.json)",
+                      std::to_string(h.block_size));
+  // ε of a ksvd frame: the manifest's, or smaller for a frame coded again for a PSNR target.
+  const double parameter = h.codec_parameter;
+  const bool parameter_ok = manifest_.codec == Codec::zfp ? parameter == manifest_.zfp_accuracy
+                            : manifest_.fixed_sparsity > 0
+                                ? parameter == 0
+                                : parameter > 0 && parameter <= manifest_.tolerance * (1 + 1e-9);
+  if (!parameter_ok)
+    throw FormatError(
+        path, offsetof(FrameHeader, codec_parameter),
+        manifest_.codec == Codec::zfp
+            ? "zfp accuracy " + std::to_string(manifest_.zfp_accuracy) + " (manifest.json)"
+        : manifest_.fixed_sparsity > 0
+            ? std::string("0 (fixed rate)")
+            : "a tolerance in (0, " + std::to_string(manifest_.tolerance) + "] (manifest.json)",
+        std::to_string(parameter));
   if (manifest_.codec == Codec::ksvd && h.atom_count != atom_count_)
     throw FormatError(path, offsetof(FrameHeader, atom_count),
                       std::to_string(atom_count_) + " atoms (the dictionary's)",

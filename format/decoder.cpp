@@ -252,8 +252,8 @@ void decode_brick(const FrameView& frame, std::uint32_t brick, const AtomTable& 
   if (brick >= frame.brick_count())
     throw FormatError(frame.name(),
                       "no brick " + str(brick) + " (frame has " + str(frame.brick_count()) + ")");
-  decode_payload(frame.brick_bytes(brick), frame.codec(), frame.header().codec_parameter, atoms,
-                 out, frame.name(), frame.brick_offset(brick));
+  decode_payload(frame.checked_brick_bytes(brick), frame.codec(), frame.header().codec_parameter,
+                 atoms, out, frame.name(), frame.brick_offset(brick));
 }
 
 void decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& atoms,

@@ -156,6 +156,7 @@ std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& d) {
   h.rms_error = d.training.rms_error;
   h.mean_sparsity = d.training.mean_sparsity;
   std::memcpy(h.program_version, d.program_version.data(), d.program_version.size());
+  h.container_id = d.container_id;
 
   std::vector<std::byte> bytes(dictionary_file_size(stored, m, d.half_atoms));
   std::memcpy(bytes.data(), &h, sizeof h);
@@ -271,7 +272,22 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes,
                             ", value " + std::to_string(i % m) + ")",
                         std::to_string(d.atoms[i]));
 
+  // 7. Every stored atom of unit norm (binary16 rounding moves a norm by less than 1e-3).
+  for (std::size_t a = 0; a < h.atom_count; ++a) {
+    double norm = 0;
+    for (std::size_t v = 0; v < m; ++v) {
+      const double x = static_cast<double>(d.atoms[a * m + v]);
+      norm += x * x;
+    }
+    norm = std::sqrt(norm);
+    if (!(std::abs(norm - 1) <= 1e-2))
+      throw FormatError(name, sizeof h + a * m * value_bytes,
+                        "atom " + std::to_string(a) + " of unit L2 norm (within 0.01)",
+                        "norm " + std::to_string(norm));
+  }
+
   if ((h.flags & dictionary_flag_dct) != 0) d = with_dct_atoms(std::move(d));
+  d.container_id = h.container_id;
 
   d.training.tolerance = h.tolerance;
   d.training.value_min = h.value_min;

@@ -89,7 +89,9 @@ std::vector<std::byte> serialize_frame(const FrameContents& frame) {
   h.level_table_offset = sizeof(FrameHeader);
   h.node_table_offset = h.level_table_offset + sizeof(LevelEntry) * frame.levels.size();
   h.brick_offsets_offset = h.node_table_offset + sizeof(Node) * frame.nodes.size();
-  h.payload_offset = h.brick_offsets_offset + sizeof(std::uint64_t) * (frame.payloads.size() + 1);
+  h.brick_crcs_offset =
+      h.brick_offsets_offset + sizeof(std::uint64_t) * (frame.payloads.size() + 1);
+  h.payload_offset = (h.brick_crcs_offset + 4 * frame.payloads.size() + 7) / 8 * 8;
   std::uint64_t payload_bytes = 0;
   for (const auto& p : frame.payloads) {
     if (p.size() % 4 != 0)
@@ -121,6 +123,8 @@ std::vector<std::byte> serialize_frame(const FrameContents& frame) {
     offset += p.size();
     append(out, offset);
   }
+  for (const auto& p : frame.payloads) append(out, crc32c(p));
+  out.resize(h.payload_offset, std::byte{0});
   const std::uint32_t index_crc = crc32c(std::span<const std::byte>(out).subspan(
       h.level_table_offset, h.payload_offset - h.level_table_offset));
   std::memcpy(out.data() + offsetof(FrameHeader, index_crc), &index_crc, 4);
@@ -142,7 +146,8 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
   };
   // 1. Header.
   if (bytes.size() < sizeof(FrameHeader))
-    fail(0, "a frame file of at least 128 bytes", str(bytes.size()) + " bytes (truncated)");
+    fail(0, "a frame file of at least " + str(sizeof(FrameHeader)) + " bytes",
+         str(bytes.size()) + " bytes (truncated)");
   header_ = load<FrameHeader>(bytes, 0);
   const FrameHeader& h = header_;
   if (std::memcmp(h.magic, frame_magic.data(), 8) != 0)
@@ -155,7 +160,8 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
                   : ""),
          str(h.format_version));
   if (h.header_bytes != sizeof(FrameHeader))
-    fail(offsetof(FrameHeader, header_bytes), "header size 128", str(h.header_bytes));
+    fail(offsetof(FrameHeader, header_bytes), "header size " + str(sizeof(FrameHeader)),
+         str(h.header_bytes));
   if (h.codec > 1) fail(offsetof(FrameHeader, codec), "codec 0 (ksvd) or 1 (zfp)", str(h.codec));
   for (int a = 0; a < 3; ++a)
     if (h.dims[a] == 0 || h.dims[a] > (1u << 24))
@@ -192,7 +198,8 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
   const std::uint64_t levels_at = sizeof(FrameHeader);
   const std::uint64_t nodes_at = levels_at + sizeof(LevelEntry) * std::uint64_t{h.level_count};
   const std::uint64_t offsets_at = nodes_at + sizeof(Node) * std::uint64_t{h.node_count};
-  const std::uint64_t payload_at = offsets_at + 8 * (std::uint64_t{h.brick_count} + 1);
+  const std::uint64_t crcs_at = offsets_at + 8 * (std::uint64_t{h.brick_count} + 1);
+  const std::uint64_t payload_at = (crcs_at + 4 * std::uint64_t{h.brick_count} + 7) / 8 * 8;
   if (h.level_table_offset != levels_at)
     fail(offsetof(FrameHeader, level_table_offset), "level table at " + str(levels_at),
          str(h.level_table_offset));
@@ -202,6 +209,9 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
   if (h.brick_offsets_offset != offsets_at)
     fail(offsetof(FrameHeader, brick_offsets_offset), "brick offsets at " + str(offsets_at),
          str(h.brick_offsets_offset));
+  if (h.brick_crcs_offset != crcs_at)
+    fail(offsetof(FrameHeader, brick_crcs_offset), "brick CRCs at " + str(crcs_at),
+         str(h.brick_crcs_offset));
   if (h.payload_offset != payload_at)
     fail(offsetof(FrameHeader, payload_offset), "payloads at " + str(payload_at),
          str(h.payload_offset));
@@ -218,6 +228,8 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
          "index CRC-32C " + str(index_crc) + " of bytes [" + str(levels_at) + ", " +
              str(payload_at) + ")",
          str(h.index_crc) + " (index corrupt)");
+  for (std::uint64_t at = crcs_at + 4 * std::uint64_t{h.brick_count}; at < payload_at; ++at)
+    if (bytes[at] != std::byte{0}) fail(at, "zero padding before the payloads", "a nonzero byte");
   // 3. Level table: geometry and contiguous node ranges.
   levels_.resize(h.level_count);
   std::uint32_t next_node = 0;
@@ -307,6 +319,38 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
       fail(at, "end offset " + str(h.payload_bytes), str(v));
     previous = v;
   }
+  // 6. Histograms and constant subtrees: every node's histogram has a bin (a brick has voxels) and
+  //    holds its children's; an empty node's brick is a constant, and its histogram (and that of a
+  //    constant finest-level brick) is that constant's bin alone.
+  for (std::uint32_t i = 0; i < h.node_count; ++i) {
+    const std::uint64_t at = nodes_at + sizeof(Node) * i;
+    const Node n = node(i);
+    if (n.histogram == 0) fail(at + 8, "node " + str(i) + " histogram with a bin set", "none");
+    const std::span<const std::byte> payload = brick_bytes(i);
+    if (n.type() == NodeType::empty && payload.size() != 4)
+      fail(brick_offset(i),
+           "a 4-byte constant payload for brick " + str(i) + " (its node is empty)",
+           str(payload.size()) + " bytes");
+    if (payload.size() == 4 && n.type() != NodeType::inner) {
+      const float value = load<float>(payload, 0);
+      const std::uint64_t bin = std::uint64_t{1} << histogram_bin(value, h.value_min, h.value_max);
+      if (n.histogram != bin)
+        fail(at + 8, "node " + str(i) + " histogram of its constant's bin alone (" + str(bin) + ")",
+             str(n.histogram));
+    }
+    if (n.type() == NodeType::inner) {
+      const std::uint32_t first = n.first_child();
+      const std::uint32_t level = positions_[i].level;
+      const std::uint32_t end = levels_[level + 1].first_node + levels_[level + 1].node_count;
+      for (std::uint32_t c = first;
+           c < end && positions_[c].level == level + 1 && positions_[c].x / 2 == positions_[i].x &&
+           positions_[c].y / 2 == positions_[i].y && positions_[c].z / 2 == positions_[i].z;
+           ++c)
+        if ((node(c).histogram & ~n.histogram) != 0)
+          fail(at + 8, "node " + str(i) + " histogram holding its child " + str(c) + "'s",
+               "bins the child has and it lacks");
+    }
+  }
 }
 
 Node FrameView::node(std::uint32_t i) const {
@@ -321,6 +365,20 @@ std::uint64_t FrameView::brick_offset(std::uint32_t b) const {
 std::span<const std::byte> FrameView::brick_bytes(std::uint32_t b) const {
   const std::uint64_t begin = brick_offset(b), end = brick_offset(b + 1);
   return bytes_.subspan(begin, end - begin);
+}
+
+std::uint32_t FrameView::brick_crc(std::uint32_t b) const {
+  return load<std::uint32_t>(bytes_, header_.brick_crcs_offset + 4 * std::uint64_t{b});
+}
+
+std::span<const std::byte> FrameView::checked_brick_bytes(std::uint32_t b) const {
+  const std::span<const std::byte> payload = brick_bytes(b);
+  const std::uint32_t found = crc32c(payload), expected = brick_crc(b);
+  if (found != expected)
+    throw FormatError(name_, brick_offset(b),
+                      "brick " + str(b) + " payload of CRC-32C " + str(expected) + " (the index's)",
+                      str(found) + " (payload corrupt)");
+  return payload;
 }
 
 std::uint64_t FrameView::payload_end_for_depth(std::uint32_t depth) const {

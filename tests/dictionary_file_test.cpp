@@ -26,6 +26,15 @@ DictionaryFile small_dictionary(std::uint32_t M = 2, std::uint32_t K = 3) {
   volreel::SplitMix64 rng(11);
   d.atoms.resize(std::size_t{K} * M * M * M);
   for (float& v : d.atoms) v = static_cast<float>(rng.normal());
+  const std::size_t m = std::size_t{M} * M * M;
+  for (std::size_t a = 0; a < K; ++a) {  // unit atoms, as the reader requires
+    double norm = 0;
+    for (std::size_t v = 0; v < m; ++v)
+      norm += std::pow(static_cast<double>(d.atoms[a * m + v]), 2);
+    for (std::size_t v = 0; v < m; ++v)
+      d.atoms[a * m + v] =
+          static_cast<float>(static_cast<double>(d.atoms[a * m + v]) / std::sqrt(norm));
+  }
   d.training.tolerance = 0.125;
   d.training.value_min = -3.5;
   d.training.value_max = 7.25;

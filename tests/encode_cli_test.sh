@@ -40,7 +40,7 @@ cp -r "$work/a.vreel" "$work/b.vreel"
 printf '\x13' | dd of="$work/b.vreel/frames/000001.vrf" bs=1 seek=200 conv=notrunc 2>/dev/null
 expect_error "000001.vrf: offset" "$volreel" verify "$work/b.vreel"
 truncate -s 100 "$work/b.vreel/frames/000002.vrf"
-expect_error "000002.vrf: offset 0: expected a frame file of at least 128 bytes" "$volreel" decode "$work/b.vreel" --frame 2 --out "$work/x.f32"
+expect_error "000002.vrf: offset 0: expected a frame file of at least 144 bytes" "$volreel" decode "$work/b.vreel" --frame 2 --out "$work/x.f32"
 # Resume repairs both and leaves frame 0 alone.
 "$volreel" encode "$work/s" --out "$work/b.vreel" --resume --tolerance "$("$volreel" info "$work/a.vreel" --json | json 'd["tolerance"]')" \
   > "$work/resume.txt" 2>/dev/null
@@ -62,7 +62,7 @@ bps=$("$volreel" info "$work/r.vreel" --json | json 'd["bps"]')
 /usr/bin/python3 -c "import sys; b=$bps; sys.exit(0 if abs(b-8)/8 <= 0.05 else 1)" || fail "--bps 8 gave $bps bps"
 
 # The pointwise bound: every value of the finest level within E (compare's max error), and a
-# container of format version 2 refused with the message to encode again.
+# container of format version 3 refused with the message to encode again.
 "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/m.vreel" --max-error 2e-3 \
   > "$work/max.txt" 2>&1 || fail "encode --max-error: $(cat "$work/max.txt")"
 grep -q "pointwise bound: every coded block within" "$work/max.txt" || fail "--max-error report: $(cat "$work/max.txt")"
@@ -73,7 +73,7 @@ expect_error "exceeds --max-error" "$volreel" compare "$work/s" "$work/m.vreel" 
 "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/p.vreel" --psnr 58 > "$work/psnr.txt" 2>&1
 grep -q "target PSNR 58.00 dB met by every frame" "$work/psnr.txt" || fail "--psnr 58: $(cat "$work/psnr.txt")"
 "$volreel" compare "$work/s" "$work/p.vreel" --no-ssim --min-psnr 58 > /dev/null 2>&1 || fail "--psnr 58 not delivered"
-sed -i 's/"format_version": 3/"format_version": 2/' "$work/m.vreel/manifest.json"
+sed -i 's/"format_version": 4/"format_version": 3/' "$work/m.vreel/manifest.json"
 expect_error "encode the series again" "$volreel" info "$work/m.vreel"
 
 echo "encode_cli_end_to_end: all checks passed"

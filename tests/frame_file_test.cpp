@@ -12,6 +12,7 @@
 #include "volreel/encoder/encoder.hpp"
 #include "volreel/format/brick_decode.h"
 #include "volreel/format/container.hpp"
+#include "volreel/format/crc32c.hpp"
 #include "volreel/format/decoder.hpp"
 #include "volreel/format/error.hpp"
 #include "volreel/format/frame_file.hpp"
@@ -66,7 +67,7 @@ std::string read_everything(std::span<const std::byte> bytes, const dictionary::
 }
 
 TEST(FrameLayout, OffsetsAndGeometry) {
-  EXPECT_EQ(sizeof(format::FrameHeader), 128u);
+  EXPECT_EQ(sizeof(format::FrameHeader), 144u);
   EXPECT_EQ(sizeof(format::Node), 16u);
   EXPECT_EQ(sizeof(format::LevelEntry), 32u);
   EXPECT_EQ(format::morton3(1, 0, 0), 1u);
@@ -86,7 +87,7 @@ TEST(FrameLayout, OffsetsAndGeometry) {
   const auto d = small_dictionary();
   const auto bytes = small_frame(format::Codec::ksvd, d);
   EXPECT_EQ(std::memcmp(bytes.data(), "VREELFRM", 8), 0);
-  EXPECT_EQ(static_cast<int>(bytes[8]), 3);
+  EXPECT_EQ(static_cast<int>(bytes[8]), 4);
   EXPECT_EQ(static_cast<int>(bytes[9]), 0);
 }
 
@@ -138,6 +139,55 @@ INSTANTIATE_TEST_SUITE_P(Codecs, DamagedFrame,
                                                                           : std::string("zfp");
                          });
 
+/// Recomputes every brick CRC, the index CRC and the file CRC after a deliberate edit, so that
+/// what a reader reports is the edited field, not a checksum.
+void reseal(std::vector<std::byte>& bytes) {
+  format::FrameHeader h;
+  std::memcpy(&h, bytes.data(), sizeof h);
+  for (std::uint32_t b = 0; b < h.brick_count; ++b) {
+    std::uint64_t begin, end;
+    std::memcpy(&begin, bytes.data() + h.brick_offsets_offset + 8 * b, 8);
+    std::memcpy(&end, bytes.data() + h.brick_offsets_offset + 8 * (b + 1), 8);
+    const std::uint32_t crc = format::crc32c(
+        std::span<const std::byte>(bytes).subspan(h.payload_offset + begin, end - begin));
+    std::memcpy(bytes.data() + h.brick_crcs_offset + 4 * b, &crc, 4);
+  }
+  const std::uint32_t index = format::crc32c(std::span<const std::byte>(bytes).subspan(
+      h.level_table_offset, h.payload_offset - h.level_table_offset));
+  std::memcpy(bytes.data() + offsetof(format::FrameHeader, index_crc), &index, 4);
+  const std::uint32_t file =
+      format::crc32c(std::span<const std::byte>(bytes).first(bytes.size() - 4));
+  std::memcpy(bytes.data() + bytes.size() - 4, &file, 4);
+}
+
+TEST(DamagedFrame, BrickChecksumsCatchPayloadDamage) {
+  const auto d = small_dictionary();
+  auto bytes = small_frame(format::Codec::ksvd, d);
+  const format::FrameView good(bytes, "x");
+  std::uint32_t brick = 0;  // the largest payload
+  for (std::uint32_t b = 1; b < good.brick_count(); ++b)
+    if (good.brick_bytes(b).size() > good.brick_bytes(brick).size()) brick = b;
+  const std::uint64_t at = good.brick_offset(brick) + 40;
+  ASSERT_LT(at, good.brick_offset(brick + 1));
+  bytes[at] ^= std::byte{0x10};
+  const format::FrameView view(bytes, "frames/000000.vrf");  // the index is intact
+  try {
+    view.checked_brick_bytes(brick);
+    ADD_FAILURE() << "a damaged payload was handed out";
+  } catch (const format::FormatError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("brick " + std::to_string(brick)), std::string::npos) << m;
+    EXPECT_NE(m.find("offset " + std::to_string(good.brick_offset(brick))), std::string::npos) << m;
+    EXPECT_NE(m.find("payload corrupt"), std::string::npos) << m;
+  }
+  std::vector<float> out(format::brick_voxels);
+  EXPECT_THROW(format::decode_brick(view, brick, table(d), out), format::FormatError);
+  for (std::uint32_t b = 0; b < view.brick_count(); ++b)  // the others still decode
+    if (b != brick) {
+      EXPECT_NO_THROW(format::decode_brick(view, b, table(d), out));
+    }
+}
+
 TEST(DamagedFrame, PayloadErrorsNameTheBrick) {
   const auto d = small_dictionary();
   auto bytes = small_frame(format::Codec::ksvd, d);
@@ -148,6 +198,7 @@ TEST(DamagedFrame, PayloadErrorsNameTheBrick) {
   std::memcpy(&layout_word, bytes.data() + word, 4);
   layout_word |= 1u << 20;
   std::memcpy(bytes.data() + word, &layout_word, 4);
+  reseal(bytes);
   const std::string e = read_everything(bytes, d, false);
   EXPECT_NE(e.find("zero bits 18..31"), std::string::npos) << e;
   EXPECT_NE(e.find("offset " + std::to_string(word)), std::string::npos) << e;
@@ -165,12 +216,14 @@ format::Manifest sample_manifest() {
   m.value_max = 1;
   m.dictionary = format::ManifestDictionary{"dictionary.bin", 28036, 12345, 32};
   m.frames = {format::ManifestFrame{"frames/000000.vrf", 1000, 1}, std::nullopt};
+  m.encoder = nlohmann::json::object();
+  m.container_id = 0x0123456789abcdefu;
   return m;
 }
 
 TEST(Manifest, RoundTripAndDamage) {
   const auto m = sample_manifest();
-  const std::string text = format::manifest_to_json(m).dump(1);
+  const std::string text = format::manifest_text(format::manifest_to_json(m));
   const auto back = format::manifest_from_json(text, "manifest.json");
   EXPECT_EQ(back.dims, m.dims);
   EXPECT_EQ(back.frames.size(), 2u);
@@ -195,7 +248,7 @@ TEST(Manifest, RoundTripAndDamage) {
   auto j = format::manifest_to_json(m);
   j["levels"] = 7;
   try {
-    format::manifest_from_json(j.dump(), "manifest.json");
+    format::manifest_from_json(format::manifest_text(j), "manifest.json");
     FAIL();
   } catch (const format::FormatError& e) {
     EXPECT_NE(std::string(e.what()).find("expected \"levels\": 2 for these dims, found 7"),
@@ -204,7 +257,66 @@ TEST(Manifest, RoundTripAndDamage) {
   }
   j = format::manifest_to_json(m);
   j["frames"][0]["file"] = "../../etc/passwd";
-  EXPECT_THROW(format::manifest_from_json(j.dump(), "manifest.json"), format::FormatError);
+  EXPECT_THROW(format::manifest_from_json(format::manifest_text(j), "manifest.json"),
+               format::FormatError);
+}
+
+/// Values SPEC.md forbids, each with the checksum recomputed, are refused naming the field; an
+/// edit without it names the checksum.
+TEST(Manifest, ForbiddenValuesAndEditsAreRefused) {
+  const auto m = sample_manifest();
+  const auto refused = [&](nlohmann::json j, const std::string& needle, bool sign = true) {
+    const std::string text = sign ? format::manifest_text(j) : j.dump(1);
+    try {
+      format::manifest_from_json(text, "manifest.json");
+      ADD_FAILURE() << "accepted; expected an error mentioning " << needle;
+    } catch (const format::FormatError& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+  };
+  const nlohmann::json good = format::manifest_to_json(m);
+  EXPECT_NO_THROW(format::manifest_from_json(format::manifest_text(good), "manifest.json"));
+  auto j = good;
+  for (int size : {0, 7}) {
+    j["block_size"] = size;
+    refused(j, "\"block_size\": an integer in 6..6");
+  }
+  j = good;
+  for (double eps : {-1.0, 0.0}) {
+    j["tolerance"] = eps;
+    refused(j, "\"tolerance\": a positive number");
+  }
+  j = good;
+  j["value_range"] = {-1e39, 1e39};
+  refused(j, "\"value_range\"");
+  j = good;
+  j["timestamps"] = {1.0, 0.5};
+  refused(j, "\"timestamps\": increasing numbers");
+  j = good;
+  j["timestamps"] = {1.0, 1.0};
+  refused(j, "\"timestamps\": increasing numbers");
+  j = good;
+  j.erase("encoder");
+  refused(j, "\"encoder\": an object");
+  j = good;
+  j["encoder"] = "x";
+  refused(j, "\"encoder\": an object");
+  j = good;
+  j["container_id"] = "0000000000000000";
+  refused(j, "\"container_id\": a nonzero identifier");
+  j = good;
+  j["complete"] = !j["complete"].get<bool>();
+  refused(j, "manifest_crc32c", false);
+  const std::string bom = "\xEF\xBB\xBF" + format::manifest_text(good);
+  EXPECT_THROW(format::manifest_from_json(bom, "manifest.json"), format::FormatError);
+  // 200,000 nested arrays, well formed: refused while parsing, no deep recursion anywhere.
+  const std::string deep = std::string(200000, '[') + std::string(200000, ']');
+  try {
+    format::manifest_from_json(deep, "manifest.json");
+    ADD_FAILURE() << "accepted 200,000 nested arrays";
+  } catch (const format::FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("nested at most 64"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <utility>
 
+#include "volreel/format/crc32c.hpp"
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
 
@@ -49,6 +50,25 @@ std::string read_byte_range(const std::filesystem::path& file, std::uint64_t off
   if (!error.empty()) out.clear();
   return error;
 }
+
+namespace {
+
+/// Reads the request's bytes into a and checks them against the request's CRC, if it has one.
+void read_arrival(BrickArrival& a) {
+  const BrickRequest& r = a.request;
+  a.error = read_byte_range(r.file, r.offset, r.bytes, a.bytes);
+  if (a.ok() && r.crc32c) {
+    const std::uint32_t found = format::crc32c(a.bytes);
+    if (found != *r.crc32c) {
+      a.error = r.file.string() + ": offset " + std::to_string(r.offset) +
+                ": expected a brick payload of CRC-32C " + std::to_string(*r.crc32c) +
+                " (the frame's index), found " + std::to_string(found) + " (payload corrupt)";
+      a.bytes.clear();
+    }
+  }
+}
+
+}  // namespace
 
 BrickLoader::BrickLoader(LoaderOptions options) : options_(std::move(options)) {
   options_.threads = std::max(1u, options_.threads);
@@ -120,8 +140,8 @@ std::vector<BrickArrival> BrickLoader::poll() {
     Pending p = std::move(on_link_.front());
     on_link_.pop_front();
     BrickArrival a;
-    a.error = read_byte_range(p.request.file, p.request.offset, p.request.bytes, a.bytes);
     a.request = std::move(p.request);
+    read_arrival(a);
     if (a.ok()) bytes_read_ += a.bytes.size();
     ready_.push_back({std::move(a), p.at});
   }
@@ -200,8 +220,8 @@ void BrickLoader::work() {
       queue_.pop_front();
     }
     BrickArrival a;
-    a.error = read_byte_range(p.request.file, p.request.offset, p.request.bytes, a.bytes);
     a.request = std::move(p.request);
+    read_arrival(a);
     std::lock_guard lock(mutex_);
     // The simulated link; a failed read takes no link time and arrives after the latency.
     Clock::time_point at = p.issued;

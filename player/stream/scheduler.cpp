@@ -181,6 +181,7 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
       r.file = index_.frame_file(k.t);
       r.offset = k.offset;
       r.bytes = k.bytes;
+      r.crc32c = k.crc32c;
       const RequestStatus s = loader_.request(std::move(r));
       if (s == RequestStatus::accepted) {
         ++out.stats.requests_sent;

@@ -54,6 +54,7 @@ void SpatialIndexBuilder::add_frame(std::uint32_t t, const format::FrameView& fr
     k.brick = n.brick;
     k.offset = frame.brick_offset(n.brick);
     k.bytes = static_cast<std::uint32_t>(frame.brick_offset(n.brick + 1) - k.offset);
+    k.crc32c = frame.brick_crc(n.brick);
     k.constant = k.bytes == 4;
     k.subtree_constant = n.type() == format::NodeType::empty;
     k.histogram = n.histogram;

@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "../test_util.hpp"
+#include "volreel/format/crc32c.hpp"
 #include "volreel/stream/brick_loader.hpp"
 
 namespace volreel::stream {
@@ -72,6 +73,36 @@ TEST(StreamLoader, ReadsByteRangesWithACapOnRequestsInFlight) {
   EXPECT_EQ(loader.bytes_read(), 400u + 1234u);
   EXPECT_EQ(loader.request(request(dir / "frame.vrf", 2, 0, 4)), RequestStatus::accepted);
   EXPECT_EQ(poll_until(loader, 1).size(), 1u);
+}
+
+TEST(StreamLoader, ArrivalsAreCheckedAgainstTheirChecksum) {
+  test::TempDir dir("stream-loader-crc");
+  const auto data = pattern(4000);
+  write_file(dir / "frame.vrf", data);
+  const std::uint32_t crc = format::crc32c(std::span(data).subspan(100, 400));
+  LoaderOptions o;
+  o.threads = 1;
+  o.max_in_flight = 4;
+  BrickLoader loader(o);
+  BrickRequest good = request(dir / "frame.vrf", 0, 100, 400),
+               bad = request(dir / "frame.vrf", 1, 100, 400);
+  good.crc32c = crc;
+  bad.crc32c = crc ^ 1u;
+  ASSERT_EQ(loader.request(good), RequestStatus::accepted);
+  ASSERT_EQ(loader.request(bad), RequestStatus::accepted);
+  const auto arrivals = poll_until(loader, 2);
+  ASSERT_EQ(arrivals.size(), 2u);
+  for (const BrickArrival& a : arrivals) {
+    if (a.request.key.x == 0) {
+      EXPECT_TRUE(a.ok()) << a.error;
+      EXPECT_EQ(a.bytes.size(), 400u);
+    } else {
+      EXPECT_FALSE(a.ok());
+      EXPECT_TRUE(a.bytes.empty());  // nothing of a bad payload is handed out
+      EXPECT_NE(a.error.find("frame.vrf: offset 100"), std::string::npos) << a.error;
+      EXPECT_NE(a.error.find("payload corrupt"), std::string::npos) << a.error;
+    }
+  }
 }
 
 TEST(StreamLoader, FailedReadsAreReportedAndBackOff) {

@@ -47,6 +47,9 @@ int coef_bits_from_text(const std::string& text);
 /// How bricks are coded.
 struct CodingSettings {
   format::Codec codec = format::Codec::ksvd;
+  /// The container the frames belong to (format::container_identifier), written into every
+  /// frame header; 0 for frames of no container (trials of the rate search, benchmarks).
+  std::uint64_t container_id = 0;
   double tolerance = 0;  ///< ksvd variable rate: ε (data units), see VariableRateRule
   VariableRateRule rule = VariableRateRule::lagrangian;
   /// Lagrangian rule: the minimum gain of an atom, as a fraction of m·ε² (> 0). Only the product

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -20,7 +21,7 @@
 namespace volreel::format {
 
 /// Version of the manifest's layout, independent of the program version.
-inline constexpr std::uint32_t container_format_version = 3;
+inline constexpr std::uint32_t container_format_version = 4;
 
 struct ManifestFrame {
   std::string file;  ///< "frames/000017.vrf", relative to the container
@@ -52,10 +53,23 @@ struct Manifest {
   std::optional<ManifestDictionary> dictionary;
   std::vector<std::optional<ManifestFrame>> frames;  ///< one per time step; empty until written
   bool complete = false;
-  nlohmann::json encoder;  ///< how it was encoded (provenance; free-form)
+  nlohmann::json encoder;  ///< how it was encoded (provenance; an object, free-form inside)
+  /// Binds the container's files together: every frame header and the dictionary carry it
+  /// (container_identifier gives the encoder's choice).
+  std::uint64_t container_id = 0;
 };
 
+/// A container's identifier: FNV-1a (64-bit) of the manifest's settings (manifest_to_json without
+/// "frames", "complete", "container_id", "encoder" and "program_version") and of the dictionary's
+/// bytes as stored with identifier 0 — the same for the same input and settings (so that --resume
+/// and regression checksums hold), different for containers whose files must not be mixed. Never 0.
+std::uint64_t container_identifier(const Manifest& manifest,
+                                   std::span<const std::byte> dictionary_bytes_without_id);
+
 nlohmann::json manifest_to_json(const Manifest& manifest);
+/// The text of manifest.json for `j` (manifest_to_json's object, possibly edited): `j` with its
+/// "manifest_crc32c" (re)computed over the rest, one space of indent per level.
+std::string manifest_text(nlohmann::json j);
 /// Parses and validates (types, ranges, counts, file names); throws FormatError naming `name`
 /// and the JSON field.
 Manifest manifest_from_json(const std::string& text, const std::filesystem::path& name);

@@ -57,6 +57,9 @@ struct DictionaryFile {
   bool dct_atoms = false;
   DictionaryTraining training;
   std::string program_version;  ///< the volreel version that wrote it, at most 15 characters
+  /// The identifier of the container whose copy this is (its manifest's container_id), so that a
+  /// reader can tell another container's dictionary; 0 for a dictionary of its own (volreel train).
+  std::uint64_t container_id = 0;
 };
 
 /// On-disk header, 128 bytes, little-endian, at offset 0. Offsets in the comments.
@@ -80,7 +83,7 @@ struct DictionaryFileHeader {
   double rms_error;               //  88
   double mean_sparsity;           //  96
   char program_version[16];       // 104  NUL-padded
-  std::uint64_t reserved;         // 120  0
+  std::uint64_t container_id;     // 120  the container's identifier, or 0
 };
 static_assert(sizeof(DictionaryFileHeader) == 128);
 static_assert(offsetof(DictionaryFileHeader, format_version) == 8);
@@ -91,7 +94,7 @@ static_assert(offsetof(DictionaryFileHeader, seed) == 72);
 static_assert(offsetof(DictionaryFileHeader, flags) == 80);
 static_assert(offsetof(DictionaryFileHeader, rms_error) == 88);
 static_assert(offsetof(DictionaryFileHeader, program_version) == 104);
-static_assert(offsetof(DictionaryFileHeader, reserved) == 120);
+static_assert(offsetof(DictionaryFileHeader, container_id) == 120);
 
 inline constexpr std::uint32_t dictionary_flag_flat = 1u;
 inline constexpr std::uint32_t dictionary_flag_half = 2u;

@@ -20,7 +20,7 @@ static_assert(std::endian::native == std::endian::little, "volreel's files are l
 
 inline constexpr std::array<char, 8> frame_magic = {'V', 'R', 'E', 'E', 'L', 'F', 'R', 'M'};
 /// Version of the frame file layout, independent of the program version.
-inline constexpr std::uint32_t frame_format_version = 3;
+inline constexpr std::uint32_t frame_format_version = 4;
 
 inline constexpr std::uint32_t brick_size = 36;      ///< stored voxels per brick axis
 inline constexpr std::uint32_t brick_interior = 34;  ///< interior voxels per brick axis
@@ -35,7 +35,7 @@ enum class Codec : std::uint32_t { ksvd = 0, zfp = 1 };
 /// constant value (its brick is a 4-byte constant payload; no children are stored).
 enum class NodeType : std::uint32_t { inner = 0, leaf = 1, empty = 2 };
 
-/// On-disk header, 128 bytes at offset 0.
+/// On-disk header, 144 bytes at offset 0.
 struct FrameHeader {
   char magic[8];                       //   0  "VREELFRM"
   std::uint32_t format_version;        //   8  frame_format_version
@@ -53,15 +53,20 @@ struct FrameHeader {
   float value_min;                     //  64  histogram range (the sequence's value range)
   float value_max;                     //  68
   double codec_parameter;              //  72  ksvd: ε (0 for fixed sparsity); zfp: accuracy
-  std::uint64_t level_table_offset;    //  80  = 128
+  std::uint64_t level_table_offset;    //  80  = 144
   std::uint64_t node_table_offset;     //  88  = level_table_offset + 32·L
   std::uint64_t brick_offsets_offset;  //  96  = node_table_offset + 16·node_count
-  std::uint64_t payload_offset;        // 104  = brick_offsets_offset + 8·(brick_count + 1)
+  std::uint64_t payload_offset;        // 104  = brick_crcs_offset + 4·brick_count, rounded up
+                                       //       to a multiple of 8 (4 zero bytes if odd)
   std::uint64_t payload_bytes;         // 112  file size = payload_offset + payload_bytes + 4
   std::uint32_t index_crc;             // 120  CRC-32C of bytes [level_table_offset, payload_offset)
   std::uint32_t fixed_sparsity;        // 124  ksvd fixed-rate S, 0 for variable rate
+  std::uint64_t container_id;          // 128  the container's identifier (manifest.json)
+  std::uint64_t brick_crcs_offset;     // 136  = brick_offsets_offset + 8·(brick_count + 1)
 };
-static_assert(sizeof(FrameHeader) == 128);
+static_assert(sizeof(FrameHeader) == 144);
+static_assert(offsetof(FrameHeader, container_id) == 128);
+static_assert(offsetof(FrameHeader, brick_crcs_offset) == 136);
 static_assert(offsetof(FrameHeader, codec) == 16);
 static_assert(offsetof(FrameHeader, dims) == 24);
 static_assert(offsetof(FrameHeader, level_count) == 48);
@@ -116,7 +121,8 @@ struct FrameContents {
   std::vector<std::vector<std::byte>> payloads;  ///< one per brick; each a multiple of 4 bytes
 };
 
-/// The file's bytes; fills in magic, version, sizes, offsets and both CRCs.
+/// The file's bytes; fills in magic, version, sizes, offsets, the brick CRCs, the index CRC and the
+/// file CRC.
 std::vector<std::byte> serialize_frame(const FrameContents& frame);
 
 /// Position of a node in the octree, computed by the reader from the child links.
@@ -127,8 +133,8 @@ struct NodePosition {
 
 /// A validated view of a frame file's bytes (owned elsewhere: memory map or vector). The
 /// constructor checks the header, the level table, every node and every brick offset, and the index
-/// CRC; check_payload_crc() checks the CRC of the whole file. Payload contents are checked when a
-/// brick is decoded (decoder.hpp).
+/// CRC; check_payload_crc() checks the CRC of the whole file, checked_brick_bytes() one brick's
+/// CRC. Payload contents are checked when a brick is decoded (decoder.hpp).
 class FrameView {
  public:
   FrameView() = default;
@@ -146,8 +152,13 @@ class FrameView {
   std::uint32_t brick_count() const { return header_.brick_count; }
   Node node(std::uint32_t i) const;
   const NodePosition& position(std::uint32_t i) const { return positions_[i]; }
-  /// Payload bytes of brick b (validated bounds).
+  /// Payload bytes of brick b (validated bounds, contents not checked).
   std::span<const std::byte> brick_bytes(std::uint32_t b) const;
+  /// Payload bytes of brick b after checking them against the brick's CRC-32C; throws FormatError
+  /// naming the file, the payload's offset and both CRCs.
+  std::span<const std::byte> checked_brick_bytes(std::uint32_t b) const;
+  /// The CRC-32C of brick b's payload, as the index records it.
+  std::uint32_t brick_crc(std::uint32_t b) const;
   /// File offset of brick b's payload.
   std::uint64_t brick_offset(std::uint32_t b) const;
   /// File offset where the payloads of levels 0..depth−1 end: they are exactly the bytes

@@ -27,6 +27,7 @@
 #include <filesystem>
 #include <functional>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <unordered_map>
@@ -53,6 +54,9 @@ struct BrickRequest {
   std::filesystem::path file;
   std::uint64_t offset = 0;  ///< absolute byte offset in file
   std::uint32_t bytes = 0;
+  /// The payload's CRC-32C from the frame's index: an arrival that does not match is an error
+  /// (never handed out as bytes). Unset: not checked.
+  std::optional<std::uint32_t> crc32c;
 };
 
 struct BrickArrival {

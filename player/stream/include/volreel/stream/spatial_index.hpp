@@ -60,6 +60,7 @@ struct KeyframeNode {
   std::uint32_t brick = 0;        ///< brick index inside frame t's file
   std::uint64_t offset = 0;       ///< absolute byte offset of the payload in the frame file
   std::uint32_t bytes = 0;        ///< payload length
+  std::uint32_t crc32c = 0;       ///< the payload's CRC-32C (the frame's index)
   std::uint64_t histogram = 0;    ///< the node's 64-bin histogram over the sequence's value range
   bool constant = false;          ///< 4-byte payload: every voxel of the brick is one value
   bool subtree_constant = false;  ///< node type `empty`: the whole subtree is that value
