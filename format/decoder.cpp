@@ -32,7 +32,8 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
   // Payloads are 4-byte aligned inside the file and the map is page-aligned, but copy to be safe
   // for in-memory views of arbitrary alignment.
   std::vector<vr_uint> payload_words(bytes.size() / 4);
-  std::memcpy(payload_words.data(), bytes.data(), payload_words.size() * 4);
+  if (!payload_words.empty())
+    std::memcpy(payload_words.data(), bytes.data(), payload_words.size() * 4);
   const vr_uint* payload = payload_words.data();
   // 1. Structure, dequantization values and atom indices.
   const KsvdPayloadLayout layout =
@@ -132,7 +133,7 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
 KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> bytes, std::uint32_t atom_count,
                                      const std::filesystem::path& name, std::uint64_t at) {
   std::vector<vr_uint> words(bytes.size() / 4);
-  std::memcpy(words.data(), bytes.data(), 4 * words.size());
+  if (!words.empty()) std::memcpy(words.data(), bytes.data(), 4 * words.size());
   return check_ksvd_payload(words, bytes.size(), atom_count, name, at);
 }
 
@@ -215,7 +216,7 @@ void decode_zfp(std::span<const std::byte> bytes, double accuracy, std::span<flo
   ZfpStream zfp(ZfpMode::accuracy(accuracy), brick_size, brick_size, brick_size);
   // zfp reads without bounds checks: give it a zero-padded copy as long as the longest stream.
   std::vector<std::byte> padded(std::max<std::size_t>(zfp.maximum_size(), bytes.size()) + 64);
-  std::memcpy(padded.data(), bytes.data(), bytes.size());
+  if (!bytes.empty()) std::memcpy(padded.data(), bytes.data(), bytes.size());
   const std::size_t used = zfp.decompress(padded.data(), padded.size(), out.data());
   if (used == 0 || used > bytes.size() + 8)
     throw FormatError(name, at, "brick payload: a zfp stream of " + str(bytes.size()) + " bytes",

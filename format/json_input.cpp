@@ -24,12 +24,16 @@ nlohmann::json parse_json_document(std::string_view text, const std::filesystem:
   };
   try {
     return json::parse(text.begin(), text.end(), limit);
-  } catch (const json::parse_error& e) {
-    // e.what() reads "[json.exception.parse_error.101] parse error at line 1, column 4: ...".
+  } catch (const json::exception& e) {
+    // A syntax error (parse_error, with its byte) or a number beyond double's range
+    // (out_of_range 406). e.what() reads "[json.exception.parse_error.101] parse error at ...".
     const std::string_view what = e.what();
     const std::size_t detail = what.find("] ");
+    const auto* syntax = dynamic_cast<const json::parse_error*>(&e);
+    const std::string where =
+        syntax ? " at byte " + std::to_string(syntax->byte > 0 ? syntax->byte - 1 : 0) : "";
     throw FormatError(
-        name, "not valid JSON at byte " + std::to_string(e.byte > 0 ? e.byte - 1 : 0) + ": " +
+        name, "not valid JSON" + where + ": " +
                   std::string(detail == std::string_view::npos ? what : what.substr(detail + 2)));
   }
 }

@@ -188,6 +188,14 @@ TEST(DamagedFrame, BrickChecksumsCatchPayloadDamage) {
     }
 }
 
+TEST(DamagedFrame, EmptyPayloadsAreErrors) {
+  const auto d = small_dictionary();
+  std::vector<float> out(format::brick_voxels);
+  for (const format::Codec codec : {format::Codec::ksvd, format::Codec::zfp})
+    EXPECT_THROW(format::decode_payload({}, codec, 1e-3, table(d), out, "x", 0),
+                 format::FormatError);
+}
+
 TEST(DamagedFrame, PayloadErrorsNameTheBrick) {
   const auto d = small_dictionary();
   auto bytes = small_frame(format::Codec::ksvd, d);
@@ -309,6 +317,14 @@ TEST(Manifest, ForbiddenValuesAndEditsAreRefused) {
   refused(j, "manifest_crc32c", false);
   const std::string bom = "\xEF\xBB\xBF" + format::manifest_text(good);
   EXPECT_THROW(format::manifest_from_json(bom, "manifest.json"), format::FormatError);
+  // A number beyond double's range is a syntax error with a message, not an escaping exception.
+  try {
+    format::manifest_from_json(R"({"format": "volreel-container", "x": 1e999})", "manifest.json");
+    ADD_FAILURE() << "accepted 1e999";
+  } catch (const format::FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("not valid JSON: number overflow"), std::string::npos)
+        << e.what();
+  }
   // 200,000 nested arrays, well formed: refused while parsing, no deep recursion anywhere.
   const std::string deep = std::string(200000, '[') + std::string(200000, ']');
   try {

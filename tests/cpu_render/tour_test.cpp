@@ -110,6 +110,7 @@ TEST(CpuRenderTour, ValidationNamesTheField) {
         << "input " << text << " gave \"" << message << "\", expected it to mention " << needle;
   };
   expect(R"({"duration": 1,)", "tour.json: not valid JSON");
+  expect(R"({"duration": 1e999})", "tour.json: not valid JSON: number overflow");
   expect(std::string(100000, '[') + std::string(100000, ']'),
          "tour.json: expected JSON nested at most 64");
   expect(R"({})", "tour.json: missing field \"duration\"");

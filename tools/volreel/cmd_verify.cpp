@@ -23,11 +23,10 @@ void run_verify(const std::string& dir) {
       &bar);
   bar.finish();
   for (const auto& p : problems) std::fprintf(stderr, "%s\n", p.c_str());
-  if (problems.size() == 1)
-    throw InputError(dir + ": 1 problem found: " + problems.front());
+  if (problems.size() == 1) throw InputError(dir + ": 1 problem found: " + problems.front());
   if (!problems.empty())
-    throw InputError(dir + ": " + std::to_string(problems.size()) + " problems found, the first: " +
-                     problems.front() + " (the rest above)");
+    throw InputError(dir + ": " + std::to_string(problems.size()) +
+                     " problems found, the first: " + problems.front() + " (the rest above)");
   std::printf("%s: OK (manifest, dictionary, every frame's CRC-32C, index and brick payloads)\n",
               dir.c_str());
 }
