@@ -1,6 +1,7 @@
 // main.cpp: the volreel program — generate datasets, compare volumes and images, benchmark
 // codecs. Every subcommand has --help.
 #include <cstdio>
+#include <new>
 #include <exception>
 
 #include <CLI/CLI.hpp>
@@ -30,6 +31,12 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr,
+                 "volreel: error: out of memory: the input asks for more memory than this machine "
+                 "can give (check the dimensions in its manifest or series.json, or decode a "
+                 "coarser --level)\n");
+    return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "volreel: error: %s\n", e.what());
     return 1;
