@@ -16,7 +16,8 @@ namespace fs = std::filesystem;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   static const fs::path dir = [] {
-    const fs::path d = fs::temp_directory_path() / ("volreel-fuzz-series-" + std::to_string(getpid()));
+    const fs::path d =
+        fs::temp_directory_path() / ("volreel-fuzz-series-" + std::to_string(getpid()));
     fs::create_directories(d);
     const std::vector<float> frame(8, 1.5f);
     for (const char* name : {"000000.f32", "000001.f32"})

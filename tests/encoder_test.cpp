@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "dictionary_test_data.hpp"
+#include "frame_edit.hpp"
 #include "test_util.hpp"
 #include "volreel/datasets/analytic.hpp"
 #include "volreel/datasets/prng.hpp"
@@ -718,6 +719,65 @@ TEST(Encoder, RegressionChecksums) {
 #endif
   EXPECT_EQ(zfp.size(), ZFP_BYTES);
   EXPECT_EQ(zfp_crc, ZFP_CRC);
+}
+
+/// Histograms that disagree with the bricks are found by verify even with every checksum
+/// recomputed: all bins set, or the bins of the values left out.
+TEST(Container, VerifyChecksHistogramsAgainstTheDecodedBricks) {
+  test::TempDir dir("container-histograms");
+  // A ramp along x over three bricks: each leaf holds about a third of the value range.
+  const Dims dims{90, 20, 20};
+  {
+    datasets::RawSeriesWriter w(dir / "ramp", dims, "ramp");
+    std::vector<float> v(dims.voxels());
+    for (std::size_t i = 0; i < v.size(); ++i)
+      v[i] = static_cast<float>(i % 90) / 89.0f + 0.01f * static_cast<float>(i / 90 % 7);
+    w.write_frame(0, 0, v);
+    w.finish();
+  }
+  const auto series = datasets::open_series(dir / "ramp");
+  format::write_dictionary_file(dir / "dct.bin", format::dct_dictionary(6, "test"));
+  encoder::EncodeJob job;
+  job.coding.tolerance = 1e-4;
+  job.dictionary_file = dir / "dct.bin";
+  const auto good = dir / "good.vreel";
+  encoder::encode_series(*series, good, job);
+  ASSERT_TRUE(format::verify_container(good).empty());
+  const auto edited = [&](const std::string& name, std::uint64_t leaf_histogram,
+                          std::uint64_t root_histogram) {
+    const auto out = dir / name;
+    std::filesystem::copy(good, out, std::filesystem::copy_options::recursive);
+    std::vector<std::byte> bytes;
+    std::uint32_t leaf = 0;
+    {
+      const format::FrameFile f(out / "frames/000000.vrf");
+      bytes.assign(f.view().bytes().begin(), f.view().bytes().end());
+      const format::LevelEntry& finest = f.view().level(f.view().level_count() - 1);
+      for (leaf = finest.first_node; f.view().brick_bytes(leaf).size() == 4; ++leaf) {
+      }
+      const std::uint64_t nodes = f.view().header().node_table_offset;
+      std::memcpy(bytes.data() + nodes + 16 * leaf + 8, &leaf_histogram, 8);
+      for (std::uint32_t i = 0; i < f.view().node_count(); ++i)  // parents hold their children's
+        if (f.view().node(i).type() == format::NodeType::inner)
+          std::memcpy(bytes.data() + nodes + 16 * i + 8, &root_histogram, 8);
+    }
+    test::reseal_frame(bytes);
+    {
+      std::ofstream(out / "frames/000000.vrf", std::ios::binary)
+          .write(reinterpret_cast<const char*>(bytes.data()),
+                 static_cast<std::streamsize>(bytes.size()));
+    }
+    auto manifest = format::manifest_to_json(format::Container(out).manifest());
+    manifest["frames"][0]["crc32c"] = format::manifest_crc(bytes);
+    std::ofstream(out / "manifest.json") << format::manifest_text(manifest);
+    const auto problems = format::verify_container(out);
+    EXPECT_EQ(problems.size(), 1u);
+    return problems.empty() ? std::string() : problems.front();
+  };
+  const std::string all = edited("all.vreel", ~std::uint64_t{0}, ~std::uint64_t{0});
+  EXPECT_NE(all.find("bins no value comes near"), std::string::npos) << all;
+  const std::string none = edited("one.vreel", std::uint64_t{1} << 63, ~std::uint64_t{0});
+  EXPECT_NE(none.find("leaves some of them out"), std::string::npos) << none;
 }
 
 TEST(Container, EncodeResumeVerifyAndDecode) {

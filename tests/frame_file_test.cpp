@@ -6,6 +6,7 @@
 #include <cstring>
 #include <string>
 
+#include "frame_edit.hpp"
 #include "volreel/datasets/analytic.hpp"
 #include "volreel/datasets/prng.hpp"
 #include "volreel/dictionary/dictionary.hpp"
@@ -139,27 +140,6 @@ INSTANTIATE_TEST_SUITE_P(Codecs, DamagedFrame,
                                                                           : std::string("zfp");
                          });
 
-/// Recomputes every brick CRC, the index CRC and the file CRC after a deliberate edit, so that
-/// what a reader reports is the edited field, not a checksum.
-void reseal(std::vector<std::byte>& bytes) {
-  format::FrameHeader h;
-  std::memcpy(&h, bytes.data(), sizeof h);
-  for (std::uint32_t b = 0; b < h.brick_count; ++b) {
-    std::uint64_t begin, end;
-    std::memcpy(&begin, bytes.data() + h.brick_offsets_offset + 8 * b, 8);
-    std::memcpy(&end, bytes.data() + h.brick_offsets_offset + 8 * (b + 1), 8);
-    const std::uint32_t crc = format::crc32c(
-        std::span<const std::byte>(bytes).subspan(h.payload_offset + begin, end - begin));
-    std::memcpy(bytes.data() + h.brick_crcs_offset + 4 * b, &crc, 4);
-  }
-  const std::uint32_t index = format::crc32c(std::span<const std::byte>(bytes).subspan(
-      h.level_table_offset, h.payload_offset - h.level_table_offset));
-  std::memcpy(bytes.data() + offsetof(format::FrameHeader, index_crc), &index, 4);
-  const std::uint32_t file =
-      format::crc32c(std::span<const std::byte>(bytes).first(bytes.size() - 4));
-  std::memcpy(bytes.data() + bytes.size() - 4, &file, 4);
-}
-
 TEST(DamagedFrame, BrickChecksumsCatchPayloadDamage) {
   const auto d = small_dictionary();
   auto bytes = small_frame(format::Codec::ksvd, d);
@@ -206,7 +186,7 @@ TEST(DamagedFrame, PayloadErrorsNameTheBrick) {
   std::memcpy(&layout_word, bytes.data() + word, 4);
   layout_word |= 1u << 20;
   std::memcpy(bytes.data() + word, &layout_word, 4);
-  reseal(bytes);
+  test::reseal_frame(bytes);
   const std::string e = read_everything(bytes, d, false);
   EXPECT_NE(e.find("zero bits 18..31"), std::string::npos) << e;
   EXPECT_NE(e.find("offset " + std::to_string(word)), std::string::npos) << e;

@@ -1,8 +1,8 @@
 // main.cpp: the volreel program — generate datasets, compare volumes and images, benchmark
 // codecs. Every subcommand has --help.
 #include <cstdio>
-#include <new>
 #include <exception>
+#include <new>
 
 #include <CLI/CLI.hpp>
 
