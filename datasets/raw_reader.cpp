@@ -5,6 +5,7 @@
 
 #include "detail.hpp"
 #include "volreel/format/error.hpp"
+#include "volreel/format/file_io.hpp"
 #include "volreel/format/json_input.hpp"
 
 namespace volreel::datasets::detail {
@@ -13,23 +14,6 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 namespace {
-
-std::string kind_of(fs::file_type type) {
-  switch (type) {
-    case fs::file_type::directory:
-      return "a directory";
-    case fs::file_type::fifo:
-      return "a FIFO (named pipe)";
-    case fs::file_type::character:
-      return "a character device";
-    case fs::file_type::block:
-      return "a block device";
-    case fs::file_type::socket:
-      return "a socket";
-    default:
-      return "not a regular file";
-  }
-}
 
 class RawSeriesReader final : public SeriesReader {
  public:
@@ -126,7 +110,7 @@ class RawSeriesReader final : public SeriesReader {
         fail("frame " + std::to_string(t) + ": '" + file.string() + "' is missing");
       if (!fs::is_regular_file(status))
         fail("frame " + std::to_string(t) + ": '" + file.string() + "' is " +
-             kind_of(status.type()) + ", expected a regular file");
+             format::detail::file_kind(status.type()) + ", expected a regular file");
       const auto size = fs::file_size(file, ec);
       if (ec)
         fail("frame " + std::to_string(t) + ": cannot read the size of '" + file.string() +

@@ -75,6 +75,11 @@ std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOption
   if (!fs::exists(path, ec)) throw InputError("'" + path.string() + "' does not exist");
   if (fs::is_directory(path, ec)) return detail::open_raw_series(path, options);
   if (path.filename() == "series.json") return detail::open_raw_series(path.parent_path(), options);
+  // Never hand a FIFO or a device to a reader that would block on it or read it forever.
+  const fs::file_type type = fs::status(path, ec).type();
+  if (type != fs::file_type::regular)
+    throw InputError("'" + path.string() + "' is " + format::detail::file_kind(type) +
+                     ", expected a regular file (raw or HDF5) or a series directory");
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });

@@ -26,6 +26,25 @@ const char* file_kind(unsigned mode) {
   return "another kind of file";
 }
 
+const char* file_kind(fs::file_type type) {
+  switch (type) {
+    case fs::file_type::regular:
+      return "a regular file";
+    case fs::file_type::directory:
+      return "a directory";
+    case fs::file_type::fifo:
+      return "a FIFO (named pipe)";
+    case fs::file_type::character:
+      return "a character device";
+    case fs::file_type::block:
+      return "a block device";
+    case fs::file_type::socket:
+      return "a socket";
+    default:
+      return "another kind of file";
+  }
+}
+
 int open_regular_file(const fs::path& path, std::uint64_t& size) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY);
   if (fd < 0) throw FormatError(path, std::string("cannot open: ") + std::strerror(errno));

@@ -154,6 +154,9 @@ TEST(RawSeries, FramesThatAreNotRegularFilesAreNamed) {
   fs::remove(path / "series.json");
   ASSERT_EQ(::mkfifo((path / "series.json").c_str(), 0600), 0);
   expect_error([&] { vd::open_series(path); }, {"series.json", "FIFO"});
+  // An HDF5 or raw input that is a FIFO: refused before HDF5 (which would block) opens it.
+  ASSERT_EQ(::mkfifo((dir / "run.h5").c_str(), 0600), 0);
+  expect_error([&] { vd::open_series(dir / "run.h5"); }, {"run.h5", "is a FIFO"});
 }
 
 TEST(RawSeries, NonFiniteValuesRefusedOrReplaced) {

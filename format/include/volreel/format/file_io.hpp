@@ -15,6 +15,8 @@ namespace volreel::format::detail {
 /// What `path` is, for a message: "a directory", "a FIFO (named pipe)", "a character device",
 /// "a block device", "a socket", "a regular file" or "another kind of file" (mode from stat).
 const char* file_kind(unsigned mode);
+/// The same for a std::filesystem file type.
+const char* file_kind(std::filesystem::file_type type);
 
 /// Opens `path` read-only without blocking (O_NONBLOCK, so that a FIFO cannot stall the open),
 /// refuses anything but a regular file ("is a FIFO (named pipe), expected a regular file"),
