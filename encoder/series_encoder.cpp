@@ -316,16 +316,16 @@ std::pair<double, double> value_range(const datasets::SeriesReader& series, std:
   return {lo, hi};
 }
 
-void check_value_range(double value_min, double value_max) {
+void check_value_range(double value_min, double value_max, const std::string& source) {
   const double largest = std::max(std::abs(value_min), std::abs(value_max));
   if (largest <= max_input_magnitude) return;
-  char text[200];
+  char text[240];
   std::snprintf(text, sizeof text,
-                "the series holds values of magnitude up to %.4g; volreel codes values up to %.0e "
-                "(its decoders' sums must stay finite in float32): scale the data (divide it by a "
-                "power of ten) first",
-                largest, max_input_magnitude);
-  throw InputError(text);
+                ": expected values of magnitude at most %.0e (the decoders' sums must stay finite "
+                "in float32), found values up to %.4g: scale the data (divide it by a power of "
+                "ten) first",
+                max_input_magnitude, largest);
+  throw InputError(source + text);
 }
 
 EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path& out,
@@ -336,7 +336,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   CodingSettings coding = job.coding;
   if (coding.value_min == 0 && coding.value_max == 0)
     std::tie(coding.value_min, coding.value_max) = value_range(series, frames);
-  check_value_range(coding.value_min, coding.value_max);
+  check_value_range(coding.value_min, coding.value_max, info.source);
 
   format::Manifest m = new_manifest(info, frames, coding, job.provenance);
   std::optional<StoredDictionary> dict;

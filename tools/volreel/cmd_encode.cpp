@@ -143,7 +143,7 @@ void run_encode(const EncodeOptions& o) {
     std::tie(c.value_min, c.value_max) = encoder::value_range(*series, frames, bar.progress());
     bar.finish();
   }
-  encoder::check_value_range(c.value_min, c.value_max);
+  encoder::check_value_range(c.value_min, c.value_max, series->info().source);
   const double range = encoder::tolerance_range(c.value_min, c.value_max);
   std::printf("value range [%.6g, %.6g]%s\n", c.value_min, c.value_max,
               c.value_max > c.value_min ? "" : " (constant: every brick is stored as the value)");

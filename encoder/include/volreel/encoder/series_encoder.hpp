@@ -90,8 +90,9 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const std::fil
                             const EncodeJob& job, const Progress& progress = {});
 
 /// Value range of the first `frames` frames (0: all).
-/// Throws InputError when a value of [value_min, value_max] is beyond max_input_magnitude.
-void check_value_range(double value_min, double value_max);
+/// Throws InputError naming `source` (the series) when a value of [value_min, value_max] is beyond
+/// max_input_magnitude.
+void check_value_range(double value_min, double value_max, const std::string& source);
 
 std::pair<double, double> value_range(const datasets::SeriesReader& series, std::size_t frames,
                                       const Progress& progress = {});
