@@ -16,16 +16,6 @@ namespace volreel::format::detail {
 
 namespace fs = std::filesystem;
 
-const char* file_kind(unsigned mode) {
-  if (S_ISREG(mode)) return "a regular file";
-  if (S_ISDIR(mode)) return "a directory";
-  if (S_ISFIFO(mode)) return "a FIFO (named pipe)";
-  if (S_ISCHR(mode)) return "a character device";
-  if (S_ISBLK(mode)) return "a block device";
-  if (S_ISSOCK(mode)) return "a socket";
-  return "another kind of file";
-}
-
 const char* file_kind(fs::file_type type) {
   switch (type) {
     case fs::file_type::regular:
@@ -43,6 +33,17 @@ const char* file_kind(fs::file_type type) {
     default:
       return "another kind of file";
   }
+}
+
+const char* file_kind(unsigned mode) {
+  // stat's mode as the std::filesystem type it names, so that one table names both.
+  if (S_ISREG(mode)) return file_kind(fs::file_type::regular);
+  if (S_ISDIR(mode)) return file_kind(fs::file_type::directory);
+  if (S_ISFIFO(mode)) return file_kind(fs::file_type::fifo);
+  if (S_ISCHR(mode)) return file_kind(fs::file_type::character);
+  if (S_ISBLK(mode)) return file_kind(fs::file_type::block);
+  if (S_ISSOCK(mode)) return file_kind(fs::file_type::socket);
+  return file_kind(fs::file_type::unknown);
 }
 
 int open_regular_file(const fs::path& path, std::uint64_t& size) {
