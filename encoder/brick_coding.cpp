@@ -20,11 +20,12 @@ using format::brick_size;
 
 namespace {
 
-/// Linear quantizer over [lo, hi] with `levels`+1 steps: q = round((v − bias)/scale).
-struct Quantizer {
+/// Mid-tread quantizer of the block means over [lo, hi] with `levels`+1 steps:
+/// q = round((v − bias)/scale).
+struct MeanQuantizer {
   float bias = 0, scale = 0;
   std::uint32_t levels = 0;
-  Quantizer(float lo, float hi, std::uint32_t n)
+  MeanQuantizer(float lo, float hi, std::uint32_t n)
       : bias(lo), scale(hi > lo ? (hi - lo) / static_cast<float>(n) : 0.0f), levels(n) {}
   std::uint32_t quantize(double v) const {
     if (!(scale > 0)) return 0;
@@ -32,6 +33,21 @@ struct Quantizer {
     return static_cast<std::uint32_t>(std::clamp(q, 0.0, static_cast<double>(levels)));
   }
   float value(std::uint32_t q) const { return bias + scale * static_cast<float>(q); }
+};
+
+/// Uniform quantizer of the coefficients, centred on zero: q = round(v/scale), |q| ≤ limit; a
+/// coefficient that rounds to 0 is no code at all.
+struct Quantizer {
+  float scale = 0;
+  std::int32_t limit = 0;
+  Quantizer(float step, std::int32_t most) : scale(step), limit(most) {}
+  std::int32_t quantize(double v) const {
+    if (!(scale > 0)) return 0;
+    const double q = std::round(v / static_cast<double>(scale));
+    return static_cast<std::int32_t>(
+        std::clamp(q, -static_cast<double>(limit), static_cast<double>(limit)));
+  }
+  float value(std::int32_t q) const { return scale * static_cast<float>(q); }
 };
 
 /// x_0 of the solution of the symmetric positive definite n×n system m·x = t (Cholesky, in place);
@@ -75,7 +91,7 @@ constexpr int max_refit_atoms = 15;  ///< beyond this many atoms, each coefficie
 
 double quantize_block(const float* y, float mean_error, const std::int32_t* a, const float* c,
                       int s, const Eigen::MatrixXf& atoms, const Quantizer& cq, bool refit,
-                      std::uint32_t* q) {
+                      std::int32_t* q) {
   if (!refit || s <= 1 || s > max_refit_atoms) {
     for (int k = 0; k < s; ++k) q[k] = cq.quantize(static_cast<double>(c[k]));
   } else {
@@ -133,7 +149,7 @@ std::uint32_t choose_mean_bits(float lo, float hi, double step, int forced) {
 
 /// Largest |value| of a block's quantized residual.
 double max_abs_residual(const float* y, float mean_error, const std::int32_t* a,
-                        const std::uint32_t* q, int s, const Eigen::MatrixXf& atoms,
+                        const std::int32_t* q, int s, const Eigen::MatrixXf& atoms,
                         const Quantizer& cq) {
   alignas(64) float r[VR_BLOCK_LENGTH];
   for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) r[v] = y[v] + mean_error;
@@ -144,46 +160,21 @@ double max_abs_residual(const float* y, float mean_error, const std::int32_t* a,
   return m;
 }
 
-/// The coefficient interval of a brick: [min, max] of its coefficients, or narrower when clipping
-/// a few extreme coefficients costs less than the coarser step costs all the others (sum of
-/// squared rounding and clipping errors over the brick's coefficients, tried for the k smallest
-/// and j largest clipped, k, j ∈ {0, 1, 2, 4, 8}) at `levels` + 1 levels. `all` is sorted.
-std::pair<float, float> coefficient_interval(const std::vector<float>& all, std::uint32_t levels,
-                                             bool optimize) {
-  if (all.empty()) return {0.0f, 0.0f};
-  float lo = all.front(), hi = all.back();
-  if (!optimize || all.size() <= 16) return {lo, hi};
-  double best = std::numeric_limits<double>::infinity();
-  for (std::size_t k : {0u, 1u, 2u, 4u, 8u})
-    for (std::size_t j : {0u, 1u, 2u, 4u, 8u}) {
-      if (k + j + 2 > all.size()) continue;
-      const Quantizer trial(all[k], all[all.size() - 1 - j], levels);
-      double cost = 0;
-      for (float c : all) {
-        const double d = static_cast<double>(c) -
-                         static_cast<double>(trial.value(trial.quantize(static_cast<double>(c))));
-        cost += d * d;
-      }
-      if (cost < best) {
-        best = cost;
-        lo = all[k];
-        hi = all[all.size() - 1 - j];
-      }
-    }
-  return {lo, hi};
+/// The coefficient step of a brick whose largest coefficient magnitude is `largest`: `forced`
+/// magnitude bits c ≥ 1 give largest/2^c; else `step` (variable rate), or with step ≤ 0 (fixed
+/// rate) largest/2^(fallback − 1); never finer than largest/2^16, the most magnitude bits.
+double coefficient_step(double largest, double step, int forced, std::uint32_t fallback) {
+  if (!(largest > 0)) return 0;
+  if (forced >= 1) return largest / std::ldexp(1.0, forced);
+  if (!(step > 0)) step = largest / std::ldexp(1.0, static_cast<int>(fallback) - 1);
+  return std::max(step, largest / std::ldexp(1.0, VR_MAX_COEF_BITS));
 }
 
-/// The coefficient bits of a brick whose coefficients span [lo, hi]: `forced` when ≥ 1, else the
-/// fewest bits c (1..16) whose step (hi − lo)/(2^c − 1) is at most `step`, and `fallback` when
-/// step ≤ 0 (no ε: fixed rate).
-std::uint32_t choose_coef_bits(float lo, float hi, double step, int forced,
-                               std::uint32_t fallback) {
-  if (forced >= 1) return static_cast<std::uint32_t>(forced);
-  if (!(step > 0)) return fallback;
-  const double span = static_cast<double>(hi) - static_cast<double>(lo);
-  for (std::uint32_t c = 1; c < VR_MAX_COEF_BITS; ++c)
-    if (span <= step * static_cast<double>((1u << c) - 1u)) return c;
-  return VR_MAX_COEF_BITS;
+/// The fewest magnitude bits c (1..16) with |q| ≤ 2^c for every q of the brick.
+std::uint32_t magnitude_bits(std::int64_t largest) {
+  std::uint32_t c = 1;
+  while (c < VR_MAX_COEF_BITS && (std::int64_t{1} << c) < largest) ++c;
+  return c;
 }
 
 }  // namespace
@@ -236,14 +227,15 @@ void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
 }
 
 /// Step 1: means to b bits over [min, max] of the brick's block means, b the fewest bits whose
-/// step is at most options.mean_step (choose_mean_bits). Step 2: the coefficient interval and the
-/// fewest coefficient bits c whose step is at most options.coef_step (choose_coef_bits). Step 3:
-/// coefficients quantized block by block (quantize_block). Step 4 ("quantization inside the
-/// pursuit"): while a block's quantized error exceeds m·ε² (options.target_energy) or one of its
-/// values is off by more than options.max_abs_error, and it has fewer than Smax atoms, add the atom
-/// most correlated with the quantized residual and quantize again; keep it only if the error
-/// falls. Step 5 (pointwise bound only): if a block still misses the bound, code the brick again
-/// with one more coefficient bit, up to 16.
+/// step is at most options.mean_step (choose_mean_bits). Step 2: the coefficient step
+/// (coefficient_step: options.coef_step in variable rate). Step 3: coefficients quantized block by
+/// block (quantize_block). Step 4 ("quantization inside the pursuit"): while a block's quantized
+/// error exceeds m·ε² (options.target_energy) or one of its values is off by more than
+/// options.max_abs_error, and it has fewer than Smax atoms, add the atom most correlated with the
+/// quantized residual and quantize again; keep it only if the error falls. Step 5 (pointwise bound
+/// only): if a block still misses the bound, code the brick again with half the step, down to
+/// the finest step 16 magnitude bits allow. Coefficients that round to 0 are left out, and each
+/// block's codes are packed in increasing atom order (the entropy coder's gaps).
 std::vector<std::byte> quantize_brick(const float* columns, const float* means,
                                       const dictionary::SparseCodes& codes, std::size_t first_block,
                                       const Eigen::MatrixXf& atoms, const QuantizeOptions& options,
@@ -253,45 +245,40 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
     mean_lo = std::min(mean_lo, means[b]);
     mean_hi = std::max(mean_hi, means[b]);
   }
-  std::vector<float> all;
+  double largest = 0;
   for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     const std::size_t i = first_block + b;
-    all.insert(all.end(), codes.coefficients_of(i), codes.coefficients_of(i) + codes.count[i]);
+    for (int k = 0; k < codes.count[i]; ++k)
+      largest = std::max(largest, std::abs(static_cast<double>(codes.coefficients_of(i)[k])));
   }
-  std::sort(all.begin(), all.end());  // once: every interval tried below reads it sorted
-  const auto [raw_lo, raw_hi] = coefficient_interval(all, 1, false);
-  const std::uint32_t first_bits = choose_coef_bits(raw_lo, raw_hi, options.coef_step,
-                                                    options.coef_bits, options.fixed_coef_bits);
+  const double first_step =
+      coefficient_step(largest, options.coef_step, options.coef_bits, options.fixed_coef_bits);
+  const double finest_step = largest / std::ldexp(1.0, VR_MAX_COEF_BITS);
 
   format::KsvdPayloadParts parts;
   parts.mean_bits = choose_mean_bits(mean_lo, mean_hi, options.mean_step, options.mean_bits);
   parts.atom_bits =
       std::max<std::uint32_t>(1, format::bits_for_count(static_cast<std::uint64_t>(atoms.cols())));
   const float mean_mid = mean_lo + (mean_hi - mean_lo) / 2;
-  const Quantizer mq = parts.mean_bits == 0
-                           ? Quantizer(mean_mid, mean_mid, 0)
-                           : Quantizer(mean_lo, mean_hi, (1u << parts.mean_bits) - 1u);
+  const MeanQuantizer mq = parts.mean_bits == 0
+                               ? MeanQuantizer(mean_mid, mean_mid, 0)
+                               : MeanQuantizer(mean_lo, mean_hi, (1u << parts.mean_bits) - 1u);
   const bool pointwise = options.max_abs_error > 0;
   const int max_atoms = std::min<int>(options.max_atoms, (1 << VR_MAX_SPARSITY_BITS) - 1);
   Eigen::VectorXf residual(VR_BLOCK_LENGTH), correlation;
   const std::size_t slots = static_cast<std::size_t>(std::max(max_atoms, codes.max_atoms)) + 1;
   std::vector<std::int32_t> a(slots);
   std::vector<float> c(slots);
-  std::vector<std::uint32_t> q(slots), q2(slots);
-  // Atoms added after quantization (step 4) fit a small residual: their coefficients lie near 0,
-  // which the interval must then hold.
-  const bool extends = pointwise || options.target_energy >= 0;
-  for (std::uint32_t bits = first_bits;; ++bits) {
-    auto [coef_lo, coef_hi] =
-        coefficient_interval(all, (1u << bits) - 1u, options.optimize_interval);
-    if (extends) coef_lo = std::min(coef_lo, 0.0f), coef_hi = std::max(coef_hi, 0.0f);
-    const Quantizer cq(coef_lo, coef_hi, (1u << bits) - 1u);
-    parts.coef_bits = bits;
+  std::vector<std::int32_t> q(slots), q2(slots);
+  std::vector<std::pair<std::uint32_t, std::int32_t>> block_codes;
+  for (double step = first_step;; step /= 2) {
+    const Quantizer cq(static_cast<float>(step), std::int32_t{1} << VR_MAX_COEF_BITS);
     parts.atoms.clear();
     parts.values.clear();
     double brick_error = 0;
     std::size_t missed = 0;
     std::uint32_t most_atoms = 0;
+    std::int64_t largest_q = 1;
     for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
       const std::size_t i = first_block + b;
       int s = codes.count[i];
@@ -302,7 +289,7 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
       const float mean_error = means[b] - mq.value(qmean);
       double e =
           quantize_block(y, mean_error, a.data(), c.data(), s, atoms, cq, options.refit, q.data());
-      const auto misses = [&](double energy, const std::uint32_t* quantized, int n) {
+      const auto misses = [&](double energy, const std::int32_t* quantized, int n) {
         if (options.target_energy >= 0 && energy > options.target_energy) return true;
         return pointwise && max_abs_residual(y, mean_error, a.data(), quantized, n, atoms, cq) >
                                 options.max_abs_error;
@@ -339,21 +326,36 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
         std::copy_n(q2.begin(), s, q.begin());
       }
       if (miss && pointwise) ++missed;
-      parts.sparsity[b] = static_cast<std::uint32_t>(s);
-      parts.mean[b] = qmean;
-      most_atoms = std::max(most_atoms, static_cast<std::uint32_t>(s));
-      for (int k = 0; k < s; ++k) {
-        parts.atoms.push_back(static_cast<std::uint32_t>(a[static_cast<std::size_t>(k)]));
-        parts.values.push_back(q[static_cast<std::size_t>(k)]);
+      // The block's codes: zeros left out, in increasing atom order (an atom twice adds up).
+      block_codes.clear();
+      for (int k = 0; k < s; ++k)
+        block_codes.emplace_back(static_cast<std::uint32_t>(a[static_cast<std::size_t>(k)]),
+                                 q[static_cast<std::size_t>(k)]);
+      std::sort(block_codes.begin(), block_codes.end());
+      std::uint32_t kept = 0;
+      for (std::size_t k = 0; k < block_codes.size();) {
+        const std::uint32_t atom = block_codes[k].first;
+        std::int64_t value = 0;
+        for (; k < block_codes.size() && block_codes[k].first == atom; ++k)
+          value += block_codes[k].second;
+        value = std::clamp<std::int64_t>(value, -cq.limit, cq.limit);
+        if (value == 0) continue;
+        parts.atoms.push_back(atom);
+        parts.values.push_back(static_cast<std::int32_t>(value));
+        largest_q = std::max(largest_q, value < 0 ? -value : value);
+        ++kept;
       }
+      parts.sparsity[b] = kept;
+      parts.mean[b] = qmean;
+      most_atoms = std::max(most_atoms, kept);
       brick_error += e;
     }
-    if (missed > 0 && bits < VR_MAX_COEF_BITS && options.coef_bits < 1) continue;
+    if (missed > 0 && step / 2 >= finest_step && options.coef_bits < 1) continue;
+    parts.coef_bits = magnitude_bits(largest_q);
     parts.sparsity_bits = format::bits_for_count(std::uint64_t{most_atoms} + 1);
     parts.dequantization[0] = mq.bias;
     parts.dequantization[1] = mq.scale;
-    parts.dequantization[2] = cq.bias;
-    parts.dequantization[3] = cq.scale;
+    parts.dequantization[2] = cq.scale;
     result->squared_error += brick_error;
     result->codes += parts.atoms.size();
     result->blocks_over_bound += missed;

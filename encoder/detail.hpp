@@ -31,13 +31,11 @@ struct QuantizeOptions {
   /// and code the brick again with more coefficient bits if a block still misses it.
   double max_abs_error = 0;
   int max_atoms = 15;
-  bool optimize_interval =
-      true;  ///< choose the coefficient interval by squared error (may clip extremes)
-  /// The largest step of a brick's quantized coefficients: each brick takes the fewest bits
-  /// (1..16) whose step over its coefficients' range is at most this. 0: fixed_coef_bits.
+  /// The step of the quantized coefficients (data units; never finer than the brick's largest
+  /// coefficient / 2^16). 0: the brick's largest coefficient / 2^(fixed_coef_bits − 1).
   double coef_step = 0;
-  int coef_bits = -1;  ///< ≥ 1: every brick takes exactly this many coefficient bits
-  std::uint32_t fixed_coef_bits = 8;  ///< the bits where there is no step (fixed rate)
+  int coef_bits = -1;  ///< ≥ 1: every brick's step is its largest coefficient / 2^coef_bits
+  std::uint32_t fixed_coef_bits = 8;  ///< signed bits of the largest value where there is no step
   /// The largest step of a brick's quantized block means: each brick takes the fewest bits
   /// (0..12) whose step over its means' range is at most this. 0: always 12 bits.
   double mean_step = 0;

@@ -92,23 +92,27 @@ void add_to_breakdown(const Cell& c, const std::array<std::uint32_t, 3>& level_d
   } else if (!ksvd) {
     b.zfp_streams += size;
   } else {
-    std::vector<vr_uint> words(std::max<std::size_t>(size / 4, VR_HEADER_WORDS));
+    // One zero word more: a Rice code's look-ahead (brick_decode.h).
+    std::vector<vr_uint> words(std::max<std::size_t>(size / 4, VR_HEADER_WORDS) + 1, 0u);
     std::memcpy(words.data(), c.payload.data(), size / 4 * 4);
     const vr_uint layout = vr_layout_word(words.data());
-    const double code_bytes = vr_layout_code_bits(layout) / 8.0;
     b.brick_headers += 4 * VR_HEADER_WORDS;
     b.block_entries += 4 * vr_entry_words(layout);
-    const auto exact_code_bytes =
-        static_cast<std::size_t>(static_cast<double>(c.codes) * code_bytes);
-    b.codes += exact_code_bytes;
-    b.alignment += size - 4 * vr_code_first_word(layout) - exact_code_bytes;
     ++st.mean_bits_histogram[vr_layout_mean_bits(layout)];
     ++st.coef_bits_histogram[vr_layout_coef_bits(layout)];
+    vr_uint bit = 0, sum = vr_rice_start_sum(layout), count = VR_RICE_START_COUNT;
     for (std::uint32_t k = 0; k < VR_BLOCKS_PER_BRICK; ++k) {
       const vr_uint sparsity = vr_entry_sparsity(layout, vr_block_entry(words.data(), layout, k));
+      const vr_uint start = bit;
+      vr_uint next_atom = 0, atom = 0;
+      for (vr_uint j = 0; j < sparsity; ++j)
+        vr_read_code(words.data(), layout, sparsity, bit, next_atom, sum, count, atom);
       ++st.sparsity_histogram[sparsity];
-      if (!coarse) b.finest_owned_codes += code_bytes * sparsity * static_cast<double>(shares[k]);
+      if (!coarse) b.finest_owned_codes += (bit - start) / 8.0 * static_cast<double>(shares[k]);
     }
+    st.code_bits += bit;
+    b.codes += bit / 8;
+    b.alignment += size - 4 * vr_code_first_word(layout) - bit / 8;
   }
   if (coarse) b.coarse_levels += size;
   // The blocks' owned shares average to the brick's interior voxels inside the level: the rest of
@@ -412,7 +416,6 @@ double FrameEncoder::atom_gain_threshold() const {
 QuantizeOptions FrameEncoder::quantize_options() const {
   QuantizeOptions o;
   o.refit = settings_.refit_quantization;
-  o.optimize_interval = settings_.optimize_interval;
   o.max_atoms = settings_.max_atoms;
   o.mean_bits = settings_.mean_bits;
   o.coef_bits = settings_.coef_bits;

@@ -286,6 +286,7 @@ void add_frame(const FrameStats& st, EncodeSummary& summary) {
     summary.mean_bits_histogram[k] += st.mean_bits_histogram[k];
   for (std::size_t k = 0; k < st.coef_bits_histogram.size(); ++k)
     summary.coef_bits_histogram[k] += st.coef_bits_histogram[k];
+  summary.code_bits += st.code_bits;
   summary.blocks_over_bound += st.blocks_over_bound;
 }
 

@@ -30,14 +30,15 @@ std::string str(std::uint64_t v) {
 void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::span<float> out,
                  const std::filesystem::path& name, std::uint64_t at) {
   // Payloads are 4-byte aligned inside the file and the map is page-aligned, but copy to be safe
-  // for in-memory views of arbitrary alignment.
-  std::vector<vr_uint> payload_words(bytes.size() / 4);
-  if (!payload_words.empty())
-    std::memcpy(payload_words.data(), bytes.data(), payload_words.size() * 4);
+  // for in-memory views of arbitrary alignment; one zero word more, which a Rice code's look-ahead
+  // at the stream's end may read (brick_decode.h).
+  std::vector<vr_uint> payload_words(bytes.size() / 4 + 1, 0u);
+  if (bytes.size() >= 4) std::memcpy(payload_words.data(), bytes.data(), bytes.size() / 4 * 4);
   const vr_uint* payload = payload_words.data();
-  // 1. Structure, dequantization values and atom indices.
+  // 1. Structure, dequantization values, atom indices and magnitudes.
   const KsvdPayloadLayout layout =
-      check_ksvd_payload(payload_words, bytes.size(), atoms.count, name, at);
+      check_ksvd_payload(std::span<const std::uint32_t>(payload_words).first(bytes.size() / 4),
+                         bytes.size(), atoms.count, name, at);
   if (atoms.values.size() < std::size_t{atoms.count} * VR_BLOCK_LENGTH)
     throw FormatError(
         name, "dictionary holds fewer than the " + str(atoms.count) + " atoms the frame needs");
@@ -45,8 +46,8 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
   //    the codes are read in order, each atom added to all 216 values at once).
   const float* atom_values = atoms.values.data();
   const float mean_bias = vr_as_float(payload[0]), mean_scale = vr_as_float(payload[1]);
-  const float coef_bias = vr_as_float(payload[2]), coef_scale = vr_as_float(payload[3]);
-  vr_uint code = 0;  // first code of block b: the prefix sum of the sparsities
+  const float coef_scale = vr_as_float(payload[2]);
+  vr_uint bit = 0, sum = vr_rice_start_sum(layout.word), count = VR_RICE_START_COUNT;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     const vr_uint entry = vr_block_entry(payload, layout.word, b);
     const vr_uint s = vr_entry_sparsity(layout.word, entry);
@@ -54,12 +55,11 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
         mean_bias + mean_scale * static_cast<float>(vr_entry_mean(layout.word, entry));
     alignas(64) float block[VR_BLOCK_LENGTH];
     for (vr_uint v = 0; v < VR_BLOCK_LENGTH; ++v) block[v] = mean;
-    for (vr_uint k = 0; k < s; ++k, ++code) {
-      const vr_uint c = vr_code(payload, layout.word, code);
-      const float coefficient =
-          coef_bias + coef_scale * static_cast<float>(vr_code_value(layout.word, c));
-      add_scaled(block, atom_values + std::size_t{vr_code_atom(layout.word, c)} * VR_BLOCK_LENGTH,
-                 coefficient);
+    vr_uint next_atom = 0, atom = 0;
+    for (vr_uint k = 0; k < s; ++k) {
+      const int q = vr_read_code(payload, layout.word, s, bit, next_atom, sum, count, atom);
+      add_scaled(block, atom_values + std::size_t{atom} * VR_BLOCK_LENGTH,
+                 coef_scale * static_cast<float>(q));
     }
     // Scatter the block into the brick, row by row.
     const vr_uint bx = b % 6, by = (b / 6) % 6, bz = b / 36;
@@ -71,14 +71,82 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
   }
 }
 
-/// Writes `width` bits of `value` at bit `bit` of the stream starting at words[first].
-void write_bits(std::vector<vr_uint>& words, vr_uint first, std::uint64_t bit, vr_uint width,
-                vr_uint value) {
-  if (width == 0) return;
-  const std::size_t word = first + static_cast<std::size_t>(bit / 32);
-  const vr_uint shift = static_cast<vr_uint>(bit % 32);
-  words[word] |= value << shift;
-  if (shift + width > 32) words[word + 1] |= value >> (32 - shift);
+/// A little-endian bit stream growing word by word (the inverse of vr_read_bits).
+class BitWriter {
+ public:
+  void put(vr_uint width, vr_uint value) {
+    if (width == 0) return;
+    const std::size_t word = static_cast<std::size_t>(bits_ / 32);
+    const vr_uint shift = static_cast<vr_uint>(bits_ % 32);
+    if (word + 1 >= words_.size()) words_.resize(word + 2, 0u);
+    words_[word] |= value << shift;
+    if (shift + width > 32) words_[word + 1] |= value >> (32 - shift);
+    bits_ += width;
+  }
+  /// A Rice code of x with parameter k (brick_decode.h, vr_read_rice).
+  void rice(vr_uint x, vr_uint k, vr_uint escape_bits) {
+    const vr_uint zeros = x >> k;
+    if (zeros >= VR_ESCAPE_ZEROS) {
+      put(VR_ESCAPE_ZEROS, 0);
+      put(escape_bits, x);
+      return;
+    }
+    put(zeros + 1, 1u << zeros);
+    put(k, x & ((1u << k) - 1u));
+  }
+  std::uint64_t bits() const { return bits_; }
+  /// The stream's words, zero bits up to the next word.
+  std::vector<vr_uint> words() const {
+    std::vector<vr_uint> w(words_.begin(),
+                           words_.begin() + static_cast<std::ptrdiff_t>((bits_ + 31) / 32));
+    return w;
+  }
+
+ private:
+  std::vector<vr_uint> words_;
+  std::uint64_t bits_ = 0;
+};
+
+/// Bits of a Rice code of x with parameter k.
+std::uint64_t rice_bits(vr_uint x, vr_uint k, vr_uint escape_bits) {
+  const vr_uint zeros = x >> k;
+  return zeros >= VR_ESCAPE_ZEROS ? VR_ESCAPE_ZEROS + escape_bits : zeros + 1 + k;
+}
+
+/// The values' Rice state after one magnitude (brick_decode.h, vr_read_code).
+void rice_update(vr_uint magnitude, vr_uint& sum, vr_uint& count) {
+  sum += magnitude;
+  count += 1;
+  if (count == VR_RICE_RESET) {
+    sum = (sum + 1) >> 1;
+    count = VR_RICE_RESET / 2;
+  }
+}
+
+/// Writes (or, with out == nullptr, counts) the code stream of `parts` under `layout`.
+std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, BitWriter* out) {
+  std::uint64_t bits = 0;
+  vr_uint sum = vr_rice_start_sum(layout), count = VR_RICE_START_COUNT;
+  std::size_t k = 0;
+  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    const vr_uint s = parts.sparsity[b], gap_rice = s > 0 ? vr_gap_rice(layout, s) : 0;
+    vr_uint next_atom = 0;
+    for (vr_uint j = 0; j < s; ++j, ++k) {
+      const vr_uint gap = parts.atoms[k] - next_atom;
+      next_atom = parts.atoms[k] + 1;
+      const vr_uint magnitude = static_cast<vr_uint>(std::abs(std::int64_t{parts.values[k]}) - 1);
+      const vr_uint value_rice = vr_value_rice(layout, sum, count);
+      if (out) {
+        out->rice(gap, gap_rice, parts.atom_bits);
+        out->rice(magnitude, value_rice, parts.coef_bits);
+        out->put(1, parts.values[k] < 0 ? 1u : 0u);
+      }
+      bits += rice_bits(gap, gap_rice, parts.atom_bits) +
+              rice_bits(magnitude, value_rice, parts.coef_bits) + 1;
+      rice_update(magnitude, sum, count);
+    }
+  }
+  return bits;
 }
 
 }  // namespace
@@ -92,12 +160,13 @@ std::uint32_t bits_for_count(std::uint64_t count) {
 std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
   if (parts.mean_bits > VR_MEAN_BITS || parts.sparsity_bits > VR_MAX_SPARSITY_BITS ||
       parts.coef_bits < 1 || parts.coef_bits > VR_MAX_COEF_BITS || parts.atom_bits < 1 ||
-      parts.atom_bits > VR_MAX_ATOM_BITS)
+      parts.atom_bits > VR_MAX_ATOM_BITS || parts.value_rice > int{VR_MAX_VALUE_RICE} ||
+      parts.gap_shift > int{VR_MAX_GAP_SHIFT})
     throw std::invalid_argument("payload widths out of range: mean " + str(parts.mean_bits) +
-                                ", sparsity " + str(parts.sparsity_bits) + ", coefficient " +
-                                str(parts.coef_bits) + ", atom " + str(parts.atom_bits) + " bits");
-  const vr_uint layout =
-      vr_make_layout(parts.mean_bits, parts.sparsity_bits, parts.coef_bits, parts.atom_bits);
+                                ", sparsity " + str(parts.sparsity_bits) + ", magnitude " +
+                                str(parts.coef_bits) + ", atom " + str(parts.atom_bits) +
+                                " bits, value Rice " + std::to_string(parts.value_rice) +
+                                ", gap shift " + std::to_string(parts.gap_shift));
   std::uint64_t codes = 0;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     if ((std::uint64_t{parts.sparsity[b]} >> parts.sparsity_bits) != 0 ||
@@ -109,25 +178,88 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
   if (codes != parts.atoms.size() || codes != parts.values.size())
     throw std::invalid_argument(str(parts.atoms.size()) + " atoms and " + str(parts.values.size()) +
                                 " values for sparsities summing to " + str(codes));
-  std::vector<vr_uint> words(vr_payload_words(layout, static_cast<vr_uint>(codes)), 0u);
-  for (vr_uint w = 0; w < 4; ++w) std::memcpy(&words[w], &parts.dequantization[w], 4);
-  words[4] = layout;
-  const vr_uint entry_bits = vr_layout_entry_bits(layout);
+  std::size_t k = 0;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
-    write_bits(words, VR_HEADER_WORDS, std::uint64_t{b} * entry_bits, entry_bits,
-               parts.sparsity[b] | (parts.mean[b] << parts.sparsity_bits));
-  const vr_uint code_bits = vr_layout_code_bits(layout), first = vr_code_first_word(layout);
-  for (std::size_t k = 0; k < parts.atoms.size(); ++k) {
-    if ((std::uint64_t{parts.atoms[k]} >> parts.atom_bits) != 0 ||
-        (std::uint64_t{parts.values[k]} >> parts.coef_bits) != 0)
-      throw std::invalid_argument("code " + str(k) + ": atom " + str(parts.atoms[k]) +
-                                  " or value " + str(parts.values[k]) + " does not fit its bits");
-    write_bits(words, first, std::uint64_t{k} * code_bits, code_bits,
-               parts.values[k] | (parts.atoms[k] << parts.coef_bits));
-  }
-  std::vector<std::byte> payload(words.size() * 4);
-  std::memcpy(payload.data(), words.data(), payload.size());
+    for (vr_uint j = 0; j < parts.sparsity[b]; ++j, ++k) {
+      const std::int64_t magnitude = std::abs(std::int64_t{parts.values[k]});
+      if ((std::uint64_t{parts.atoms[k]} >> parts.atom_bits) != 0 || magnitude == 0 ||
+          magnitude > (std::int64_t{1} << parts.coef_bits) ||
+          (j > 0 && parts.atoms[k] <= parts.atoms[k - 1]))
+        throw std::invalid_argument("code " + str(k) + " (block " + str(b) + "): atom " +
+                                    str(parts.atoms[k]) + " or value " +
+                                    std::to_string(parts.values[k]) +
+                                    " does not fit its bits, is zero or is out of order");
+    }
+  // The entropy coder's parameters: each the one with the fewest bits (the gaps' bits do not
+  // depend on the values' parameter, nor the values' on the gap shift).
+  const auto layout_of = [&](vr_uint value_rice, vr_uint gap_shift) {
+    return vr_make_layout(parts.mean_bits, parts.sparsity_bits, parts.coef_bits, parts.atom_bits,
+                          value_rice, gap_shift);
+  };
+  const auto best = [&](int given, vr_uint most, auto layout_for) {
+    if (given >= 0) return static_cast<vr_uint>(given);
+    vr_uint choice = 0;
+    std::uint64_t fewest = ~std::uint64_t{0};
+    for (vr_uint p = 0; p <= most; ++p) {
+      const std::uint64_t bits = write_codes(parts, layout_for(p), nullptr);
+      if (bits < fewest) fewest = bits, choice = p;
+    }
+    return choice;
+  };
+  const vr_uint value_rice =
+      best(parts.value_rice, VR_MAX_VALUE_RICE, [&](vr_uint p) { return layout_of(p, 0); });
+  const vr_uint gap_shift =
+      best(parts.gap_shift, VR_MAX_GAP_SHIFT, [&](vr_uint p) { return layout_of(value_rice, p); });
+  const vr_uint layout = layout_of(value_rice, gap_shift);
+
+  BitWriter entries, stream;
+  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+    entries.put(vr_layout_entry_bits(layout),
+                parts.sparsity[b] | (parts.mean[b] << parts.sparsity_bits));
+  write_codes(parts, layout, &stream);
+  const std::vector<vr_uint> entry_words = entries.words(), code_words = stream.words();
+  std::vector<std::byte> payload(4 * (VR_HEADER_WORDS + entry_words.size() + code_words.size()));
+  std::memcpy(payload.data(), parts.dequantization, 12);
+  std::memcpy(payload.data() + 12, &layout, 4);
+  std::size_t at = 4 * VR_HEADER_WORDS;
+  for (const std::vector<vr_uint>* part : {&entry_words, &code_words})
+    for (const vr_uint w : *part) {
+      std::memcpy(payload.data() + at, &w, 4);
+      at += 4;
+    }
   return payload;
+}
+
+KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint32_t atom_count,
+                                     const std::filesystem::path& name, std::uint64_t at) {
+  std::vector<vr_uint> words(bytes.size() / 4 + 1, 0u);  // + the look-ahead word
+  if (bytes.size() >= 4) std::memcpy(words.data(), bytes.data(), bytes.size() / 4 * 4);
+  const KsvdPayloadLayout layout =
+      check_ksvd_payload(std::span<const std::uint32_t>(words).first(bytes.size() / 4),
+                         bytes.size(), atom_count, name, at);
+  const vr_uint* payload = words.data();
+  KsvdPayloadParts parts;
+  std::memcpy(parts.dequantization, payload, 12);
+  parts.mean_bits = layout.mean_bits;
+  parts.sparsity_bits = layout.sparsity_bits;
+  parts.coef_bits = layout.coef_bits;
+  parts.atom_bits = layout.atom_bits;
+  parts.value_rice = static_cast<int>(vr_layout_value_rice(layout.word));
+  parts.gap_shift = static_cast<int>(vr_layout_gap_shift(layout.word));
+  vr_uint bit = 0, sum = vr_rice_start_sum(layout.word), count = VR_RICE_START_COUNT;
+  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    const vr_uint entry = vr_block_entry(payload, layout.word, b);
+    const vr_uint s = vr_entry_sparsity(layout.word, entry);
+    parts.sparsity[b] = s;
+    parts.mean[b] = vr_entry_mean(layout.word, entry);
+    vr_uint next_atom = 0, atom = 0;
+    for (vr_uint k = 0; k < s; ++k) {
+      parts.values.push_back(
+          vr_read_code(payload, layout.word, s, bit, next_atom, sum, count, atom));
+      parts.atoms.push_back(atom);
+    }
+  }
+  return parts;
 }
 
 KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> bytes, std::uint32_t atom_count,
@@ -144,68 +276,88 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::
                         const std::string& found) {
     throw FormatError(name, at + offset, "brick payload " + expected, found);
   };
-  // 1. Header: four finite dequantization values and the layout word.
+  // 1. Header: three finite dequantization values and the layout word.
   if (bytes < 4 * VR_HEADER_WORDS || bytes % 4 != 0 || words.size() != bytes / 4)
     fail(0, "of at least " + str(4 * VR_HEADER_WORDS) + " bytes, a multiple of 4",
          str(bytes) + " bytes");
-  for (vr_uint w = 0; w < 4; ++w)
+  for (vr_uint w = 0; w < 3; ++w)
     if (!std::isfinite(vr_as_float(words[w])))
       fail(4 * w, "finite dequantization value", "NaN or infinity");
   KsvdPayloadLayout layout;
-  layout.word = words[4];
+  layout.word = words[3];
   layout.mean_bits = vr_layout_mean_bits(layout.word);
   layout.sparsity_bits = vr_layout_sparsity_bits(layout.word);
   layout.coef_bits = vr_layout_coef_bits(layout.word);
   layout.atom_bits = vr_layout_atom_bits(layout.word);
   if (layout.mean_bits > VR_MEAN_BITS || layout.sparsity_bits > VR_MAX_SPARSITY_BITS ||
       layout.coef_bits < 1 || layout.coef_bits > VR_MAX_COEF_BITS || layout.atom_bits < 1 ||
-      layout.atom_bits > VR_MAX_ATOM_BITS || (layout.word >> 18) != 0)
-    fail(16,
+      layout.atom_bits > VR_MAX_ATOM_BITS || (layout.word >> 24) != 0)
+    fail(12,
          "layout word with mean bits 0.." + str(VR_MEAN_BITS) + ", sparsity bits 0.." +
-             str(VR_MAX_SPARSITY_BITS) + ", coefficient bits 1.." + str(VR_MAX_COEF_BITS) +
-             ", atom bits 1.." + str(VR_MAX_ATOM_BITS) + " and zero bits 18..31",
+             str(VR_MAX_SPARSITY_BITS) + ", magnitude bits 1.." + str(VR_MAX_COEF_BITS) +
+             ", atom bits 1.." + str(VR_MAX_ATOM_BITS) + " and zero bits 24..31",
          "mean " + str(layout.mean_bits) + ", sparsity " + str(layout.sparsity_bits) +
-             ", coefficient " + str(layout.coef_bits) + ", atom " + str(layout.atom_bits) +
-             ", reserved " + str(layout.word >> 18));
-  // Every decoded value is a mean plus at most 255 coefficients times atom values of magnitude at
-  // most 1 (unit-norm atoms), so this bound keeps every value finite, on the CPU and on the GPU.
-  const auto magnitude = [&](vr_uint w, vr_uint bits) {
-    return std::abs(static_cast<double>(vr_as_float(words[w]))) +
-           std::abs(static_cast<double>(vr_as_float(words[w + 1]))) *
-               static_cast<double>((std::uint64_t{1} << bits) - 1);
+             ", magnitude " + str(layout.coef_bits) + ", atom " + str(layout.atom_bits) +
+             ", reserved " + str(layout.word >> 24));
+  // Every decoded value is a mean plus at most 255 coefficients of magnitude at most
+  // |coef_scale|·2^c times atom values of magnitude at most 1 (unit-norm atoms), so this bound
+  // keeps every value finite, on the CPU and on the GPU.
+  const auto magnitude = [&](vr_uint w) {
+    return std::abs(static_cast<double>(vr_as_float(words[w])));
   };
-  const double bound =
-      magnitude(0, layout.mean_bits) + static_cast<double>((1u << layout.sparsity_bits) - 1u) *
-                                           magnitude(2, layout.coef_bits) * max_atom_magnitude;
+  const double bound = magnitude(0) +
+                       magnitude(1) * static_cast<double>((1u << layout.mean_bits) - 1u) +
+                       static_cast<double>((1u << layout.sparsity_bits) - 1u) * magnitude(2) *
+                           static_cast<double>(1u << layout.coef_bits) * max_atom_magnitude;
   if (!(bound <= max_decoded_magnitude))
     fail(0,
          "dequantization values whose decoded values stay below " +
              std::to_string(max_decoded_magnitude) + " in magnitude",
          "values that reach " + std::to_string(bound));
-  // 2. The entries, then the length their sparsities give.
-  const std::uint64_t header_entries = 4 * std::uint64_t{vr_code_first_word(layout.word)};
-  if (bytes < header_entries)
+  // 2. The entries.
+  const vr_uint first = vr_code_first_word(layout.word);
+  if (bytes < 4 * std::uint64_t{first})
     fail(0,
-         "of at least " + str(header_entries) + " bytes for " +
+         "of at least " + str(4 * std::uint64_t{first}) + " bytes for " +
              str(vr_layout_entry_bits(layout.word)) + "-bit block entries",
          str(bytes) + " bytes");
-  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
-    layout.codes += vr_entry_sparsity(layout.word, vr_block_entry(words.data(), layout.word, b));
-  const std::uint64_t need = 4 * std::uint64_t{vr_payload_words(layout.word, layout.codes)};
-  if (bytes != need)
-    fail(0,
-         str(need) + " bytes for " + str(layout.codes) + " codes of " +
-             str(vr_layout_code_bits(layout.word)) + " bits",
-         str(bytes) + " bytes");
-  // 3. Atom indices.
-  const vr_uint code_bits = vr_layout_code_bits(layout.word);
-  for (vr_uint k = 0; k < layout.codes; ++k) {
-    const vr_uint a = vr_code_atom(layout.word, vr_code(words.data(), layout.word, k));
-    if (a >= atom_count)
-      fail(4 * std::uint64_t{vr_code_first_word(layout.word)} +
-               std::uint64_t{k} * code_bits / 32 * 4,
-           "atom index < " + str(atom_count) + " (code " + str(k) + ")", str(a));
+  // 3. The code stream, read as the decoders read it, from a copy with zero words after the
+  //    payload (the look-ahead of a Rice code and a damaged stream's overrun read zeros).
+  std::vector<vr_uint> padded(words.size() + 2, 0u);
+  std::copy(words.begin(), words.end(), padded.begin());
+  const vr_uint* payload = padded.data();
+  const std::uint64_t stream_bits = (std::uint64_t{words.size()} - first) * 32;
+  const vr_uint largest = 1u << layout.coef_bits;
+  vr_uint bit = 0, sum = vr_rice_start_sum(layout.word), count = VR_RICE_START_COUNT;
+  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    const vr_uint s = vr_entry_sparsity(layout.word, vr_block_entry(payload, layout.word, b));
+    layout.codes += s;
+    vr_uint next_atom = 0, atom = 0;
+    for (vr_uint k = 0; k < s; ++k) {
+      const std::uint64_t code_at = 4 * std::uint64_t{first} + bit / 8;
+      if (bit >= stream_bits)
+        fail(code_at, "codes inside the payload (block " + str(b) + ", code " + str(k) + ")",
+             "the payload's end");
+      const int q = vr_read_code(payload, layout.word, s, bit, next_atom, sum, count, atom);
+      if (atom >= atom_count)
+        fail(code_at,
+             "atom index < " + str(atom_count) + " (block " + str(b) + ", code " + str(k) + ")",
+             str(atom));
+      const vr_uint m = static_cast<vr_uint>(q < 0 ? -static_cast<std::int64_t>(q) : q);
+      if (m > largest)
+        fail(code_at,
+             "magnitude ≤ 2^" + str(layout.coef_bits) + " (block " + str(b) + ", code " + str(k) +
+                 ")",
+             str(m));
+    }
   }
+  layout.code_bits = bit;
+  const std::uint64_t need = 4 * (std::uint64_t{first} + (std::uint64_t{bit} + 31) / 32);
+  if (bytes != need)
+    fail(0, str(need) + " bytes for " + str(layout.codes) + " codes in " + str(bit) + " bits",
+         str(bytes) + " bytes");
+  if (bit % 32 != 0 && (words.back() >> (bit % 32)) != 0)
+    fail(bytes - 4, "zero bits after the last code", "nonzero bits");
   return layout;
 }
 

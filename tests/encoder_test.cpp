@@ -165,34 +165,38 @@ TEST(Pyramid, ApronVoxelsEqualTheNeighboursInterior) {
 
 TEST(Encoder, RoundTripOfABrickBuiltFromAtoms) {
   const auto d = random_dictionary(64, 7);
-  // Each block: a mean on a fine grid plus one atom with a coefficient on the 6-bit grid of [1, 2].
+  // Each block: a mean on a fine grid plus one atom with a coefficient on the grid of step 1/64 in
+  // [1, 2) (the quantization step ε·--coef-step, ε = 1/64 and a step factor of 1).
   std::vector<float> brick(brick_voxels);
   std::vector<int> chosen(216);
   for (std::uint32_t b = 0; b < 216; ++b) {
     chosen[b] = static_cast<int>((b * 37) % 64);
     const float mean = static_cast<float>(b) * 0.01f - 1.0f;
-    const float coefficient = 1.0f + static_cast<float>(b % 64) / 63.0f;
+    const float coefficient = 1.0f + static_cast<float>(b % 64) / 64.0f;
     for (std::uint32_t v = 0; v < 216; ++v)
       brick[vr_brick_voxel(b, v)] = mean + coefficient * d.atoms(v, chosen[b]);
   }
   encoder::CodingSettings s;
-  s.tolerance = 1e-3;
+  s.tolerance = 1.0 / 64;
+  s.coef_step_factor = 1;  // the coefficients' grid
+  s.mean_bits = 12;
   s.value_min = -3;
   s.value_max = 3;
-  s.coef_bits = 6;  // the coefficients' grid
   const encoder::FrameEncoder enc(&d, s);
   const auto payload = enc.encode_brick(brick);
-  // One code per block, naming the atom the block was built from.
-  std::vector<vr_uint> words(payload.size() / 4);
-  std::memcpy(words.data(), payload.data(), payload.size());
-  ASSERT_GE(words.size(), VR_HEADER_WORDS);
-  ASSERT_NE(words.data(), nullptr);
-  const vr_uint lw = vr_layout_word(words.data());
-  ASSERT_EQ(payload.size(), 4 * vr_payload_words(lw, 216));
-  for (vr_uint b = 0, code = 0; b < 216; ++b) {
-    ASSERT_EQ(vr_entry_sparsity(lw, vr_block_entry(words.data(), lw, b)), 1u) << "block " << b;
-    ASSERT_EQ(vr_code_atom(lw, vr_code(words.data(), lw, code++)), static_cast<vr_uint>(chosen[b]));
+  // One code per block, naming the atom the block was built from, with its coefficient.
+  const format::KsvdPayloadParts parts = format::unpack_ksvd_payload(payload, 64, "<memory>", 0);
+  ASSERT_EQ(parts.atoms.size(), 216u);
+  for (vr_uint b = 0; b < 216; ++b) {
+    ASSERT_EQ(parts.sparsity[b], 1u) << "block " << b;
+    ASSERT_EQ(parts.atoms[b], static_cast<vr_uint>(chosen[b])) << "block " << b;
+    ASSERT_EQ(static_cast<float>(parts.values[b]) * parts.dequantization[2],
+              1.0f + static_cast<float>(b % 64) / 64.0f)
+        << "block " << b;
   }
+  // One zero word after the payload: the look-ahead of the last Rice code (brick_decode.h).
+  std::vector<vr_uint> words(payload.size() / 4 + 1, 0u);
+  std::memcpy(words.data(), payload.data(), payload.size());
   std::vector<float> out(brick_voxels);
   format::decode_payload(payload, format::Codec::ksvd, 0, atom_table(d), out, "<memory>", 0);
   double max_error = 0;
@@ -201,11 +205,9 @@ TEST(Encoder, RoundTripOfABrickBuiltFromAtoms) {
   EXPECT_LT(max_error,
             3e-4);  // half the 12-bit mean step 2.15/4095 (coefficients lie on their grid)
   // The shared per-value decode of brick_decode.h agrees with the brick decoder.
-  vr_uint first = 0;
   for (vr_uint b = 0; b < 216; b += 17) {
-    first = b;  // one code per block
     for (vr_uint v = 0; v < 216; v += 5)
-      ASSERT_FLOAT_EQ(vr_decode_value(words.data(), d.atoms.data(), b, first, v),
+      ASSERT_FLOAT_EQ(vr_decode_value(words.data(), d.atoms.data(), b, v),
                       out[vr_brick_voxel(b, v)]);
   }
 }
@@ -365,12 +367,19 @@ TEST(Encoder, FinestOwnedCodesCountEachBlockByItsOwnVoxels) {
   for (std::uint32_t i = f.level(f.level_count() - 1).first_node; i < f.node_count(); ++i) {
     const std::vector<vr_uint> sparsities = block_sparsities(f, i);
     ASSERT_EQ(sparsities.size(), VR_BLOCKS_PER_BRICK);
-    vr_uint lw;
-    std::memcpy(&lw, f.brick_bytes(i).data() + 16, 4);
-    const double code_bytes = vr_layout_code_bits(lw) / 8.0;
+    // The code bits of each block, read as the decoders read them.
+    const auto payload = f.brick_bytes(i);
+    std::vector<vr_uint> words(payload.size() / 4 + 1, 0u);
+    std::memcpy(words.data(), payload.data(), payload.size());
+    const vr_uint lw = vr_layout_word(words.data());
+    vr_uint bit = 0, sum = vr_rice_start_sum(lw), count = VR_RICE_START_COUNT;
     const std::uint32_t pos[3] = {f.position(i).x, f.position(i).y, f.position(i).z};
     for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
-      const vr_uint atoms = sparsities[b];
+      const vr_uint atoms = sparsities[b], start = bit;
+      vr_uint next_atom = 0, atom = 0;
+      for (vr_uint k = 0; k < atoms; ++k)
+        vr_read_code(words.data(), lw, atoms, bit, next_atom, sum, count, atom);
+      const double code_bytes = (bit - start) / 8.0;
       const std::uint32_t block[3] = {b % 6, (b / 6) % 6, b / 36};
       double owned = 1;  // voxel by voxel: stored index 1..34 and inside the volume
       for (int a = 0; a < 3; ++a) {
@@ -379,8 +388,8 @@ TEST(Encoder, FinestOwnedCodesCountEachBlockByItsOwnVoxels) {
           n += k >= 1 && k <= 34 && 34 * pos[a] + k - 1 < dims[a];
         owned *= n / 6.0;
       }
-      expected += code_bytes * atoms * owned;
-      finest_codes += code_bytes * atoms;
+      expected += code_bytes * owned;
+      finest_codes += code_bytes;
     }
   }
   EXPECT_NEAR(st.breakdown.finest_owned_codes, expected, 1e-6 * expected);
@@ -543,22 +552,35 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
     format::KsvdPayloadParts parts;
     parts.dequantization[0] = 0.5f;
     parts.dequantization[1] = 0.25f;
-    parts.dequantization[2] = -1.0f;
-    parts.dequantization[3] = 0.125f;
+    parts.dequantization[2] = 0.125f;
     parts.mean_bits = bits;
     parts.sparsity_bits = bits % (VR_MAX_SPARSITY_BITS + 1);
     parts.coef_bits = 1 + (bits * 5) % VR_MAX_COEF_BITS;
     parts.atom_bits = 9 + bits % 8;  // K = 300 needs 9
+    if (bits % 3 == 1) parts.value_rice = static_cast<int>(bits), parts.gap_shift = bits % 4;
+    std::vector<std::uint32_t> order(atom_count);
     for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
       parts.sparsity[b] =
           static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << parts.sparsity_bits));
       parts.mean[b] = static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << bits));
       if (b == 0) parts.mean[b] = (1u << bits) - 1u;  // the largest value of the width
       if (b == 1) parts.sparsity[b] = (1u << parts.sparsity_bits) - 1u;
+      // Distinct atoms in increasing order (a partial shuffle, sorted), the first and last atom
+      // and the largest magnitudes among them; values of both signs, small and escaped.
+      for (std::uint32_t k = 0; k < atom_count; ++k) order[k] = k;
+      for (std::uint32_t k = 0; k < parts.sparsity[b]; ++k)
+        std::swap(order[k], order[k + rng.below(atom_count - k)]);
+      std::sort(order.begin(), order.begin() + parts.sparsity[b]);
+      if (b == 2 && parts.sparsity[b] >= 2)
+        order[0] = 0, order[parts.sparsity[b] - 1] = atom_count - 1;
       for (std::uint32_t k = 0; k < parts.sparsity[b]; ++k) {
-        parts.atoms.push_back(static_cast<std::uint32_t>(rng.below(atom_count)));
-        parts.values.push_back(
-            static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << parts.coef_bits)));
+        parts.atoms.push_back(order[k]);
+        const auto largest = std::int64_t{1} << parts.coef_bits;
+        std::int64_t value = rng.below(4) == 0
+                                 ? largest - static_cast<std::int64_t>(rng.below(2))
+                                 : 1 + static_cast<std::int64_t>(
+                                           rng.below(std::uint64_t{1} << (parts.coef_bits / 2)));
+        parts.values.push_back(static_cast<std::int32_t>(rng.below(2) ? value : -value));
       }
     }
     const auto payload = format::pack_ksvd_payload(parts);
@@ -569,33 +591,35 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
     ASSERT_EQ(layout.atom_bits, parts.atom_bits);
     ASSERT_EQ(layout.codes, parts.atoms.size());
     const std::uint64_t entry_words = (216u * (bits + parts.sparsity_bits) + 31) / 32;
-    const std::uint64_t code_words =
-        (std::uint64_t{layout.codes} * (parts.coef_bits + parts.atom_bits) + 31) / 32;
-    ASSERT_EQ(payload.size(), 4 * (VR_HEADER_WORDS + entry_words + code_words));
-    std::vector<vr_uint> w(payload.size() / 4);
-    std::memcpy(w.data(), payload.data(), payload.size());
-    ASSERT_GE(w.size(), VR_HEADER_WORDS);
-    const vr_uint lw = vr_layout_word(w.data());
-    for (std::uint32_t b = 0, code = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
-      const vr_uint entry = vr_block_entry(w.data(), lw, b);
-      ASSERT_EQ(vr_entry_sparsity(lw, entry), parts.sparsity[b]) << bits << " bits, block " << b;
-      ASSERT_EQ(vr_entry_mean(lw, entry), parts.mean[b]) << bits << " bits, block " << b;
-      for (std::uint32_t k = 0; k < parts.sparsity[b]; ++k, ++code) {
-        const vr_uint c = vr_code(w.data(), lw, code);
-        ASSERT_EQ(vr_code_atom(lw, c), parts.atoms[code]);
-        ASSERT_EQ(vr_code_value(lw, c), parts.values[code]);
-      }
+    ASSERT_EQ(payload.size(), 4 * (VR_HEADER_WORDS + entry_words + (layout.code_bits + 31) / 32));
+    const format::KsvdPayloadParts back = format::unpack_ksvd_payload(payload, atom_count, "p", 0);
+    ASSERT_EQ(back.sparsity, parts.sparsity) << bits << " bits";
+    ASSERT_EQ(back.mean, parts.mean) << bits << " bits";
+    ASSERT_EQ(back.atoms, parts.atoms) << bits << " bits";
+    ASSERT_EQ(back.values, parts.values) << bits << " bits";
+    if (parts.value_rice >= 0) {
+      ASSERT_EQ(back.value_rice, parts.value_rice);
+      ASSERT_EQ(back.gap_shift, parts.gap_shift);
     }
-    // A layout word with a width out of range or reserved bits set, a short payload and an atom
-    // index past K are refused.
-    const vr_uint good = lw;
+    // A layout word with a width out of range or reserved bits set, a short payload, a payload
+    // with a word too many, nonzero padding and an atom index past K are refused.
+    vr_uint good;
+    std::memcpy(&good, payload.data() + 12, 4);
     for (vr_uint bad :
          {(good & ~0xFu) | 13u, (good & ~0xF0u) | (9u << 4), good & ~0x1F00u,
-          (good & ~(0x1Fu << 13)) | (17u << 13), good | (1u << 18), good | (1u << 31)}) {
+          (good & ~(0x1Fu << 13)) | (17u << 13), good | (1u << 24), good | (1u << 31)}) {
       auto broken = payload;
-      std::memcpy(broken.data() + 16, &bad, 4);
+      std::memcpy(broken.data() + 12, &bad, 4);
       EXPECT_THROW(format::check_ksvd_payload(broken, atom_count, "p", 0), format::FormatError)
           << bad;
+    }
+    auto longer = payload;
+    longer.resize(payload.size() + 4);
+    EXPECT_THROW(format::check_ksvd_payload(longer, atom_count, "p", 0), format::FormatError);
+    if (layout.code_bits % 32 != 0) {
+      auto padded = payload;
+      padded.back() = std::byte{0x80};
+      EXPECT_THROW(format::check_ksvd_payload(padded, atom_count, "p", 0), format::FormatError);
     }
     const std::vector<std::byte> short_payload(payload.begin(), payload.end() - 4);
     if (layout.codes > 1) {
@@ -604,6 +628,28 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
       EXPECT_THROW(format::check_ksvd_payload(payload, 1, "p", 0), format::FormatError);
     }
   }
+}
+
+TEST(BrickPayload, PackingRefusesWhatTheFormatCannotHold) {
+  format::KsvdPayloadParts parts;
+  parts.sparsity_bits = 2;
+  parts.coef_bits = 3;
+  parts.atom_bits = 4;
+  parts.sparsity[0] = 2;
+  const auto refused = [&](std::vector<std::uint32_t> atoms, std::vector<std::int32_t> values) {
+    parts.atoms = std::move(atoms);
+    parts.values = std::move(values);
+    EXPECT_THROW(format::pack_ksvd_payload(parts), std::invalid_argument);
+  };
+  refused({3, 3}, {1, 1});   // an atom twice
+  refused({5, 3}, {1, 1});   // out of order
+  refused({3, 5}, {0, 1});   // a zero value
+  refused({3, 5}, {1, 9});   // |q| > 2^3
+  refused({3, 16}, {1, 1});  // past 2^4 atoms
+  refused({3}, {1});         // fewer codes than the sparsities
+  parts.atoms = {3, 5};
+  parts.values = {-8, 8};
+  EXPECT_NO_THROW(format::pack_ksvd_payload(parts));
 }
 
 TEST(Encoder, NodeTableIsBreadthFirstWithBottomUpHistograms) {
@@ -680,8 +726,8 @@ TEST(Encoder, FixedSparsityUsesAtMostSAtoms) {
 /// coding changes on purpose, print the new values with VOLREEL_PRINT_CHECKSUMS=1 and update them
 /// (KSVD_* and ZFP_* in tests/CMakeLists.txt: the ε rule and zfp; LAGRANGIAN_* below: the default
 /// variable rate).
-constexpr std::size_t LAGRANGIAN_BYTES = 2844;
-constexpr std::uint32_t LAGRANGIAN_CRC = 0x08fa622au;
+constexpr std::size_t LAGRANGIAN_BYTES = 2364;
+constexpr std::uint32_t LAGRANGIAN_CRC = 0x92c37248u;
 
 TEST(Encoder, RegressionChecksums) {
   const Volume v = analytic_volume(datasets::AnalyticField::blobs, {40, 36, 34}, 1);

@@ -88,7 +88,7 @@ TEST(FrameLayout, OffsetsAndGeometry) {
   const auto d = small_dictionary();
   const auto bytes = small_frame(format::Codec::ksvd, d);
   EXPECT_EQ(std::memcmp(bytes.data(), "VREELFRM", 8), 0);
-  EXPECT_EQ(static_cast<int>(bytes[8]), 4);
+  EXPECT_EQ(static_cast<int>(bytes[8]), 5);
   EXPECT_EQ(static_cast<int>(bytes[9]), 0);
 }
 
@@ -182,13 +182,13 @@ TEST(DamagedFrame, PayloadErrorsNameTheBrick) {
   const format::FrameView view(bytes, "x");
   // A reserved bit of brick 0's layout word: caught by payload validation (not the index CRC).
   vr_uint layout_word;
-  const std::uint64_t word = view.brick_offset(0) + 16;
+  const std::uint64_t word = view.brick_offset(0) + 12;
   std::memcpy(&layout_word, bytes.data() + word, 4);
-  layout_word |= 1u << 20;
+  layout_word |= 1u << 26;
   std::memcpy(bytes.data() + word, &layout_word, 4);
   test::reseal_frame(bytes);
   const std::string e = read_everything(bytes, d, false);
-  EXPECT_NE(e.find("zero bits 18..31"), std::string::npos) << e;
+  EXPECT_NE(e.find("zero bits 24..31"), std::string::npos) << e;
   EXPECT_NE(e.find("offset " + std::to_string(word)), std::string::npos) << e;
 }
 

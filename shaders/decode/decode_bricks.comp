@@ -38,9 +38,8 @@ float vr_load_atom(uint index) { return atom_quads[index >> 2u][index & 3u]; }
 #include "volreel/player/atlas_layout.h"
 
 // The brick's payload is read from the batch where it lies (a payload has no size limit that
-// would fit shared memory: up to 255 codes a block of up to 32 bits each).
-shared uint s_scan[VR_INVOCATIONS];
-shared uint s_first[216];
+// would fit shared memory); a zero word follows each ksvd payload in the batch, for the look-ahead
+// of a Rice code at the stream's end.
 
 uint g_base;  // word offset of the brick's payload in the batch
 uint vr_load_word(uint index) { return batch_words[g_base + index]; }
@@ -79,45 +78,23 @@ void main() {
     return;
   }
 
-  // 1. Block start offsets: prefix sum of the sparsities. Invocation t sums blocks 4t..4t+3, a
-  //    Hillis–Steele scan over the 54 sums, then each writes the first code of its 4 blocks.
+  // Block by block, invocation t reconstructs values 4t..4t+3 as vr_decode_value does:
+  // mean_bias + mean_scale·q, plus coef_scale·q·atom[a][v] for each code. The codes have variable
+  // length: every invocation reads the same bits (uniform control flow) and keeps the same
+  // position and Rice state from block to block.
   const uint layout_word = vr_layout_word();
-  uint own[4];
-  uint sum = 0u;
-  for (uint i = 0u; i < 4u; ++i) {
-    own[i] = vr_entry_sparsity(layout_word, vr_block_entry(layout_word, 4u * t + i));
-    sum += own[i];
-  }
-  s_scan[t] = sum;
-  barrier();
-  for (uint offset = 1u; offset < VR_INVOCATIONS; offset <<= 1u) {
-    const uint add = t >= offset ? s_scan[t - offset] : 0u;
-    barrier();
-    s_scan[t] += add;
-    barrier();
-  }
-  uint first = s_scan[t] - sum;
-  for (uint i = 0u; i < 4u; ++i) {
-    s_first[4u * t + i] = first;
-    first += own[i];
-  }
-  barrier();
-
-  // 2. Block by block, invocation t reconstructs values 4t..4t+3 as vr_decode_value does:
-  //    mean_bias + mean_scale·q, plus (coef_bias + coef_scale·c)·atom[a][v] for each code.
   const float mean_bias = vr_as_float(vr_load_word(0u));
   const float mean_scale = vr_as_float(vr_load_word(1u));
-  const float coef_bias = vr_as_float(vr_load_word(2u));
-  const float coef_scale = vr_as_float(vr_load_word(3u));
+  const float coef_scale = vr_as_float(vr_load_word(2u));
+  uint bit = 0u, sum = vr_rice_start_sum(layout_word), count = VR_RICE_START_COUNT;
   for (uint b = 0u; b < VR_BLOCKS_PER_BRICK; ++b) {
     const uint entry = vr_block_entry(layout_word, b);
     const uint s = vr_entry_sparsity(layout_word, entry);
-    const uint first_code = s_first[b];
     vec4 value = vec4(mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry)));
+    uint next_atom = 0u, atom = 0u;
     for (uint k = 0u; k < s; ++k) {
-      const uint code = vr_code(layout_word, first_code + k);
-      const float coefficient = coef_bias + coef_scale * float(vr_code_value(layout_word, code));
-      value += coefficient * atom_quads[vr_code_atom(layout_word, code) * (VR_BLOCK_LENGTH / 4u) + t];
+      const int q = vr_read_code(layout_word, s, bit, next_atom, sum, count, atom);
+      value += coef_scale * float(q) * atom_quads[atom * (VR_BLOCK_LENGTH / 4u) + t];
     }
     for (uint i = 0u; i < 4u; ++i) store_voxel(origin, vr_brick_voxel(b, 4u * t + i), value[i]);
   }

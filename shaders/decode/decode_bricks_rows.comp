@@ -4,9 +4,8 @@
 // arithmetic as decode_bricks.comp (format/include/volreel/format/brick_decode.h), organized for
 // the fewest memory operations:
 //  - one workgroup of 8 invocations per brick, no shared memory and no barrier: the workgroup walks
-//    the 216 blocks in order and keeps the running sum of the sparsities (the first code of the
-//    next block), so no prefix sum is needed; each code (the same for the whole workgroup) is
-//    read once per block;
+//    the 216 blocks in order, keeping the code stream's bit position and Rice state (the codes
+//    have variable length); each code (the same for the whole workgroup) is read once;
 //  - invocation i reconstructs the rows (6 values along x) i, i + 8, ..., i + 32 of the block's
 //    36 in registers; the dictionary is a uniform texel buffer of RGBA32F (a gather on a CPU),
 //    each atom 36 rows of 6 values padded to 8 (two texels a row; AtlasDecoder::set_dictionary
@@ -111,10 +110,9 @@ void main() {
 
   const float mean_bias = vr_as_float(vr_load_word(0u));
   const float mean_scale = vr_as_float(vr_load_word(1u));
-  const float coef_bias = vr_as_float(vr_load_word(2u));
-  const float coef_scale = vr_as_float(vr_load_word(3u));
+  const float coef_scale = vr_as_float(vr_load_word(2u));
   const uint layout_word = vr_layout_word();
-  uint first_code = 0u;  // sum of the sparsities of the blocks before b
+  uint bit = 0u, sum = vr_rice_start_sum(layout_word), count = VR_RICE_START_COUNT;
   uint b = 0u;
   for (uint bz = 0u; bz < VR_BLOCKS_PER_AXIS; ++bz)
     for (uint by = 0u; by < VR_BLOCKS_PER_AXIS; ++by)
@@ -124,16 +122,16 @@ void main() {
         const float mean = mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry));
         low0 = low1 = low2 = low3 = low4 = vec4(mean);
         high0 = high1 = high2 = high3 = high4 = vec2(mean);
+        uint next_atom = 0u, atom_index = 0u;
         for (uint k = 0u; k < s; ++k) {
-          const uint code = vr_code(layout_word, first_code + k);
-          const float coefficient = coef_bias + coef_scale * float(vr_code_value(layout_word, code));
-          const int atom = int(vr_code_atom(layout_word, code) * VR_ATOM_TEXELS);
+          const float coefficient =
+              coef_scale * float(vr_read_code(layout_word, s, bit, next_atom, sum, count, atom_index));
+          const int atom = int(atom_index * VR_ATOM_TEXELS);
 #define VR_ACCUMULATE(r)                                                         \
   low##r += coefficient * texelFetch(atom_texels, atom + int(texel##r));         \
   high##r += coefficient * texelFetch(atom_texels, atom + int(texel##r) + 1).xy;
           VR_ACCUMULATE(0) VR_ACCUMULATE(1) VR_ACCUMULATE(2) VR_ACCUMULATE(3) VR_ACCUMULATE(4)
         }
-        first_code += s;
         // Row (y, z) of block (bx, by, bz) in column bx of the brick: uvec4 index
         // (6bz + z)·36 + 6by + y.
         const uint origin = out_base + bx * VR_COLUMN_ROWS +

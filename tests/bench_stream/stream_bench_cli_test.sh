@@ -79,7 +79,7 @@ grep -q "truth:   the original series (--series" "$work/n.txt" || fail "--series
 
 # 3. The simulated clock (the default) makes a run repeatable: everything but the timings agrees.
 for run in 1 2; do
-  "$volreel" bench stream "$work/a.vreel" --series "$work/s-moved" --bandwidth 30kB/s --latency 40ms --duration 2 \
+  "$volreel" bench stream "$work/a.vreel" --series "$work/s-moved" --bandwidth 15kB/s --latency 40ms --duration 2 \
     --fps 8 --size 32x32 --policy patent --out "$work/r$run" > "$work/r$run.txt" 2>/dev/null || fail "bench stream run $run"
 done
 grep -q "simulated clock, 8 frames per tour second" "$work/r1.txt" || fail "no simulated-clock line: $(cat "$work/r1.txt")"
@@ -90,10 +90,10 @@ cmp -s "$work/r1.cut" "$work/r2.cut" || fail "two simulated runs differ: $(diff 
 /usr/bin/python3 - "$work/r1/stream_patent.csv" <<'PY' || fail "simulated clock: the link's bandwidth is not respected"
 import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
-for r in rows:  # 30 kB/s after 40 ms of latency: never more bytes than the link can have delivered
+for r in rows:  # 15 kB/s after 40 ms of latency: never more bytes than the link can have delivered
     t = float(r["time_s"])
-    assert int(r["bytes_loaded"]) <= 30000 * max(0.0, t - 0.04) + 1, (t, r["bytes_loaded"])
-assert int(rows[-1]["bytes_loaded"]) > 0.5 * 30000 * (2 - 0.04), "the link sat idle"
+    assert int(r["bytes_loaded"]) <= 15000 * max(0.0, t - 0.04) + 1, (t, r["bytes_loaded"])
+assert int(rows[-1]["bytes_loaded"]) > 0.5 * 15000 * (2 - 0.04), "the link sat idle"
 PY
 
 # 4. Several tours (--seeds): one folder per seed, each with both policies, and the targets on the

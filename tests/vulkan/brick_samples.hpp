@@ -26,21 +26,21 @@ inline std::vector<float> random_atoms(SplitMix64& rng, std::uint32_t count) {
 }
 
 /// A ksvd payload. `style` picks the pattern: 0 random widths (mean bits 0..12, sparsity bits
-/// 0..6, coefficient bits 1..16, atom bits from K up to 16), sparsities, codes and means; 1 every
-/// block at sparsity 63; 2 every block at sparsity 0; 3 extreme fields (atoms 0 and K−1, values 0
-/// and 2^16 − 1, 12-bit means 0 and 4095, sparsities up to 255 in 8-bit fields, 32-bit codes);
-/// 4 like 0 with negative scales.
+/// 0..6, magnitude bits 1..16, atom bits from K up to 16), sparsities, codes and means; 1 every
+/// block at sparsity 63; 2 every block at sparsity 0; 3 extreme fields (atoms 0 and K−1,
+/// magnitudes 1 and 2^16, 12-bit means 0 and 4095, sparsities up to 255 in 8-bit fields,
+/// escaped gaps and values); 4 like 0 with negative scales. Values of both signs, most small
+/// (the entropy coder's common case), some at the largest magnitude (escapes).
 inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t atom_count,
                                                   int style) {
   const auto sign = [&] { return rng.below(2) ? 1.0f : -1.0f; };
   format::KsvdPayloadParts parts;
   parts.dequantization[0] = static_cast<float>(rng.uniform(-2, 2));
   parts.dequantization[1] = sign() * static_cast<float>(rng.uniform(1e-4, 1e-3));
-  parts.dequantization[2] = static_cast<float>(rng.uniform(-0.5, 0.5));
-  parts.dequantization[3] = sign() * static_cast<float>(rng.uniform(0.005, 0.03));
+  parts.dequantization[2] = sign() * static_cast<float>(rng.uniform(0.005, 0.03));
   if (style == 4) {
     parts.dequantization[1] = -std::abs(parts.dequantization[1]);
-    parts.dequantization[3] = -std::abs(parts.dequantization[3]);
+    parts.dequantization[2] = -std::abs(parts.dequantization[2]);
   }
   const std::uint32_t least_atom_bits =
       std::max<std::uint32_t>(1, format::bits_for_count(atom_count));
@@ -54,28 +54,35 @@ inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t
   parts.atom_bits = style == 3 ? VR_MAX_ATOM_BITS
                                : least_atom_bits + static_cast<std::uint32_t>(rng.below(
                                                        VR_MAX_ATOM_BITS - least_atom_bits + 1));
-  const std::uint32_t most = (1u << parts.sparsity_bits) - 1u;
+  const std::uint32_t most = std::min((1u << parts.sparsity_bits) - 1u, atom_count);
+  const std::int64_t largest = std::int64_t{1} << parts.coef_bits;
+  std::vector<std::uint32_t> order(atom_count);
   for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     std::uint32_t s = static_cast<std::uint32_t>(rng.below(std::uint64_t{std::min(most, 40u)} + 1));
     std::uint32_t mean = static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << parts.mean_bits));
-    if (style == 1) s = 63;
+    if (style == 1) s = std::min(63u, atom_count);
     if (style == 2) s = 0;
     if (style == 3) {
-      s = b % 20 == 0 ? 255 : 1 + b % 15;
+      s = std::min(b % 20 == 0 ? 255 : 1 + b % 15, atom_count);
       mean = b % 2 ? (1u << VR_MEAN_BITS) - 1u : 0u;
     }
     parts.sparsity[b] = s;
     parts.mean[b] = mean;
+    // s distinct atoms in increasing order: a partial shuffle, sorted (style 3: the first and the
+    // last atom among them).
+    for (std::uint32_t k = 0; k < atom_count; ++k) order[k] = k;
+    for (std::uint32_t k = 0; k < s; ++k) std::swap(order[k], order[k + rng.below(atom_count - k)]);
+    std::sort(order.begin(), order.begin() + s);
+    if (style == 3 && s >= 2) order[0] = 0, order[s - 1] = atom_count - 1;
     for (std::uint32_t k = 0; k < s; ++k) {
-      std::uint32_t atom = static_cast<std::uint32_t>(rng.below(atom_count));
-      std::uint32_t value =
-          static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << parts.coef_bits));
-      if (style == 3) {
-        atom = (b + k) % 2 ? atom_count - 1 : 0;
-        value = (b + k) % 3 == 0 ? 0 : (1u << parts.coef_bits) - 1u;
-      }
-      parts.atoms.push_back(atom);
-      parts.values.push_back(value);
+      std::int64_t value =
+          rng.below(8) == 0
+              ? largest
+              : 1 + static_cast<std::int64_t>(
+                        rng.below(static_cast<std::uint64_t>(std::min<std::int64_t>(largest, 8))));
+      if (style == 3) value = (b + k) % 3 == 0 ? 1 : largest;
+      parts.atoms.push_back(order[k]);
+      parts.values.push_back(static_cast<std::int32_t>(rng.below(2) ? value : -value));
     }
   }
   return format::pack_ksvd_payload(parts);

@@ -289,7 +289,7 @@ TEST_F(DecoderTest, RejectsBadUploadsBeforeSubmitting) {
   ao.max_slots = 8;
   Atlas atlas(ctx, ao);
   AtlasDecoder decoder(ctx, atlas);
-  const Payload good = test::random_ksvd_payload(rng, 16, 0);
+  const Payload good = test::random_ksvd_payload(rng, 16, 3);  // atom 15 in most blocks
   const BrickUpload no_dictionary{good, format::Codec::ksvd, 0, 0};
   EXPECT_THROW(decoder.submit({&no_dictionary, 1}), std::invalid_argument);
   const std::vector<float> atom_values = test::random_atoms(rng, 8);

@@ -1,7 +1,8 @@
 // layout_probe.comp: evaluates the shared-layout functions of brick_decode.h and atlas_layout.h
 // in GLSL for test inputs, so that vulkan_test can compare them with the C++ results. One
 // workgroup per block b, one invocation per value v; index i = 216·b + v. Output sections of
-// 46656 words each (see layout_test.cpp).
+// 46656 words each (see layout_test.cpp). The payload buffer ends with a zero word (the look-ahead
+// of the last Rice code).
 #version 450
 #extension GL_GOOGLE_include_directive : require
 #define VR_GLSL 1
@@ -22,30 +23,40 @@ const uint N = 46656u;
 void main() {
   const uint b = gl_WorkGroupID.x, v = gl_LocalInvocationIndex, i = b * 216u + v;
   const uint layout_word = vr_layout_word();
-  uint first_code = 0u, codes = 0u;
-  for (uint c = 0u; c < VR_BLOCKS_PER_BRICK; ++c) {
+  uint codes = 0u;
+  for (uint c = 0u; c < VR_BLOCKS_PER_BRICK; ++c)
+    codes += vr_entry_sparsity(layout_word, vr_block_entry(layout_word, c));
+  // Code v of block b (atom in the low 16 bits, q in the high 16), read as the decoders do.
+  uint code = 0xFFFFFFFFu;
+  uint bit = 0u, sum = vr_rice_start_sum(layout_word), count = VR_RICE_START_COUNT;
+  for (uint c = 0u; c <= b; ++c) {
     const uint s = vr_entry_sparsity(layout_word, vr_block_entry(layout_word, c));
-    if (c < b) first_code += s;
-    codes += s;
+    uint next_atom = 0u, atom = 0u;
+    for (uint k = 0u; k < s; ++k) {
+      const int q = vr_read_code(layout_word, s, bit, next_atom, sum, count, atom);
+      if (c == b && k == v) code = atom | (uint(q) << 16u);
+    }
   }
-  // Layout words of every width (mean 0..12, sparsity 0..8, coefficient and atom 1..16).
+  // Layout words of every width and parameter.
   const uint other = vr_make_layout(i % 13u, (i / 13u) % 9u, 1u + (i / 117u) % 16u,
-                                    1u + (i / 1872u) % 16u);
+                                    1u + (i / 1872u) % 16u, (i / 7u) % 16u, (i / 3u) % 4u);
   const uint entry = vr_block_entry(layout_word, i % VR_BLOCKS_PER_BRICK);
-  const uint code = vr_code(layout_word, codes == 0u ? 0u : i % codes);
+  uint rice_bit = (i * 7u) % 900u;
+  const uint rice = vr_read_rice(0u, rice_bit, i % 16u, 1u + i % 16u);
   results[0u * N + i] = vr_brick_voxel(b, v);
-  results[1u * N + i] = floatBitsToUint(vr_decode_value(b, first_code, v));
+  results[1u * N + i] = floatBitsToUint(vr_decode_value(b, v));
   results[2u * N + i] = vr_read_bits(0u, (i * 13u) % 1024u, i % 33u);
   results[3u * N + i] = vr_entry_sparsity(layout_word, entry) |
                         (vr_entry_mean(layout_word, entry) << 8u);
-  results[4u * N + i] = codes == 0u ? 0u : vr_code_atom(layout_word, code) |
-                                               (vr_code_value(layout_word, code) << 16u);
-  results[5u * N + i] = vr_layout_entry_bits(other) | (vr_layout_code_bits(other) << 5u) |
-                        (vr_entry_words(other) << 11u) ^ (vr_payload_words(other, i) << 8u);
+  results[4u * N + i] = code;
+  results[5u * N + i] = vr_layout_entry_bits(other) | (vr_gap_rice(other, 1u + i % 255u) << 5u) |
+                        (vr_value_rice(other, i % 5000u, 1u + i % 31u) << 10u) |
+                        (vr_entry_words(other) << 15u) | (vr_code_first_word(other) << 23u);
   results[6u * N + i] = vr_atlas_cell_x(i, 7u) | (vr_atlas_cell_y(i, 7u, 5u) << 8u) |
                         (vr_atlas_cell_z(i, 7u, 5u) << 16u);
   results[7u * N + i] = vr_atlas_cell_x(i, 56u) | (vr_atlas_cell_y(i, 56u, 56u) << 8u) |
                         (vr_atlas_cell_z(i, 56u, 56u) << 16u);
+  results[9u * N + i] = rice ^ (rice_bit << 20u);
   if (i == 0u) {
     const uint constants[16] = uint[16](
         VR_BRICK_SIZE, VR_BRICK_INTERIOR, VR_BLOCK_SIZE, VR_BLOCK_LENGTH, VR_BLOCKS_PER_AXIS,

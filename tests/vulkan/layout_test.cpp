@@ -17,7 +17,7 @@ namespace volreel::vulkan {
 namespace {
 
 constexpr std::uint32_t N = 46656;  // 216 blocks × 216 values
-constexpr std::uint32_t sections = 9;
+constexpr std::uint32_t sections = 10;
 
 class LayoutTest : public test::VulkanTest {};
 
@@ -27,15 +27,17 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
   const std::uint32_t atom_count = 1024;
   const std::vector<float> atoms = test::random_atoms(rng, atom_count);
   const std::vector<std::byte> bytes = test::random_ksvd_payload(rng, atom_count, 0);
-  std::vector<vr_uint> payload(bytes.size() / 4);
+  std::vector<vr_uint> payload(bytes.size() / 4 + 1, 0u);  // + the look-ahead word
   std::memcpy(payload.data(), bytes.data(), bytes.size());
+  const format::KsvdPayloadParts parts =
+      format::unpack_ksvd_payload(bytes, atom_count, "<memory>", 0);
 
   // 1. Run the probe.
   const auto host = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
-  Buffer payload_buffer(ctx, bytes.size(), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, host);
+  Buffer payload_buffer(ctx, 4 * payload.size(), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, host);
   Buffer atom_buffer(ctx, 4 * atoms.size(), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, host);
   Buffer results(ctx, 4ull * sections * N, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, host);
-  std::memcpy(payload_buffer.mapped(), bytes.data(), bytes.size());
+  std::memcpy(payload_buffer.mapped(), payload.data(), 4 * payload.size());
   std::memcpy(atom_buffer.mapped(), atoms.data(), 4 * atoms.size());
   VkDescriptorSetLayoutBinding bindings[3];
   for (std::uint32_t b = 0; b < 3; ++b)
@@ -68,7 +70,7 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
   for (std::uint32_t c = 0; c < VR_BLOCKS_PER_BRICK; ++c)
     codes += vr_entry_sparsity(layout_word, vr_block_entry(p, layout_word, c));
   ASSERT_GT(codes, 0u);
-  ASSERT_GE(payload.size(), 33u) << "the probe reads bits 0..1055";
+  ASSERT_GE(payload.size(), 34u) << "the probe reads bits 0..1055";
   const std::uint32_t constants[16] = {VR_BRICK_SIZE,
                                        VR_BRICK_INTERIOR,
                                        VR_BLOCK_SIZE,
@@ -87,37 +89,44 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
                                        vr_code_first_word(layout_word)};
   for (std::uint32_t k = 0; k < 16; ++k)
     EXPECT_EQ(gpu[8 * N + k], constants[k]) << "constant " << k;
-  std::uint32_t first_code = 0, mismatches = 0;
+  std::uint32_t mismatches = 0;
   float worst = 0;
+  std::size_t first_code = 0;  // of block b in parts
   for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) {
       const std::uint32_t i = b * 216 + v;
-      const vr_uint other =
-          vr_make_layout(i % 13, (i / 13) % 9, 1 + (i / 117) % 16, 1 + (i / 1872) % 16);
+      const vr_uint other = vr_make_layout(i % 13, (i / 13) % 9, 1 + (i / 117) % 16,
+                                           1 + (i / 1872) % 16, (i / 7) % 16, (i / 3) % 4);
       const vr_uint entry = vr_block_entry(p, layout_word, i % VR_BLOCKS_PER_BRICK);
-      const vr_uint code = vr_code(p, layout_word, i % codes);
-      const std::uint32_t expected[8] = {
+      vr_uint rice_bit = (i * 7) % 900;
+      const vr_uint rice = vr_read_rice(p, 0, rice_bit, i % 16, 1 + i % 16);
+      const std::uint32_t expected[10] = {
           vr_brick_voxel(b, v),
           0,  // the decoded value, compared below
           vr_read_bits(p, 0, (i * 13) % 1024, i % 33),
           vr_entry_sparsity(layout_word, entry) | (vr_entry_mean(layout_word, entry) << 8),
-          vr_code_atom(layout_word, code) | (vr_code_value(layout_word, code) << 16),
-          vr_layout_entry_bits(other) | (vr_layout_code_bits(other) << 5) |
-              ((vr_entry_words(other) << 11) ^ (vr_payload_words(other, i) << 8)),
+          v < parts.sparsity[b] ? parts.atoms[first_code + v] |
+                                      (static_cast<vr_uint>(parts.values[first_code + v]) << 16)
+                                : 0xFFFFFFFFu,
+          vr_layout_entry_bits(other) | (vr_gap_rice(other, 1 + i % 255) << 5) |
+              (vr_value_rice(other, i % 5000, 1 + i % 31) << 10) | (vr_entry_words(other) << 15) |
+              (vr_code_first_word(other) << 23),
           vr_atlas_cell_x(i, 7) | (vr_atlas_cell_y(i, 7, 5) << 8) |
               (vr_atlas_cell_z(i, 7, 5) << 16),
           vr_atlas_cell_x(i, 56) | (vr_atlas_cell_y(i, 56, 56) << 8) |
-              (vr_atlas_cell_z(i, 56, 56) << 16)};
-      for (std::uint32_t s = 0; s < 8; ++s)
-        if (s != 1 && gpu[s * N + i] != expected[s] && ++mismatches <= 10)
+              (vr_atlas_cell_z(i, 56, 56) << 16),
+          0,  // constants
+          rice ^ (rice_bit << 20)};
+      for (std::uint32_t s = 0; s < 10; ++s)
+        if (s != 1 && s != 8 && gpu[s * N + i] != expected[s] && ++mismatches <= 3000)
           ADD_FAILURE() << "section " << s << " index " << i << ": GLSL " << gpu[s * N + i]
                         << ", C++ " << expected[s];
       // The decoded value: the same arithmetic; the device may fuse multiply-adds.
-      const float cpu = vr_decode_value(p, a, b, first_code, v);
+      const float cpu = vr_decode_value(p, a, b, v);
       const float glsl = std::bit_cast<float>(gpu[N + i]);
       worst = std::max(worst, std::fabs(cpu - glsl) / std::max(1.0f, std::fabs(cpu)));
     }
-    first_code += vr_entry_sparsity(layout_word, vr_block_entry(p, layout_word, b));
+    first_code += parts.sparsity[b];
   }
   EXPECT_EQ(mismatches, 0u);
   EXPECT_LT(worst, 1e-5f) << "largest relative difference of decoded values";

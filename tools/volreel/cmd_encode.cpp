@@ -37,7 +37,7 @@ struct EncodeOptions {
          coef_step_factor = encoder::CodingSettings{}.coef_step_factor;
   int fixed_sparsity = 0, max_atoms = encoder::default_max_atoms, atoms = 0;
   std::size_t max_frames = 0, rate_sample_frames = 3;
-  bool resume = false, overwrite = false, no_refit = false, no_interval = false, extend = false;
+  bool resume = false, overwrite = false, no_refit = false, extend = false;
   CLI::Option *tolerance_opt = nullptr, *psnr_opt = nullptr, *bps_opt = nullptr, *zfp_opt = nullptr,
               *level_factor_opt = nullptr, *max_error_opt = nullptr, *max_atoms_opt = nullptr,
               *rate_rule_opt = nullptr;
@@ -72,7 +72,6 @@ encoder::CodingSettings coding_settings(const EncodeOptions& o) {
   }
   c.refit_quantization = !o.no_refit;
   c.extend_pursuit = o.extend;
-  c.optimize_interval = !o.no_interval;
   return c;
 }
 
@@ -199,7 +198,6 @@ void run_encode(const EncodeOptions& o) {
                     {"series", o.series},
                     {"refit_quantization", c.refit_quantization},
                     {"extend_pursuit", c.extend_pursuit},
-                    {"optimize_interval", c.optimize_interval},
                     {"max_atoms", c.max_atoms},
                     {"coef_bits", o.coef_bits},
                     {"coef_step_factor", c.coef_step_factor},
@@ -291,12 +289,13 @@ void add_encode_command(CLI::App& app) {
                   "whose step is at most eps/2; fixed rate: 12) or 0..12 for every brick")
       ->capture_default_str();
   cmd->add_option("--coef-bits", o->coef_bits,
-                  "Bits of each brick's quantized coefficients: auto (variable rate: per brick "
-                  "the fewest bits, 1..16,\nwhose step is at most --coef-step times eps; fixed "
-                  "rate: 8) or 1..16 for every brick")
+                  "Magnitude bits of each brick's quantized coefficients: auto (variable rate: "
+                  "the step is --coef-step\ntimes eps; fixed rate: the brick's largest "
+                  "coefficient / 128) or 1..16 (the step is the brick's largest\ncoefficient / "
+                  "2^N)")
       ->capture_default_str();
   cmd->add_option("--coef-step", o->coef_step_factor,
-                  "Variable rate: the largest coefficient step as a multiple of eps")
+                  "Variable rate: the coefficient quantization step as a multiple of eps")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->add_option("--atom-storage", o->atom_storage,
@@ -317,8 +316,6 @@ void add_encode_command(CLI::App& app) {
   cmd->add_flag("--overwrite", o->overwrite, "Replace an existing container");
   cmd->add_flag("--no-refit", o->no_refit,
                 "Quantize coefficients independently (no least-squares refit; for comparison)");
-  cmd->add_flag("--no-interval", o->no_interval,
-                "Quantize coefficients over [min, max] of each brick (for comparison)");
   cmd->add_flag("--extend-pursuit", o->extend,
                 "--rate-rule tolerance: add atoms to blocks whose quantized error exceeds eps "
                 "(quantization inside the\n"

@@ -52,7 +52,10 @@ void print_breakdown(const encoder::EncodeSummary& s) {
       "64+ atoms (%%):",
       static_cast<double>(codes) / static_cast<double>(blocks), most);
   for (std::size_t lo : {0u, 1u, 4u, 8u, 16u, 32u, 64u}) {
-    const std::size_t hi = lo == 0 ? 1 : lo == 64 ? s.sparsity_histogram.size() : 2 * lo;
+    const std::size_t hi = lo == 0    ? 1
+                           : lo == 1  ? 4
+                           : lo == 64 ? s.sparsity_histogram.size()
+                                      : 2 * lo;
     std::size_t count = 0;
     for (std::size_t k = lo; k < hi; ++k) count += s.sparsity_histogram[k];
     std::printf(" %.1f", 100.0 * static_cast<double>(count) / static_cast<double>(blocks));
@@ -61,7 +64,9 @@ void print_breakdown(const encoder::EncodeSummary& s) {
   for (std::size_t k = 0; k < s.coef_bits_histogram.size(); ++k)
     coded_bricks += s.coef_bits_histogram[k], coef_bits += k * s.coef_bits_histogram[k];
   std::printf(
-      "\ncoefficient bits per brick: mean %.2f",
+      "\nbits per code (atom gap, magnitude and sign): mean %.2f; magnitude bits per brick: mean "
+      "%.2f",
+      static_cast<double>(s.code_bits) / static_cast<double>(std::max<std::size_t>(codes, 1)),
       static_cast<double>(coef_bits) / static_cast<double>(std::max<std::size_t>(coded_bricks, 1)));
   std::size_t bricks = 0, bits = 0;
   for (std::size_t k = 0; k < s.mean_bits_histogram.size(); ++k)
@@ -125,9 +130,8 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
     std::printf(
         "quantization: %.3f dB lost against the unquantized sparse approximation (squared error "
         "over all coded blocks, "
-        "every level; refit %s, optimized interval %s, pursuit extension %s)\n",
+        "every level; refit %s, pursuit extension %s)\n",
         s.quantization_loss_db(), c.refit_quantization ? "on" : "off",
-        c.optimize_interval ? "on" : "off",
         c.extend_pursuit && c.fixed_sparsity == 0 && c.rule == encoder::VariableRateRule::tolerance
             ? "on"
             : "off");

@@ -98,8 +98,9 @@ std::uint64_t AtlasDecoder::upload_bytes(const BrickUpload& brick) {
       return record_bytes + 4;
     case kind_raw:
       return record_bytes + raw_bytes;
-    default:
-      return record_bytes + (brick.payload.size() + 3) / 4 * 4;
+    default:  // and a zero word after a ksvd payload: the look-ahead of its last Rice code
+      return record_bytes + (brick.payload.size() + 3) / 4 * 4 +
+             (kind_of(brick) == kind_ksvd ? 4 : 0);
   }
 }
 
@@ -333,11 +334,13 @@ Ticket AtlasDecoder::submit(std::span<const BrickUpload> batch) {
         payload_words = static_cast<std::uint32_t>(brick.payload.size() / 4);  // validated above
         std::memcpy(words + cursor, brick.payload.data(), 4 * std::size_t{payload_words});
       }
+      const std::uint32_t padding = kind == kind_ksvd ? 1 : 0;  // see upload_bytes
+      if (padding) words[cursor + payload_words] = 0;
       words[4 * i + 0] = cursor;
       words[4 * i + 1] = brick.slot;
       words[4 * i + 2] = kind;
       words[4 * i + 3] = payload_words;
-      cursor += payload_words;
+      cursor += payload_words + padding;
     }
     entry.staging.flush(0, VK_WHOLE_SIZE);
     record_and_submit(entry, count, std::uint64_t{cursor} * 4);

@@ -90,9 +90,9 @@ struct CodingSettings {
   /// 0.25·216·ε² per code (16 bits when this was measured, format 2), and the two slopes are equal
   /// at a step of ε/2: of the factors measured, 0.5 gives the most PSNR for the same bytes.
   double mean_step_factor = 0.5;
-  /// ksvd: the bits c of each brick's quantized coefficients (format/SPEC.md, the layout word).
-  /// -1: variable rate gives each brick the fewest bits (1..16) whose step over the span of its
-  /// coefficients is at most coef_step_factor·ε_l, fixed rate 8 bits; 1..16: every brick c bits.
+  /// ksvd: the magnitude bits c of each brick's quantized coefficients (format/SPEC.md, the layout
+  /// word). -1: variable rate quantizes with the step coef_step_factor·ε_l, fixed rate with the
+  /// brick's largest coefficient / 128; 1..16: every brick with its largest coefficient / 2^c.
   int coef_bits = -1;
   /// The coefficient step as a multiple of ε (see coef_bits). A coefficient off by e adds e² to
   /// its block's squared error (atoms have unit norm), against the m·ε² scale of the block's
@@ -113,9 +113,6 @@ struct CodingSettings {
   /// pursuit"). Off by default: it recovers part of the quantization loss for more bytes (about
   /// neutral at equal bps) and slows the encoding.
   bool extend_pursuit = false;
-  /// Choose each brick's coefficient interval by least squared error (clipping up to 8
-  /// extreme coefficients at either end) instead of [min, max].
-  bool optimize_interval = true;
   double value_min = 0, value_max = 0;  ///< the sequence's value range, for node histograms
 };
 

@@ -59,7 +59,8 @@ struct FrameStats {
   ByteBreakdown breakdown;
   std::array<std::size_t, 256> sparsity_histogram{};  ///< coded blocks (ksvd) by atom count
   std::array<std::size_t, 13> mean_bits_histogram{};  ///< coded bricks (ksvd) by mean bits
-  std::array<std::size_t, 17> coef_bits_histogram{};  ///< coded bricks (ksvd) by coefficient bits
+  std::array<std::size_t, 17> coef_bits_histogram{};  ///< coded bricks (ksvd) by magnitude bits
+  std::uint64_t code_bits = 0;  ///< ksvd: bits of the code streams (padding excluded)
   /// Blocks that missed the pointwise bound (CodingSettings::max_error) even with 16-bit
   /// coefficients and Smax atoms: 0 whenever the bound holds.
   std::size_t blocks_over_bound = 0;

@@ -4,16 +4,20 @@
 // PNanoVDB.h. Layout in format/SPEC.md, "Brick payload"; MTV-Player §3.2 and Fig. 3.
 //
 // A payload is an array of little-endian 32-bit words:
-//   words 0..3            f32 mean_bias, mean_scale, coef_bias, coef_scale (bit patterns)
-//   word 4                the layout word: bits b of a quantized mean, t of a sparsity field,
-//                         c of a quantized coefficient, a of an atom index (vr_layout_*)
-//   entry[216]            per block, t + b bits each, one bit stream from bit 0 of word 5
+//   words 0..2            f32 mean_bias, mean_scale, coef_scale (bit patterns)
+//   word 3                the layout word: bits b of a quantized mean, t of a sparsity field,
+//                         c of a magnitude, a of an atom index, the values' first Rice
+//                         parameter and the gaps' Rice shift (vr_layout_*)
+//   entry[216]            per block, t + b bits each, one bit stream from bit 0 of word 4
 //                         (low bit first): sparsity s in the low t bits, quantized mean q above;
 //                         zero bits up to the next word
-//   code[Σ s]             per coefficient, c + a bits each, one bit stream from the next word:
-//                         quantized value q in the low c bits, atom index above; zero bits up to
-//                         the next word
-// Dequantization: mean = mean_bias + mean_scale·q, coefficient = coef_bias + coef_scale·q.
+//   codes                 one bit stream from the next word, block after block, each block's
+//                         codes in increasing atom order: the gap to the atom and the magnitude
+//                         as Rice codes, then the sign (vr_read_code); zero bits up to the next
+//                         word
+// Dequantization: mean = mean_bias + mean_scale·q, coefficient = coef_scale·q (q ≠ 0 signed).
+// The codes have variable length, so a decoder walks a brick's blocks in order, keeping the bit
+// position and the values' adaptive Rice state from block to block.
 //
 // The host side (C++) defines VR_CPU before including nothing else: the functions read from a
 // `const vr_uint*` span; a GLSL includer defines VR_GLSL and provides
@@ -35,6 +39,7 @@ typedef std::uint32_t vr_uint;
 #define VR_PAYLOAD_ARG_ONLY payload
 #define VR_ATOMS_PARAM const float *atoms,
 #define VR_ATOMS_ARG atoms,
+#define VR_INOUT(type, name) type& name
 #define VR_LOAD_WORD(i) payload[i]
 #define VR_LOAD_ATOM(i) atoms[i]
 VR_INLINE float vr_as_float(vr_uint bits) {
@@ -51,23 +56,28 @@ VR_INLINE float vr_as_float(vr_uint bits) {
 #define VR_PAYLOAD_ARG_ONLY
 #define VR_ATOMS_PARAM
 #define VR_ATOMS_ARG
+#define VR_INOUT(type, name) inout type name
 #define VR_LOAD_WORD(i) vr_load_word(i)
 #define VR_LOAD_ATOM(i) vr_load_atom(i)
 #define vr_as_float(bits) uintBitsToFloat(bits)
 #endif
 
-/* Constants of format version 3 (SPEC.md). */
+/* Constants of format version 5 (SPEC.md). */
 #define VR_BRICK_SIZE 36u        /* stored voxels per axis: interior + 2·apron */
 #define VR_BRICK_INTERIOR 34u    /* interior voxels per axis */
 #define VR_BLOCK_SIZE 6u         /* M */
 #define VR_BLOCK_LENGTH 216u     /* m = M³ values per block */
 #define VR_BLOCKS_PER_AXIS 6u    /* blocks per brick axis */
 #define VR_BLOCKS_PER_BRICK 216u /* 6³ blocks per brick, x fastest */
-#define VR_HEADER_WORDS 5u       /* the four f32 dequantization values and the layout word */
+#define VR_HEADER_WORDS 4u       /* three f32 dequantization values and the layout word */
 #define VR_MEAN_BITS 12u         /* the most bits of a quantized mean */
 #define VR_MAX_SPARSITY_BITS 8u  /* the widest sparsity field: at most 255 atoms a block */
-#define VR_MAX_COEF_BITS 16u     /* the most bits of a quantized coefficient */
+#define VR_MAX_COEF_BITS 16u     /* the most magnitude bits: |q| ≤ 2^16 */
 #define VR_MAX_ATOM_BITS 16u     /* the widest atom index */
+#define VR_MAX_VALUE_RICE 15u    /* the largest initial Rice parameter of the values */
+#define VR_MAX_GAP_SHIFT 3u      /* the largest reduction of the gaps' Rice parameter */
+#define VR_ESCAPE_ZEROS 16u      /* a Rice code whose unary part reaches 16 zeros is an escape */
+#define VR_RICE_RESET 32u        /* the values' adaptive state halves when it counts this many */
 
 /* Bits [bit, bit + width) of the bit stream that starts at bit 0 of word `first_word` (bit i of
  * the stream is bit i mod 32 of word first_word + i/32), width 0..32. A field spans at most two
@@ -81,14 +91,17 @@ VR_INLINE vr_uint vr_read_bits(VR_PAYLOAD_PARAM vr_uint first_word, vr_uint bit,
   return width >= 32u ? value : (value & ((1u << width) - 1u));
 }
 
-/* Word 4, the layout word (a reader checks every field's range and that bits 18..31 are zero):
+/* Word 3, the layout word (a reader checks every field's range and that bits 24..31 are zero):
  *   bits 0..3    mean bits b         (0..12)  bits of each block's quantized mean
  *   bits 4..7    sparsity bits t     (0..8)   width of each block's sparsity field
- *   bits 8..12   coefficient bits c  (1..16)  bits of each quantized coefficient
- *   bits 13..17  atom bits a         (1..16)  width of each atom index
- *   bits 18..31  zero (reserved) */
+ *   bits 8..12   magnitude bits c    (1..16)  every quantized coefficient has |q| ≤ 2^c; an
+ *                                             escaped value is |q| − 1 in c bits
+ *   bits 13..17  atom bits a         (1..16)  an escaped gap takes a bits (every index < 2^a)
+ *   bits 18..21  value Rice k0       (0..15)  the values' Rice parameter at the brick's start
+ *   bits 22..23  gap shift g         (0..3)   lowers the gaps' Rice parameter (vr_gap_rice)
+ *   bits 24..31  zero (reserved) */
 VR_INLINE vr_uint vr_layout_word(VR_PAYLOAD_PARAM_ONLY) {
-  return VR_LOAD_WORD(4u);
+  return VR_LOAD_WORD(3u);
 }
 VR_INLINE vr_uint vr_layout_mean_bits(vr_uint layout_word) {
   return layout_word & 0xFu;
@@ -102,16 +115,20 @@ VR_INLINE vr_uint vr_layout_coef_bits(vr_uint layout_word) {
 VR_INLINE vr_uint vr_layout_atom_bits(vr_uint layout_word) {
   return (layout_word >> 13u) & 0x1Fu;
 }
-VR_INLINE vr_uint vr_make_layout(vr_uint mean_bits, vr_uint sparsity_bits, vr_uint coef_bits,
-                                 vr_uint atom_bits) {
-  return mean_bits | (sparsity_bits << 4u) | (coef_bits << 8u) | (atom_bits << 13u);
+VR_INLINE vr_uint vr_layout_value_rice(vr_uint layout_word) {
+  return (layout_word >> 18u) & 0xFu;
 }
-/* Width of a block entry, t + b (0..20), and of a code, a + c (2..32). */
+VR_INLINE vr_uint vr_layout_gap_shift(vr_uint layout_word) {
+  return (layout_word >> 22u) & 0x3u;
+}
+VR_INLINE vr_uint vr_make_layout(vr_uint mean_bits, vr_uint sparsity_bits, vr_uint coef_bits,
+                                 vr_uint atom_bits, vr_uint value_rice, vr_uint gap_shift) {
+  return mean_bits | (sparsity_bits << 4u) | (coef_bits << 8u) | (atom_bits << 13u) |
+         (value_rice << 18u) | (gap_shift << 22u);
+}
+/* Width of a block entry, t + b (0..20). */
 VR_INLINE vr_uint vr_layout_entry_bits(vr_uint layout_word) {
   return vr_layout_sparsity_bits(layout_word) + vr_layout_mean_bits(layout_word);
-}
-VR_INLINE vr_uint vr_layout_code_bits(vr_uint layout_word) {
-  return vr_layout_coef_bits(layout_word) + vr_layout_atom_bits(layout_word);
 }
 
 /* Block entry `block` (0..215): sparsity in the low t bits, quantized mean above. */
@@ -135,44 +152,118 @@ VR_INLINE vr_uint vr_code_first_word(vr_uint layout_word) {
   return VR_HEADER_WORDS + vr_entry_words(layout_word);
 }
 
-/* Code k (counted over the whole brick): quantized coefficient in the low c bits, atom index
- * above. */
-VR_INLINE vr_uint vr_code(VR_PAYLOAD_PARAM vr_uint layout_word, vr_uint code) {
-  vr_uint code_bits = vr_layout_code_bits(layout_word);
-  return vr_read_bits(VR_PAYLOAD_ARG vr_code_first_word(layout_word), code * code_bits, code_bits);
+/* The codes: one bit stream from word vr_code_first_word, the blocks' codes in block order, each
+ * block's in increasing atom order. A code is the gap to its atom (atom − previous atom of the
+ * block − 1; the first code of a block: its atom), then the value's magnitude |q| − 1 (q ≠ 0),
+ * both as Rice codes, then the sign of q (1: negative). A Rice code of x with parameter k is
+ * u = x >> k zero bits, a one, and the low k bits of x; when u would be 16 or more it is 16
+ * zero bits and x in `escape_bits` bits instead (a bits for a gap, c bits for a magnitude). */
+
+/* Index of the lowest set bit of x ≠ 0. */
+#ifndef VR_GLSL
+VR_INLINE vr_uint vr_lowest_bit(vr_uint x) {
+  vr_uint n = 0u;
+  while ((x & 1u) == 0u) x >>= 1u, ++n;
+  return n;
 }
-VR_INLINE vr_uint vr_code_atom(vr_uint layout_word, vr_uint code) {
-  return code >> vr_layout_coef_bits(layout_word);
+/* floor(log2(x)) of x ≥ 1. */
+VR_INLINE vr_uint vr_highest_bit(vr_uint x) {
+  vr_uint n = 0u;
+  while (x > 1u) x >>= 1u, ++n;
+  return n;
 }
-VR_INLINE vr_uint vr_code_value(vr_uint layout_word, vr_uint code) {
-  return code & ((1u << vr_layout_coef_bits(layout_word)) - 1u);
+#else
+#define vr_lowest_bit(x) uint(findLSB(x))
+#define vr_highest_bit(x) uint(findMSB(x))
+#endif
+
+/* Reads the Rice code at *bit with parameter k and advances *bit past it. */
+VR_INLINE vr_uint vr_read_rice(VR_PAYLOAD_PARAM vr_uint first_word, VR_INOUT(vr_uint, bit),
+                               vr_uint k, vr_uint escape_bits) {
+  vr_uint zeros = vr_lowest_bit(vr_read_bits(VR_PAYLOAD_ARG first_word, bit, VR_ESCAPE_ZEROS) |
+                                (1u << VR_ESCAPE_ZEROS));
+  if (zeros == VR_ESCAPE_ZEROS) {
+    vr_uint x = vr_read_bits(VR_PAYLOAD_ARG first_word, bit + VR_ESCAPE_ZEROS, escape_bits);
+    bit += VR_ESCAPE_ZEROS + escape_bits;
+    return x;
+  }
+  vr_uint low = vr_read_bits(VR_PAYLOAD_ARG first_word, bit + zeros + 1u, k);
+  bit += zeros + 1u + k;
+  return (zeros << k) | low;
 }
 
-/* Payload words of a brick with this layout_word whose blocks hold `codes` coefficients in all. */
-VR_INLINE vr_uint vr_payload_words(vr_uint layout_word, vr_uint codes) {
-  return vr_code_first_word(layout_word) + (codes * vr_layout_code_bits(layout_word) + 31u) / 32u;
+/* The gaps' Rice parameter in a block of s ≥ 1 codes: about log2 of the mean gap 2^a/(s + 1)
+ * less one, lowered by the layout's gap shift g: max(0, a − 1 − floor(log2(s + 1)) − g). */
+VR_INLINE vr_uint vr_gap_rice(vr_uint layout_word, vr_uint s) {
+  vr_uint lower = 1u + vr_highest_bit(s + 1u) + vr_layout_gap_shift(layout_word);
+  vr_uint a = vr_layout_atom_bits(layout_word);
+  return a > lower ? a - lower : 0u;
 }
 
-/* Decodes value v (0..215, x fastest inside the block) of block `block` whose first code is
- * `first_code` (the sum of the sparsities of blocks 0..block-1: a prefix sum). Steps:
- *  1. read the layout_word word and the block entry: sparsity s, quantized mean q;
+/* The values' adaptive Rice parameter: the smallest k ≤ c with count·2^k ≥ sum, where sum and
+ * count (vr_rice_start_sum, vr_read_code) follow the magnitudes read so far in the brick. A
+ * loop of fixed trip count: Mesa 22.3's lavapipe miscompiled the equivalent `while` loop once the
+ * caller had read a few hundred codes (the layout test's probe caught it). */
+VR_INLINE vr_uint vr_value_rice(vr_uint layout_word, vr_uint sum, vr_uint count) {
+  vr_uint c = vr_layout_coef_bits(layout_word);
+  vr_uint k = 0u;
+  for (vr_uint j = 0u; j < VR_MAX_COEF_BITS; ++j)
+    if (k < c && (count << k) < sum) ++k;
+  return k;
+}
+VR_INLINE vr_uint vr_rice_start_sum(vr_uint layout_word) {
+  return 1u << vr_layout_value_rice(layout_word);
+}
+#define VR_RICE_START_COUNT 1u
+
+/* Reads the next code of a block of s codes. Before a block's first code next_atom = 0; the state
+ * (bit, sum, count) runs on over the whole brick, starting at the first code word with
+ * sum = vr_rice_start_sum, count = VR_RICE_START_COUNT. Sets atom; returns the signed quantized
+ * coefficient q (coefficient = coef_scale·q). */
+VR_INLINE int vr_read_code(VR_PAYLOAD_PARAM vr_uint layout_word, vr_uint s, VR_INOUT(vr_uint, bit),
+                           VR_INOUT(vr_uint, next_atom), VR_INOUT(vr_uint, sum),
+                           VR_INOUT(vr_uint, count), VR_INOUT(vr_uint, atom)) {
+  vr_uint first = vr_code_first_word(layout_word);
+  atom = next_atom + vr_read_rice(VR_PAYLOAD_ARG first, bit, vr_gap_rice(layout_word, s),
+                                  vr_layout_atom_bits(layout_word));
+  next_atom = atom + 1u;
+  vr_uint magnitude =
+      vr_read_rice(VR_PAYLOAD_ARG first, bit, vr_value_rice(layout_word, sum, count),
+                   vr_layout_coef_bits(layout_word));
+  vr_uint negative = vr_read_bits(VR_PAYLOAD_ARG first, bit, 1u);
+  bit += 1u;
+  sum += magnitude;
+  count += 1u;
+  if (count == VR_RICE_RESET) {
+    sum = (sum + 1u) >> 1u;
+    count = VR_RICE_RESET / 2u;
+  }
+  int q = int(magnitude + 1u);
+  return negative != 0u ? -q : q;
+}
+
+/* Decodes value v (0..215, x fastest inside the block) of block `block`: walks the codes of
+ * blocks 0..block (a reference; the decoders walk the blocks in order once). Steps:
+ *  1. read the layout word and, block by block, the entry: sparsity s, quantized mean q;
  *  2. value = mean_bias + mean_scale·q;
- *  3. for each of the s codes: atom a, quantized coefficient c;
- *     value += (coef_bias + coef_scale·c) · atoms[a·216 + v]. */
-VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint block, vr_uint first_code,
-                                vr_uint v) {
+ *  3. for each of the block's s codes (vr_read_code): atom a, quantized coefficient q;
+ *     value += coef_scale·q · atoms[a·216 + v]. */
+VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint block, vr_uint v) {
   float mean_bias = vr_as_float(VR_LOAD_WORD(0u));
   float mean_scale = vr_as_float(VR_LOAD_WORD(1u));
-  float coef_bias = vr_as_float(VR_LOAD_WORD(2u));
-  float coef_scale = vr_as_float(VR_LOAD_WORD(3u));
+  float coef_scale = vr_as_float(VR_LOAD_WORD(2u));
   vr_uint layout_word = vr_layout_word(VR_PAYLOAD_ARG_ONLY);
-  vr_uint entry = vr_block_entry(VR_PAYLOAD_ARG layout_word, block);
-  vr_uint s = vr_entry_sparsity(layout_word, entry);
-  float value = mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry));
-  for (vr_uint k = 0u; k < s; ++k) {
-    vr_uint code = vr_code(VR_PAYLOAD_ARG layout_word, first_code + k);
-    float coefficient = coef_bias + coef_scale * float(vr_code_value(layout_word, code));
-    value += coefficient * VR_LOAD_ATOM(vr_code_atom(layout_word, code) * VR_BLOCK_LENGTH + v);
+  vr_uint bit = 0u, sum = vr_rice_start_sum(layout_word), count = VR_RICE_START_COUNT;
+  float value = 0.0f;
+  for (vr_uint b = 0u; b <= block; ++b) {
+    vr_uint entry = vr_block_entry(VR_PAYLOAD_ARG layout_word, b);
+    vr_uint s = vr_entry_sparsity(layout_word, entry);
+    value = mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry));
+    vr_uint next_atom = 0u, atom = 0u;
+    for (vr_uint k = 0u; k < s; ++k) {
+      int q = vr_read_code(VR_PAYLOAD_ARG layout_word, s, bit, next_atom, sum, count, atom);
+      if (b == block) value += coef_scale * float(q) * VR_LOAD_ATOM(atom * VR_BLOCK_LENGTH + v);
+    }
   }
   return value;
 }

@@ -20,12 +20,13 @@ struct AtomTable {
 
 /// The structure of a ksvd brick payload (brick_decode.h's layout), once checked.
 struct KsvdPayloadLayout {
-  std::uint32_t word = 0;           ///< the layout word (word 4)
+  std::uint32_t word = 0;           ///< the layout word (word 3)
   std::uint32_t mean_bits = 0;      ///< b, 0..12
   std::uint32_t sparsity_bits = 0;  ///< t, 0..8
-  std::uint32_t coef_bits = 0;      ///< c, 1..16
+  std::uint32_t coef_bits = 0;      ///< c, 1..16: every |q| ≤ 2^c
   std::uint32_t atom_bits = 0;      ///< a, 1..16
   std::uint32_t codes = 0;          ///< Σ sparsities
+  std::uint64_t code_bits = 0;      ///< length of the code stream, without its zero padding
 };
 
 /// The largest magnitude a decoded value may reach, and the largest magnitude of an atom value
@@ -35,9 +36,10 @@ constexpr double max_atom_magnitude = 1.01;
 
 /// Checks a ksvd payload before anything decodes it (the CPU decoder here, or the GPU): the header
 /// and entries present, finite dequantization values that bound every decoded value by
-/// max_decoded_magnitude, the layout word (every width in range, the
-/// reserved bits zero, 2^a ≥ atom_count is not required but every atom index < atom_count), the
-/// length = the words of the header, entries and codes exactly. Throws FormatError naming `name`
+/// max_decoded_magnitude, the layout word (every field in range, the reserved bits zero), and the
+/// code stream read to its end: in each block atom indices increasing and < atom_count, every
+/// magnitude ≤ 2^c, the stream inside the payload, the payload exactly the words of the header,
+/// entries and codes, and the padding after the last code zero. Throws FormatError naming `name`
 /// and the offset `at` + the bad field's offset in the payload.
 KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> payload, std::uint32_t atom_count,
                                      const std::filesystem::path& name, std::uint64_t at);
@@ -46,28 +48,38 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::
                                      std::uint32_t atom_count, const std::filesystem::path& name,
                                      std::uint64_t at);
 
-/// The parts of a ksvd brick payload before packing: the four dequantization values (mean_bias,
-/// mean_scale, coef_bias, coef_scale), the field widths (mean bits b 0..12, sparsity bits t 0..8,
-/// coefficient bits c 1..16, atom bits a 1..16), per block its sparsity (< 2^t) and quantized mean
-/// (< 2^b), and the codes of all blocks in block order (atom index, quantized value < 2^c).
+/// The parts of a ksvd brick payload before packing: the three dequantization values (mean_bias,
+/// mean_scale, coef_scale), the field widths (mean bits b 0..12, sparsity bits t 0..8, magnitude
+/// bits c 1..16, atom bits a 1..16), the entropy coder's two parameters, per block its sparsity
+/// (< 2^t) and quantized mean (< 2^b), and the codes of all blocks in block order, each block's
+/// in increasing atom order (atom index < 2^a, quantized value q ≠ 0 with |q| ≤ 2^c).
 struct KsvdPayloadParts {
-  float dequantization[4] = {0, 0, 0, 0};
+  float dequantization[3] = {0, 0, 0};
   std::uint32_t mean_bits = 12;
   std::uint32_t sparsity_bits = 4;
   std::uint32_t coef_bits = 6;
   std::uint32_t atom_bits = 10;
+  int value_rice = -1;  ///< the values' first Rice parameter 0..15; -1: the one giving fewest bits
+  int gap_shift = -1;   ///< the gaps' Rice shift 0..3; -1: the one giving the fewest bits
   std::array<std::uint32_t, 216> sparsity{};
   std::array<std::uint32_t, 216> mean{};
-  std::vector<std::uint32_t> atoms;   ///< one per code
-  std::vector<std::uint32_t> values;  ///< one per code
+  std::vector<std::uint32_t> atoms;  ///< one per code
+  std::vector<std::int32_t> values;  ///< one per code
 };
 
 /// The fewest bits that hold every value 0..count − 1 (0 for count ≤ 1).
 std::uint32_t bits_for_count(std::uint64_t count);
 
-/// Packs the parts into a payload of brick_decode.h's layout. Throws std::invalid_argument when a
-/// width is out of range, a field does not fit its bits or the codes do not number Σ sparsity.
+/// Packs the parts into a payload of brick_decode.h's layout, choosing the entropy coder's
+/// parameters where the parts leave them at −1. Throws std::invalid_argument when a width is out
+/// of range, a field does not fit its bits, a block's atoms do not increase, a value is 0 or
+/// the codes do not number Σ sparsity.
 std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts);
+
+/// The parts of a ksvd payload (the inverse of pack_ksvd_payload, with the entropy coder's
+/// parameters as stored), after check_ksvd_payload.
+KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> payload, std::uint32_t atom_count,
+                                     const std::filesystem::path& name, std::uint64_t at);
 
 /// Decodes one brick payload (a 4-byte constant, a ksvd payload or a zfp stream of codec `codec`
 /// with accuracy `zfp_accuracy`) into out (36³ values). `name` and `offset` (the payload's file
