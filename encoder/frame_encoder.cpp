@@ -100,13 +100,14 @@ void add_to_breakdown(const Cell& c, const std::array<std::uint32_t, 3>& level_d
     b.block_entries += 4 * vr_entry_words(layout);
     ++st.mean_bits_histogram[vr_layout_mean_bits(layout)];
     ++st.coef_bits_histogram[vr_layout_coef_bits(layout)];
-    vr_uint bit = 0, sum = vr_rice_start_sum(layout), count = VR_RICE_START_COUNT;
+    const vr_uint band_word = vr_band_word(words.data());
+    vr_uint bit = 0;
     for (std::uint32_t k = 0; k < VR_BLOCKS_PER_BRICK; ++k) {
       const vr_uint sparsity = vr_entry_sparsity(layout, vr_block_entry(words.data(), layout, k));
       const vr_uint start = bit;
       vr_uint next_atom = 0, atom = 0;
       for (vr_uint j = 0; j < sparsity; ++j)
-        vr_read_code(words.data(), layout, sparsity, bit, next_atom, sum, count, atom);
+        vr_read_code(words.data(), layout, band_word, sparsity, bit, next_atom, atom);
       ++st.sparsity_histogram[sparsity];
       if (!coarse) b.finest_owned_codes += (bit - start) / 8.0 * static_cast<double>(shares[k]);
     }

@@ -47,7 +47,7 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
   const float* atom_values = atoms.values.data();
   const float mean_bias = vr_as_float(payload[0]), mean_scale = vr_as_float(payload[1]);
   const float coef_scale = vr_as_float(payload[2]);
-  vr_uint bit = 0, sum = vr_rice_start_sum(layout.word), count = VR_RICE_START_COUNT;
+  vr_uint bit = 0;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     const vr_uint entry = vr_block_entry(payload, layout.word, b);
     const vr_uint s = vr_entry_sparsity(layout.word, entry);
@@ -57,7 +57,7 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
     for (vr_uint v = 0; v < VR_BLOCK_LENGTH; ++v) block[v] = mean;
     vr_uint next_atom = 0, atom = 0;
     for (vr_uint k = 0; k < s; ++k) {
-      const int q = vr_read_code(payload, layout.word, s, bit, next_atom, sum, count, atom);
+      const int q = vr_read_code(payload, layout.word, layout.band_word, s, bit, next_atom, atom);
       add_scaled(block, atom_values + std::size_t{atom} * VR_BLOCK_LENGTH,
                  coef_scale * static_cast<float>(q));
     }
@@ -113,20 +113,10 @@ std::uint64_t rice_bits(vr_uint x, vr_uint k, vr_uint escape_bits) {
   return zeros >= VR_ESCAPE_ZEROS ? VR_ESCAPE_ZEROS + escape_bits : zeros + 1 + k;
 }
 
-/// The values' Rice state after one magnitude (brick_decode.h, vr_read_code).
-void rice_update(vr_uint magnitude, vr_uint& sum, vr_uint& count) {
-  sum += magnitude;
-  count += 1;
-  if (count == VR_RICE_RESET) {
-    sum = (sum + 1) >> 1;
-    count = VR_RICE_RESET / 2;
-  }
-}
-
 /// Writes (or, with out == nullptr, counts) the code stream of `parts` under `layout`.
-std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, BitWriter* out) {
+std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, vr_uint band_word,
+                          BitWriter* out) {
   std::uint64_t bits = 0;
-  vr_uint sum = vr_rice_start_sum(layout), count = VR_RICE_START_COUNT;
   std::size_t k = 0;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     const vr_uint s = parts.sparsity[b], gap_rice = s > 0 ? vr_gap_rice(layout, s) : 0;
@@ -135,7 +125,7 @@ std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, BitWrit
       const vr_uint gap = parts.atoms[k] - next_atom;
       next_atom = parts.atoms[k] + 1;
       const vr_uint magnitude = static_cast<vr_uint>(std::abs(std::int64_t{parts.values[k]}) - 1);
-      const vr_uint value_rice = vr_value_rice(layout, sum, count);
+      const vr_uint value_rice = vr_band_rice(band_word, parts.atoms[k]);
       if (out) {
         out->rice(gap, gap_rice, parts.atom_bits);
         out->rice(magnitude, value_rice, parts.coef_bits);
@@ -143,7 +133,6 @@ std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, BitWrit
       }
       bits += rice_bits(gap, gap_rice, parts.atom_bits) +
               rice_bits(magnitude, value_rice, parts.coef_bits) + 1;
-      rice_update(magnitude, sum, count);
     }
   }
   return bits;
@@ -160,13 +149,13 @@ std::uint32_t bits_for_count(std::uint64_t count) {
 std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
   if (parts.mean_bits > VR_MEAN_BITS || parts.sparsity_bits > VR_MAX_SPARSITY_BITS ||
       parts.coef_bits < 1 || parts.coef_bits > VR_MAX_COEF_BITS || parts.atom_bits < 1 ||
-      parts.atom_bits > VR_MAX_ATOM_BITS || parts.value_rice > int{VR_MAX_VALUE_RICE} ||
-      parts.gap_shift > int{VR_MAX_GAP_SHIFT})
+      parts.atom_bits > VR_MAX_ATOM_BITS || parts.gap_shift > int{VR_MAX_GAP_SHIFT} ||
+      std::any_of(parts.band_rice.begin(), parts.band_rice.end(), [](int k) { return k > 15; }))
     throw std::invalid_argument("payload widths out of range: mean " + str(parts.mean_bits) +
                                 ", sparsity " + str(parts.sparsity_bits) + ", magnitude " +
                                 str(parts.coef_bits) + ", atom " + str(parts.atom_bits) +
-                                " bits, value Rice " + std::to_string(parts.value_rice) +
-                                ", gap shift " + std::to_string(parts.gap_shift));
+                                " bits, gap shift " + std::to_string(parts.gap_shift) +
+                                " or a band's Rice parameter over 15");
   std::uint64_t codes = 0;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     if ((std::uint64_t{parts.sparsity[b]} >> parts.sparsity_bits) != 0 ||
@@ -190,37 +179,47 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
                                     std::to_string(parts.values[k]) +
                                     " does not fit its bits, is zero or is out of order");
     }
-  // The entropy coder's parameters: each the one with the fewest bits (the gaps' bits do not
-  // depend on the values' parameter, nor the values' on the gap shift).
-  const auto layout_of = [&](vr_uint value_rice, vr_uint gap_shift) {
+  // The entropy coder's parameters: each band's magnitude parameter the one with the fewest
+  // bits for the band's magnitudes, then the gap shift with the fewest bits for the gaps.
+  std::array<std::array<std::uint64_t, 16>, VR_ATOM_BANDS> band_bits{};
+  for (std::size_t j = 0; j < parts.atoms.size(); ++j) {
+    const vr_uint magnitude = static_cast<vr_uint>(std::abs(std::int64_t{parts.values[j]}) - 1);
+    for (vr_uint r = 0; r < 16; ++r)
+      band_bits[vr_atom_band(parts.atoms[j])][r] += rice_bits(magnitude, r, parts.coef_bits);
+  }
+  vr_uint band_word = 0;
+  for (vr_uint band = 0; band < VR_ATOM_BANDS; ++band) {
+    const auto& bits = band_bits[band];
+    const vr_uint choice =
+        parts.band_rice[band] >= 0
+            ? static_cast<vr_uint>(parts.band_rice[band])
+            : static_cast<vr_uint>(std::min_element(bits.begin(), bits.end()) - bits.begin());
+    band_word |= choice << (4 * band);
+  }
+  const auto layout_of = [&](vr_uint gap_shift) {
     return vr_make_layout(parts.mean_bits, parts.sparsity_bits, parts.coef_bits, parts.atom_bits,
-                          value_rice, gap_shift);
+                          gap_shift);
   };
-  const auto best = [&](int given, vr_uint most, auto layout_for) {
-    if (given >= 0) return static_cast<vr_uint>(given);
-    vr_uint choice = 0;
+  vr_uint gap_shift = parts.gap_shift >= 0 ? static_cast<vr_uint>(parts.gap_shift) : 0;
+  if (parts.gap_shift < 0) {
     std::uint64_t fewest = ~std::uint64_t{0};
-    for (vr_uint p = 0; p <= most; ++p) {
-      const std::uint64_t bits = write_codes(parts, layout_for(p), nullptr);
-      if (bits < fewest) fewest = bits, choice = p;
+    for (vr_uint g = 0; g <= VR_MAX_GAP_SHIFT; ++g) {
+      const std::uint64_t bits = write_codes(parts, layout_of(g), band_word, nullptr);
+      if (bits < fewest) fewest = bits, gap_shift = g;
     }
-    return choice;
-  };
-  const vr_uint value_rice =
-      best(parts.value_rice, VR_MAX_VALUE_RICE, [&](vr_uint p) { return layout_of(p, 0); });
-  const vr_uint gap_shift =
-      best(parts.gap_shift, VR_MAX_GAP_SHIFT, [&](vr_uint p) { return layout_of(value_rice, p); });
-  const vr_uint layout = layout_of(value_rice, gap_shift);
+  }
+  const vr_uint layout = layout_of(gap_shift);
 
   BitWriter entries, stream;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
     entries.put(vr_layout_entry_bits(layout),
                 parts.sparsity[b] | (parts.mean[b] << parts.sparsity_bits));
-  write_codes(parts, layout, &stream);
+  write_codes(parts, layout, band_word, &stream);
   const std::vector<vr_uint> entry_words = entries.words(), code_words = stream.words();
   std::vector<std::byte> payload(4 * (VR_HEADER_WORDS + entry_words.size() + code_words.size()));
   std::memcpy(payload.data(), parts.dequantization, 12);
   std::memcpy(payload.data() + 12, &layout, 4);
+  std::memcpy(payload.data() + 16, &band_word, 4);
   std::size_t at = 4 * VR_HEADER_WORDS;
   for (const std::vector<vr_uint>* part : {&entry_words, &code_words})
     for (const vr_uint w : *part) {
@@ -244,9 +243,10 @@ KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint
   parts.sparsity_bits = layout.sparsity_bits;
   parts.coef_bits = layout.coef_bits;
   parts.atom_bits = layout.atom_bits;
-  parts.value_rice = static_cast<int>(vr_layout_value_rice(layout.word));
+  for (vr_uint band = 0; band < VR_ATOM_BANDS; ++band)
+    parts.band_rice[band] = static_cast<int>((layout.band_word >> (4 * band)) & 0xF);
   parts.gap_shift = static_cast<int>(vr_layout_gap_shift(layout.word));
-  vr_uint bit = 0, sum = vr_rice_start_sum(layout.word), count = VR_RICE_START_COUNT;
+  vr_uint bit = 0;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     const vr_uint entry = vr_block_entry(payload, layout.word, b);
     const vr_uint s = vr_entry_sparsity(layout.word, entry);
@@ -255,7 +255,7 @@ KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint
     vr_uint next_atom = 0, atom = 0;
     for (vr_uint k = 0; k < s; ++k) {
       parts.values.push_back(
-          vr_read_code(payload, layout.word, s, bit, next_atom, sum, count, atom));
+          vr_read_code(payload, layout.word, layout.band_word, s, bit, next_atom, atom));
       parts.atoms.push_back(atom);
     }
   }
@@ -285,20 +285,21 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::
       fail(4 * w, "finite dequantization value", "NaN or infinity");
   KsvdPayloadLayout layout;
   layout.word = words[3];
+  layout.band_word = words[4];
   layout.mean_bits = vr_layout_mean_bits(layout.word);
   layout.sparsity_bits = vr_layout_sparsity_bits(layout.word);
   layout.coef_bits = vr_layout_coef_bits(layout.word);
   layout.atom_bits = vr_layout_atom_bits(layout.word);
   if (layout.mean_bits > VR_MEAN_BITS || layout.sparsity_bits > VR_MAX_SPARSITY_BITS ||
       layout.coef_bits < 1 || layout.coef_bits > VR_MAX_COEF_BITS || layout.atom_bits < 1 ||
-      layout.atom_bits > VR_MAX_ATOM_BITS || (layout.word >> 24) != 0)
+      layout.atom_bits > VR_MAX_ATOM_BITS || (layout.word >> 20) != 0)
     fail(12,
          "layout word with mean bits 0.." + str(VR_MEAN_BITS) + ", sparsity bits 0.." +
              str(VR_MAX_SPARSITY_BITS) + ", magnitude bits 1.." + str(VR_MAX_COEF_BITS) +
-             ", atom bits 1.." + str(VR_MAX_ATOM_BITS) + " and zero bits 24..31",
+             ", atom bits 1.." + str(VR_MAX_ATOM_BITS) + " and zero bits 20..31",
          "mean " + str(layout.mean_bits) + ", sparsity " + str(layout.sparsity_bits) +
              ", magnitude " + str(layout.coef_bits) + ", atom " + str(layout.atom_bits) +
-             ", reserved " + str(layout.word >> 24));
+             ", reserved " + str(layout.word >> 20));
   // Every decoded value is a mean plus at most 255 coefficients of magnitude at most
   // |coef_scale|·2^c times atom values of magnitude at most 1 (unit-norm atoms), so this bound
   // keeps every value finite, on the CPU and on the GPU.
@@ -328,7 +329,7 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::
   const vr_uint* payload = padded.data();
   const std::uint64_t stream_bits = (std::uint64_t{words.size()} - first) * 32;
   const vr_uint largest = 1u << layout.coef_bits;
-  vr_uint bit = 0, sum = vr_rice_start_sum(layout.word), count = VR_RICE_START_COUNT;
+  vr_uint bit = 0;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     const vr_uint s = vr_entry_sparsity(layout.word, vr_block_entry(payload, layout.word, b));
     layout.codes += s;
@@ -338,7 +339,7 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::
       if (bit >= stream_bits)
         fail(code_at, "codes inside the payload (block " + str(b) + ", code " + str(k) + ")",
              "the payload's end");
-      const int q = vr_read_code(payload, layout.word, s, bit, next_atom, sum, count, atom);
+      const int q = vr_read_code(payload, layout.word, layout.band_word, s, bit, next_atom, atom);
       if (atom >= atom_count)
         fail(code_at,
              "atom index < " + str(atom_count) + " (block " + str(b) + ", code " + str(k) + ")",

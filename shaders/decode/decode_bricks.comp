@@ -81,19 +81,20 @@ void main() {
   // Block by block, invocation t reconstructs values 4t..4t+3 as vr_decode_value does:
   // mean_bias + mean_scale·q, plus coef_scale·q·atom[a][v] for each code. The codes have variable
   // length: every invocation reads the same bits (uniform control flow) and keeps the same
-  // position and Rice state from block to block.
+  // position from block to block.
   const uint layout_word = vr_layout_word();
   const float mean_bias = vr_as_float(vr_load_word(0u));
   const float mean_scale = vr_as_float(vr_load_word(1u));
   const float coef_scale = vr_as_float(vr_load_word(2u));
-  uint bit = 0u, sum = vr_rice_start_sum(layout_word), count = VR_RICE_START_COUNT;
+  const uint band_word = vr_band_word();
+  uint bit = 0u;
   for (uint b = 0u; b < VR_BLOCKS_PER_BRICK; ++b) {
     const uint entry = vr_block_entry(layout_word, b);
     const uint s = vr_entry_sparsity(layout_word, entry);
     vec4 value = vec4(mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry)));
     uint next_atom = 0u, atom = 0u;
     for (uint k = 0u; k < s; ++k) {
-      const int q = vr_read_code(layout_word, s, bit, next_atom, sum, count, atom);
+      const int q = vr_read_code(layout_word, band_word, s, bit, next_atom, atom);
       value += coef_scale * float(q) * atom_quads[atom * (VR_BLOCK_LENGTH / 4u) + t];
     }
     for (uint i = 0u; i < 4u; ++i) store_voxel(origin, vr_brick_voxel(b, 4u * t + i), value[i]);

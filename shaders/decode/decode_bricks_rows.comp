@@ -4,8 +4,8 @@
 // arithmetic as decode_bricks.comp (format/include/volreel/format/brick_decode.h), organized for
 // the fewest memory operations:
 //  - one workgroup of 8 invocations per brick, no shared memory and no barrier: the workgroup walks
-//    the 216 blocks in order, keeping the code stream's bit position and Rice state (the codes
-//    have variable length); each code (the same for the whole workgroup) is read once;
+//    the 216 blocks in order, keeping the code stream's bit position (the codes have variable
+//    length); each code (the same for the whole workgroup) is read once;
 //  - invocation i reconstructs the rows (6 values along x) i, i + 8, ..., i + 32 of the block's
 //    36 in registers; the dictionary is a uniform texel buffer of RGBA32F (a gather on a CPU),
 //    each atom 36 rows of 6 values padded to 8 (two texels a row; AtlasDecoder::set_dictionary
@@ -112,7 +112,8 @@ void main() {
   const float mean_scale = vr_as_float(vr_load_word(1u));
   const float coef_scale = vr_as_float(vr_load_word(2u));
   const uint layout_word = vr_layout_word();
-  uint bit = 0u, sum = vr_rice_start_sum(layout_word), count = VR_RICE_START_COUNT;
+  const uint band_word = vr_band_word();
+  uint bit = 0u;
   uint b = 0u;
   for (uint bz = 0u; bz < VR_BLOCKS_PER_AXIS; ++bz)
     for (uint by = 0u; by < VR_BLOCKS_PER_AXIS; ++by)
@@ -125,7 +126,7 @@ void main() {
         uint next_atom = 0u, atom_index = 0u;
         for (uint k = 0u; k < s; ++k) {
           const float coefficient =
-              coef_scale * float(vr_read_code(layout_word, s, bit, next_atom, sum, count, atom_index));
+              coef_scale * float(vr_read_code(layout_word, band_word, s, bit, next_atom, atom_index));
           const int atom = int(atom_index * VR_ATOM_TEXELS);
 #define VR_ACCUMULATE(r)                                                         \
   low##r += coefficient * texelFetch(atom_texels, atom + int(texel##r));         \

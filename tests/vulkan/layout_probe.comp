@@ -28,18 +28,19 @@ void main() {
     codes += vr_entry_sparsity(layout_word, vr_block_entry(layout_word, c));
   // Code v of block b (atom in the low 16 bits, q in the high 16), read as the decoders do.
   uint code = 0xFFFFFFFFu;
-  uint bit = 0u, sum = vr_rice_start_sum(layout_word), count = VR_RICE_START_COUNT;
+  const uint band_word = vr_band_word();
+  uint bit = 0u;
   for (uint c = 0u; c <= b; ++c) {
     const uint s = vr_entry_sparsity(layout_word, vr_block_entry(layout_word, c));
     uint next_atom = 0u, atom = 0u;
     for (uint k = 0u; k < s; ++k) {
-      const int q = vr_read_code(layout_word, s, bit, next_atom, sum, count, atom);
+      const int q = vr_read_code(layout_word, band_word, s, bit, next_atom, atom);
       if (c == b && k == v) code = atom | (uint(q) << 16u);
     }
   }
   // Layout words of every width and parameter.
   const uint other = vr_make_layout(i % 13u, (i / 13u) % 9u, 1u + (i / 117u) % 16u,
-                                    1u + (i / 1872u) % 16u, (i / 7u) % 16u, (i / 3u) % 4u);
+                                    1u + (i / 1872u) % 16u, (i / 3u) % 4u);
   const uint entry = vr_block_entry(layout_word, i % VR_BLOCKS_PER_BRICK);
   uint rice_bit = (i * 7u) % 900u;
   const uint rice = vr_read_rice(0u, rice_bit, i % 16u, 1u + i % 16u);
@@ -50,7 +51,7 @@ void main() {
                         (vr_entry_mean(layout_word, entry) << 8u);
   results[4u * N + i] = code;
   results[5u * N + i] = vr_layout_entry_bits(other) | (vr_gap_rice(other, 1u + i % 255u) << 5u) |
-                        (vr_value_rice(other, i % 5000u, 1u + i % 31u) << 10u) |
+                        (vr_band_rice(i * 2654435761u, i % 300u) << 10u) |
                         (vr_entry_words(other) << 15u) | (vr_code_first_word(other) << 23u);
   results[6u * N + i] = vr_atlas_cell_x(i, 7u) | (vr_atlas_cell_y(i, 7u, 5u) << 8u) |
                         (vr_atlas_cell_z(i, 7u, 5u) << 16u);

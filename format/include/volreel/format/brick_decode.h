@@ -6,9 +6,11 @@
 // A payload is an array of little-endian 32-bit words:
 //   words 0..2            f32 mean_bias, mean_scale, coef_scale (bit patterns)
 //   word 3                the layout word: bits b of a quantized mean, t of a sparsity field,
-//                         c of a magnitude, a of an atom index, the values' first Rice
-//                         parameter and the gaps' Rice shift (vr_layout_*)
-//   entry[216]            per block, t + b bits each, one bit stream from bit 0 of word 4
+//                         c of a magnitude, a of an atom index, and the gaps' Rice shift
+//                         (vr_layout_*)
+//   word 4                the band word: the magnitudes' Rice parameter of each of 8 atom
+//                         bands, 4 bits each (vr_band_rice)
+//   entry[216]            per block, t + b bits each, one bit stream from bit 0 of word 5
 //                         (low bit first): sparsity s in the low t bits, quantized mean q above;
 //                         zero bits up to the next word
 //   codes                 one bit stream from the next word, block after block, each block's
@@ -17,7 +19,7 @@
 //                         word
 // Dequantization: mean = mean_bias + mean_scale·q, coefficient = coef_scale·q (q ≠ 0 signed).
 // The codes have variable length, so a decoder walks a brick's blocks in order, keeping the bit
-// position and the values' adaptive Rice state from block to block.
+// position from block to block.
 //
 // The host side (C++) defines VR_CPU before including nothing else: the functions read from a
 // `const vr_uint*` span; a GLSL includer defines VR_GLSL and provides
@@ -69,15 +71,14 @@ VR_INLINE float vr_as_float(vr_uint bits) {
 #define VR_BLOCK_LENGTH 216u     /* m = M³ values per block */
 #define VR_BLOCKS_PER_AXIS 6u    /* blocks per brick axis */
 #define VR_BLOCKS_PER_BRICK 216u /* 6³ blocks per brick, x fastest */
-#define VR_HEADER_WORDS 4u       /* three f32 dequantization values and the layout word */
+#define VR_HEADER_WORDS 5u       /* three f32 dequantization values, layout and band words */
 #define VR_MEAN_BITS 12u         /* the most bits of a quantized mean */
 #define VR_MAX_SPARSITY_BITS 8u  /* the widest sparsity field: at most 255 atoms a block */
 #define VR_MAX_COEF_BITS 16u     /* the most magnitude bits: |q| ≤ 2^16 */
 #define VR_MAX_ATOM_BITS 16u     /* the widest atom index */
-#define VR_MAX_VALUE_RICE 15u    /* the largest initial Rice parameter of the values */
 #define VR_MAX_GAP_SHIFT 3u      /* the largest reduction of the gaps' Rice parameter */
 #define VR_ESCAPE_ZEROS 16u      /* a Rice code whose unary part reaches 16 zeros is an escape */
-#define VR_RICE_RESET 32u        /* the values' adaptive state halves when it counts this many */
+#define VR_ATOM_BANDS 8u         /* atom bands of the magnitudes' Rice parameters */
 
 /* Bits [bit, bit + width) of the bit stream that starts at bit 0 of word `first_word` (bit i of
  * the stream is bit i mod 32 of word first_word + i/32), width 0..32. A field spans at most two
@@ -91,15 +92,14 @@ VR_INLINE vr_uint vr_read_bits(VR_PAYLOAD_PARAM vr_uint first_word, vr_uint bit,
   return width >= 32u ? value : (value & ((1u << width) - 1u));
 }
 
-/* Word 3, the layout word (a reader checks every field's range and that bits 24..31 are zero):
+/* Word 3, the layout word (a reader checks every field's range and that bits 20..31 are zero):
  *   bits 0..3    mean bits b         (0..12)  bits of each block's quantized mean
  *   bits 4..7    sparsity bits t     (0..8)   width of each block's sparsity field
  *   bits 8..12   magnitude bits c    (1..16)  every quantized coefficient has |q| ≤ 2^c; an
  *                                             escaped value is |q| − 1 in c bits
  *   bits 13..17  atom bits a         (1..16)  an escaped gap takes a bits (every index < 2^a)
- *   bits 18..21  value Rice k0       (0..15)  the values' Rice parameter at the brick's start
- *   bits 22..23  gap shift g         (0..3)   lowers the gaps' Rice parameter (vr_gap_rice)
- *   bits 24..31  zero (reserved) */
+ *   bits 18..19  gap shift g         (0..3)   lowers the gaps' Rice parameter (vr_gap_rice)
+ *   bits 20..31  zero (reserved) */
 VR_INLINE vr_uint vr_layout_word(VR_PAYLOAD_PARAM_ONLY) {
   return VR_LOAD_WORD(3u);
 }
@@ -115,16 +115,17 @@ VR_INLINE vr_uint vr_layout_coef_bits(vr_uint layout_word) {
 VR_INLINE vr_uint vr_layout_atom_bits(vr_uint layout_word) {
   return (layout_word >> 13u) & 0x1Fu;
 }
-VR_INLINE vr_uint vr_layout_value_rice(vr_uint layout_word) {
-  return (layout_word >> 18u) & 0xFu;
-}
 VR_INLINE vr_uint vr_layout_gap_shift(vr_uint layout_word) {
-  return (layout_word >> 22u) & 0x3u;
+  return (layout_word >> 18u) & 0x3u;
 }
 VR_INLINE vr_uint vr_make_layout(vr_uint mean_bits, vr_uint sparsity_bits, vr_uint coef_bits,
-                                 vr_uint atom_bits, vr_uint value_rice, vr_uint gap_shift) {
+                                 vr_uint atom_bits, vr_uint gap_shift) {
   return mean_bits | (sparsity_bits << 4u) | (coef_bits << 8u) | (atom_bits << 13u) |
-         (value_rice << 18u) | (gap_shift << 22u);
+         (gap_shift << 18u);
+}
+/* Word 4, the band word: 4 bits per band, band j at bits 4j..4j+3. */
+VR_INLINE vr_uint vr_band_word(VR_PAYLOAD_PARAM_ONLY) {
+  return VR_LOAD_WORD(4u);
 }
 /* Width of a block entry, t + b (0..20). */
 VR_INLINE vr_uint vr_layout_entry_bits(vr_uint layout_word) {
@@ -155,7 +156,8 @@ VR_INLINE vr_uint vr_code_first_word(vr_uint layout_word) {
 /* The codes: one bit stream from word vr_code_first_word, the blocks' codes in block order, each
  * block's in increasing atom order. A code is the gap to its atom (atom − previous atom of the
  * block − 1; the first code of a block: its atom), then the value's magnitude |q| − 1 (q ≠ 0),
- * both as Rice codes, then the sign of q (1: negative). A Rice code of x with parameter k is
+ * both as Rice codes (the gap's parameter from the block's sparsity, the magnitude's from the
+ * atom's band), then the sign of q (1: negative). A Rice code of x with parameter k is
  * u = x >> k zero bits, a one, and the low k bits of x; when u would be 16 or more it is 16
  * zero bits and x in `escape_bits` bits instead (a bits for a gap, c bits for a magnitude). */
 
@@ -200,44 +202,32 @@ VR_INLINE vr_uint vr_gap_rice(vr_uint layout_word, vr_uint s) {
   return a > lower ? a - lower : 0u;
 }
 
-/* The values' adaptive Rice parameter: the smallest k ≤ c with count·2^k ≥ sum, where sum and
- * count (vr_rice_start_sum, vr_read_code) follow the magnitudes read so far in the brick. A
- * loop of fixed trip count: Mesa 22.3's lavapipe miscompiled the equivalent `while` loop once the
- * caller had read a few hundred codes (the layout test's probe caught it). */
-VR_INLINE vr_uint vr_value_rice(vr_uint layout_word, vr_uint sum, vr_uint count) {
-  vr_uint c = vr_layout_coef_bits(layout_word);
-  vr_uint k = 0u;
-  for (vr_uint j = 0u; j < VR_MAX_COEF_BITS; ++j)
-    if (k < c && (count << k) < sum) ++k;
-  return k;
+/* The band of an atom: floor(log2(atom + 1)), at most 7 (atom 0; 1..2; 3..6; ...; 127 and up).
+ * Low indices are the learned atoms a dictionary lists first and the DCT basis's low
+ * frequencies, whose coefficients are larger. */
+VR_INLINE vr_uint vr_atom_band(vr_uint atom) {
+  vr_uint band = vr_highest_bit(atom + 1u);
+  return band < VR_ATOM_BANDS - 1u ? band : VR_ATOM_BANDS - 1u;
 }
-VR_INLINE vr_uint vr_rice_start_sum(vr_uint layout_word) {
-  return 1u << vr_layout_value_rice(layout_word);
+/* The magnitudes' Rice parameter of an atom's band (0..15). */
+VR_INLINE vr_uint vr_band_rice(vr_uint band_word, vr_uint atom) {
+  return (band_word >> (4u * vr_atom_band(atom))) & 0xFu;
 }
-#define VR_RICE_START_COUNT 1u
 
-/* Reads the next code of a block of s codes. Before a block's first code next_atom = 0; the state
- * (bit, sum, count) runs on over the whole brick, starting at the first code word with
- * sum = vr_rice_start_sum, count = VR_RICE_START_COUNT. Sets atom; returns the signed quantized
- * coefficient q (coefficient = coef_scale·q). */
-VR_INLINE int vr_read_code(VR_PAYLOAD_PARAM vr_uint layout_word, vr_uint s, VR_INOUT(vr_uint, bit),
-                           VR_INOUT(vr_uint, next_atom), VR_INOUT(vr_uint, sum),
-                           VR_INOUT(vr_uint, count), VR_INOUT(vr_uint, atom)) {
+/* Reads the next code of a block of s codes, starting at bit `bit` of the code stream (the
+ * stream runs on over the whole brick); before a block's first code next_atom = 0. Sets atom;
+ * returns the signed quantized coefficient q (coefficient = coef_scale·q). */
+VR_INLINE int vr_read_code(VR_PAYLOAD_PARAM vr_uint layout_word, vr_uint band_word, vr_uint s,
+                           VR_INOUT(vr_uint, bit), VR_INOUT(vr_uint, next_atom),
+                           VR_INOUT(vr_uint, atom)) {
   vr_uint first = vr_code_first_word(layout_word);
   atom = next_atom + vr_read_rice(VR_PAYLOAD_ARG first, bit, vr_gap_rice(layout_word, s),
                                   vr_layout_atom_bits(layout_word));
   next_atom = atom + 1u;
-  vr_uint magnitude =
-      vr_read_rice(VR_PAYLOAD_ARG first, bit, vr_value_rice(layout_word, sum, count),
-                   vr_layout_coef_bits(layout_word));
+  vr_uint magnitude = vr_read_rice(VR_PAYLOAD_ARG first, bit, vr_band_rice(band_word, atom),
+                                   vr_layout_coef_bits(layout_word));
   vr_uint negative = vr_read_bits(VR_PAYLOAD_ARG first, bit, 1u);
   bit += 1u;
-  sum += magnitude;
-  count += 1u;
-  if (count == VR_RICE_RESET) {
-    sum = (sum + 1u) >> 1u;
-    count = VR_RICE_RESET / 2u;
-  }
   int q = int(magnitude + 1u);
   return negative != 0u ? -q : q;
 }
@@ -253,7 +243,8 @@ VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint block, v
   float mean_scale = vr_as_float(VR_LOAD_WORD(1u));
   float coef_scale = vr_as_float(VR_LOAD_WORD(2u));
   vr_uint layout_word = vr_layout_word(VR_PAYLOAD_ARG_ONLY);
-  vr_uint bit = 0u, sum = vr_rice_start_sum(layout_word), count = VR_RICE_START_COUNT;
+  vr_uint band_word = vr_band_word(VR_PAYLOAD_ARG_ONLY);
+  vr_uint bit = 0u;
   float value = 0.0f;
   for (vr_uint b = 0u; b <= block; ++b) {
     vr_uint entry = vr_block_entry(VR_PAYLOAD_ARG layout_word, b);
@@ -261,7 +252,7 @@ VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint block, v
     value = mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry));
     vr_uint next_atom = 0u, atom = 0u;
     for (vr_uint k = 0u; k < s; ++k) {
-      int q = vr_read_code(VR_PAYLOAD_ARG layout_word, s, bit, next_atom, sum, count, atom);
+      int q = vr_read_code(VR_PAYLOAD_ARG layout_word, band_word, s, bit, next_atom, atom);
       if (b == block) value += coef_scale * float(q) * VR_LOAD_ATOM(atom * VR_BLOCK_LENGTH + v);
     }
   }

@@ -21,6 +21,7 @@ struct AtomTable {
 /// The structure of a ksvd brick payload (brick_decode.h's layout), once checked.
 struct KsvdPayloadLayout {
   std::uint32_t word = 0;           ///< the layout word (word 3)
+  std::uint32_t band_word = 0;      ///< the magnitudes' Rice parameters (word 4)
   std::uint32_t mean_bits = 0;      ///< b, 0..12
   std::uint32_t sparsity_bits = 0;  ///< t, 0..8
   std::uint32_t coef_bits = 0;      ///< c, 1..16: every |q| ≤ 2^c
@@ -59,8 +60,10 @@ struct KsvdPayloadParts {
   std::uint32_t sparsity_bits = 4;
   std::uint32_t coef_bits = 6;
   std::uint32_t atom_bits = 10;
-  int value_rice = -1;  ///< the values' first Rice parameter 0..15; -1: the one giving fewest bits
-  int gap_shift = -1;   ///< the gaps' Rice shift 0..3; -1: the one giving the fewest bits
+  /// The magnitudes' Rice parameter of each atom band (brick_decode.h, vr_atom_band), 0..15;
+  /// -1: the one giving the band the fewest bits.
+  std::array<int, 8> band_rice{-1, -1, -1, -1, -1, -1, -1, -1};
+  int gap_shift = -1;  ///< the gaps' Rice shift 0..3; -1: the one giving the fewest bits
   std::array<std::uint32_t, 216> sparsity{};
   std::array<std::uint32_t, 216> mean{};
   std::vector<std::uint32_t> atoms;  ///< one per code
