@@ -256,6 +256,7 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
   const double finest_step = largest / std::ldexp(1.0, VR_MAX_COEF_BITS);
 
   format::KsvdPayloadParts parts;
+  parts.band_split = options.band_split;
   parts.mean_bits = choose_mean_bits(mean_lo, mean_hi, options.mean_step, options.mean_bits);
   parts.atom_bits =
       std::max<std::uint32_t>(1, format::bits_for_count(static_cast<std::uint64_t>(atoms.cols())));

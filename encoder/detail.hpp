@@ -31,6 +31,7 @@ struct QuantizeOptions {
   /// and code the brick again with more coefficient bits if a block still misses it.
   double max_abs_error = 0;
   int max_atoms = 15;
+  std::uint32_t band_split = 0;  ///< the payload's band split (format::KsvdPayloadParts)
   /// The step of the quantized coefficients (data units; never finer than the brick's largest
   /// coefficient / 2^16). 0: the brick's largest coefficient / 2^(fixed_coef_bits − 1).
   double coef_step = 0;

@@ -362,6 +362,14 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
         static_cast<std::uint32_t>(dictionary_->atom_count()) > format::dictionary_max_atoms)
       throw InputError("the dictionary has " + std::to_string(dictionary_->atom_count()) +
                        " atoms; the 16-bit atom index allows 1..65536");
+    // The learned atoms before the DCT basis, when the dictionary ends with it (every container
+    // dictionary does): they form the payloads' band 0.
+    const std::vector<float> dct = format::block_dct_atoms(VR_BLOCK_SIZE);
+    const auto dct_count = static_cast<Eigen::Index>(dct.size() / VR_BLOCK_LENGTH);
+    const Eigen::Index first = dictionary_->atoms.cols() - dct_count;
+    if (first >= 0 &&
+        std::equal(dct.begin(), dct.end(), dictionary_->atoms.data() + first * VR_BLOCK_LENGTH))
+      band_split_ = static_cast<std::uint32_t>(std::min<Eigen::Index>(first, VR_MAX_BAND_SPLIT));
     if (settings_.max_atoms < 1 || settings_.max_atoms > max_sparsity)
       throw InputError("--max-atoms must be in 1..216 (the values of a block), not " +
                        std::to_string(settings_.max_atoms));
@@ -421,6 +429,7 @@ QuantizeOptions FrameEncoder::quantize_options() const {
   o.mean_bits = settings_.mean_bits;
   o.coef_bits = settings_.coef_bits;
   o.fixed_coef_bits = fixed_rate_coef_bits;
+  o.band_split = band_split_;
   if (settings_.fixed_sparsity == 0) {
     o.mean_step = settings_.mean_step_factor * settings_.tolerance;
     o.coef_step = settings_.coef_step_factor * settings_.tolerance;

@@ -125,7 +125,7 @@ std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, vr_uint
       const vr_uint gap = parts.atoms[k] - next_atom;
       next_atom = parts.atoms[k] + 1;
       const vr_uint magnitude = static_cast<vr_uint>(std::abs(std::int64_t{parts.values[k]}) - 1);
-      const vr_uint value_rice = vr_band_rice(band_word, parts.atoms[k]);
+      const vr_uint value_rice = vr_band_rice(layout, band_word, parts.atoms[k]);
       if (out) {
         out->rice(gap, gap_rice, parts.atom_bits);
         out->rice(magnitude, value_rice, parts.coef_bits);
@@ -150,6 +150,7 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
   if (parts.mean_bits > VR_MEAN_BITS || parts.sparsity_bits > VR_MAX_SPARSITY_BITS ||
       parts.coef_bits < 1 || parts.coef_bits > VR_MAX_COEF_BITS || parts.atom_bits < 1 ||
       parts.atom_bits > VR_MAX_ATOM_BITS || parts.gap_shift > int{VR_MAX_GAP_SHIFT} ||
+      parts.band_split > VR_MAX_BAND_SPLIT ||
       std::any_of(parts.band_rice.begin(), parts.band_rice.end(), [](int k) { return k > 15; }))
     throw std::invalid_argument("payload widths out of range: mean " + str(parts.mean_bits) +
                                 ", sparsity " + str(parts.sparsity_bits) + ", magnitude " +
@@ -181,11 +182,16 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
     }
   // The entropy coder's parameters: each band's magnitude parameter the one with the fewest
   // bits for the band's magnitudes, then the gap shift with the fewest bits for the gaps.
+  const auto layout_of = [&](vr_uint gap_shift) {
+    return vr_make_layout(parts.mean_bits, parts.sparsity_bits, parts.coef_bits, parts.atom_bits,
+                          gap_shift, parts.band_split);
+  };
   std::array<std::array<std::uint64_t, 16>, VR_ATOM_BANDS> band_bits{};
   for (std::size_t j = 0; j < parts.atoms.size(); ++j) {
     const vr_uint magnitude = static_cast<vr_uint>(std::abs(std::int64_t{parts.values[j]}) - 1);
     for (vr_uint r = 0; r < 16; ++r)
-      band_bits[vr_atom_band(parts.atoms[j])][r] += rice_bits(magnitude, r, parts.coef_bits);
+      band_bits[vr_atom_band(layout_of(0), parts.atoms[j])][r] +=
+          rice_bits(magnitude, r, parts.coef_bits);
   }
   vr_uint band_word = 0;
   for (vr_uint band = 0; band < VR_ATOM_BANDS; ++band) {
@@ -196,10 +202,6 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
             : static_cast<vr_uint>(std::min_element(bits.begin(), bits.end()) - bits.begin());
     band_word |= choice << (4 * band);
   }
-  const auto layout_of = [&](vr_uint gap_shift) {
-    return vr_make_layout(parts.mean_bits, parts.sparsity_bits, parts.coef_bits, parts.atom_bits,
-                          gap_shift);
-  };
   vr_uint gap_shift = parts.gap_shift >= 0 ? static_cast<vr_uint>(parts.gap_shift) : 0;
   if (parts.gap_shift < 0) {
     std::uint64_t fewest = ~std::uint64_t{0};
@@ -246,6 +248,7 @@ KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint
   for (vr_uint band = 0; band < VR_ATOM_BANDS; ++band)
     parts.band_rice[band] = static_cast<int>((layout.band_word >> (4 * band)) & 0xF);
   parts.gap_shift = static_cast<int>(vr_layout_gap_shift(layout.word));
+  parts.band_split = vr_layout_band_split(layout.word);
   vr_uint bit = 0;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     const vr_uint entry = vr_block_entry(payload, layout.word, b);
@@ -292,14 +295,13 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::
   layout.atom_bits = vr_layout_atom_bits(layout.word);
   if (layout.mean_bits > VR_MEAN_BITS || layout.sparsity_bits > VR_MAX_SPARSITY_BITS ||
       layout.coef_bits < 1 || layout.coef_bits > VR_MAX_COEF_BITS || layout.atom_bits < 1 ||
-      layout.atom_bits > VR_MAX_ATOM_BITS || (layout.word >> 20) != 0)
+      layout.atom_bits > VR_MAX_ATOM_BITS)
     fail(12,
          "layout word with mean bits 0.." + str(VR_MEAN_BITS) + ", sparsity bits 0.." +
              str(VR_MAX_SPARSITY_BITS) + ", magnitude bits 1.." + str(VR_MAX_COEF_BITS) +
-             ", atom bits 1.." + str(VR_MAX_ATOM_BITS) + " and zero bits 20..31",
+             ", atom bits 1.." + str(VR_MAX_ATOM_BITS),
          "mean " + str(layout.mean_bits) + ", sparsity " + str(layout.sparsity_bits) +
-             ", magnitude " + str(layout.coef_bits) + ", atom " + str(layout.atom_bits) +
-             ", reserved " + str(layout.word >> 20));
+             ", magnitude " + str(layout.coef_bits) + ", atom " + str(layout.atom_bits));
   // Every decoded value is a mean plus at most 255 coefficients of magnitude at most
   // |coef_scale|·2^c times atom values of magnitude at most 1 (unit-norm atoms), so this bound
   // keeps every value finite, on the CPU and on the GPU.

@@ -558,6 +558,7 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
     parts.sparsity_bits = bits % (VR_MAX_SPARSITY_BITS + 1);
     parts.coef_bits = 1 + (bits * 5) % VR_MAX_COEF_BITS;
     parts.atom_bits = 9 + bits % 8;  // K = 300 needs 9
+    parts.band_split = bits * 23;    // 0 .. 276: every band in use or band 0 alone
     if (bits % 3 == 1) {             // given parameters instead of the best ones
       for (std::uint32_t band = 0; band < 8; ++band)
         parts.band_rice[band] = static_cast<int>((bits + band) % 16);
@@ -606,13 +607,12 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
       ASSERT_EQ(back.band_rice, parts.band_rice);
       ASSERT_EQ(back.gap_shift, parts.gap_shift);
     }
-    // A layout word with a width out of range or reserved bits set, a short payload, a payload
+    // A layout word with a width out of range, a short payload, a payload
     // with a word too many, nonzero padding and an atom index past K are refused.
     vr_uint good;
     std::memcpy(&good, payload.data() + 12, 4);
-    for (vr_uint bad :
-         {(good & ~0xFu) | 13u, (good & ~0xF0u) | (9u << 4), good & ~0x1F00u,
-          (good & ~(0x1Fu << 13)) | (17u << 13), good | (1u << 20), good | (1u << 31)}) {
+    for (vr_uint bad : {(good & ~0xFu) | 13u, (good & ~0xF0u) | (9u << 4), good & ~0x1F00u,
+                        (good & ~(0x1Fu << 13)) | (17u << 13), good & ~(0x1Fu << 13)}) {
       auto broken = payload;
       std::memcpy(broken.data() + 12, &bad, 4);
       EXPECT_THROW(format::check_ksvd_payload(broken, atom_count, "p", 0), format::FormatError)
@@ -731,8 +731,8 @@ TEST(Encoder, FixedSparsityUsesAtMostSAtoms) {
 /// coding changes on purpose, print the new values with VOLREEL_PRINT_CHECKSUMS=1 and update them
 /// (KSVD_* and ZFP_* in tests/CMakeLists.txt: the ε rule and zfp; LAGRANGIAN_* below: the default
 /// variable rate).
-constexpr std::size_t LAGRANGIAN_BYTES = 2220;
-constexpr std::uint32_t LAGRANGIAN_CRC = 0x04c587e9u;
+constexpr std::size_t LAGRANGIAN_BYTES = 2180;
+constexpr std::uint32_t LAGRANGIAN_CRC = 0x419ee328u;
 
 TEST(Encoder, RegressionChecksums) {
   const Volume v = analytic_volume(datasets::AnalyticField::blobs, {40, 36, 34}, 1);
@@ -1026,9 +1026,9 @@ TEST(DctAtoms, AreGeneratedByTheReaderNotStored) {
   EXPECT_THROW(format::serialize_dictionary_file(bad), format::FormatError);
 }
 
-// The quality ceiling of 6-bit coefficients, 15 atoms and a dictionary that does not span the
-// blocks is gone: with the DCT part and coefficient bits that follow ε, the PSNR keeps rising as
-// ε falls, past 60 dB, on white noise, which no dictionary was trained on.
+// The quality ceiling of fixed-width codes, 15 atoms and a dictionary that does not span the
+// blocks is gone: with the DCT part and a coefficient step that follows ε, the PSNR keeps rising
+// as ε falls, past 65 dB, on white noise, which no dictionary was trained on.
 TEST(Encoder, QualityKeepsRisingWithoutACeiling) {
   const Volume v = analytic_volume(datasets::AnalyticField::noise, {40, 36, 34}, 2);
   const auto d = with_dct(random_dictionary(64, 21));
@@ -1036,7 +1036,7 @@ TEST(Encoder, QualityKeepsRisingWithoutACeiling) {
   const double range = static_cast<double>(*mx) - static_cast<double>(*mn);
   double previous = 0;
   std::size_t previous_bytes = 0;
-  for (double psnr : {40.0, 50.0, 60.0, 70.0}) {
+  for (double psnr : {40.0, 50.0, 60.0, 70.0, 80.0}) {
     auto s = ksvd_settings(dictionary::tolerance_for_psnr(psnr, range), v);
     const auto bytes = encoder::FrameEncoder(&d, s).encode(0, v);
     const double got = finest_level_error(bytes, d, v).first;
@@ -1045,7 +1045,7 @@ TEST(Encoder, QualityKeepsRisingWithoutACeiling) {
     previous = got;
     previous_bytes = bytes.size();
   }
-  EXPECT_GT(previous, 60.0);
+  EXPECT_GT(previous, 65.0);  // white noise needs nearly every atom: no ceiling below that
 }
 
 // --max-error: every decoded value of the finest level within E, for several E and both a smooth

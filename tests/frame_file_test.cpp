@@ -180,15 +180,15 @@ TEST(DamagedFrame, PayloadErrorsNameTheBrick) {
   const auto d = small_dictionary();
   auto bytes = small_frame(format::Codec::ksvd, d);
   const format::FrameView view(bytes, "x");
-  // A reserved bit of brick 0's layout word: caught by payload validation (not the index CRC).
+  // Brick 0's layout word with 0 atom bits: caught by payload validation (not the index CRC).
   vr_uint layout_word;
   const std::uint64_t word = view.brick_offset(0) + 12;
   std::memcpy(&layout_word, bytes.data() + word, 4);
-  layout_word |= 1u << 23;
+  layout_word &= ~(0x1Fu << 13);
   std::memcpy(bytes.data() + word, &layout_word, 4);
   test::reseal_frame(bytes);
   const std::string e = read_everything(bytes, d, false);
-  EXPECT_NE(e.find("zero bits 20..31"), std::string::npos) << e;
+  EXPECT_NE(e.find("atom bits 1..16"), std::string::npos) << e;
   EXPECT_NE(e.find("offset " + std::to_string(word)), std::string::npos) << e;
 }
 

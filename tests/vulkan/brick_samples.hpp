@@ -54,6 +54,7 @@ inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t
   parts.atom_bits = style == 3 ? VR_MAX_ATOM_BITS
                                : least_atom_bits + static_cast<std::uint32_t>(rng.below(
                                                        VR_MAX_ATOM_BITS - least_atom_bits + 1));
+  parts.band_split = static_cast<std::uint32_t>(rng.below(atom_count + 1));
   const std::uint32_t most = std::min((1u << parts.sparsity_bits) - 1u, atom_count);
   const std::int64_t largest = std::int64_t{1} << parts.coef_bits;
   std::vector<std::uint32_t> order(atom_count);

@@ -40,7 +40,7 @@ void main() {
   }
   // Layout words of every width and parameter.
   const uint other = vr_make_layout(i % 13u, (i / 13u) % 9u, 1u + (i / 117u) % 16u,
-                                    1u + (i / 1872u) % 16u, (i / 3u) % 4u);
+                                    1u + (i / 1872u) % 16u, (i / 3u) % 4u, i % 4096u);
   const uint entry = vr_block_entry(layout_word, i % VR_BLOCKS_PER_BRICK);
   uint rice_bit = (i * 7u) % 900u;
   const uint rice = vr_read_rice(0u, rice_bit, i % 16u, 1u + i % 16u);
@@ -51,7 +51,7 @@ void main() {
                         (vr_entry_mean(layout_word, entry) << 8u);
   results[4u * N + i] = code;
   results[5u * N + i] = vr_layout_entry_bits(other) | (vr_gap_rice(other, 1u + i % 255u) << 5u) |
-                        (vr_band_rice(i * 2654435761u, i % 300u) << 10u) |
+                        (vr_band_rice(other, i * 2654435761u, i % 300u) << 10u) |
                         (vr_entry_words(other) << 15u) | (vr_code_first_word(other) << 23u);
   results[6u * N + i] = vr_atlas_cell_x(i, 7u) | (vr_atlas_cell_y(i, 7u, 5u) << 8u) |
                         (vr_atlas_cell_z(i, 7u, 5u) << 16u);

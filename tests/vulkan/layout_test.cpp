@@ -96,7 +96,7 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
     for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) {
       const std::uint32_t i = b * 216 + v;
       const vr_uint other = vr_make_layout(i % 13, (i / 13) % 9, 1 + (i / 117) % 16,
-                                           1 + (i / 1872) % 16, (i / 3) % 4);
+                                           1 + (i / 1872) % 16, (i / 3) % 4, i % 4096);
       const vr_uint entry = vr_block_entry(p, layout_word, i % VR_BLOCKS_PER_BRICK);
       vr_uint rice_bit = (i * 7) % 900;
       const vr_uint rice = vr_read_rice(p, 0, rice_bit, i % 16, 1 + i % 16);
@@ -109,8 +109,8 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
                                       (static_cast<vr_uint>(parts.values[first_code + v]) << 16)
                                 : 0xFFFFFFFFu,
           vr_layout_entry_bits(other) | (vr_gap_rice(other, 1 + i % 255) << 5) |
-              (vr_band_rice(i * 2654435761u, i % 300) << 10) | (vr_entry_words(other) << 15) |
-              (vr_code_first_word(other) << 23),
+              (vr_band_rice(other, i * 2654435761u, i % 300) << 10) |
+              (vr_entry_words(other) << 15) | (vr_code_first_word(other) << 23),
           vr_atlas_cell_x(i, 7) | (vr_atlas_cell_y(i, 7, 5) << 8) |
               (vr_atlas_cell_z(i, 7, 5) << 16),
           vr_atlas_cell_x(i, 56) | (vr_atlas_cell_y(i, 56, 56) << 8) |

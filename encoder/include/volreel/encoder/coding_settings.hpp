@@ -99,7 +99,7 @@ struct CodingSettings {
   /// coding error. Chosen on the rate-distortion suite (scripts/rd-suite; docs/benchmarks.md):
   /// 4 gains PSNR at equal bps on every member over 1 and 2 and keeps the quantization loss under
   /// 0.3 dB; 8 gains a little more at equal bps but loses more to quantization; 16 and 32 lose.
-  double coef_step_factor = 8.0;
+  double coef_step_factor = 11.0;
   /// > 0: the pointwise bound E (data units): every decoded value of a coded block within E of
   /// the original, checked after quantization; blocks take atoms (and bricks coefficient bits)
   /// until it holds (volreel encode --max-error).

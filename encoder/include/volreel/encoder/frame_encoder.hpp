@@ -87,6 +87,9 @@ class FrameEncoder {
   const dictionary::Dictionary* dictionary_;
   CodingSettings settings_;
   std::shared_ptr<const dictionary::BatchOmp> omp_;
+  /// The atoms before the DCT basis when the dictionary ends with it (the payloads' band split,
+  /// format/SPEC.md), else 0; at most 4095.
+  std::uint32_t band_split_ = 0;
   detail::QuantizeOptions quantize_options() const;
 };
 

@@ -77,6 +77,7 @@ VR_INLINE float vr_as_float(vr_uint bits) {
 #define VR_MAX_COEF_BITS 16u     /* the most magnitude bits: |q| ≤ 2^16 */
 #define VR_MAX_ATOM_BITS 16u     /* the widest atom index */
 #define VR_MAX_GAP_SHIFT 3u      /* the largest reduction of the gaps' Rice parameter */
+#define VR_MAX_BAND_SPLIT 4095u  /* the largest split between band 0 and the others */
 #define VR_ESCAPE_ZEROS 16u      /* a Rice code whose unary part reaches 16 zeros is an escape */
 #define VR_ATOM_BANDS 8u         /* atom bands of the magnitudes' Rice parameters */
 
@@ -92,14 +93,16 @@ VR_INLINE vr_uint vr_read_bits(VR_PAYLOAD_PARAM vr_uint first_word, vr_uint bit,
   return width >= 32u ? value : (value & ((1u << width) - 1u));
 }
 
-/* Word 3, the layout word (a reader checks every field's range and that bits 20..31 are zero):
+/* Word 3, the layout word (a reader checks every field's range):
  *   bits 0..3    mean bits b         (0..12)  bits of each block's quantized mean
  *   bits 4..7    sparsity bits t     (0..8)   width of each block's sparsity field
  *   bits 8..12   magnitude bits c    (1..16)  every quantized coefficient has |q| ≤ 2^c; an
  *                                             escaped value is |q| − 1 in c bits
  *   bits 13..17  atom bits a         (1..16)  an escaped gap takes a bits (every index < 2^a)
  *   bits 18..19  gap shift g         (0..3)   lowers the gaps' Rice parameter (vr_gap_rice)
- *   bits 20..31  zero (reserved) */
+ *   bits 20..31  split L             (0..4095) atoms below L form band 0 (vr_atom_band): the
+ *                                             learned atoms a dictionary lists before the DCT
+ *                                             basis */
 VR_INLINE vr_uint vr_layout_word(VR_PAYLOAD_PARAM_ONLY) {
   return VR_LOAD_WORD(3u);
 }
@@ -118,10 +121,13 @@ VR_INLINE vr_uint vr_layout_atom_bits(vr_uint layout_word) {
 VR_INLINE vr_uint vr_layout_gap_shift(vr_uint layout_word) {
   return (layout_word >> 18u) & 0x3u;
 }
+VR_INLINE vr_uint vr_layout_band_split(vr_uint layout_word) {
+  return layout_word >> 20u;
+}
 VR_INLINE vr_uint vr_make_layout(vr_uint mean_bits, vr_uint sparsity_bits, vr_uint coef_bits,
-                                 vr_uint atom_bits, vr_uint gap_shift) {
+                                 vr_uint atom_bits, vr_uint gap_shift, vr_uint band_split) {
   return mean_bits | (sparsity_bits << 4u) | (coef_bits << 8u) | (atom_bits << 13u) |
-         (gap_shift << 18u);
+         (gap_shift << 18u) | (band_split << 20u);
 }
 /* Word 4, the band word: 4 bits per band, band j at bits 4j..4j+3. */
 VR_INLINE vr_uint vr_band_word(VR_PAYLOAD_PARAM_ONLY) {
@@ -202,16 +208,18 @@ VR_INLINE vr_uint vr_gap_rice(vr_uint layout_word, vr_uint s) {
   return a > lower ? a - lower : 0u;
 }
 
-/* The band of an atom: floor(log2(atom + 1)), at most 7 (atom 0; 1..2; 3..6; ...; 127 and up).
- * Low indices are the learned atoms a dictionary lists first and the DCT basis's low
- * frequencies, whose coefficients are larger. */
-VR_INLINE vr_uint vr_atom_band(vr_uint atom) {
-  vr_uint band = vr_highest_bit(atom + 1u);
-  return band < VR_ATOM_BANDS - 1u ? band : VR_ATOM_BANDS - 1u;
+/* The band of an atom: 0 below the layout's split L (the learned atoms), else
+ * 1 + min(6, floor(log2(atom − L + 1))): the DCT basis by frequency (atom − L = 0; 1..2; 3..6;
+ * ...; 63 and up), low frequencies having the larger coefficients. */
+VR_INLINE vr_uint vr_atom_band(vr_uint layout_word, vr_uint atom) {
+  vr_uint split = vr_layout_band_split(layout_word);
+  if (atom < split) return 0u;
+  vr_uint band = vr_highest_bit(atom - split + 1u);
+  return 1u + (band < VR_ATOM_BANDS - 2u ? band : VR_ATOM_BANDS - 2u);
 }
 /* The magnitudes' Rice parameter of an atom's band (0..15). */
-VR_INLINE vr_uint vr_band_rice(vr_uint band_word, vr_uint atom) {
-  return (band_word >> (4u * vr_atom_band(atom))) & 0xFu;
+VR_INLINE vr_uint vr_band_rice(vr_uint layout_word, vr_uint band_word, vr_uint atom) {
+  return (band_word >> (4u * vr_atom_band(layout_word, atom))) & 0xFu;
 }
 
 /* Reads the next code of a block of s codes, starting at bit `bit` of the code stream (the
@@ -224,8 +232,9 @@ VR_INLINE int vr_read_code(VR_PAYLOAD_PARAM vr_uint layout_word, vr_uint band_wo
   atom = next_atom + vr_read_rice(VR_PAYLOAD_ARG first, bit, vr_gap_rice(layout_word, s),
                                   vr_layout_atom_bits(layout_word));
   next_atom = atom + 1u;
-  vr_uint magnitude = vr_read_rice(VR_PAYLOAD_ARG first, bit, vr_band_rice(band_word, atom),
-                                   vr_layout_coef_bits(layout_word));
+  vr_uint magnitude =
+      vr_read_rice(VR_PAYLOAD_ARG first, bit, vr_band_rice(layout_word, band_word, atom),
+                   vr_layout_coef_bits(layout_word));
   vr_uint negative = vr_read_bits(VR_PAYLOAD_ARG first, bit, 1u);
   bit += 1u;
   int q = int(magnitude + 1u);

@@ -64,6 +64,8 @@ struct KsvdPayloadParts {
   /// -1: the one giving the band the fewest bits.
   std::array<int, 8> band_rice{-1, -1, -1, -1, -1, -1, -1, -1};
   int gap_shift = -1;  ///< the gaps' Rice shift 0..3; -1: the one giving the fewest bits
+  /// Atoms below this form band 0 (0..4095): the learned atoms before the DCT basis.
+  std::uint32_t band_split = 0;
   std::array<std::uint32_t, 216> sparsity{};
   std::array<std::uint32_t, 216> mean{};
   std::vector<std::uint32_t> atoms;  ///< one per code
