@@ -223,7 +223,7 @@ void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
                          const std::array<std::uint32_t, 3>& dims, float* weights) {
   owned_block_shares(x, y, z, dims, weights);
   for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
-    weights[b] = std::max(weights[b], 1.0f / VR_BLOCK_LENGTH);
+    weights[b] = weights[b] > 0 ? std::max(weights[b], 1.0f / VR_BLOCK_LENGTH) : 0.0f;
 }
 
 /// Step 1: means to b bits over [min, max] of the brick's block means, b the fewest bits whose

@@ -55,8 +55,9 @@ void brick_to_blocks(const float* brick, float* columns, float* means);
 void owned_block_shares(std::uint32_t x, std::uint32_t y, std::uint32_t z,
                         const std::array<std::uint32_t, 3>& dims, float* shares);
 
-/// The shares as weights of the Lagrangian rule: at least 1/216 (one voxel), so that as ε → 0
-/// every block is still coded up to Smax.
+/// The shares as weights of the Lagrangian rule: at least 1/216 (one voxel) for a block that
+/// holds any of the level's own voxels, so that as ε → 0 every such block is still coded up to
+/// Smax; 0 for a block of padding alone (past the volume's edge, never drawn): its mean only.
 void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
                          const std::array<std::uint32_t, 3>& dims, float* weights);
 
