@@ -27,27 +27,131 @@ std::string str(std::uint64_t v) {
   for (vr_uint v = 0; v < VR_BLOCK_LENGTH; ++v) block[v] += c * atom[v];
 }
 
+/// Zero words after a payload's copy: the look-ahead of a Rice code and the overrun of a damaged
+/// stream's last code (at most 81 bits past the stream's end) read zeros.
+constexpr std::size_t payload_padding_words = 4;
+
+/// One code as read: its atom and signed quantized coefficient.
+struct ParsedCode {
+  vr_uint atom;
+  int q;
+};
+
+/// check_ksvd_payload on `payload` (word_count words followed by payload_padding_words zero
+/// words), appending the codes to *codes when it is not null.
+KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_count,
+                                     std::size_t bytes, std::uint32_t atom_count,
+                                     const std::filesystem::path& name, std::uint64_t at,
+                                     std::vector<ParsedCode>* codes) {
+  const auto fail = [&](std::uint64_t offset, const std::string& expected,
+                        const std::string& found) {
+    throw FormatError(name, at + offset, "brick payload " + expected, found);
+  };
+  // 1. Header: three finite dequantization values and the layout word.
+  if (bytes < 4 * VR_HEADER_WORDS || bytes % 4 != 0 || word_count != bytes / 4)
+    fail(0, "of at least " + str(4 * VR_HEADER_WORDS) + " bytes, a multiple of 4",
+         str(bytes) + " bytes");
+  for (vr_uint w = 0; w < 3; ++w)
+    if (!std::isfinite(vr_as_float(payload[w])))
+      fail(4 * w, "finite dequantization value", "NaN or infinity");
+  KsvdPayloadLayout layout;
+  layout.word = payload[3];
+  layout.band_word = payload[4];
+  layout.mean_bits = vr_layout_mean_bits(layout.word);
+  layout.sparsity_bits = vr_layout_sparsity_bits(layout.word);
+  layout.coef_bits = vr_layout_coef_bits(layout.word);
+  layout.atom_bits = vr_layout_atom_bits(layout.word);
+  if (layout.mean_bits > VR_MEAN_BITS || layout.sparsity_bits > VR_MAX_SPARSITY_BITS ||
+      layout.coef_bits < 1 || layout.coef_bits > VR_MAX_COEF_BITS || layout.atom_bits < 1 ||
+      layout.atom_bits > VR_MAX_ATOM_BITS)
+    fail(12,
+         "layout word with mean bits 0.." + str(VR_MEAN_BITS) + ", sparsity bits 0.." +
+             str(VR_MAX_SPARSITY_BITS) + ", magnitude bits 1.." + str(VR_MAX_COEF_BITS) +
+             ", atom bits 1.." + str(VR_MAX_ATOM_BITS),
+         "mean " + str(layout.mean_bits) + ", sparsity " + str(layout.sparsity_bits) +
+             ", magnitude " + str(layout.coef_bits) + ", atom " + str(layout.atom_bits));
+  // Every decoded value is a mean plus at most 255 coefficients of magnitude at most
+  // |coef_scale|·2^c times atom values of magnitude at most 1 (unit-norm atoms), so this bound
+  // keeps every value finite, on the CPU and on the GPU.
+  const auto magnitude = [&](vr_uint w) {
+    return std::abs(static_cast<double>(vr_as_float(payload[w])));
+  };
+  const double bound = magnitude(0) +
+                       magnitude(1) * static_cast<double>((1u << layout.mean_bits) - 1u) +
+                       static_cast<double>((1u << layout.sparsity_bits) - 1u) * magnitude(2) *
+                           static_cast<double>(1u << layout.coef_bits) * max_atom_magnitude;
+  if (!(bound <= max_decoded_magnitude))
+    fail(0,
+         "dequantization values whose decoded values stay below " +
+             std::to_string(max_decoded_magnitude) + " in magnitude",
+         "values that reach " + std::to_string(bound));
+  // 2. The entries.
+  const vr_uint first = vr_code_first_word(layout.word);
+  if (bytes < 4 * std::uint64_t{first})
+    fail(0,
+         "of at least " + str(4 * std::uint64_t{first}) + " bytes for " +
+             str(vr_layout_entry_bits(layout.word)) + "-bit block entries",
+         str(bytes) + " bytes");
+  // 3. The code stream, read as the decoders read it (the zero words after the payload take the
+  //    look-ahead of a Rice code and a damaged stream's overrun: a code reads at most 81 bits).
+  const std::uint64_t stream_bits = (std::uint64_t{word_count} - first) * 32;
+  const vr_uint largest = 1u << layout.coef_bits;
+  vr_uint bit = 0;
+  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    const vr_uint s = vr_entry_sparsity(layout.word, vr_block_entry(payload, layout.word, b));
+    layout.codes += s;
+    vr_uint next_atom = 0, atom = 0;
+    for (vr_uint k = 0; k < s; ++k) {
+      const std::uint64_t code_at = 4 * std::uint64_t{first} + bit / 8;
+      if (bit >= stream_bits)
+        fail(code_at, "codes inside the payload (block " + str(b) + ", code " + str(k) + ")",
+             "the payload's end");
+      const int q = vr_read_code(payload, layout.word, layout.band_word, s, bit, next_atom, atom);
+      if (atom >= atom_count)
+        fail(code_at,
+             "atom index < " + str(atom_count) + " (block " + str(b) + ", code " + str(k) + ")",
+             str(atom));
+      const vr_uint m = static_cast<vr_uint>(q < 0 ? -static_cast<std::int64_t>(q) : q);
+      if (m > largest)
+        fail(code_at,
+             "magnitude ≤ 2^" + str(layout.coef_bits) + " (block " + str(b) + ", code " + str(k) +
+                 ")",
+             str(m));
+      if (codes) codes->push_back({atom, q});
+    }
+  }
+  layout.code_bits = bit;
+  const std::uint64_t need = 4 * (std::uint64_t{first} + (std::uint64_t{bit} + 31) / 32);
+  if (bytes != need)
+    fail(0, str(need) + " bytes for " + str(layout.codes) + " codes in " + str(bit) + " bits",
+         str(bytes) + " bytes");
+  if (bit % 32 != 0 && (payload[word_count - 1] >> (bit % 32)) != 0)
+    fail(bytes - 4, "zero bits after the last code", "nonzero bits");
+  return layout;
+}
+
 void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::span<float> out,
                  const std::filesystem::path& name, std::uint64_t at) {
   // Payloads are 4-byte aligned inside the file and the map is page-aligned, but copy to be safe
   // for in-memory views of arbitrary alignment; one zero word more, which a Rice code's look-ahead
   // at the stream's end may read (brick_decode.h).
-  std::vector<vr_uint> payload_words(bytes.size() / 4 + 1, 0u);
+  std::vector<vr_uint> payload_words(bytes.size() / 4 + payload_padding_words, 0u);
   if (bytes.size() >= 4) std::memcpy(payload_words.data(), bytes.data(), bytes.size() / 4 * 4);
   const vr_uint* payload = payload_words.data();
-  // 1. Structure, dequantization values, atom indices and magnitudes.
+  // 1. Structure, dequantization values, atom indices and magnitudes; the codes, read once.
+  thread_local std::vector<ParsedCode> codes;
+  codes.clear();
   const KsvdPayloadLayout layout =
-      check_ksvd_payload(std::span<const std::uint32_t>(payload_words).first(bytes.size() / 4),
-                         bytes.size(), atoms.count, name, at);
+      parse_ksvd_payload(payload, bytes.size() / 4, bytes.size(), atoms.count, name, at, &codes);
   if (atoms.values.size() < std::size_t{atoms.count} * VR_BLOCK_LENGTH)
     throw FormatError(
         name, "dictionary holds fewer than the " + str(atoms.count) + " atoms the frame needs");
   // 2. Decode every value of every block (brick_decode.h's arithmetic, vectorized over the block:
-  //    the codes are read in order, each atom added to all 216 values at once).
+  //    each atom added to all 216 values at once).
   const float* atom_values = atoms.values.data();
   const float mean_bias = vr_as_float(payload[0]), mean_scale = vr_as_float(payload[1]);
   const float coef_scale = vr_as_float(payload[2]);
-  vr_uint bit = 0;
+  std::size_t code = 0;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     const vr_uint entry = vr_block_entry(payload, layout.word, b);
     const vr_uint s = vr_entry_sparsity(layout.word, entry);
@@ -55,12 +159,9 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
         mean_bias + mean_scale * static_cast<float>(vr_entry_mean(layout.word, entry));
     alignas(64) float block[VR_BLOCK_LENGTH];
     for (vr_uint v = 0; v < VR_BLOCK_LENGTH; ++v) block[v] = mean;
-    vr_uint next_atom = 0, atom = 0;
-    for (vr_uint k = 0; k < s; ++k) {
-      const int q = vr_read_code(payload, layout.word, layout.band_word, s, bit, next_atom, atom);
-      add_scaled(block, atom_values + std::size_t{atom} * VR_BLOCK_LENGTH,
-                 coef_scale * static_cast<float>(q));
-    }
+    for (vr_uint k = 0; k < s; ++k, ++code)
+      add_scaled(block, atom_values + std::size_t{codes[code].atom} * VR_BLOCK_LENGTH,
+                 coef_scale * static_cast<float>(codes[code].q));
     // Scatter the block into the brick, row by row.
     const vr_uint bx = b % 6, by = (b / 6) % 6, bz = b / 36;
     for (vr_uint z = 0; z < 6; ++z)
@@ -275,93 +376,9 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> bytes, std::uint
 KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::size_t bytes,
                                      std::uint32_t atom_count, const std::filesystem::path& name,
                                      std::uint64_t at) {
-  const auto fail = [&](std::uint64_t offset, const std::string& expected,
-                        const std::string& found) {
-    throw FormatError(name, at + offset, "brick payload " + expected, found);
-  };
-  // 1. Header: three finite dequantization values and the layout word.
-  if (bytes < 4 * VR_HEADER_WORDS || bytes % 4 != 0 || words.size() != bytes / 4)
-    fail(0, "of at least " + str(4 * VR_HEADER_WORDS) + " bytes, a multiple of 4",
-         str(bytes) + " bytes");
-  for (vr_uint w = 0; w < 3; ++w)
-    if (!std::isfinite(vr_as_float(words[w])))
-      fail(4 * w, "finite dequantization value", "NaN or infinity");
-  KsvdPayloadLayout layout;
-  layout.word = words[3];
-  layout.band_word = words[4];
-  layout.mean_bits = vr_layout_mean_bits(layout.word);
-  layout.sparsity_bits = vr_layout_sparsity_bits(layout.word);
-  layout.coef_bits = vr_layout_coef_bits(layout.word);
-  layout.atom_bits = vr_layout_atom_bits(layout.word);
-  if (layout.mean_bits > VR_MEAN_BITS || layout.sparsity_bits > VR_MAX_SPARSITY_BITS ||
-      layout.coef_bits < 1 || layout.coef_bits > VR_MAX_COEF_BITS || layout.atom_bits < 1 ||
-      layout.atom_bits > VR_MAX_ATOM_BITS)
-    fail(12,
-         "layout word with mean bits 0.." + str(VR_MEAN_BITS) + ", sparsity bits 0.." +
-             str(VR_MAX_SPARSITY_BITS) + ", magnitude bits 1.." + str(VR_MAX_COEF_BITS) +
-             ", atom bits 1.." + str(VR_MAX_ATOM_BITS),
-         "mean " + str(layout.mean_bits) + ", sparsity " + str(layout.sparsity_bits) +
-             ", magnitude " + str(layout.coef_bits) + ", atom " + str(layout.atom_bits));
-  // Every decoded value is a mean plus at most 255 coefficients of magnitude at most
-  // |coef_scale|·2^c times atom values of magnitude at most 1 (unit-norm atoms), so this bound
-  // keeps every value finite, on the CPU and on the GPU.
-  const auto magnitude = [&](vr_uint w) {
-    return std::abs(static_cast<double>(vr_as_float(words[w])));
-  };
-  const double bound = magnitude(0) +
-                       magnitude(1) * static_cast<double>((1u << layout.mean_bits) - 1u) +
-                       static_cast<double>((1u << layout.sparsity_bits) - 1u) * magnitude(2) *
-                           static_cast<double>(1u << layout.coef_bits) * max_atom_magnitude;
-  if (!(bound <= max_decoded_magnitude))
-    fail(0,
-         "dequantization values whose decoded values stay below " +
-             std::to_string(max_decoded_magnitude) + " in magnitude",
-         "values that reach " + std::to_string(bound));
-  // 2. The entries.
-  const vr_uint first = vr_code_first_word(layout.word);
-  if (bytes < 4 * std::uint64_t{first})
-    fail(0,
-         "of at least " + str(4 * std::uint64_t{first}) + " bytes for " +
-             str(vr_layout_entry_bits(layout.word)) + "-bit block entries",
-         str(bytes) + " bytes");
-  // 3. The code stream, read as the decoders read it, from a copy with zero words after the
-  //    payload (the look-ahead of a Rice code and a damaged stream's overrun read zeros).
-  std::vector<vr_uint> padded(words.size() + 2, 0u);
+  std::vector<vr_uint> padded(words.size() + payload_padding_words, 0u);
   std::copy(words.begin(), words.end(), padded.begin());
-  const vr_uint* payload = padded.data();
-  const std::uint64_t stream_bits = (std::uint64_t{words.size()} - first) * 32;
-  const vr_uint largest = 1u << layout.coef_bits;
-  vr_uint bit = 0;
-  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
-    const vr_uint s = vr_entry_sparsity(layout.word, vr_block_entry(payload, layout.word, b));
-    layout.codes += s;
-    vr_uint next_atom = 0, atom = 0;
-    for (vr_uint k = 0; k < s; ++k) {
-      const std::uint64_t code_at = 4 * std::uint64_t{first} + bit / 8;
-      if (bit >= stream_bits)
-        fail(code_at, "codes inside the payload (block " + str(b) + ", code " + str(k) + ")",
-             "the payload's end");
-      const int q = vr_read_code(payload, layout.word, layout.band_word, s, bit, next_atom, atom);
-      if (atom >= atom_count)
-        fail(code_at,
-             "atom index < " + str(atom_count) + " (block " + str(b) + ", code " + str(k) + ")",
-             str(atom));
-      const vr_uint m = static_cast<vr_uint>(q < 0 ? -static_cast<std::int64_t>(q) : q);
-      if (m > largest)
-        fail(code_at,
-             "magnitude ≤ 2^" + str(layout.coef_bits) + " (block " + str(b) + ", code " + str(k) +
-                 ")",
-             str(m));
-    }
-  }
-  layout.code_bits = bit;
-  const std::uint64_t need = 4 * (std::uint64_t{first} + (std::uint64_t{bit} + 31) / 32);
-  if (bytes != need)
-    fail(0, str(need) + " bytes for " + str(layout.codes) + " codes in " + str(bit) + " bits",
-         str(bytes) + " bytes");
-  if (bit % 32 != 0 && (words.back() >> (bit % 32)) != 0)
-    fail(bytes - 4, "zero bits after the last code", "nonzero bits");
-  return layout;
+  return parse_ksvd_payload(padded.data(), words.size(), bytes, atom_count, name, at, nullptr);
 }
 
 namespace {

@@ -30,6 +30,7 @@
 #define VOLREEL_FORMAT_BRICK_DECODE_H
 
 #ifndef VR_GLSL
+#include <bit>
 #include <cstdint>
 #include <cstring>
 typedef std::uint32_t vr_uint;
@@ -170,15 +171,11 @@ VR_INLINE vr_uint vr_code_first_word(vr_uint layout_word) {
 /* Index of the lowest set bit of x ≠ 0. */
 #ifndef VR_GLSL
 VR_INLINE vr_uint vr_lowest_bit(vr_uint x) {
-  vr_uint n = 0u;
-  while ((x & 1u) == 0u) x >>= 1u, ++n;
-  return n;
+  return static_cast<vr_uint>(std::countr_zero(x));
 }
 /* floor(log2(x)) of x ≥ 1. */
 VR_INLINE vr_uint vr_highest_bit(vr_uint x) {
-  vr_uint n = 0u;
-  while (x > 1u) x >>= 1u, ++n;
-  return n;
+  return static_cast<vr_uint>(std::bit_width(x)) - 1u;
 }
 #else
 #define vr_lowest_bit(x) uint(findLSB(x))
