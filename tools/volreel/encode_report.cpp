@@ -103,7 +103,8 @@ void print_tolerance_choice(const encoder::ToleranceChoice& e, const encoder::Co
   else if (c.fixed_sparsity == 0)
     std::printf(
         "tolerance eps %.4g, Lagrangian rule: a block keeps an atom if it lowers its squared "
-        "error by >= %.3g (%g*216*eps^2; nominal PSNR %.2f dB), K = %u\n",
+        "error by >= %.3g (%g*216*eps^2; 20*log10(range/eps) = %.2f dB, not a prediction: the "
+        "delivered PSNR is measured below), K = %u\n",
         c.tolerance, c.lagrangian_factor * 216 * c.tolerance * c.tolerance, c.lagrangian_factor,
         dictionary::psnr_for_tolerance(c.tolerance, range), atoms);
 }

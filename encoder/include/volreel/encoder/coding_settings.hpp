@@ -52,10 +52,11 @@ struct CodingSettings {
   std::uint64_t container_id = 0;
   double tolerance = 0;  ///< ksvd variable rate: ε (data units), see VariableRateRule
   VariableRateRule rule = VariableRateRule::lagrangian;
-  /// Lagrangian rule: the minimum gain of an atom, as a fraction of m·ε² (> 0). Only the product
-  /// with ε² matters, so this sets what ε means: the default keeps the PSNR at a given ε about
-  /// that of the ε rule and above 20·log10(range/ε), so that --psnr keeps its meaning (the ε
-  /// rule's bound per block no longer holds).
+  /// Lagrangian rule: the minimum gain of an atom, as a fraction of m·ε² (> 0). Only its ratio
+  /// to coef_step_factor² and the product with ε² matter: chosen with coef_step_factor on the
+  /// rate-distortion suite (docs/benchmarks.md). The PSNR delivered at ε then lies some dB below
+  /// 20·log10(range/ε) (about 5 dB on the suite's turbulence), so --psnr measures each frame and
+  /// codes it again at a smaller ε where it falls short.
   double lagrangian_factor = 0.25;
   /// Lagrangian rule: weigh each block's atom gains by the share of its voxels that the decoder
   /// takes from it (its brick's interior, inside the level). The rest are the apron, a copy of a
