@@ -28,7 +28,7 @@ struct QuantizeOptions {
   double target_energy =
       -1;  ///< m·ε²: extend the pursuit while the quantized error exceeds it (< 0: never)
   /// > 0: extend the pursuit while a value of the block is off by more than this (data units),
-  /// and code the brick again with more coefficient bits if a block still misses it.
+  /// and code the brick again with half the coefficient step if a block still misses it.
   double max_abs_error = 0;
   int max_atoms = 15;
   std::uint32_t band_split = 0;  ///< the payload's band split (format::KsvdPayloadParts)

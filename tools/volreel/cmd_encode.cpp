@@ -62,7 +62,8 @@ encoder::CodingSettings coding_settings(const EncodeOptions& o) {
   c.coef_step_factor = o.coef_step_factor;
   if (o.max_error_opt->count() > 0) {
     // The pointwise bound: the tolerance rule at ε = E/2 (an RMS error never above the largest),
-    // then atoms and coefficient bits until every value holds (quantize_brick's steps 4 and 5).
+    // then atoms and a finer coefficient step until every value holds (quantize_brick's steps 4
+    // and 5).
     if (c.fixed_sparsity > 0)
       throw InputError("--max-error and --fixed-sparsity exclude each other");
     if (o.rate_rule_opt->count() > 0 && c.rule != encoder::VariableRateRule::tolerance)
@@ -250,8 +251,8 @@ void add_encode_command(CLI::App& app) {
   o->max_error_opt = cmd->add_option(
       "--max-error", o->max_error,
       "Pointwise bound E, data units: every decoded value of the finest level within E of the "
-      "original\n(blocks take atoms, bricks coefficient bits, until it holds; volreel compare "
-      "--max-error checks it)");
+      "original\n(blocks take atoms, bricks a finer coefficient step, until it holds; volreel "
+      "compare --max-error checks it)");
   o->max_error_opt->check(CLI::PositiveNumber);
   o->tolerance_opt->excludes(o->psnr_opt)->excludes(o->bps_opt)->excludes(o->max_error_opt);
   o->psnr_opt->excludes(o->bps_opt)->excludes(o->max_error_opt);

@@ -104,8 +104,8 @@ struct CodingSettings {
   /// 0.3 dB; 8 gains a little more at equal bps but loses more to quantization; 16 and 32 lose.
   double coef_step_factor = 11.0;
   /// > 0: the pointwise bound E (data units): every decoded value of a coded block within E of
-  /// the original, checked after quantization; blocks take atoms (and bricks coefficient bits)
-  /// until it holds (volreel encode --max-error).
+  /// the original, checked after quantization; blocks take atoms (and bricks a finer coefficient
+  /// step) until it holds (volreel encode --max-error).
   double max_error = 0;
   double zfp_accuracy = 0;  ///< zfp fixed-accuracy tolerance (data units)
   /// Quantize coefficients one at a time, re-solving the least-squares fit of the block's later
