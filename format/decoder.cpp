@@ -70,9 +70,9 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
              ", atom bits 1.." + str(VR_MAX_ATOM_BITS),
          "mean " + str(layout.mean_bits) + ", sparsity " + str(layout.sparsity_bits) +
              ", magnitude " + str(layout.coef_bits) + ", atom " + str(layout.atom_bits));
-  // Every decoded value is a mean plus at most 255 coefficients of magnitude at most
-  // |coef_scale|·2^c times atom values of magnitude at most 1 (unit-norm atoms), so this bound
-  // keeps every value finite, on the CPU and on the GPU.
+  // Every decoded value is a mean plus at most 2^t − 1 coefficients of magnitude at most
+  // |coef_scale|·2^c times atom values of magnitude at most max_atom_magnitude (unit-norm atoms,
+  // binary16 rounding), so this bound keeps every value finite, on the CPU and on the GPU.
   const auto magnitude = [&](vr_uint w) {
     return std::abs(static_cast<double>(vr_as_float(payload[w])));
   };
@@ -133,8 +133,8 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
 void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::span<float> out,
                  const std::filesystem::path& name, std::uint64_t at) {
   // Payloads are 4-byte aligned inside the file and the map is page-aligned, but copy to be safe
-  // for in-memory views of arbitrary alignment; one zero word more, which a Rice code's look-ahead
-  // at the stream's end may read (brick_decode.h).
+  // for in-memory views of arbitrary alignment; zero words after it, which a Rice code's
+  // look-ahead at the stream's end (and a damaged stream's overrun) read (brick_decode.h).
   std::vector<vr_uint> payload_words(bytes.size() / 4 + payload_padding_words, 0u);
   if (bytes.size() >= 4) std::memcpy(payload_words.data(), bytes.data(), bytes.size() / 4 * 4);
   const vr_uint* payload = payload_words.data();

@@ -83,10 +83,10 @@ struct CodingSettings {
   /// squared error most) needs fewer atoms than OMP (the most correlated one) for the same error;
   /// see dictionary::AtomSelection.
   dictionary::AtomSelection selection = dictionary::AtomSelection::error;
-  /// ksvd: the bits b of each brick's quantized block means (format/SPEC.md, word 4). -1: variable
-  /// rate gives each brick the fewest bits (0..12) whose step over the span of its block means is
-  /// at most mean_step_factor·ε_l (ε_l: the brick's level's tolerance, see level_tolerance_factor),
-  /// fixed rate (no ε) 12 bits; 0..12: every brick exactly b bits.
+  /// ksvd: the bits b of each brick's quantized block means (format/SPEC.md, the layout word). -1:
+  /// variable rate gives each brick the fewest bits (0..12) whose step over the span of its block
+  /// means is at most mean_step_factor·ε_l (ε_l: the brick's level's tolerance, see
+  /// level_tolerance_factor), fixed rate (no ε) 12 bits; 0..12: every brick exactly b bits.
   int mean_bits = -1;
   /// The mean step as a fraction of ε. A mean off by e adds 216·e² to its block's squared error,
   /// so halving the step gains 13.5·step² for one more bit per block; the Lagrangian rule buys

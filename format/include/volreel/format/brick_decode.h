@@ -21,7 +21,7 @@
 // The codes have variable length, so a decoder walks a brick's blocks in order, keeping the bit
 // position from block to block.
 //
-// The host side (C++) defines VR_CPU before including nothing else: the functions read from a
+// The host side (C++) includes it as it is: the functions read from a
 // `const vr_uint*` span; a GLSL includer defines VR_GLSL and provides
 //   vr_uint vr_load_word(vr_uint index)    (the payload storage buffer)
 //   float   vr_load_atom(vr_uint index)    (the dictionary storage buffer, atom-major)

@@ -37,7 +37,7 @@ constexpr double max_atom_magnitude = 1.01;
 
 /// Checks a ksvd payload before anything decodes it (the CPU decoder here, or the GPU): the header
 /// and entries present, finite dequantization values that bound every decoded value by
-/// max_decoded_magnitude, the layout word (every field in range, the reserved bits zero), and the
+/// max_decoded_magnitude, the layout word (every width in range), and the
 /// code stream read to its end: in each block atom indices increasing and < atom_count, every
 /// magnitude ≤ 2^c, the stream inside the payload, the payload exactly the words of the header,
 /// entries and codes, and the padding after the last code zero. Throws FormatError naming `name`
