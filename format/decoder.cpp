@@ -334,12 +334,12 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
 
 KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint32_t atom_count,
                                      const std::filesystem::path& name, std::uint64_t at) {
-  std::vector<vr_uint> words(bytes.size() / 4 + 1, 0u);  // + the look-ahead word
+  std::vector<vr_uint> words(bytes.size() / 4 + payload_padding_words, 0u);
   if (bytes.size() >= 4) std::memcpy(words.data(), bytes.data(), bytes.size() / 4 * 4);
-  const KsvdPayloadLayout layout =
-      check_ksvd_payload(std::span<const std::uint32_t>(words).first(bytes.size() / 4),
-                         bytes.size(), atom_count, name, at);
   const vr_uint* payload = words.data();
+  std::vector<ParsedCode> codes;  // read once, by the check
+  const KsvdPayloadLayout layout =
+      parse_ksvd_payload(payload, bytes.size() / 4, bytes.size(), atom_count, name, at, &codes);
   KsvdPayloadParts parts;
   std::memcpy(parts.dequantization, payload, 12);
   parts.mean_bits = layout.mean_bits;
@@ -350,18 +350,14 @@ KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint
     parts.band_rice[band] = static_cast<int>((layout.band_word >> (4 * band)) & 0xF);
   parts.gap_shift = static_cast<int>(vr_layout_gap_shift(layout.word));
   parts.band_split = vr_layout_band_split(layout.word);
-  vr_uint bit = 0;
   for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     const vr_uint entry = vr_block_entry(payload, layout.word, b);
-    const vr_uint s = vr_entry_sparsity(layout.word, entry);
-    parts.sparsity[b] = s;
+    parts.sparsity[b] = vr_entry_sparsity(layout.word, entry);
     parts.mean[b] = vr_entry_mean(layout.word, entry);
-    vr_uint next_atom = 0, atom = 0;
-    for (vr_uint k = 0; k < s; ++k) {
-      parts.values.push_back(
-          vr_read_code(payload, layout.word, layout.band_word, s, bit, next_atom, atom));
-      parts.atoms.push_back(atom);
-    }
+  }
+  for (const ParsedCode& code : codes) {
+    parts.atoms.push_back(code.atom);
+    parts.values.push_back(code.q);
   }
   return parts;
 }
