@@ -32,16 +32,7 @@ constexpr std::uint32_t fixed_rate_coef_bits = 8;
 constexpr std::size_t chunk_bricks =
     32;  ///< bricks coded per batch-OMP call (memory: 32·36³ floats ×2)
 
-/// One node of the full octree while encoding.
-struct Cell {
-  std::uint32_t level = 0, x = 0, y = 0, z = 0;
-  std::uint64_t morton = 0;
-  std::vector<std::byte> payload;
-  std::size_t codes = 0;  ///< ksvd codes in the payload
-  std::uint64_t histogram = 0;
-  bool constant = false, subtree_constant = false;
-  float value = 0;
-};
+using Cell = CodedBrick;
 
 /// The full octree's cells, level by level: level_begin[l] is the first cell of level l and
 /// level_begin[levels] the cell count.
@@ -239,12 +230,17 @@ void code_ksvd_chunk(const Pyramid& pyramid, std::span<Cell> chunk,
 
 /// Step 2: bricks in chunks: extract, histogram, constant test; then code the non-constant ones.
 void code_bricks(const Pyramid& pyramid, std::vector<Cell>& cells, float lo, float hi,
-                 const BrickCoding& coding, FrameStats& st) {
+                 const BrickCoding& coding, FrameStats& st, std::vector<float>* originals) {
   ChunkWorkspace work;
+  if (originals) originals->resize(cells.size() * brick_voxels);
   for (std::size_t begin = 0; begin < cells.size(); begin += chunk_bricks) {
     const std::span<Cell> chunk(cells.data() + begin, std::min(chunk_bricks, cells.size() - begin));
     const auto part = Clock::now();
     extract_chunk(pyramid, chunk, work.bricks.data(), lo, hi, coding);
+    if (originals)
+      std::copy(work.bricks.begin(),
+                work.bricks.begin() + static_cast<std::ptrdiff_t>(chunk.size() * brick_voxels),
+                originals->begin() + static_cast<std::ptrdiff_t>(begin * brick_voxels));
     if (!coding.ksvd()) {
       st.seconds_bricks += seconds_since(part);
       continue;
@@ -285,11 +281,11 @@ std::vector<std::vector<std::size_t>> merge_subtrees(OctreeCells& octree) {
 
 /// Step 4: keep the nodes not under an empty node; number them breadth-first; link first
 /// children. Moves the kept cells' payloads into `out` and counts their bytes in `st`.
-void build_node_table(const Pyramid& pyramid, OctreeCells& octree,
-                      const std::vector<std::vector<std::size_t>>& children, bool ksvd,
+void build_node_table(const CodedFrame& coded, std::span<const char> keep_brick, bool ksvd,
                       format::FrameContents& out, FrameStats& st) {
-  std::vector<Cell>& cells = octree.cells;
-  const std::vector<std::size_t>& level_begin = octree.level_begin;
+  const std::vector<Cell>& cells = coded.bricks;
+  const std::vector<std::size_t>& level_begin = coded.level_begin;
+  const std::vector<std::vector<std::size_t>>& children = coded.children;
   const std::size_t levels = level_begin.size() - 1;
   std::vector<char> kept(cells.size(), 0);
   if (kept.empty()) throw std::logic_error("a frame has at least one brick");
@@ -302,13 +298,18 @@ void build_node_table(const Pyramid& pyramid, OctreeCells& octree,
       if (!kept[i]) continue;
       index[i] = static_cast<std::uint32_t>(out.nodes.size());
       format::Node node{};
-      node.brick = index[i];
       node.histogram = cells[i].histogram;
+      node.brick = format::no_brick;
+      if (keep_brick.empty() || keep_brick[i] || cells[i].subtree_constant) {
+        node.brick = static_cast<std::uint32_t>(out.payloads.size());
+        add_to_breakdown(cells[i], coded.geometry[l].dims, l + 1 < levels, ksvd, st);
+        out.payloads.push_back(cells[i].payload);
+        ++st.bricks;
+        if (cells[i].constant) ++st.constant_bricks;
+      } else {
+        ++st.interpolated_nodes;
+      }
       out.nodes.push_back(node);
-      add_to_breakdown(cells[i], pyramid.geometry[l].dims, l + 1 < levels, ksvd, st);
-      out.payloads.push_back(std::move(cells[i].payload));
-      ++st.bricks;
-      if (cells[i].constant) ++st.constant_bricks;
     }
     e.node_count = static_cast<std::uint32_t>(out.nodes.size()) - e.first_node;
     out.levels.push_back(e);
@@ -465,11 +466,11 @@ std::vector<std::byte> FrameEncoder::encode_brick(std::span<const float> brick) 
                                 quantize_options(), &result);
 }
 
-std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
-                                            FrameStats* stats) const {
+CodedFrame FrameEncoder::code(std::size_t t, const Volume& frame, bool keep_originals) const {
   const auto start = Clock::now();
   const Pyramid pyramid = build_pyramid(frame);
-  FrameStats st;
+  CodedFrame coded;
+  FrameStats& st = coded.stats;
   st.seconds_pyramid = seconds_since(start);
   const auto lo = static_cast<float>(settings_.value_min),
              hi = static_cast<float>(settings_.value_max);
@@ -486,32 +487,61 @@ std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
                      false};
   coding.weighted = ksvd && coding.atom_gain_threshold > 0 &&
                     (settings_.weight_owned_voxels || settings_.level_tolerance_factor != 1);
-  code_bricks(pyramid, octree.cells, lo, hi, coding, st);
+  code_bricks(pyramid, octree.cells, lo, hi, coding, st,
+              keep_originals ? &coded.originals : nullptr);
 
-  const auto children = merge_subtrees(octree);  // 3.
+  coded.children = merge_subtrees(octree);  // 3.
+  coded.parent.assign(octree.cells.size(), 0);
+  for (std::size_t i = 0; i < coded.children.size(); ++i)
+    for (std::size_t c : coded.children[i]) coded.parent[c] = i;
+  coded.t = t;
+  coded.geometry = pyramid.geometry;
+  coded.bricks = std::move(octree.cells);
+  coded.level_begin = std::move(octree.level_begin);
+  const bool variable = ksvd && settings_.fixed_sparsity == 0;
+  for (std::size_t l = 0; l < pyramid.geometry.size(); ++l)
+    coded.level_tolerance.push_back(
+        variable ? settings_.tolerance * coding.level_scale(static_cast<std::uint32_t>(l)) : 0.0);
+  coded.max_abs_error = ksvd ? settings_.max_error : settings_.zfp_accuracy;
 
-  format::FrameContents out;  // 4.
-  out.header.codec = static_cast<std::uint32_t>(settings_.codec);
-  out.header.frame_index = static_cast<std::uint32_t>(t);
-  out.header.dims[0] = static_cast<std::uint32_t>(frame.dims.x);
-  out.header.dims[1] = static_cast<std::uint32_t>(frame.dims.y);
-  out.header.dims[2] = static_cast<std::uint32_t>(frame.dims.z);
-  out.header.block_size = ksvd ? 6 : 0;
-  out.header.atom_count = ksvd ? static_cast<std::uint32_t>(dictionary_->atom_count()) : 0;
-  out.header.value_min = lo;
-  out.header.value_max = hi;
-  out.header.codec_parameter =
+  format::FrameHeader& h = coded.header;
+  h.codec = static_cast<std::uint32_t>(settings_.codec);
+  h.frame_index = static_cast<std::uint32_t>(t);
+  h.dims[0] = static_cast<std::uint32_t>(frame.dims.x);
+  h.dims[1] = static_cast<std::uint32_t>(frame.dims.y);
+  h.dims[2] = static_cast<std::uint32_t>(frame.dims.z);
+  h.block_size = ksvd ? 6 : 0;
+  h.atom_count = ksvd ? static_cast<std::uint32_t>(dictionary_->atom_count()) : 0;
+  h.value_min = lo;
+  h.value_max = hi;
+  h.codec_parameter =
       ksvd ? (settings_.fixed_sparsity > 0 ? 0.0 : settings_.tolerance) : settings_.zfp_accuracy;
-  out.header.fixed_sparsity = static_cast<std::uint32_t>(settings_.fixed_sparsity);
-  out.header.container_id = settings_.container_id;
-  build_node_table(pyramid, octree, children, ksvd, out, st);
+  h.fixed_sparsity = static_cast<std::uint32_t>(settings_.fixed_sparsity);
+  h.container_id = settings_.container_id;
+  st.seconds = seconds_since(start);
+  return coded;
+}
 
+std::vector<std::byte> FrameEncoder::write(const CodedFrame& coded, std::span<const char> keep,
+                                           FrameStats* stats) const {
+  if (!keep.empty() && keep.size() != coded.bricks.size())
+    throw std::invalid_argument("FrameEncoder::write: one keep flag per brick");
+  const auto start = Clock::now();
+  FrameStats st = coded.stats;
+  format::FrameContents out;  // 4.
+  out.header = coded.header;
+  build_node_table(coded, keep, settings_.codec == format::Codec::ksvd, out, st);
   std::vector<std::byte> bytes = format::serialize_frame(out);
   st.bytes = bytes.size();
   st.breakdown.frame_tables = st.bytes - st.breakdown.total();  // what is not a brick payload
-  st.seconds = seconds_since(start);
+  st.seconds += seconds_since(start);
   if (stats) *stats = st;
   return bytes;
+}
+
+std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
+                                            FrameStats* stats) const {
+  return write(code(t, frame), {}, stats);
 }
 
 }  // namespace volreel::encoder

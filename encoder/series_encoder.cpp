@@ -15,12 +15,14 @@
 
 #include "detail.hpp"
 #include "volreel/dictionary/dictionary.hpp"
+#include "volreel/encoder/keyframes.hpp"
 #include "volreel/format/container.hpp"
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/decoder.hpp"
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
+#include "volreel/format/time_step.hpp"
 
 namespace volreel::encoder {
 
@@ -80,6 +82,7 @@ std::string settings_difference(const format::Manifest& old, const format::Manif
   differ("value range", text(std::vector<double>{old.value_min, old.value_max}),
          text(std::vector<double>{now.value_min, now.value_max}));
   differ("frames", text(old.frames.size()), text(now.frames.size()));
+  differ("max keyframe gap", text(old.max_keyframe_gap), text(now.max_keyframe_gap));
   const auto dictionary = [](const format::Manifest& m) {
     return m.dictionary
                ? nlohmann::json{{"crc32c", m.dictionary->crc32c}, {"bytes", m.dictionary->bytes}}
@@ -104,7 +107,8 @@ std::string settings_difference(const format::Manifest& old, const format::Manif
 /// with `coding` (its value range set): the volume, the codec and its parameters, and the
 /// provenance with the coding choices a resumed encode must repeat.
 format::Manifest new_manifest(const datasets::SeriesInfo& info, std::size_t frames,
-                              const CodingSettings& coding, const nlohmann::json& provenance) {
+                              const CodingSettings& coding, std::uint32_t max_keyframe_gap,
+                              const nlohmann::json& provenance) {
   format::Manifest m;
   m.program_version = VOLREEL_VERSION;
   m.dims = {static_cast<std::uint32_t>(info.dims.x), static_cast<std::uint32_t>(info.dims.y),
@@ -127,6 +131,7 @@ format::Manifest new_manifest(const datasets::SeriesInfo& info, std::size_t fram
   m.value_min = coding.value_min;
   m.value_max = coding.value_max;
   m.frames.assign(frames, std::nullopt);
+  m.max_keyframe_gap = std::max<std::uint32_t>(max_keyframe_gap, 1);
   m.encoder = provenance;
   if (!m.encoder.is_object()) m.encoder = nlohmann::json::object();
   if (coding.codec == format::Codec::ksvd) {
@@ -287,6 +292,8 @@ void add_frame(const FrameStats& st, EncodeSummary& summary) {
   for (std::size_t k = 0; k < st.coef_bits_histogram.size(); ++k)
     summary.coef_bits_histogram[k] += st.coef_bits_histogram[k];
   summary.code_bits += st.code_bits;
+  summary.bricks_stored += st.bricks;
+  summary.nodes_interpolated += st.interpolated_nodes;
   summary.blocks_over_bound += st.blocks_over_bound;
 }
 
@@ -339,7 +346,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     std::tie(coding.value_min, coding.value_max) = value_range(series, frames);
   check_value_range(coding.value_min, coding.value_max, info.source);
 
-  format::Manifest m = new_manifest(info, frames, coding, job.provenance);
+  format::Manifest m = new_manifest(info, frames, coding, job.max_keyframe_gap, job.provenance);
   std::optional<StoredDictionary> dict;
   if (coding.codec == format::Codec::ksvd) {
     dict = stored_dictionary(job);
@@ -382,26 +389,32 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   m.complete = false;
   format::write_manifest(out, m);
 
-  // 3. Encode the rest, one frame in memory at a time.
-  Volume frame(info.dims);
+  // 3. Encode the rest, a stretch of at most max_keyframe_gap + 1 frames in memory at a time:
+  //    [s, e] with e = s + G (the series' last frame at most). Each frame is coded in full (coded
+  //    again at a smaller ε while it falls short of psnr_target); then each node keeps its brick
+  //    at the steps its interpolation cannot stand in for (keyframes.hpp); s and e store every
+  //    node, so a stretch is resumed whole and decodes without frames outside it.
+  const std::size_t gap = std::max<std::uint32_t>(job.max_keyframe_gap, 1);
   const double voxels = static_cast<double>(info.dims.voxels());
-  for (std::size_t t = 0; t < frames; ++t) {
-    if (done[t]) continue;
-    series.read_frame(t, frame.data);
-    FrameStats st;
-    const auto start = Clock::now();
-    std::vector<std::byte> bytes = encoder->encode(t, frame, &st);
-    // The delivered error of the finest level; with a PSNR target, code the frame again at a
-    // smaller ε while it falls short.
-    auto [squared, worst] = finest_level_error(bytes, atoms, frame, t);
-    const double voxel_count = static_cast<double>(frame.data.size());
-    const auto frame_psnr = [&](double e) {
-      return e > 0 ? 10 * std::log10(range * range / (e / voxel_count))
-                   : std::numeric_limits<double>::infinity();
-    };
-    for (int retry = 0;
-         holds_psnr && retry < max_tolerance_retries && frame_psnr(squared) < job.psnr_target;
-         ++retry) {
+  const double voxel_count = voxels;
+  const auto frame_psnr = [&](double e) {
+    return e > 0 ? 10 * std::log10(range * range / (e / voxel_count))
+                 : std::numeric_limits<double>::infinity();
+  };
+  struct Step {
+    Volume volume;
+    CodedFrame coded;
+    bool measured = false;  ///< its delivered error counted (as the end of the previous stretch)
+  };
+  // Codes frame t (read into step.volume), again at a smaller ε while it misses psnr_target.
+  const auto code_step = [&](std::size_t t, Step& step) {
+    step.volume = Volume(info.dims);
+    series.read_frame(t, step.volume.data);
+    step.coded = encoder->code(t, step.volume, gap > 1);
+    for (int retry = 0; holds_psnr && retry < max_tolerance_retries; ++retry) {
+      const auto [squared, worst] =
+          finest_level_error(encoder->write(step.coded), atoms, step.volume, t);
+      if (frame_psnr(squared) >= job.psnr_target) break;
       if (retry == 0) ++summary.delivered.frames_coded_again;
       // 0.1 dB more than the shortfall, so that the next try lands above the target.
       summary.delivered.tolerance_scale *=
@@ -409,37 +422,97 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       CodingSettings smaller = coding;
       smaller.tolerance = coding.tolerance * summary.delivered.tolerance_scale;
       encoder.emplace(&dict->dictionary, smaller);
-      bytes = encoder->encode(t, frame, &st);
-      std::tie(squared, worst) = finest_level_error(bytes, atoms, frame, t);
+      step.coded = encoder->code(t, step.volume, gap > 1);
     }
-    // Never write a frame that a reader would refuse.
-    try {
-      format::validate_payloads(format::FrameView(bytes, format::frame_file_name(t)), atoms);
-    } catch (const format::FormatError& e) {
-      throw std::runtime_error("frame " + std::to_string(t) +
-                               " was coded into bytes that do not decode, so it was not written (" +
-                               e.what() + ")");
+  };
+  const auto opener = [&](std::size_t t) {
+    return format::FrameFile(out / format::frame_file_name(t));
+  };
+  std::optional<Step> carried;  // the last frame of the previous stretch
+  for (std::size_t s = 0;;) {
+    const std::size_t e = std::min(s + gap, frames - 1);
+    if (std::all_of(done.begin() + static_cast<std::ptrdiff_t>(s),
+                    done.begin() + static_cast<std::ptrdiff_t>(e + 1),
+                    [](char d) { return d != 0; })) {
+      carried.reset();
+    } else {
+      const auto start = Clock::now();
+      std::vector<Step> steps(e - s + 1);
+      for (std::size_t t = s; t <= e; ++t) {
+        if (t == s && carried) {
+          steps[0] = std::move(*carried);
+          continue;
+        }
+        code_step(t, steps[t - s]);
+      }
+      std::vector<std::vector<char>> keep(steps.size());
+      if (gap > 1 && steps.size() > 2) {
+        std::vector<const CodedFrame*> coded;
+        for (const Step& st : steps) coded.push_back(&st.coded);
+        KeyframeRule rule;
+        rule.within_coded_error = holds_psnr;
+        keep = choose_keyframes(coded, atoms, rule);
+      }
+      summary.seconds += seconds_since(start);
+      for (std::size_t t = s; t <= e; ++t) {
+        Step& step = steps[t - s];
+        if (done[t]) continue;  // the end of a stretch already written
+        const auto write_start = Clock::now();
+        FrameStats st;
+        std::vector<std::byte> bytes = encoder->write(step.coded, keep[t - s], &st);
+        // Never write a frame that a reader would refuse.
+        try {
+          format::validate_payloads(format::FrameView(bytes, format::frame_file_name(t)), atoms);
+        } catch (const format::FormatError& err) {
+          throw std::runtime_error(
+              "frame " + std::to_string(t) +
+              " was coded into bytes that do not decode, so it was not written (" + err.what() +
+              ")");
+        }
+        format::write_container_file(out, format::frame_file_name(t), bytes);
+        m.frames[t] = format::ManifestFrame{format::frame_file_name(t), bytes.size(),
+                                            format::manifest_crc(bytes)};
+        format::write_manifest(out, m);
+        done[t] = 1;
+        summary.seconds += seconds_since(write_start);
+        add_frame(st, summary);
+        char status[64];
+        std::snprintf(status, sizeof status, "%.1f MVoxel/s",
+                      voxels * static_cast<double>(summary.encoded) / 1e6 / summary.seconds);
+        progress.report(static_cast<double>(summary.skipped + summary.encoded),
+                        static_cast<double>(frames), status);
+      }
+      // The delivered error of every step of the stretch, decoded from the files as a reader
+      // does (interpolated nodes included).
+      format::TimeStepDecoder decoder(frames, static_cast<std::uint32_t>(gap), atoms, opener);
+      std::vector<float> decoded(info.dims.voxels());
+      const std::uint32_t finest = static_cast<std::uint32_t>(steps[0].coded.geometry.size() - 1);
+      for (std::size_t t = s; t <= e; ++t) {
+        Step& step = steps[t - s];
+        if (step.measured) continue;
+        decoder.decode(t, finest, decoded);
+        double squared = 0, worst = 0;
+        for (std::size_t i = 0; i < decoded.size(); ++i) {
+          const double d =
+              static_cast<double>(decoded[i]) - static_cast<double>(step.volume.data[i]);
+          squared += d * d;
+          worst = std::max(worst, std::abs(d));
+        }
+        step.measured = true;
+        DeliveredQuality& q = summary.delivered;
+        ++q.frames;
+        q.squared_error += squared;
+        q.voxels += voxel_count;
+        q.max_abs_error = std::max(q.max_abs_error, worst);
+        if (frame_psnr(squared) < q.worst_frame_psnr) {
+          q.worst_frame_psnr = frame_psnr(squared);
+          q.worst_frame = t;
+        }
+      }
+      carried = std::move(steps.back());
     }
-    summary.seconds += seconds_since(start);
-    DeliveredQuality& q = summary.delivered;
-    ++q.frames;
-    q.squared_error += squared;
-    q.voxels += voxel_count;
-    q.max_abs_error = std::max(q.max_abs_error, worst);
-    if (frame_psnr(squared) < q.worst_frame_psnr) {
-      q.worst_frame_psnr = frame_psnr(squared);
-      q.worst_frame = t;
-    }
-    format::write_container_file(out, format::frame_file_name(t), bytes);
-    m.frames[t] = format::ManifestFrame{format::frame_file_name(t), bytes.size(),
-                                        format::manifest_crc(bytes)};
-    format::write_manifest(out, m);
-    add_frame(st, summary);
-    char status[64];
-    std::snprintf(status, sizeof status, "%.1f MVoxel/s",
-                  voxels * static_cast<double>(summary.encoded) / 1e6 / summary.seconds);
-    progress.report(static_cast<double>(summary.skipped + summary.encoded),
-                    static_cast<double>(frames), status);
+    if (e + 1 >= frames) break;
+    s = e;
   }
   m.complete = true;
   format::write_manifest(out, m);

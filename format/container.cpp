@@ -14,6 +14,7 @@
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
 #include "volreel/format/json_input.hpp"
+#include "volreel/format/time_step.hpp"
 
 namespace volreel::format {
 
@@ -70,6 +71,7 @@ json manifest_to_json(const Manifest& m) {
          {"fixed_sparsity", m.fixed_sparsity},
          {"zfp_accuracy", m.zfp_accuracy},
          {"value_range", {m.value_min, m.value_max}},
+         {"max_keyframe_gap", m.max_keyframe_gap},
          {"dictionary", m.dictionary ? json{{"file", m.dictionary->file},
                                             {"bytes", m.dictionary->bytes},
                                             {"crc32c", m.dictionary->crc32c},
@@ -222,6 +224,7 @@ Manifest manifest_from_json(const std::string& text, const fs::path& name) {
     fail("value_range", "[min, max] with min <= max, both within float32's range", range);
   m.value_min = range[0].get<double>();
   m.value_max = range[1].get<double>();
+  m.max_keyframe_gap = static_cast<std::uint32_t>(uint_field("max_keyframe_gap", 1, 65535));
   const json& dict = get("dictionary");
   if (m.codec == Codec::ksvd) {
     if (!dict.is_object()) fail("dictionary", "an object (ksvd codec)", dict);
@@ -389,6 +392,16 @@ FrameFile Container::open_frame(std::size_t t) const {
             ? std::string("0 (fixed rate)")
             : "a tolerance in (0, " + std::to_string(manifest_.tolerance) + "] (manifest.json)",
         std::to_string(parameter));
+  // The first and last steps store every node; so does every step without keyframe gaps.
+  if (h.brick_count != h.node_count &&
+      (t == 0 || t + 1 == manifest_.frames.size() || manifest_.max_keyframe_gap == 1))
+    throw FormatError(path, offsetof(FrameHeader, brick_count),
+                      "a brick for each of the " + std::to_string(h.node_count) + " nodes (" +
+                          (manifest_.max_keyframe_gap == 1
+                               ? std::string("max_keyframe_gap 1: every step stores every node")
+                               : std::string("the first and last steps store every node")) +
+                          ")",
+                      std::to_string(h.brick_count) + " bricks");
   if (manifest_.codec == Codec::ksvd && h.atom_count != atom_count_)
     throw FormatError(path, offsetof(FrameHeader, atom_count),
                       std::to_string(atom_count_) + " atoms (the dictionary's)",
@@ -431,11 +444,14 @@ void decode_and_check_histograms(const FrameView& view, const AtomTable& atoms) 
   const std::uint32_t finest = view.level(view.level_count() - 1).first_node;
   std::vector<float> brick(brick_voxels);
   // Every brick decoded once (what validate_payloads does); the finest level's non-constant
-  // bricks also against their histograms (constant ones are checked by the reader).
-  for (std::uint32_t i = 0; i < view.brick_count(); ++i) {
-    decode_brick(view, i, atoms, brick);
-    if (!check || i < finest || view.brick_bytes(i).size() == 4) continue;
+  // bricks also against their histograms (constant ones are checked by the reader). A node
+  // without a brick at this step has the histogram of the frame's data, which its interpolated
+  // values need not match.
+  for (std::uint32_t i = 0; i < view.node_count(); ++i) {
     const Node n = view.node(i);
+    if (n.brick == no_brick) continue;
+    decode_brick(view, n.brick, atoms, brick);
+    if (!check || i < finest || view.brick_bytes(n.brick).size() == 4) continue;
     std::uint64_t decoded = 0;
     for (float v : brick) decoded |= std::uint64_t{1} << histogram_bin(v, h.value_min, h.value_max);
     const std::uint64_t at = h.node_table_offset + sizeof(Node) * std::uint64_t{i} + 8;
@@ -483,9 +499,11 @@ std::vector<std::string> verify_container(const fs::path& dir,
       problems.push_back(e.what());
     }
   }
+  TimeStepDecoder steps(*container);
   for (std::size_t t = 0; t < m.frames.size(); ++t) {
     try {
       const FrameFile f = container->open_frame(t);
+      steps.check_keyframes(t);
       f.view().check_payload_crc();
       const std::uint32_t crc = manifest_crc(f.view().bytes());
       if (crc != m.frames[t]->crc32c)

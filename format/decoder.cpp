@@ -425,22 +425,54 @@ void decode_brick(const FrameView& frame, std::uint32_t brick, const AtomTable& 
                  atoms, out, frame.name(), frame.brick_offset(brick));
 }
 
-void decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& atoms,
-                  std::span<float> out) {
+void place_in_level(const NodePosition& p, std::uint32_t level, std::array<std::uint32_t, 3> dims,
+                    std::span<const float> brick, std::span<float> out) {
+  const std::size_t nx = dims[0], ny = dims[1], nz = dims[2];
+  const std::size_t scale = std::size_t{1}
+                            << (level - p.level);  // a node voxel covers scale³ voxels of `level`
+  const std::size_t span_voxels = brick_interior * scale;
+  const std::size_t x0 = p.x * span_voxels, y0 = p.y * span_voxels, z0 = p.z * span_voxels;
+  const std::size_t x1 = std::min(nx, x0 + span_voxels), y1 = std::min(ny, y0 + span_voxels),
+                    z1 = std::min(nz, z0 + span_voxels);
+  for (std::size_t z = z0; z < z1; ++z)
+    for (std::size_t y = y0; y < y1; ++y) {
+      float* row = out.data() + (z * ny + y) * nx;
+      if (p.level == level) {
+        const float* src =
+            brick.data() + ((z - z0 + 1) * brick_size + (y - y0 + 1)) * brick_size + 1;
+        std::memcpy(row + x0, src, (x1 - x0) * sizeof(float));
+      } else {
+        std::fill(row + x0, row + x1, brick[0]);
+      }
+    }
+}
+
+std::vector<std::uint32_t> level_work(const FrameView& frame, std::uint32_t level) {
   if (level >= frame.level_count())
     throw FormatError(frame.name(), "no level " + str(level) + " (frame has " +
                                         str(frame.level_count()) + " levels)");
-  const LevelEntry& target = frame.level(level);
-  const std::size_t nx = target.dims[0], ny = target.dims[1], nz = target.dims[2];
-  if (out.size() != nx * ny * nz)
-    throw FormatError(frame.name(), "decode_level: output of the wrong size");
-  // 1. Nodes of this level and empty nodes above it, in one list.
   std::vector<std::uint32_t> work;
   for (std::uint32_t l = 0; l <= level; ++l) {
     const LevelEntry& e = frame.level(l);
     for (std::uint32_t i = e.first_node; i < e.first_node + e.node_count; ++i)
       if (l == level || frame.node(i).type() == NodeType::empty) work.push_back(i);
   }
+  return work;
+}
+
+void decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& atoms,
+                  std::span<float> out) {
+  // 1. Nodes of this level and empty nodes above it, in one list.
+  const std::vector<std::uint32_t> work = level_work(frame, level);
+  const LevelEntry& target = frame.level(level);
+  if (out.size() != std::size_t{target.dims[0]} * target.dims[1] * target.dims[2])
+    throw FormatError(frame.name(), "decode_level: output of the wrong size");
+  for (std::uint32_t i : work)
+    if (!frame.has_brick(i))
+      throw FormatError(frame.name(), "node " + str(i) +
+                                          " has no brick at this time step (it is interpolated "
+                                          "between its keyframes: decode the time step through "
+                                          "its container, format::TimeStepDecoder)");
   // 2. Decode each brick and copy its interior (or its constant region) into the volume.
   std::exception_ptr error;
   const auto n = static_cast<std::ptrdiff_t>(work.size());
@@ -451,30 +483,14 @@ void decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& 
     for (std::ptrdiff_t w = 0; w < n; ++w) {
       const std::uint32_t i = work[static_cast<std::size_t>(w)];
       try {
-        decode_brick(frame, i, atoms, brick);
+        decode_brick(frame, frame.node(i).brick, atoms, brick);
       } catch (const FormatError&) {
 #pragma omp critical(volreel_decode_error)
         if (!error) error = std::current_exception();
         continue;
       }
-      const NodePosition& p = frame.position(i);
-      const std::size_t scale =
-          std::size_t{1} << (level - p.level);  // a node voxel covers scale³ voxels of `level`
-      const std::size_t span_voxels = brick_interior * scale;
-      const std::size_t x0 = p.x * span_voxels, y0 = p.y * span_voxels, z0 = p.z * span_voxels;
-      const std::size_t x1 = std::min(nx, x0 + span_voxels), y1 = std::min(ny, y0 + span_voxels),
-                        z1 = std::min(nz, z0 + span_voxels);
-      for (std::size_t z = z0; z < z1; ++z)
-        for (std::size_t y = y0; y < y1; ++y) {
-          float* row = out.data() + (z * ny + y) * nx;
-          if (p.level == level) {
-            const float* src =
-                brick.data() + ((z - z0 + 1) * brick_size + (y - y0 + 1)) * brick_size + 1;
-            std::memcpy(row + x0, src, (x1 - x0) * sizeof(float));
-          } else {
-            std::fill(row + x0, row + x1, brick[0]);
-          }
-        }
+      place_in_level(frame.position(i), level, {target.dims[0], target.dims[1], target.dims[2]},
+                     brick, out);
     }
   }
   if (error) std::rethrow_exception(error);

@@ -191,8 +191,8 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
   if (h.node_count == 0 || h.node_count > max_nodes)
     fail(offsetof(FrameHeader, node_count), "node count in 1.." + str(max_nodes),
          str(h.node_count));
-  if (h.brick_count != h.node_count)
-    fail(offsetof(FrameHeader, brick_count), "brick count = node count " + str(h.node_count),
+  if (h.brick_count > h.node_count)
+    fail(offsetof(FrameHeader, brick_count), "brick count in 0.." + str(h.node_count) + " (nodes)",
          str(h.brick_count));
   // 2. Section offsets: exactly back to back.
   const std::uint64_t levels_at = sizeof(FrameHeader);
@@ -259,16 +259,33 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
   if (next_node != h.node_count)
     fail(levels_at, "level node counts summing to " + str(h.node_count), str(next_node));
   // 4. Nodes: types, bricks, and child links that tile each level in order; positions follow.
+  //    Bricks are numbered in node order; a node without one (no_brick) is not a keyframe at
+  //    this time step, and an empty node always has one.
   positions_.assign(h.node_count, {});
+  level_first_brick_.assign(h.level_count + 1, 0);
+  std::uint32_t next_brick = 0;
   for (std::uint32_t l = 0; l < h.level_count; ++l) {
     const LevelEntry& e = levels_[l];
+    level_first_brick_[l] = next_brick;
     std::uint32_t expected_child = l + 1 < h.level_count ? levels_[l + 1].first_node : 0;
     for (std::uint32_t i = e.first_node; i < e.first_node + e.node_count; ++i) {
       const std::uint64_t at = nodes_at + sizeof(Node) * i;
       const Node n = load<Node>(bytes, at);
-      if (n.brick != i) fail(at, "node " + str(i) + " brick index " + str(i), str(n.brick));
       const auto type = static_cast<std::uint32_t>(n.type());
       if (type > 2) fail(at + 4, "node " + str(i) + " type 0..2", str(type));
+      if (n.brick == no_brick) {
+        if (n.type() == NodeType::empty)
+          fail(at, "node " + str(i) + " (empty) brick " + str(next_brick), "none (no_brick)");
+      } else if (n.brick != next_brick || next_brick >= h.brick_count) {
+        fail(at,
+             "node " + str(i) + " brick index " +
+                 (next_brick < h.brick_count
+                      ? str(next_brick) + " or none (no_brick)"
+                      : std::string("none (all ") + str(h.brick_count) + " bricks numbered)"),
+             str(n.brick));
+      } else {
+        ++next_brick;
+      }
       const bool finest = l + 1 == h.level_count;
       if (n.type() == NodeType::leaf && !finest)
         fail(at + 4, "node " + str(i) + " of level " + str(l) + ": inner or empty", "leaf");
@@ -297,6 +314,10 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
       }
       expected_child = c;
     }
+    level_first_brick_[l + 1] = next_brick;
+    if (l + 1 == h.level_count && next_brick != h.brick_count)
+      fail(offsetof(FrameHeader, brick_count),
+           "brick count " + str(next_brick) + " (the nodes with a brick)", str(h.brick_count));
     if (l + 1 < h.level_count &&
         expected_child != levels_[l + 1].first_node + levels_[l + 1].node_count)
       fail(nodes_at + sizeof(Node) * e.first_node,
@@ -326,10 +347,11 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
     const std::uint64_t at = nodes_at + sizeof(Node) * i;
     const Node n = node(i);
     if (n.histogram == 0) fail(at + 8, "node " + str(i) + " histogram with a bin set", "none");
-    const std::span<const std::byte> payload = brick_bytes(i);
+    const std::span<const std::byte> payload =
+        n.brick == no_brick ? std::span<const std::byte>() : brick_bytes(n.brick);
     if (n.type() == NodeType::empty && payload.size() != 4)
-      fail(brick_offset(i),
-           "a 4-byte constant payload for brick " + str(i) + " (its node is empty)",
+      fail(brick_offset(n.brick),
+           "a 4-byte constant payload for brick " + str(n.brick) + " (its node is empty)",
            str(payload.size()) + " bytes");
     if (payload.size() == 4 && n.type() != NodeType::inner) {
       const float value = load<float>(payload, 0);
@@ -383,7 +405,26 @@ std::span<const std::byte> FrameView::checked_brick_bytes(std::uint32_t b) const
 
 std::uint64_t FrameView::payload_end_for_depth(std::uint32_t depth) const {
   if (depth >= header_.level_count) return header_.payload_offset + header_.payload_bytes;
-  return brick_offset(levels_[depth].first_node);
+  return brick_offset(level_first_brick_[depth]);
+}
+
+std::uint32_t FrameView::find_node(const NodePosition& p) const {
+  if (p.level >= header_.level_count) return no_node_index;
+  const LevelEntry& e = levels_[p.level];
+  const std::uint64_t key = morton3(p.x, p.y, p.z);
+  // Nodes of a level are in Morton order.
+  std::uint32_t lo = e.first_node, hi = e.first_node + e.node_count;
+  while (lo < hi) {
+    const std::uint32_t mid = lo + (hi - lo) / 2;
+    const NodePosition& q = positions_[mid];
+    if (morton3(q.x, q.y, q.z) < key)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  if (lo == e.first_node + e.node_count) return no_node_index;
+  const NodePosition& q = positions_[lo];
+  return q.x == p.x && q.y == p.y && q.z == p.z ? lo : no_node_index;
 }
 
 void FrameView::check_payload_crc() const {

@@ -32,7 +32,7 @@ echo "$out" | json '1 if d["bps"] > 0 and d["sequence"]["psnr"] > 35 else exit(1
 "$volreel" decode "$work/a.vreel" --frame 2 --level 0 --out "$work/f2l0.f32" > /dev/null
 [ "$(stat -c %s "$work/f2l0.f32")" = $((20 * 18 * 15 * 4)) ] || fail "decode at level 0: wrong size"
 expect_error "levels 0..1" "$volreel" decode "$work/a.vreel" --frame 0 --level 5 --out "$work/x.f32"
-expect_error "no frame 3" "$volreel" decode "$work/a.vreel" --frame 3 --out "$work/x.f32"
+expect_error "the container has frames 0..2" "$volreel" decode "$work/a.vreel" --frame 3 --out "$work/x.f32"
 expect_error "already holds a container" "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/a.vreel"
 
 # Damage: a flipped byte in a frame, a truncated frame, a broken manifest.
@@ -73,7 +73,7 @@ expect_error "exceeds --max-error" "$volreel" compare "$work/s" "$work/m.vreel" 
 "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/p.vreel" --psnr 58 > "$work/psnr.txt" 2>&1
 grep -q "target PSNR 58.00 dB met by every frame" "$work/psnr.txt" || fail "--psnr 58: $(cat "$work/psnr.txt")"
 "$volreel" compare "$work/s" "$work/p.vreel" --no-ssim --min-psnr 58 > /dev/null 2>&1 || fail "--psnr 58 not delivered"
-sed -i 's/"format_version": 5/"format_version": 4/' "$work/m.vreel/manifest.json"
+sed -i 's/"format_version": 6/"format_version": 5/' "$work/m.vreel/manifest.json"
 expect_error "encode the series again" "$volreel" info "$work/m.vreel"
 
 echo "encode_cli_end_to_end: all checks passed"

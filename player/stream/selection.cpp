@@ -62,11 +62,55 @@ KeyframePick nearest_on_side(const SpatialIndex& index, std::span<const Resident
   return best_other;
 }
 
+/// The time step on `side` of p nearest it at which `node` has a keyframe node in the index (with
+/// constant_only, a constant subtree's), not beyond `limit` (a nearer one found elsewhere); -1
+/// when there is none.
+double stored_time(const SpatialIndex& index, std::uint32_t node, double p, Side side,
+                   bool constant_only, double limit) {
+  const std::span<const KeyframeNode> list = index.keyframes(node);
+  // First keyframe node after p.
+  const auto after = std::upper_bound(
+      list.begin(), list.end(), p,
+      [](double v, const KeyframeNode& k) { return v < static_cast<double>(k.t); });
+  if (side == Side::before) {
+    for (auto it = after; it != list.begin();) {
+      --it;
+      if (limit >= 0 && static_cast<double>(it->t) < limit) break;
+      if (!constant_only || it->subtree_constant) return static_cast<double>(it->t);
+    }
+  } else {
+    // Keyframe nodes at p itself are on both sides.
+    auto it = after;
+    while (it != list.begin() && static_cast<double>(std::prev(it)->t) == p) --it;
+    for (; it != list.end(); ++it) {
+      if (limit >= 0 && static_cast<double>(it->t) > limit) break;
+      if (!constant_only || it->subtree_constant) return static_cast<double>(it->t);
+    }
+  }
+  return -1;
+}
+
+/// The time step on `side` of p nearest it at which the node's state is stored: its own keyframe
+/// nodes and the constant subtrees of its ancestors (exact data for it); -1 when none is.
+double stored_state_time(const SpatialIndex& index, std::uint32_t node, double p, Side side) {
+  double best = stored_time(index, node, p, side, false, -1);
+  for (std::uint32_t a = index.node(node).parent; a != no_node; a = index.node(a).parent) {
+    const double t = stored_time(index, a, p, side, true, best);
+    if (t >= 0 && (best < 0 || (side == Side::before ? t > best : t < best))) best = t;
+  }
+  return best;
+}
+
 KeyframePick pick_side(const SpatialIndex& index, std::uint32_t node, double p,
                        const ResidentKeyframes& resident, Side side,
                        const SelectionSettings& settings) {
   KeyframePick best;
   best.score = std::numeric_limits<double>::infinity();
+  // The nearest time step on this side, and the step at which this node's state is stored
+  // nearest it: a node without a brick at every step is drawn between its stored states, so its
+  // nearest stored state counts as if it were at the nearest step (distance from p to that step).
+  const double step = side == Side::before ? std::floor(p) : std::ceil(p);
+  const double own_reference = stored_state_time(index, node, p, side);
   std::uint32_t up = 0;
   for (std::uint32_t n = node; n != no_node; n = index.node(n).parent, ++up) {
     KeyframePick c = nearest_on_side(index, resident.of_node(n), p, side, settings);
@@ -74,6 +118,11 @@ KeyframePick pick_side(const SpatialIndex& index, std::uint32_t node, double p,
     const KeyframeNode& k = index.keyframe(c.keyframe);
     // 2. Ancestor handicap, except for a constant subtree, which is exact for its descendants.
     c.exact = up == 0 || k.subtree_constant;
+    const double t = static_cast<double>(k.t);
+    if (side == Side::before ? t <= p : t >= p) {
+      const double reference = c.exact ? own_reference : stored_time(index, n, p, side, false, -1);
+      if (reference >= 0) c.score = std::abs(reference - t) + std::abs(step - p);
+    }
     if (!c.exact) c.score *= std::exp(settings.ancestor_handicap * static_cast<double>(up));
     c.lod_difference = up;
     c.t = k.t;

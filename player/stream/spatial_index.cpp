@@ -48,6 +48,7 @@ void SpatialIndexBuilder::add_frame(std::uint32_t t, const format::FrameView& fr
                               str(geometry_.size()) + " levels", str(frame.level_count()));
   for (std::uint32_t i = 0; i < frame.node_count(); ++i) {
     const format::Node n = frame.node(i);
+    if (n.brick == format::no_brick) continue;  // not a keyframe of the node at step t
     const format::NodePosition& p = frame.position(i);
     KeyframeNode k;
     k.t = t;

@@ -23,7 +23,7 @@ using Clock = std::chrono::steady_clock;
 
 GroundTruth::GroundTruth(const format::Container& container,
                          std::unique_ptr<datasets::SeriesReader> series)
-    : container_(container), series_(std::move(series)) {
+    : container_(container), series_(std::move(series)), steps_(container) {
   const format::Manifest& m = container.manifest();
   geometry_ = cpu_render::VolumeGeometry::of(m.dims);
   if (series_) {
@@ -50,8 +50,7 @@ const std::vector<float>& GroundTruth::frame(std::size_t t, std::size_t keep) {
     values.resize(d.voxels());
     series_->read_frame(t, values);
   } else {
-    const format::FrameFile file = container_.open_frame(t);
-    values = format::decode_level(file.view(), geometry_.levels - 1, container_.atoms()).data;
+    values = steps_.decode(t, geometry_.levels - 1).data;
   }
   return cache_.emplace(t, std::move(values)).first->second;
 }

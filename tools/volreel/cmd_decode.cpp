@@ -12,6 +12,7 @@
 #include "commands.hpp"
 #include "volreel/format/container.hpp"
 #include "volreel/format/decoder.hpp"
+#include "volreel/format/time_step.hpp"
 
 namespace volreel::cli {
 
@@ -28,21 +29,25 @@ struct DecodeOptions {
 
 void run_decode(const DecodeOptions& o) {
   const format::Container c(o.dir);
-  const auto f = c.open_frame(o.frame);
-  const std::uint32_t levels = f.view().level_count();
+  format::TimeStepDecoder steps(c);
+  if (o.frame >= c.frame_count())
+    throw InputError("--frame " + std::to_string(o.frame) + ": the container has frames 0.." +
+                     std::to_string(c.frame_count() - 1));
+  const format::FrameView& f = steps.frame(o.frame);
+  const std::uint32_t levels = f.level_count();
   const std::uint32_t level = o.level < 0 ? levels - 1 : static_cast<std::uint32_t>(o.level);
   if (level >= levels)
     throw InputError("--level " + std::to_string(o.level) + ": the frame has levels 0.." +
                      std::to_string(levels - 1));
   format::LevelVolume v;
-  const auto& e = f.view().level(level);
+  const auto& e = f.level(level);
   v.dims = {e.dims[0], e.dims[1], e.dims[2]};
   v.data.resize(std::size_t{e.dims[0]} * e.dims[1] * e.dims[2]);
   // Timed: decoding into the allocated volume, the best of --repeat runs.
   double seconds = 1e30;
   for (int r = 0; r < std::max(1, o.repeat); ++r) {
     const auto start = Clock::now();
-    format::decode_level(f.view(), level, c.atoms(), v.data);
+    steps.decode(o.frame, level, v.data);
     seconds = std::min(seconds, std::chrono::duration<double>(Clock::now() - start).count());
   }
   std::ofstream out(o.out, std::ios::binary);

@@ -37,10 +37,11 @@ struct EncodeOptions {
          coef_step_factor = encoder::CodingSettings{}.coef_step_factor;
   int fixed_sparsity = 0, max_atoms = encoder::default_max_atoms, atoms = 0;
   std::size_t max_frames = 0, rate_sample_frames = 3;
+  std::uint32_t max_keyframe_gap = encoder::default_max_keyframe_gap;
   bool resume = false, overwrite = false, no_refit = false, extend = false;
   CLI::Option *tolerance_opt = nullptr, *psnr_opt = nullptr, *bps_opt = nullptr, *zfp_opt = nullptr,
               *level_factor_opt = nullptr, *max_error_opt = nullptr, *max_atoms_opt = nullptr,
-              *rate_rule_opt = nullptr;
+              *rate_rule_opt = nullptr, *keyframe_gap_opt = nullptr;
 };
 
 /// The options' coding settings (the value range and ε not yet set).
@@ -137,6 +138,10 @@ void run_encode(const EncodeOptions& o) {
   job.coding = coding_settings(o);
   job.half_atoms = o.atom_storage == "f16";
   if (o.psnr_opt->count() > 0) job.psnr_target = o.psnr;
+  // --bps's rate search codes sample frames whole; without a gap given, every frame stores every
+  // brick so that the size it finds is the size written.
+  job.max_keyframe_gap =
+      o.bps_opt->count() > 0 && o.keyframe_gap_opt->count() == 0 ? 1 : o.max_keyframe_gap;
   auto& c = job.coding;
   {
     ProgressBar bar("value range", "frames");
@@ -310,6 +315,17 @@ void add_encode_command(CLI::App& app) {
   o->zfp_opt = cmd->add_option("--zfp-accuracy", o->zfp_accuracy,
                                "zfp absolute error tolerance (default range*1e-3)");
   cmd->add_option("--max-frames", o->max_frames, "Encode only the first N frames (0: all)");
+  o->keyframe_gap_opt =
+      cmd->add_option("--max-keyframe-gap", o->max_keyframe_gap,
+                      "The most time steps between two stored bricks of a node: a node stores no "
+                      "brick at the steps\n"
+                      "between where interpolating its neighbouring keyframes meets the error "
+                      "rule. 1: every step\n"
+                      "stores every brick. Memory: G + 1 frames. With --bps the default is 1 (the "
+                      "rate search codes\n"
+                      "whole frames)")
+          ->check(CLI::Range(1, 65535))
+          ->capture_default_str();
   cmd->add_option("--rate-sample-frames", o->rate_sample_frames, "--bps: frames encoded per trial")
       ->capture_default_str();
   cmd->add_flag("--resume", o->resume,

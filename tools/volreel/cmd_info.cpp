@@ -1,5 +1,6 @@
 // cmd_info.cpp: `volreel info` — describe a NAME.vreel container: the volume, the codec and its
-// parameters, the levels of frame 0, the size and bps; or all of it as JSON.
+// parameters, the share of node-steps that store a brick (keyframes), the levels of frame 0, the
+// size and bps; or all of it as JSON.
 #include <algorithm>
 #include <cstdint>
 #include <cstdio>
@@ -38,8 +39,19 @@ void run_info(const std::string& dir, bool json) {
                                               f.view().payload_end_for_depth(l)}});
     }
   }
+  // Keyframes: the nodes of the frames' trees that store a brick at their step.
+  std::uint64_t nodes = 0, bricks = 0;
+  for (std::size_t t = 0; t < m.frames.size(); ++t) {
+    if (!m.frames[t]) continue;
+    const auto f = c.open_frame(t);
+    nodes += f.view().node_count();
+    bricks += f.view().brick_count();
+  }
+  const double kept = nodes > 0 ? static_cast<double>(bricks) / static_cast<double>(nodes) : 1.0;
   if (json) {
     nlohmann::json j = format::manifest_to_json(m);
+    j["node_steps"] = nodes;
+    j["bricks_stored"] = bricks;
     j["total_bytes"] = bytes;
     j["bps"] = bps;
     j["frames_written"] = written;
@@ -67,6 +79,10 @@ void run_info(const std::string& dir, bool json) {
     std::printf("codec    zfp fixed accuracy %.6g\n", m.zfp_accuracy);
   }
   std::printf("values   [%.6g, %.6g]\n", m.value_min, m.value_max);
+  std::printf("keyframes max gap %u time steps; %ju of %ju node-steps store a brick (%.1f %%)%s\n",
+              m.max_keyframe_gap, static_cast<std::uintmax_t>(bricks),
+              static_cast<std::uintmax_t>(nodes), 100.0 * kept,
+              bricks < nodes ? ", the rest are interpolated" : "");
   std::printf("size     %ju bytes, %.4f bps (all files, over the %zu frames written)\n",
               static_cast<std::uintmax_t>(bytes), bps, written);
   for (const auto& l : levels)

@@ -7,7 +7,8 @@ bool is_container(const std::filesystem::path& path) {
   return std::filesystem::is_directory(path) && std::filesystem::exists(path / "manifest.json");
 }
 
-ContainerSeries::ContainerSeries(const std::filesystem::path& dir) : container_(dir) {
+ContainerSeries::ContainerSeries(const std::filesystem::path& dir)
+    : container_(dir), steps_(container_) {
   const auto& m = container_.manifest();
   info_.dims = Dims{m.dims[0], m.dims[1], m.dims[2]};
   info_.frames = m.frames.size();
@@ -19,9 +20,8 @@ ContainerSeries::ContainerSeries(const std::filesystem::path& dir) : container_(
 }
 
 void ContainerSeries::read_frame(std::size_t t, std::span<float> out) const {
-  const format::FrameFile frame = container_.open_frame(t);
   if (out.size() != info_.dims.voxels()) throw InputError("read_frame: output of the wrong size");
-  format::decode_level(frame.view(), frame.view().level_count() - 1, container_.atoms(), out);
+  steps_.decode(t, container_.manifest().levels - 1, out);
 }
 
 }  // namespace volreel::cli

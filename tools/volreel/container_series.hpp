@@ -1,5 +1,6 @@
 // container_series.hpp: a NAME.vreel container read as a series (frames decoded at full
-// resolution by the CPU reference decoder), so that `compare` and friends accept it.
+// resolution by the CPU reference decoder, interpolated nodes as the player draws them), so that
+// `compare` and friends accept it.
 #pragma once
 
 #include <filesystem>
@@ -7,6 +8,7 @@
 
 #include "volreel/datasets/series.hpp"
 #include "volreel/format/container.hpp"
+#include "volreel/format/time_step.hpp"
 
 namespace volreel::cli {
 
@@ -22,6 +24,7 @@ class ContainerSeries : public datasets::SeriesReader {
 
  private:
   format::Container container_;
+  mutable format::TimeStepDecoder steps_;  ///< time steps as the player draws them
 };
 
 }  // namespace volreel::cli

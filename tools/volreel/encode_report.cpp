@@ -142,11 +142,20 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
       "s, %.2f MVoxel/s on %d threads\n",
       out.c_str(), s.frames, s.encoded, s.skipped, static_cast<std::uintmax_t>(s.container_bytes),
       s.bps, s.seconds, s.mvoxels_per_s, omp_get_max_threads());
+  const std::size_t node_steps = s.bricks_stored + s.nodes_interpolated;
+  if (s.nodes_interpolated > 0)
+    std::printf(
+        "keyframes: %zu of %zu node-steps store a brick (%.1f %%); the other %zu are drawn by "
+        "interpolating their node's keyframes\n",
+        s.bricks_stored, node_steps,
+        100.0 * static_cast<double>(s.bricks_stored) / static_cast<double>(node_steps),
+        s.nodes_interpolated);
   const encoder::DeliveredQuality& q = s.delivered;
   if (q.frames == 0) return;
   const double range = c.value_max - c.value_min;
   std::printf(
-      "delivered (finest level of the %zu frames encoded, decoded and compared): PSNR %.2f dB over "
+      "delivered (finest level of the %zu time steps encoded, decoded as the player draws them and "
+      "compared): PSNR %.2f dB over "
       "the sequence, worst frame %zu at %.2f dB, largest error %.4g\n",
       q.frames, q.sequence_psnr(range), q.worst_frame, q.worst_frame_psnr, q.max_abs_error);
   if (psnr_target > 0 && c.codec == format::Codec::ksvd && c.fixed_sparsity == 0) {

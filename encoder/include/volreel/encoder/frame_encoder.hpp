@@ -13,6 +13,7 @@
 #include "volreel/dictionary/dictionary.hpp"
 #include "volreel/dictionary/omp.hpp"
 #include "volreel/encoder/coding_settings.hpp"
+#include "volreel/format/frame_file.hpp"
 
 namespace volreel::encoder {
 
@@ -47,7 +48,8 @@ struct ByteBreakdown {
 
 struct FrameStats {
   std::size_t bricks = 0, constant_bricks = 0, empty_nodes = 0;
-  std::size_t blocks = 0, codes = 0;  ///< coded blocks and coefficients (ksvd)
+  std::size_t interpolated_nodes = 0;  ///< nodes without a brick at this step (keyframes.hpp)
+  std::size_t blocks = 0, codes = 0;   ///< coded blocks and coefficients (ksvd)
   std::size_t bytes = 0;
   double seconds = 0;
   double seconds_pyramid = 0, seconds_bricks = 0, seconds_omp = 0,
@@ -66,15 +68,56 @@ struct FrameStats {
   std::size_t blocks_over_bound = 0;
 };
 
+/// One node of a frame's full octree, coded: what the keyframe choice (keyframes.hpp) and the
+/// frame file need.
+struct CodedBrick {
+  std::uint32_t level = 0, x = 0, y = 0, z = 0;
+  std::uint64_t morton = 0;
+  std::vector<std::byte> payload;  ///< a 4-byte constant, a ksvd payload or a zfp stream
+  std::size_t codes = 0;           ///< ksvd codes in the payload
+  std::uint64_t histogram = 0;     ///< of the brick and its descendants (64 bins)
+  bool constant = false;           ///< every stored voxel one value
+  bool subtree_constant = false;   ///< the brick and every descendant that value (an empty node)
+  float value = 0;                 ///< the constant (constant bricks)
+};
+
+/// A frame coded brick by brick, before its frame file is written (FrameEncoder::code).
+struct CodedFrame {
+  std::size_t t = 0;
+  std::vector<format::LevelGeometry> geometry;
+  /// Every node of the full octree, level by level (breadth-first, Morton order inside a level):
+  /// level_begin[l] is level l's first and level_begin[levels] the count.
+  std::vector<CodedBrick> bricks;
+  std::vector<std::size_t> level_begin;
+  std::vector<std::vector<std::size_t>> children;  ///< per brick, its children's indices
+  std::vector<std::size_t> parent;                 ///< per brick, its parent's (root: itself)
+  /// The stored voxels (36³ each) of every brick of the frame, when code() was asked to keep them.
+  std::vector<float> originals;
+  /// The error rule the bricks were coded to, per level: ε_l (ksvd variable rate; 0 otherwise),
+  /// the pointwise bound (--max-error or the zfp accuracy; 0 for none).
+  std::vector<double> level_tolerance;
+  double max_abs_error = 0;
+  format::FrameHeader header{};
+  FrameStats stats;  ///< of the coding (bytes and the byte breakdown come with the frame file)
+};
+
 /// Encodes frames with fixed settings and dictionary; safe to use from one thread at a time
 /// (it parallelizes inside with OpenMP).
 class FrameEncoder {
  public:
   /// dictionary: required for ksvd (K ≤ 65536, M = 6). Throws InputError on bad settings.
   FrameEncoder(const dictionary::Dictionary* dictionary, CodingSettings settings);
-  /// Frame t -> the frame file's bytes.
+  /// Frame t -> the frame file's bytes (every node with its brick).
   std::vector<std::byte> encode(std::size_t t, const Volume& frame,
                                 FrameStats* stats = nullptr) const;
+  /// Frame t coded brick by brick; keep_originals: keep the stored voxels of every brick.
+  CodedFrame code(std::size_t t, const Volume& frame, bool keep_originals = false) const;
+  /// The frame file of a coded frame, with the bricks of the nodes keep[i] (one flag per brick of
+  /// coded.bricks; empty: every node) and no brick for the other nodes of its tree (they are
+  /// interpolated: format/SPEC.md, "Keyframes"). An empty node always keeps its brick. stats: the
+  /// coding's statistics with the bytes written.
+  std::vector<std::byte> write(const CodedFrame& coded, std::span<const char> keep = {},
+                               FrameStats* stats = nullptr) const;
   /// One stored brick (36³ values, x fastest) -> its payload: a 4-byte constant, a ksvd payload
   /// or a zfp stream (the same coding encode() applies to every brick).
   std::vector<std::byte> encode_brick(std::span<const float> brick) const;

@@ -17,8 +17,12 @@
 #include "volreel/datasets/volume.hpp"
 #include "volreel/encoder/coding_settings.hpp"
 #include "volreel/encoder/frame_encoder.hpp"
+#include "volreel/encoder/keyframes.hpp"
 
 namespace volreel::encoder {
+
+/// EncodeJob::max_keyframe_gap where no option sets it (docs/benchmarks.md, "Keyframes").
+inline constexpr std::uint32_t default_max_keyframe_gap = 8;
 
 /// The whole series into a container.
 struct EncodeJob {
@@ -31,7 +35,11 @@ struct EncodeJob {
   bool resume = false;         ///< keep frames already written and valid
   bool overwrite = false;      ///< replace an existing complete container
   std::size_t max_frames = 0;  ///< 0: every frame
-  nlohmann::json provenance;   ///< stored under "encoder" in the manifest
+  /// The most time steps between two stored bricks of a node (format/SPEC.md, "Keyframes"): a
+  /// node keeps no brick at the steps between where interpolation meets the error rule
+  /// (keyframes.hpp). 1: every frame stores every brick. Memory: G + 1 frames with their bricks.
+  std::uint32_t max_keyframe_gap = default_max_keyframe_gap;
+  nlohmann::json provenance;  ///< stored under "encoder" in the manifest
   /// > 0 (dB, ksvd variable rate): every frame's finest-level PSNR over the sequence's value range
   /// at least this (volreel encode --psnr). A frame that falls short is coded again at a smaller
   /// ε (ε·10^(−shortfall/20), a little less), up to max_tolerance_retries times; the next frame
@@ -83,6 +91,9 @@ struct EncodeSummary {
   /// every frame (the container's bytes are then all accounted for); std::nullopt otherwise.
   std::optional<double> finest_owned_codes_bps() const;
   DeliveredQuality delivered;  ///< of the frames encoded (not of those already there)
+  /// Of the frames encoded: the bricks stored, and the nodes of their trees left without a brick
+  /// (drawn by interpolation between their keyframes).
+  std::size_t bricks_stored = 0, nodes_interpolated = 0;
 };
 /// Writes OUT (a NAME.vreel directory). Frames go to temporary names renamed when complete; the
 /// manifest is rewritten after each frame. Progress: frames done, total, status with MVoxel/s.

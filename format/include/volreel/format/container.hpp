@@ -21,7 +21,7 @@
 namespace volreel::format {
 
 /// Version of the manifest's layout, independent of the program version.
-inline constexpr std::uint32_t container_format_version = 5;
+inline constexpr std::uint32_t container_format_version = 6;
 
 struct ManifestFrame {
   std::string file;  ///< "frames/000017.vrf", relative to the container
@@ -50,6 +50,10 @@ struct Manifest {
   std::uint32_t fixed_sparsity = 0;  ///< ksvd fixed rate S (0: variable rate)
   double zfp_accuracy = 0;
   double value_min = 0, value_max = 0;  ///< of the whole sequence (node histograms use it)
+  /// The most time steps between two stored states of a node (format/SPEC.md, "Keyframes"): 1
+  /// when every frame stores every node; G > 1 lets a node go without a brick for up to G − 1
+  /// steps, drawn by interpolation (time_step.hpp). The first and last steps store every node.
+  std::uint32_t max_keyframe_gap = 1;
   std::optional<ManifestDictionary> dictionary;
   std::vector<std::optional<ManifestFrame>> frames;  ///< one per time step; empty until written
   bool complete = false;

@@ -106,12 +106,23 @@ struct LevelVolume {
 };
 
 /// Decodes level `level` (0 = root .. level_count−1 = full resolution) of a frame: the interior
-/// of every brick of that level; regions under an empty (constant) ancestor take its value.
+/// of every brick of that level; regions under an empty (constant) ancestor take its value. Every
+/// node of the level must have a brick at this time step (else FormatError: a step with
+/// interpolated nodes decodes through TimeStepDecoder, time_step.hpp).
 /// Parallel (OpenMP) over bricks. Throws FormatError on a bad payload.
 LevelVolume decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& atoms);
 /// The same into an existing buffer of the level's size.
 void decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& atoms,
                   std::span<float> out);
+
+/// Copies a decoded brick of the node at `p` into a volume of level `level` (dims: the level's
+/// size): its interior when the node is of that level, else its first value over the region it
+/// covers (an empty node above the level).
+void place_in_level(const NodePosition& p, std::uint32_t level, std::array<std::uint32_t, 3> dims,
+                    std::span<const float> brick, std::span<float> out);
+/// The nodes whose bricks make level `level` of a frame: the level's nodes and the empty nodes
+/// above it. Throws FormatError when the frame has no such level.
+std::vector<std::uint32_t> level_work(const FrameView& frame, std::uint32_t level);
 
 /// Checks every brick payload of the frame by decoding it; throws FormatError on the first bad one.
 void validate_payloads(const FrameView& frame, const AtomTable& atoms);

@@ -20,14 +20,17 @@ static_assert(std::endian::native == std::endian::little, "volreel's files are l
 
 inline constexpr std::array<char, 8> frame_magic = {'V', 'R', 'E', 'E', 'L', 'F', 'R', 'M'};
 /// Version of the frame file layout, independent of the program version.
-inline constexpr std::uint32_t frame_format_version = 5;
+inline constexpr std::uint32_t frame_format_version = 6;
 
 inline constexpr std::uint32_t brick_size = 36;      ///< stored voxels per brick axis
 inline constexpr std::uint32_t brick_interior = 34;  ///< interior voxels per brick axis
 inline constexpr std::uint32_t brick_apron = 1;      ///< voxels copied from each neighbour
 inline constexpr std::uint32_t brick_voxels = brick_size * brick_size * brick_size;
 inline constexpr std::uint32_t max_levels = 16;
+/// Node::brick of a node that has no brick at this time step (not one of its keyframes).
 inline constexpr std::uint32_t no_brick = 0xFFFFFFFFu;
+/// "No such node" (FrameView::find_node).
+inline constexpr std::uint32_t no_node_index = 0xFFFFFFFFu;
 inline constexpr std::uint32_t histogram_bins = 64;
 
 enum class Codec : std::uint32_t { ksvd = 0, zfp = 1 };
@@ -48,7 +51,7 @@ struct FrameHeader {
   std::uint32_t block_size;            //  44  6 (ksvd) or 0 (zfp)
   std::uint32_t level_count;           //  48  levels L; level 0 is the root, L−1 the finest
   std::uint32_t node_count;            //  52
-  std::uint32_t brick_count;           //  56
+  std::uint32_t brick_count;           //  56  nodes with a brick at this time step (≤ nodes)
   std::uint32_t atom_count;            //  60  K of the dictionary the codes index (ksvd), else 0
   float value_min;                     //  64  histogram range (the sequence's value range)
   float value_max;                     //  68
@@ -88,7 +91,8 @@ static_assert(offsetof(LevelEntry, grid) == 20);
 
 /// One spatial node, 128 bits (MTV-Player §3.2).
 struct Node {
-  std::uint32_t brick;           //   0  brick index (bricks are numbered like payloads)
+  std::uint32_t brick;           //   0  brick index (bricks numbered in node order), or no_brick:
+                                 //      not a keyframe of the node (time_step.hpp interpolates)
   std::uint32_t child_and_type;  //   4  bits 0..29 first child (0 unless inner), 30..31 NodeType
   std::uint64_t histogram;       //   8  bit b: a voxel of the subtree lies in bin b of 64
                                  //      over [value_min, value_max]
@@ -152,6 +156,11 @@ class FrameView {
   std::uint32_t brick_count() const { return header_.brick_count; }
   Node node(std::uint32_t i) const;
   const NodePosition& position(std::uint32_t i) const { return positions_[i]; }
+  /// Whether node i has a brick at this time step (is one of its keyframes).
+  bool has_brick(std::uint32_t i) const { return node(i).brick != no_brick; }
+  /// The node at (level, x, y, z), or no_node_index when the frame's tree has none there (the
+  /// position lies outside the level's grid or under an empty node).
+  std::uint32_t find_node(const NodePosition& p) const;
   /// Payload bytes of brick b (validated bounds, contents not checked).
   std::span<const std::byte> brick_bytes(std::uint32_t b) const;
   /// Payload bytes of brick b after checking them against the brick's CRC-32C; throws FormatError
@@ -175,6 +184,7 @@ class FrameView {
   FrameHeader header_{};
   std::vector<LevelEntry> levels_;
   std::vector<NodePosition> positions_;
+  std::vector<std::uint32_t> level_first_brick_;  ///< per level, then the brick count
 };
 
 /// A read-only memory map of a whole file (POSIX mmap), movable.

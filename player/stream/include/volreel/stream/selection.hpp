@@ -6,6 +6,14 @@
 //   1. The node's own candidate is its resident keyframe node on that side nearest p, scored by
 //      its distance |t − p| ([0070]). If the node has none on that side, its nearest resident
 //      keyframe node on the other side stands in, its distance × 200 ([0047]).
+//      Sparse keyframes (volreel, format/SPEC.md "Keyframes"): a node need not have a keyframe
+//      node at every time step; between two of them it is their interpolation. So a candidate on
+//      its side is scored by how far it lies from the node's stored state nearest p, plus the
+//      distance from p to the nearest time step on that side: |t − t*| + |step − p|, where t* is
+//      the nearest step at which the node has a keyframe node or an ancestor a constant subtree
+//      (for an ancestor's own candidate, its own nearest keyframe node), and step = floor(p)
+//      before, ceil(p) after. When every step has a keyframe node, t* = step and this is |t − p|.
+//      A node's own stored state far from p so beats a coarser ancestor at p.
 //   2. Each ancestor `up` levels higher offers its candidate the same way, its score multiplied
 //      by the handicap exp(4·up) ([0046], [0072]).
 //   3. The candidate with the smallest score is kept ([0073]–[0074]). All ancestors are examined

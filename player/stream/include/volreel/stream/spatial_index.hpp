@@ -1,10 +1,11 @@
 // spatial_index.hpp: the spatial octree and its keyframe nodes (Cesium patent [0034], [0058]–
 // [0059]; docs/design.md, "Streaming"). The spatial octree is the same for every frame: it is the
 // union of the frames' brick octrees (format/SPEC.md "Frame file"). Each spatial node
-// (level, x, y, z) lists its keyframe nodes, one per time step whose frame file has a brick there,
-// sorted by time step; a keyframe node points at that brick's bytes (file, absolute offset,
-// length). Residency in the atlas is keyed by (level, x, y, z, keyframe), so a node that leaves the
-// view and comes back finds its brick where it left it.
+// (level, x, y, z) lists its keyframe nodes, one per time step whose frame file has a brick there
+// (a frame may leave a node without one: the node is then drawn by interpolating its neighbouring
+// keyframes, format/SPEC.md "Keyframes"), sorted by time step; a keyframe node points at that
+// brick's bytes (file, absolute offset, length). Residency in the atlas is keyed by (level, x, y,
+// z, keyframe), so a node that leaves the view and comes back finds its brick where it left it.
 //
 // Geometry (player/include/volreel/player/svo_layout.h): with L levels, a node of level l at brick
 // coordinates c covers finest voxels [c·34·2^(L−1−l), (c+1)·34·2^(L−1−l)) per axis; bounds() clips

@@ -21,6 +21,7 @@
 #include "volreel/cpu_render/transfer_function.hpp"
 #include "volreel/datasets/series.hpp"
 #include "volreel/format/container.hpp"
+#include "volreel/format/time_step.hpp"
 #include "volreel/stream/priorities.hpp"
 #include "volreel/stream/scheduler.hpp"
 #include "volreel/stream/selection.hpp"
@@ -31,7 +32,8 @@ namespace volreel::stream_bench {
 /// Progress of a long step: (done, total, status), once per frame.
 using Progress = std::function<void(double done, double total, const std::string& status)>;
 
-/// Ground truth: the original series (or the container's finest-level decode).
+/// Ground truth: the original series (or the container's finest level, each time step decoded as
+/// the player draws it).
 class GroundTruth {
  public:
   /// `series` may be null (the container's own finest level). Throws InputError naming --series
@@ -55,6 +57,7 @@ class GroundTruth {
   std::unique_ptr<datasets::SeriesReader> series_;
   cpu_render::VolumeGeometry geometry_;
   std::map<std::size_t, std::vector<float>> cache_;
+  format::TimeStepDecoder steps_;  ///< the container's time steps, as the player draws them
 };
 
 struct RunSetup {
