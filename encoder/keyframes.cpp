@@ -17,10 +17,12 @@ using format::brick_voxels;
 /// Whether the interpolation (1 − f)·a + f·b stands in for the brick at a step: original o, coded
 /// c (what storing it would give), under the rule's bounds.
 bool interpolation_holds(const float* o, const float* c, const float* a, const float* b, float f,
-                         double eps, double max_abs, const KeyframeRule& rule) {
+                         double eps, double max_abs, bool energy, const KeyframeRule& rule) {
   if (rule.within_coded_error) eps = 0;
   const double block_factor = rule.block_factor;
-  const float f0 = 1.0f - f;
+  // In double: the interpolation itself; a decoder's float arithmetic adds a rounding of the
+  // value (none where a = b).
+  const double f1 = static_cast<double>(f), f0 = 1.0 - f1;
   double total = 0, total_coded = 0;
   const double block_tolerance = VR_BLOCK_LENGTH * eps * eps;
   for (std::uint32_t bz = 0; bz < VR_BLOCKS_PER_AXIS; ++bz)
@@ -35,19 +37,23 @@ bool interpolation_holds(const float* o, const float* c, const float* a, const f
                 bx * VR_BLOCK_SIZE;
             for (std::uint32_t x = 0; x < VR_BLOCK_SIZE; ++x) {
               const std::size_t v = row + x;
-              const float interpolated = f0 * a[v] + f * b[v];
-              const double d = static_cast<double>(o[v]) - static_cast<double>(interpolated);
+              const double interpolated =
+                  f0 * static_cast<double>(a[v]) + f1 * static_cast<double>(b[v]);
+              const double d = static_cast<double>(o[v]) - interpolated;
               const double dc = static_cast<double>(o[v]) - static_cast<double>(c[v]);
               if (max_abs > 0 && std::abs(d) > max_abs) return false;
               e += d * d;
               e_coded += dc * dc;
             }
           }
+        if (!energy) continue;
         if (e > block_factor * std::max(block_tolerance, e_coded)) return false;
         total += e;
         total_coded += e_coded;
       }
-  return total <= std::max(static_cast<double>(brick_voxels) * eps * eps, total_coded);
+  return !energy ||
+         total <= rule.brick_factor *
+                      std::max(static_cast<double>(brick_voxels) * eps * eps, total_coded);
 }
 
 }  // namespace
@@ -110,12 +116,12 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
           for (std::size_t u = k + 2; u < n && !forced[u - 1]; ++u) {
             bool holds = true;
             for (std::size_t t = k + 1; t < u && holds; ++t) {
-              const float f = static_cast<float>(static_cast<double>(t - k) /
-                                                 static_cast<double>(u - k));
+              const float f =
+                  static_cast<float>(static_cast<double>(t - k) / static_cast<double>(u - k));
               const CodedFrame& ft = *frames[t];
               holds = interpolation_holds(ft.originals.data() + i * brick_voxels, state(t),
                                           state(k), state(u), f, ft.level_tolerance[level],
-                                          ft.max_abs_error, rule);
+                                          ft.max_abs_error, codec == format::Codec::ksvd, rule);
             }
             if (!holds) break;
             best = u;

@@ -33,9 +33,8 @@ TimeStepDecoder::TimeStepDecoder(std::size_t frame_count, std::uint32_t max_gap,
 
 TimeStepDecoder::TimeStepDecoder(const Container& container)
     : TimeStepDecoder(container.frame_count(), container.manifest().max_keyframe_gap,
-                      container.atoms(), [&container](std::size_t t) {
-                        return container.open_frame(t);
-                      }) {}
+                      container.atoms(),
+                      [&container](std::size_t t) { return container.open_frame(t); }) {}
 
 const FrameView& TimeStepDecoder::frame(std::size_t t) {
   auto it = open_.find(t);
@@ -84,9 +83,8 @@ StoredState TimeStepDecoder::stored_state(std::size_t from, const NodePosition& 
   }
   throw FormatError(origin.name(),
                     origin.header().node_table_offset + sizeof(Node) * std::uint64_t{node},
-                    "node " + str(node) + " " + describe(p) +
-                        " without a brick stored within " + str(max_gap_ - 1) + " time steps " +
-                        (direction < 0 ? "before" : "after") +
+                    "node " + str(node) + " " + describe(p) + " without a brick stored within " +
+                        str(max_gap_ - 1) + " time steps " + (direction < 0 ? "before" : "after") +
                         " it (the container's max_keyframe_gap is " + str(max_gap_) + ")",
                     "none");
 }
@@ -94,7 +92,8 @@ StoredState TimeStepDecoder::stored_state(std::size_t from, const NodePosition& 
 NodeSource TimeStepDecoder::source(std::size_t t, std::uint32_t node) {
   const FrameView& f = frame(t);
   if (node >= f.node_count())
-    throw FormatError(f.name(), "no node " + str(node) + " (frame has " + str(f.node_count()) + ")");
+    throw FormatError(f.name(),
+                      "no node " + str(node) + " (frame has " + str(f.node_count()) + ")");
   NodeSource src;
   if (f.has_brick(node)) {
     src.a = {t, f.node(node).brick, 0};
@@ -109,8 +108,8 @@ NodeSource TimeStepDecoder::source(std::size_t t, std::uint32_t node) {
                       "node " + str(node) + " " + describe(p) + " between stored states at most " +
                           str(max_gap_) + " time steps apart (max_keyframe_gap)",
                       "steps " + str(src.a.t) + " and " + str(src.b.t));
-  src.factor = static_cast<float>(static_cast<double>(t - src.a.t) /
-                                  static_cast<double>(src.b.t - src.a.t));
+  src.factor =
+      static_cast<float>(static_cast<double>(t - src.a.t) / static_cast<double>(src.b.t - src.a.t));
   src.interpolated = true;
   return src;
 }
@@ -132,8 +131,8 @@ void decode_state(const FrameView& frame, const StoredState& state, const AtomTa
 
 void TimeStepDecoder::decode(std::size_t t, std::uint32_t level, std::span<float> out) {
   if (t >= frame_count_)
-    throw FormatError("<container>", "no time step " + str(t) + " (the series has " +
-                                         str(frame_count_) + ")");
+    throw FormatError("<container>",
+                      "no time step " + str(t) + " (the series has " + str(frame_count_) + ")");
   forget_frames_far_from(t);
   const FrameView& f = frame(t);
   // 1. The nodes that make the level, and where each takes its values (this opens the frames
@@ -181,8 +180,8 @@ void TimeStepDecoder::decode(std::size_t t, std::uint32_t level, std::span<float
 LevelVolume TimeStepDecoder::decode(std::size_t t, std::uint32_t level) {
   const FrameView& f = frame(t);
   if (level >= f.level_count())
-    throw FormatError(f.name(), "no level " + str(level) + " (frame has " +
-                                    str(f.level_count()) + " levels)");
+    throw FormatError(
+        f.name(), "no level " + str(level) + " (frame has " + str(f.level_count()) + " levels)");
   LevelVolume v;
   const LevelEntry& e = f.level(level);
   v.dims = {e.dims[0], e.dims[1], e.dims[2]};

@@ -8,6 +8,7 @@
 #include <map>
 #include <thread>
 
+#include "../keyframe_series.hpp"
 #include "stream_test_util.hpp"
 #include "volreel/stream/scheduler.hpp"
 
@@ -121,6 +122,59 @@ INSTANTIATE_TEST_SUITE_P(Stream, StreamSchedulerPolicy,
                                       ? std::string("patent")
                                       : std::string("nearest");
                          });
+
+TEST(StreamScheduler, ASeekIntoALongGapDrawsTheInterpolatedState) {
+  // Sparse keyframes: the finest nodes of grid column 0 never change, so they store bricks at
+  // steps 0 and 8 only; column 2 at every step. After a seek to 4, the still nodes are drawn from
+  // their own keyframes 0 and 8 halfway (not from a coarser node at step 4), the others from their
+  // own keyframe at 4.
+  test::TempDir dir("stream-scheduler-gap");
+  const Dims gap_dims{70, 40, 40};
+  test::write_keyframe_series(dir.path() / "series", gap_dims, 9);
+  encoder::EncodeJob job;
+  job.coding = test::zfp_coding();
+  job.max_keyframe_gap = 8;
+  const auto series = datasets::open_series(dir.path() / "series");
+  encoder::encode_series(*series, dir.path() / "gap.vreel", job);
+  const format::Container c(dir.path() / "gap.vreel");
+  SchedulerSettings settings;
+  settings.atlas_slots = 256;
+  StreamScheduler s(c, settings);
+  ASSERT_TRUE(s.errors().empty());
+  const std::uint32_t finest = s.index().level_count() - 1;
+  const std::uint32_t still = s.index().find({finest, 0, 1, 1});
+  const std::uint32_t moving = s.index().find({finest, 2, 1, 1});
+  ASSERT_NE(still, no_node);
+  ASSERT_NE(moving, no_node);
+  ASSERT_EQ(s.index().keyframes(still).size(), 2u);
+  EXPECT_EQ(s.index().keyframes(moving).size(), 9u);
+  const auto cam = test::close_camera(gap_dims);
+  std::uint64_t frame = 0;
+  const double playhead = 4.0;
+  const FrameUpdate u = run_until(s, cam, playhead, frame, [&](const FrameUpdate& f) {
+    return f.stats.fraction_at_target == 1.0 && f.stats.requests_in_flight == 0 &&
+           f.stats.arrivals_waiting == 0;
+  });
+  expect_svo_references_resident_slots(s, u);
+  std::vector<ResidentKeyframe> entries;
+  for (std::uint32_t slot = 0; slot < s.atlas().capacity(); ++slot)
+    if (const auto key = s.atlas().key(slot);
+        key && s.atlas().state(slot) == AtlasSlots::State::occupied)
+      entries.push_back({s.index().find_keyframe(*key), slot});
+  ResidentKeyframes resident;
+  resident.assign(s.index(), entries);
+  const KeyframePair p = select_keyframe_pair(s.index(), still, playhead, resident);
+  EXPECT_TRUE(p.at_full_detail());
+  EXPECT_EQ(p.a.t, 0u);
+  EXPECT_EQ(p.b.t, 8u);
+  EXPECT_EQ(p.a.lod_difference, 0u);
+  EXPECT_EQ(p.b.lod_difference, 0u);
+  EXPECT_FLOAT_EQ(p.factor, 0.5f);
+  const KeyframePair q = select_keyframe_pair(s.index(), moving, playhead, resident);
+  EXPECT_TRUE(q.at_full_detail());
+  EXPECT_EQ(q.a.t, 4u);
+  EXPECT_EQ(q.b.t, 4u);
+}
 
 TEST(StreamScheduler, TheRootArrivesFirstAndTheUploadBudgetHolds) {
   test::TempDir dir("stream-scheduler-budget");

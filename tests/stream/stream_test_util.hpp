@@ -26,10 +26,12 @@ inline encoder::CodingSettings zfp_coding() {
   return s;
 }
 
-/// Writes DIR/NAME.vreel: `frames` frames of an analytic field of `dims`, zfp-coded.
+/// Writes DIR/NAME.vreel: `frames` frames of an analytic field of `dims`, zfp-coded, every node
+/// stored at every step unless max_keyframe_gap > 1.
 inline std::filesystem::path make_container(
     const std::filesystem::path& dir, Dims dims, std::size_t frames,
-    datasets::AnalyticField field = datasets::AnalyticField::blobs) {
+    datasets::AnalyticField field = datasets::AnalyticField::blobs,
+    std::uint32_t max_keyframe_gap = 1) {
   datasets::AnalyticParams p;
   p.field = field;
   p.dims = dims;
@@ -41,6 +43,7 @@ inline std::filesystem::path make_container(
   const auto series = datasets::open_series(dir / "series");
   encoder::EncodeJob job;
   job.coding = zfp_coding();
+  job.max_keyframe_gap = max_keyframe_gap;
   const auto out = dir / "test.vreel";
   encoder::encode_series(*series, out, job);
   return out;

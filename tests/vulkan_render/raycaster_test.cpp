@@ -24,6 +24,7 @@
 
 #include "../cpu_render/svo_builder.hpp"
 #include "../dictionary_test_data.hpp"
+#include "../keyframe_series.hpp"
 #include "../test_util.hpp"
 #include "../vulkan/vulkan_test_util.hpp"
 #include "volreel/cpu_render/cpu_atlas.hpp"
@@ -620,38 +621,22 @@ TEST_F(VulkanRender, RejectsBadInput) {
 
 // --- The streaming frame loop on a container on disk --------------------------------------
 
-TEST_F(VulkanRender, FrameLoopConvergesAndMatchesTheCpuRenderer) {
-  // A zfp container of 6 frames; the loop runs until every visible node is at its target LOD,
-  // mirroring every upload into a CPU atlas; the last frame equals render_svo of its SVO.
-  test::TempDir dir("vulkan-render-loop");
-  const Dims dims{70, 50, 40};
-  {
-    datasets::AnalyticParams p;
-    p.field = datasets::AnalyticField::blobs;
-    p.dims = dims;
-    p.frames = 6;
-    datasets::RawSeriesWriter w(dir / "series", dims, "test");
-    datasets::generate_analytic(p, w);
-  }
-  encoder::EncodeJob job;
-  job.coding.codec = format::Codec::zfp;
-  job.coding.zfp_accuracy = 1e-3;
-  const auto series = datasets::open_series(dir / "series");
-  encoder::encode_series(*series, dir / "test.vreel", job);
-  const format::Container container(dir / "test.vreel");
+/// Runs the streaming frame loop on `container` until every visible node is at its target LOD,
+/// mirroring every upload into a CPU atlas; the last frame must equal render_svo of its SVO.
+void expect_frame_loop_matches_cpu(const vulkan::Context& context,
+                                   const format::Container& container, double playhead) {
   const format::Manifest& m = container.manifest();
-
+  const glm::dvec3 size{m.dims[0], m.dims[1], m.dims[2]};
   loop::FrameLoopOptions o;
   o.atlas_bytes = std::uint64_t{125} * 93312;  // every keyframe node of the view fits
   o.width = 80;
   o.height = 60;
   o.pipelined = true;
-  vulkan_render::VulkanFrameLoop loop(context(), container, o);
+  vulkan_render::VulkanFrameLoop loop(context, container, o);
   CpuAtlas mirror(loop.atlas().slot_count());
-  auto camera = player::OrbitCamera::framing({70, 50, 40}, 80, 60);
+  auto camera = player::OrbitCamera::framing(size, 80, 60);
   const auto tf = TransferFunction::preset("cool-warm", static_cast<float>(m.value_min),
                                            static_cast<float>(m.value_max));
-  const double playhead = 2.25;  // between keyframes 2 and 3: time interpolation
   loop::FrameReport report;
   bool converged = false;
   for (int i = 0; i < 2000 && !converged; ++i) {
@@ -684,6 +669,41 @@ TEST_F(VulkanRender, FrameLoopConvergesAndMatchesTheCpuRenderer) {
   const auto plain = loop.frame(camera, playhead, tf, true);
   EXPECT_GE(compare(loop.read_back(plain.ticket), got).psnr, 50.0);
   loop.finish();
+}
+
+TEST_F(VulkanRender, FrameLoopConvergesAndMatchesTheCpuRenderer) {
+  // A zfp container of 6 frames, between keyframes 2 and 3: time interpolation.
+  test::TempDir dir("vulkan-render-loop");
+  const Dims dims{70, 50, 40};
+  {
+    datasets::AnalyticParams p;
+    p.field = datasets::AnalyticField::blobs;
+    p.dims = dims;
+    p.frames = 6;
+    datasets::RawSeriesWriter w(dir / "series", dims, "test");
+    datasets::generate_analytic(p, w);
+  }
+  encoder::EncodeJob job;
+  job.coding.codec = format::Codec::zfp;
+  job.coding.zfp_accuracy = 1e-3;
+  const auto series = datasets::open_series(dir / "series");
+  encoder::encode_series(*series, dir / "test.vreel", job);
+  expect_frame_loop_matches_cpu(context(), format::Container(dir / "test.vreel"), 2.25);
+}
+
+TEST_F(VulkanRender, SparseKeyframesMatchTheCpuRenderer) {
+  // Sparse keyframe lists: the still nodes have keyframes 0 and 8 only, the others one at every
+  // step; at 2.25 the still nodes interpolate 0 and 8, the others 2 and 3.
+  test::TempDir dir("vulkan-render-gap");
+  test::write_keyframe_series(dir / "series", {70, 40, 40}, 9);
+  encoder::EncodeJob job;
+  job.coding.codec = format::Codec::zfp;
+  job.coding.zfp_accuracy = 1e-3;
+  job.max_keyframe_gap = 8;
+  const auto series = datasets::open_series(dir / "series");
+  const auto summary = encoder::encode_series(*series, dir / "gap.vreel", job);
+  ASSERT_GT(summary.nodes_interpolated, 0u);
+  expect_frame_loop_matches_cpu(context(), format::Container(dir / "gap.vreel"), 2.25);
 }
 
 }  // namespace

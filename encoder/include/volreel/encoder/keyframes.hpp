@@ -15,15 +15,18 @@ namespace volreel::encoder {
 
 /// The error rule an interpolated brick is held to (each brick's level's ε_l and the pointwise
 /// bound come with its CodedFrame):
-/// - ksvd variable rate: the brick's squared error at most max(N·ε_l², E_coded) and each 6³
-///   block's at most block_factor·max(216·ε_l², e_coded), where E_coded and e_coded are the
-///   errors of the brick as coded at that step (so an interpolated brick is never much worse than
-///   the coded one, nor held to more than the tolerance);
+/// - ksvd variable rate: the brick's squared error at most brick_factor·max(N·ε_l², E_coded) and
+///   each 6³ block's at most block_factor·max(216·ε_l², e_coded), where E_coded and e_coded are
+///   the errors of the brick as coded at that step (so an interpolated brick is never much worse
+///   than the coded one, nor held to more than the tolerance; the brick factor absorbs that the
+///   two stored states' coding errors are alike where the data is, so that their interpolation's
+///   error fluctuates about the coded one's);
 /// - fixed rate (no ε): the same with ε = 0;
-/// - a pointwise bound (--max-error, or zfp's accuracy): every value within it.
-/// - within_coded_error (for a PSNR target): the brick's squared error at most E_coded and each
-///   block's at most block_factor·e_coded, without the tolerance.
+/// - a pointwise bound (--max-error with ksvd, in addition; zfp's accuracy, alone): every value
+///   within it.
+/// - within_coded_error (for a PSNR target): the same without the tolerance (ε_l = 0).
 struct KeyframeRule {
+  double brick_factor = 1.25;
   double block_factor = 4.0;
   bool within_coded_error = false;
 };

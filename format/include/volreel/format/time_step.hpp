@@ -20,9 +20,9 @@ namespace volreel::format {
 
 /// Where a node's state at one time step comes from.
 struct StoredState {
-  std::size_t t = 0;              ///< the time step that stores it
-  std::uint32_t brick = no_brick; ///< the node's brick in frame t, or no_brick for a constant
-  float constant = 0;             ///< the empty ancestor's value (brick == no_brick)
+  std::size_t t = 0;               ///< the time step that stores it
+  std::uint32_t brick = no_brick;  ///< the node's brick in frame t, or no_brick for a constant
+  float constant = 0;              ///< the empty ancestor's value (brick == no_brick)
 };
 
 /// A node's value at a time step: one stored state (f = 0), or two to interpolate.
