@@ -2,6 +2,7 @@
 #include "volreel/encoder/keyframes.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <exception>
 #include <stdexcept>
@@ -14,46 +15,80 @@ namespace {
 
 using format::brick_voxels;
 
-/// Whether the interpolation (1 − f)·a + f·b stands in for the brick at a step: original o, coded
-/// c (what storing it would give), under the rule's bounds.
-bool interpolation_holds(const float* o, const float* c, const float* a, const float* b, float f,
-                         double eps, double max_abs, bool energy, const KeyframeRule& rule) {
+constexpr std::uint32_t blocks = VR_BLOCKS_PER_BRICK;
+constexpr std::uint32_t side = format::brick_size;
+
+/// Squared errors of a brick against its original, per 6³ block and in all.
+struct BrickError {
+  std::array<double, blocks> block{};
+  double total = 0;
+};
+
+/// Adds the squared differences o − (f0·a + f1·b) of one row of 36 voxels to its six blocks'
+/// sums; returns the row's largest |difference|.
+double add_row(const float* o, const float* a, const float* b, double f0, double f1,
+               double* block_sums) {
+  double d2[side];
+  double largest = 0;
+  for (std::uint32_t x = 0; x < side; ++x) {
+    const double d = static_cast<double>(o[x]) -
+                     (f0 * static_cast<double>(a[x]) + f1 * static_cast<double>(b[x]));
+    d2[x] = d * d;
+    largest = std::max(largest, std::abs(d));
+  }
+  for (std::uint32_t bx = 0; bx < VR_BLOCKS_PER_AXIS; ++bx) {
+    double sum = 0;
+    for (std::uint32_t x = 0; x < VR_BLOCK_SIZE; ++x) sum += d2[bx * VR_BLOCK_SIZE + x];
+    block_sums[bx] += sum;
+  }
+  return largest;
+}
+
+/// The coded brick's error against the original (a stored state's, for the rule).
+BrickError coded_error(const float* o, const float* c) {
+  BrickError e;
+  for (std::uint32_t z = 0; z < side; ++z)
+    for (std::uint32_t y = 0; y < side; ++y) {
+      const std::size_t row = (std::size_t{z} * side + y) * side;
+      add_row(o + row, c + row, c + row, 1.0, 0.0,
+              &e.block[((z / VR_BLOCK_SIZE) * VR_BLOCKS_PER_AXIS + y / VR_BLOCK_SIZE) *
+                       VR_BLOCKS_PER_AXIS]);
+    }
+  for (double v : e.block) e.total += v;
+  return e;
+}
+
+/// Whether the interpolation (1 − f)·a + f·b stands in for the brick at a step: original o, the
+/// error `coded` that storing it would give, under the rule's bounds. In double: the
+/// interpolation itself (a decoder's float arithmetic adds a rounding of the value, none where
+/// a = b).
+bool interpolation_holds(const float* o, const BrickError& coded, const float* a, const float* b,
+                         float f, double eps, double max_abs, bool energy,
+                         const KeyframeRule& rule) {
   if (rule.within_coded_error) eps = 0;
-  const double block_factor = rule.block_factor;
-  // In double: the interpolation itself; a decoder's float arithmetic adds a rounding of the
-  // value (none where a = b).
   const double f1 = static_cast<double>(f), f0 = 1.0 - f1;
-  double total = 0, total_coded = 0;
   const double block_tolerance = VR_BLOCK_LENGTH * eps * eps;
-  for (std::uint32_t bz = 0; bz < VR_BLOCKS_PER_AXIS; ++bz)
-    for (std::uint32_t by = 0; by < VR_BLOCKS_PER_AXIS; ++by)
-      for (std::uint32_t bx = 0; bx < VR_BLOCKS_PER_AXIS; ++bx) {
-        double e = 0, e_coded = 0;
-        for (std::uint32_t z = 0; z < VR_BLOCK_SIZE; ++z)
-          for (std::uint32_t y = 0; y < VR_BLOCK_SIZE; ++y) {
-            const std::size_t row =
-                ((bz * VR_BLOCK_SIZE + z) * format::brick_size + by * VR_BLOCK_SIZE + y) *
-                    format::brick_size +
-                bx * VR_BLOCK_SIZE;
-            for (std::uint32_t x = 0; x < VR_BLOCK_SIZE; ++x) {
-              const std::size_t v = row + x;
-              const double interpolated =
-                  f0 * static_cast<double>(a[v]) + f1 * static_cast<double>(b[v]);
-              const double d = static_cast<double>(o[v]) - interpolated;
-              const double dc = static_cast<double>(o[v]) - static_cast<double>(c[v]);
-              if (max_abs > 0 && std::abs(d) > max_abs) return false;
-              e += d * d;
-              e_coded += dc * dc;
-            }
-          }
-        if (!energy) continue;
-        if (e > block_factor * std::max(block_tolerance, e_coded)) return false;
-        total += e;
-        total_coded += e_coded;
+  std::array<double, blocks> e{};
+  double total = 0;
+  for (std::uint32_t bz = 0; bz < VR_BLOCKS_PER_AXIS; ++bz) {
+    for (std::uint32_t z = bz * VR_BLOCK_SIZE; z < (bz + 1) * VR_BLOCK_SIZE; ++z)
+      for (std::uint32_t y = 0; y < side; ++y) {
+        const std::size_t row = (std::size_t{z} * side + y) * side;
+        const double largest = add_row(
+            o + row, a + row, b + row, f0, f1,
+            &e[(bz * VR_BLOCKS_PER_AXIS + y / VR_BLOCK_SIZE) * VR_BLOCKS_PER_AXIS]);
+        if (max_abs > 0 && largest > max_abs) return false;
       }
+    if (!energy) continue;
+    // The slab of blocks bz is complete.
+    for (std::uint32_t k = bz * 36; k < (bz + 1) * 36; ++k) {
+      if (e[k] > rule.block_factor * std::max(block_tolerance, coded.block[k])) return false;
+      total += e[k];
+    }
+  }
   return !energy ||
          total <= rule.brick_factor *
-                      std::max(static_cast<double>(brick_voxels) * eps * eps, total_coded);
+                      std::max(static_cast<double>(brick_voxels) * eps * eps, coded.total);
 }
 
 }  // namespace
@@ -90,7 +125,8 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
   const format::Codec codec = static_cast<format::Codec>(frames[0]->header.codec);
 #pragma omp parallel reduction(+ : nodes, interpolated)
   {
-    std::vector<float> states(n * brick_voxels), coded(brick_voxels);
+    std::vector<float> states(n * brick_voxels);
+    std::vector<BrickError> coded(n);
 #pragma omp for schedule(dynamic, 1)
     for (std::ptrdiff_t ci = 0; ci < static_cast<std::ptrdiff_t>(cells); ++ci) {
       const auto i = static_cast<std::size_t>(ci);
@@ -108,6 +144,8 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
                                    "<encoder>", 0);
           forced[f] = f == 0 || f + 1 == n || covered[f][i] || b.subtree_constant;
           if (!covered[f][i]) ++nodes;
+          if (!forced[f])
+            coded[f] = coded_error(frames[f]->originals.data() + i * brick_voxels, state(f));
         }
         const std::uint32_t level = frames[0]->bricks[i].level;
         std::size_t k = 0;
@@ -119,7 +157,7 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
               const float f =
                   static_cast<float>(static_cast<double>(t - k) / static_cast<double>(u - k));
               const CodedFrame& ft = *frames[t];
-              holds = interpolation_holds(ft.originals.data() + i * brick_voxels, state(t),
+              holds = interpolation_holds(ft.originals.data() + i * brick_voxels, coded[t],
                                           state(k), state(u), f, ft.level_tolerance[level],
                                           ft.max_abs_error, codec == format::Codec::ksvd, rule);
             }

@@ -429,6 +429,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     return format::FrameFile(out / format::frame_file_name(t));
   };
   std::optional<Step> carried;  // the last frame of the previous stretch
+  std::size_t coded_frames = summary.skipped;
   for (std::size_t s = 0;;) {
     const std::size_t e = std::min(s + gap, frames - 1);
     if (std::all_of(done.begin() + static_cast<std::ptrdiff_t>(s),
@@ -444,6 +445,13 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
           continue;
         }
         code_step(t, steps[t - s]);
+        if (!done[t]) ++coded_frames;
+        char status[64];
+        std::snprintf(status, sizeof status, "coding frame %zu, %.1f MVoxel/s", t,
+                      voxels * static_cast<double>(coded_frames - summary.skipped) / 1e6 /
+                          std::max(1e-9, summary.seconds + seconds_since(start)));
+        progress.report(static_cast<double>(std::min(coded_frames, frames)),
+                        static_cast<double>(frames), status);
       }
       std::vector<std::vector<char>> keep(steps.size());
       if (gap > 1 && steps.size() > 2) {
@@ -476,11 +484,6 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
         done[t] = 1;
         summary.seconds += seconds_since(write_start);
         add_frame(st, summary);
-        char status[64];
-        std::snprintf(status, sizeof status, "%.1f MVoxel/s",
-                      voxels * static_cast<double>(summary.encoded) / 1e6 / summary.seconds);
-        progress.report(static_cast<double>(summary.skipped + summary.encoded),
-                        static_cast<double>(frames), status);
       }
       // The delivered error of every step of the stretch, decoded from the files as a reader
       // does (interpolated nodes included).
