@@ -74,9 +74,9 @@ bool interpolation_holds(const float* o, const BrickError& coded, const float* a
     for (std::uint32_t z = bz * VR_BLOCK_SIZE; z < (bz + 1) * VR_BLOCK_SIZE; ++z)
       for (std::uint32_t y = 0; y < side; ++y) {
         const std::size_t row = (std::size_t{z} * side + y) * side;
-        const double largest = add_row(
-            o + row, a + row, b + row, f0, f1,
-            &e[(bz * VR_BLOCKS_PER_AXIS + y / VR_BLOCK_SIZE) * VR_BLOCKS_PER_AXIS]);
+        const double largest =
+            add_row(o + row, a + row, b + row, f0, f1,
+                    &e[(bz * VR_BLOCKS_PER_AXIS + y / VR_BLOCK_SIZE) * VR_BLOCKS_PER_AXIS]);
         if (max_abs > 0 && largest > max_abs) return false;
       }
     if (!energy) continue;
