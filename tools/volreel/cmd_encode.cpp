@@ -19,6 +19,7 @@
 #include "volreel/dictionary/training.hpp"
 #include "volreel/encoder/encoder.hpp"
 #include "volreel/format/dictionary_file.hpp"
+#include "volreel/format/frame_file.hpp"
 
 namespace volreel::cli {
 
@@ -125,6 +126,36 @@ void train_dictionary(const datasets::SeriesReader& series, const EncodeOptions&
               eps);
 }
 
+/// What the encoder holds per frame of a stretch with keyframe gaps: the frame and the original
+/// voxels of every brick of its octree.
+double stretch_bytes_per_frame(const Dims& dims) {
+  std::uint64_t bricks = 0;
+  for (const auto& g : format::level_geometry({static_cast<std::uint32_t>(dims.x),
+                                               static_cast<std::uint32_t>(dims.y),
+                                               static_cast<std::uint32_t>(dims.z)}))
+    bricks += std::uint64_t{g.grid[0]} * g.grid[1] * g.grid[2];
+  return 4.0 * (static_cast<double>(dims.voxels()) +
+                static_cast<double>(bricks) * static_cast<double>(format::brick_voxels));
+}
+
+/// The keyframe gap to encode with: the option's, or without one the default, lowered so that the
+/// G + 1 frames of a stretch take at most half the machine's memory (said when it is lowered).
+std::uint32_t keyframe_gap(const EncodeOptions& o, const Dims& dims) {
+  if (o.keyframe_gap_opt->count() > 0) return o.max_keyframe_gap;
+  // --bps's rate search codes whole sample frames: the size it finds is the size written only
+  // when every frame stores every brick.
+  if (o.bps_opt->count() > 0) return 1;
+  const double memory =
+      static_cast<double>(::sysconf(_SC_PHYS_PAGES)) * static_cast<double>(::sysconf(_SC_PAGESIZE));
+  const double per_frame = stretch_bytes_per_frame(dims);
+  std::uint32_t gap = o.max_keyframe_gap;
+  while (gap > 1 && memory > 0 && (gap + 1) * per_frame > memory / 2) --gap;
+  if (gap < o.max_keyframe_gap)
+    std::printf("keyframe gap %u (not %u): %u frames of %.0f MB each fit in half the memory\n", gap,
+                o.max_keyframe_gap, gap + 1, per_frame / 1e6);
+  return gap;
+}
+
 void run_encode(const EncodeOptions& o) {
   const auto series = datasets::open_series(o.series, o.reader.to_open_options());
   const auto& info = series->info();
@@ -138,10 +169,7 @@ void run_encode(const EncodeOptions& o) {
   job.coding = coding_settings(o);
   job.half_atoms = o.atom_storage == "f16";
   if (o.psnr_opt->count() > 0) job.psnr_target = o.psnr;
-  // --bps's rate search codes sample frames whole; without a gap given, every frame stores every
-  // brick so that the size it finds is the size written.
-  job.max_keyframe_gap =
-      o.bps_opt->count() > 0 && o.keyframe_gap_opt->count() == 0 ? 1 : o.max_keyframe_gap;
+  job.max_keyframe_gap = keyframe_gap(o, info.dims);
   auto& c = job.coding;
   {
     ProgressBar bar("value range", "frames");
@@ -323,7 +351,9 @@ void add_encode_command(CLI::App& app) {
                       "rule. 1: every step\n"
                       "stores every brick. Memory: G + 1 frames. With --bps the default is 1 (the "
                       "rate search codes\n"
-                      "whole frames)")
+                      "whole frames); without the option it is lowered where G + 1 frames would "
+                      "take more than\n"
+                      "half the memory")
           ->check(CLI::Range(1, 65535))
           ->capture_default_str();
   cmd->add_option("--rate-sample-frames", o->rate_sample_frames, "--bps: frames encoded per trial")
