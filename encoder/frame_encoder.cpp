@@ -232,7 +232,9 @@ void code_ksvd_chunk(const Pyramid& pyramid, std::span<Cell> chunk,
 void code_bricks(const Pyramid& pyramid, std::vector<Cell>& cells, float lo, float hi,
                  const BrickCoding& coding, FrameStats& st, std::vector<float>* originals) {
   ChunkWorkspace work;
-  if (originals) originals->resize(cells.size() * brick_voxels);
+  // A buffer of the right size is reused as it is (every value is overwritten below).
+  if (originals && originals->size() != cells.size() * brick_voxels)
+    originals->resize(cells.size() * brick_voxels);
   for (std::size_t begin = 0; begin < cells.size(); begin += chunk_bricks) {
     const std::span<Cell> chunk(cells.data() + begin, std::min(chunk_bricks, cells.size() - begin));
     const auto part = Clock::now();
@@ -467,9 +469,18 @@ std::vector<std::byte> FrameEncoder::encode_brick(std::span<const float> brick) 
 }
 
 CodedFrame FrameEncoder::code(std::size_t t, const Volume& frame, bool keep_originals) const {
+  CodedFrame coded;
+  code_into(t, frame, coded, keep_originals);
+  return coded;
+}
+
+void FrameEncoder::code_into(std::size_t t, const Volume& frame, CodedFrame& coded,
+                             bool keep_originals) const {
   const auto start = Clock::now();
   const Pyramid pyramid = build_pyramid(frame);
-  CodedFrame coded;
+  std::vector<float> originals = std::move(coded.originals);
+  coded = CodedFrame{};
+  if (keep_originals) coded.originals = std::move(originals);  // its storage, reused
   FrameStats& st = coded.stats;
   st.seconds_pyramid = seconds_since(start);
   const auto lo = static_cast<float>(settings_.value_min),
@@ -519,7 +530,6 @@ CodedFrame FrameEncoder::code(std::size_t t, const Volume& frame, bool keep_orig
   h.fixed_sparsity = static_cast<std::uint32_t>(settings_.fixed_sparsity);
   h.container_id = settings_.container_id;
   st.seconds = seconds_since(start);
-  return coded;
 }
 
 std::vector<std::byte> FrameEncoder::write(const CodedFrame& coded, std::span<const char> keep,

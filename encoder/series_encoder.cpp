@@ -408,9 +408,10 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   };
   // Codes frame t (read into step.volume), again at a smaller ε while it misses psnr_target.
   const auto code_step = [&](std::size_t t, Step& step) {
-    step.volume = Volume(info.dims);
+    if (step.volume.data.size() != info.dims.voxels()) step.volume = Volume(info.dims);
     series.read_frame(t, step.volume.data);
-    step.coded = encoder->code(t, step.volume, gap > 1);
+    step.measured = false;
+    encoder->code_into(t, step.volume, step.coded, gap > 1);
     for (int retry = 0; holds_psnr && retry < max_tolerance_retries; ++retry) {
       const auto [squared, worst] =
           finest_level_error(encoder->write(step.coded), atoms, step.volume, t);
@@ -422,13 +423,14 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       CodingSettings smaller = coding;
       smaller.tolerance = coding.tolerance * summary.delivered.tolerance_scale;
       encoder.emplace(&dict->dictionary, smaller);
-      step.coded = encoder->code(t, step.volume, gap > 1);
+      encoder->code_into(t, step.volume, step.coded, gap > 1);
     }
   };
   const auto opener = [&](std::size_t t) {
     return format::FrameFile(out / format::frame_file_name(t));
   };
   std::optional<Step> carried;  // the last frame of the previous stretch
+  std::vector<Step> pool;       // the other frames of the previous stretch: their buffers reused
   std::size_t coded_frames = summary.skipped;
   for (std::size_t s = 0;;) {
     const std::size_t e = std::min(s + gap, frames - 1);
@@ -443,6 +445,10 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
         if (t == s && carried) {
           steps[0] = std::move(*carried);
           continue;
+        }
+        if (!pool.empty()) {
+          steps[t - s] = std::move(pool.back());
+          pool.pop_back();
         }
         code_step(t, steps[t - s]);
         if (!done[t]) ++coded_frames;
@@ -513,6 +519,8 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
         }
       }
       carried = std::move(steps.back());
+      steps.pop_back();
+      pool = std::move(steps);
     }
     if (e + 1 >= frames) break;
     s = e;

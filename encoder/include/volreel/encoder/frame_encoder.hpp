@@ -112,6 +112,10 @@ class FrameEncoder {
                                 FrameStats* stats = nullptr) const;
   /// Frame t coded brick by brick; keep_originals: keep the stored voxels of every brick.
   CodedFrame code(std::size_t t, const Volume& frame, bool keep_originals = false) const;
+  /// The same into `coded`, reusing the storage of its originals (a stretch of frames coded one
+  /// after another allocates them once).
+  void code_into(std::size_t t, const Volume& frame, CodedFrame& coded,
+                 bool keep_originals = false) const;
   /// The frame file of a coded frame, with the bricks of the nodes keep[i] (one flag per brick of
   /// coded.bricks; empty: every node) and no brick for the other nodes of its tree (they are
   /// interpolated: format/SPEC.md, "Keyframes"). An empty node always keeps its brick. stats: the
