@@ -95,7 +95,7 @@ bool interpolation_holds(const float* o, const BrickError& coded, const float* a
 
 std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* const> frames,
                                                 const format::AtomTable& atoms,
-                                                const KeyframeRule& rule, KeyframeStats* stats) {
+                                                const KeyframeRule& rule) {
   const std::size_t n = frames.size();
   std::vector<std::vector<char>> keep(n);
   if (n == 0) return keep;
@@ -120,10 +120,9 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
       }
     }
   }
-  std::size_t nodes = 0, interpolated = 0;
   std::exception_ptr error;
   const format::Codec codec = static_cast<format::Codec>(frames[0]->header.codec);
-#pragma omp parallel reduction(+ : nodes, interpolated)
+#pragma omp parallel
   {
     std::vector<float> states(n * brick_voxels);
     std::vector<BrickError> coded(n);
@@ -143,7 +142,6 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
             format::decode_payload(b.payload, codec, frames[f]->header.codec_parameter, atoms, out,
                                    "<encoder>", 0);
           forced[f] = f == 0 || f + 1 == n || covered[f][i] || b.subtree_constant;
-          if (!covered[f][i]) ++nodes;
           if (!forced[f])
             coded[f] = coded_error(frames[f]->originals.data() + i * brick_voxels, state(f));
         }
@@ -166,7 +164,6 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
           }
           for (std::size_t t = k + 1; t < best; ++t) {
             keep[t][i] = 0;
-            ++interpolated;
           }
           k = best;
         }
@@ -177,10 +174,6 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
     }
   }
   if (error) std::rethrow_exception(error);
-  if (stats) {
-    stats->nodes += nodes;
-    stats->interpolated += interpolated;
-  }
   return keep;
 }
 

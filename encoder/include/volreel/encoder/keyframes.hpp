@@ -31,11 +31,6 @@ struct KeyframeRule {
   bool within_coded_error = false;
 };
 
-struct KeyframeStats {
-  std::size_t nodes = 0;         ///< node-steps of the trees (nodes under an empty node excluded)
-  std::size_t interpolated = 0;  ///< of those, without a brick
-};
-
 /// For the frames of one stretch of consecutive time steps (coded with their originals kept; the
 /// first and the last store every node), one flag per brick of each frame: store it (1) or leave it
 /// to interpolation (0). Greedy along each node's time line: from a stored state, the farthest
@@ -43,7 +38,6 @@ struct KeyframeStats {
 /// empty itself, is stored. Parallel (OpenMP) over nodes.
 std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* const> frames,
                                                 const format::AtomTable& atoms,
-                                                const KeyframeRule& rule = {},
-                                                KeyframeStats* stats = nullptr);
+                                                const KeyframeRule& rule = {});
 
 }  // namespace volreel::encoder
