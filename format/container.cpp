@@ -305,11 +305,14 @@ void write_manifest(const fs::path& dir, const Manifest& manifest) {
   write_container_file(dir, "manifest.json", std::as_bytes(std::span(text.data(), text.size())));
 }
 
-Container::Container(fs::path dir, bool allow_incomplete) : dir_(std::move(dir)) {
-  const fs::path manifest_path = dir_ / "manifest.json";
-  if (!fs::is_directory(dir_))
-    throw FormatError(dir_, "not a volreel container (no such directory)");
-  const auto bytes = detail::read_whole_file(manifest_path, detail::max_json_bytes);
+Container::Container(fs::path dir, bool allow_incomplete)
+    : Container(std::make_shared<LocalSource>(std::move(dir)), allow_incomplete) {}
+
+Container::Container(std::shared_ptr<const ContainerSource> source, bool allow_incomplete)
+    : source_(std::move(source)), dir_(source_->location()) {
+  const fs::path manifest_path = source_->name("manifest.json");
+  const auto bytes = source_->read_file("manifest.json", detail::max_json_bytes);
+  manifest_bytes_ = bytes.size();
   manifest_ = manifest_from_json(
       std::string(reinterpret_cast<const char*>(bytes.data()), bytes.size()), manifest_path);
   if (!manifest_.complete && !allow_incomplete)
@@ -317,8 +320,13 @@ Container::Container(fs::path dir, bool allow_incomplete) : dir_(std::move(dir))
         manifest_path,
         "the encode is not complete (\"complete\": false); resume it with volreel encode --resume");
   if (manifest_.dictionary) {
-    const fs::path dict_path = dir_ / manifest_.dictionary->file;
-    const DictionaryFile d = read_dictionary_file(dict_path);
+    const fs::path dict_path = source_->name(manifest_.dictionary->file);
+    auto kept = source_->kept(manifest_.dictionary->file, 0);
+    const bool from_cache = kept.has_value();
+    const std::vector<std::byte> dict_bytes =
+        kept ? std::move(*kept)
+             : source_->read_file(manifest_.dictionary->file, detail::max_dictionary_bytes);
+    const DictionaryFile d = parse_dictionary_file(dict_bytes, dict_path);
     if (d.block_size != 6)
       throw FormatError(dict_path, 20, "block size 6", std::to_string(d.block_size));
     if (d.atom_count != manifest_.dictionary->atom_count)
@@ -332,23 +340,96 @@ Container::Container(fs::path dir, bool allow_incomplete) : dir_(std::move(dir))
           id_text(d.container_id) + " (the dictionary of another container)");
     atoms_ = d.atoms;
     atom_count_ = d.atom_count;
+    if (!from_cache) source_->keep(manifest_.dictionary->file, 0, dict_bytes);
   }
 }
 
-FrameFile Container::open_frame(std::size_t t) const {
-  if (t >= manifest_.frames.size())
-    throw FormatError(dir_, "no frame " + std::to_string(t) + " (the container has " +
-                                std::to_string(manifest_.frames.size()) + ")");
-  if (!manifest_.frames[t])
-    throw FormatError(dir_ / "manifest.json",
+namespace {
+
+/// The manifest's entry of frame t; throws FormatError if there is none.
+const ManifestFrame& manifest_frame(const Manifest& m, const ContainerSource& source,
+                                    std::size_t t) {
+  if (t >= m.frames.size())
+    throw FormatError(source.location(), "no frame " + std::to_string(t) + " (the container has " +
+                                             std::to_string(m.frames.size()) + ")");
+  if (!m.frames[t])
+    throw FormatError(source.name("manifest.json"),
                       "frame " + std::to_string(t) + " has not been written");
-  const fs::path path = dir_ / manifest_.frames[t]->file;
-  FrameFile file(path);
-  const FrameHeader& h = file.view().header();
-  if (file.view().bytes().size() != manifest_.frames[t]->bytes)
+  return *m.frames[t];
+}
+
+/// What a remote reader fetches first of a frame file to find its index: the whole index of a
+/// frame of up to about 150 nodes in one request (a 256³ volume's), the rest in a second.
+constexpr std::uint64_t first_index_read = 4096;
+
+}  // namespace
+
+FrameFile Container::open_frame(std::size_t t) const {
+  const ManifestFrame& entry = manifest_frame(manifest_, *source_, t);
+  const fs::path path = source_->name(entry.file);
+  const auto local = source_->local_directory();
+  FrameFile file = local
+                       ? FrameFile(path)
+                       : FrameFile(source_->read_file(entry.file, entry.bytes), path, entry.bytes);
+  check_frame(t, file.view());
+  return file;
+}
+
+FrameFile Container::open_frame_index(std::size_t t) const {
+  if (source_->local_directory()) return open_frame(t);
+  const ManifestFrame& entry = manifest_frame(manifest_, *source_, t);
+  const fs::path path = source_->name(entry.file);
+  if (auto kept = source_->kept(entry.file, 0)) {
+    FrameFile file(std::move(*kept), path, entry.bytes);
+    check_frame(t, file.view());
+    return file;
+  }
+  std::vector<std::byte> bytes =
+      source_->read_range(entry.file, 0, std::min(entry.bytes, first_index_read));
+  if (bytes.size() >= sizeof(FrameHeader)) {
+    // The index ends where the payloads begin (the header's payload_offset); an offset beyond the
+    // file is left to the view's checks.
+    std::uint64_t payload_offset = 0;
+    std::memcpy(&payload_offset, bytes.data() + offsetof(FrameHeader, payload_offset), 8);
+    if (payload_offset > bytes.size() && payload_offset <= entry.bytes) {
+      const std::vector<std::byte> rest =
+          source_->read_range(entry.file, bytes.size(), payload_offset - bytes.size());
+      bytes.insert(bytes.end(), rest.begin(), rest.end());
+    } else if (payload_offset >= sizeof(FrameHeader) && payload_offset < bytes.size()) {
+      bytes.resize(payload_offset);  // the index alone (payloads are read and checked by brick)
+    }
+  }
+  FrameFile file(std::move(bytes), path, entry.bytes);
+  check_frame(t, file.view());
+  source_->keep(entry.file, 0, file.view().bytes());
+  return file;
+}
+
+std::vector<std::byte> Container::read_brick(const FrameView& view, std::uint32_t b) const {
+  if (view.has_payloads()) {
+    const std::span<const std::byte> payload = view.checked_brick_bytes(b);
+    return {payload.begin(), payload.end()};
+  }
+  const ManifestFrame& entry = manifest_frame(manifest_, *source_, view.header().frame_index);
+  std::vector<std::byte> payload =
+      source_->read_range(entry.file, view.brick_offset(b), view.brick_payload_bytes(b));
+  const std::uint32_t found = crc32c(payload), expected = view.brick_crc(b);
+  if (found != expected)
+    throw FormatError(view.name(), view.brick_offset(b),
+                      "brick " + std::to_string(b) + " payload of CRC-32C " +
+                          std::to_string(expected) + " (the frame's index)",
+                      std::to_string(found) + " (payload corrupt)");
+  return payload;
+}
+
+void Container::check_frame(std::size_t t, const FrameView& view) const {
+  const ManifestFrame& entry = *manifest_.frames[t];
+  const fs::path& path = view.name();
+  const FrameHeader& h = view.header();
+  if (view.file_size() != entry.bytes)
     throw FormatError(path, FormatError::no_offset,
-                      std::to_string(manifest_.frames[t]->bytes) + " bytes (manifest.json)",
-                      std::to_string(file.view().bytes().size()));
+                      std::to_string(entry.bytes) + " bytes (manifest.json)",
+                      std::to_string(view.file_size()));
   if (h.container_id != manifest_.container_id)
     throw FormatError(
         path, offsetof(FrameHeader, container_id),
@@ -406,11 +487,10 @@ FrameFile Container::open_frame(std::size_t t) const {
     throw FormatError(path, offsetof(FrameHeader, atom_count),
                       std::to_string(atom_count_) + " atoms (the dictionary's)",
                       std::to_string(h.atom_count));
-  return file;
 }
 
 std::uint64_t Container::total_bytes() const {
-  std::uint64_t total = fs::file_size(dir_ / "manifest.json");
+  std::uint64_t total = manifest_bytes_;
   if (manifest_.dictionary) total += manifest_.dictionary->bytes;
   for (const auto& f : manifest_.frames)
     if (f) total += f->bytes;
@@ -473,21 +553,33 @@ void decode_and_check_histograms(const FrameView& view, const AtomTable& atoms) 
 std::vector<std::string> verify_container(const fs::path& dir,
                                           void (*progress)(std::size_t, std::size_t, void*),
                                           void* user) {
+  std::shared_ptr<const ContainerSource> source;
+  try {
+    source = std::make_shared<LocalSource>(dir);
+  } catch (const FormatError& e) {
+    return {e.what()};
+  }
+  return verify_container(std::move(source), progress, user);
+}
+
+std::vector<std::string> verify_container(std::shared_ptr<const ContainerSource> source,
+                                          void (*progress)(std::size_t, std::size_t, void*),
+                                          void* user) {
   std::vector<std::string> problems;
   std::optional<Container> container;
   try {
-    container.emplace(dir, true);
+    container.emplace(source, true);
   } catch (const FormatError& e) {
     problems.push_back(e.what());
     return problems;
   }
   const Manifest& m = container->manifest();
   if (!m.complete)
-    problems.push_back((dir / "manifest.json").string() + ": the encode is not complete");
+    problems.push_back(source->name("manifest.json").string() + ": the encode is not complete");
   if (m.dictionary) {
-    const fs::path p = dir / m.dictionary->file;
+    const fs::path p = source->name(m.dictionary->file);
     try {
-      const auto bytes = detail::read_whole_file(p, detail::max_dictionary_bytes);
+      const auto bytes = source->read_file(m.dictionary->file, detail::max_dictionary_bytes);
       if (bytes.size() != m.dictionary->bytes)
         problems.push_back(p.string() + ": expected " + std::to_string(m.dictionary->bytes) +
                            " bytes (manifest.json), found " + std::to_string(bytes.size()));

@@ -139,12 +139,17 @@ std::vector<std::byte> serialize_frame(const FrameContents& frame) {
 }
 
 FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
-    : bytes_(bytes), name_(std::move(name)) {
+    : FrameView(bytes, std::move(name), bytes.size()) {}
+
+FrameView::FrameView(std::span<const std::byte> bytes, fs::path name, std::uint64_t file_size)
+    : bytes_(bytes), name_(std::move(name)), file_size_(file_size) {
   const auto fail = [&](std::uint64_t offset, const std::string& expected,
                         const std::string& found) {
     throw FormatError(name_, offset, expected, found);
   };
   // 1. Header.
+  if (bytes.size() > file_size)
+    fail(file_size, "a frame file of " + str(file_size) + " bytes", str(bytes.size()) + " bytes");
   if (bytes.size() < sizeof(FrameHeader))
     fail(0, "a frame file of at least " + str(sizeof(FrameHeader)) + " bytes",
          str(bytes.size()) + " bytes (truncated)");
@@ -217,11 +222,11 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
          str(h.payload_offset));
   if (bytes.size() < payload_at)
     fail(bytes.size(), "index sections up to offset " + str(payload_at), "end of file (truncated)");
-  if (h.payload_bytes > bytes.size() || bytes.size() != payload_at + h.payload_bytes + 4)
+  if (h.payload_bytes > file_size || file_size != payload_at + h.payload_bytes + 4)
     fail(offsetof(FrameHeader, payload_bytes),
          "file size " + str(payload_at) +
              " + payload bytes + 4 = " + str(payload_at + h.payload_bytes + 4),
-         str(bytes.size()) + " bytes (payload bytes " + str(h.payload_bytes) + ")");
+         str(file_size) + " bytes (payload bytes " + str(h.payload_bytes) + ")");
   const std::uint32_t index_crc = crc32c(bytes.subspan(levels_at, payload_at - levels_at));
   if (index_crc != h.index_crc)
     fail(offsetof(FrameHeader, index_crc),
@@ -347,13 +352,15 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name)
     const std::uint64_t at = nodes_at + sizeof(Node) * i;
     const Node n = node(i);
     if (n.histogram == 0) fail(at + 8, "node " + str(i) + " histogram with a bin set", "none");
-    const std::span<const std::byte> payload =
-        n.brick == no_brick ? std::span<const std::byte>() : brick_bytes(n.brick);
-    if (n.type() == NodeType::empty && payload.size() != 4)
+    const std::uint64_t payload_size = n.brick == no_brick ? 0 : brick_payload_bytes(n.brick);
+    if (n.type() == NodeType::empty && payload_size != 4)
       fail(brick_offset(n.brick),
            "a 4-byte constant payload for brick " + str(n.brick) + " (its node is empty)",
-           str(payload.size()) + " bytes");
-    if (payload.size() == 4 && n.type() != NodeType::inner) {
+           str(payload_size) + " bytes");
+    // (The constant itself is checked where the payloads are held; a reader of single bricks
+    // checks each against its CRC.)
+    if (payload_size == 4 && n.type() != NodeType::inner && has_payloads()) {
+      const std::span<const std::byte> payload = brick_bytes(n.brick);
       const float value = load<float>(payload, 0);
       const std::uint64_t bin = std::uint64_t{1} << histogram_bin(value, h.value_min, h.value_max);
       if (n.histogram != bin)
@@ -384,8 +391,15 @@ std::uint64_t FrameView::brick_offset(std::uint32_t b) const {
          load<std::uint64_t>(bytes_, header_.brick_offsets_offset + 8 * std::uint64_t{b});
 }
 
+std::uint64_t FrameView::brick_payload_bytes(std::uint32_t b) const {
+  return brick_offset(b + 1) - brick_offset(b);
+}
+
 std::span<const std::byte> FrameView::brick_bytes(std::uint32_t b) const {
   const std::uint64_t begin = brick_offset(b), end = brick_offset(b + 1);
+  if (!has_payloads())
+    throw FormatError(name_, begin, "the payload of brick " + str(b) + " in memory",
+                      "the frame's index alone (its bricks are read one by one)");
   return bytes_.subspan(begin, end - begin);
 }
 
@@ -428,6 +442,9 @@ std::uint32_t FrameView::find_node(const NodePosition& p) const {
 }
 
 void FrameView::check_payload_crc() const {
+  if (!has_payloads())
+    throw FormatError(name_, header_.payload_offset, "the whole frame file in memory",
+                      "its index alone");
   const std::uint64_t end = bytes_.size() - 4;
   const std::uint32_t want = crc32c(bytes_.subspan(0, end));
   const auto found = load<std::uint32_t>(bytes_, end);

@@ -1,76 +1,85 @@
-// brick_loader.cpp: worker threads reading brick byte ranges with pread, a simulated link
-// (bandwidth, latency) and per-key back-off after failures.
+// brick_loader.cpp: worker threads reading brick byte ranges through a RangeReader (coalescing
+// back-to-back requests where it asks for it), a simulated link (bandwidth, latency) and per-key
+// back-off after failures.
 #include "volreel/stream/brick_loader.hpp"
 
-#include <fcntl.h>
-#include <unistd.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
-#include <cstring>
 #include <utility>
 
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/error.hpp"
-#include "volreel/format/file_io.hpp"
+#include "volreel/format/source.hpp"
 
 namespace volreel::stream {
 
-std::string read_byte_range(const std::filesystem::path& file, std::uint64_t offset,
-                            std::uint32_t bytes, std::vector<std::byte>& out) {
-  out.resize(bytes);
-  int fd = -1;
-  try {
-    std::uint64_t size = 0;
-    fd = format::detail::open_regular_file(file, size);
-  } catch (const format::FormatError& e) {
-    out.clear();
-    return e.what();
-  }
-  std::size_t done = 0;
-  std::string error;
-  while (done < bytes) {
-    const ssize_t n =
-        ::pread(fd, out.data() + done, bytes - done, static_cast<off_t>(offset + done));
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      error = file.string() + ": offset " + std::to_string(offset + done) +
-              ": read failed: " + std::strerror(errno);
-      break;
+std::vector<BrickArrival> BrickLoader::read_batch(std::vector<BrickRequest> batch) {
+  std::vector<ByteRange> ranges;
+  for (const BrickRequest& r : batch) ranges.push_back({r.offset, r.bytes});
+  std::vector<std::vector<std::byte>> bytes;
+  const std::string error = options_.reader->read(batch.front().file, ranges, bytes);
+  std::vector<BrickArrival> out(batch.size());
+  for (std::size_t i = 0; i < batch.size(); ++i) {
+    BrickArrival& a = out[i];
+    a.request = std::move(batch[i]);
+    const BrickRequest& r = a.request;
+    if (!error.empty()) {
+      a.error = error;
+      continue;
     }
-    if (n == 0) {
-      error = file.string() + ": offset " + std::to_string(offset) + ": expected " +
-              std::to_string(bytes) + " bytes, found " + std::to_string(done) + " (file truncated)";
-      break;
+    a.bytes = std::move(bytes[i]);
+    if (r.crc32c) {
+      const std::uint32_t found = format::crc32c(a.bytes);
+      if (found != *r.crc32c) {
+        a.error = r.file.string() + ": offset " + std::to_string(r.offset) +
+                  ": expected a brick payload of CRC-32C " + std::to_string(*r.crc32c) +
+                  " (the frame's index), found " + std::to_string(found) + " (payload corrupt)";
+        a.bytes.clear();
+        continue;
+      }
+      options_.reader->keep(r.file, r.offset, a.bytes);
     }
-    done += static_cast<std::size_t>(n);
   }
-  ::close(fd);
-  if (!error.empty()) out.clear();
-  return error;
+  return out;
 }
 
-namespace {
-
-/// Reads the request's bytes into a and checks them against the request's CRC, if it has one.
-void read_arrival(BrickArrival& a) {
-  const BrickRequest& r = a.request;
-  a.error = read_byte_range(r.file, r.offset, r.bytes, a.bytes);
-  if (a.ok() && r.crc32c) {
-    const std::uint32_t found = format::crc32c(a.bytes);
-    if (found != *r.crc32c) {
-      a.error = r.file.string() + ": offset " + std::to_string(r.offset) +
-                ": expected a brick payload of CRC-32C " + std::to_string(*r.crc32c) +
-                " (the frame's index), found " + std::to_string(found) + " (payload corrupt)";
-      a.bytes.clear();
+std::vector<BrickRequest> BrickLoader::take_batch(BrickRequest first) {
+  const std::uint64_t limit = options_.reader->coalesce_bytes();
+  std::vector<BrickRequest> before, after;  // before: nearest first
+  if (limit > 0 && !options_.reader->holds(first.file, {first.offset, first.bytes})) {
+    std::uint64_t begin = first.offset, end = begin + first.bytes;
+    // Grow the range at either end with queued requests of the same file that touch it.
+    for (bool grew = true; grew;) {
+      grew = false;
+      for (auto it = queue_.begin(); it != queue_.end(); ++it) {
+        const BrickRequest& r = it->request;
+        if (r.file != first.file || end - begin + r.bytes > limit ||
+            (r.offset != end && r.offset + r.bytes != begin) ||
+            options_.reader->holds(r.file, {r.offset, r.bytes}))
+          continue;
+        if (r.offset == end) {
+          end += r.bytes;
+          after.push_back(std::move(it->request));
+        } else {
+          begin = r.offset;
+          before.push_back(std::move(it->request));
+        }
+        queue_.erase(it);
+        grew = true;
+        break;
+      }
     }
   }
+  std::vector<BrickRequest> batch;
+  batch.reserve(before.size() + 1 + after.size());
+  for (auto it = before.rbegin(); it != before.rend(); ++it) batch.push_back(std::move(*it));
+  batch.push_back(std::move(first));
+  for (BrickRequest& r : after) batch.push_back(std::move(r));
+  return batch;
 }
-
-}  // namespace
 
 BrickLoader::BrickLoader(LoaderOptions options) : options_(std::move(options)) {
+  if (!options_.reader) options_.reader = std::make_shared<format::LocalRangeReader>();
   options_.threads = std::max(1u, options_.threads);
   options_.max_in_flight = std::max<std::size_t>(1, options_.max_in_flight);
   link_free_ = now();
@@ -139,10 +148,14 @@ std::vector<BrickArrival> BrickLoader::poll() {
   while (!on_link_.empty() && on_link_.front().at <= now) {
     Pending p = std::move(on_link_.front());
     on_link_.pop_front();
-    BrickArrival a;
-    a.request = std::move(p.request);
-    read_arrival(a);
-    if (a.ok()) bytes_read_ += a.bytes.size();
+    std::vector<BrickRequest> one;
+    one.push_back(std::move(p.request));
+    ++reads_;
+    BrickArrival a = std::move(read_batch(std::move(one)).front());
+    if (a.ok()) {
+      bytes_read_ += a.bytes.size();
+      ++bricks_read_;
+    }
     ready_.push_back({std::move(a), p.at});
   }
   // Keep arrival order: ready_ is ordered by completion; deliver those due.
@@ -209,30 +222,50 @@ std::uint64_t BrickLoader::bytes_read() const {
   return bytes_read_;
 }
 
+std::uint64_t BrickLoader::bricks_read() const {
+  std::lock_guard lock(mutex_);
+  return bricks_read_;
+}
+
+std::uint64_t BrickLoader::reads() const {
+  std::lock_guard lock(mutex_);
+  return reads_;
+}
+
 void BrickLoader::work() {
   for (;;) {
-    Pending p;
+    std::vector<BrickRequest> batch;
+    Clock::time_point issued;
     {
       std::unique_lock lock(mutex_);
       wake_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
       if (stopping_) return;
-      p = std::move(queue_.front());
+      Pending p = std::move(queue_.front());
       queue_.pop_front();
+      issued = p.issued;
+      batch = take_batch(std::move(p.request));
+      ++reads_;
     }
-    BrickArrival a;
-    a.request = std::move(p.request);
-    read_arrival(a);
+    std::vector<BrickArrival> arrivals = read_batch(std::move(batch));
     std::lock_guard lock(mutex_);
-    // The simulated link; a failed read takes no link time and arrives after the latency.
-    Clock::time_point at = p.issued;
-    if (a.ok()) {
-      bytes_read_ += a.bytes.size();
-      at = arrival_time(p.issued, a.bytes.size());
-    } else {
-      at += std::chrono::duration_cast<Clock::duration>(
-          std::chrono::duration<double>(std::max(0.0, options_.latency_s)));
+    for (BrickArrival& a : arrivals) {
+      // The simulated link; a failed read takes no link time and arrives after the latency. Over
+      // a real network the bytes are there when they have arrived.
+      Clock::time_point at = issued;
+      if (a.ok()) {
+        bytes_read_ += a.bytes.size();
+        ++bricks_read_;
+      }
+      if (options_.reader->remote()) {
+        at = Clock::now();
+      } else if (a.ok()) {
+        at = arrival_time(issued, a.bytes.size());
+      } else {
+        at += std::chrono::duration_cast<Clock::duration>(
+            std::chrono::duration<double>(std::max(0.0, options_.latency_s)));
+      }
+      ready_.push_back({std::move(a), at});
     }
-    ready_.push_back({std::move(a), at});
   }
 }
 

@@ -6,8 +6,18 @@
 
 namespace volreel::stream {
 
+namespace {
+
+/// The settings with the container's brick reader, unless they name one.
+SchedulerSettings reading_from(const format::Container& container, SchedulerSettings settings) {
+  if (!settings.loader.reader) settings.loader.reader = container.source().brick_reader();
+  return settings;
+}
+
+}  // namespace
+
 StreamScheduler::StreamScheduler(const format::Container& container, SchedulerSettings settings)
-    : StreamScheduler(SpatialIndex{}, settings) {
+    : StreamScheduler(SpatialIndex{}, reading_from(container, std::move(settings))) {
   std::vector<std::string> errors;
   index_ = build_spatial_index(container, &errors);
   random_table_ = random_selection_table(index_.frame_count());
@@ -226,6 +236,8 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
   out.stats.requests_in_flight = loader_.in_flight();
   out.stats.arrivals_waiting = waiting_.size();
   out.stats.bytes_loaded = loader_.bytes_read();
+  out.stats.bricks_loaded = loader_.bricks_read();
+  out.stats.loader_reads = loader_.reads();
   out.stats.atlas_occupied = atlas_.occupied_count();
   out.stats.atlas_capacity = atlas_.capacity();
   out.stats.errors = error_count_;

@@ -166,9 +166,9 @@ SpatialIndex build_spatial_index(const format::Container& container,
       continue;
     }
     try {
-      const format::FrameFile frame = container.open_frame(t);
+      const format::FrameFile frame = container.open_frame_index(t);
       builder.add_frame(static_cast<std::uint32_t>(t), frame.view(),
-                        container.directory() / m.frames[t]->file);
+                        container.source().name(m.frames[t]->file));
     } catch (const std::exception& e) {
       if (errors) errors->push_back(e.what());
     }

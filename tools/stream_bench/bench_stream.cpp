@@ -170,8 +170,9 @@ std::unique_ptr<datasets::SeriesReader> open_original(const std::string& series,
     note = "--series " + series;
     return datasets::open_series(series, options);
   }
-  const fs::path dir = fs::absolute(container.directory()).lexically_normal();
-  for (const std::string& c : source_candidates(m)) {
+  const auto local = container.source().local_directory();
+  const fs::path dir = local ? fs::absolute(*local).lexically_normal() : fs::path();
+  for (const std::string& c : local ? source_candidates(m) : std::vector<std::string>{}) {
     std::vector<fs::path> tries = {fs::path(c)};
     if (fs::path(c).is_relative()) {
       tries.push_back(dir.parent_path() / c);
@@ -342,19 +343,25 @@ RunSetup run_setup(const BenchStreamSettings& o, const format::Container& contai
   setup.simulated_fps = o.clock == "simulated" ? o.fps : 0;
   setup.render.background = {0.06f, 0.06f, 0.08f};
   setup.settings = scheduler;
+  setup.settings.loader.reader = container.source().brick_reader();
   return setup;
 }
 
 BenchPlan prepare_bench(const BenchStreamSettings& s, const std::string& container_path,
                         const std::string& series, const datasets::OpenOptions& options,
-                        const std::string& out) {
+                        const std::string& out,
+                        std::shared_ptr<const format::ContainerSource> source) {
   s.check();
   BenchPlan plan;
   std::tie(plan.width, plan.height) = s.image_size();
   plan.link.latency_s = s.latency_s();
-  if (!fs::is_directory(container_path))
-    throw InputError(container_path + ": not a container folder (NAME.vreel)");
-  plan.container = std::make_unique<format::Container>(container_path);
+  if (source) {
+    plan.container = std::make_unique<format::Container>(std::move(source));
+  } else {
+    if (!fs::is_directory(container_path))
+      throw InputError(container_path + ": not a container folder (NAME.vreel)");
+    plan.container = std::make_unique<format::Container>(container_path);
+  }
   const format::Container& container = *plan.container;
   if (container.frame_count() == 0)
     throw InputError(container_path + ": the container has no frames");

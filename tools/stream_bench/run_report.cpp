@@ -91,6 +91,10 @@ nlohmann::json summary_json(const RunResult& r) {
           {"max_holes_after_first_root", r.max_holes_after_root},
           {"bytes_loaded", r.bytes_loaded},
           {"bytes_uploaded", r.bytes_uploaded},
+          {"bricks_loaded", r.bricks_loaded},
+          {"loader_reads", r.loader_reads},
+          {"transfer_requests", r.transfer_requests},
+          {"transfer_bytes", r.transfer_bytes},
           {"errors", r.errors},
           {"mean_update_ms", r.mean_update_ms},
           {"mean_decode_ms", r.mean_decode_ms},
@@ -164,6 +168,16 @@ void print_side_by_side(const std::vector<RunResult>& runs) {
                : std::string("not reached");
     });
   row("errors", [&](const RunResult& r) { return std::to_string(r.errors); });
+  if (runs.front().transfer_requests > 0) {
+    row("HTTP requests per brick loaded", [&](const RunResult& r) {
+      return num("%.3f", static_cast<double>(r.transfer_requests) /
+                             static_cast<double>(std::max<std::uint64_t>(r.bricks_loaded, 1))) +
+             " (" + std::to_string(r.transfer_requests) + ")";
+    });
+    row("bytes received / brick bytes", [&](const RunResult& r) {
+      return num("%.3f", static_cast<double>(r.transfer_bytes) / std::max(r.bytes_loaded, 1.0));
+    });
+  }
   std::printf(
       "  (at target LOD: both keyframes from the node's own bricks, whichever keyframes they are; "
       "full quality:\n"

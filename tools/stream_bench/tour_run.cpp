@@ -166,6 +166,8 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy, const Progr
   const stream::StreamScheduler& scheduler = frames.scheduler();
   const double duration = s.tour->duration();
 
+  const format::ContainerSource& source = s.container->source();
+  const std::uint64_t requests_before = source.requests(), bytes_before = source.bytes_received();
   const auto start = Clock::now();
   bool root = false;
   std::uint64_t uploaded = 0;
@@ -218,6 +220,12 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy, const Progr
     if (time >= duration) break;
   }
   r.wall_s = std::chrono::duration<double>(Clock::now() - start).count();
+  r.transfer_requests = source.requests() - requests_before;
+  r.transfer_bytes = source.bytes_received() - bytes_before;
+  if (!r.frames.empty()) {
+    r.bricks_loaded = r.frames.back().stats.bricks_loaded;
+    r.loader_reads = r.frames.back().stats.loader_reads;
+  }
   r.errors = s.index_errors + scheduler.error_count();
   return r;
 }

@@ -13,6 +13,7 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
+#include "remote_options.hpp"
 #include "volreel/stream_bench/bench_stream.hpp"
 #include "volreel/stream_bench/run_report.hpp"
 #include "volreel/stream_bench/tour_run.hpp"
@@ -27,6 +28,7 @@ struct BenchStreamOptions {
   std::string container, series, out;
   sb::BenchStreamSettings s;
   ReaderOptions reader;
+  RemoteCli remote;
 };
 
 /// Each long step of the library on its own progress bar.
@@ -42,8 +44,9 @@ void stage(const std::string& title, const std::string& unit,
 void run_bench_stream(const BenchStreamOptions& o) {
   // 1. Settings (all checked before any work), the container, the tour, the link, the truth.
   const sb::BenchStreamSettings& s = o.s;
-  const sb::BenchPlan plan =
-      sb::prepare_bench(s, o.container, o.series, o.reader.to_open_options(), o.out);
+  const sb::BenchPlan plan = sb::prepare_bench(
+      s, o.container, o.series, o.reader.to_open_options(), o.out,
+      remote::is_url(o.container) ? open_container_source(o.container, o.remote) : nullptr);
   const sb::RunSetup& setup = plan.setup;
   const sb::GroundTruth& truth = *plan.truth;
   sb::print_bench_header(plan, s, o.container, describe_machine());
@@ -100,11 +103,14 @@ void add_bench_stream_command(CLI::App& bench) {
       "original data at that playhead, fraction of nodes at target LOD, holes, bytes loaded, time "
       "to full quality\n"
       "after each seek. Writes OUT/stream_<policy>.csv, OUT/summary.json and a few PNGs.");
-  cmd->add_option("CONTAINER", o->container, "The container directory NAME.vreel")->required();
-  cmd->add_option("--bandwidth", o->s.bandwidth,
-                  "Simulated read bandwidth: a rate (20MB/s, 500kB/s), a multiple of the playback "
-                  "data rate (0.5x: half\n"
-                  "of what playing every brick at the tour's fastest speed needs), or 0/unlimited")
+  cmd->add_option("CONTAINER", o->container, container_argument_help)->required();
+  cmd->add_option(
+         "--bandwidth", o->s.bandwidth,
+         "Simulated read bandwidth: a rate (20MB/s, 500kB/s), a multiple of the playback "
+         "data rate (0.5x: half\n"
+         "of what playing every brick at the tour's fastest speed needs), or 0/unlimited.\n"
+         "For a URL the network is the link: the rate is not simulated, only planned "
+         "for (use --clock wall)")
       ->capture_default_str();
   cmd->add_option("--latency", o->s.latency, "Simulated latency per request, e.g. 50ms, 0.2s")
       ->capture_default_str();
@@ -206,6 +212,7 @@ void add_bench_stream_command(CLI::App& bench) {
   cmd->add_option("--out", o->out,
                   "Output folder (default: a new folder in /tmp, printed at the end)");
   o->reader.add_to(*cmd);
+  add_remote_options(*cmd, o->remote);
   cmd->callback([o] { run_bench_stream(*o); });
 }
 

@@ -11,14 +11,15 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.hpp"
+#include "remote_options.hpp"
 #include "volreel/format/container.hpp"
 
 namespace volreel::cli {
 
 namespace {
 
-void run_info(const std::string& dir, bool json) {
-  const format::Container c(dir, true);
+void run_info(const std::string& dir, bool json, const RemoteCli& remote) {
+  const format::Container c(open_container_source(dir, remote), true);
   const auto& m = c.manifest();
   const double voxels = static_cast<double>(m.dims[0]) * m.dims[1] * m.dims[2];
   std::size_t written = 0;
@@ -28,7 +29,7 @@ void run_info(const std::string& dir, bool json) {
                      (voxels * static_cast<double>(std::max<std::size_t>(written, 1)));
   nlohmann::json levels = nlohmann::json::array();
   if (written > 0 && m.frames[0]) {
-    const auto f = c.open_frame(0);
+    const auto f = c.open_frame_index(0);
     for (std::uint32_t l = 0; l < f.view().level_count(); ++l) {
       const auto& e = f.view().level(l);
       levels.push_back({{"level", l},
@@ -43,7 +44,7 @@ void run_info(const std::string& dir, bool json) {
   std::uint64_t nodes = 0, bricks = 0;
   for (std::size_t t = 0; t < m.frames.size(); ++t) {
     if (!m.frames[t]) continue;
-    const auto f = c.open_frame(t);
+    const auto f = c.open_frame_index(t);
     nodes += f.view().node_count();
     bricks += f.view().brick_count();
   }
@@ -89,6 +90,7 @@ void run_info(const std::string& dir, bool json) {
     std::printf("frame 0 level %d: %s voxels, %d nodes, %ju payload bytes\n", l["level"].get<int>(),
                 l["dims"].dump().c_str(), l["nodes"].get<int>(),
                 static_cast<std::uintmax_t>(l["payload_bytes"].get<std::uint64_t>()));
+  print_remote_summary(c.source(), "info");
 }
 
 }  // namespace
@@ -98,9 +100,11 @@ void add_info_command(CLI::App& app) {
   auto info_json = std::make_shared<bool>(false);
   CLI::App* info = app.add_subcommand(
       "info", "Describe a NAME.vreel container: volume, codec, levels, sizes and bps");
-  info->add_option("CONTAINER", *info_dir, "NAME.vreel directory")->required();
+  auto remote = std::make_shared<RemoteCli>();
+  info->add_option("CONTAINER", *info_dir, container_argument_help)->required();
   info->add_flag("--json", *info_json, "Print JSON (the manifest plus totals)");
-  info->callback([info_dir, info_json] { run_info(*info_dir, *info_json); });
+  add_remote_options(*info, *remote);
+  info->callback([info_dir, info_json, remote] { run_info(*info_dir, *info_json, *remote); });
 }
 
 }  // namespace volreel::cli

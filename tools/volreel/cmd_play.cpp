@@ -9,6 +9,7 @@
 #include <string>
 
 #include "commands.hpp"
+#include "remote_options.hpp"
 #include "volreel/app/player.hpp"
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
@@ -26,10 +27,12 @@ struct PlayCommandOptions {
   std::string bandwidth = "0", latency = "0";
   std::string renderer = "auto";
   std::string script_file, script_inline, screenshot_on_exit;
+  RemoteCli remote;
 };
 
 void run_play(PlayCommandOptions& o) {
   app::PlayerOptions& p = o.player;
+  p.source = open_container_source(p.container.string(), o.remote);
   {
     const auto [w, h] = loop::parse_size(o.size);
     if (w < 64 || h < 64)
@@ -87,7 +90,8 @@ void add_play_command(CLI::App& app) {
                                      "tests: \"0.5 key space; 12f key right;\n"
                                      "2.0 settle; 2.1 screenshot a.png; 3 quit\" (see "
                                      "player/app/include/volreel/app/script.hpp).");
-  cmd->add_option("CONTAINER", o->player.container, "Container directory NAME.vreel")->required();
+  cmd->add_option("CONTAINER", o->player.container, container_argument_help)->required();
+  add_remote_options(*cmd, o->remote);
   cmd->add_option("--size", o->size, "Window size WxH, pixels")->capture_default_str();
   cmd->add_option("--atlas-mb", o->atlas_mb, "Brick atlas memory budget, MiB")
       ->capture_default_str();

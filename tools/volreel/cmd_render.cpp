@@ -21,6 +21,7 @@
 #include "loop_options.hpp"
 #include "process.hpp"
 #include "progress.hpp"
+#include "remote_options.hpp"
 #include "render_truth.hpp"
 #include "volreel/cpu_render/renderer.hpp"
 #include "volreel/cpu_render/tour.hpp"
@@ -45,11 +46,12 @@ struct RenderCommandOptions {
   std::size_t max_frames = 0;
   loop::LoopSettings loop;
   ReaderOptions reader;
+  RemoteCli remote;
 };
 
 void run_render(const RenderCommandOptions& o) {
   // 1. Input, tour, output folder; ffmpeg is checked before any work.
-  const format::Container container(o.container);
+  const format::Container container(open_container_source(o.container, o.remote));
   const format::Manifest& m = container.manifest();
   const cpu_render::TourContext tour_context{
       m.dims,
@@ -205,6 +207,7 @@ void run_render(const RenderCommandOptions& o) {
       100 * last.stats.fraction_at_target, last.stats.atlas_occupied, last.stats.atlas_capacity,
       double(last.stats.bytes_loaded) * 1e-6);
   if (errors) std::printf("%zu errors (see the warnings above)\n", errors);
+  print_remote_summary(container.source(), "render");
   if (compared)
     std::printf(
         "image quality against the original series (CPU render_reference, time-interpolated): mean "
@@ -244,7 +247,8 @@ void add_render_command(CLI::App& app) {
                                      "Render a tour of a container headlessly (no window or "
                                      "display): PNG frames and per-frame metrics, on the "
                                      "Vulkan device or, where there is none, on the CPU");
-  cmd->add_option("CONTAINER", o->container, "The container directory NAME.vreel")->required();
+  cmd->add_option("CONTAINER", o->container, container_argument_help)->required();
+  add_remote_options(*cmd, o->remote);
   cmd->add_option(
       "--tour", o->tour,
       "Tour JSON (camera, playhead and transfer-function keys; see player/cpu_render tour.hpp); "

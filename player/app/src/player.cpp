@@ -43,7 +43,8 @@ namespace detail {
 
 Player::Player(const PlayerOptions& options)
     : options_(options),
-      container_(options.container),
+      container_(options.source ? format::Container(options.source)
+                                : format::Container(options.container)),
       script_(parse_script(options.script)),
       window_(options.width, options.height, "volreel — " + options.container.filename().string()),
       playhead_(std::max<std::size_t>(container_.frame_count(), 1),

@@ -22,7 +22,7 @@ namespace {
 /// Values of up to `max_bricks` finest-level bricks of frame t, evenly spread.
 std::vector<float> finest_brick_values(const format::Container& container, std::size_t t,
                                        std::size_t max_bricks) {
-  const format::FrameFile file = container.open_frame(t);
+  const format::FrameFile file = container.open_frame_index(t);
   const format::FrameView& view = file.view();
   std::vector<std::uint32_t> bricks;
   for (std::uint32_t i = 0; i < view.node_count(); ++i) {
@@ -33,9 +33,13 @@ std::vector<float> finest_brick_values(const format::Container& container, std::
   const std::size_t take = std::min(std::max<std::size_t>(max_bricks, 1), bricks.size());
   const format::AtomTable atoms = container.atoms();
   std::vector<float> values(take * format::brick_voxels);
-  for (std::size_t k = 0; k < take; ++k)
-    format::decode_brick(view, bricks[k * bricks.size() / take], atoms,
-                         {values.data() + k * format::brick_voxels, format::brick_voxels});
+  for (std::size_t k = 0; k < take; ++k) {
+    const std::uint32_t b = bricks[k * bricks.size() / take];
+    format::decode_payload(container.read_brick(view, b), view.codec(),
+                           view.header().codec_parameter, atoms,
+                           {values.data() + k * format::brick_voxels, format::brick_voxels},
+                           view.name(), view.brick_offset(b));
+  }
   return values;
 }
 

@@ -7,6 +7,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <optional>
 #include <span>
 #include <string>
@@ -17,6 +18,7 @@
 #include "volreel/format/decoder.hpp"
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/frame_file.hpp"
+#include "volreel/format/source.hpp"
 
 namespace volreel::format {
 
@@ -93,33 +95,55 @@ void write_container_file(const std::filesystem::path& dir, const std::string& r
                           std::span<const std::byte> bytes);
 
 /// A container opened for reading: manifest parsed, dictionary loaded (ksvd), frame files mapped
-/// on demand.
+/// (local) or fetched (remote) on demand.
 class Container {
  public:
   /// Throws FormatError if the manifest or dictionary is bad, or the encode is not complete
   /// (unless allow_incomplete).
   explicit Container(std::filesystem::path dir, bool allow_incomplete = false);
+  /// The same, reading through `source` (local or remote).
+  explicit Container(std::shared_ptr<const ContainerSource> source, bool allow_incomplete = false);
 
+  /// The container's location: its directory, or its URL.
   const std::filesystem::path& directory() const { return dir_; }
+  const ContainerSource& source() const { return *source_; }
+  std::shared_ptr<const ContainerSource> shared_source() const { return source_; }
   const Manifest& manifest() const { return manifest_; }
   std::size_t frame_count() const { return manifest_.frames.size(); }
   /// The dictionary's atoms (empty for zfp).
   AtomTable atoms() const { return {atoms_, atom_count_}; }
-  /// Maps and validates frame t's index (header, levels, nodes, offsets); checks that it matches
-  /// the manifest (size, frame index, dims, codec). Throws FormatError.
+  /// Maps (local) or fetches (remote) frame t whole and validates its index (header, levels,
+  /// nodes, offsets); checks that it matches the manifest (size, frame index, dims, codec). Throws
+  /// FormatError.
   FrameFile open_frame(std::size_t t) const;
+  /// Frame t's index, validated as open_frame does, without its payloads where they would have to
+  /// be fetched (a remote source reads the index by range); a local frame is mapped whole.
+  FrameFile open_frame_index(std::size_t t) const;
+  /// Brick b's payload of a frame opened by open_frame or open_frame_index, checked against its
+  /// CRC-32C (read by range where the view holds the index alone). Throws FormatError.
+  std::vector<std::byte> read_brick(const FrameView& view, std::uint32_t b) const;
   /// Every byte of the container: manifest, dictionary, frames (for bps).
   std::uint64_t total_bytes() const;
 
  private:
+  std::shared_ptr<const ContainerSource> source_;
   std::filesystem::path dir_;
+  std::uint64_t manifest_bytes_ = 0;
   Manifest manifest_;
   std::vector<float> atoms_;
   std::uint32_t atom_count_ = 0;
+
+  /// The checks of open_frame on a validated view of frame t.
+  void check_frame(std::size_t t, const FrameView& view) const;
 };
 
 /// `volreel verify`: every CRC and structure. Returns the problems found (empty: valid); calls
 /// progress(done, total) after each frame if given.
+std::vector<std::string> verify_container(std::shared_ptr<const ContainerSource> source,
+                                          void (*progress)(std::size_t, std::size_t,
+                                                           void*) = nullptr,
+                                          void* user = nullptr);
+/// The same for a local directory.
 std::vector<std::string> verify_container(const std::filesystem::path& dir,
                                           void (*progress)(std::size_t, std::size_t,
                                                            void*) = nullptr,

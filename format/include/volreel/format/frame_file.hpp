@@ -144,11 +144,21 @@ class FrameView {
   FrameView() = default;
   /// Throws FormatError naming `name`, the offset, what was expected and what was found.
   FrameView(std::span<const std::byte> bytes, std::filesystem::path name);
+  /// The index alone: `bytes` are the file's first bytes, at least up to the payloads, of a file
+  /// of `file_size` bytes (a remote frame, whose bricks are read by range and checked against their
+  /// CRCs). Everything but the payloads is checked as for a whole file; brick_bytes() and
+  /// check_payload_crc() then throw.
+  FrameView(std::span<const std::byte> bytes, std::filesystem::path name, std::uint64_t file_size);
 
   const FrameHeader& header() const { return header_; }
   Codec codec() const { return static_cast<Codec>(header_.codec); }
   const std::filesystem::path& name() const { return name_; }
+  /// The bytes held: the whole file, or the index alone (has_payloads()).
   std::span<const std::byte> bytes() const { return bytes_; }
+  /// The size of the frame file.
+  std::uint64_t file_size() const { return file_size_; }
+  /// Whether the payloads are held (a whole file), not only the index.
+  bool has_payloads() const { return bytes_.size() == file_size_; }
 
   std::uint32_t level_count() const { return header_.level_count; }
   const LevelEntry& level(std::uint32_t l) const { return levels_[l]; }
@@ -161,8 +171,11 @@ class FrameView {
   /// The node at (level, x, y, z), or no_node_index when the frame's tree has none there (the
   /// position lies outside the level's grid or under an empty node).
   std::uint32_t find_node(const NodePosition& p) const;
-  /// Payload bytes of brick b (validated bounds, contents not checked).
+  /// Payload bytes of brick b (validated bounds, contents not checked). Throws FormatError if the
+  /// view holds the index alone.
   std::span<const std::byte> brick_bytes(std::uint32_t b) const;
+  /// The size of brick b's payload in bytes.
+  std::uint64_t brick_payload_bytes(std::uint32_t b) const;
   /// Payload bytes of brick b after checking them against the brick's CRC-32C; throws FormatError
   /// naming the file, the payload's offset and both CRCs.
   std::span<const std::byte> checked_brick_bytes(std::uint32_t b) const;
@@ -181,6 +194,7 @@ class FrameView {
  private:
   std::span<const std::byte> bytes_;
   std::filesystem::path name_;
+  std::uint64_t file_size_ = 0;
   FrameHeader header_{};
   std::vector<LevelEntry> levels_;
   std::vector<NodePosition> positions_;
@@ -205,14 +219,23 @@ class MappedFile {
   std::size_t size_ = 0;
 };
 
-/// A memory-mapped, validated frame file.
+/// A validated frame file: memory-mapped, or bytes held in memory (a whole remote file, or its
+/// index alone).
 class FrameFile {
  public:
   explicit FrameFile(const std::filesystem::path& path) : map_(path), view_(map_.bytes(), path) {}
+  /// The whole file's bytes, or (file_size larger) its index alone; `name` names it in messages.
+  FrameFile(std::vector<std::byte> bytes, std::filesystem::path name, std::uint64_t file_size)
+      : held_(std::move(bytes)), view_(held_, std::move(name), file_size) {}
+  FrameFile(FrameFile&&) noexcept = default;  // the view's span follows the moved buffer
+  FrameFile& operator=(FrameFile&&) noexcept = default;
+  FrameFile(const FrameFile&) = delete;
+  FrameFile& operator=(const FrameFile&) = delete;
   const FrameView& view() const { return view_; }
 
  private:
   MappedFile map_;
+  std::vector<std::byte> held_;
   FrameView view_;
 };
 

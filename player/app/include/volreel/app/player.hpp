@@ -16,9 +16,12 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
+
+#include "volreel/format/source.hpp"
 
 namespace volreel::app {
 
@@ -30,7 +33,9 @@ enum class RendererKind {
 };
 
 struct PlayerOptions {
-  std::filesystem::path container;           ///< NAME.vreel
+  std::filesystem::path container;  ///< NAME.vreel (or its URL, for the title)
+  /// Where to read it from (a remote source); empty: the folder `container`.
+  std::shared_ptr<const format::ContainerSource> source;
   int width = 1024, height = 720;            ///< initial window size, pixels
   std::uint64_t atlas_bytes = 256ull << 20;  ///< GPU atlas memory budget
   double bandwidth_bytes_per_s = 0;          ///< loader bandwidth limit (0: unlimited)

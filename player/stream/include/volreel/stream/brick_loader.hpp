@@ -4,13 +4,19 @@
 // like a slow network or disk (`--bandwidth 20MB/s --latency 50ms`). Arrivals wait in a thread-safe
 // queue until the scheduler polls them, once per rendered frame.
 //
-// Link model: a request accepted at time s has its first byte at s + latency; the bytes of all
+// Link model (local files, or any reader on a simulated clock; over a real network, the network is
+// the link): a request accepted at time s has its first byte at s + latency; the bytes of all
 // requests share one link of `bandwidth` bytes/s in the order they are read, so a request of B
 // bytes arrives at max(s + latency, link free) + B / bandwidth.
 //
-// A failed read (missing file, short file, I/O error) arrives as an error naming the file and the
-// offset; the key then backs off (retry_initial_s, doubling up to retry_max_s) before request()
-// accepts it again. Failures never hold a slot in flight and never stop other requests.
+// Where the bytes come from: a RangeReader — local files with pread (the default), or a web server
+// (remote::HttpSource), which also reads back-to-back requests of one frame file as one range
+// (coalescing: one HTTP request for several bricks) and keeps what arrives intact in a disk cache.
+//
+// A failed read (missing file, short file, I/O or network error, a payload whose CRC-32C does not
+// match the frame's index) arrives as an error naming the file and the offset; the key then backs
+// off (retry_initial_s, doubling up to retry_max_s) before request() accepts it again. Failures
+// never hold a slot in flight and never stop other requests.
 //
 // Simulated time (LoaderOptions::clock): the same link model on a caller's clock instead of the
 // steady clock, with no worker threads. A request takes its place on the link when accepted (as
@@ -26,16 +32,22 @@
 #include <deque>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <string>
 #include <thread>
 #include <unordered_map>
 #include <vector>
 
+#include "volreel/format/source.hpp"
 #include "volreel/stream/spatial_index.hpp"
 
 namespace volreel::stream {
+
+using format::ByteRange;
+using format::RangeReader;
 
 struct LoaderOptions {
   unsigned threads = 4;              ///< worker threads reading files (≥ 1)
@@ -46,6 +58,8 @@ struct LoaderOptions {
   double retry_max_s = 8.0;          ///< longest back-off
   /// Simulated time in seconds (non-decreasing); empty: the steady clock and worker threads.
   std::function<double()> clock;
+  /// Where the bytes come from (Container::source().brick_reader()); empty: local files.
+  std::shared_ptr<RangeReader> reader;
 };
 
 struct BrickRequest {
@@ -99,6 +113,10 @@ class BrickLoader {
   bool is_in_flight(const KeyframeKey& key) const;
   /// Bytes read successfully since construction.
   std::uint64_t bytes_read() const;
+  /// Bricks read successfully since construction.
+  std::uint64_t bricks_read() const;
+  /// Reads issued to the reader (a coalesced batch is one) since construction.
+  std::uint64_t reads() const;
   const LoaderOptions& options() const { return options_; }
 
  private:
@@ -129,7 +147,16 @@ class BrickLoader {
   Clock::time_point link_free_;
   Clock::time_point started_;
   std::uint64_t bytes_read_ = 0;
+  std::uint64_t reads_ = 0;
+  std::uint64_t bricks_read_ = 0;
   std::vector<std::thread> workers_;
+
+  /// Reads a batch of back-to-back requests of one file with the reader, checks each against its
+  /// CRC and passes the good ones to the reader's keep().
+  std::vector<BrickArrival> read_batch(std::vector<BrickRequest> batch);
+  /// Moves queued requests back to back with `first` (same file, adjacent ranges, not held by
+  /// the reader) into a batch with it, up to the reader's coalescing limit. Requires mutex_.
+  std::vector<BrickRequest> take_batch(BrickRequest first);
 
   Clock::time_point now() const;
   /// The link model: when a successful read of `bytes` bytes issued at `issued` arrives; advances
@@ -137,11 +164,5 @@ class BrickLoader {
   Clock::time_point arrival_time(Clock::time_point issued, std::size_t bytes);
   void work();
 };
-
-/// Reads `bytes` bytes at `offset` of `file` with pread into out; returns an error message naming
-/// the file and offset ("frames/000002.vrf: offset 4096: expected 1800 bytes, found 12 (file
-/// truncated)"), or an empty string on success.
-std::string read_byte_range(const std::filesystem::path& file, std::uint64_t offset,
-                            std::uint32_t bytes, std::vector<std::byte>& out);
 
 }  // namespace volreel::stream

@@ -83,6 +83,8 @@ struct StreamStats {
   std::size_t uploads = 0;             ///< this frame
   std::uint64_t bytes_uploaded = 0;    ///< this frame
   std::uint64_t bytes_loaded = 0;      ///< since construction, read by the loader
+  std::uint64_t bricks_loaded = 0;     ///< since construction, read by the loader
+  std::uint64_t loader_reads = 0;      ///< since construction (a coalesced read counts once)
   std::uint32_t atlas_occupied = 0, atlas_capacity = 0;
   std::uint32_t svo_nodes = 0, svo_leaves = 0;
   std::size_t errors = 0;  ///< since construction

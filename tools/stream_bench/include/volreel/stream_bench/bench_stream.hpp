@@ -180,13 +180,15 @@ struct BenchPlan {
   RunSetup setup;  ///< without its tour (run_tours sets each)
 };
 
-/// Checks `settings`, opens the container (InputError unless a container folder with frames), makes
+/// Checks `settings`, opens the container (InputError unless a container folder with frames, or
+/// `source` when given: a remote one), makes
 /// the first tour, the link, the output folder (bench_out_dir), the ground truth (open_original
 /// with `series` and `options`), the transfer function, the spatial index (its warnings on stderr)
 /// and the RunSetup.
 BenchPlan prepare_bench(const BenchStreamSettings& settings, const std::string& container,
                         const std::string& series, const datasets::OpenOptions& options,
-                        const std::string& out);
+                        const std::string& out,
+                        std::shared_ptr<const format::ContainerSource> source = nullptr);
 
 // ---------------------------------------------------------------------------------------------
 // The runs.

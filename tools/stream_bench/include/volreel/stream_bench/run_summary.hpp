@@ -54,6 +54,9 @@ struct RunResult {
   std::size_t frames_with_holes_after_root = 0, hole_frames = 0;
   std::uint32_t max_holes_after_root = 0;
   double bytes_loaded = 0, bytes_uploaded = 0;
+  /// Bricks the loader read, and what the container's source transferred meanwhile (requests,
+  /// bytes received; 0 for local files) during the timed run.
+  std::uint64_t bricks_loaded = 0, loader_reads = 0, transfer_requests = 0, transfer_bytes = 0;
   double mean_update_ms = 0, mean_decode_ms = 0, mean_render_ms = 0, mean_frame_ms = 0;
 };
 

@@ -1,0 +1,353 @@
+// http_client.cpp: libcurl's multi interface on one thread (see http_client.hpp).
+#include "volreel/remote/http_client.hpp"
+
+#include <curl/curl.h>
+
+#include <algorithm>
+#include <cctype>
+#include <charconv>
+#include <deque>
+#include <mutex>
+#include <stdexcept>
+#include <thread>
+#include <unordered_map>
+
+namespace volreel::remote {
+
+namespace {
+
+bool iequals_prefix(std::string_view text, std::string_view prefix) {
+  if (text.size() < prefix.size()) return false;
+  for (std::size_t i = 0; i < prefix.size(); ++i)
+    if (std::tolower(static_cast<unsigned char>(text[i])) !=
+        std::tolower(static_cast<unsigned char>(prefix[i])))
+      return false;
+  return true;
+}
+
+std::string_view trim(std::string_view s) {
+  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r' || s.back() == '\n'))
+    s.remove_suffix(1);
+  return s;
+}
+
+bool parse_u64(std::string_view s, std::uint64_t& v) {
+  if (s.empty() || s.size() > 20) return false;
+  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+  return ec == std::errc() && end == s.data() + s.size();
+}
+
+/// One GET in flight.
+struct Transfer {
+  std::string url;
+  std::uint64_t offset = 0, bytes = 0;  // bytes 0: the whole file
+  std::uint64_t limit = 0;              // the most body bytes accepted
+  std::promise<HttpResponse> promise;
+  std::vector<std::byte> body;
+  std::string content_range;
+  bool over_limit = false;
+  char error[CURL_ERROR_SIZE] = {};
+  std::atomic<std::uint64_t>* received = nullptr;
+  CURL* easy = nullptr;
+
+  std::string what() const {
+    return bytes > 0 ? url + ": bytes " + std::to_string(offset) + "-" +
+                           std::to_string(offset + bytes - 1)
+                     : url;
+  }
+};
+
+std::size_t on_body(char* data, std::size_t size, std::size_t count, void* user) {
+  auto* t = static_cast<Transfer*>(user);
+  const std::size_t n = size * count;
+  if (t->body.size() + n > t->limit) {
+    t->over_limit = true;
+    return 0;  // aborts the transfer (CURLE_WRITE_ERROR)
+  }
+  const auto* p = reinterpret_cast<const std::byte*>(data);
+  t->body.insert(t->body.end(), p, p + n);
+  *t->received += n;
+  return n;
+}
+
+std::size_t on_header(char* data, std::size_t size, std::size_t count, void* user) {
+  auto* t = static_cast<Transfer*>(user);
+  const std::size_t n = size * count;
+  const std::string_view line(data, n);
+  if (iequals_prefix(line, "HTTP/")) {
+    t->content_range.clear();  // a new response (after a redirect or an interim one)
+  } else if (iequals_prefix(line, "content-range:")) {
+    t->content_range = std::string(trim(line.substr(14)));
+  }
+  return n;
+}
+
+/// Whether a libcurl failure may go away on its own.
+bool transient_failure(CURLcode code) {
+  switch (code) {
+    case CURLE_UNSUPPORTED_PROTOCOL:
+    case CURLE_URL_MALFORMAT:
+    case CURLE_NOT_BUILT_IN:
+    case CURLE_PEER_FAILED_VERIFICATION:
+    case CURLE_SSL_CERTPROBLEM:
+    case CURLE_SSL_CACERT_BADFILE:
+    case CURLE_TOO_MANY_REDIRECTS:
+    case CURLE_WRITE_ERROR:
+    case CURLE_OUT_OF_MEMORY:
+      return false;
+    default:
+      return true;
+  }
+}
+
+HttpResponse finish(Transfer& t, CURLcode code) {
+  HttpResponse r;
+  long status = 0;
+  curl_easy_getinfo(t.easy, CURLINFO_RESPONSE_CODE, &status);
+  r.status = status;
+  const std::string what = t.what();
+  const std::string expected_size =
+      t.bytes > 0 ? std::to_string(t.bytes) + " bytes" : "at most " + std::to_string(t.limit) + " bytes";
+  if (code != CURLE_OK) {
+    if (t.over_limit) {
+      r.error = what + ": expected " + expected_size + ", found more";
+    } else {
+      r.error = what + ": " + curl_easy_strerror(code);
+      if (t.error[0] != '\0') r.error += std::string(" (") + t.error + ")";
+      r.transient = transient_failure(code);
+    }
+    return r;
+  }
+  const long wanted = t.bytes > 0 ? 206 : 200;
+  if (status != wanted) {
+    if (t.bytes > 0 && status == 200)
+      r.error = what + ": expected HTTP 206 (a byte range), found HTTP 200 (the server does not " +
+                "serve byte ranges)";
+    else
+      r.error = what + ": expected HTTP " + std::to_string(wanted) + ", found HTTP " +
+                std::to_string(status);
+    r.transient = status == 408 || status == 429 || status >= 500;
+    return r;
+  }
+  if (t.bytes > 0) {
+    const auto range = parse_content_range(t.content_range);
+    if (!range || range->first != t.offset || range->last != t.offset + t.bytes - 1) {
+      r.error = what + ": expected Content-Range bytes " + std::to_string(t.offset) + "-" +
+                std::to_string(t.offset + t.bytes - 1) + ", found " +
+                (t.content_range.empty() ? std::string("none") : "\"" + t.content_range + "\"");
+      return r;
+    }
+    if (t.body.size() != t.bytes) {
+      r.error = what + ": expected " + std::to_string(t.bytes) + " bytes, found " +
+                std::to_string(t.body.size()) + " (response truncated)";
+      r.transient = true;
+      return r;
+    }
+  }
+  r.body = std::move(t.body);
+  return r;
+}
+
+void global_init() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    if (curl_global_init(CURL_GLOBAL_DEFAULT) != CURLE_OK)
+      throw std::runtime_error("libcurl could not be initialised");
+  });
+}
+
+}  // namespace
+
+std::optional<ContentRange> parse_content_range(std::string_view value) {
+  value = trim(value);
+  if (!iequals_prefix(value, "bytes ")) return std::nullopt;
+  value = trim(value.substr(6));
+  const std::size_t dash = value.find('-'), slash = value.find('/');
+  if (dash == std::string_view::npos || slash == std::string_view::npos || dash > slash)
+    return std::nullopt;
+  ContentRange r;
+  if (!parse_u64(value.substr(0, dash), r.first) ||
+      !parse_u64(value.substr(dash + 1, slash - dash - 1), r.last) || r.last < r.first)
+    return std::nullopt;
+  const std::string_view total = value.substr(slash + 1);
+  if (total != "*") {
+    std::uint64_t v = 0;
+    if (!parse_u64(total, v) || v <= r.last) return std::nullopt;
+    r.total = v;
+  }
+  return r;
+}
+
+bool is_url(std::string_view location) {
+  const std::size_t colon = location.find("://");
+  if (colon == std::string_view::npos || colon == 0) return false;
+  return std::all_of(location.begin(), location.begin() + static_cast<std::ptrdiff_t>(colon),
+                     [](char c) {
+                       return std::isalnum(static_cast<unsigned char>(c)) || c == '+' ||
+                              c == '-' || c == '.';
+                     });
+}
+
+std::string check_url(std::string url) {
+  const std::size_t colon = url.find("://");
+  if (!is_url(url)) throw std::invalid_argument(url + ": not a URL (expected http:// or https://)");
+  std::string scheme = url.substr(0, colon);
+  std::transform(scheme.begin(), scheme.end(), scheme.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (scheme != "http" && scheme != "https")
+    throw std::invalid_argument(url + ": unsupported scheme \"" + scheme +
+                                "://\" (volreel reads http:// and https:// URLs, or local paths)");
+  for (const char c : url)
+    if (static_cast<unsigned char>(c) <= 0x20 || c == 0x7f)
+      throw std::invalid_argument(url + ": a URL may not hold spaces or control characters " +
+                                  "(percent-encode them)");
+  if (url.find_first_of("?#") != std::string::npos)
+    throw std::invalid_argument(url + ": a container URL names its folder; query strings and " +
+                                "fragments are not supported");
+  while (url.size() > colon + 3 && url.back() == '/') url.pop_back();
+  const std::size_t host_end = url.find('/', colon + 3);
+  if (url.substr(colon + 3, host_end - colon - 3).empty())
+    throw std::invalid_argument(url + ": no host");
+  return scheme + url.substr(colon);
+}
+
+struct HttpClient::Impl {
+  CURLM* multi = nullptr;
+  std::mutex mutex;
+  std::deque<std::unique_ptr<Transfer>> incoming;
+  bool stopping = false;
+  std::unordered_map<CURL*, std::unique_ptr<Transfer>> active;
+  std::thread thread;
+
+  void start(Transfer& t, const HttpOptions& o) {
+    CURL* e = curl_easy_init();
+    if (!e) {
+      HttpResponse r;
+      r.error = t.what() + ": libcurl could not make a handle";
+      r.transient = true;
+      t.promise.set_value(std::move(r));
+      return;
+    }
+    t.easy = e;
+    curl_easy_setopt(e, CURLOPT_URL, t.url.c_str());
+    curl_easy_setopt(e, CURLOPT_PROTOCOLS_STR, "http,https");
+    curl_easy_setopt(e, CURLOPT_REDIR_PROTOCOLS_STR, "http,https");
+    curl_easy_setopt(e, CURLOPT_FOLLOWLOCATION, 1L);
+    curl_easy_setopt(e, CURLOPT_MAXREDIRS, 5L);
+    curl_easy_setopt(e, CURLOPT_NOSIGNAL, 1L);
+    curl_easy_setopt(e, CURLOPT_CONNECTTIMEOUT_MS, static_cast<long>(o.connect_timeout_s * 1e3));
+    curl_easy_setopt(e, CURLOPT_LOW_SPEED_LIMIT, 1L);
+    curl_easy_setopt(e, CURLOPT_LOW_SPEED_TIME,
+                     std::max(1L, static_cast<long>(o.stall_timeout_s + 0.5)));
+    curl_easy_setopt(e, CURLOPT_HTTP_VERSION, static_cast<long>(CURL_HTTP_VERSION_2TLS));
+    curl_easy_setopt(e, CURLOPT_PIPEWAIT, 1L);
+    curl_easy_setopt(e, CURLOPT_TCP_KEEPALIVE, 1L);
+    curl_easy_setopt(e, CURLOPT_USERAGENT, "volreel");
+    curl_easy_setopt(e, CURLOPT_ERRORBUFFER, t.error);
+    curl_easy_setopt(e, CURLOPT_WRITEFUNCTION, on_body);
+    curl_easy_setopt(e, CURLOPT_WRITEDATA, &t);
+    curl_easy_setopt(e, CURLOPT_HEADERFUNCTION, on_header);
+    curl_easy_setopt(e, CURLOPT_HEADERDATA, &t);
+    std::string range;
+    if (t.bytes > 0) {
+      range = std::to_string(t.offset) + "-" + std::to_string(t.offset + t.bytes - 1);
+      curl_easy_setopt(e, CURLOPT_RANGE, range.c_str());  // copied by libcurl
+    }
+    curl_multi_add_handle(multi, e);
+  }
+
+  void run(const HttpOptions& options, std::atomic<std::uint64_t>& requests) {
+    for (;;) {
+      std::deque<std::unique_ptr<Transfer>> added;
+      {
+        std::lock_guard lock(mutex);
+        if (stopping) break;
+        added.swap(incoming);
+      }
+      for (auto& t : added) {
+        start(*t, options);
+        if (t->easy) active.emplace(t->easy, std::move(t));
+      }
+      int running = 0;
+      curl_multi_perform(multi, &running);
+      int left = 0;
+      while (CURLMsg* m = curl_multi_info_read(multi, &left)) {
+        if (m->msg != CURLMSG_DONE) continue;
+        CURL* e = m->easy_handle;
+        const CURLcode code = m->data.result;
+        const auto it = active.find(e);
+        curl_multi_remove_handle(multi, e);
+        if (it != active.end()) {
+          std::unique_ptr<Transfer> t = std::move(it->second);
+          active.erase(it);
+          ++requests;
+          t->promise.set_value(finish(*t, code));
+        }
+        curl_easy_cleanup(e);
+      }
+      curl_multi_poll(multi, nullptr, 0, 1000, nullptr);
+    }
+    // Closing: what is still running or waiting fails.
+    for (auto& [e, t] : active) {
+      curl_multi_remove_handle(multi, e);
+      curl_easy_cleanup(e);
+      HttpResponse r;
+      r.error = t->what() + ": the HTTP client was closed";
+      t->promise.set_value(std::move(r));
+    }
+    active.clear();
+    std::lock_guard lock(mutex);
+    for (auto& t : incoming) {
+      HttpResponse r;
+      r.error = t->what() + ": the HTTP client was closed";
+      t->promise.set_value(std::move(r));
+    }
+    incoming.clear();
+  }
+};
+
+HttpClient::HttpClient(HttpOptions options) : options_(options), impl_(std::make_unique<Impl>()) {
+  global_init();
+  impl_->multi = curl_multi_init();
+  if (!impl_->multi) throw std::runtime_error("libcurl could not make a multi handle");
+  curl_multi_setopt(impl_->multi, CURLMOPT_MAX_HOST_CONNECTIONS,
+                    static_cast<long>(std::max(1u, options_.max_connections)));
+  curl_multi_setopt(impl_->multi, CURLMOPT_PIPELINING, static_cast<long>(CURLPIPE_MULTIPLEX));
+  impl_->thread = std::thread([this] { impl_->run(options_, requests_); });
+}
+
+HttpClient::~HttpClient() {
+  {
+    std::lock_guard lock(impl_->mutex);
+    impl_->stopping = true;
+  }
+  curl_multi_wakeup(impl_->multi);
+  impl_->thread.join();
+  curl_multi_cleanup(impl_->multi);
+}
+
+std::future<HttpResponse> HttpClient::get(std::string url, std::uint64_t offset,
+                                          std::uint64_t bytes) {
+  auto t = std::make_unique<Transfer>();
+  t->url = std::move(url);
+  t->offset = offset;
+  t->bytes = bytes;
+  t->limit = bytes > 0 ? bytes : options_.max_bytes;
+  t->received = &bytes_received_;
+  std::future<HttpResponse> f = t->promise.get_future();
+  {
+    std::lock_guard lock(impl_->mutex);
+    if (impl_->stopping) {
+      HttpResponse r;
+      r.error = t->what() + ": the HTTP client was closed";
+      t->promise.set_value(std::move(r));
+      return f;
+    }
+    impl_->incoming.push_back(std::move(t));
+  }
+  curl_multi_wakeup(impl_->multi);
+  return f;
+}
+
+}  // namespace volreel::remote

@@ -1,0 +1,112 @@
+// http_source.hpp: a container on a web server or object store, read by HTTP(S) GETs: the
+// manifest whole (always fresh), the dictionary whole, each frame's index by range, and bricks by
+// range for the player's loader — back-to-back bricks of one frame as one request, what arrives
+// intact kept in an optional disk cache.
+//
+// Only the container's own files are ever asked for: the manifest reader accepts no other names
+// ("dictionary.bin", "frames/NNNNNN.vrf"), and the loader's requests must lie under the container's
+// URL. Reads for the container (manifest, dictionary, indexes) retry transient failures with
+// back-off; the loader's reads are tried once, since the loader backs off itself.
+//
+// Cache keys carry the container's identifier and the file's CRC-32C from the manifest, so a
+// container encoded again at the same URL never reads another's bytes; nothing is cached before
+// the manifest has been read.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "volreel/format/source.hpp"
+#include "volreel/remote/disk_cache.hpp"
+#include "volreel/remote/http_client.hpp"
+
+namespace volreel::remote {
+
+struct RemoteOptions {
+  HttpOptions http;
+  unsigned attempts = 4;            ///< tries of a container read (manifest, dictionary, index)
+  double retry_initial_s = 0.25;    ///< back-off before the second try, doubling after
+  std::uint64_t coalesce_bytes = std::uint64_t{1} << 20;  ///< the largest range of several bricks
+  std::filesystem::path cache_dir;  ///< empty: no cache
+  std::uint64_t cache_bytes = std::uint64_t{2} << 30;
+};
+
+class HttpSource final : public format::ContainerSource,
+                         public format::RangeReader,
+                         public std::enable_shared_from_this<HttpSource> {
+ public:
+  /// Checks the URL (check_url: http or https only); reads nothing yet. Throws
+  /// std::invalid_argument for a bad URL, FormatError for a cache folder that cannot be used.
+  HttpSource(std::string url, RemoteOptions options = {});
+
+  // ContainerSource
+  const std::string& location() const override { return url_; }
+  std::filesystem::path name(const std::string& relative) const override;
+  std::optional<std::filesystem::path> local_directory() const override { return std::nullopt; }
+  std::vector<std::byte> read_file(const std::string& relative,
+                                   std::uint64_t max_bytes) const override;
+  std::vector<std::byte> read_range(const std::string& relative, std::uint64_t offset,
+                                    std::uint64_t bytes) const override;
+  std::uint64_t bytes_received() const override { return client_->bytes_received(); }
+  void keep(const std::string& relative, std::uint64_t offset,
+            std::span<const std::byte> bytes) const override;
+  std::optional<std::vector<std::byte>> kept(const std::string& relative,
+                                             std::uint64_t offset) const override;
+  std::shared_ptr<format::RangeReader> brick_reader() const override;
+
+  // RangeReader (the player's loader)
+  std::string read(const std::filesystem::path& file, std::span<const format::ByteRange> ranges,
+                   std::vector<std::vector<std::byte>>& out) override;
+  std::uint64_t coalesce_bytes() const override { return options_.coalesce_bytes; }
+  bool holds(const std::filesystem::path& file, format::ByteRange range) const override;
+  void keep(const std::filesystem::path& file, std::uint64_t offset,
+            std::span<const std::byte> bytes) override;
+  bool remote() const override { return true; }
+
+  /// HTTP requests completed so far (any outcome).
+  std::uint64_t requests() const override { return client_->requests(); }
+  /// The cache, if any.
+  const DiskCache* cache() const { return cache_.get(); }
+  /// Bytes served from the cache instead of the network.
+  std::uint64_t cache_bytes_served() const;
+
+ private:
+  std::string url_;
+  RemoteOptions options_;
+  std::unique_ptr<HttpClient> client_;
+  std::unique_ptr<DiskCache> cache_;
+  mutable std::mutex mutex_;
+  struct FileTag {
+    std::string tag;  ///< "CONTAINER_ID/CRC32C"
+    std::uint64_t bytes = 0;
+  };
+  /// Per file of the manifest (set when the manifest is read).
+  mutable std::map<std::string, FileTag> tags_;
+  mutable std::uint64_t cache_served_ = 0;
+
+  /// The container-relative name of a loader's file (its URL), or empty if it is not one.
+  std::string relative_of(const std::filesystem::path& file) const;
+  /// The cache key of a range of a file (bytes: its length, or "*" for what keep() kept at
+  /// offset), or empty when it is not to be cached.
+  std::string cache_key(const std::string& relative, std::uint64_t offset,
+                        const std::string& bytes) const;
+  std::optional<std::vector<std::byte>> cached(const std::string& relative, std::uint64_t offset,
+                                               std::uint64_t bytes) const;
+  /// GET with retries of transient failures; throws FormatError with the last error.
+  std::vector<std::byte> fetch(const std::string& relative, std::uint64_t offset,
+                               std::uint64_t bytes) const;
+  /// Records the manifest's identifier and CRCs for cache keys.
+  void learn_manifest(std::span<const std::byte> bytes) const;
+};
+
+/// The source of a container named by a path or a URL.
+std::shared_ptr<const format::ContainerSource> open_source(const std::string& location,
+                                                           const RemoteOptions& options = {});
+
+}  // namespace volreel::remote

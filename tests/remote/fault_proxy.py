@@ -1,0 +1,83 @@
+#!/usr/bin/env python3
+"""A small HTTP proxy on 127.0.0.1 that passes GETs (with their Range header) to a web server on
+127.0.0.1 and can spoil the answers, for volreel's tests of remote reading.
+
+    fault_proxy.py UPSTREAM_PORT MODE_FILE
+
+It prints the port it listens on, then serves until killed. Before every request it reads
+MODE_FILE (missing or empty: "pass"):
+    pass        the upstream's answer as it is
+    flip        byte ranges (HTTP 206) with one byte of the body changed
+    truncate    half of the body, then the connection closed (Content-Length promises all of it)
+    stall       one byte of the body, then nothing for 60 seconds
+    status N    HTTP status N with an empty body, the upstream not asked
+"""
+import http.client
+import http.server
+import os
+import socket
+import sys
+import time
+
+UPSTREAM = int(sys.argv[1])
+MODE_FILE = sys.argv[2]
+PASSED_HEADERS = ("content-range", "content-type", "etag", "last-modified", "accept-ranges")
+
+
+def mode():
+    try:
+        with open(MODE_FILE) as f:
+            return f.read().strip() or "pass"
+    except FileNotFoundError:
+        return "pass"
+
+
+class Handler(http.server.BaseHTTPRequestHandler):
+    protocol_version = "HTTP/1.1"
+
+    def do_GET(self):
+        m = mode()
+        if m.startswith("status "):
+            self.send_response(int(m.split()[1]))
+            self.send_header("Content-Length", "0")
+            self.end_headers()
+            return
+        upstream = http.client.HTTPConnection("127.0.0.1", UPSTREAM, timeout=30)
+        headers = {k: v for k, v in self.headers.items() if k.lower() == "range"}
+        upstream.request("GET", self.path, headers=headers)
+        answer = upstream.getresponse()
+        body = bytearray(answer.read())
+        upstream.close()
+        if m == "flip" and answer.status == 206 and body:
+            body[len(body) // 2] ^= 0x40
+        self.send_response(answer.status)
+        for k, v in answer.getheaders():
+            if k.lower() in PASSED_HEADERS:
+                self.send_header(k, v)
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        if m == "truncate":
+            self.wfile.write(body[: len(body) // 2])
+            self.wfile.flush()
+            self.close_connection = True
+            self.connection.shutdown(socket.SHUT_RDWR)
+        elif m == "stall":
+            self.wfile.write(body[:1])
+            self.wfile.flush()
+            time.sleep(60)
+            self.close_connection = True
+        else:
+            self.wfile.write(body)
+
+    def log_message(self, *args):
+        pass
+
+
+class Server(http.server.ThreadingHTTPServer):
+    daemon_threads = True
+
+
+if __name__ == "__main__":
+    server = Server(("127.0.0.1", 0), Handler)
+    print(server.server_address[1], flush=True)
+    server.serve_forever()

@@ -1,0 +1,177 @@
+// http_test_util.hpp: real servers on 127.0.0.1 for the tests of remote reading — nginx (Debian's)
+// serving a folder on a free port, optionally shaped with limit_rate, that a test can stop and
+// start again on the same port; and the fault proxy (fault_proxy.py) in front of it.
+#pragma once
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "../test_util.hpp"
+
+extern char** environ;
+
+namespace volreel::test {
+
+/// A TCP port on 127.0.0.1 that was free a moment ago.
+inline int free_port() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = 0;
+  if (fd < 0 || ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0)
+    throw std::runtime_error("no free port on 127.0.0.1");
+  socklen_t n = sizeof a;
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &n);
+  ::close(fd);
+  return ntohs(a.sin_port);
+}
+
+/// Whether something accepts connections on 127.0.0.1:port.
+inline bool port_open(int port) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = htons(static_cast<std::uint16_t>(port));
+  const bool ok = fd >= 0 && ::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
+  if (fd >= 0) ::close(fd);
+  return ok;
+}
+
+inline pid_t spawn(const std::vector<std::string>& args, int stdout_fd = -1) {
+  std::vector<char*> argv;
+  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  if (stdout_fd >= 0) posix_spawn_file_actions_adddup2(&actions, stdout_fd, 1);
+  pid_t pid = 0;
+  const int rc = posix_spawnp(&pid, argv[0], &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (rc != 0) throw std::runtime_error("cannot start " + args[0]);
+  return pid;
+}
+
+inline void stop_process(pid_t& pid) {
+  if (pid <= 0) return;
+  ::kill(pid, SIGTERM);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  pid = 0;
+}
+
+inline std::string nginx_binary() {
+  for (const char* p : {"/usr/sbin/nginx", "/usr/local/sbin/nginx", "/usr/bin/nginx"})
+    if (std::filesystem::exists(p)) return p;
+  throw std::runtime_error("nginx not found: install Debian's nginx (scripts/install-deps)");
+}
+
+/// nginx serving `root` on 127.0.0.1:port (one process, no daemon), with `limit_rate` bytes/s per
+/// request when > 0. Stopped on destruction.
+class Nginx {
+ public:
+  Nginx(std::filesystem::path root, std::filesystem::path work, std::uint64_t limit_rate = 0)
+      : root_(std::move(root)), work_(std::move(work)), port_(free_port()) {
+    std::filesystem::create_directories(work_ / "tmp");
+    std::ofstream c(work_ / "nginx.conf");
+    c << (::geteuid() == 0 ? "user root;\n" : "") << "worker_processes 1;\nmaster_process off;\n"
+      << "daemon off;\npid " << (work_ / "nginx.pid").string() << ";\nerror_log "
+      << (work_ / "error.log").string() << " warn;\nevents { worker_connections 256; }\n"
+      << "http {\n  access_log " << (work_ / "access.log").string() << ";\n"
+      << "  client_body_temp_path " << (work_ / "tmp").string() << ";\n"
+      << "  proxy_temp_path " << (work_ / "tmp").string() << ";\n"
+      << "  fastcgi_temp_path " << (work_ / "tmp").string() << ";\n"
+      << "  uwsgi_temp_path " << (work_ / "tmp").string() << ";\n"
+      << "  scgi_temp_path " << (work_ / "tmp").string() << ";\n"
+      << "  default_type application/octet-stream;\n  keepalive_requests 100000;\n"
+      << "  server {\n    listen 127.0.0.1:" << port_ << ";\n    root " << root_.string()
+      << ";\n"
+      << (limit_rate > 0 ? "    limit_rate " + std::to_string(limit_rate) + ";\n" : "")
+      << "  }\n}\n";
+    c.close();
+    start();
+  }
+  ~Nginx() { stop(); }
+  Nginx(const Nginx&) = delete;
+  Nginx& operator=(const Nginx&) = delete;
+
+  void start() {
+    pid_ = spawn({nginx_binary(), "-p", work_.string(), "-e", (work_ / "error.log").string(), "-c",
+                  (work_ / "nginx.conf").string()});
+    for (int i = 0; i < 500 && !port_open(port_); ++i)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (!port_open(port_)) {
+      const std::vector<std::byte> log = read_bytes(work_ / "error.log");
+      const std::string text(reinterpret_cast<const char*>(log.data()), log.size());
+      stop();
+      throw std::runtime_error("nginx did not start on 127.0.0.1:" + std::to_string(port_) + ": " +
+                               text);
+    }
+  }
+  void stop() { stop_process(pid_); }
+  int port() const { return port_; }
+  std::string url(const std::string& path) const {
+    return "http://127.0.0.1:" + std::to_string(port_) + "/" + path;
+  }
+  /// Requests nginx has served (lines of its access log).
+  std::size_t requests_served() const {
+    std::ifstream log(work_ / "access.log");
+    std::size_t n = 0;
+    for (std::string line; std::getline(log, line);) ++n;
+    return n;
+  }
+
+ private:
+  std::filesystem::path root_, work_;
+  int port_;
+  pid_t pid_ = 0;
+};
+
+/// fault_proxy.py in front of 127.0.0.1:upstream_port; set_mode() changes how it answers.
+class FaultProxy {
+ public:
+  FaultProxy(const std::filesystem::path& script, int upstream_port, std::filesystem::path work)
+      : mode_file_(std::move(work) / "proxy_mode") {
+    set_mode("pass");
+    int fds[2];
+    if (::pipe(fds) != 0) throw std::runtime_error("pipe");
+    pid_ = spawn({"python3", script.string(), std::to_string(upstream_port), mode_file_.string()},
+                 fds[1]);
+    ::close(fds[1]);
+    std::string line;
+    char c = 0;
+    while (::read(fds[0], &c, 1) == 1 && c != '\n') line += c;
+    ::close(fds[0]);
+    port_ = std::stoi(line);
+  }
+  ~FaultProxy() { stop_process(pid_); }
+  FaultProxy(const FaultProxy&) = delete;
+  FaultProxy& operator=(const FaultProxy&) = delete;
+
+  void set_mode(const std::string& mode) { std::ofstream(mode_file_) << mode << '\n'; }
+  std::string url(const std::string& path) const {
+    return "http://127.0.0.1:" + std::to_string(port_) + "/" + path;
+  }
+
+ private:
+  std::filesystem::path mode_file_;
+  int port_ = 0;
+  pid_t pid_ = 0;
+};
+
+}  // namespace volreel::test

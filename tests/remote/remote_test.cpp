@@ -1,0 +1,402 @@
+// remote_test.cpp: containers read over HTTP from a real nginx on 127.0.0.1 — the same manifest,
+// indexes and bricks as from the folder, coalesced range requests, the disk cache, and faults
+// (a corrupted byte, error statuses, truncated and stalled answers, a server that stops and comes
+// back) that give clear errors and never hand out bad bytes; plus the pieces alone (Content-Range,
+// URL checks, the cache folder).
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <fstream>
+#include <thread>
+
+#include "../stream/stream_test_util.hpp"
+#include "http_test_util.hpp"
+#include "volreel/format/container.hpp"
+#include "volreel/format/crc32c.hpp"
+#include "volreel/format/error.hpp"
+#include "volreel/remote/disk_cache.hpp"
+#include "volreel/remote/http_source.hpp"
+#include "volreel/stream/brick_loader.hpp"
+#include "volreel/stream/spatial_index.hpp"
+
+namespace volreel::remote {
+namespace {
+
+namespace fs = std::filesystem;
+
+const fs::path proxy_script = VOLREEL_FAULT_PROXY;
+
+std::string text_of(const fs::path& path) {
+  const std::vector<std::byte> bytes = test::read_bytes(path);
+  return {reinterpret_cast<const char*>(bytes.data()), bytes.size()};
+}
+
+// ---------------------------------------------------------------------------------------------
+// The pieces.
+
+TEST(RemoteHttp, ParsesContentRange) {
+  const auto r = parse_content_range("bytes 100-199/1000");
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->first, 100u);
+  EXPECT_EQ(r->last, 199u);
+  EXPECT_EQ(r->total, 1000u);
+  EXPECT_TRUE(parse_content_range("  BYTES 0-0/*\r\n"));
+  EXPECT_FALSE(parse_content_range("bytes 0-0/*")->total);
+  for (const char* bad : {"", "bytes", "bytes 5-4/10", "bytes 0-9/9", "bytes -1-2/3", "items 0-1/2",
+                          "bytes 0-1", "bytes a-b/c", "bytes 0-99999999999999999999/1"})
+    EXPECT_FALSE(parse_content_range(bad)) << bad;
+}
+
+TEST(RemoteHttp, AcceptsOnlyHttpAndHttpsUrls) {
+  EXPECT_EQ(check_url("http://host/a/run.vreel/"), "http://host/a/run.vreel");
+  EXPECT_EQ(check_url("HTTPS://host:8443/run.vreel"), "https://host:8443/run.vreel");
+  EXPECT_TRUE(is_url("http://x"));
+  EXPECT_FALSE(is_url("out/run.vreel"));
+  EXPECT_FALSE(is_url("/abs/with://inside"));
+  const auto message = [](const std::string& url) {
+    try {
+      check_url(url);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_NE(message("ftp://host/run.vreel").find("unsupported scheme \"ftp://\""),
+            std::string::npos);
+  EXPECT_NE(message("file:///etc/run.vreel").find("unsupported scheme"), std::string::npos);
+  EXPECT_NE(message("http://host/a b").find("spaces"), std::string::npos);
+  EXPECT_NE(message("http://host/run.vreel?sig=1").find("query"), std::string::npos);
+  EXPECT_NE(message("http:///run.vreel").find("no host"), std::string::npos);
+}
+
+TEST(RemoteCache, KeepsEntriesAndEvictsTheLeastRecentlyUsed) {
+  test::TempDir dir("remote-cache");
+  const std::vector<std::byte> a(3000, std::byte{1}), b(3000, std::byte{2}), c(3000, std::byte{3});
+  {
+    DiskCache cache(dir / "cache", 8000);  // room for two entries of ~3 KB
+    cache.put("a", a);
+    cache.put("b", b);
+    EXPECT_EQ(cache.get("a"), a);  // a is now the most recent
+    cache.put("c", c);             // evicts b
+    EXPECT_FALSE(cache.get("b"));
+    EXPECT_EQ(cache.get("a"), a);
+    EXPECT_EQ(cache.get("c"), c);
+    EXPECT_LE(cache.bytes(), 8000u);
+  }
+  // A new instance finds them, oldest use first out.
+  DiskCache again(dir / "cache", 8000);
+  EXPECT_EQ(again.entries(), 2u);
+  EXPECT_EQ(again.get("c"), c);
+  // A damaged entry is removed and counts as a miss.
+  for (const auto& e : fs::directory_iterator(dir / "cache")) {
+    std::fstream f(e.path(), std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(40);
+    f.put('\x55');
+  }
+  EXPECT_FALSE(again.get("a"));
+  EXPECT_EQ(again.entries(), 1u);
+  EXPECT_EQ(parse_cache_size("2G"), std::uint64_t{2} << 30);
+  EXPECT_EQ(parse_cache_size("500MiB"), std::uint64_t{500} << 20);
+  EXPECT_EQ(parse_cache_size("4096"), 4096u);
+  EXPECT_THROW(parse_cache_size("lots"), std::invalid_argument);
+  EXPECT_THROW(parse_cache_size("-1G"), std::invalid_argument);
+}
+
+// ---------------------------------------------------------------------------------------------
+// A container served by nginx.
+
+class RemoteContainer : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new test::TempDir("remote-container");
+    container_ = new fs::path(test::make_container(dir_->path(), {70, 70, 40}, 6));
+    nginx_ = new test::Nginx(dir_->path(), dir_->path() / "nginx");
+  }
+  static void TearDownTestSuite() {
+    delete nginx_;
+    delete container_;
+    delete dir_;
+  }
+  static std::string url() { return nginx_->url("test.vreel"); }
+
+  /// Requests every brick of every frame of the index through a loader reading with `reader`,
+  /// and returns the arrivals (successes and errors) once each has come once.
+  static std::vector<stream::BrickArrival> load_all(const stream::SpatialIndex& index,
+                                                    std::shared_ptr<format::RangeReader> reader,
+                                                    unsigned threads = 1) {
+    stream::LoaderOptions o;
+    o.threads = threads;
+    o.max_in_flight = 100000;
+    o.reader = std::move(reader);
+    stream::BrickLoader loader(o);
+    std::size_t requested = 0;
+    for (std::size_t k = 0; k < index.keyframe_count(); ++k) {
+      const auto id = static_cast<stream::KeyframeId>(k);
+      const stream::KeyframeNode& n = index.keyframe(id);
+      stream::BrickRequest r;
+      r.key = index.key(id);
+      r.keyframe = id;
+      r.file = index.frame_file(n.t);
+      r.offset = n.offset;
+      r.bytes = n.bytes;
+      r.crc32c = n.crc32c;
+      EXPECT_EQ(loader.request(std::move(r)), stream::RequestStatus::accepted);
+      ++requested;
+    }
+    std::vector<stream::BrickArrival> all;
+    for (int i = 0; i < 20000 && all.size() < requested; ++i) {
+      for (auto& a : loader.poll()) all.push_back(std::move(a));
+      if (all.size() < requested) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    EXPECT_EQ(all.size(), requested);
+    return all;
+  }
+
+  static test::TempDir* dir_;
+  static fs::path* container_;
+  static test::Nginx* nginx_;
+};
+
+test::TempDir* RemoteContainer::dir_ = nullptr;
+fs::path* RemoteContainer::container_ = nullptr;
+test::Nginx* RemoteContainer::nginx_ = nullptr;
+
+TEST_F(RemoteContainer, ReadsWhatTheFolderHolds) {
+  const format::Container local(*container_);
+  const auto source = std::make_shared<HttpSource>(url());
+  const format::Container remote(source);
+  EXPECT_EQ(format::manifest_to_json(remote.manifest()), format::manifest_to_json(local.manifest()));
+  EXPECT_EQ(remote.total_bytes(), local.total_bytes());
+  for (std::size_t t = 0; t < local.frame_count(); ++t) {
+    const format::FrameFile whole = local.open_frame(t);
+    const format::FrameFile index = remote.open_frame_index(t);
+    // The index alone: everything before the payloads, the same bytes.
+    ASSERT_FALSE(index.view().has_payloads());
+    ASSERT_EQ(index.view().bytes().size(), whole.view().header().payload_offset);
+    EXPECT_TRUE(std::equal(index.view().bytes().begin(), index.view().bytes().end(),
+                           whole.view().bytes().begin()));
+    EXPECT_THROW(index.view().brick_bytes(0), format::FormatError);
+    for (std::uint32_t b = 0; b < whole.view().brick_count(); ++b) {
+      const auto payload = remote.read_brick(index.view(), b);
+      const auto expected = whole.view().checked_brick_bytes(b);
+      ASSERT_TRUE(std::equal(payload.begin(), payload.end(), expected.begin(), expected.end()));
+    }
+    // Whole frames (decode, verify) are fetched whole.
+    const format::FrameFile fetched = remote.open_frame(t);
+    EXPECT_TRUE(fetched.view().has_payloads());
+    EXPECT_NO_THROW(fetched.view().check_payload_crc());
+  }
+  EXPECT_TRUE(format::verify_container(source).empty());
+  EXPECT_GT(source->requests(), 0u);
+}
+
+TEST_F(RemoteContainer, CoalescesBackToBackBricksIntoFewRequests) {
+  const auto source = std::make_shared<HttpSource>(url());
+  const format::Container remote(source);
+  const stream::SpatialIndex index = stream::build_spatial_index(remote);
+  const format::Container local(*container_);
+  const stream::SpatialIndex local_index = stream::build_spatial_index(local);
+  ASSERT_EQ(index.keyframe_count(), local_index.keyframe_count());
+  const std::uint64_t before = source->requests();
+  const auto arrivals = load_all(index, remote.source().brick_reader());
+  const std::uint64_t requests = source->requests() - before;
+  std::uint64_t bytes = 0;
+  for (const auto& a : arrivals) {
+    ASSERT_TRUE(a.ok()) << a.error;
+    // The same bytes as the local file's.
+    std::vector<std::byte> expected;
+    const stream::KeyframeId id = a.request.keyframe;
+    ASSERT_EQ(format::read_file_range(local_index.frame_file(local_index.keyframe(id).t),
+                                      a.request.offset, a.request.bytes, expected),
+              "");
+    EXPECT_EQ(a.bytes, expected);
+    bytes += a.bytes.size();
+  }
+  // One worker: while it reads one range, the rest queue and are read back to back.
+  EXPECT_LE(requests * 2, arrivals.size()) << requests << " requests for " << arrivals.size();
+  EXPECT_GE(requests, remote.frame_count());  // one file per frame
+  std::printf("%llu requests for %zu bricks (%llu bytes)\n",
+              static_cast<unsigned long long>(requests), arrivals.size(),
+              static_cast<unsigned long long>(bytes));
+}
+
+TEST_F(RemoteContainer, ASecondRunWithTheCacheTransfersOnlyTheManifest) {
+  test::TempDir cache("remote-cache-run");
+  RemoteOptions o;
+  o.cache_dir = cache.path();
+  std::uint64_t first_bytes = 0, manifest_bytes = 0;
+  for (int run = 0; run < 2; ++run) {
+    const auto source = std::make_shared<HttpSource>(url(), o);
+    const format::Container remote(source);
+    const stream::SpatialIndex index = stream::build_spatial_index(remote);
+    for (const auto& a : load_all(index, remote.source().brick_reader())) ASSERT_TRUE(a.ok());
+    manifest_bytes = fs::file_size(*container_ / "manifest.json");
+    if (run == 0) {
+      first_bytes = source->bytes_received();
+      EXPECT_GT(first_bytes, 10 * manifest_bytes);
+    } else {
+      EXPECT_EQ(source->bytes_received(), manifest_bytes);  // the manifest is always fresh
+      EXPECT_GT(source->cache_bytes_served(), 0u);
+    }
+  }
+}
+
+TEST_F(RemoteContainer, ACorruptedByteIsRequestedAgainAndNeverHandedOut) {
+  test::Nginx& nginx = *nginx_;
+  test::FaultProxy proxy(proxy_script, nginx.port(), dir_->path());
+  const auto source = std::make_shared<HttpSource>(proxy.url("test.vreel"));
+  const format::Container remote(source);
+  const stream::SpatialIndex index = stream::build_spatial_index(remote);
+  stream::LoaderOptions o;
+  o.threads = 2;
+  o.retry_initial_s = 0.05;
+  o.reader = remote.source().brick_reader();
+  stream::BrickLoader loader(o);
+  const auto id = static_cast<stream::KeyframeId>(index.keyframe_count() - 1);
+  const stream::KeyframeNode& n = index.keyframe(id);
+  stream::BrickRequest r;
+  r.key = index.key(id);
+  r.keyframe = id;
+  r.file = index.frame_file(n.t);
+  r.offset = n.offset;
+  r.bytes = n.bytes;
+  r.crc32c = n.crc32c;
+  const auto wait_one = [&] {
+    for (int i = 0; i < 5000; ++i) {
+      auto got = loader.poll();
+      if (!got.empty()) return std::move(got.front());
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    return stream::BrickArrival{};
+  };
+  proxy.set_mode("flip");
+  ASSERT_EQ(loader.request(r), stream::RequestStatus::accepted);
+  const stream::BrickArrival bad = wait_one();
+  EXPECT_FALSE(bad.ok());
+  EXPECT_TRUE(bad.bytes.empty());
+  EXPECT_NE(bad.error.find("payload corrupt"), std::string::npos) << bad.error;
+  EXPECT_NE(bad.error.find(r.file.string()), std::string::npos) << bad.error;
+  // Backing off, then asked again: the intact bytes.
+  proxy.set_mode("pass");
+  EXPECT_EQ(loader.request(r), stream::RequestStatus::backing_off);
+  std::this_thread::sleep_for(std::chrono::milliseconds(80));
+  ASSERT_EQ(loader.request(r), stream::RequestStatus::accepted);
+  const stream::BrickArrival good = wait_one();
+  ASSERT_TRUE(good.ok()) << good.error;
+  EXPECT_EQ(format::crc32c(good.bytes), *r.crc32c);
+}
+
+TEST_F(RemoteContainer, ErrorStatusesTruncationAndStallsAreClearErrors) {
+  test::FaultProxy proxy(proxy_script, nginx_->port(), dir_->path());
+  RemoteOptions o;
+  o.attempts = 2;
+  o.retry_initial_s = 0.01;
+  o.http.stall_timeout_s = 1;
+  const auto source = std::make_shared<HttpSource>(proxy.url("test.vreel"), o);
+  const format::Container remote(source);
+  const format::FrameFile frame = remote.open_frame_index(1);
+  const auto error_of = [&](const std::string& mode) {
+    proxy.set_mode(mode);
+    try {
+      remote.read_brick(frame.view(), 0);
+    } catch (const format::FormatError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  const std::string name = proxy.url("test.vreel/frames/000001.vrf");
+  for (const auto& [mode, expected] :
+       std::vector<std::pair<std::string, std::string>>{{"status 404", "found HTTP 404"},
+                                                        {"status 503", "found HTTP 503"},
+                                                        {"status 200", "found HTTP 200"},
+                                                        {"truncate", "bytes"},
+                                                        {"stall", "imeout"},
+                                                        {"flip", "payload corrupt"}}) {
+    const std::string e = error_of(mode);
+    EXPECT_EQ(e.rfind(name, 0), 0u) << mode << ": " << e;
+    EXPECT_NE(e.find(expected), std::string::npos) << mode << ": " << e;
+  }
+  proxy.set_mode("pass");
+  EXPECT_NO_THROW(remote.read_brick(frame.view(), 0));
+  // A manifest that cannot be had is an error naming it.
+  proxy.set_mode("status 500");
+  try {
+    format::Container again(std::make_shared<HttpSource>(proxy.url("test.vreel"), o));
+    ADD_FAILURE() << "opened";
+  } catch (const format::FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("manifest.json"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("HTTP 500"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(RemoteContainer, LoadingResumesWhenTheServerComesBack) {
+  const auto source = std::make_shared<HttpSource>(url());
+  const format::Container remote(source);
+  const stream::SpatialIndex index = stream::build_spatial_index(remote);
+  nginx_->stop();
+  const auto during = load_all(index, remote.source().brick_reader(), 2);
+  for (const auto& a : during) {
+    EXPECT_FALSE(a.ok());
+    EXPECT_NE(a.error.find("127.0.0.1"), std::string::npos) << a.error;
+  }
+  nginx_->start();
+  for (const auto& a : load_all(index, remote.source().brick_reader(), 2))
+    EXPECT_TRUE(a.ok()) << a.error;
+}
+
+TEST_F(RemoteContainer, ARemoteManifestNamesOnlyTheContainersOwnFiles) {
+  test::TempDir served("remote-evil");
+  fs::create_directories(served / "evil.vreel");
+  // A manifest whose CRC holds (recomputed), with a frame file outside the container.
+  nlohmann::json j = nlohmann::json::parse(text_of(*container_ / "manifest.json"));
+  j["frames"][1]["file"] = "../../etc/passwd";
+  std::ofstream(served / "evil.vreel" / "manifest.json") << format::manifest_text(j);
+  test::Nginx server(served.path(), served / "nginx");
+  try {
+    format::Container c(std::make_shared<HttpSource>(server.url("evil.vreel")));
+    ADD_FAILURE() << "opened";
+  } catch (const format::FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("frames[1].file"), std::string::npos) << e.what();
+  }
+  // The loader refuses files outside the container.
+  const auto source = std::make_shared<HttpSource>(url());
+  const format::Container remote(source);
+  std::vector<std::vector<std::byte>> out;
+  const format::ByteRange range{0, 16};
+  const std::string error = source->read(nginx_->url("other.vreel/frames/000000.vrf"), {&range, 1},
+                                         out);
+  EXPECT_NE(error.find("not a file of the container"), std::string::npos) << error;
+}
+
+TEST_F(RemoteContainer, TheCommandsReadAUrl) {
+  const std::string volreel = VOLREEL_BINARY;
+  const fs::path out = dir_->path() / "cli";
+  fs::create_directories(out);
+  const auto run = [&](const std::string& args, const std::string& log) {
+    return std::system((volreel + " " + args + " > " + (out / log).string() + " 2>&1").c_str());
+  };
+  const auto text = [&](const std::string& log) { return text_of(out / log); };
+  ASSERT_EQ(run("info " + url(), "info.txt"), 0) << text("info.txt");
+  EXPECT_NE(text("info.txt").find("6 frames"), std::string::npos) << text("info.txt");
+  ASSERT_EQ(run("verify " + url(), "verify.txt"), 0) << text("verify.txt");
+  EXPECT_NE(text("verify.txt").find("OK"), std::string::npos);
+  ASSERT_EQ(run("render " + url() + " --cpu --size 64x48 --max-frames 4 --cache " +
+                    (out / "cache").string() + " --out " + (out / "frames").string(),
+                "render.txt"),
+            0)
+      << text("render.txt");
+  EXPECT_TRUE(fs::exists(out / "frames" / "frame_00003.png"));
+  EXPECT_NE(text("render.txt").find("HTTP requests"), std::string::npos) << text("render.txt");
+  EXPECT_EQ(text("render.txt").find("error"), std::string::npos) << text("render.txt");
+  // Only http and https; a server that answers 404 names the URL.
+  EXPECT_NE(run("info ftp://127.0.0.1/x.vreel", "ftp.txt"), 0);
+  EXPECT_NE(text("ftp.txt").find("unsupported scheme"), std::string::npos) << text("ftp.txt");
+  EXPECT_NE(run("info " + nginx_->url("missing.vreel"), "missing.txt"), 0);
+  EXPECT_NE(text("missing.txt").find("missing.vreel/manifest.json"), std::string::npos)
+      << text("missing.txt");
+  EXPECT_NE(text("missing.txt").find("HTTP 404"), std::string::npos) << text("missing.txt");
+}
+
+}  // namespace
+}  // namespace volreel::remote

@@ -1,0 +1,78 @@
+// remote_options.hpp: how the commands that read a container (info, verify, render, play, bench
+// stream) open one named by a path or an http(s):// URL, with the options of remote reading:
+// --cache DIR, --cache-size, --connections.
+#pragma once
+
+#include <cstdio>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "volreel/datasets/volume.hpp"
+#include "volreel/format/source.hpp"
+#include "volreel/remote/http_source.hpp"
+
+namespace volreel::cli {
+
+struct RemoteCli {
+  std::string cache;                ///< folder; empty: no cache
+  std::string cache_size = "2G";
+  unsigned connections = 4;
+};
+
+/// The CONTAINER argument's help: a folder or a URL.
+inline constexpr const char* container_argument_help =
+    "Container: a NAME.vreel folder, or its http:// or https:// URL (any static web server or "
+    "object store)";
+
+inline void add_remote_options(CLI::App& cmd, RemoteCli& o) {
+  cmd.add_option("--cache", o.cache,
+                 "For a URL: keep what arrives in this folder (bricks, indexes, dictionary), so "
+                 "that the next run starts warm");
+  cmd.add_option("--cache-size", o.cache_size,
+                 "For a URL: the cache folder's size limit, least recently used out first (e.g. "
+                 "2G, 500M)")
+      ->capture_default_str();
+  cmd.add_option("--connections", o.connections,
+                 "For a URL: HTTP connections to the server at most")
+      ->check(CLI::Range(1u, 64u))
+      ->capture_default_str();
+}
+
+/// The source of the container at `location` (a folder or a URL). Throws InputError for a bad URL
+/// or option, format::FormatError for a folder that is not a container or a cache folder that
+/// cannot be used.
+inline std::shared_ptr<const format::ContainerSource> open_container_source(
+    const std::string& location, const RemoteCli& o) {
+  remote::RemoteOptions options;
+  options.http.max_connections = o.connections;
+  try {
+    if (!o.cache.empty()) {
+      options.cache_dir = o.cache;
+      options.cache_bytes = remote::parse_cache_size(o.cache_size);
+    }
+    return remote::open_source(location, options);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(e.what());
+  }
+}
+
+/// One line on what a remote source transferred ("remote: 41 requests, 1.9 MB received, 0.3 MB
+/// from the cache"), to stderr; nothing for a local one.
+inline void print_remote_summary(const format::ContainerSource& source, const char* command) {
+  const auto* http = dynamic_cast<const remote::HttpSource*>(&source);
+  if (!http) return;
+  std::fprintf(stderr, "volreel %s: %s: %llu HTTP requests, %.2f MB received", command,
+               http->location().c_str(), static_cast<unsigned long long>(http->requests()),
+               static_cast<double>(http->bytes_received()) / 1e6);
+  if (http->cache())
+    std::fprintf(stderr, ", %.2f MB from the cache %s (%.1f MB held)",
+                 static_cast<double>(http->cache_bytes_served()) / 1e6,
+                 http->cache()->directory().c_str(),
+                 static_cast<double>(http->cache()->bytes()) / 1e6);
+  std::fprintf(stderr, "\n");
+}
+
+}  // namespace volreel::cli
