@@ -80,13 +80,14 @@ std::vector<std::byte> LocalSource::read_range(const std::string& relative, std:
   const std::string error = read_file_range(path, offset, bytes, out);
   // The message begins with the file's name, as FormatError writes it.
   const std::size_t prefix = path.string().size() + 2;
-  if (!error.empty())
-    throw FormatError(path, error.size() > prefix ? error.substr(prefix) : error);
+  if (!error.empty()) throw FormatError(path, error.size() > prefix ? error.substr(prefix) : error);
   received_ += out.size();
   return out;
 }
 
-std::uint64_t LocalSource::bytes_received() const { return received_; }
+std::uint64_t LocalSource::bytes_received() const {
+  return received_;
+}
 
 std::shared_ptr<RangeReader> LocalSource::brick_reader() const {
   return std::make_shared<LocalRangeReader>();

@@ -3,6 +3,7 @@
 // so that mutations reach the checks behind it; every outcome is a FormatError or a valid frame.
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <vector>
 
@@ -45,6 +46,21 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
     view.check_payload_crc();
   } catch (const FormatError&) {
+  }
+  // The index alone, as a remote reader holds it: the same checks with the file's size given.
+  if (size >= sizeof(FrameHeader)) {
+    FrameHeader h;
+    std::memcpy(&h, bytes.data(), sizeof h);
+    if (h.payload_offset <= size) {
+      try {
+        const FrameView index(std::span<const std::byte>(bytes).first(h.payload_offset), "fuzz.vrf",
+                              size);
+        for (std::uint32_t b = 0; b < index.brick_count(); ++b)
+          if (index.brick_offset(b) + index.brick_payload_bytes(b) > size) std::abort();
+        if (index.brick_count() > 0 && !index.has_payloads()) index.brick_bytes(0);
+      } catch (const FormatError&) {
+      }
+    }
   }
   return 0;
 }

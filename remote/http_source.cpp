@@ -21,7 +21,9 @@ HttpSource::HttpSource(std::string url, RemoteOptions options)
     cache_ = std::make_unique<DiskCache>(options_.cache_dir, options_.cache_bytes);
 }
 
-fs::path HttpSource::name(const std::string& relative) const { return url_ + "/" + relative; }
+fs::path HttpSource::name(const std::string& relative) const {
+  return url_ + "/" + relative;
+}
 
 std::string HttpSource::relative_of(const fs::path& file) const {
   const std::string s = file.string();
@@ -43,7 +45,7 @@ void HttpSource::learn_manifest(std::span<const std::byte> bytes) const {
     if (f.is_object() && f.contains("file") && f["file"].is_string() && f.contains("crc32c") &&
         f.contains("bytes") && f["bytes"].is_number_unsigned())
       tags[f["file"].get<std::string>()] = {id + "/" + f["crc32c"].dump(),
-                                           f["bytes"].get<std::uint64_t>()};
+                                            f["bytes"].get<std::uint64_t>()};
   };
   if (j.contains("dictionary")) add(j["dictionary"]);
   if (j.contains("frames") && j["frames"].is_array())

@@ -2,6 +2,8 @@
 #include "volreel/stream/spatial_index.hpp"
 
 #include <algorithm>
+#include <optional>
+#include <thread>
 
 #include "volreel/format/error.hpp"
 
@@ -158,19 +160,44 @@ KeyframeKey SpatialIndex::key(KeyframeId id) const {
 SpatialIndex build_spatial_index(const format::Container& container,
                                  std::vector<std::string>* errors) {
   const auto& m = container.manifest();
-  SpatialIndexBuilder builder(m.dims, container.frame_count());
-  for (std::size_t t = 0; t < container.frame_count(); ++t) {
-    if (!m.frames[t]) {
-      if (errors)
-        errors->push_back(format::frame_file_name(t) + ": frame not written (incomplete encode)");
-      continue;
+  const std::size_t frames = container.frame_count();
+  SpatialIndexBuilder builder(m.dims, frames);
+  // A remote container's indexes are fetched a window at a time by several threads (each one a
+  // round trip or two); local ones are mapped in order.
+  const std::size_t window = container.source().local_directory() ? 1 : 16;
+  std::vector<std::optional<format::FrameFile>> opened(frames);
+  std::vector<std::string> failures(frames);
+  for (std::size_t first = 0; first < frames; first += window) {
+    const std::size_t end = std::min(frames, first + window);
+    const auto open = [&](std::size_t t) {
+      if (!m.frames[t]) {
+        failures[t] = format::frame_file_name(t) + ": frame not written (incomplete encode)";
+        return;
+      }
+      try {
+        opened[t].emplace(container.open_frame_index(t));
+      } catch (const std::exception& e) {
+        failures[t] = e.what();
+      }
+    };
+    if (window == 1) {
+      open(first);
+    } else {
+      std::vector<std::thread> threads;
+      for (std::size_t t = first; t < end; ++t) threads.emplace_back(open, t);
+      for (std::thread& th : threads) th.join();
     }
-    try {
-      const format::FrameFile frame = container.open_frame_index(t);
-      builder.add_frame(static_cast<std::uint32_t>(t), frame.view(),
-                        container.source().name(m.frames[t]->file));
-    } catch (const std::exception& e) {
-      if (errors) errors->push_back(e.what());
+    for (std::size_t t = first; t < end; ++t) {
+      if (opened[t]) {
+        try {
+          builder.add_frame(static_cast<std::uint32_t>(t), opened[t]->view(),
+                            container.source().name(m.frames[t]->file));
+        } catch (const std::exception& e) {
+          failures[t] = e.what();
+        }
+      }
+      if (!failures[t].empty() && errors) errors->push_back(failures[t]);
+      opened[t].reset();
     }
   }
   return std::move(builder).build();

@@ -99,8 +99,7 @@ class Nginx {
       << "  uwsgi_temp_path " << (work_ / "tmp").string() << ";\n"
       << "  scgi_temp_path " << (work_ / "tmp").string() << ";\n"
       << "  default_type application/octet-stream;\n  keepalive_requests 100000;\n"
-      << "  server {\n    listen 127.0.0.1:" << port_ << ";\n    root " << root_.string()
-      << ";\n"
+      << "  server {\n    listen 127.0.0.1:" << port_ << ";\n    root " << root_.string() << ";\n"
       << (limit_rate > 0 ? "    limit_rate " + std::to_string(limit_rate) + ";\n" : "")
       << "  }\n}\n";
     c.close();

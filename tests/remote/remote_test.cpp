@@ -166,7 +166,8 @@ TEST_F(RemoteContainer, ReadsWhatTheFolderHolds) {
   const format::Container local(*container_);
   const auto source = std::make_shared<HttpSource>(url());
   const format::Container remote(source);
-  EXPECT_EQ(format::manifest_to_json(remote.manifest()), format::manifest_to_json(local.manifest()));
+  EXPECT_EQ(format::manifest_to_json(remote.manifest()),
+            format::manifest_to_json(local.manifest()));
   EXPECT_EQ(remote.total_bytes(), local.total_bytes());
   for (std::size_t t = 0; t < local.frame_count(); ++t) {
     const format::FrameFile whole = local.open_frame(t);
@@ -364,8 +365,8 @@ TEST_F(RemoteContainer, ARemoteManifestNamesOnlyTheContainersOwnFiles) {
   const format::Container remote(source);
   std::vector<std::vector<std::byte>> out;
   const format::ByteRange range{0, 16};
-  const std::string error = source->read(nginx_->url("other.vreel/frames/000000.vrf"), {&range, 1},
-                                         out);
+  const std::string error =
+      source->read(nginx_->url("other.vreel/frames/000000.vrf"), {&range, 1}, out);
   EXPECT_NE(error.find("not a file of the container"), std::string::npos) << error;
 }
 

@@ -32,7 +32,6 @@ struct PlayCommandOptions {
 
 void run_play(PlayCommandOptions& o) {
   app::PlayerOptions& p = o.player;
-  p.source = open_container_source(p.container.string(), o.remote);
   {
     const auto [w, h] = loop::parse_size(o.size);
     if (w < 64 || h < 64)
@@ -60,6 +59,7 @@ void run_play(PlayCommandOptions& o) {
   }
   if (!o.script_inline.empty()) p.script += "\n" + o.script_inline;
   if (!o.screenshot_on_exit.empty()) p.screenshot_on_exit = o.screenshot_on_exit;
+  p.source = open_container_source(p.container.string(), o.remote);
   try {
     app::run_player(p);
   } catch (const app::NoDisplayError& e) {

@@ -17,7 +17,7 @@
 namespace volreel::cli {
 
 struct RemoteCli {
-  std::string cache;                ///< folder; empty: no cache
+  std::string cache;  ///< folder; empty: no cache
   std::string cache_size = "2G";
   unsigned connections = 4;
 };

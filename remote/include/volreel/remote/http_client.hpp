@@ -24,17 +24,17 @@
 namespace volreel::remote {
 
 struct HttpOptions {
-  double connect_timeout_s = 5;   ///< to establish a connection
-  double stall_timeout_s = 20;    ///< a transfer with no byte for this long fails
-  unsigned max_connections = 4;   ///< per host (requests beyond it wait for a connection)
+  double connect_timeout_s = 5;  ///< to establish a connection
+  double stall_timeout_s = 20;   ///< a transfer with no byte for this long fails
+  unsigned max_connections = 4;  ///< per host (requests beyond it wait for a connection)
   std::uint64_t max_bytes = std::uint64_t{1} << 31;  ///< the largest body accepted
 };
 
 struct HttpResponse {
-  long status = 0;               ///< HTTP status, 0 if none arrived
-  std::vector<std::byte> body;   ///< the bytes, when ok()
-  std::string error;             ///< empty on success: "URL: bytes A-B: expected …, found …"
-  bool transient = false;        ///< a retry may succeed
+  long status = 0;              ///< HTTP status, 0 if none arrived
+  std::vector<std::byte> body;  ///< the bytes, when ok()
+  std::string error;            ///< empty on success: "URL: bytes A-B: expected …, found …"
+  bool transient = false;       ///< a retry may succeed
   bool ok() const { return error.empty(); }
 };
 
@@ -51,6 +51,12 @@ std::optional<ContentRange> parse_content_range(std::string_view value);
 std::string check_url(std::string url);
 /// Whether `location` names a URL (has a "scheme://" prefix) rather than a path.
 bool is_url(std::string_view location);
+
+namespace detail {
+bool iequals_prefix(std::string_view text, std::string_view prefix);
+std::string_view trim(std::string_view s);
+bool parse_u64(std::string_view s, std::uint64_t& v);
+}  // namespace detail
 
 class HttpClient {
  public:
