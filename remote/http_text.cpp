@@ -22,7 +22,8 @@ bool iequals_prefix(std::string_view text, std::string_view prefix) {
 
 std::string_view trim(std::string_view s) {
   while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
-  while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r' || s.back() == '\n'))
+  while (!s.empty() &&
+         (s.back() == ' ' || s.back() == '\t' || s.back() == '\r' || s.back() == '\n'))
     s.remove_suffix(1);
   return s;
 }
@@ -62,11 +63,10 @@ std::optional<ContentRange> parse_content_range(std::string_view value) {
 bool is_url(std::string_view location) {
   const std::size_t colon = location.find("://");
   if (colon == std::string_view::npos || colon == 0) return false;
-  return std::all_of(location.begin(), location.begin() + static_cast<std::ptrdiff_t>(colon),
-                     [](char c) {
-                       return std::isalnum(static_cast<unsigned char>(c)) || c == '+' ||
-                              c == '-' || c == '.';
-                     });
+  return std::all_of(
+      location.begin(), location.begin() + static_cast<std::ptrdiff_t>(colon), [](char c) {
+        return std::isalnum(static_cast<unsigned char>(c)) || c == '+' || c == '-' || c == '.';
+      });
 }
 
 std::string check_url(std::string url) {

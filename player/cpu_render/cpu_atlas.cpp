@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <new>
 #include <stdexcept>
 #include <string>
 
@@ -11,20 +13,28 @@
 namespace volreel::cpu_render {
 
 CpuAtlas::CpuAtlas(std::uint32_t slot_count)
-    : slot_count_(slot_count), values_(std::size_t{slot_count} * slot_values, 0.0f) {}
+    : slot_count_(slot_count),
+      values_(static_cast<float*>(
+          std::calloc(std::max<std::size_t>(slot_count, 1), slot_values * sizeof(float)))) {
+  if (!values_) throw std::bad_alloc();
+}
+
+void CpuAtlas::Free::operator()(float* p) const {
+  std::free(p);
+}
 
 std::span<const float> CpuAtlas::slot(std::uint32_t slot) const {
   if (slot >= slot_count_)
     throw std::out_of_range("CpuAtlas: slot " + std::to_string(slot) + " of " +
                             std::to_string(slot_count_));
-  return {values_.data() + std::size_t{slot} * slot_values, slot_values};
+  return {values_.get() + std::size_t{slot} * slot_values, slot_values};
 }
 
 std::span<float> CpuAtlas::slot(std::uint32_t slot) {
   if (slot >= slot_count_)
     throw std::out_of_range("CpuAtlas: slot " + std::to_string(slot) + " of " +
                             std::to_string(slot_count_));
-  return {values_.data() + std::size_t{slot} * slot_values, slot_values};
+  return {values_.get() + std::size_t{slot} * slot_values, slot_values};
 }
 
 void CpuAtlas::store(std::uint32_t slot, std::span<const float> brick) {
@@ -42,7 +52,7 @@ void CpuAtlas::decode_into(std::uint32_t slot, std::span<const std::byte> payloa
 
 float CpuAtlas::sample(std::uint32_t slot, float x, float y, float z) const {
   constexpr std::uint32_t n = VR_ATLAS_SLOT_SIZE;
-  return detail::trilinear(values_.data() + std::size_t{slot} * slot_values, n, n, n, x - 0.5f,
+  return detail::trilinear(values_.get() + std::size_t{slot} * slot_values, n, n, n, x - 0.5f,
                            y - 0.5f, z - 0.5f);
 }
 

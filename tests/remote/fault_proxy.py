@@ -2,9 +2,12 @@
 """A small HTTP proxy on 127.0.0.1 that passes GETs (with their Range header) to a web server on
 127.0.0.1 and can spoil the answers, for volreel's tests of remote reading.
 
-    fault_proxy.py UPSTREAM_PORT MODE_FILE
+    fault_proxy.py UPSTREAM_PORT MODE_FILE [RATE]
 
-It prints the port it listens on, then serves until killed. Before every request it reads
+It prints the port it listens on, then serves until killed. With RATE (bytes per second) every
+body goes out in chunks paced by one token bucket shared by all connections: a link of that rate,
+first come first served (nginx's limit_rate applies per request and lets each request start with a
+second's worth of bytes). Before every request it reads
 MODE_FILE (missing or empty: "pass"):
     pass        the upstream's answer as it is
     flip        byte ranges (HTTP 206) with one byte of the body changed
@@ -14,13 +17,30 @@ MODE_FILE (missing or empty: "pass"):
 """
 import http.client
 import http.server
-import os
 import socket
 import sys
+import threading
 import time
 
 UPSTREAM = int(sys.argv[1])
 MODE_FILE = sys.argv[2]
+RATE = float(sys.argv[3]) if len(sys.argv) > 3 else 0.0
+CHUNK = 16384
+link_lock = threading.Lock()
+link_free = 0.0  # when the shared link has sent everything handed to it so far
+
+
+def send_paced(wfile, body):
+    """Writes body in chunks, each after the link has had the time to carry it."""
+    global link_free
+    for at in range(0, len(body), CHUNK):
+        chunk = body[at : at + CHUNK]
+        if RATE > 0:
+            with link_lock:
+                link_free = max(link_free, time.monotonic()) + len(chunk) / RATE
+                due = link_free
+            time.sleep(max(0.0, due - time.monotonic()))
+        wfile.write(chunk)
 PASSED_HEADERS = ("content-range", "content-type", "etag", "last-modified", "accept-ranges")
 
 
@@ -67,7 +87,7 @@ class Handler(http.server.BaseHTTPRequestHandler):
             time.sleep(60)
             self.close_connection = True
         else:
-            self.wfile.write(body)
+            send_paced(self.wfile, body)
 
     def log_message(self, *args):
         pass

@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -45,7 +46,13 @@ class CpuAtlas {
 
  private:
   std::uint32_t slot_count_ = 0;
-  std::vector<float> values_;
+  struct Free {
+    void operator()(float* p) const;
+  };
+  /// Zeroed by calloc: a large block comes from fresh pages the kernel zeroes when first touched,
+  /// so an atlas of hundreds of MiB costs nothing until its slots are used (a std::vector would
+  /// write every byte up front, seconds before the first frame).
+  std::unique_ptr<float[], Free> values_;
 };
 
 }  // namespace volreel::cpu_render
