@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <thread>
 #include <unordered_map>
+#include <utility>
 
 namespace volreel::remote {
 
@@ -143,6 +144,7 @@ struct HttpClient::Impl {
   std::mutex mutex;
   std::deque<std::unique_ptr<Transfer>> incoming;
   bool stopping = false;
+  bool cancelling = false;
   std::unordered_map<CURL*, std::unique_ptr<Transfer>> active;
   std::thread thread;
 
@@ -183,13 +185,43 @@ struct HttpClient::Impl {
     curl_multi_add_handle(multi, e);
   }
 
+  /// Fails every transfer that is running or waiting with `why`.
+  void fail_all(const std::string& why) {
+    for (auto& [e, t] : active) {
+      curl_multi_remove_handle(multi, e);
+      curl_easy_cleanup(e);
+      HttpResponse r;
+      r.error = t->what() + ": " + why;
+      t->promise.set_value(std::move(r));
+    }
+    active.clear();
+    std::lock_guard lock(mutex);
+    for (auto& t : incoming) {
+      HttpResponse r;
+      r.error = t->what() + ": " + why;
+      t->promise.set_value(std::move(r));
+    }
+    incoming.clear();
+  }
+
   void run(const HttpOptions& options, std::atomic<std::uint64_t>& requests) {
     for (;;) {
       std::deque<std::unique_ptr<Transfer>> added;
+      bool cancel = false;
       {
         std::lock_guard lock(mutex);
         if (stopping) break;
         added.swap(incoming);
+        cancel = std::exchange(cancelling, false);
+      }
+      if (cancel) {
+        for (auto& t : added) {
+          HttpResponse r;
+          r.error = t->what() + ": cancelled";
+          t->promise.set_value(std::move(r));
+        }
+        added.clear();
+        fail_all("cancelled");
       }
       for (auto& t : added) {
         start(*t, options);
@@ -215,21 +247,7 @@ struct HttpClient::Impl {
       curl_multi_poll(multi, nullptr, 0, 1000, nullptr);
     }
     // Closing: what is still running or waiting fails.
-    for (auto& [e, t] : active) {
-      curl_multi_remove_handle(multi, e);
-      curl_easy_cleanup(e);
-      HttpResponse r;
-      r.error = t->what() + ": the HTTP client was closed";
-      t->promise.set_value(std::move(r));
-    }
-    active.clear();
-    std::lock_guard lock(mutex);
-    for (auto& t : incoming) {
-      HttpResponse r;
-      r.error = t->what() + ": the HTTP client was closed";
-      t->promise.set_value(std::move(r));
-    }
-    incoming.clear();
+    fail_all("the HTTP client was closed");
   }
 };
 
@@ -251,6 +269,14 @@ HttpClient::~HttpClient() {
   curl_multi_wakeup(impl_->multi);
   impl_->thread.join();
   curl_multi_cleanup(impl_->multi);
+}
+
+void HttpClient::cancel_all() {
+  {
+    std::lock_guard lock(impl_->mutex);
+    impl_->cancelling = true;
+  }
+  curl_multi_wakeup(impl_->multi);
 }
 
 std::future<HttpResponse> HttpClient::get(std::string url, std::uint64_t offset,

@@ -116,6 +116,7 @@ BrickLoader::~BrickLoader() {
     queue_.clear();
   }
   wake_.notify_all();
+  options_.reader->cancel();  // reads in progress end now (a stalled server must not hold us)
   for (std::thread& w : workers_) w.join();
 }
 

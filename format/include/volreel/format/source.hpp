@@ -40,6 +40,9 @@ class RangeReader {
   virtual void keep(const std::filesystem::path&, std::uint64_t, std::span<const std::byte>) {}
   /// Whether the bytes cross a real network: the loader then simulates no link of its own.
   virtual bool remote() const { return false; }
+  /// Ends the reads in progress now, as errors (a loader that is being closed calls it, so that it
+  /// does not wait for a slow or stalled server).
+  virtual void cancel() {}
 };
 
 /// Local files, with pread.

@@ -69,6 +69,9 @@ class HttpClient {
   /// GET `url`: bytes [offset, offset + bytes) when bytes > 0, else the whole (up to max_bytes).
   std::future<HttpResponse> get(std::string url, std::uint64_t offset = 0, std::uint64_t bytes = 0);
 
+  /// Fails every request waiting or in flight ("cancelled") at once; later requests run as usual.
+  void cancel_all();
+
   /// Requests completed (any outcome) and body bytes received, over the client's life.
   std::uint64_t requests() const { return requests_; }
   std::uint64_t bytes_received() const { return bytes_received_; }

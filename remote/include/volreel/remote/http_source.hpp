@@ -68,6 +68,7 @@ class HttpSource final : public format::ContainerSource,
   void keep(const std::filesystem::path& file, std::uint64_t offset,
             std::span<const std::byte> bytes) override;
   bool remote() const override { return true; }
+  void cancel() override { client_->cancel_all(); }
 
   /// HTTP requests completed so far (any outcome).
   std::uint64_t requests() const override { return client_->requests(); }
