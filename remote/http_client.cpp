@@ -172,6 +172,7 @@ struct HttpClient::Impl {
     curl_easy_setopt(e, CURLOPT_PIPEWAIT, 1L);
     curl_easy_setopt(e, CURLOPT_TCP_KEEPALIVE, 1L);
     curl_easy_setopt(e, CURLOPT_USERAGENT, "volreel");
+    if (!o.ca_file.empty()) curl_easy_setopt(e, CURLOPT_CAINFO, o.ca_file.c_str());
     curl_easy_setopt(e, CURLOPT_ERRORBUFFER, t.error);
     curl_easy_setopt(e, CURLOPT_WRITEFUNCTION, on_body);
     curl_easy_setopt(e, CURLOPT_WRITEDATA, &t);
@@ -204,7 +205,7 @@ struct HttpClient::Impl {
     incoming.clear();
   }
 
-  void run(const HttpOptions& options, std::atomic<std::uint64_t>& requests) {
+  void run(const HttpOptions& options, HttpClient& client) {
     for (;;) {
       std::deque<std::unique_ptr<Transfer>> added;
       bool cancel = false;
@@ -239,7 +240,12 @@ struct HttpClient::Impl {
         if (it != active.end()) {
           std::unique_ptr<Transfer> t = std::move(it->second);
           active.erase(it);
-          ++requests;
+          ++client.requests_;
+          long version = 0, connects = 0;
+          curl_easy_getinfo(e, CURLINFO_HTTP_VERSION, &version);
+          curl_easy_getinfo(e, CURLINFO_NUM_CONNECTS, &connects);
+          if (version == CURL_HTTP_VERSION_2_0) ++client.http2_responses_;
+          client.connections_opened_ += static_cast<std::uint64_t>(std::max(0L, connects));
           t->promise.set_value(finish(*t, code));
         }
         curl_easy_cleanup(e);
@@ -258,7 +264,7 @@ HttpClient::HttpClient(HttpOptions options) : options_(options), impl_(std::make
   curl_multi_setopt(impl_->multi, CURLMOPT_MAX_HOST_CONNECTIONS,
                     static_cast<long>(std::max(1u, options_.max_connections)));
   curl_multi_setopt(impl_->multi, CURLMOPT_PIPELINING, static_cast<long>(CURLPIPE_MULTIPLEX));
-  impl_->thread = std::thread([this] { impl_->run(options_, requests_); });
+  impl_->thread = std::thread([this] { impl_->run(options_, *this); });
 }
 
 HttpClient::~HttpClient() {

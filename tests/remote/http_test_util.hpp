@@ -13,6 +13,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <stdexcept>
@@ -82,12 +83,22 @@ inline std::string nginx_binary() {
 }
 
 /// nginx serving `root` on 127.0.0.1:port (one process, no daemon), with `limit_rate` bytes/s per
-/// request when > 0. Stopped on destruction.
+/// request when > 0, and with `tls` over https and HTTP/2 with a self-signed certificate for
+/// 127.0.0.1 (certificate()). Stopped on destruction.
 class Nginx {
  public:
-  Nginx(std::filesystem::path root, std::filesystem::path work, std::uint64_t limit_rate = 0)
-      : root_(std::move(root)), work_(std::move(work)), port_(free_port()) {
+  Nginx(std::filesystem::path root, std::filesystem::path work, std::uint64_t limit_rate = 0,
+        bool tls = false)
+      : root_(std::move(root)), work_(std::move(work)), port_(free_port()), tls_(tls) {
     std::filesystem::create_directories(work_ / "tmp");
+    if (tls_) {
+      const std::string command =
+          "openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj /CN=127.0.0.1 -addext "
+          "subjectAltName=IP:127.0.0.1 -keyout " +
+          (work_ / "key.pem").string() + " -out " + certificate().string() + " 2>/dev/null";
+      if (std::system(command.c_str()) != 0)
+        throw std::runtime_error("openssl could not make a certificate (scripts/install-deps)");
+    }
     std::ofstream c(work_ / "nginx.conf");
     c << (::geteuid() == 0 ? "user root;\n" : "") << "worker_processes 1;\nmaster_process off;\n"
       << "daemon off;\npid " << (work_ / "nginx.pid").string() << ";\nerror_log "
@@ -99,7 +110,11 @@ class Nginx {
       << "  uwsgi_temp_path " << (work_ / "tmp").string() << ";\n"
       << "  scgi_temp_path " << (work_ / "tmp").string() << ";\n"
       << "  default_type application/octet-stream;\n  keepalive_requests 100000;\n"
-      << "  server {\n    listen 127.0.0.1:" << port_ << ";\n    root " << root_.string() << ";\n"
+      << "  server {\n    listen 127.0.0.1:" << port_ << (tls_ ? " ssl http2" : "") << ";\n"
+      << (tls_ ? "    ssl_certificate " + certificate().string() + ";\n    ssl_certificate_key " +
+                     (work_ / "key.pem").string() + ";\n"
+               : std::string())
+      << "    root " << root_.string() << ";\n"
       << (limit_rate > 0 ? "    limit_rate " + std::to_string(limit_rate) + ";\n" : "")
       << "  }\n}\n";
     c.close();
@@ -125,8 +140,10 @@ class Nginx {
   void stop() { stop_process(pid_); }
   int port() const { return port_; }
   std::string url(const std::string& path) const {
-    return "http://127.0.0.1:" + std::to_string(port_) + "/" + path;
+    return std::string(tls_ ? "https" : "http") + "://127.0.0.1:" + std::to_string(port_) + "/" +
+           path;
   }
+  std::filesystem::path certificate() const { return work_ / "cert.pem"; }
   /// Requests nginx has served (lines of its access log).
   std::size_t requests_served() const {
     std::ifstream log(work_ / "access.log");
@@ -138,6 +155,7 @@ class Nginx {
  private:
   std::filesystem::path root_, work_;
   int port_;
+  bool tls_ = false;
   pid_t pid_ = 0;
 };
 

@@ -222,6 +222,28 @@ TEST_F(RemoteContainer, CoalescesBackToBackBricksIntoFewRequests) {
               static_cast<unsigned long long>(bytes));
 }
 
+TEST_F(RemoteContainer, HttpsServesOverHttp2OnOneConnection) {
+  test::Nginx tls(dir_->path(), dir_->path() / "nginx-tls", 0, true);
+  // A certificate the system does not trust is a clear error.
+  try {
+    format::Container c(std::make_shared<HttpSource>(tls.url("test.vreel")));
+    ADD_FAILURE() << "opened";
+  } catch (const format::FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("certificate"), std::string::npos) << e.what();
+  }
+  RemoteOptions o;
+  o.http.ca_file = tls.certificate().string();
+  const auto source = std::make_shared<HttpSource>(tls.url("test.vreel"), o);
+  const format::Container remote(source);
+  const stream::SpatialIndex index = stream::build_spatial_index(remote);
+  for (const auto& a : load_all(index, remote.source().brick_reader(), 4))
+    ASSERT_TRUE(a.ok()) << a.error;
+  const HttpClient& client = source->client();
+  EXPECT_EQ(client.http2_responses(), client.requests());
+  // Indexes fetched 16 at a time and 4 loader threads: multiplexed, not a connection each.
+  EXPECT_LE(client.connections_opened(), 2u) << client.requests() << " requests";
+}
+
 TEST_F(RemoteContainer, ASecondRunWithTheCacheTransfersOnlyTheManifest) {
   test::TempDir cache("remote-cache-run");
   RemoteOptions o;

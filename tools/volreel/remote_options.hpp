@@ -20,6 +20,7 @@ struct RemoteCli {
   std::string cache;  ///< folder; empty: no cache
   std::string cache_size = "2G";
   unsigned connections = 4;
+  std::string ca_file;
 };
 
 /// The CONTAINER argument's help: a folder or a URL.
@@ -39,6 +40,10 @@ inline void add_remote_options(CLI::App& cmd, RemoteCli& o) {
                  "For a URL: HTTP connections to the server at most")
       ->check(CLI::Range(1u, 64u))
       ->capture_default_str();
+  cmd.add_option("--ca-file", o.ca_file,
+                 "For an https URL: trust the certificate authorities in this PEM file (a "
+                 "centre's own CA) instead of the system's")
+      ->check(CLI::ExistingFile);
 }
 
 /// The source of the container at `location` (a folder or a URL). Throws InputError for a bad URL
@@ -48,6 +53,7 @@ inline std::shared_ptr<const format::ContainerSource> open_container_source(
     const std::string& location, const RemoteCli& o) {
   remote::RemoteOptions options;
   options.http.max_connections = o.connections;
+  options.http.ca_file = o.ca_file;
   try {
     if (!o.cache.empty()) {
       options.cache_dir = o.cache;
@@ -64,8 +70,12 @@ inline std::shared_ptr<const format::ContainerSource> open_container_source(
 inline void print_remote_summary(const format::ContainerSource& source, const char* command) {
   const auto* http = dynamic_cast<const remote::HttpSource*>(&source);
   if (!http) return;
-  std::fprintf(stderr, "volreel %s: %s: %llu HTTP requests, %.2f MB received", command,
-               http->location().c_str(), static_cast<unsigned long long>(http->requests()),
+  std::fprintf(stderr,
+               "volreel %s: %s: %llu HTTP requests (%llu over HTTP/2) on %llu connections, "
+               "%.2f MB received",
+               command, http->location().c_str(), static_cast<unsigned long long>(http->requests()),
+               static_cast<unsigned long long>(http->client().http2_responses()),
+               static_cast<unsigned long long>(http->client().connections_opened()),
                static_cast<double>(http->bytes_received()) / 1e6);
   if (http->cache())
     std::fprintf(stderr, ", %.2f MB from the cache %s (%.1f MB held)",

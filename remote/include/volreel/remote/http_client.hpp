@@ -28,6 +28,9 @@ struct HttpOptions {
   double stall_timeout_s = 20;   ///< a transfer with no byte for this long fails
   unsigned max_connections = 4;  ///< per host (requests beyond it wait for a connection)
   std::uint64_t max_bytes = std::uint64_t{1} << 31;  ///< the largest body accepted
+  /// PEM file of the certificate authorities to trust for https (a centre's own CA); empty: the
+  /// system's.
+  std::string ca_file;
 };
 
 struct HttpResponse {
@@ -75,12 +78,16 @@ class HttpClient {
   /// Requests completed (any outcome) and body bytes received, over the client's life.
   std::uint64_t requests() const { return requests_; }
   std::uint64_t bytes_received() const { return bytes_received_; }
+  /// Responses that came over HTTP/2, and connections opened (the rest reused one).
+  std::uint64_t http2_responses() const { return http2_responses_; }
+  std::uint64_t connections_opened() const { return connections_opened_; }
   const HttpOptions& options() const { return options_; }
 
  private:
   struct Impl;
   HttpOptions options_;
-  std::atomic<std::uint64_t> requests_{0}, bytes_received_{0};
+  std::atomic<std::uint64_t> requests_{0}, bytes_received_{0}, http2_responses_{0},
+      connections_opened_{0};
   std::unique_ptr<Impl> impl_;
 };
 

@@ -72,6 +72,7 @@ class HttpSource final : public format::ContainerSource,
 
   /// HTTP requests completed so far (any outcome).
   std::uint64_t requests() const override { return client_->requests(); }
+  const HttpClient& client() const { return *client_; }
   /// The cache, if any.
   const DiskCache* cache() const { return cache_.get(); }
   /// Bytes served from the cache instead of the network.
