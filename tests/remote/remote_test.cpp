@@ -15,6 +15,8 @@
 #include "volreel/format/container.hpp"
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/error.hpp"
+#include "volreel/loop/cpu_frame_loop.hpp"
+#include "volreel/player/camera.hpp"
 #include "volreel/remote/disk_cache.hpp"
 #include "volreel/remote/http_source.hpp"
 #include "volreel/stream/brick_loader.hpp"
@@ -366,6 +368,49 @@ TEST_F(RemoteContainer, LoadingResumesWhenTheServerComesBack) {
   nginx_->start();
   for (const auto& a : load_all(index, remote.source().brick_reader(), 2))
     EXPECT_TRUE(a.ok()) << a.error;
+}
+
+TEST_F(RemoteContainer, PlaybackGoesOnWhileTheServerIsAwayAndCatchesUpAfter) {
+  const auto source = std::make_shared<HttpSource>(url());
+  const format::Container remote(source);
+  const format::Manifest& m = remote.manifest();
+  loop::FrameLoopOptions o;
+  o.width = 48;
+  o.height = 40;
+  o.atlas_bytes = std::uint64_t{30} * 93312;  // room for about one time step's bricks
+  o.scheduler.loader.retry_initial_s = 0.05;
+  o.scheduler.loader.retry_max_s = 0.2;
+  loop::CpuFrameLoop frames(remote, o);
+  const auto camera = player::OrbitCamera::framing({m.dims[0], m.dims[1], m.dims[2]}, 48, 40);
+  const auto tf = cpu_render::TransferFunction::preset("cool-warm", static_cast<float>(m.value_min),
+                                                       static_cast<float>(m.value_max));
+  const auto play = [&](double playhead, int max_frames) {
+    loop::FrameReport report;
+    std::size_t errors = 0;
+    for (int i = 0; i < max_frames; ++i) {
+      report = frames.frame(camera, playhead, tf);
+      errors += report.new_errors.size();
+      if (report.stats.fraction_at_target == 1.0 && report.stats.requests_in_flight == 0) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    return std::pair{report, errors};
+  };
+  // The first time step loads while the server is up.
+  auto [first, first_errors] = play(0.0, 2000);
+  EXPECT_EQ(first.stats.fraction_at_target, 1.0);
+  EXPECT_EQ(first_errors, 0u);
+  // The server goes away; the playhead moves on: frames keep coming (drawn from what is
+  // resident), the errors name the server, nothing throws.
+  nginx_->stop();
+  auto [away, away_errors] = play(5.0, 60);
+  EXPECT_LT(away.stats.fraction_at_target, 1.0);
+  EXPECT_GT(away_errors, 0u);
+  EXPECT_GT(away.stats.svo_nodes, 0u);  // something is still drawn
+  // It comes back: loading resumes by itself and the new time step is reached.
+  nginx_->start();
+  auto [back, back_errors] = play(5.0, 4000);
+  EXPECT_EQ(back.stats.fraction_at_target, 1.0);
+  (void)back_errors;
 }
 
 TEST_F(RemoteContainer, ARemoteManifestNamesOnlyTheContainersOwnFiles) {
