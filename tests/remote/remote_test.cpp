@@ -155,6 +155,15 @@ class RemoteContainer : public ::testing::Test {
     return all;
   }
 
+  /// What reading every frame's index transfers: its first read (up to 4 KiB), or the index.
+  static std::uint64_t index_bytes(const format::Container& c) {
+    std::uint64_t total = 0;
+    for (std::size_t t = 0; t < c.frame_count(); ++t)
+      total += std::max<std::uint64_t>(std::min<std::uint64_t>(c.manifest().frames[t]->bytes, 4096),
+                                       c.open_frame_index(t).view().bytes().size());
+    return total;
+  }
+
   static test::TempDir* dir_;
   static fs::path* container_;
   static test::Nginx* nginx_;
@@ -222,6 +231,27 @@ TEST_F(RemoteContainer, CoalescesBackToBackBricksIntoFewRequests) {
   std::printf("%llu requests for %zu bricks (%llu bytes)\n",
               static_cast<unsigned long long>(requests), arrivals.size(),
               static_cast<unsigned long long>(bytes));
+}
+
+TEST_F(RemoteContainer, AShapedServerDeliversEveryBrickIntactInFewRequests) {
+  // nginx's limit_rate at 1 MB/s per request: a slow link, with many requests waiting.
+  test::Nginx slow(dir_->path(), dir_->path() / "nginx-slow", 1000000);
+  const auto source = std::make_shared<HttpSource>(slow.url("test.vreel"));
+  const format::Container remote(source);
+  const stream::SpatialIndex index = stream::build_spatial_index(remote);
+  const std::uint64_t before = source->requests();
+  std::uint64_t bytes = 0;
+  const auto arrivals = load_all(index, remote.source().brick_reader(), 2);
+  for (const auto& a : arrivals) {
+    ASSERT_TRUE(a.ok()) << a.error;
+    EXPECT_EQ(format::crc32c(a.bytes), *a.request.crc32c);
+    bytes += a.bytes.size();
+  }
+  const std::uint64_t requests = source->requests() - before;
+  const std::uint64_t received = source->bytes_received();
+  EXPECT_LE(requests * 2, arrivals.size()) << requests << " requests for " << arrivals.size();
+  // Nothing but the manifest (zfp: no dictionary), the indexes and the bricks.
+  EXPECT_EQ(received, bytes + fs::file_size(*container_ / "manifest.json") + index_bytes(remote));
 }
 
 TEST_F(RemoteContainer, HttpsServesOverHttp2OnOneConnection) {
