@@ -147,7 +147,10 @@ void DiskCache::forget(const std::string& name) {
 }
 
 void DiskCache::evict() {
-  while (total_ > max_bytes_ && !by_use_.empty()) forget(by_use_.begin()->second);
+  while (total_ > max_bytes_ && !by_use_.empty()) {
+    const std::string name = by_use_.begin()->second;  // a copy: forget() erases the map's
+    forget(name);
+  }
 }
 
 std::optional<std::vector<std::byte>> DiskCache::get(const std::string& key) {
