@@ -185,14 +185,7 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
       if (bounded && !e.due && in_flight_bytes_ > 0 &&
           static_cast<double>(in_flight_bytes_ + k.bytes) > speculative_limit)
         break;
-      BrickRequest r;
-      r.key = key;
-      r.keyframe = e.keyframe;
-      r.file = index_.frame_file(k.t);
-      r.offset = k.offset;
-      r.bytes = k.bytes;
-      r.crc32c = k.crc32c;
-      const RequestStatus s = loader_.request(std::move(r));
+      const RequestStatus s = loader_.request(brick_request(index_, e.keyframe));
       if (s == RequestStatus::accepted) {
         ++out.stats.requests_sent;
         const bool speculative = bounded && !e.due;

@@ -134,16 +134,8 @@ class RemoteContainer : public ::testing::Test {
     stream::BrickLoader loader(o);
     std::size_t requested = 0;
     for (std::size_t k = 0; k < index.keyframe_count(); ++k) {
-      const auto id = static_cast<stream::KeyframeId>(k);
-      const stream::KeyframeNode& n = index.keyframe(id);
-      stream::BrickRequest r;
-      r.key = index.key(id);
-      r.keyframe = id;
-      r.file = index.frame_file(n.t);
-      r.offset = n.offset;
-      r.bytes = n.bytes;
-      r.crc32c = n.crc32c;
-      EXPECT_EQ(loader.request(std::move(r)), stream::RequestStatus::accepted);
+      EXPECT_EQ(loader.request(stream::brick_request(index, static_cast<stream::KeyframeId>(k))),
+                stream::RequestStatus::accepted);
       ++requested;
     }
     std::vector<stream::BrickArrival> all;
@@ -308,15 +300,8 @@ TEST_F(RemoteContainer, ACorruptedByteIsRequestedAgainAndNeverHandedOut) {
   o.retry_initial_s = 0.05;
   o.reader = remote.source().brick_reader();
   stream::BrickLoader loader(o);
-  const auto id = static_cast<stream::KeyframeId>(index.keyframe_count() - 1);
-  const stream::KeyframeNode& n = index.keyframe(id);
-  stream::BrickRequest r;
-  r.key = index.key(id);
-  r.keyframe = id;
-  r.file = index.frame_file(n.t);
-  r.offset = n.offset;
-  r.bytes = n.bytes;
-  r.crc32c = n.crc32c;
+  const stream::BrickRequest r =
+      stream::brick_request(index, static_cast<stream::KeyframeId>(index.keyframe_count() - 1));
   const auto wait_one = [&] {
     for (int i = 0; i < 5000; ++i) {
       auto got = loader.poll();

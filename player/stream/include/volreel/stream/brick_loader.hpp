@@ -73,6 +73,19 @@ struct BrickRequest {
   std::optional<std::uint32_t> crc32c;
 };
 
+/// The request for keyframe node `id` of the index: its frame file, offset, length and CRC.
+inline BrickRequest brick_request(const SpatialIndex& index, KeyframeId id) {
+  const KeyframeNode& k = index.keyframe(id);
+  BrickRequest r;
+  r.key = index.key(id);
+  r.keyframe = id;
+  r.file = index.frame_file(k.t);
+  r.offset = k.offset;
+  r.bytes = k.bytes;
+  r.crc32c = k.crc32c;
+  return r;
+}
+
 struct BrickArrival {
   BrickRequest request;
   std::vector<std::byte> bytes;  ///< request.bytes bytes, unless error
