@@ -186,8 +186,18 @@ struct HttpClient::Impl {
     curl_multi_add_handle(multi, e);
   }
 
-  /// Fails every transfer that is running or waiting with `why`.
-  void fail_all(const std::string& why) {
+  /// Fails every transfer in `transfers` with `why`.
+  static void fail(std::deque<std::unique_ptr<Transfer>>& transfers, const std::string& why) {
+    for (auto& t : transfers) {
+      HttpResponse r;
+      r.error = t->what() + ": " + why;
+      t->promise.set_value(std::move(r));
+    }
+    transfers.clear();
+  }
+
+  /// Fails every transfer that is running with `why`.
+  void fail_active(const std::string& why) {
     for (auto& [e, t] : active) {
       curl_multi_remove_handle(multi, e);
       curl_easy_cleanup(e);
@@ -196,13 +206,17 @@ struct HttpClient::Impl {
       t->promise.set_value(std::move(r));
     }
     active.clear();
-    std::lock_guard lock(mutex);
-    for (auto& t : incoming) {
-      HttpResponse r;
-      r.error = t->what() + ": " + why;
-      t->promise.set_value(std::move(r));
+  }
+
+  /// Fails every transfer that is running or waiting with `why`.
+  void fail_all(const std::string& why) {
+    fail_active(why);
+    std::deque<std::unique_ptr<Transfer>> waiting;
+    {
+      std::lock_guard lock(mutex);
+      waiting.swap(incoming);
     }
-    incoming.clear();
+    fail(waiting, why);
   }
 
   void run(const HttpOptions& options, HttpClient& client) {
@@ -215,15 +229,9 @@ struct HttpClient::Impl {
         added.swap(incoming);
         cancel = std::exchange(cancelling, false);
       }
-      if (cancel) {
-        for (auto& t : added) {
-          HttpResponse r;
-          r.error = t->what() + ": cancelled";
-          t->promise.set_value(std::move(r));
-        }
-        added.clear();
-        fail_all("cancelled");
-      }
+      // cancel_all() failed what was waiting; what runs now was started before it. What was
+      // added since is a later request and runs.
+      if (cancel) fail_active("cancelled");
       for (auto& t : added) {
         start(*t, options);
         if (t->easy) active.emplace(t->easy, std::move(t));
@@ -278,10 +286,15 @@ HttpClient::~HttpClient() {
 }
 
 void HttpClient::cancel_all() {
+  // What waits fails here; what runs fails on the client's thread, before anything submitted
+  // after this call starts (the flag is read together with the next batch of requests).
+  std::deque<std::unique_ptr<Transfer>> waiting;
   {
     std::lock_guard lock(impl_->mutex);
+    waiting.swap(impl_->incoming);
     impl_->cancelling = true;
   }
+  Impl::fail(waiting, "cancelled");
   curl_multi_wakeup(impl_->multi);
 }
 

@@ -370,6 +370,31 @@ TEST_F(RemoteContainer, ErrorStatusesTruncationAndStallsAreClearErrors) {
   }
 }
 
+TEST_F(RemoteContainer, CancelEndsWhatRunsAndNotWhatComesAfter) {
+  test::FaultProxy proxy(proxy_script, nginx_->port(), dir_->path());
+  HttpClient client;
+  const std::string manifest = proxy.url("test.vreel/manifest.json");
+  // A stalled answer ends at once, named, instead of at the stall timeout.
+  proxy.set_mode("stall");
+  auto stalled = client.get(manifest, 0, 64);
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  const auto start = std::chrono::steady_clock::now();
+  client.cancel_all();
+  const HttpResponse r = stalled.get();
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(5));
+  EXPECT_NE(r.error.find(manifest), std::string::npos) << r.error;
+  EXPECT_NE(r.error.find("cancelled"), std::string::npos) << r.error;
+  // A request made right after a cancel is a later request: it runs (a loader closing must not
+  // fail the next reader's first request).
+  proxy.set_mode("pass");
+  for (int i = 0; i < 50; ++i) {
+    client.cancel_all();
+    const HttpResponse after = client.get(manifest, 0, 64).get();
+    ASSERT_TRUE(after.ok()) << i << ": " << after.error;
+    EXPECT_EQ(after.body.size(), 64u);
+  }
+}
+
 TEST_F(RemoteContainer, LoadingResumesWhenTheServerComesBack) {
   const auto source = std::make_shared<HttpSource>(url());
   const format::Container remote(source);
