@@ -6,6 +6,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "volreel/datasets/series.hpp"
 
@@ -28,6 +29,13 @@ std::unique_ptr<SeriesReader> open_raw_series(const std::filesystem::path& dir,
                                               const OpenOptions& options);
 std::unique_ptr<SeriesReader> open_raw_file(const std::filesystem::path& file,
                                             const OpenOptions& options);
+/// The files `pattern` (glob(3): *, ?, [...]) matches, one frame each, in natural order
+/// ("p_2" before "p_10"); needs options.dims.
+std::unique_ptr<SeriesReader> open_raw_glob(const std::string& pattern, const OpenOptions& options);
+/// Whether `text` has a glob character (*, ? or [).
+bool is_glob(const std::string& text);
+/// The paths `pattern` matches in natural order; InputError when none does.
+std::vector<std::filesystem::path> expand_glob(const std::string& pattern);
 std::unique_ptr<SeriesReader> open_hdf5(const std::filesystem::path& file,
                                         const OpenOptions& options);
 

@@ -1,5 +1,9 @@
 // raw_reader.cpp: readers for raw series directories (series.json + one float32 file per frame)
 // and for single raw files described on the command line (--dims, --dtype, --frames).
+#include <glob.h>
+
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <vector>
 
@@ -139,34 +143,54 @@ class RawSeriesReader final : public SeriesReader {
   std::optional<float> replace_nan_;
 };
 
+/// Raw files described on the command line: one file holding --frames frames back to back, or
+/// the files a glob matched, one frame each, in natural order.
 class RawFileReader final : public SeriesReader {
  public:
-  RawFileReader(fs::path file, const OpenOptions& options)
-      : file_(std::move(file)),
+  /// `pattern`: what matched the files (a glob), or empty for one file; `described`: how errors
+  /// name the input.
+  RawFileReader(std::vector<fs::path> files, std::size_t frames_per_file,
+                const std::string& pattern, const std::string& described,
+                const OpenOptions& options)
+      : files_(std::move(files)),
+        frames_per_file_(frames_per_file),
         dtype_(options.dtype.value_or(Dtype::f32)),
         replace_nan_(options.replace_nan) {
     if (!options.dims)
-      throw InputError("'" + file_.string() +
-                       "' is a raw file: say its size with --dims XxYxZ (and --dtype, --frames if "
-                       "not f32 and 1)");
+      throw InputError(described +
+                       " is raw: say the size of a frame with --dims XxYxZ (and --dtype if not "
+                       "f32)");
     info_.dims = *options.dims;
-    info_.frames = options.frames.value_or(1);
+    info_.frames = files_.size() * frames_per_file_;
     if (info_.frames == 0) throw InputError("--frames must be at least 1");
     frame_bytes_ = info_.dims.voxels() * dtype_size(dtype_);
-    std::error_code ec;
-    const auto size = fs::file_size(file_, ec);
-    if (ec) throw InputError("cannot read the size of '" + file_.string() + "': " + ec.message());
-    if (size != frame_bytes_ * info_.frames)
-      throw InputError(
-          "'" + file_.string() + "' is " + std::to_string(size) + " bytes, but --dims " +
-          to_string(info_.dims) + " --dtype " + to_string(dtype_) + " --frames " +
-          std::to_string(info_.frames) + " needs " + std::to_string(frame_bytes_ * info_.frames) +
-          (size % frame_bytes_ == 0 ? " (it holds " + std::to_string(size / frame_bytes_) +
-                                          " such frames: pass --frames)"
-                                    : ""));
+    for (const fs::path& file : files_) {
+      std::error_code ec;
+      const fs::file_type type = fs::status(file, ec).type();
+      if (type != fs::file_type::regular)
+        throw InputError("'" + file.string() + "' is " + format::detail::file_kind(type) +
+                         ", expected a regular raw file");
+      const auto size = fs::file_size(file, ec);
+      if (ec) throw InputError("cannot read the size of '" + file.string() + "': " + ec.message());
+      if (size == frame_bytes_ * frames_per_file_) continue;
+      const std::string needs = "--dims " + to_string(info_.dims) + " --dtype " +
+                                to_string(dtype_) +
+                                (files_.size() == 1 ? " --frames " + std::to_string(info_.frames)
+                                                    : std::string(" (one frame per file)")) +
+                                " needs " + std::to_string(frame_bytes_ * frames_per_file_);
+      throw InputError("'" + file.string() + "' is " + std::to_string(size) + " bytes, but " +
+                       needs +
+                       (files_.size() == 1 && size % frame_bytes_ == 0
+                            ? " (it holds " + std::to_string(size / frame_bytes_) +
+                                  " such frames: pass --frames)"
+                            : ""));
+    }
     for (std::size_t t = 0; t < info_.frames; ++t)
       info_.timestamps.push_back(static_cast<double>(t));
-    info_.source = "raw file " + file_.string() + " (" + to_string(dtype_) + ")";
+    info_.source = files_.size() == 1
+                       ? "raw file " + files_.front().string() + " (" + to_string(dtype_) + ")"
+                       : "raw files " + pattern + " (" + std::to_string(files_.size()) +
+                             " files, " + to_string(dtype_) + ")";
   }
 
   void read_frame(std::size_t t, std::span<float> out) const override {
@@ -175,28 +199,93 @@ class RawFileReader final : public SeriesReader {
                        " has " + std::to_string(info_.frames) + " frames");
     if (out.size() != info_.dims.voxels())
       throw InputError("read_frame: output has the wrong size");
+    const fs::path& file = files_[t / frames_per_file_];
+    const std::size_t within = t % frames_per_file_;
     std::vector<unsigned char> bytes(frame_bytes_);
-    read_exact(file_, t * frame_bytes_, bytes);
+    read_exact(file, within * frame_bytes_, bytes);
     convert_to_float(bytes.data(), dtype_, out);
-    check_finite(out, info_.dims, "'" + file_.string() + "' frame " + std::to_string(t),
+    check_finite(out, info_.dims,
+                 "'" + file.string() + "'" +
+                     (frames_per_file_ > 1 ? " frame " + std::to_string(within) : std::string()),
                  replace_nan_);
   }
 
  private:
-  fs::path file_;
+  std::vector<fs::path> files_;
+  std::size_t frames_per_file_ = 1;
   Dtype dtype_;
   std::size_t frame_bytes_ = 0;
   std::optional<float> replace_nan_;
 };
 
+/// Natural order: runs of digits compare as numbers ("p_2" before "p_10"), the rest bytewise.
+bool natural_less(const std::string& a, const std::string& b) {
+  std::size_t i = 0, j = 0;
+  while (i < a.size() && j < b.size()) {
+    const bool da = std::isdigit(static_cast<unsigned char>(a[i])) != 0;
+    const bool db = std::isdigit(static_cast<unsigned char>(b[j])) != 0;
+    if (da && db) {
+      std::size_t ie = i, je = j;
+      while (ie < a.size() && std::isdigit(static_cast<unsigned char>(a[ie]))) ++ie;
+      while (je < b.size() && std::isdigit(static_cast<unsigned char>(b[je]))) ++je;
+      // Without leading zeros, the longer run is the larger number.
+      std::size_t is = i, js = j;
+      while (is + 1 < ie && a[is] == '0') ++is;
+      while (js + 1 < je && b[js] == '0') ++js;
+      if (ie - is != je - js) return ie - is < je - js;
+      const int c = a.compare(is, ie - is, b, js, je - js);
+      if (c != 0) return c < 0;
+      if (ie - i != je - j) return ie - i < je - j;  // "07" after "7"
+      i = ie;
+      j = je;
+      continue;
+    }
+    if (a[i] != b[j]) return static_cast<unsigned char>(a[i]) < static_cast<unsigned char>(b[j]);
+    ++i;
+    ++j;
+  }
+  return a.size() - i < b.size() - j;
+}
+
 }  // namespace
+
+bool is_glob(const std::string& text) {
+  return text.find_first_of("*?[") != std::string::npos;
+}
+
+std::vector<fs::path> expand_glob(const std::string& pattern) {
+  ::glob_t g{};
+  const int rc = ::glob(pattern.c_str(), GLOB_ERR, nullptr, &g);
+  std::vector<std::string> names;
+  for (std::size_t i = 0; rc == 0 && i < g.gl_pathc; ++i) names.emplace_back(g.gl_pathv[i]);
+  ::globfree(&g);
+  if (rc == GLOB_NOMATCH)
+    throw InputError("'" + pattern + "' matches no file (quote the pattern so that the shell " +
+                     "leaves it to volreel)");
+  if (rc != 0) throw InputError("'" + pattern + "': cannot list the files it names");
+  std::sort(names.begin(), names.end(), natural_less);
+  return {names.begin(), names.end()};
+}
 
 std::unique_ptr<SeriesReader> open_raw_series(const fs::path& dir, const OpenOptions& options) {
   return std::make_unique<RawSeriesReader>(dir, options);
 }
 
 std::unique_ptr<SeriesReader> open_raw_file(const fs::path& file, const OpenOptions& options) {
-  return std::make_unique<RawFileReader>(file, options);
+  return std::make_unique<RawFileReader>(std::vector<fs::path>{file}, options.frames.value_or(1),
+                                         "", "'" + file.string() + "'", options);
+}
+
+std::unique_ptr<SeriesReader> open_raw_glob(const std::string& pattern,
+                                            const OpenOptions& options) {
+  if (options.frames && *options.frames != 1)
+    throw InputError("'" + pattern +
+                     "': a pattern reads one frame per file; --frames applies to a single file");
+  std::vector<fs::path> files = expand_glob(pattern);
+  const std::string described =
+      "'" + pattern + "' (" + std::to_string(files.size()) + " files, " + files.front().string() +
+      (files.size() > 1 ? " ... " + files.back().string() : std::string()) + ")";
+  return std::make_unique<RawFileReader>(std::move(files), 1, pattern, described, options);
 }
 
 }  // namespace volreel::datasets::detail

@@ -72,6 +72,8 @@ Volume SeriesReader::read_frame(std::size_t t) const {
 
 std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOptions& options) {
   std::error_code ec;
+  if (!fs::exists(path, ec) && detail::is_glob(path.string()))
+    return detail::open_raw_glob(path.string(), options);
   if (!fs::exists(path, ec)) throw InputError("'" + path.string() + "' does not exist");
   if (fs::is_directory(path, ec)) return detail::open_raw_series(path, options);
   if (path.filename() == "series.json") return detail::open_raw_series(path.parent_path(), options);

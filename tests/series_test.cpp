@@ -215,6 +215,40 @@ TEST(RawFile, AllDtypesConvert) {
   expect_error([&] { vd::open_series(dir / "u8.raw", no_dims); }, {"--dims"});
 }
 
+TEST(RawFile, APatternReadsOneFramePerFileInNaturalOrder) {
+  TempDir dir("rawglob");
+  const Dims d{2, 2, 1};
+  // Frames 1, 2, 10: natural order puts p_2 before p_10 (bytewise order would not).
+  for (int t : {10, 1, 2}) {
+    std::vector<float> v(d.voxels(), static_cast<float>(t));
+    write_bytes(dir / ("p_" + std::to_string(t) + ".f32"), v.data(), v.size() * 4);
+  }
+  // Not matched by the pattern: another variable.
+  std::vector<float> other(d.voxels(), -1.0f);
+  write_bytes(dir / "q_3.f32", other.data(), other.size() * 4);
+  vd::OpenOptions o;
+  o.dims = d;
+  const std::string pattern = (dir / "p_*.f32").string();
+  const auto s = vd::open_series(pattern, o);
+  ASSERT_EQ(s->info().frames, 3u);
+  EXPECT_EQ(s->read_frame(0).data[0], 1.0f);
+  EXPECT_EQ(s->read_frame(1).data[3], 2.0f);
+  EXPECT_EQ(s->read_frame(2).data[0], 10.0f);
+  EXPECT_NE(s->info().source.find("3 files"), std::string::npos) << s->info().source;
+  // Errors: no match, no --dims, --frames, a file of the wrong size, a directory matched.
+  expect_error([&] { vd::open_series((dir / "x_*.f32").string(), o); },
+               {"x_*.f32", "matches no file"});
+  expect_error([&] { vd::open_series(pattern, vd::OpenOptions{}); }, {"p_*.f32", "--dims"});
+  vd::OpenOptions frames = o;
+  frames.frames = 2;
+  expect_error([&] { vd::open_series(pattern, frames); }, {"one frame per file"});
+  write_bytes(dir / "p_11.f32", other.data(), 8);
+  expect_error([&] { vd::open_series(pattern, o); }, {"p_11.f32", "is 8 bytes", "needs 16"});
+  fs::remove(dir / "p_11.f32");
+  fs::create_directory(dir / "p_12.f32");
+  expect_error([&] { vd::open_series(pattern, o); }, {"p_12.f32", "directory"});
+}
+
 namespace {
 
 void h5_write(hid_t file, const std::string& name, const std::vector<hsize_t>& shape,

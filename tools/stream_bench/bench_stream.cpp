@@ -138,12 +138,12 @@ double bench_bandwidth(const std::string& text, double playback_bytes_per_s) {
   return loop::parse_bandwidth(text);
 }
 
-/// The path inside a manifest's "source" ("raw series DIR", "raw file FILE (f32)", "HDF5 FILE
-/// (datasets …)") or the encoder's "series" field.
+/// The path inside a manifest's "source" ("raw series DIR", "raw file FILE (f32)", "raw files
+/// PATTERN (N files, f32)", "HDF5 FILE (datasets …)") or the encoder's "series" field.
 std::vector<std::string> source_candidates(const format::Manifest& m) {
   std::vector<std::string> out;
   std::string s = m.source;
-  for (const char* prefix : {"raw series ", "raw file ", "HDF5 "})
+  for (const char* prefix : {"raw series ", "raw files ", "raw file ", "HDF5 "})
     if (s.rfind(prefix, 0) == 0) {
       s = s.substr(std::string(prefix).size());
       const std::size_t paren = s.rfind(" (");
@@ -166,7 +166,6 @@ std::unique_ptr<datasets::SeriesReader> open_original(const std::string& series,
   const format::Manifest& m = container.manifest();
   if (!options.dims) options.dims = Dims{m.dims[0], m.dims[1], m.dims[2]};
   if (!series.empty()) {
-    if (!fs::exists(series)) throw InputError("--series " + series + ": no such file or folder");
     note = "--series " + series;
     return datasets::open_series(series, options);
   }
@@ -179,7 +178,8 @@ std::unique_ptr<datasets::SeriesReader> open_original(const std::string& series,
       tries.push_back(dir.parent_path().parent_path() / c);
     }
     for (const fs::path& p : tries) {
-      if (!fs::exists(p)) continue;
+      const bool pattern = p.string().find_first_of("*?[") != std::string::npos;
+      if (!fs::exists(p) && !pattern) continue;
       try {
         auto reader = datasets::open_series(p, options);
         note = "the manifest's source " + p.string();

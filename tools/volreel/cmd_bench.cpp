@@ -130,7 +130,10 @@ void add_bench_command(CLI::App& app) {
                             "setting, then every codec's PSNR at equal bps (--at-bps); writes "
                             "OUT/rd.csv, OUT/rd_equal_bps.csv and\n"
                             "OUT/rd.png (PSNR vs bps, via gnuplot).");
-  rd->add_option("SERIES", o->series, "Raw series directory, HDF5 file or raw file")->required();
+  rd->add_option(
+        "SERIES", o->series,
+        "Raw series directory, HDF5 file, raw file or quoted pattern of raw files (see below)")
+      ->required();
   rd->add_option("--out", o->out, "Directory for rd.csv and rd.png")->capture_default_str();
   rd->add_option("--max-frames", o->rd.max_frames, "Use only the first N frames (0: all)")
       ->capture_default_str();

@@ -259,7 +259,10 @@ void add_encode_command(CLI::App& app) {
       "its squared error by at least 0.25*216*eps^2, the rate-distortion optimal\nallocation; or, "
       "--rate-rule tolerance, atoms until its RMS error <= eps; fixed rate: S atoms) and\n"
       "quantized, or each brick coded by zfp (--codec zfp).");
-  cmd->add_option("SERIES", o->series, "Raw series directory, HDF5 file or raw file")->required();
+  cmd->add_option(
+         "SERIES", o->series,
+         "Raw series directory, HDF5 file, raw file or quoted pattern of raw files (see below)")
+      ->required();
   cmd->add_option("--out", o->out, "The container directory to write, e.g. turb.vreel")->required();
   cmd->add_option("--dictionary", o->dictionary,
                   "Dictionary from volreel train, or 'dct' for the DCT basis alone (no learned "

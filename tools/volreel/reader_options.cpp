@@ -15,9 +15,28 @@ std::optional<double> positive_number(const std::string& text) {
   return v;
 }
 
+const char* const series_inputs_help = R"(Series (SERIES):
+  DIR or DIR/series.json  a raw series directory: series.json and one float32 file per frame
+  FILE --dims XxYxZ       a raw file ([--dtype f32|f64|u8|u16] [--frames T back to back])
+  'PATTERN' --dims XxYxZ  raw files a glob matches (*, ?, [...]; quote it), one frame each,
+                          in natural order (p_2 before p_10)
+  FILE.h5 --dataset NAME  HDF5: a 4D dataset [t][z][y][x], or 3D datasets by pattern
+
+series.json (every key required unless marked optional):
+  "format": "volreel-raw-series"    "version": 1
+  "dims": [x, y, z]                 "dtype": "f32" (little-endian, x fastest, no header)
+  "frames": ["000000.f32", ...]     file names relative to the directory
+  "timestamps": [t0, t1, ...]       one increasing number per frame
+  "spacing": [sx, sy, sz]           optional, default [1, 1, 1]
+  "variable": "pressure"            optional
+  "generator": {...}                optional: how the series was made (kept, not read))";
+
 void ReaderOptions::add_to(CLI::App& command) {
-  command.add_option("--dims", dims, "Raw file: volume size XxYxZ (x fastest), e.g. 256x256x128");
-  command.add_option("--dtype", dtype, "Raw file: f32 (default), f64, u8 or u16, little-endian");
+  command.footer(series_inputs_help);
+  command.add_option("--dims", dims,
+                     "Raw file or pattern: volume size XxYxZ (x fastest), e.g. 256x256x128");
+  command.add_option("--dtype", dtype,
+                     "Raw file or pattern: f32 (default), f64, u8 or u16, little-endian");
   command.add_option("--frames", frames, "Raw file: frames stored back to back (default 1)");
   command.add_option("--dataset", dataset,
                      "HDF5: a 4D dataset [t][z][y][x], or one 3D dataset per step by pattern: "

@@ -44,7 +44,10 @@ std::string mvoxels(double voxels) {
 }
 
 void TrainingCli::add_to(CLI::App& c) {
-  c.add_option("SERIES", series, "Raw series directory, HDF5 file or raw file")->required();
+  c.add_option(
+       "SERIES", series,
+       "Raw series directory, HDF5 file, raw file or quoted pattern of raw files (see below)")
+      ->required();
   tolerance_option = c.add_option(
       "--tolerance", tolerance,
       "Error tolerance eps: RMS error per value of a block, in data units (a block is done when\n"

@@ -67,7 +67,8 @@ class SeriesReader {
 };
 
 /// Open a series: a raw series directory (or its series.json), an HDF5 file (.h5, .hdf5, .hdf),
-/// or a single raw file (needs options.dims). Throws InputError with a clear message.
+/// a single raw file, or a glob pattern (*, ?, [...]) of raw files with one frame each in
+/// natural order (raw input needs options.dims). Throws InputError with a clear message.
 std::unique_ptr<SeriesReader> open_series(const std::filesystem::path& path,
                                           const OpenOptions& options = {});
 
