@@ -534,6 +534,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   summary.mvoxels_per_s =
       summary.seconds > 0 ? voxels * static_cast<double>(summary.encoded) / 1e6 / summary.seconds
                           : 0;
+  summary.coding = job.coding;
   return summary;
 }
 

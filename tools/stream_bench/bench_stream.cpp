@@ -166,6 +166,8 @@ std::unique_ptr<datasets::SeriesReader> open_original(const std::string& series,
   const format::Manifest& m = container.manifest();
   if (!options.dims) options.dims = Dims{m.dims[0], m.dims[1], m.dims[2]};
   if (!series.empty()) {
+    if (!fs::exists(series) && series.find_first_of("*?[") == std::string::npos)
+      throw InputError("--series " + series + ": no such file or folder");
     note = "--series " + series;
     return datasets::open_series(series, options);
   }

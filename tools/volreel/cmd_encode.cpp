@@ -88,163 +88,53 @@ encoder::ToleranceRequest tolerance_request(const EncodeOptions& o) {
   return r;
 }
 
-/// Trains the dictionary of an encode given none into `path`, printing each K tried.
-void train_dictionary(const datasets::SeriesReader& series, const EncodeOptions& o, double eps,
-                      std::size_t frames, const encoder::CodingSettings& coding,
-                      const fs::path& path) {
-  encoder::DefaultDictionaryOptions d;
-  d.tolerance = eps;
-  d.atoms = o.atoms;
-  d.frames = frames;
-  d.sample_frames = o.rate_sample_frames;
-  d.half_atoms = o.atom_storage == "f16";
-  d.coding = coding;
-  dictionary::CoresetHierarchy h;
-  {
-    ProgressBar bar("coreset", "frames");
-    h = dictionary::build_coreset_hierarchy(series, d.coreset, bar.progress());
-    bar.finish();
-  }
-  const auto chosen = encoder::train_default_dictionary(series, h, d, [&](const auto& k) {
-    if (d.atoms == 0 && k.atoms == 0)
-      std::printf("  the DCT basis alone: estimated container %.0f bytes (dictionary %.0f)\n",
-                  k.estimated_bytes, k.dictionary_bytes);
-    else if (d.atoms == 0)
-      std::printf(
-          "  K = %4d: trained in %.1f s; estimated container %.0f bytes (dictionary %.0f)\n",
-          k.atoms, k.train_seconds, k.estimated_bytes, k.dictionary_bytes);
-    else
-      std::printf("  K = %4d: trained in %.1f s\n", k.atoms, k.train_seconds);
-  });
-  if (chosen.dct_only) {
-    format::write_dictionary_file(path, format::dct_dictionary(6, VOLREEL_VERSION));
-    std::printf("using the DCT basis alone (eps %.4g)\n", eps);
-    return;
-  }
-  dictionary::save_dictionary(path, chosen.dictionary, chosen.training);
-  std::printf("using the dictionary of K = %d atoms (eps %.4g)\n", chosen.dictionary.atom_count(),
-              eps);
-}
-
-/// What the encoder holds per frame of a stretch with keyframe gaps: the frame and the original
-/// voxels of every brick of its octree.
-double stretch_bytes_per_frame(const Dims& dims) {
-  std::uint64_t bricks = 0;
-  for (const auto& g : format::level_geometry({static_cast<std::uint32_t>(dims.x),
-                                               static_cast<std::uint32_t>(dims.y),
-                                               static_cast<std::uint32_t>(dims.z)}))
-    bricks += std::uint64_t{g.grid[0]} * g.grid[1] * g.grid[2];
-  return 4.0 * (static_cast<double>(dims.voxels()) +
-                static_cast<double>(bricks) * static_cast<double>(format::brick_voxels));
-}
-
-/// The keyframe gap to encode with: the option's, or without one the default, lowered so that the
-/// G + 1 frames of a stretch take at most half the machine's memory (said when it is lowered).
-std::uint32_t keyframe_gap(const EncodeOptions& o, const Dims& dims) {
-  if (o.keyframe_gap_opt->count() > 0) return o.max_keyframe_gap;
-  // --bps's rate search codes whole sample frames: the size it finds is the size written only
-  // when every frame stores every brick.
-  if (o.bps_opt->count() > 0) return 1;
-  const double memory =
-      static_cast<double>(::sysconf(_SC_PHYS_PAGES)) * static_cast<double>(::sysconf(_SC_PAGESIZE));
-  const double per_frame = stretch_bytes_per_frame(dims);
-  std::uint32_t gap = o.max_keyframe_gap;
-  while (gap > 1 && memory > 0 && (gap + 1) * per_frame > memory / 2) --gap;
-  if (gap < o.max_keyframe_gap)
-    std::printf("keyframe gap %u (not %u): %u frames of %.0f MB each fit in half the memory\n", gap,
-                o.max_keyframe_gap, gap + 1, per_frame / 1e6);
-  return gap;
-}
-
 void run_encode(const EncodeOptions& o) {
   const auto series = datasets::open_series(o.series, o.reader.to_open_options());
   const auto& info = series->info();
   const std::size_t frames = o.max_frames ? std::min(o.max_frames, info.frames) : info.frames;
   std::printf("volreel encode: %s, %s x %zu frames, variable '%s'\n", info.source.c_str(),
               to_string(info.dims).c_str(), frames, info.variable.c_str());
-  encoder::EncodeJob job;
-  job.resume = o.resume;
-  job.overwrite = o.overwrite;
-  job.max_frames = frames;
-  job.coding = coding_settings(o);
-  job.half_atoms = o.atom_storage == "f16";
-  if (o.psnr_opt->count() > 0) job.psnr_target = o.psnr;
-  job.max_keyframe_gap = keyframe_gap(o, info.dims);
-  auto& c = job.coding;
-  {
-    ProgressBar bar("value range", "frames");
-    std::tie(c.value_min, c.value_max) = encoder::value_range(*series, frames, bar.progress());
-    bar.finish();
-  }
-  encoder::check_value_range(c.value_min, c.value_max, series->info().source);
-  const double range = encoder::tolerance_range(c.value_min, c.value_max);
-  std::printf("value range [%.6g, %.6g]%s\n", c.value_min, c.value_max,
-              c.value_max > c.value_min ? "" : " (constant: every brick is stored as the value)");
-
-  if (c.codec == format::Codec::zfp) {
-    c.zfp_accuracy = o.zfp_opt->count() ? o.zfp_accuracy : range * 1e-3;
-    std::printf("codec zfp, fixed accuracy %.4g per brick\n", c.zfp_accuracy);
-  } else {
-    // The dictionary: given, the container's own (resume), or trained here.
-    const encoder::ToleranceRequest request = tolerance_request(o);
-    fs::path dict_path = o.dictionary;
-    fs::path trained;
-    if (dict_path.empty() && o.resume && fs::exists(fs::path(o.out) / "dictionary.bin"))
-      dict_path = fs::path(o.out) / "dictionary.bin";
-    if (dict_path.empty() && !(c.value_max > c.value_min)) dict_path = "dct";  // nothing to learn
-    if (dict_path.empty()) {
-      const double eps = encoder::tolerance_to_train_at(request, range);
-      trained =
-          fs::temp_directory_path() / ("volreel-dictionary-" + std::to_string(::getpid()) + ".bin");
-      std::printf(
-          "no --dictionary given: training one with volreel train's defaults at eps %.4g, %s\n",
-          eps,
-          o.atoms ? ("K = " + std::to_string(o.atoms)).c_str()
-                  : "K chosen by the total size it gives (--atoms to fix it)");
-      train_dictionary(*series, o, eps, frames, c, trained);
-      dict_path = trained;
-    }
-    // A copy, so that the container's own dictionary.bin can be used to resume.
-    const fs::path copy = fs::temp_directory_path() /
-                          ("volreel-dictionary-copy-" + std::to_string(::getpid()) + ".bin");
-    if (dict_path == "dct")
-      format::write_dictionary_file(copy, format::dct_dictionary(6, VOLREEL_VERSION));
-    else
-      fs::copy_file(dict_path, copy, fs::copy_options::overwrite_existing);
-    if (!trained.empty()) fs::remove(trained);
-    job.dictionary_file = copy;
-    auto file = format::read_dictionary_file(copy);
-    if ((job.half_atoms && !file.half_atoms) || !file.dct_atoms) {
-      // Stored as the container will store it, so that --bps measures what the encode writes.
-      file = format::container_dictionary(std::move(file), job.half_atoms);
-      format::write_dictionary_file(copy, file);
-    }
-    std::optional<ProgressBar> bar;
-    if (request.bps && c.fixed_sparsity == 0) bar.emplace("rate control", "steps");
-    const auto eps = encoder::choose_tolerance(*series, file, fs::file_size(copy), c, frames,
-                                               request, bar ? bar->progress() : Progress{});
+  encoder::EncodeRequest r;
+  r.coding = coding_settings(o);
+  r.tolerance = tolerance_request(o);
+  if (o.zfp_opt->count()) r.zfp_accuracy = o.zfp_accuracy;
+  r.dictionary = o.dictionary;
+  r.atoms = o.atoms;
+  r.half_atoms = o.atom_storage == "f16";
+  r.resume = o.resume;
+  r.overwrite = o.overwrite;
+  r.max_frames = frames;
+  if (o.keyframe_gap_opt->count() > 0) r.max_keyframe_gap = o.max_keyframe_gap;
+  r.provenance = {
+      {"program", "volreel " VOLREEL_VERSION}, {"series", o.series}, {"coef_bits", o.coef_bits}};
+  encoder::EncodeEvents events;
+  events.message = [](const std::string& line) { std::printf("%s\n", line.c_str()); };
+  std::optional<ProgressBar> bar;
+  events.stage = [&](const std::string& stage, const std::string& unit) {
+    return bar.emplace(stage, unit).progress();
+  };
+  events.stage_done = [&] {
     if (bar) bar->finish();
-    c.tolerance = eps.tolerance;
-    print_tolerance_choice(eps, c, o.bps, std::min(o.rate_sample_frames, frames), range,
-                           file.atom_count);
-  }
-  job.provenance = {{"program", "volreel " VOLREEL_VERSION},
-                    {"series", o.series},
-                    {"refit_quantization", c.refit_quantization},
-                    {"extend_pursuit", c.extend_pursuit},
-                    {"max_atoms", c.max_atoms},
-                    {"coef_bits", o.coef_bits},
-                    {"coef_step_factor", c.coef_step_factor},
-                    {"max_error", c.max_error}};
-  // encode_series adds the variable-rate rule and its parameters.
-  encoder::EncodeSummary s;
-  {
-    ProgressBar bar("encoding", "frames");
-    s = encoder::encode_series(*series, o.out, job, bar.progress());
-    bar.finish();
-  }
-  if (!job.dictionary_file.empty()) fs::remove(job.dictionary_file);
-  print_encode_summary(s, c, o.out, job.psnr_target);
+    bar.reset();
+  };
+  events.candidate = [&](const encoder::DictionaryCandidate& k) {
+    if (o.atoms == 0 && k.atoms == 0)
+      std::printf("  the DCT basis alone: estimated container %.0f bytes (dictionary %.0f)\n",
+                  k.estimated_bytes, k.dictionary_bytes);
+    else if (o.atoms == 0)
+      std::printf(
+          "  K = %4d: trained in %.1f s; estimated container %.0f bytes (dictionary %.0f)\n",
+          k.atoms, k.train_seconds, k.estimated_bytes, k.dictionary_bytes);
+    else
+      std::printf("  K = %4d: trained in %.1f s\n", k.atoms, k.train_seconds);
+  };
+  events.tolerance_chosen = [&](const encoder::ToleranceChoice& eps,
+                                const encoder::CodingSettings& c, std::uint32_t atoms) {
+    print_tolerance_choice(eps, c, o.bps, std::min(o.rate_sample_frames, frames),
+                           encoder::tolerance_range(c.value_min, c.value_max), atoms);
+  };
+  const encoder::EncodeSummary s = encoder::encode(*series, o.out, r, events);
+  print_encode_summary(s, s.coding, o.out, r.tolerance.psnr.value_or(0));
 }
 
 }  // namespace

@@ -94,6 +94,8 @@ struct EncodeSummary {
   /// Of the frames encoded: the bricks stored, and the nodes of their trees left without a brick
   /// (drawn by interpolation between their keyframes).
   std::size_t bricks_stored = 0, nodes_interpolated = 0;
+  /// The settings the frames were coded with (value range and ε set).
+  CodingSettings coding;
 };
 /// Writes OUT (a NAME.vreel directory). Frames go to temporary names renamed when complete; the
 /// manifest is rewritten after each frame. Progress: frames done, total, status with MVoxel/s.

@@ -1,0 +1,215 @@
+// encode.cpp: the whole encode (encode.hpp) — value range, dictionary, ε, the series encoder.
+#include "volreel/encoder/encode.hpp"
+
+#include <unistd.h>
+
+#include <atomic>
+#include <cstdio>
+#include <utility>
+
+#include "volreel/dictionary/training.hpp"
+#include "volreel/format/dictionary_file.hpp"
+#include "volreel/format/frame_file.hpp"
+
+namespace volreel::encoder {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+/// A file name in the temporary folder no other encode of this or another process uses; the
+/// file is removed when this goes.
+class TemporaryFile {
+ public:
+  explicit TemporaryFile(const std::string& stem) {
+    static std::atomic<unsigned> counter{0};
+    path_ = fs::temp_directory_path() / (stem + "-" + std::to_string(::getpid()) + "-" +
+                                         std::to_string(counter++) + ".bin");
+  }
+  ~TemporaryFile() {
+    std::error_code ec;
+    fs::remove(path_, ec);
+  }
+  TemporaryFile(const TemporaryFile&) = delete;
+  TemporaryFile& operator=(const TemporaryFile&) = delete;
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
+};
+
+/// A stage of EncodeEvents: started when made, done when it goes (also on an exception).
+class Stage {
+ public:
+  Stage(const EncodeEvents& events, const std::string& name, const std::string& unit)
+      : events_(events) {
+    if (events_.stage) progress_ = events_.stage(name, unit);
+  }
+  ~Stage() {
+    if (events_.stage && events_.stage_done) events_.stage_done();
+  }
+  Stage(const Stage&) = delete;
+  Stage& operator=(const Stage&) = delete;
+  const Progress& progress() const { return progress_; }
+
+ private:
+  const EncodeEvents& events_;
+  Progress progress_;
+};
+
+std::string printed(const char* format, double a, double b = 0) {
+  char text[160];
+  std::snprintf(text, sizeof text, format, a, b);
+  return text;
+}
+
+/// What the encoder holds per frame of a stretch with keyframe gaps: the frame and the original
+/// voxels of every brick of its octree.
+double stretch_bytes_per_frame(const Dims& dims) {
+  std::uint64_t bricks = 0;
+  for (const auto& g : format::level_geometry({static_cast<std::uint32_t>(dims.x),
+                                               static_cast<std::uint32_t>(dims.y),
+                                               static_cast<std::uint32_t>(dims.z)}))
+    bricks += std::uint64_t{g.grid[0]} * g.grid[1] * g.grid[2];
+  return 4.0 * (static_cast<double>(dims.voxels()) +
+                static_cast<double>(bricks) * static_cast<double>(format::brick_voxels));
+}
+
+/// Trains the dictionary of an encode given none into `path`.
+void train_dictionary(const datasets::SeriesReader& series, const EncodeRequest& request,
+                      double eps, std::size_t frames, const EncodeEvents& events,
+                      const fs::path& path) {
+  DefaultDictionaryOptions d;
+  d.tolerance = eps;
+  d.atoms = request.atoms;
+  d.frames = frames;
+  d.sample_frames = request.tolerance.rate_sample_frames;
+  d.half_atoms = request.half_atoms;
+  d.coding = request.coding;
+  dictionary::CoresetHierarchy h;
+  {
+    Stage stage(events, "coreset", "frames");
+    h = dictionary::build_coreset_hierarchy(series, d.coreset, stage.progress());
+  }
+  const auto chosen = train_default_dictionary(series, h, d, events.candidate);
+  if (chosen.dct_only) {
+    format::write_dictionary_file(path, format::dct_dictionary(6, VOLREEL_VERSION));
+    if (events.message) events.message(printed("using the DCT basis alone (eps %.4g)", eps));
+    return;
+  }
+  dictionary::save_dictionary(path, chosen.dictionary, chosen.training);
+  if (events.message)
+    events.message(printed("using the dictionary of K = %.0f atoms (eps %.4g)",
+                           chosen.dictionary.atom_count(), eps));
+}
+
+}  // namespace
+
+std::uint32_t default_keyframe_gap(const Dims& dims, bool size_target, bool* lowered) {
+  if (lowered) *lowered = false;
+  if (size_target) return 1;
+  const double memory =
+      static_cast<double>(::sysconf(_SC_PHYS_PAGES)) * static_cast<double>(::sysconf(_SC_PAGESIZE));
+  const double per_frame = stretch_bytes_per_frame(dims);
+  std::uint32_t gap = default_max_keyframe_gap;
+  while (gap > 1 && memory > 0 && (gap + 1) * per_frame > memory / 2) --gap;
+  if (lowered) *lowered = gap < default_max_keyframe_gap;
+  return gap;
+}
+
+EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
+                     EncodeRequest request, const EncodeEvents& events) {
+  const auto say = [&](const std::string& line) {
+    if (events.message) events.message(line);
+  };
+  const auto& info = series.info();
+  const std::size_t frames =
+      request.max_frames ? std::min(request.max_frames, info.frames) : info.frames;
+  EncodeJob job;
+  job.resume = request.resume;
+  job.overwrite = request.overwrite;
+  job.max_frames = frames;
+  job.coding = request.coding;
+  job.half_atoms = request.half_atoms;
+  if (request.tolerance.psnr) job.psnr_target = *request.tolerance.psnr;
+  if (request.max_keyframe_gap) {
+    job.max_keyframe_gap = *request.max_keyframe_gap;
+  } else {
+    bool lowered = false;
+    job.max_keyframe_gap =
+        default_keyframe_gap(info.dims, request.tolerance.bps.has_value(), &lowered);
+    if (lowered)
+      say("keyframe gap " + std::to_string(job.max_keyframe_gap) + " (not " +
+          std::to_string(default_max_keyframe_gap) + "): " +
+          std::to_string(job.max_keyframe_gap + 1) +
+          printed(" frames of %.0f MB each fit in half the memory",
+                  stretch_bytes_per_frame(info.dims) / 1e6));
+  }
+  auto& c = job.coding;
+  {
+    Stage stage(events, "value range", "frames");
+    std::tie(c.value_min, c.value_max) = value_range(series, frames, stage.progress());
+  }
+  check_value_range(c.value_min, c.value_max, info.source);
+  const double range = tolerance_range(c.value_min, c.value_max);
+  say(printed("value range [%.6g, %.6g]", c.value_min, c.value_max) +
+      (c.value_max > c.value_min ? "" : " (constant: every brick is stored as the value)"));
+
+  std::optional<TemporaryFile> copy;
+  if (c.codec == format::Codec::zfp) {
+    c.zfp_accuracy = request.zfp_accuracy.value_or(range * 1e-3);
+    say(printed("codec zfp, fixed accuracy %.4g per brick", c.zfp_accuracy));
+  } else {
+    // The dictionary: given, the container's own (resume), or trained here.
+    fs::path dict_path = request.dictionary;
+    std::optional<TemporaryFile> trained;
+    if (dict_path.empty() && request.resume && fs::exists(out / "dictionary.bin"))
+      dict_path = out / "dictionary.bin";
+    if (dict_path.empty() && !(c.value_max > c.value_min)) dict_path = "dct";  // nothing to learn
+    if (dict_path.empty()) {
+      const double eps = tolerance_to_train_at(request.tolerance, range);
+      trained.emplace("volreel-dictionary");
+      say(printed("no dictionary given: training one with volreel train's defaults at eps %.4g, ",
+                  eps) +
+          (request.atoms ? "K = " + std::to_string(request.atoms)
+                         : std::string("K chosen by the total size it gives")));
+      train_dictionary(series, request, eps, frames, events, trained->path());
+      dict_path = trained->path();
+    }
+    // A copy, so that the container's own dictionary.bin can be used to resume.
+    copy.emplace("volreel-dictionary-copy");
+    if (dict_path == "dct")
+      format::write_dictionary_file(copy->path(), format::dct_dictionary(6, VOLREEL_VERSION));
+    else
+      fs::copy_file(dict_path, copy->path(), fs::copy_options::overwrite_existing);
+    job.dictionary_file = copy->path();
+    auto file = format::read_dictionary_file(copy->path());
+    if ((job.half_atoms && !file.half_atoms) || !file.dct_atoms) {
+      // Stored as the container will store it, so that a size target measures what is written.
+      file = format::container_dictionary(std::move(file), job.half_atoms);
+      format::write_dictionary_file(copy->path(), file);
+    }
+    ToleranceChoice eps;
+    {
+      std::optional<Stage> stage;
+      if (request.tolerance.bps && c.fixed_sparsity == 0)
+        stage.emplace(events, "rate control", "steps");
+      eps = choose_tolerance(series, file, fs::file_size(copy->path()), c, frames,
+                             request.tolerance, stage ? stage->progress() : Progress{});
+    }
+    c.tolerance = eps.tolerance;
+    if (events.tolerance_chosen) events.tolerance_chosen(eps, c, file.atom_count);
+  }
+  job.provenance = std::move(request.provenance);
+  if (!job.provenance.is_object()) job.provenance = nlohmann::json::object();
+  job.provenance["refit_quantization"] = c.refit_quantization;
+  job.provenance["extend_pursuit"] = c.extend_pursuit;
+  job.provenance["max_atoms"] = c.max_atoms;
+  job.provenance["coef_step_factor"] = c.coef_step_factor;
+  job.provenance["max_error"] = c.max_error;
+  // encode_series adds the variable-rate rule and its parameters.
+  Stage stage(events, "encoding", "frames");
+  return encode_series(series, out, job, stage.progress());
+}
+
+}  // namespace volreel::encoder

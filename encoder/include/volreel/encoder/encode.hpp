@@ -1,0 +1,71 @@
+// encode.hpp: the whole encode as `volreel encode` runs it, for any front end (the command line,
+// the Python module): the value range, the dictionary (given, the container's own when resuming,
+// the DCT basis, or trained), ε (given, from a PSNR or a size target), and the series written to a
+// container (series_encoder.hpp).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "volreel/datasets/series.hpp"
+#include "volreel/encoder/coding_settings.hpp"
+#include "volreel/encoder/default_dictionary.hpp"
+#include "volreel/encoder/series_encoder.hpp"
+#include "volreel/encoder/tolerance.hpp"
+
+namespace volreel::encoder {
+
+struct EncodeRequest {
+  /// How bricks are coded; encode() sets the value range, ε and zfp's accuracy.
+  CodingSettings coding;
+  /// What ε is asked to be (ksvd): tolerance, PSNR (also every frame's target,
+  /// EncodeJob::psnr_target) or a size.
+  ToleranceRequest tolerance;
+  /// zfp: the absolute error per brick (default: range · 1e-3).
+  std::optional<double> zfp_accuracy;
+  /// ksvd: a dictionary file, "dct" for the DCT basis alone, or empty: train one (on resume, the
+  /// container's own).
+  std::string dictionary;
+  /// Training a dictionary: K (0: chosen by the container size it gives).
+  int atoms = 0;
+  bool half_atoms = true;  ///< the container stores the atoms in binary16
+  bool resume = false, overwrite = false;
+  std::size_t max_frames = 0;  ///< 0: every frame
+  /// The most time steps between keyframes of a node. Unset: default_max_keyframe_gap, lowered
+  /// until G + 1 frames take at most half the machine's memory; 1 with a size target (its search
+  /// codes whole frames).
+  std::optional<std::uint32_t> max_keyframe_gap;
+  nlohmann::json provenance;  ///< stored under "encoder" in the manifest, with the program's
+};
+
+/// What encode() tells its caller as it goes; every member may be empty.
+struct EncodeEvents {
+  /// A line worth printing ("value range [a, b]", "using the dictionary of K = 256 atoms").
+  std::function<void(const std::string&)> message;
+  /// A long stage starts ("value range" in "frames", "coreset", "rate control", "encoding"); the
+  /// Progress returned receives its progress until stage_done.
+  std::function<Progress(const std::string& stage, const std::string& unit)> stage;
+  std::function<void()> stage_done;
+  /// Training without K: each K as soon as it is measured.
+  DictionaryCandidateCallback candidate;
+  /// ε chosen (ksvd), with the dictionary's K.
+  std::function<void(const ToleranceChoice&, const CodingSettings&, std::uint32_t atoms)>
+      tolerance_chosen;
+};
+
+/// The keyframe gap an encode of frames of `dims` uses when none is asked for (see
+/// EncodeRequest::max_keyframe_gap); `lowered` says whether memory lowered it.
+std::uint32_t default_keyframe_gap(const Dims& dims, bool size_target, bool* lowered = nullptr);
+
+/// Encodes `series` into the container `out` as asked. Temporary dictionary files are removed
+/// whatever happens. Throws InputError/FormatError with what was wrong.
+EncodeSummary encode(const datasets::SeriesReader& series, const std::filesystem::path& out,
+                     EncodeRequest request, const EncodeEvents& events = {});
+
+}  // namespace volreel::encoder
