@@ -23,8 +23,8 @@ class TemporaryFile {
  public:
   explicit TemporaryFile(const std::string& stem) {
     static std::atomic<unsigned> counter{0};
-    path_ = fs::temp_directory_path() / (stem + "-" + std::to_string(::getpid()) + "-" +
-                                         std::to_string(counter++) + ".bin");
+    path_ = fs::temp_directory_path() /
+            (stem + "-" + std::to_string(::getpid()) + "-" + std::to_string(counter++) + ".bin");
   }
   ~TemporaryFile() {
     std::error_code ec;
@@ -140,8 +140,8 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
         default_keyframe_gap(info.dims, request.tolerance.bps.has_value(), &lowered);
     if (lowered)
       say("keyframe gap " + std::to_string(job.max_keyframe_gap) + " (not " +
-          std::to_string(default_max_keyframe_gap) + "): " +
-          std::to_string(job.max_keyframe_gap + 1) +
+          std::to_string(default_max_keyframe_gap) +
+          "): " + std::to_string(job.max_keyframe_gap + 1) +
           printed(" frames of %.0f MB each fit in half the memory",
                   stretch_bytes_per_frame(info.dims) / 1e6));
   }

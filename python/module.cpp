@@ -1,0 +1,432 @@
+// module.cpp: volreel's Python module (volreel._volreel, wrapped by volreel/__init__.py) — a
+// container opened as frames in numpy arrays, the whole encode and the dictionary training from
+// arrays or iterables of arrays, and the PSNR and SSIM of `volreel compare`. The GIL is released
+// while decoding, encoding, training and measuring.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <unistd.h>
+
+#include "volreel/datasets/series.hpp"
+#include "volreel/dictionary/training.hpp"
+#include "volreel/encoder/encode.hpp"
+#include "volreel/format/container.hpp"
+#include "volreel/format/error.hpp"
+#include "volreel/format/time_step.hpp"
+#include "volreel/psnr/metrics.hpp"
+#include "volreel/remote/http_client.hpp"
+#include "volreel/remote/http_source.hpp"
+
+namespace py = pybind11;
+namespace fs = std::filesystem;
+
+namespace volreel::python {
+
+namespace {
+
+using FloatArray = py::array_t<float, py::array::c_style | py::array::forcecast>;
+
+/// An open container: its frames decoded as the player draws them (format::TimeStepDecoder).
+class PyContainer {
+ public:
+  explicit PyContainer(const std::string& location)
+      : container_(remote::open_source(location)), steps_(container_) {}
+
+  const format::Manifest& manifest() const { return container_.manifest(); }
+  std::size_t frames() const { return container_.frame_count(); }
+  std::string location() const { return container_.directory().string(); }
+  std::uint64_t total_bytes() const { return container_.total_bytes(); }
+  double bps() const {
+    const auto& d = manifest().dims;
+    const double voxels = double(d[0]) * d[1] * d[2] * static_cast<double>(frames());
+    return voxels > 0 ? 8.0 * static_cast<double>(total_bytes()) / voxels : 0;
+  }
+
+  /// Time step t (negative: from the end) at `level` (None: the finest) as a [z, y, x] array.
+  FloatArray frame(std::int64_t t, std::optional<std::int64_t> level) {
+    const auto n = static_cast<std::int64_t>(frames());
+    if (t < 0) t += n;
+    if (t < 0 || t >= n)
+      throw py::index_error("frame " + std::to_string(t < 0 ? t - n : t) +
+                            " is out of range: the container has frames 0.." +
+                            std::to_string(n - 1));
+    const auto levels = static_cast<std::int64_t>(manifest().levels);
+    std::int64_t l = level.value_or(levels - 1);
+    if (l < 0) l += levels;
+    if (l < 0 || l >= levels)
+      throw py::index_error("level " + std::to_string(level.value_or(0)) +
+                            " is out of range: the container has levels 0.." +
+                            std::to_string(levels - 1) + " (0 is the root brick)");
+    const auto dims = level_dims(static_cast<std::uint32_t>(l));
+    FloatArray out({std::size_t{dims[2]}, std::size_t{dims[1]}, std::size_t{dims[0]}});
+    float* data = out.mutable_data();
+    const std::size_t count = static_cast<std::size_t>(out.size());
+    {
+      py::gil_scoped_release release;
+      std::lock_guard lock(mutex_);
+      steps_.decode(static_cast<std::size_t>(t), static_cast<std::uint32_t>(l), {data, count});
+    }
+    return out;
+  }
+
+  /// The size (x, y, z) of level l.
+  std::array<std::uint32_t, 3> level_dims(std::uint32_t l) const {
+    const auto geometry = format::level_geometry(manifest().dims);
+    if (l >= geometry.size()) throw py::index_error("level " + std::to_string(l));
+    return geometry[l].dims;
+  }
+
+  py::dict info() const {
+    const py::object loads = py::module_::import("json").attr("loads");
+    py::dict d = loads(format::manifest_to_json(manifest()).dump());
+    d["location"] = location();
+    d["total_bytes"] = total_bytes();
+    d["bps"] = bps();
+    return d;
+  }
+
+ private:
+  format::Container container_;
+  std::mutex mutex_;  ///< the decoder keeps frames open between steps
+  format::TimeStepDecoder steps_;
+};
+
+/// A series over a [t, z, y, x] float32 array (kept alive; read without the GIL).
+class ArraySeries final : public datasets::SeriesReader {
+ public:
+  ArraySeries(FloatArray array, std::vector<double> timestamps, std::string variable)
+      : array_(std::move(array)) {
+    if (array_.ndim() != 4)
+      throw py::value_error("frames: expected an array [t, z, y, x], found " +
+                            std::to_string(array_.ndim()) + " dimensions");
+    info_.dims = Dims{array_.shape(3), array_.shape(2), array_.shape(1)};
+    info_.frames = static_cast<std::size_t>(array_.shape(0));
+    info_.timestamps = std::move(timestamps);
+    info_.variable = std::move(variable);
+    info_.source = "numpy array [" + std::to_string(array_.shape(0)) + ", " +
+                   std::to_string(info_.dims.z) + ", " + std::to_string(info_.dims.y) + ", " +
+                   std::to_string(info_.dims.x) + "]";
+    data_ = array_.data();
+  }
+  void read_frame(std::size_t t, std::span<float> out) const override {
+    if (t >= info_.frames || out.size() != info_.dims.voxels())
+      throw InputError("frame " + std::to_string(t) + ": out of range or the wrong size");
+    const float* frame = data_ + t * info_.dims.voxels();
+    for (std::size_t i = 0; i < out.size(); ++i) {
+      if (std::isfinite(frame[i])) continue;
+      const auto v = static_cast<std::int64_t>(i);
+      const Dims& d = info_.dims;
+      throw InputError("frames[" + std::to_string(t) + "]: value " + std::to_string(frame[i]) +
+                       " at [z, y, x] = [" + std::to_string(v / d.x / d.y) + ", " +
+                       std::to_string(v / d.x % d.y) + ", " + std::to_string(v % d.x) +
+                       "] is not finite");
+    }
+    std::memcpy(out.data(), frame, out.size_bytes());
+  }
+  using datasets::SeriesReader::read_frame;
+
+ private:
+  FloatArray array_;
+  const float* data_ = nullptr;
+};
+
+/// Timestamps given (one per frame, increasing) or 0, 1, 2, ...
+std::vector<double> timestamps_for(std::optional<std::vector<double>> given, std::size_t frames) {
+  if (!given) {
+    std::vector<double> t(frames);
+    for (std::size_t i = 0; i < frames; ++i) t[i] = static_cast<double>(i);
+    return t;
+  }
+  if (given->size() != frames)
+    throw py::value_error("times: expected " + std::to_string(frames) + " numbers (one per frame), " +
+                          "found " + std::to_string(given->size()));
+  for (std::size_t i = 1; i < given->size(); ++i)
+    if (!((*given)[i] > (*given)[i - 1]))
+      throw py::value_error("times: expected increasing numbers, found " +
+                            std::to_string((*given)[i]) + " after " +
+                            std::to_string((*given)[i - 1]));
+  return *given;
+}
+
+/// A raw series directory written from an iterable of 3D arrays, removed when this goes.
+class SpooledSeries {
+ public:
+  SpooledSeries(const py::iterable& frames, const fs::path& near,
+                const std::optional<std::vector<double>>& times, const std::string& variable) {
+    static std::atomic<unsigned> counter{0};
+    dir_ = fs::absolute(near).parent_path() /
+           ("." + near.filename().string() + ".frames-" + std::to_string(::getpid()) + "-" +
+            std::to_string(counter++));
+    std::optional<datasets::RawSeriesWriter> writer;
+    std::size_t t = 0;
+    try {
+      for (const py::handle item : frames) {
+        const FloatArray a = FloatArray::ensure(item);
+        if (!a)
+          throw py::type_error("frames[" + std::to_string(t) +
+                               "]: expected a 3D array of numbers, found " +
+                               std::string(py::str(py::type::of(item))));
+        if (a.ndim() != 3)
+          throw py::value_error("frames[" + std::to_string(t) + "]: expected a 3D array [z, y, x], " +
+                                "found " + std::to_string(a.ndim()) + " dimensions");
+        const Dims d{a.shape(2), a.shape(1), a.shape(0)};
+        if (!writer) writer.emplace(dir_, d, variable);
+        if (d != writer->dims())
+          throw py::value_error("frames[" + std::to_string(t) + "]: shape [" +
+                                std::to_string(d.z) + ", " + std::to_string(d.y) + ", " +
+                                std::to_string(d.x) + "] differs from the first frame's");
+        written_.push_back(static_cast<double>(t));
+        writer->write_frame(t, times && t < times->size() ? (*times)[t] : static_cast<double>(t),
+                            {a.data(), static_cast<std::size_t>(a.size())});
+        ++t;
+      }
+      if (!writer) throw py::value_error("frames: the iterable gave no frame");
+      if (times) timestamps_for(times, t);  // checks count and order
+      writer->finish();
+    } catch (...) {
+      std::error_code ec;
+      fs::remove_all(dir_, ec);
+      throw;
+    }
+  }
+  ~SpooledSeries() {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+  SpooledSeries(const SpooledSeries&) = delete;
+  SpooledSeries& operator=(const SpooledSeries&) = delete;
+  const fs::path& directory() const { return dir_; }
+
+ private:
+  fs::path dir_;
+  std::vector<double> written_;
+};
+
+/// The series `frames` stands for: a 4D array read in place, or an iterable written to a raw
+/// series next to `near` first (the value range and the dictionary need every frame).
+struct SeriesInput {
+  std::unique_ptr<SpooledSeries> spool;
+  std::unique_ptr<datasets::SeriesReader> reader;
+};
+SeriesInput series_input(const py::object& frames, const fs::path& near,
+                         const std::optional<std::vector<double>>& times,
+                         const std::string& variable) {
+  SeriesInput in;
+  if (py::isinstance<py::array>(frames) && py::cast<py::array>(frames).ndim() == 4) {
+    FloatArray a = FloatArray::ensure(frames);
+    if (!a) throw py::type_error("frames: expected an array of numbers");
+    const auto count = static_cast<std::size_t>(a.shape(0));
+    in.reader = std::make_unique<ArraySeries>(std::move(a), timestamps_for(times, count), variable);
+    return in;
+  }
+  if (py::isinstance<py::array>(frames))
+    throw py::value_error("frames: expected an array [t, z, y, x] or an iterable of arrays "
+                          "[z, y, x], found an array of " +
+                          std::to_string(py::cast<py::array>(frames).ndim()) + " dimensions");
+  if (!py::isinstance<py::iterable>(frames))
+    throw py::type_error("frames: expected an array [t, z, y, x] or an iterable of 3D arrays");
+  in.spool = std::make_unique<SpooledSeries>(py::reinterpret_borrow<py::iterable>(frames), near,
+                                             times, variable);
+  in.reader = datasets::open_series(in.spool->directory());
+  return in;
+}
+
+py::dict encode(const py::object& frames, const fs::path& out, std::optional<double> psnr,
+                std::optional<double> bps, std::optional<double> tolerance,
+                std::optional<double> max_error, const std::string& dictionary,
+                const std::string& codec, std::optional<double> zfp_accuracy, int atoms,
+                std::optional<std::uint32_t> max_keyframe_gap, bool overwrite, bool resume,
+                const std::optional<std::vector<double>>& times, const std::string& variable) {
+  if (int(psnr.has_value()) + int(bps.has_value()) + int(tolerance.has_value()) +
+          int(max_error.has_value()) >
+      1)
+    throw py::value_error("give at most one of psnr, bps, tolerance and max_error");
+  SeriesInput in = series_input(frames, out, times, variable);
+  encoder::EncodeRequest r;
+  r.coding.codec = encoder::codec_from_name(codec);
+  if (tolerance) r.tolerance.tolerance = *tolerance;
+  if (psnr) r.tolerance.psnr = *psnr;
+  if (bps) r.tolerance.bps = *bps;
+  if (max_error) {
+    if (!(*max_error > 0)) throw py::value_error("max_error must be positive");
+    r.coding.rule = encoder::VariableRateRule::tolerance;
+    r.coding.max_error = *max_error;
+    r.tolerance.tolerance = *max_error / 2;
+  }
+  r.zfp_accuracy = zfp_accuracy;
+  r.dictionary = dictionary;
+  r.atoms = atoms;
+  r.overwrite = overwrite;
+  r.resume = resume;
+  r.max_keyframe_gap = max_keyframe_gap;
+  r.provenance = {{"program", "volreel " VOLREEL_VERSION " (Python)"},
+                  {"series", in.reader->info().source}};
+  encoder::EncodeSummary s;
+  {
+    py::gil_scoped_release release;
+    s = encoder::encode(*in.reader, out, r);
+  }
+  py::dict d;
+  d["path"] = out.string();
+  d["frames"] = s.frames;
+  d["bytes"] = s.container_bytes;
+  d["bps"] = s.bps;
+  d["seconds"] = s.seconds;
+  d["mvoxels_per_s"] = s.mvoxels_per_s;
+  const double range = encoder::tolerance_range(s.coding.value_min, s.coding.value_max);
+  d["psnr"] = s.delivered.frames > 0 ? s.delivered.sequence_psnr(range)
+                                     : std::numeric_limits<double>::quiet_NaN();
+  d["worst_frame_psnr"] = s.delivered.worst_frame_psnr;
+  d["max_abs_error"] = s.delivered.max_abs_error;
+  d["tolerance"] = s.coding.tolerance;
+  return d;
+}
+
+py::dict train(const py::object& frames, const fs::path& out, int atoms, std::optional<double> psnr,
+               std::optional<double> tolerance, const std::optional<std::vector<double>>& times) {
+  if (psnr && tolerance) throw py::value_error("give psnr or tolerance, not both");
+  if (atoms < 1) throw py::value_error("atoms must be at least 1");
+  SeriesInput in = series_input(frames, out, times, "");
+  dictionary::TrainingResult result;
+  {
+    py::gil_scoped_release release;
+    dictionary::CoresetOptions coreset;
+    const auto hierarchy = dictionary::build_coreset_hierarchy(*in.reader, coreset);
+    dictionary::TrainingOptions options;
+    options.atom_count = atoms;
+    options.convergence = 0.01;  // volreel train's default
+    options.coding.tolerance = dictionary::training_tolerance(
+        tolerance, psnr.value_or(dictionary::default_training_psnr), hierarchy);
+    result = dictionary::train_dictionary(hierarchy, options);
+    dictionary::save_dictionary(out, result.dictionary,
+                                dictionary::training_provenance(coreset, options, hierarchy, result));
+  }
+  py::dict d;
+  d["path"] = out.string();
+  d["atoms"] = result.dictionary.atom_count();
+  d["seconds"] = result.seconds;
+  d["rms_error"] = result.final_stats.rms_error;
+  d["mean_sparsity"] = result.final_stats.mean_sparsity;
+  return d;
+}
+
+/// The two arrays as spans of equal shape.
+void check_pair(const FloatArray& a, const FloatArray& b) {
+  if (a.ndim() != b.ndim() || !std::equal(a.shape(), a.shape() + a.ndim(), b.shape()))
+    throw py::value_error("a and b must have the same shape");
+  if (a.size() == 0) throw py::value_error("a and b are empty");
+}
+
+double psnr_of(const FloatArray& a, const FloatArray& b) {
+  check_pair(a, b);
+  const std::span<const float> sa(a.data(), static_cast<std::size_t>(a.size())),
+      sb(b.data(), static_cast<std::size_t>(b.size()));
+  py::gil_scoped_release release;
+  return psnr::compare(sa, sb).psnr;
+}
+
+double ssim_of(const FloatArray& a, const FloatArray& b) {
+  check_pair(a, b);
+  if (a.ndim() < 1 || a.ndim() > 3)
+    throw py::value_error("ssim: expected arrays of 1, 2 or 3 dimensions, found " +
+                          std::to_string(a.ndim()));
+  std::int64_t shape[3] = {1, 1, 1};  // x, y, z: the last axis varies fastest
+  for (py::ssize_t i = 0; i < a.ndim(); ++i) shape[i] = a.shape(a.ndim() - 1 - i);
+  const std::span<const float> sa(a.data(), static_cast<std::size_t>(a.size())),
+      sb(b.data(), static_cast<std::size_t>(b.size()));
+  py::gil_scoped_release release;
+  return psnr::ssim(Dims{shape[0], shape[1], shape[2]}, sa, sb);
+}
+
+template <typename T>
+py::tuple as_tuple(const std::array<T, 3>& v) {
+  return py::make_tuple(v[0], v[1], v[2]);
+}
+
+}  // namespace
+
+}  // namespace volreel::python
+
+PYBIND11_MODULE(_volreel, m) {
+  using namespace volreel;
+  using namespace volreel::python;
+  m.doc() = "volreel's library: containers as numpy arrays, encoding, training and metrics";
+  m.attr("__version__") = VOLREEL_VERSION;
+
+  static py::exception<format::FormatError> format_error(m, "FormatError", PyExc_ValueError);
+  static py::exception<InputError> input_error(m, "InputError", PyExc_ValueError);
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const format::FormatError& e) {
+      format_error(e.what());
+    } catch (const InputError& e) {
+      input_error(e.what());
+    }
+  });
+
+  py::class_<PyContainer>(m, "Container", "A NAME.vreel container opened for reading")
+      .def(py::init<const std::string&>(), py::arg("location"),
+           "Opens a NAME.vreel folder or an http(s):// URL of one")
+      .def_property_readonly(
+          "dims", [](const PyContainer& c) { return as_tuple(c.manifest().dims); },
+          "The finest level's size (x, y, z); frames are arrays [z, y, x]")
+      .def_property_readonly("frames", &PyContainer::frames, "The number of time steps")
+      .def_property_readonly(
+          "times", [](const PyContainer& c) { return c.manifest().timestamps; },
+          "Each time step's simulated time")
+      .def_property_readonly(
+          "levels", [](const PyContainer& c) { return c.manifest().levels; },
+          "Octree levels: 0 is the root brick, levels - 1 full resolution")
+      .def_property_readonly(
+          "value_range",
+          [](const PyContainer& c) {
+            return std::pair(c.manifest().value_min, c.manifest().value_max);
+          },
+          "(min, max) of the values encoded")
+      .def_property_readonly("bps", &PyContainer::bps,
+                             "Bits per voxel: 8 x all stored bytes / (voxels per frame x frames)")
+      .def_property_readonly(
+          "variable", [](const PyContainer& c) { return c.manifest().variable; }, "The variable")
+      .def_property_readonly(
+          "spacing", [](const PyContainer& c) { return as_tuple(c.manifest().spacing); },
+          "Voxel spacing (x, y, z)")
+      .def_property_readonly("location", &PyContainer::location, "The folder or URL")
+      .def(
+          "level_dims",
+          [](const PyContainer& c, std::uint32_t l) { return as_tuple(c.level_dims(l)); },
+          py::arg("level"),
+           "The size (x, y, z) of a level")
+      .def("frame", &PyContainer::frame, py::arg("t"), py::arg("level") = py::none(),
+           "Time step t (negative: from the end) at a level (default the finest) as a float32 "
+           "array [z, y, x], decoded as the player draws it (steps without a stored brick "
+           "interpolated)")
+      .def("info", &PyContainer::info, "The manifest as a dict, with location, total_bytes, bps");
+
+  m.def("encode", &encode, py::arg("frames"), py::arg("out"), py::kw_only(),
+        py::arg("psnr") = py::none(), py::arg("bps") = py::none(),
+        py::arg("tolerance") = py::none(), py::arg("max_error") = py::none(),
+        py::arg("dictionary") = "", py::arg("codec") = "ksvd",
+        py::arg("zfp_accuracy") = py::none(), py::arg("atoms") = 0,
+        py::arg("max_keyframe_gap") = py::none(), py::arg("overwrite") = false,
+        py::arg("resume") = false, py::arg("times") = py::none(), py::arg("variable") = "",
+        "Encodes frames into the container `out` as `volreel encode` does");
+  m.def("train", &train, py::arg("frames"), py::arg("out"), py::kw_only(), py::arg("atoms") = 256,
+        py::arg("psnr") = py::none(), py::arg("tolerance") = py::none(),
+        py::arg("times") = py::none(),
+        "Trains a dictionary on frames (Algorithm 1 over a coreset hierarchy) into the file `out`");
+  m.def("psnr", &psnr_of, py::arg("a"), py::arg("b"),
+        "PSNR of b against the original a: 10 log10((max a - min a)^2 / MSE), in dB");
+  m.def("ssim", &ssim_of, py::arg("a"), py::arg("b"),
+        "SSIM of b against a (1, 2 or 3 D): Gaussian window sigma 1.5, as volreel compare");
+}

@@ -1,0 +1,87 @@
+"""volreel: time-varying volumes encoded for random access, from Python.
+
+    import volreel
+    c = volreel.open("turbulence.vreel")      # a folder, or an http(s):// URL of one
+    c.dims, c.frames, c.times, c.levels, c.value_range, c.bps
+    a = c.frame(3)                             # numpy float32 [z, y, x], the finest level
+    coarse = c.frame(3, level=1)
+    for volume in c: ...                       # every time step in order
+
+    volreel.encode(frames, "out.vreel", psnr=50)   # frames: [t, z, y, x] or an iterable of [z, y, x]
+    volreel.train(frames, "dictionary.bin", atoms=256)
+    volreel.psnr(original, decoded), volreel.ssim(original, decoded)
+
+Errors are volreel.FormatError (a damaged or unexpected container) and volreel.InputError (bad
+input data or options), both ValueErrors carrying the library's message; IndexError for a time step
+or level out of range.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Iterator, Optional, Union
+
+from ._volreel import (  # noqa: F401  (re-exported)
+    FormatError,
+    InputError,
+    __version__,
+    encode,
+    psnr,
+    ssim,
+    train,
+)
+from ._volreel import Container as _Container
+
+__all__ = [
+    "Container",
+    "FormatError",
+    "InputError",
+    "encode",
+    "open",
+    "psnr",
+    "ssim",
+    "train",
+    "__version__",
+]
+
+
+class Container(_Container):
+    """A NAME.vreel container: its time steps as numpy arrays [z, y, x].
+
+    c[t] is c.frame(t) (negative t counts from the end); len(c) is the number of time steps;
+    iterating gives every time step in order, decoded one at a time.
+    """
+
+    def __len__(self) -> int:
+        return self.frames
+
+    def __getitem__(self, t: int):
+        if isinstance(t, slice):
+            return [self.frame(i) for i in range(*t.indices(self.frames))]
+        return self.frame(t)
+
+    def __iter__(self) -> Iterator:
+        for t in range(self.frames):
+            yield self.frame(t)
+
+    @property
+    def shape(self) -> tuple:
+        """(frames, z, y, x): the shape of all time steps stacked."""
+        x, y, z = self.dims
+        return (self.frames, z, y, x)
+
+    def __enter__(self) -> "Container":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+    def __repr__(self) -> str:
+        x, y, z = self.dims
+        return (f"volreel.Container({self.location!r}: {x}x{y}x{z} x {self.frames} frames, "
+                f"{self.levels} levels, {self.bps:.3f} bps)")
+
+
+def open(location: Union[str, os.PathLike]) -> Container:  # noqa: A001  (volreel.open)
+    """Opens a NAME.vreel folder or an http(s):// URL of one."""
+    return Container(os.fspath(location))

@@ -1,0 +1,201 @@
+"""The Python module against the command line: the same frames as `volreel decode`, the same
+metrics as `volreel compare`, encodes from arrays and generators, and clear exceptions for bad
+input. Run by ctest with PYTHONPATH at build/python and VOLREEL_CLI naming the volreel program."""
+
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import volreel
+
+CLI = os.environ["VOLREEL_CLI"]
+
+
+def run(*args, cwd=None):
+    return subprocess.run([CLI, *map(str, args)], check=True, capture_output=True, text=True,
+                          cwd=cwd).stdout
+
+
+def read_f32(path, dims):
+    x, y, z = dims
+    return np.fromfile(path, dtype="<f4").reshape(z, y, x)
+
+
+def sequence_psnr(original, decoded):
+    original = np.asarray(original, dtype=np.float64)
+    mse = np.mean((original - np.asarray(decoded, dtype=np.float64)) ** 2)
+    value_range = original.max() - original.min()
+    return 10 * np.log10(value_range ** 2 / mse)
+
+
+@pytest.fixture(scope="module")
+def series(tmp_path_factory):
+    """A 40x36x24 series of 6 frames (a non-cube) written by volreel gen."""
+    d = tmp_path_factory.mktemp("series")
+    run("gen", "analytic", "--field", "blobs", "--dims", "40x36x24", "--frames", "6",
+        "--out", d / "s")
+    meta = json.loads((d / "s" / "series.json").read_text())
+    frames = np.stack([read_f32(d / "s" / f, meta["dims"]) for f in meta["frames"]])
+    return d / "s", meta, frames
+
+
+@pytest.fixture(scope="module")
+def container(series, tmp_path_factory):
+    path, _, _ = series
+    out = tmp_path_factory.mktemp("container") / "c.vreel"
+    run("encode", path, "--out", out, "--psnr", "45", "--atoms", "64")
+    return out
+
+
+def test_opens_with_the_manifest_attributes(series, container):
+    _, meta, frames = series
+    c = volreel.open(container)
+    assert c.dims == tuple(meta["dims"])
+    assert c.shape == (6, 24, 36, 40)
+    assert c.frames == len(c) == 6
+    assert c.times == pytest.approx(meta["timestamps"])
+    assert c.levels >= 1
+    lo, hi = c.value_range
+    assert lo == pytest.approx(frames.min()) and hi == pytest.approx(frames.max())
+    info = c.info()
+    assert info["bps"] == pytest.approx(c.bps)
+    assert c.bps == pytest.approx(8 * info["total_bytes"] / (40 * 36 * 24 * 6))
+    assert info["dims"] == list(meta["dims"])
+    assert "c.vreel" in repr(c)
+
+
+def test_frames_are_those_of_volreel_decode(container, tmp_path):
+    c = volreel.open(container)
+    for t in (0, 3, 5):
+        for level in range(c.levels):
+            out = tmp_path / f"f{t}_{level}.f32"
+            run("decode", container, "--frame", t, "--level", level, "--out", out)
+            expected = read_f32(out, c.level_dims(level))
+            got = c.frame(t, level=level)
+            assert got.dtype == np.float32 and got.shape == expected.shape
+            assert np.array_equal(got, expected), (t, level)
+    # The finest level by default, negative indices from the end.
+    assert np.array_equal(c.frame(5), c.frame(-1, level=c.levels - 1))
+
+
+def test_iteration_and_indexing(series, container):
+    _, _, frames = series
+    c = volreel.open(container)
+    all_frames = list(c)
+    assert len(all_frames) == 6
+    assert np.array_equal(all_frames[2], c[2])
+    assert np.array_equal(c[-1], c[5])
+    assert [f.shape for f in c[1:5:2]] == [(24, 36, 40)] * 2
+    decoded = np.stack(all_frames)
+    assert sequence_psnr(frames, decoded) >= 45 - 0.05
+
+
+def test_bad_input_raises_with_the_library_message(container, tmp_path):
+    with pytest.raises(volreel.FormatError, match="nothing.vreel"):
+        volreel.open(tmp_path / "nothing.vreel")
+    with pytest.raises(ValueError, match="unsupported scheme"):
+        volreel.open("ftp://example.org/c.vreel")
+    c = volreel.open(container)
+    with pytest.raises(IndexError, match="out of range"):
+        c.frame(6)
+    with pytest.raises(IndexError, match="level"):
+        c.frame(0, level=c.levels)
+    # A damaged frame: a byte flipped in the last frame file's payload.
+    damaged = tmp_path / "damaged.vreel"
+    shutil.copytree(container, damaged)
+    frame = sorted((damaged / "frames").iterdir())[-1]
+    data = bytearray(frame.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    frame.write_bytes(bytes(data))
+    with pytest.raises(volreel.FormatError, match=frame.name):
+        volreel.open(damaged).frame(5)
+    # Input that cannot be encoded.
+    bad = np.zeros((3, 8, 8, 8), dtype=np.float32)
+    bad[2, 1, 2, 3] = np.nan
+    with pytest.raises(volreel.InputError, match=r"frames\[2\].*\[1, 2, 3\].*not finite"):
+        volreel.encode(bad, tmp_path / "nan.vreel", codec="zfp")
+    assert not (tmp_path / "nan.vreel").exists()
+    with pytest.raises(ValueError, match="t, z, y, x"):
+        volreel.encode(np.zeros((8, 8)), tmp_path / "flat.vreel")
+    with pytest.raises(ValueError, match="at most one"):
+        volreel.encode(np.zeros((2, 8, 8, 8)), tmp_path / "x.vreel", psnr=40, bps=1)
+    with pytest.raises(ValueError, match="same shape"):
+        volreel.psnr(np.zeros((4, 4)), np.zeros((4, 5)))
+
+
+def test_encode_from_a_generator(series, tmp_path):
+    _, _, frames = series
+    out = tmp_path / "gen.vreel"
+
+    def generate():
+        for f in frames:
+            yield f.astype(np.float64)  # converted as they come
+
+    summary = volreel.encode(generate(), out, psnr=45, times=[0.5 * t for t in range(6)])
+    assert summary["frames"] == 6 and summary["psnr"] >= 45 - 0.05
+    c = volreel.open(out)
+    assert c.frames == 6 and c.times == pytest.approx([0.5 * t for t in range(6)])
+    assert sequence_psnr(frames, np.stack(list(c))) >= 45 - 0.05
+    # The frames went through a temporary raw series beside `out`, removed after.
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gen.vreel"]
+    # Frames of different shapes: an error, and nothing left behind.
+    mixed = [frames[0], frames[1][:, :, :20]]
+    with pytest.raises(ValueError, match=r"frames\[1\].*differs"):
+        volreel.encode(iter(mixed), tmp_path / "mixed.vreel")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gen.vreel"]
+
+
+def test_encode_from_an_array_is_the_command_line_encode(series, tmp_path):
+    path, _, frames = series
+    run("encode", path, "--out", tmp_path / "cli.vreel", "--dictionary", "dct", "--psnr", "40")
+    summary = volreel.encode(frames, tmp_path / "py.vreel", dictionary="dct", psnr=40)
+    cli, py = volreel.open(tmp_path / "cli.vreel"), volreel.open(tmp_path / "py.vreel")
+    assert py.info()["total_bytes"] == summary["bytes"]
+    # The same frames (the manifests differ in the source they name).
+    frame_bytes = [sum(f["bytes"] for f in c.info()["frames"]) for c in (cli, py)]
+    assert frame_bytes[0] == frame_bytes[1]
+    for t in range(6):
+        assert np.array_equal(py[t], cli[t])
+    # An existing container is kept unless asked.
+    with pytest.raises(volreel.InputError, match="overwrite"):
+        volreel.encode(frames, tmp_path / "py.vreel", dictionary="dct", psnr=40)
+    volreel.encode(frames, tmp_path / "py.vreel", codec="zfp", overwrite=True)
+    assert volreel.open(tmp_path / "py.vreel").info()["codec"] == "zfp"
+
+
+def test_train_then_encode_with_the_dictionary(series, tmp_path):
+    _, _, frames = series
+    result = volreel.train(frames, tmp_path / "d.bin", atoms=32, psnr=45)
+    assert result["atoms"] == 32 and (tmp_path / "d.bin").stat().st_size > 0
+    s = volreel.encode(frames, tmp_path / "t.vreel", dictionary=str(tmp_path / "d.bin"), psnr=45)
+    assert s["psnr"] >= 45 - 0.05
+
+
+def test_psnr_and_ssim_are_those_of_volreel_compare(series, tmp_path):
+    _, meta, frames = series
+    a, b = frames[0], frames[3]
+    a.tofile(tmp_path / "a.f32")
+    b.tofile(tmp_path / "b.f32")
+    dims = "x".join(map(str, meta["dims"]))
+    report = json.loads(run("compare", tmp_path / "a.f32", tmp_path / "b.f32", "--dims", dims,
+                            "--json"))
+    assert volreel.psnr(a, b) == pytest.approx(report["sequence"]["psnr"], rel=1e-12)
+    assert volreel.ssim(a, b) == pytest.approx(report["frames"][0]["ssim"], rel=1e-9)
+    assert volreel.psnr(a, a) == float("inf")
+    assert volreel.ssim(a, a) == pytest.approx(1.0)
+
+
+def test_the_notebook_style_example_runs(tmp_path):
+    example = Path(__file__).resolve().parents[2] / "docs" / "python_example.py"
+    env = dict(os.environ, MPLBACKEND="Agg")
+    result = subprocess.run([os.sys.executable, example, tmp_path], check=True, env=env,
+                            capture_output=True, text=True)
+    assert "PSNR" in result.stdout, result.stdout
+    psnr = float(result.stdout.split("time step 4: PSNR ")[1].split(" dB")[0])
+    assert psnr >= 49.5
+    assert (tmp_path / "slice.png").stat().st_size > 10000
