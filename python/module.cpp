@@ -7,6 +7,7 @@
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
+#include <unistd.h>
 #include <atomic>
 #include <cmath>
 #include <cstring>
@@ -15,7 +16,6 @@
 #include <mutex>
 #include <optional>
 #include <string>
-#include <unistd.h>
 
 #include "volreel/datasets/series.hpp"
 #include "volreel/dictionary/training.hpp"
@@ -53,7 +53,9 @@ class PyContainer {
   }
 
   /// Time step t (negative: from the end) at `level` (None: the finest) as a [z, y, x] array.
-  FloatArray frame(std::int64_t t, std::optional<std::int64_t> level) {
+  /// `out`: an array to decode into (float32, C order, the level's shape), or None for a new one.
+  py::array frame(std::int64_t t, std::optional<std::int64_t> level,
+                  std::optional<py::array> out_given) {
     const auto n = static_cast<std::int64_t>(frames());
     if (t < 0) t += n;
     if (t < 0 || t >= n)
@@ -68,8 +70,21 @@ class PyContainer {
                             " is out of range: the container has levels 0.." +
                             std::to_string(levels - 1) + " (0 is the root brick)");
     const auto dims = level_dims(static_cast<std::uint32_t>(l));
-    FloatArray out({std::size_t{dims[2]}, std::size_t{dims[1]}, std::size_t{dims[0]}});
-    float* data = out.mutable_data();
+    const std::vector<py::ssize_t> shape = {dims[2], dims[1], dims[0]};
+    py::array out;
+    if (out_given) {
+      out = *out_given;
+      const bool fits = out.dtype().is(py::dtype::of<float>()) &&
+                        (out.flags() & py::array::c_style) && out.writeable() && out.ndim() == 3 &&
+                        std::equal(shape.begin(), shape.end(), out.shape());
+      if (!fits)
+        throw py::value_error("out: expected a writeable C-contiguous float32 array of shape (" +
+                              std::to_string(dims[2]) + ", " + std::to_string(dims[1]) + ", " +
+                              std::to_string(dims[0]) + ")");
+    } else {
+      out = FloatArray(shape);
+    }
+    float* data = static_cast<float*>(out.mutable_data());
     const std::size_t count = static_cast<std::size_t>(out.size());
     {
       py::gil_scoped_release release;
@@ -148,8 +163,8 @@ std::vector<double> timestamps_for(std::optional<std::vector<double>> given, std
     return t;
   }
   if (given->size() != frames)
-    throw py::value_error("times: expected " + std::to_string(frames) + " numbers (one per frame), " +
-                          "found " + std::to_string(given->size()));
+    throw py::value_error("times: expected " + std::to_string(frames) +
+                          " numbers (one per frame), " + "found " + std::to_string(given->size()));
   for (std::size_t i = 1; i < given->size(); ++i)
     if (!((*given)[i] > (*given)[i - 1]))
       throw py::value_error("times: expected increasing numbers, found " +
@@ -177,14 +192,15 @@ class SpooledSeries {
                                "]: expected a 3D array of numbers, found " +
                                std::string(py::str(py::type::of(item))));
         if (a.ndim() != 3)
-          throw py::value_error("frames[" + std::to_string(t) + "]: expected a 3D array [z, y, x], " +
-                                "found " + std::to_string(a.ndim()) + " dimensions");
+          throw py::value_error("frames[" + std::to_string(t) +
+                                "]: expected a 3D array [z, y, x], " + "found " +
+                                std::to_string(a.ndim()) + " dimensions");
         const Dims d{a.shape(2), a.shape(1), a.shape(0)};
         if (!writer) writer.emplace(dir_, d, variable);
         if (d != writer->dims())
-          throw py::value_error("frames[" + std::to_string(t) + "]: shape [" +
-                                std::to_string(d.z) + ", " + std::to_string(d.y) + ", " +
-                                std::to_string(d.x) + "] differs from the first frame's");
+          throw py::value_error("frames[" + std::to_string(t) + "]: shape [" + std::to_string(d.z) +
+                                ", " + std::to_string(d.y) + ", " + std::to_string(d.x) +
+                                "] differs from the first frame's");
         written_.push_back(static_cast<double>(t));
         writer->write_frame(t, times && t < times->size() ? (*times)[t] : static_cast<double>(t),
                             {a.data(), static_cast<std::size_t>(a.size())});
@@ -230,9 +246,10 @@ SeriesInput series_input(const py::object& frames, const fs::path& near,
     return in;
   }
   if (py::isinstance<py::array>(frames))
-    throw py::value_error("frames: expected an array [t, z, y, x] or an iterable of arrays "
-                          "[z, y, x], found an array of " +
-                          std::to_string(py::cast<py::array>(frames).ndim()) + " dimensions");
+    throw py::value_error(
+        "frames: expected an array [t, z, y, x] or an iterable of arrays "
+        "[z, y, x], found an array of " +
+        std::to_string(py::cast<py::array>(frames).ndim()) + " dimensions");
   if (!py::isinstance<py::iterable>(frames))
     throw py::type_error("frames: expected an array [t, z, y, x] or an iterable of 3D arrays");
   in.spool = std::make_unique<SpooledSeries>(py::reinterpret_borrow<py::iterable>(frames), near,
@@ -308,8 +325,9 @@ py::dict train(const py::object& frames, const fs::path& out, int atoms, std::op
     options.coding.tolerance = dictionary::training_tolerance(
         tolerance, psnr.value_or(dictionary::default_training_psnr), hierarchy);
     result = dictionary::train_dictionary(hierarchy, options);
-    dictionary::save_dictionary(out, result.dictionary,
-                                dictionary::training_provenance(coreset, options, hierarchy, result));
+    dictionary::save_dictionary(
+        out, result.dictionary,
+        dictionary::training_provenance(coreset, options, hierarchy, result));
   }
   py::dict d;
   d["path"] = out.string();
@@ -405,21 +423,21 @@ PYBIND11_MODULE(_volreel, m) {
       .def(
           "level_dims",
           [](const PyContainer& c, std::uint32_t l) { return as_tuple(c.level_dims(l)); },
-          py::arg("level"),
-           "The size (x, y, z) of a level")
+          py::arg("level"), "The size (x, y, z) of a level")
       .def("frame", &PyContainer::frame, py::arg("t"), py::arg("level") = py::none(),
+           py::arg("out") = py::none(),
            "Time step t (negative: from the end) at a level (default the finest) as a float32 "
            "array [z, y, x], decoded as the player draws it (steps without a stored brick "
-           "interpolated)")
+           "interpolated); into `out` when given (float32, C order, the level's shape)")
       .def("info", &PyContainer::info, "The manifest as a dict, with location, total_bytes, bps");
 
   m.def("encode", &encode, py::arg("frames"), py::arg("out"), py::kw_only(),
         py::arg("psnr") = py::none(), py::arg("bps") = py::none(),
         py::arg("tolerance") = py::none(), py::arg("max_error") = py::none(),
-        py::arg("dictionary") = "", py::arg("codec") = "ksvd",
-        py::arg("zfp_accuracy") = py::none(), py::arg("atoms") = 0,
-        py::arg("max_keyframe_gap") = py::none(), py::arg("overwrite") = false,
-        py::arg("resume") = false, py::arg("times") = py::none(), py::arg("variable") = "",
+        py::arg("dictionary") = "", py::arg("codec") = "ksvd", py::arg("zfp_accuracy") = py::none(),
+        py::arg("atoms") = 0, py::arg("max_keyframe_gap") = py::none(),
+        py::arg("overwrite") = false, py::arg("resume") = false, py::arg("times") = py::none(),
+        py::arg("variable") = "",
         "Encodes frames into the container `out` as `volreel encode` does");
   m.def("train", &train, py::arg("frames"), py::arg("out"), py::kw_only(), py::arg("atoms") = 256,
         py::arg("psnr") = py::none(), py::arg("tolerance") = py::none(),

@@ -79,6 +79,14 @@ def test_frames_are_those_of_volreel_decode(container, tmp_path):
             got = c.frame(t, level=level)
             assert got.dtype == np.float32 and got.shape == expected.shape
             assert np.array_equal(got, expected), (t, level)
+    # Into an array given, reused from step to step.
+    buffer = np.full((24, 36, 40), np.nan, dtype=np.float32)
+    assert c.frame(3, out=buffer) is buffer
+    assert np.array_equal(buffer, c.frame(3))
+    with pytest.raises(ValueError, match="out: expected"):
+        c.frame(3, out=np.empty((24, 36, 40), dtype=np.float64))
+    with pytest.raises(ValueError, match="out: expected"):
+        c.frame(3, level=0, out=buffer)
     # The finest level by default, negative indices from the end.
     assert np.array_equal(c.frame(5), c.frame(-1, level=c.levels - 1))
 

@@ -1,0 +1,9 @@
+# paraview --script /path/to/volreel/paraview_startup.py: loads volreel's reader into ParaView
+# (pvplugin.py says why a script rather than --plugin on Debian 12).
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from volreel import pvplugin  # noqa: E402
+
+pvplugin.load(globals())
