@@ -36,6 +36,8 @@ std::unique_ptr<SeriesReader> open_raw_glob(const std::string& pattern, const Op
 bool is_glob(const std::string& text);
 /// The paths `pattern` matches in natural order; InputError when none does.
 std::vector<std::filesystem::path> expand_glob(const std::string& pattern);
+std::unique_ptr<SeriesReader> open_netcdf(const std::filesystem::path& file,
+                                          const OpenOptions& options);
 std::unique_ptr<SeriesReader> open_hdf5(const std::filesystem::path& file,
                                         const OpenOptions& options);
 

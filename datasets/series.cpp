@@ -87,6 +87,8 @@ std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOption
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   if (ext == ".h5" || ext == ".hdf5" || ext == ".hdf" || ext == ".he5")
     return detail::open_hdf5(path, options);
+  if (ext == ".nc" || ext == ".nc4" || ext == ".cdf" || ext == ".netcdf")
+    return detail::open_netcdf(path, options);
   return detail::open_raw_file(path, options);
 }
 

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 #include <hdf5.h>
+#include <netcdf.h>
 
 #include <cmath>
 #include <fstream>
@@ -343,3 +344,107 @@ TEST(Hdf5, CorruptFilesAreRejected) {
     EXPECT_NE(std::string(e.what()).find("good.h5"), std::string::npos) << e.what();
   }
 }
+
+namespace volreel {
+namespace {
+
+/// A CF-style NetCDF file: temp(time, lev, lat, lon) packed as shorts with scale_factor,
+/// add_offset and a _FillValue; salt(time, lev, lat, lon) as floats; lev non-uniform; a 3D
+/// variable depth(lev, lat, lon).
+void write_netcdf(const fs::path& file, bool with_fill) {
+  int nc = 0, time = 0, lev = 0, lat = 0, lon = 0;
+  ASSERT_EQ(nc_create(file.c_str(), NC_CLOBBER | NC_NETCDF4, &nc), NC_NOERR);
+  nc_def_dim(nc, "time", NC_UNLIMITED, &time);
+  nc_def_dim(nc, "lev", 3, &lev);
+  nc_def_dim(nc, "lat", 4, &lat);
+  nc_def_dim(nc, "lon", 5, &lon);
+  int vtime = 0, vlev = 0, vlat = 0, vlon = 0, vtemp = 0, vsalt = 0, vdepth = 0;
+  nc_def_var(nc, "time", NC_DOUBLE, 1, &time, &vtime);
+  nc_def_var(nc, "lev", NC_DOUBLE, 1, &lev, &vlev);
+  nc_def_var(nc, "lat", NC_DOUBLE, 1, &lat, &vlat);
+  nc_def_var(nc, "lon", NC_DOUBLE, 1, &lon, &vlon);
+  const int d4[4] = {time, lev, lat, lon};
+  nc_def_var(nc, "temp", NC_SHORT, 4, d4, &vtemp);
+  nc_def_var(nc, "salt", NC_FLOAT, 4, d4, &vsalt);
+  nc_def_var(nc, "depth", NC_FLOAT, 3, d4 + 1, &vdepth);
+  const double scale = 0.5, offset = 10;
+  const short fill = -999;
+  nc_put_att_double(nc, vtemp, "scale_factor", NC_DOUBLE, 1, &scale);
+  nc_put_att_double(nc, vtemp, "add_offset", NC_DOUBLE, 1, &offset);
+  nc_put_att_short(nc, vtemp, "_FillValue", NC_SHORT, 1, &fill);
+  nc_enddef(nc);
+  const double times[2] = {3600, 7200}, levs[3] = {0, 10, 30}, lats[4] = {-3, -1, 1, 3},
+               lons[5] = {0, 0.5, 1, 1.5, 2};
+  const std::size_t start1 = 0, two = 2;
+  nc_put_vara_double(nc, vtime, &start1, &two, times);
+  nc_put_var_double(nc, vlev, levs);
+  nc_put_var_double(nc, vlat, lats);
+  nc_put_var_double(nc, vlon, lons);
+  std::vector<short> temp(2 * 60);
+  std::vector<float> salt(2 * 60), depth(60, 1.0f);
+  for (std::size_t i = 0; i < temp.size(); ++i) {
+    temp[i] = static_cast<short>(i);
+    salt[i] = 35.0f + static_cast<float>(i) * 0.01f;
+  }
+  if (with_fill) temp[60 + 7] = fill;  // frame 1, lev 0, lat 1, lon 2
+  const std::size_t start[4] = {0, 0, 0, 0}, count[4] = {2, 3, 4, 5};
+  nc_put_vara_short(nc, vtemp, start, count, temp.data());
+  nc_put_vara_float(nc, vsalt, start, count, salt.data());
+  nc_put_var_float(nc, vdepth, depth.data());
+  ASSERT_EQ(nc_close(nc), NC_NOERR);
+}
+
+TEST(NetCdf, ReadsAVariableWithItsCfCoordinatesAndPacking) {
+  test::TempDir dir("netcdf");
+  const fs::path file = dir.path() / "ocean.nc";
+  write_netcdf(file, false);
+  datasets::OpenOptions o;
+  o.variable = "temp";
+  const auto s = datasets::open_series(file, o);
+  EXPECT_EQ(s->info().dims, (Dims{5, 4, 3}));
+  EXPECT_EQ(s->info().frames, 2u);
+  EXPECT_EQ(s->info().timestamps, (std::vector<double>{3600, 7200}));
+  EXPECT_DOUBLE_EQ(s->info().spacing[0], 0.5);   // lon
+  EXPECT_DOUBLE_EQ(s->info().spacing[1], 2.0);   // lat
+  EXPECT_DOUBLE_EQ(s->info().spacing[2], 15.0);  // lev: non-uniform, the mean step
+  EXPECT_NE(s->info().source.find("non-uniform 'lev'"), std::string::npos) << s->info().source;
+  EXPECT_EQ(s->info().variable, "temp");
+  const Volume v = s->read_frame(1);
+  // Packed: stored i -> i * 0.5 + 10; x (lon) fastest.
+  EXPECT_FLOAT_EQ(v.at(0, 0, 0), 60 * 0.5f + 10);
+  EXPECT_FLOAT_EQ(v.at(2, 1, 0), (60 + 7) * 0.5f + 10);
+  EXPECT_FLOAT_EQ(v.at(4, 3, 2), (60 + 59) * 0.5f + 10);
+  // Another variable; a 3D variable is one frame.
+  o.variable = "salt";
+  EXPECT_FLOAT_EQ(datasets::open_series(file, o)->read_frame(0).at(1, 0, 0), 35.01f);
+  o.variable = "depth";
+  EXPECT_EQ(datasets::open_series(file, o)->info().frames, 1u);
+}
+
+TEST(NetCdf, MissingValuesAndWrongChoicesAreClearErrors) {
+  test::TempDir dir("netcdf-errors");
+  const fs::path file = dir.path() / "ocean.nc";
+  write_netcdf(file, true);
+  datasets::OpenOptions o;
+  expect_error([&] { datasets::open_series(file, o); },
+               {"ocean.nc", "--variable", "temp, salt, depth"});
+  o.variable = "pressure";
+  expect_error([&] { datasets::open_series(file, o); }, {"no variable 'pressure'", "temp"});
+  o.variable = "temp";
+  o.time_dimension = "step";
+  expect_error([&] { datasets::open_series(file, o); }, {"no dimension 'step'", "--time-dim"});
+  o.time_dimension.clear();
+  const auto s = datasets::open_series(file, o);
+  EXPECT_NO_THROW(s->read_frame(0));
+  expect_error([&] { s->read_frame(1); },
+               {"ocean.nc", "variable 'temp' frame 1", "voxel (2, 1, 0)", "--replace-nan"});
+  o.replace_nan = -1.0f;
+  EXPECT_EQ(datasets::open_series(file, o)->read_frame(1).at(2, 1, 0), -1.0f);
+  // Not a NetCDF file.
+  const fs::path bad = dir.path() / "bad.nc";
+  std::ofstream(bad) << "not netcdf";
+  expect_error([&] { datasets::open_series(bad, o); }, {"bad.nc", "NetCDF"});
+}
+
+}  // namespace
+}  // namespace volreel

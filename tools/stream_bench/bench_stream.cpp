@@ -139,11 +139,12 @@ double bench_bandwidth(const std::string& text, double playback_bytes_per_s) {
 }
 
 /// The path inside a manifest's "source" ("raw series DIR", "raw file FILE (f32)", "raw files
-/// PATTERN (N files, f32)", "HDF5 FILE (datasets …)") or the encoder's "series" field.
+/// PATTERN (N files, f32)", "HDF5 FILE (datasets …)", "NetCDF FILE (variable …)") or the
+/// encoder's "series" field.
 std::vector<std::string> source_candidates(const format::Manifest& m) {
   std::vector<std::string> out;
   std::string s = m.source;
-  for (const char* prefix : {"raw series ", "raw files ", "raw file ", "HDF5 "})
+  for (const char* prefix : {"raw series ", "raw files ", "raw file ", "HDF5 ", "NetCDF "})
     if (s.rfind(prefix, 0) == 0) {
       s = s.substr(std::string(prefix).size());
       const std::size_t paren = s.rfind(" (");

@@ -42,7 +42,7 @@ std::optional<double> positive_number(const std::string& text);
 /// Options that say how to read a series whose file does not describe itself; shared by every
 /// command that reads one.
 struct ReaderOptions {
-  std::string dims, dtype, dataset;
+  std::string dims, dtype, dataset, variable, time_dimension;
   std::size_t frames = 0;
   double replace_nan = 0;
   bool replace_nan_set = false;

@@ -21,6 +21,9 @@ const char* const series_inputs_help = R"(Series (SERIES):
   'PATTERN' --dims XxYxZ  raw files a glob matches (*, ?, [...]; quote it), one frame each,
                           in natural order (p_2 before p_10)
   FILE.h5 --dataset NAME  HDF5: a 4D dataset [t][z][y][x], or 3D datasets by pattern
+  FILE.nc [--variable V]  NetCDF: a variable (time, z, y, x) or (z, y, x), x the last; spacing
+                          and times from CF coordinate variables, scale_factor/add_offset
+                          applied, _FillValue/missing_value refused unless --replace-nan
 
 series.json (every key required unless marked optional):
   "format": "volreel-raw-series"    "version": 1
@@ -41,6 +44,11 @@ void ReaderOptions::add_to(CLI::App& command) {
   command.add_option("--dataset", dataset,
                      "HDF5: a 4D dataset [t][z][y][x], or one 3D dataset per step by pattern: "
                      "'Pressure_####' (# = a digit) or 'Pressure_*'");
+  command.add_option("--variable", variable,
+                     "NetCDF: the variable to read (default: the only one of 3 or 4 dimensions)");
+  command.add_option("--time-dim", time_dimension,
+                     "NetCDF: the time dimension (default: the unlimited one, or one named time "
+                     "or t)");
   command
       .add_option("--replace-nan", replace_nan,
                   "Substitute NaN/Inf values with this value instead of refusing the input")
@@ -53,6 +61,8 @@ datasets::OpenOptions ReaderOptions::to_open_options() const {
   if (!dtype.empty()) o.dtype = datasets::parse_dtype(dtype);
   if (frames) o.frames = frames;
   o.dataset = dataset;
+  o.variable = variable;
+  o.time_dimension = time_dimension;
   if (replace_nan_set) o.replace_nan = static_cast<float>(replace_nan);
   return o;
 }

@@ -47,7 +47,10 @@ struct OpenOptions {
   std::optional<std::size_t> frames;  ///< raw file: frames stored back to back (default 1)
   std::string dataset;                ///< HDF5: a 4D dataset name, or a pattern with one
                                       ///< run of '#' (e.g. "Pressure_####") or '*'
-  std::optional<float> replace_nan;   ///< substitute NaN/Inf with this value instead of failing
+  std::string variable;              ///< NetCDF: the variable (default: the only one of 3–4 dims)
+  std::string time_dimension;        ///< NetCDF: the time dimension (default: the unlimited one,
+                                     ///< or one named time or t)
+  std::optional<float> replace_nan;  ///< substitute NaN/Inf with this value instead of failing
 };
 
 /// Reads frames of a series. Implementations are safe to call from several threads at once.
@@ -67,6 +70,7 @@ class SeriesReader {
 };
 
 /// Open a series: a raw series directory (or its series.json), an HDF5 file (.h5, .hdf5, .hdf),
+/// a NetCDF file (.nc, .nc4, .cdf),
 /// a single raw file, or a glob pattern (*, ?, [...]) of raw files with one frame each in
 /// natural order (raw input needs options.dims). Throws InputError with a clear message.
 std::unique_ptr<SeriesReader> open_series(const std::filesystem::path& path,

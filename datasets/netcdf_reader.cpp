@@ -1,0 +1,255 @@
+// netcdf_reader.cpp: reads a time series from a NetCDF file (classic or NetCDF-4), the format of
+// climate and ocean models: one variable of dimensions (time, z, y, x) — x the last, fastest — or
+// (z, y, x) for a single frame. The variable and the time dimension are chosen by name or found;
+// CF conventions are read: coordinate variables give the spacing and the times, scale_factor and
+// add_offset unpack values, _FillValue and missing_value mark missing ones (refused, or replaced
+// by --replace-nan). Any numeric type is converted to float32 by the NetCDF library.
+//
+// The Debian NetCDF library is not thread-safe, so every call holds one global mutex.
+#include <netcdf.h>
+
+#include <algorithm>
+#include <cmath>
+#include <mutex>
+#include <vector>
+
+#include "detail.hpp"
+
+namespace volreel::datasets::detail {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::mutex& netcdf_mutex() {
+  static std::mutex m;
+  return m;
+}
+
+class NetcdfReader final : public SeriesReader {
+ public:
+  NetcdfReader(fs::path file, const OpenOptions& options)
+      : file_(std::move(file)), replace_nan_(options.replace_nan) {
+    std::lock_guard lock(netcdf_mutex());
+    check(nc_open(file_.c_str(), NC_NOWRITE, &ncid_), "cannot open it as NetCDF");
+    try {
+      open(options);
+    } catch (...) {
+      nc_close(ncid_);
+      throw;
+    }
+  }
+  ~NetcdfReader() override {
+    std::lock_guard lock(netcdf_mutex());
+    nc_close(ncid_);
+  }
+  NetcdfReader(const NetcdfReader&) = delete;
+  NetcdfReader& operator=(const NetcdfReader&) = delete;
+
+  void read_frame(std::size_t t, std::span<float> out) const override {
+    if (t >= info_.frames)
+      throw InputError("frame " + std::to_string(t) + " is out of range: " + info_.source +
+                       " has " + std::to_string(info_.frames) + " frames");
+    if (out.size() != info_.dims.voxels())
+      throw InputError("read_frame: output has the wrong size");
+    std::vector<std::size_t> start(static_cast<std::size_t>(rank_), 0),
+        count(static_cast<std::size_t>(rank_), 1);
+    for (int a = 0; a < 3; ++a)
+      count[static_cast<std::size_t>(rank_ - 3 + a)] = static_cast<std::size_t>(
+          a == 0 ? info_.dims.z : a == 1 ? info_.dims.y : info_.dims.x);
+    if (rank_ == 4) start[0] = t;
+    {
+      std::lock_guard lock(netcdf_mutex());
+      check(nc_get_vara_float(ncid_, varid_, start.data(), count.data(), out.data()),
+            "variable '" + variable_ + "' frame " + std::to_string(t));
+    }
+    // Missing values become NaN (refused below unless replaced); packed values are unpacked.
+    for (float& v : out) {
+      if ((fill_ && v == *fill_) || (missing_ && v == *missing_)) {
+        v = std::numeric_limits<float>::quiet_NaN();
+        continue;
+      }
+      if (scale_ != 1 || offset_ != 0) v = static_cast<float>(static_cast<double>(v) * scale_ + offset_);
+    }
+    check_finite(out, info_.dims,
+                 "'" + file_.string() + "' variable '" + variable_ + "' frame " + std::to_string(t),
+                 replace_nan_);
+  }
+
+ private:
+  fs::path file_;
+  std::optional<float> replace_nan_;
+  int ncid_ = -1, varid_ = -1, rank_ = 0;
+  std::string variable_;
+  std::optional<float> fill_, missing_;
+  double scale_ = 1, offset_ = 0;
+
+  [[noreturn]] void fail(const std::string& what) const {
+    throw InputError("'" + file_.string() + "': " + what);
+  }
+  void check(int status, const std::string& what) const {
+    if (status != NC_NOERR) fail(what + ": " + nc_strerror(status));
+  }
+
+  std::string dimension_name(int dimid) const {
+    char name[NC_MAX_NAME + 1] = {};
+    check(nc_inq_dimname(ncid_, dimid, name), "dimension " + std::to_string(dimid));
+    return name;
+  }
+  std::size_t dimension_length(int dimid) const {
+    std::size_t n = 0;
+    check(nc_inq_dimlen(ncid_, dimid, &n), "dimension '" + dimension_name(dimid) + "'");
+    return n;
+  }
+  std::vector<int> variable_dimensions(int varid) const {
+    int rank = 0;
+    check(nc_inq_varndims(ncid_, varid, &rank), "variable " + std::to_string(varid));
+    std::vector<int> dims(static_cast<std::size_t>(rank));
+    if (rank > 0) check(nc_inq_vardimid(ncid_, varid, dims.data()), "variable dimensions");
+    return dims;
+  }
+  std::string variable_name(int varid) const {
+    char name[NC_MAX_NAME + 1] = {};
+    check(nc_inq_varname(ncid_, varid, name), "variable " + std::to_string(varid));
+    return name;
+  }
+  /// A numeric attribute of variable `varid` as a double, if it has one value.
+  std::optional<double> number_attribute(int varid, const char* name) const {
+    nc_type type = 0;
+    std::size_t length = 0;
+    if (nc_inq_att(ncid_, varid, name, &type, &length) != NC_NOERR || length != 1 ||
+        type == NC_CHAR || type == NC_STRING)
+      return std::nullopt;
+    double v = 0;
+    check(nc_get_att_double(ncid_, varid, name, &v),
+          "attribute '" + std::string(name) + "' of '" + variable_name(varid) + "'");
+    return v;
+  }
+  /// The values of the coordinate variable of dimension `dimid` (a 1D variable of its name).
+  std::optional<std::vector<double>> coordinate(int dimid) const {
+    int varid = -1;
+    if (nc_inq_varid(ncid_, dimension_name(dimid).c_str(), &varid) != NC_NOERR) return std::nullopt;
+    const std::vector<int> dims = variable_dimensions(varid);
+    if (dims.size() != 1 || dims[0] != dimid) return std::nullopt;
+    std::vector<double> values(dimension_length(dimid));
+    if (!values.empty())
+      check(nc_get_var_double(ncid_, varid, values.data()),
+            "coordinate variable '" + dimension_name(dimid) + "'");
+    return values;
+  }
+
+  /// The variable's candidates: numeric variables of 3 or 4 dimensions that are not coordinates.
+  std::vector<std::string> candidates() const {
+    int count = 0;
+    check(nc_inq_nvars(ncid_, &count), "variables");
+    std::vector<std::string> out;
+    for (int v = 0; v < count; ++v) {
+      const auto dims = variable_dimensions(v);
+      if (dims.size() == 3 || dims.size() == 4) out.push_back(variable_name(v));
+    }
+    return out;
+  }
+
+  void open(const OpenOptions& options) {
+    const std::vector<std::string> found = candidates();
+    std::string listed;
+    for (const auto& c : found) listed += (listed.empty() ? "" : ", ") + c;
+    if (listed.empty()) listed = "none";
+    variable_ = options.variable;
+    if (variable_.empty()) {
+      if (found.size() != 1)
+        fail("say which variable to read with --variable NAME (variables of 3 or 4 dimensions: " +
+             listed + ")");
+      variable_ = found.front();
+    }
+    if (nc_inq_varid(ncid_, variable_.c_str(), &varid_) != NC_NOERR)
+      fail("has no variable '" + variable_ + "' (variables of 3 or 4 dimensions: " + listed + ")");
+    nc_type type = 0;
+    check(nc_inq_vartype(ncid_, varid_, &type), "variable '" + variable_ + "'");
+    if (type == NC_CHAR || type == NC_STRING || type >= NC_FIRSTUSERTYPEID)
+      fail("variable '" + variable_ + "' is not numeric");
+    const std::vector<int> dims = variable_dimensions(varid_);
+    rank_ = static_cast<int>(dims.size());
+    std::string shape;
+    for (int d : dims)
+      shape += (shape.empty() ? "" : ", ") + dimension_name(d) + " = " +
+               std::to_string(dimension_length(d));
+    // The time dimension: named, else the unlimited one, else one called time or t.
+    int unlimited = -1;
+    check(nc_inq_unlimdim(ncid_, &unlimited), "the unlimited dimension");
+    int time_dim = -1;
+    for (int d : dims) {
+      const std::string name = dimension_name(d);
+      if (!options.time_dimension.empty() ? name == options.time_dimension
+                                          : (d == unlimited || name == "time" || name == "t" ||
+                                             name == "Time"))
+        time_dim = d;
+    }
+    if (!options.time_dimension.empty() && time_dim < 0)
+      fail("variable '" + variable_ + "' (" + shape + ") has no dimension '" +
+           options.time_dimension + "' (--time-dim)");
+    if (time_dim >= 0 && rank_ != 4)
+      fail("variable '" + variable_ + "' (" + shape +
+           "): expected (time, z, y, x) with a time dimension, or (z, y, x)");
+    if (time_dim < 0 && rank_ != 3)
+      fail("variable '" + variable_ + "' (" + shape +
+           "): expected (z, y, x) or (time, z, y, x); name the time dimension with --time-dim");
+    if (time_dim >= 0 && dims[0] != time_dim)
+      fail("variable '" + variable_ + "' (" + shape + "): the time dimension '" +
+           dimension_name(time_dim) + "' must come first");
+    const auto length = [&](int axis) {
+      const std::size_t n = dimension_length(dims[static_cast<std::size_t>(axis)]);
+      if (n == 0 || n > (std::size_t{1} << 24))
+        fail("variable '" + variable_ + "' (" + shape + "): expected sizes in 1..16777216");
+      return static_cast<std::int64_t>(n);
+    };
+    info_.dims = Dims{length(rank_ - 1), length(rank_ - 2), length(rank_ - 3)};
+    info_.frames = rank_ == 4 ? dimension_length(dims[0]) : 1;
+    if (info_.frames == 0) fail("variable '" + variable_ + "' has no time steps");
+    info_.variable = variable_;
+    // CF: spacing from the coordinate variables (uniform, or their mean step), times from the
+    // time coordinate.
+    std::string notes;
+    for (int a = 0; a < 3; ++a) {
+      const int dim = dims[static_cast<std::size_t>(rank_ - 1 - a)];
+      const auto values = coordinate(dim);
+      if (!values || values->size() < 2) continue;
+      const double step =
+          std::abs(values->back() - values->front()) / static_cast<double>(values->size() - 1);
+      if (!(step > 0) || !std::isfinite(step)) continue;
+      for (std::size_t i = 1; i < values->size(); ++i)
+        if (std::abs(std::abs((*values)[i] - (*values)[i - 1]) - step) > 1e-3 * step) {
+          notes += ", non-uniform '" + dimension_name(dim) + "': mean step used";
+          break;
+        }
+      info_.spacing[static_cast<std::size_t>(a)] = step;
+    }
+    std::optional<std::vector<double>> times;
+    if (rank_ == 4) times = coordinate(dims[0]);
+    if (times) {
+      for (std::size_t i = 1; i < times->size(); ++i)
+        if (!((*times)[i] > (*times)[i - 1]) || !std::isfinite((*times)[i]))
+          fail("time coordinate '" + dimension_name(dims[0]) + "': expected increasing numbers, " +
+               "found " + std::to_string((*times)[i]) + " after " +
+               std::to_string((*times)[i - 1]));
+      info_.timestamps = *times;
+    } else {
+      for (std::size_t t = 0; t < info_.frames; ++t)
+        info_.timestamps.push_back(static_cast<double>(t));
+    }
+    if (const auto v = number_attribute(varid_, "_FillValue")) fill_ = static_cast<float>(*v);
+    if (const auto v = number_attribute(varid_, "missing_value")) missing_ = static_cast<float>(*v);
+    scale_ = number_attribute(varid_, "scale_factor").value_or(1.0);
+    offset_ = number_attribute(varid_, "add_offset").value_or(0.0);
+    info_.source = "NetCDF " + file_.string() + " (variable " + variable_ + ": " + shape + notes +
+                   ")";
+  }
+};
+
+}  // namespace
+
+std::unique_ptr<SeriesReader> open_netcdf(const fs::path& file, const OpenOptions& options) {
+  return std::make_unique<NetcdfReader>(file, options);
+}
+
+}  // namespace volreel::datasets::detail
