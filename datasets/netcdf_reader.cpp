@@ -55,8 +55,10 @@ class NetcdfReader final : public SeriesReader {
     std::vector<std::size_t> start(static_cast<std::size_t>(rank_), 0),
         count(static_cast<std::size_t>(rank_), 1);
     for (int a = 0; a < 3; ++a)
-      count[static_cast<std::size_t>(rank_ - 3 + a)] = static_cast<std::size_t>(
-          a == 0 ? info_.dims.z : a == 1 ? info_.dims.y : info_.dims.x);
+      count[static_cast<std::size_t>(rank_ - 3 + a)] =
+          static_cast<std::size_t>(a == 0   ? info_.dims.z
+                                   : a == 1 ? info_.dims.y
+                                            : info_.dims.x);
     if (rank_ == 4) start[0] = t;
     {
       std::lock_guard lock(netcdf_mutex());
@@ -69,7 +71,8 @@ class NetcdfReader final : public SeriesReader {
         v = std::numeric_limits<float>::quiet_NaN();
         continue;
       }
-      if (scale_ != 1 || offset_ != 0) v = static_cast<float>(static_cast<double>(v) * scale_ + offset_);
+      if (scale_ != 1 || offset_ != 0)
+        v = static_cast<float>(static_cast<double>(v) * scale_ + offset_);
     }
     check_finite(out, info_.dims,
                  "'" + file_.string() + "' variable '" + variable_ + "' frame " + std::to_string(t),
@@ -180,9 +183,9 @@ class NetcdfReader final : public SeriesReader {
     int time_dim = -1;
     for (int d : dims) {
       const std::string name = dimension_name(d);
-      if (!options.time_dimension.empty() ? name == options.time_dimension
-                                          : (d == unlimited || name == "time" || name == "t" ||
-                                             name == "Time"))
+      if (!options.time_dimension.empty()
+              ? name == options.time_dimension
+              : (d == unlimited || name == "time" || name == "t" || name == "Time"))
         time_dim = d;
     }
     if (!options.time_dimension.empty() && time_dim < 0)
@@ -241,8 +244,8 @@ class NetcdfReader final : public SeriesReader {
     if (const auto v = number_attribute(varid_, "missing_value")) missing_ = static_cast<float>(*v);
     scale_ = number_attribute(varid_, "scale_factor").value_or(1.0);
     offset_ = number_attribute(varid_, "add_offset").value_or(0.0);
-    info_.source = "NetCDF " + file_.string() + " (variable " + variable_ + ": " + shape + notes +
-                   ")";
+    info_.source =
+        "NetCDF " + file_.string() + " (variable " + variable_ + ": " + shape + notes + ")";
   }
 };
 

@@ -3,8 +3,7 @@
     pvpython:  from volreel import pvplugin; pvplugin.load(globals())
                reader = VolreelReader(FileName="turbulence.vreel")
     paraview:  paraview --script /path/to/volreel/paraview_startup.py
-               (then File > Open a NAME.vreel folder's manifest.json, or the Python shell's
-               VolreelReader(FileName=...))
+               (then VolreelReader(FileName=...) in its Python shell)
 
 Where ParaView's own plugin loader works, `paraview --plugin /path/to/volreel/paraview_reader.py`
 does the same. Debian 12's ParaView 5.11 runs on Python 3.11, whose `inspect` no longer has the
