@@ -207,3 +207,49 @@ def test_the_notebook_style_example_runs(tmp_path):
     psnr = float(result.stdout.split("time step 4: PSNR ")[1].split(" dB")[0])
     assert psnr >= 49.5
     assert (tmp_path / "slice.png").stat().st_size > 10000
+
+
+def free_port():
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_container_on_a_web_server_reads_as_the_folder(container, tmp_path):
+    """volreel.open(URL): nginx on 127.0.0.1 serving the container's folder."""
+    import socket
+    import time
+
+    nginx = next(p for p in ("/usr/sbin/nginx", "/usr/local/sbin/nginx", "/usr/bin/nginx")
+                 if os.path.exists(p))
+    port = free_port()
+    (tmp_path / "tmp").mkdir()
+    conf = tmp_path / "nginx.conf"
+    user = "user root;\n" if os.geteuid() == 0 else ""
+    conf.write_text(
+        f"{user}worker_processes 1;\nmaster_process off;\ndaemon off;\npid {tmp_path}/nginx.pid;\n"
+        f"error_log {tmp_path}/error.log warn;\nevents {{ worker_connections 64; }}\n"
+        f"http {{\n access_log off;\n client_body_temp_path {tmp_path}/tmp;\n"
+        f" proxy_temp_path {tmp_path}/tmp;\n fastcgi_temp_path {tmp_path}/tmp;\n"
+        f" uwsgi_temp_path {tmp_path}/tmp;\n scgi_temp_path {tmp_path}/tmp;\n"
+        f" server {{ listen 127.0.0.1:{port}; root {container.parent}; }}\n}}\n")
+    server = subprocess.Popen([nginx, "-p", str(tmp_path), "-e", str(tmp_path / "error.log"),
+                               "-c", str(conf)])
+    try:
+        for _ in range(500):
+            with socket.socket() as s:
+                if s.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            time.sleep(0.01)
+        remote = volreel.open(f"http://127.0.0.1:{port}/{container.name}")
+        local = volreel.open(container)
+        assert remote.frames == local.frames and remote.dims == local.dims
+        for t in (0, 4):
+            assert np.array_equal(remote.frame(t), local.frame(t))
+        with pytest.raises(volreel.FormatError, match="404"):
+            volreel.open(f"http://127.0.0.1:{port}/missing.vreel")
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
