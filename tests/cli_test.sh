@@ -8,9 +8,9 @@ trap 'rm -rf "$work"' EXIT
 fail() { echo "FAIL: $*" >&2; exit 1; }
 json() { /usr/bin/python3 -c "import json,sys; d=json.load(sys.stdin); print($1)"; }
 
-"$volreel" --help | grep -q "gen" || fail "--help does not list gen"
-"$volreel" --help | grep -q "compare" || fail "--help does not list compare"
-"$volreel" --help | grep -q "bench" || fail "--help does not list bench"
+grep -q "gen" <<< "$("$volreel" --help)" || fail "--help does not list gen"
+grep -q "compare" <<< "$("$volreel" --help)" || fail "--help does not list compare"
+grep -q "bench" <<< "$("$volreel" --help)" || fail "--help does not list bench"
 
 # Generate two analytic series and a tiny turbulence run.
 "$volreel" gen analytic --field blobs --dims 24x20x16 --frames 4 --out "$work/a" 2>/dev/null

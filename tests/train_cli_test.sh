@@ -8,9 +8,9 @@ work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 fail() { echo "FAIL: $*" >&2; exit 1; }
 
-"$volreel" --help | grep -q "train" || fail "--help does not list train"
-"$volreel" train --help | grep -q -- "--tolerance" || fail "train --help lacks --tolerance"
-"$volreel" bench --help | grep -q "train" || fail "bench --help does not list train"
+grep -q "train" <<< "$("$volreel" --help)" || fail "--help does not list train"
+grep -q -- "--tolerance" <<< "$("$volreel" train --help)" || fail "train --help lacks --tolerance"
+grep -q "train" <<< "$("$volreel" bench --help)" || fail "bench --help does not list train"
 
 "$volreel" gen analytic --field blobs --size 48 --frames 6 --out "$work/a" > /dev/null 2>&1
 
