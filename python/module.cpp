@@ -116,6 +116,18 @@ class PyContainer {
   format::TimeStepDecoder steps_;
 };
 
+/// InputError naming frames[t] and the [z, y, x] index of its first value that is not finite.
+void check_finite(std::span<const float> frame, const Dims& d, std::size_t t) {
+  for (std::size_t i = 0; i < frame.size(); ++i) {
+    if (std::isfinite(frame[i])) continue;
+    const auto v = static_cast<std::int64_t>(i);
+    throw InputError("frames[" + std::to_string(t) + "]: value " + std::to_string(frame[i]) +
+                     " at [z, y, x] = [" + std::to_string(v / d.x / d.y) + ", " +
+                     std::to_string(v / d.x % d.y) + ", " + std::to_string(v % d.x) +
+                     "] is not finite");
+  }
+}
+
 /// A series over a [t, z, y, x] float32 array (kept alive; read without the GIL).
 class ArraySeries final : public datasets::SeriesReader {
  public:
@@ -137,15 +149,7 @@ class ArraySeries final : public datasets::SeriesReader {
     if (t >= info_.frames || out.size() != info_.dims.voxels())
       throw InputError("frame " + std::to_string(t) + ": out of range or the wrong size");
     const float* frame = data_ + t * info_.dims.voxels();
-    for (std::size_t i = 0; i < out.size(); ++i) {
-      if (std::isfinite(frame[i])) continue;
-      const auto v = static_cast<std::int64_t>(i);
-      const Dims& d = info_.dims;
-      throw InputError("frames[" + std::to_string(t) + "]: value " + std::to_string(frame[i]) +
-                       " at [z, y, x] = [" + std::to_string(v / d.x / d.y) + ", " +
-                       std::to_string(v / d.x % d.y) + ", " + std::to_string(v % d.x) +
-                       "] is not finite");
-    }
+    check_finite({frame, out.size()}, info_.dims, t);
     std::memcpy(out.data(), frame, out.size_bytes());
   }
   using datasets::SeriesReader::read_frame;
@@ -201,7 +205,7 @@ class SpooledSeries {
           throw py::value_error("frames[" + std::to_string(t) + "]: shape [" + std::to_string(d.z) +
                                 ", " + std::to_string(d.y) + ", " + std::to_string(d.x) +
                                 "] differs from the first frame's");
-        written_.push_back(static_cast<double>(t));
+        check_finite({a.data(), static_cast<std::size_t>(a.size())}, d, t);
         writer->write_frame(t, times && t < times->size() ? (*times)[t] : static_cast<double>(t),
                             {a.data(), static_cast<std::size_t>(a.size())});
         ++t;
@@ -225,7 +229,6 @@ class SpooledSeries {
 
  private:
   fs::path dir_;
-  std::vector<double> written_;
 };
 
 /// The series `frames` stands for: a 4D array read in place, or an iterable written to a raw

@@ -128,6 +128,9 @@ def test_bad_input_raises_with_the_library_message(container, tmp_path):
     with pytest.raises(volreel.InputError, match=r"frames\[2\].*\[1, 2, 3\].*not finite"):
         volreel.encode(bad, tmp_path / "nan.vreel", codec="zfp")
     assert not (tmp_path / "nan.vreel").exists()
+    with pytest.raises(volreel.InputError, match=r"frames\[2\].*\[1, 2, 3\].*not finite"):
+        volreel.encode(iter(bad), tmp_path / "nan.vreel", codec="zfp")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["damaged.vreel"]
     with pytest.raises(ValueError, match="t, z, y, x"):
         volreel.encode(np.zeros((8, 8)), tmp_path / "flat.vreel")
     with pytest.raises(ValueError, match="at most one"):
