@@ -3,7 +3,8 @@
 // (z, y, x) for a single frame. The variable and the time dimension are chosen by name or found;
 // CF conventions are read: coordinate variables give the spacing and the times, scale_factor and
 // add_offset unpack values, _FillValue and missing_value mark missing ones (refused, or replaced
-// by --replace-nan). Any numeric type is converted to float32 by the NetCDF library.
+// by --replace-nan), as are values equal to NetCDF's default fill (data never written). Any
+// numeric type is converted to float32 by the NetCDF library.
 //
 // The Debian NetCDF library is not thread-safe, so every call holds one global mutex.
 #include <netcdf.h>
@@ -128,6 +129,27 @@ class NetcdfReader final : public SeriesReader {
           "attribute '" + std::string(name) + "' of '" + variable_name(varid) + "'");
     return v;
   }
+  /// The value NetCDF gives data never written to a variable of `type` without a _FillValue (CF:
+  /// missing too); none for bytes, whose default fill is a valid value (NetCDF's guidance).
+  static std::optional<float> default_fill(nc_type type) {
+    switch (type) {
+      case NC_SHORT:
+        return static_cast<float>(NC_FILL_SHORT);
+      case NC_USHORT:
+        return static_cast<float>(NC_FILL_USHORT);
+      case NC_INT:
+        return static_cast<float>(NC_FILL_INT);
+      case NC_UINT:
+        return static_cast<float>(NC_FILL_UINT);
+      case NC_FLOAT:
+        return NC_FILL_FLOAT;
+      case NC_DOUBLE:
+        return static_cast<float>(NC_FILL_DOUBLE);
+      default:
+        return std::nullopt;
+    }
+  }
+
   /// The values of the coordinate variable of dimension `dimid` (a 1D variable of its name).
   std::optional<std::vector<double>> coordinate(int dimid) const {
     int varid = -1;
@@ -240,7 +262,10 @@ class NetcdfReader final : public SeriesReader {
       for (std::size_t t = 0; t < info_.frames; ++t)
         info_.timestamps.push_back(static_cast<double>(t));
     }
-    if (const auto v = number_attribute(varid_, "_FillValue")) fill_ = static_cast<float>(*v);
+    if (const auto v = number_attribute(varid_, "_FillValue"))
+      fill_ = static_cast<float>(*v);
+    else
+      fill_ = default_fill(type);
     if (const auto v = number_attribute(varid_, "missing_value")) missing_ = static_cast<float>(*v);
     scale_ = number_attribute(varid_, "scale_factor").value_or(1.0);
     offset_ = number_attribute(varid_, "add_offset").value_or(0.0);

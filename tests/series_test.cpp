@@ -367,6 +367,8 @@ void write_netcdf(const fs::path& file, bool with_fill) {
   nc_def_var(nc, "temp", NC_SHORT, 4, d4, &vtemp);
   nc_def_var(nc, "salt", NC_FLOAT, 4, d4, &vsalt);
   nc_def_var(nc, "depth", NC_FLOAT, 3, d4 + 1, &vdepth);
+  int vempty = 0;  // never written: NetCDF's default fill
+  nc_def_var(nc, "empty", NC_FLOAT, 3, d4 + 1, &vempty);
   const double scale = 0.5, offset = 10;
   const short fill = -999;
   nc_put_att_double(nc, vtemp, "scale_factor", NC_DOUBLE, 1, &scale);
@@ -427,7 +429,7 @@ TEST(NetCdf, MissingValuesAndWrongChoicesAreClearErrors) {
   write_netcdf(file, true);
   datasets::OpenOptions o;
   expect_error([&] { datasets::open_series(file, o); },
-               {"ocean.nc", "--variable", "temp, salt, depth"});
+               {"ocean.nc", "--variable", "temp, salt, depth, empty"});
   o.variable = "pressure";
   expect_error([&] { datasets::open_series(file, o); }, {"no variable 'pressure'", "temp"});
   o.variable = "temp";
@@ -440,6 +442,11 @@ TEST(NetCdf, MissingValuesAndWrongChoicesAreClearErrors) {
                {"ocean.nc", "variable 'temp' frame 1", "voxel (2, 1, 0)", "--replace-nan"});
   o.replace_nan = -1.0f;
   EXPECT_EQ(datasets::open_series(file, o)->read_frame(1).at(2, 1, 0), -1.0f);
+  // Data never written reads as NetCDF's default fill: missing, not 9.97e36.
+  o.variable = "empty";
+  o.replace_nan.reset();
+  expect_error([&] { datasets::open_series(file, o)->read_frame(0); },
+               {"variable 'empty' frame 0", "not finite", "--replace-nan"});
   // Not a NetCDF file.
   const fs::path bad = dir.path() / "bad.nc";
   std::ofstream(bad) << "not netcdf";
