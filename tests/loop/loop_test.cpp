@@ -1,6 +1,7 @@
 // loop_test.cpp: volreel::loop — loop::CpuFrameLoop streams a small zfp container until every
 // visible node is at its target LOD and keeps the last image; loop_settings parses sizes, rates
-// and durations and applies them to FrameLoopOptions.
+// and durations and applies them to FrameLoopOptions; ResolutionControl holds a frame-time target
+// on simulated renderers.
 #include <gtest/gtest.h>
 
 #include <cstdint>
@@ -14,6 +15,7 @@
 #include "volreel/format/container.hpp"
 #include "volreel/loop/cpu_frame_loop.hpp"
 #include "volreel/loop/loop_settings.hpp"
+#include "volreel/loop/resolution_control.hpp"
 
 namespace volreel {
 namespace {
@@ -96,8 +98,67 @@ TEST(LoopSettings, AppliesToTheOptions) {
   EXPECT_EQ(o.atlas_bytes, std::uint64_t{2} << 20);
   EXPECT_DOUBLE_EQ(o.scheduler.loader.bandwidth_bytes_per_s, 1e9);
   EXPECT_FALSE(o.transfer_culling);
+  EXPECT_EQ(o.gpu.decode, loop::FrameLoopOptions::Decode::automatic);
+  s.decode = "cpu";
+  loop::apply(s, o);
+  EXPECT_EQ(o.gpu.decode, loop::FrameLoopOptions::Decode::cpu);
+  s.decode = "fpga";
+  EXPECT_THROW(loop::apply(s, o), std::invalid_argument);
+  s.decode = "gpu";
   s.size = "wide";
   EXPECT_THROW(loop::apply(s, o), std::invalid_argument);
+}
+
+// A renderer whose frame costs fixed + per · s² milliseconds at scale s.
+struct SimulatedRenderer {
+  double fixed = 0, per = 0;
+  double cost(double scale) const { return fixed + per * scale * scale; }
+};
+
+/// Runs `frames` busy frames through the control; returns the last scale.
+double settle(loop::ResolutionControl& control, const SimulatedRenderer& r, int frames) {
+  double s = 1;
+  for (int i = 0; i < frames; ++i) {
+    s = control.next(true);
+    control.measured(s, r.cost(s));
+  }
+  return s;
+}
+
+TEST(ResolutionControl, HoldsTheFrameTimeWhileBusyAndRefinesWhenStill) {
+  // 1.5 s a full frame with 10 ms that do not scale: about sqrt(90/1500) = 0.245 of the side.
+  loop::ResolutionControl control({100, 0.125, 0.2});
+  const SimulatedRenderer slow{10, 1490};
+  const double s = settle(control, slow, 12);
+  EXPECT_LE(slow.cost(s), 100 * 1.2) << "scale " << s;
+  EXPECT_GE(slow.cost(s + 1.0 / 16), 100) << "the largest step that fits: scale " << s;
+  EXPECT_NEAR(control.predict(1.0), slow.cost(1.0), 1.0);
+  EXPECT_NEAR(control.predict(0.25), slow.cost(0.25), 1.0);
+  // Still: one full frame; busy again: back to the busy scale at once.
+  EXPECT_EQ(control.next(false), 1.0);
+  control.measured(1.0, slow.cost(1.0));
+  EXPECT_EQ(control.next(true), s);
+}
+
+TEST(ResolutionControl, GrowsWhenTheRendererGetsFasterAndStaysWithinItsRange) {
+  loop::ResolutionControl control({100, 0.25, 0.2});
+  // A renderer far too slow for the target: the smallest scale, never below it.
+  EXPECT_EQ(settle(control, {150, 5000}, 12), 0.25);
+  // A fast renderer (a GPU, a smaller view): full resolution while busy too.
+  EXPECT_EQ(settle(control, {2, 40}, 24), 1.0);
+  // The scale does not move with a little noise about the target.
+  loop::ResolutionControl steady({100, 0.125, 0.2});
+  const SimulatedRenderer r{0, 400};  // 100 ms at scale 0.5
+  const double s = settle(steady, r, 12);
+  EXPECT_EQ(s, 0.5);
+  for (int i = 0; i < 20; ++i) {
+    EXPECT_EQ(steady.next(true), s);
+    steady.measured(s, r.cost(s) * (i % 2 ? 1.1 : 0.9));
+  }
+  EXPECT_THROW(loop::ResolutionControl({0, 0.5, 0.2}), std::invalid_argument);
+  EXPECT_THROW(loop::ResolutionControl({100, 0, 0.2}), std::invalid_argument);
+  EXPECT_EQ(loop::scaled_size(512, 300, 0.25), (std::pair<int, int>{128, 75}));
+  EXPECT_EQ(loop::scaled_size(3, 2, 0.1), (std::pair<int, int>{1, 1}));
 }
 
 }  // namespace

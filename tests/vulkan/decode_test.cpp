@@ -249,11 +249,13 @@ TEST_P(DecodeTest, OverwritesSlotsAndWrapsTheStagingRing) {
 INSTANTIATE_TEST_SUITE_P(
     FormatsAndKernels, DecodeTest,
     ::testing::Combine(::testing::Values(AtlasFormat::r16_unorm, AtlasFormat::r16_sfloat),
-                       ::testing::Values(Kernel::image_store, Kernel::buffer_copy)),
+                       ::testing::Values(Kernel::image_store, Kernel::buffer_copy, Kernel::host)),
     [](const ::testing::TestParamInfo<std::tuple<AtlasFormat, Kernel>>& param) {
       return std::string(std::get<0>(param.param) == AtlasFormat::r16_unorm ? "R16Unorm"
                                                                             : "R16Sfloat") +
-             (std::get<1>(param.param) == Kernel::image_store ? "ImageStore" : "BufferCopy");
+             (std::get<1>(param.param) == Kernel::image_store   ? "ImageStore"
+              : std::get<1>(param.param) == Kernel::buffer_copy ? "BufferCopy"
+                                                                : "Host");
     });
 
 class DecoderTest : public test::VulkanTest {};

@@ -3,6 +3,8 @@
 # the expected number of frames and metrics with sane values and reaches full detail, on the
 # Vulkan device (or the CPU fallback where there is none) and with --cpu; a bad option is refused
 # with a message naming it; --compare measures the frames against the original series.
+# Without --realtime every frame, the first included, is drawn at full detail (it waits for its
+# bricks); with --realtime on a slow simulated link the first frame is not.
 # Usage: render_cli_test.sh path/to/volreel
 set -euo pipefail
 volreel=$1
@@ -23,12 +25,13 @@ check_run() {  # $1 output folder; the tour has 20 frames
   [ "$(wc -l < "$out/metrics.csv")" -eq 21 ] || { echo "expected 21 lines in $out/metrics.csv"; exit 1; }
   head -1 "$out/metrics.csv" | grep -q "^frame,time_s,playhead,frame_ms,fps,schedule_ms,upload_ms,decode_ms,render_ms" \
     || { echo "unexpected metrics header"; exit 1; }
-  # Every row: playhead 1.5, fps > 0, occupancy and fraction at target in [0, 1]; the last row at
-  # full detail with nothing in flight.
+  head -1 "$out/metrics.csv" | grep -q ",errors,wait_ms" || { echo "no wait_ms column"; exit 1; }
+  # Every row: playhead 1.5, fps > 0, occupancy in [0, 1], and at full detail: the first frame
+  # waited for its bricks.
   awk -F, 'NR > 1 {
-      if ($3 != 1.5 || $5 <= 0 || $13 < 0 || $13 > 1 || $19 < 0 || $19 > 1) { print "bad row: " $0; exit 1 }
-      last = $0; at = $19 }
-    END { if (at != 1) { print "not at full detail at the end: " last; exit 1 } }' "$out/metrics.csv"
+      if ($3 != 1.5 || $5 <= 0 || $13 < 0 || $13 > 1) { print "bad row: " $0; exit 1 }
+      if ($19 != 1) { print "frame " $1 " drawn before its bricks arrived: " $0; exit 1 } }' \
+    "$out/metrics.csv"
 }
 
 "$volreel" render "$dir/test.vreel" --tour "$dir/tour.json" --out "$dir/gpu" > "$dir/gpu.log" 2>&1 \
@@ -43,6 +46,12 @@ grep -q "mean PSNR" "$dir/cpu.log" || { echo "no image quality summary"; cat "$d
 psnr=$(awk '/^PSNR/ {print $2}' "$dir/compare.log")
 awk -v p="$psnr" 'BEGIN { exit !(p == "inf" || p >= 40) }' \
   || { echo "GPU and CPU frames differ: PSNR $psnr"; exit 1; }
+
+# --realtime on a slow link draws what has arrived: the first frame is not complete yet.
+"$volreel" render "$dir/test.vreel" --tour "$dir/tour.json" --out "$dir/rt" --realtime \
+  --bandwidth 200kB/s --max-frames 2 > "$dir/rt.log" 2>&1 || { cat "$dir/rt.log"; exit 1; }
+awk -F, 'NR == 2 { if ($19 >= 1) { print "realtime frame 0 complete on a 200 kB/s link: " $0; exit 1 } }' \
+  "$dir/rt/metrics.csv"
 
 # Helpful errors.
 if "$volreel" render "$dir/test.vreel" --out "$dir/bad" --size 12 > "$dir/bad.log" 2>&1; then

@@ -118,6 +118,7 @@ void run_bench_decode(const BenchDecodeOptions& o) {
   decoder_options.ring_size = o.ring;
   if (o.kernel == "image") decoder_options.kernel = vulkan::DecoderOptions::Kernel::image_store;
   if (o.kernel == "copy") decoder_options.kernel = vulkan::DecoderOptions::Kernel::buffer_copy;
+  if (o.kernel == "host") decoder_options.kernel = vulkan::DecoderOptions::Kernel::host;
   const auto upload_of = [&](std::size_t i, std::uint32_t slot) {
     const BrickRef& r = bricks[i];
     return vulkan::BrickUpload{r.frame->brick_bytes(r.brick), r.frame->codec(),
@@ -172,10 +173,7 @@ void run_bench_decode(const BenchDecodeOptions& o) {
       "%s\n",
       vulkan::atlas_format_name(format), atlas.slot_count(), atlas.grid().x, atlas.grid().y,
       atlas.grid().z, static_cast<double>(decoder.options().upload_budget_bytes) / 1048576.0,
-      decoder.options().ring_size,
-      decoder.kernel() == vulkan::DecoderOptions::Kernel::buffer_copy
-          ? "buffer_copy (decode_bricks_rows.comp, vkCmdCopyBufferToImage)"
-          : "image_store (decode_bricks.comp)");
+      decoder.options().ring_size, vulkan::kernel_name(decoder.kernel()));
   const int threads = omp_get_max_threads();
   std::vector<float> scratch(format::brick_voxels);
   const double cpu1 = time_passes(o.min_seconds, [&] {
@@ -266,9 +264,9 @@ void add_bench_decode_command(CLI::App& bench) {
       ->capture_default_str();
   cmd->add_option("--ring", o->ring, "Staging buffers in the ring")->capture_default_str();
   cmd->add_option("--kernel", o->kernel,
-                  "Decode kernel: auto (buffer copy on CPU devices, image stores otherwise), image "
-                  "or copy")
-      ->check(CLI::IsMember({"auto", "image", "copy"}))
+                  "Decode kernel: auto (host on CPU devices, image stores otherwise), image, copy "
+                  "or host (the CPU decoder, its texels copied into the atlas)")
+      ->check(CLI::IsMember({"auto", "image", "copy", "host"}))
       ->capture_default_str();
   cmd->callback([o] { run_bench_decode(*o); });
 }

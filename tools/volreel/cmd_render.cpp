@@ -2,7 +2,10 @@
 // display): every frame drives the streaming loop (scheduler → uploads → decode → ray casting) on
 // the Vulkan device, or on the CPU where there is none (--cpu), and writes DIR/frame_NNNNN.png and
 // a row of DIR/metrics.csv; optionally encodes the frames with ffmpeg (--video) and measures each
-// frame against a ground-truth render of the original series (--compare).
+// frame against a ground-truth render of the original series (--compare). Without --realtime a
+// frame is drawn once the bricks it needs have arrived (loop::wait_for_view, within
+// --wait-timeout), so a movie never starts black or shows data still streaming in; with it, frames
+// keep the tour's pace and show what has arrived, as the player does.
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -43,6 +46,7 @@ using Clock = std::chrono::steady_clock;
 struct RenderCommandOptions {
   std::string container, tour, out, video, compare, transfer;
   bool cpu = false, realtime = false;
+  double wait_timeout = 30;  ///< seconds a frame waits for its bricks (not with --realtime)
   std::size_t max_frames = 0;
   loop::LoopSettings loop;
   ReaderOptions reader;
@@ -119,12 +123,13 @@ void run_render(const RenderCommandOptions& o) {
          "atlas_occupied,"
          "atlas_capacity,atlas_occupancy,requests_in_flight,requests_sent,uploads,mb_uploaded,mb_"
          "loaded,"
-         "fraction_at_target,holes,svo_nodes,svo_leaves,errors"
+         "fraction_at_target,holes,svo_nodes,svo_leaves,errors,wait_ms"
       << (truth ? ",psnr_db,ssim" : "") << '\n';
   std::future<void> writing;
   double sum_ms[5] = {0, 0, 0, 0, 0};
   double sum_psnr = 0, sum_ssim = 0;
-  std::size_t compared = 0, errors = 0;
+  std::size_t compared = 0, errors = 0, timeouts = 0;
+  double waited_s = 0;
   loop::FrameReport last;
   const auto start = Clock::now();
   {
@@ -138,6 +143,27 @@ void run_render(const RenderCommandOptions& o) {
       if (transfer) tf.transfer = *transfer;
       tf.camera.width = options.width;
       tf.camera.height = options.height;
+      // Without --realtime a frame is drawn once what it needs has arrived (or nothing more
+      // can), so that a movie never shows a frame still streaming in.
+      double wait_ms = 0;
+      if (!o.realtime) {
+        loop::ViewWait wait =
+            loop::wait_for_view(*renderer, tf.camera, tf.playhead, o.wait_timeout);
+        wait_ms = 1000 * wait.seconds;
+        waited_s += wait.seconds;
+        for (const std::string& e : wait.new_errors)
+          std::fprintf(stderr, "\nvolreel: warning: %s\n", e.c_str());
+        errors += wait.new_errors.size();
+        if (wait.timed_out) {
+          ++timeouts;
+          std::fprintf(stderr,
+                       "\nvolreel: warning: frame %zu drawn after waiting %.1f s (--wait-timeout) "
+                       "with %.0f%% of its visible nodes at their target level of detail and %zu "
+                       "requests in flight\n",
+                       i, wait.seconds, 100 * wait.stats.fraction_at_target,
+                       wait.stats.requests_in_flight);
+        }
+      }
       const loop::FrameReport report = renderer->frame(tf.camera, tf.playhead, tf.transfer, true);
       const auto read_start = Clock::now();
       cpu_render::RgbaImage image = renderer->read_back(report.ticket);
@@ -170,14 +196,14 @@ void run_render(const RenderCommandOptions& o) {
       char row[512];
       std::snprintf(row, sizeof row,
                     "%zu,%.4f,%.4f,%.3f,%.2f,%.3f,%.3f,%.3f,%.3f,%.3f,%u,%u,%.4f,%zu,%zu,%zu,%.4f,%"
-                    ".4f,%.4f,%u,%u,%u,%zu",
+                    ".4f,%.4f,%u,%u,%u,%zu,%.3f",
                     i, time, tf.playhead, frame_ms, 1000.0 / frame_ms, t.schedule_ms, t.upload_ms,
                     t.decode_ms, t.render_ms, readback_ms, s.atlas_occupied, s.atlas_capacity,
                     s.atlas_capacity ? double(s.atlas_occupied) / double(s.atlas_capacity) : 0.0,
                     s.requests_in_flight, s.requests_sent, s.uploads,
                     double(s.bytes_uploaded) * 1e-6, double(s.bytes_loaded) * 1e-6,
                     s.fraction_at_target, s.holes, s.svo_nodes, s.svo_leaves,
-                    report.new_errors.size());
+                    report.new_errors.size(), wait_ms);
       csv << row;
       if (quality) csv << ',' << quality->psnr << ',' << quality->ssim;
       csv << '\n';
@@ -206,6 +232,12 @@ void run_render(const RenderCommandOptions& o) {
       "loaded\n",
       100 * last.stats.fraction_at_target, last.stats.atlas_occupied, last.stats.atlas_capacity,
       double(last.stats.bytes_loaded) * 1e-6);
+  if (!o.realtime)
+    std::printf("waited %.2f s in all for bricks before drawing frames%s\n", waited_s,
+                timeouts ? (", " + std::to_string(timeouts) +
+                            " frames drawn incomplete after --wait-timeout")
+                               .c_str()
+                         : "");
   if (errors) std::printf("%zu errors (see the warnings above)\n", errors);
   print_remote_summary(container.source(), "render");
   if (compared)
@@ -265,9 +297,14 @@ void add_render_command(CLI::App& app) {
                 "Render on the CPU (CPU atlas and reference ray caster) instead of Vulkan");
   add_loop_options(*cmd, o->loop);
   cmd->add_flag("--realtime", o->realtime,
-                "Start frame i no earlier than i/fps seconds in, so streaming (which runs in "
-                "wall-clock time) keeps "
-                "the tour's pace; by default frames render as fast as they can");
+                "Start frame i no earlier than i/fps seconds in and draw it with whatever has "
+                "arrived, as the player does; by default each frame is drawn once the bricks it "
+                "needs have arrived (see --wait-timeout)");
+  cmd->add_option("--wait-timeout", o->wait_timeout,
+                  "Without --realtime: seconds a frame waits for its bricks before it is drawn "
+                  "with what it has (reported)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   cmd->add_option("--max-frames", o->max_frames, "Render only the first N frames of the tour");
   cmd->add_option(
       "--compare", o->compare,

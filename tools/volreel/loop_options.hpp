@@ -9,7 +9,7 @@
 namespace volreel::cli {
 
 /// --atlas-mb, --bandwidth, --latency, --sse-target, --upload-budget, --step,
-/// --max-step-doublings, --no-culling.
+/// --max-step-doublings, --no-culling, --decode.
 inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
   cmd.add_option("--atlas-mb", loop.atlas_mb, "Brick atlas memory, MiB (93 312 bytes per slot)")
       ->capture_default_str();
@@ -31,6 +31,12 @@ inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
       ->capture_default_str();
   cmd.add_flag("--no-culling", loop.no_culling,
                "Do not skip nodes the transfer function makes invisible");
+  cmd.add_option("--decode", loop.decode,
+                 "Where bricks are decoded: auto (on the CPU with a CPU Vulkan implementation such "
+                 "as lavapipe, in the compute shader on a GPU), gpu (the compute shader) or cpu "
+                 "(the CPU decoder, texels copied into the atlas)")
+      ->check(CLI::IsMember({"auto", "gpu", "cpu"}))
+      ->capture_default_str();
 }
 
 }  // namespace volreel::cli

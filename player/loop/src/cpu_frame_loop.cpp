@@ -42,14 +42,12 @@ CpuFrameLoop::CpuFrameLoop(const format::Container& container, stream::SpatialIn
   scheduler_ = std::make_unique<stream::StreamScheduler>(std::move(index), options_.scheduler);
 }
 
-FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhead,
-                                const cpu_render::TransferFunction& transfer, bool) {
-  const auto start = Clock::now();
-  FrameReport report;
-  report.ticket = ++ticket_;
-  // 1. The scheduler (the previous frame is complete: rendering is synchronous).
+stream::FrameUpdate CpuFrameLoop::update_and_decode(const player::OrbitCamera& camera,
+                                                    double playhead, FrameReport& report) {
+  // 1. The scheduler (the previous frame is complete: rendering is synchronous). Its slots are
+  //    marked for the next frame to render.
   auto t = Clock::now();
-  stream::FrameUpdate update = scheduler_->update(camera, playhead, report.ticket);
+  stream::FrameUpdate update = scheduler_->update(camera, playhead, ticket_ + 1);
   report.timings.schedule_ms = ms_since(t);
   report.new_errors = update.new_errors;
   // 2. Decode the arrived bricks into their slots; a bad one becomes the lowest value.
@@ -68,8 +66,29 @@ FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhe
     }
   }
   report.timings.decode_ms = ms_since(t);
+  report.stats = update.stats;
+  return update;
+}
+
+FrameReport CpuFrameLoop::stream(const player::OrbitCamera& camera, double playhead) {
+  const auto start = Clock::now();
+  FrameReport report;
+  update_and_decode(camera, playhead, report);
+  // Nothing reads the atlas between frames here: the slots marked for the next frame may be
+  // reused by the next step already.
+  scheduler_->retire(ticket_ + 1);
+  report.timings.frame_ms = ms_since(start);
+  return report;
+}
+
+FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhead,
+                                const cpu_render::TransferFunction& transfer, bool) {
+  const auto start = Clock::now();
+  FrameReport report;
+  stream::FrameUpdate update = update_and_decode(camera, playhead, report);
+  report.ticket = ++ticket_;
   // 3. Render.
-  t = Clock::now();
+  const auto t = Clock::now();
   cpu_render::SvoView svo;
   svo.nodes = update.svo_nodes;
   svo.leaves = update.svo_leaves;
@@ -77,7 +96,6 @@ FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhe
   report.timings.render_ms = ms_since(t);
   // 4. Retire: nothing reads the atlas after render_svo returned.
   scheduler_->retire(report.ticket);
-  report.stats = update.stats;
   last_update_ = std::move(update);
   report.timings.frame_ms = ms_since(start);
   return report;

@@ -79,6 +79,13 @@ double parse_latency(const std::string& text, const std::string& option) {
   bad(option, expected, text);
 }
 
+FrameLoopOptions::Decode parse_decode(const std::string& text, const std::string& option) {
+  if (text == "auto") return FrameLoopOptions::Decode::automatic;
+  if (text == "gpu") return FrameLoopOptions::Decode::gpu;
+  if (text == "cpu") return FrameLoopOptions::Decode::cpu;
+  bad(option, "auto, gpu or cpu", text);
+}
+
 void apply(const LoopSettings& s, FrameLoopOptions& o) {
   if (!s.size.empty()) {
     const auto [w, h] = parse_size(s.size);
@@ -103,6 +110,7 @@ void apply(const LoopSettings& s, FrameLoopOptions& o) {
     bad("--max-step-doublings", "0..16", std::to_string(s.max_step_doublings));
   o.render.max_step_doublings = s.max_step_doublings;
   o.transfer_culling = !s.no_culling;
+  o.gpu.decode = parse_decode(s.decode);
 }
 
 }  // namespace volreel::loop

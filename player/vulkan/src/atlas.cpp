@@ -145,11 +145,15 @@ float Atlas::texel_to_value(std::uint16_t texel) const {
          (options_.value_max - options_.value_min) * (static_cast<float>(texel) / 65535.0f);
 }
 
+std::uint16_t Atlas::value_to_texel(float value) const {
+  if (options_.format == AtlasFormat::r16_sfloat) return float_to_half(value);
+  const float x = (value - options_.value_min) / (options_.value_max - options_.value_min);
+  const float n = std::isnan(x) ? 0.0f : std::clamp(x, 0.0f, 1.0f);  // NaN: the lowest value
+  return static_cast<std::uint16_t>(std::lround(n * 65535.0f));
+}
+
 float Atlas::round_trip(float value) const {
-  if (options_.format == AtlasFormat::r16_sfloat) return half_to_float(float_to_half(value));
-  const float n = std::clamp(
-      (value - options_.value_min) / (options_.value_max - options_.value_min), 0.0f, 1.0f);
-  return texel_to_value(static_cast<std::uint16_t>(std::lround(n * 65535.0f)));
+  return texel_to_value(value_to_texel(value));
 }
 
 float Atlas::rounding_bound(float value) const {

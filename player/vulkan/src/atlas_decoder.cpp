@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <exception>
 #include <stdexcept>
 #include <string>
 
@@ -26,6 +27,7 @@ namespace {
 constexpr std::uint32_t kind_ksvd = 0, kind_constant = 1, kind_raw = 2;
 constexpr std::uint64_t record_bytes = 16;  // {payload word offset, slot, kind, payload words}
 constexpr std::uint64_t raw_bytes = std::uint64_t{format::brick_voxels} * 4;
+constexpr std::uint64_t texel_bytes = std::uint64_t{format::brick_voxels} * 2;  // host kernel
 constexpr std::uint32_t max_bricks_per_dispatch = 65535;  // maxComputeWorkGroupCount[0] minimum
 /// The most atoms the buffer_copy kernel's texel buffer holds: a learned dictionary of up to 1024
 /// atoms with its 215 DCT atoms, rounded up.
@@ -82,6 +84,19 @@ void validate_upload(const BrickUpload& brick, std::size_t index, std::uint32_t 
 
 }  // namespace
 
+const char* kernel_name(DecoderOptions::Kernel kernel) {
+  switch (kernel) {
+    case DecoderOptions::Kernel::image_store:
+      return "image_store (GPU: decode_bricks.comp)";
+    case DecoderOptions::Kernel::buffer_copy:
+      return "buffer_copy (GPU: decode_bricks_rows.comp, vkCmdCopyBufferToImage)";
+    case DecoderOptions::Kernel::host:
+      return "host (CPU reference decoder, vkCmdCopyBufferToImage)";
+    default:
+      return "automatic";
+  }
+}
+
 struct AtlasDecoder::RingEntry {
   Buffer staging;  ///< host-visible: records, then payloads
   Buffer device;   ///< device-local copy the shader reads, unless staging is device-local itself
@@ -92,7 +107,8 @@ struct AtlasDecoder::RingEntry {
   const Buffer& shader_buffer() const { return device.handle() ? device : staging; }
 };
 
-std::uint64_t AtlasDecoder::upload_bytes(const BrickUpload& brick) {
+std::uint64_t AtlasDecoder::upload_bytes(const BrickUpload& brick, DecoderOptions::Kernel kernel) {
+  if (kernel == DecoderOptions::Kernel::host) return texel_bytes;
   switch (kind_of(brick)) {
     case kind_constant:
       return record_bytes + 4;
@@ -122,13 +138,15 @@ AtlasDecoder::AtlasDecoder(const Context& context, const Atlas& atlas,
   const bool texels_fit =
       context.limits().maxTexelBufferElements >= max_copy_atoms * copy_atom_floats / 4;
   if (kernel_ == DecoderOptions::Kernel::automatic)
-    kernel_ = context.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU && texels_fit
-                  ? DecoderOptions::Kernel::buffer_copy
+    kernel_ = context.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU
+                  ? DecoderOptions::Kernel::host
                   : DecoderOptions::Kernel::image_store;
   if (kernel_ == DecoderOptions::Kernel::buffer_copy && !texels_fit)
     throw std::invalid_argument("AtlasDecoder: the buffer_copy kernel needs texel buffers of " +
                                 std::to_string(max_copy_atoms * copy_atom_floats / 4) +
                                 " elements");
+  // The host kernel keeps the pipeline of image_store (cheap to build, never dispatched), so that
+  // every descriptor stays valid whichever kernel runs.
   const bool copy = kernel_ == DecoderOptions::Kernel::buffer_copy;
   const bool unorm = atlas.format() == AtlasFormat::r16_unorm;
   const VkDescriptorType atoms_type =
@@ -253,6 +271,12 @@ void AtlasDecoder::set_dictionary(const format::AtomTable& atoms) {
                                 " atoms; the decoder holds at most " +
                                 std::to_string(copy ? max_copy_atoms : 1u << VR_MAX_ATOM_BITS));
   wait_all();
+  if (kernel_ == DecoderOptions::Kernel::host) {
+    host_atoms_.assign(atoms.values.begin(),
+                       atoms.values.begin() + static_cast<std::ptrdiff_t>(values));
+    atom_count_ = atoms.count;
+    return;
+  }
   Buffer staging(context_, 4 * floats, VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
                  VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT);
   if (copy) {  // rows of 6 values padded to 8
@@ -306,14 +330,34 @@ Ticket AtlasDecoder::submit(std::span<const BrickUpload> batch) {
     std::size_t end = next;
     std::uint64_t bytes = 0;
     while (end < batch.size() && end - next < max_bricks_per_dispatch &&
-           bytes + upload_bytes(batch[end]) <= budget)
-      bytes += upload_bytes(batch[end++]);
+           bytes + upload_bytes(batch[end], kernel_) <= budget)
+      bytes += upload_bytes(batch[end++], kernel_);
     if (end == next)
       throw std::invalid_argument("brick upload " + std::to_string(next) + " needs " +
-                                  std::to_string(upload_bytes(batch[next])) +
+                                  std::to_string(upload_bytes(batch[next], kernel_)) +
                                   " bytes, more than the upload budget of " +
                                   std::to_string(budget));
     const auto count = static_cast<std::uint32_t>(end - next);
+    if (kernel_ == DecoderOptions::Kernel::host) {
+      const std::span<const BrickUpload> chunk = batch.subspan(next, count);
+      decode_on_host(chunk, next, reinterpret_cast<std::uint16_t*>(entry.staging.mapped()));
+      entry.staging.flush(0, VK_WHOLE_SIZE);
+      const VkCommandBuffer commands = entry.commands;
+      begin_commands(commands);
+      record_host_copies(commands, entry.staging.handle(), chunk);
+      end_commands(commands);
+      entry.fence.reset();
+      VkSubmitInfo info{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+      info.commandBufferCount = 1;
+      info.pCommandBuffers = &commands;
+      context_.submit(info, entry.fence.handle());
+      entry.ticket = ++last_ticket_;
+      ++stats_.submissions;
+      stats_.bricks += count;
+      stats_.uploaded_bytes += bytes;
+      next = end;
+      continue;
+    }
     auto* words = reinterpret_cast<std::uint32_t*>(entry.staging.mapped());
     std::uint32_t cursor = 4 * count;  // word offset of the next payload
     for (std::uint32_t i = 0; i < count; ++i) {
@@ -444,6 +488,69 @@ void AtlasDecoder::record_decode(VkCommandBuffer commands, const std::uint32_t* 
                   VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT |
                       VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
   }
+}
+
+void AtlasDecoder::decode_on_host(std::span<const BrickUpload> bricks, std::size_t first,
+                                  std::uint16_t* texels) {
+  const auto start = std::chrono::steady_clock::now();
+  const format::AtomTable atoms{host_atoms_, atom_count_};
+  const auto n = static_cast<std::ptrdiff_t>(bricks.size());
+  std::exception_ptr error;  // the first bad payload's error, raised after the loop
+  std::size_t error_index = bricks.size();
+#pragma omp parallel
+  {
+    std::vector<float> values(format::brick_voxels);
+#pragma omp for schedule(dynamic, 1)
+    for (std::ptrdiff_t i = 0; i < n; ++i) {
+      const BrickUpload& brick = bricks[static_cast<std::size_t>(i)];
+      try {
+        format::decode_payload(
+            brick.payload, brick.codec, brick.zfp_accuracy, atoms, values,
+            "brick upload " + std::to_string(first + static_cast<std::size_t>(i)), 0);
+      } catch (...) {
+#pragma omp critical(volreel_host_decode_error)
+        if (static_cast<std::size_t>(i) < error_index) {
+          error_index = static_cast<std::size_t>(i);
+          error = std::current_exception();
+        }
+        continue;
+      }
+      std::uint16_t* out = texels + static_cast<std::size_t>(i) * format::brick_voxels;
+      for (std::size_t v = 0; v < format::brick_voxels; ++v)
+        out[v] = atlas_.value_to_texel(values[v]);
+    }
+  }
+  stats_.cpu_decode_seconds +=
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (error) std::rethrow_exception(error);
+}
+
+void AtlasDecoder::record_host_copies(VkCommandBuffer commands, VkBuffer texels,
+                                      std::span<const BrickUpload> bricks) {
+  // After all earlier compute and transfer work on this queue (a ray caster sampling the slots,
+  // earlier copies into them), then each brick's texels into its slot.
+  const VkImage image = atlas_.image().handle();
+  image_barrier(commands, image, VK_IMAGE_LAYOUT_GENERAL, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT,
+                VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT);
+  std::vector<VkBufferImageCopy>& regions = copy_regions_;
+  regions.resize(bricks.size());
+  for (std::size_t i = 0; i < bricks.size(); ++i) {
+    VkBufferImageCopy& r = regions[i];
+    r = {};
+    r.bufferOffset = i * texel_bytes;
+    r.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+    r.imageOffset = atlas_.slot_origin(bricks[i].slot);
+    r.imageExtent = {VR_ATLAS_SLOT_SIZE, VR_ATLAS_SLOT_SIZE, VR_ATLAS_SLOT_SIZE};
+  }
+  vkCmdCopyBufferToImage(commands, texels, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                         static_cast<std::uint32_t>(regions.size()), regions.data());
+  image_barrier(commands, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_GENERAL,
+                VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT |
+                    VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
 }
 
 bool AtlasDecoder::poll(Ticket ticket) const {

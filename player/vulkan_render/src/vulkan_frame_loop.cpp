@@ -1,6 +1,7 @@
 // vulkan_frame_loop.cpp: the per-frame streaming loop on the GPU (see vulkan_frame_loop.hpp).
 #include "volreel/vulkan_render/vulkan_frame_loop.hpp"
 
+#include <algorithm>
 #include <bit>
 #include <chrono>
 #include <cstring>
@@ -73,6 +74,18 @@ VulkanFrameLoop::VulkanFrameLoop(std::unique_ptr<vulkan::Context>&& owned,
   vulkan::DecoderOptions dopt;
   dopt.upload_budget_bytes = options.gpu.staging_bytes;
   dopt.ring_size = 3;
+  const bool cpu_device = context.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
+  switch (options.gpu.decode) {
+    case loop::FrameLoopOptions::Decode::cpu:
+      dopt.kernel = vulkan::DecoderOptions::Kernel::host;
+      break;
+    case loop::FrameLoopOptions::Decode::gpu:  // the compute kernel that is faster there
+      dopt.kernel = cpu_device ? vulkan::DecoderOptions::Kernel::buffer_copy
+                               : vulkan::DecoderOptions::Kernel::image_store;
+      break;
+    default:
+      dopt.kernel = vulkan::DecoderOptions::Kernel::automatic;
+  }
   decoder_ = std::make_unique<vulkan::AtlasDecoder>(context, *atlas_, dopt);
   if (m.codec == format::Codec::ksvd) decoder_->set_dictionary(container.atoms());
   RaycasterOptions ro;
@@ -145,23 +158,24 @@ void VulkanFrameLoop::decode_uploads(const std::vector<stream::BrickUpload>& upl
   }
 }
 
-loop::FrameReport VulkanFrameLoop::frame(const player::OrbitCamera& camera, double playhead,
-                                         const cpu_render::TransferFunction& transfer,
-                                         bool readback) {
-  const auto start = Clock::now();
-  loop::FrameReport report;
+stream::FrameUpdate VulkanFrameLoop::update_and_decode(const player::OrbitCamera& camera,
+                                                       double playhead, loop::FrameReport& report) {
   // 1. Retire finished frames: their slots may be overwritten now.
   retire_completed();
-  // 2. The scheduler: arrivals, priorities, requests, slots, the SVO ([0029]–[0075]).
+  // 2. The scheduler: arrivals, priorities, requests, slots, the SVO ([0029]–[0075]), for the
+  //    next frame the ray caster renders.
   const Ticket gpu_frame = raycaster_->last_ticket() + 1;
   auto t = Clock::now();
   stream::FrameUpdate update = scheduler_->update(camera, playhead, gpu_frame);
   report.timings.schedule_ms = ms_since(t);
   report.new_errors = std::move(update.new_errors);
-  // 3. Decode the arrived bricks into their slots (MTV-Player §4.2).
+  // 3. Decode the arrived bricks into their slots (MTV-Player §4.2); the next frame recomputes
+  //    their block ranges.
   t = Clock::now();
-  for (const stream::BrickUpload& u : update.uploads)
+  for (const stream::BrickUpload& u : update.uploads) {
     slot_histograms_[u.slot] = options_.transfer_culling ? histogram_of(u.key) : 0;
+    changed_slots_.push_back(u.slot);
+  }
   decode_uploads(update.uploads, report.new_errors);
   report.timings.upload_ms = ms_since(t);
   if (!options_.pipelined) {
@@ -169,6 +183,25 @@ loop::FrameReport VulkanFrameLoop::frame(const player::OrbitCamera& camera, doub
     decoder_->wait_all();
     report.timings.decode_ms = ms_since(t);
   }
+  report.stats = update.stats;
+  return update;
+}
+
+loop::FrameReport VulkanFrameLoop::stream(const player::OrbitCamera& camera, double playhead) {
+  const auto start = Clock::now();
+  loop::FrameReport report;
+  update_and_decode(camera, playhead, report);
+  report.timings.frame_ms = ms_since(start);
+  return report;
+}
+
+loop::FrameReport VulkanFrameLoop::frame(const player::OrbitCamera& camera, double playhead,
+                                         const cpu_render::TransferFunction& transfer,
+                                         bool readback) {
+  const auto start = Clock::now();
+  loop::FrameReport report;
+  stream::FrameUpdate update = update_and_decode(camera, playhead, report);
+  const Ticket gpu_frame = raycaster_->last_ticket() + 1;  // what the scheduler was told
   // 4. Ray casting (same queue: it sees the decoded slots).
   FrameInput input;
   input.svo_nodes = update.svo_nodes;
@@ -183,12 +216,15 @@ loop::FrameReport VulkanFrameLoop::frame(const player::OrbitCamera& camera, doub
   input.camera = camera;
   input.transfer = &transfer;
   input.options = options_.render;
-  changed_slots_.clear();
-  for (const stream::BrickUpload& u : update.uploads) changed_slots_.push_back(u.slot);
+  // Slots decoded since the last frame (stream() steps included), each once.
+  std::sort(changed_slots_.begin(), changed_slots_.end());
+  changed_slots_.erase(std::unique(changed_slots_.begin(), changed_slots_.end()),
+                       changed_slots_.end());
   input.changed_slots = changed_slots_;
   input.skip_invisible_blocks = options_.transfer_culling;
-  t = Clock::now();
+  const auto t = Clock::now();
   report.ticket = raycaster_->render(input, readback);
+  changed_slots_.clear();
   if (gpu_frame != report.ticket)
     throw std::logic_error("VulkanFrameLoop: the ray caster's frame numbers went out of step");
   if (!options_.pipelined) {
@@ -197,10 +233,13 @@ loop::FrameReport VulkanFrameLoop::frame(const player::OrbitCamera& camera, doub
     report.timings.render_ms = raycaster_->gpu_milliseconds(report.ticket).value_or(wall);
     retire_completed();
   }
-  report.stats = update.stats;
   last_update_ = std::move(update);
   report.timings.frame_ms = ms_since(start);
   return report;
+}
+
+std::string VulkanFrameLoop::describe() const {
+  return context_.describe() + ", bricks decoded by " + vulkan::kernel_name(decoder_->kernel());
 }
 
 void VulkanFrameLoop::resize(int width, int height) {

@@ -30,6 +30,7 @@ class CpuFrameLoop final : public FrameLoop {
   /// camera's size. The image is kept for read_back(report.ticket) whatever `readback` says.
   FrameReport frame(const player::OrbitCamera& camera, double playhead,
                     const cpu_render::TransferFunction& transfer, bool readback = false) override;
+  FrameReport stream(const player::OrbitCamera& camera, double playhead) override;
   /// The image of the last frame; throws std::invalid_argument for any other ticket.
   cpu_render::RgbaImage read_back(Ticket ticket) const override { return last_image(ticket); }
   /// The same without a copy.
@@ -52,6 +53,9 @@ class CpuFrameLoop final : public FrameLoop {
 
  private:
   static std::uint32_t slots_for(const FrameLoopOptions& options);
+  /// Steps 1–2 of a frame: the scheduler's update and the decode of the uploads.
+  stream::FrameUpdate update_and_decode(const player::OrbitCamera& camera, double playhead,
+                                        FrameReport& report);
 
   const format::Container& container_;
   FrameLoopOptions options_;

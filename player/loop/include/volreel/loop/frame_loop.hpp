@@ -9,6 +9,7 @@
 // `volreel render`, `volreel bench play`, `volreel bench stream` and the player window drive it.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -33,8 +34,15 @@ struct FrameLoopOptions {
   bool transfer_culling = true;
   bool pipelined = false;  ///< overlap the next frame's CPU work with this frame's GPU work
 
+  /// Where the Vulkan loop decodes bricks: automatic (on the CPU with a CPU Vulkan
+  /// implementation such as lavapipe, where the reference decoder is several times faster than
+  /// the compute shader; in the compute shader on a GPU), gpu (the compute shader) or cpu (the
+  /// reference decoder, texels copied into the atlas). The CPU loop always decodes on the CPU.
+  enum class Decode { automatic, gpu, cpu };
+
   /// Read by the Vulkan loop only.
   struct Gpu {
+    Decode decode = Decode::automatic;
     std::uint64_t staging_bytes = std::uint64_t{8} << 20;  ///< one decoder staging buffer
     std::uint32_t frames_in_flight = 2;                    ///< ray caster ring entries (≥ 1)
   } gpu;
@@ -68,6 +76,10 @@ class FrameLoop {
   virtual FrameReport frame(const player::OrbitCamera& camera, double playhead,
                             const cpu_render::TransferFunction& transfer,
                             bool readback = false) = 0;
+  /// The scheduler's update and the decode of what arrived, without rendering: for waiting until
+  /// what a frame needs has arrived before drawing it. The next frame() draws it. No ticket
+  /// (report.ticket is 0).
+  virtual FrameReport stream(const player::OrbitCamera& camera, double playhead) = 0;
   /// The image of a recent frame rendered with readback (waits for it). Throws
   /// std::invalid_argument for a frame whose image is not kept.
   virtual cpu_render::RgbaImage read_back(Ticket ticket) const = 0;
@@ -88,5 +100,22 @@ class FrameLoop {
   virtual const cpu_render::VolumeGeometry& geometry() const = 0;
   virtual const FrameLoopOptions& options() const = 0;
 };
+
+/// What wait_for_view reached.
+struct ViewWait {
+  stream::StreamStats stats;  ///< of the last stream step
+  double seconds = 0;         ///< spent waiting
+  std::size_t steps = 0;      ///< stream steps taken
+  bool complete = false;      ///< every visible node at its target LOD, everything uploaded
+  bool timed_out = false;     ///< stopped by the timeout
+  std::vector<std::string> new_errors;
+};
+
+/// Streams (FrameLoop::stream) at a fixed view until every visible node is drawn at its target
+/// LOD, nothing more can come (no request in flight and nothing waiting to be uploaded, as after
+/// read errors or with an atlas too small for the view) or `timeout_s` passed. Sleeps briefly
+/// while requests are in flight and nothing arrived.
+ViewWait wait_for_view(FrameLoop& loop, const player::OrbitCamera& camera, double playhead,
+                       double timeout_s);
 
 }  // namespace volreel::loop

@@ -21,13 +21,17 @@ struct LoopSettings {
   double step = 0.5;             ///< ray step, finest voxels
   /// Coarse leaves step up to 2^this times longer (0: a fixed step).
   std::uint32_t max_step_doublings = 3;
-  bool no_culling = false;  ///< no transfer-function culling
+  bool no_culling = false;      ///< no transfer-function culling
+  std::string decode = "auto";  ///< "auto", "gpu" or "cpu" (FrameLoopOptions::Decode)
 };
 
 /// "512x512" -> {512, 512} (1..16384 each). Throws std::invalid_argument naming `option`.
 std::pair<int, int> parse_size(const std::string& text, const std::string& option = "--size");
 /// "20MB/s" (also kB/s, GB/s, B/s, MiB/s; a bare number is MB/s) -> bytes per second (≥ 0).
 double parse_bandwidth(const std::string& text, const std::string& option = "--bandwidth");
+/// "auto", "gpu", "cpu" -> FrameLoopOptions::Decode. Throws std::invalid_argument naming `option`.
+FrameLoopOptions::Decode parse_decode(const std::string& text,
+                                      const std::string& option = "--decode");
 /// "50ms", "0.2s", a bare number in ms -> seconds (≥ 0).
 double parse_latency(const std::string& text, const std::string& option = "--latency");
 

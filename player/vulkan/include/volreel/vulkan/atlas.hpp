@@ -69,6 +69,8 @@ class Atlas {
   VkOffset3D slot_origin(std::uint32_t slot) const;
   /// A texel read back from the image as a value.
   float texel_to_value(std::uint16_t texel) const;
+  /// The texel that `value` is stored as (round to nearest; r16_unorm clamps to the range).
+  std::uint16_t value_to_texel(float value) const;
   /// The value a voxel of `value` reads back as (the format's rounding, round-to-nearest).
   float round_trip(float value) const;
   /// Largest |round_trip(v) − v| for v of magnitude ≤ |value| (half a unit of the format, for

@@ -8,7 +8,10 @@
 //
 // Kinds: ksvd payloads are decoded on the GPU; 4-byte payloads (constant bricks) are filled
 // without reading codes; zfp payloads are decoded on the CPU (format::decode_payload) and uploaded
-// as 36³ float32 values.
+// as 36³ float32 values. The host kernel instead decodes every brick on the CPU (the reference
+// decoder, OpenMP over the bricks), converts it to the atlas's 16-bit texels and copies it into
+// its slot: no compute pass at all, for CPU implementations, where the CPU decoder is several
+// times faster than either shader.
 //
 // Staging: a ring of host-visible buffers, each of `upload_budget_bytes` (the most a frame
 // uploads). A batch larger than one buffer is split over several ring entries. A ring entry is
@@ -53,13 +56,19 @@ struct DecoderOptions {
   ///    storage buffer then copied into the slots with vkCmdCopyBufferToImage
   ///    (shaders/decode/decode_bricks_rows.comp): for CPU implementations (lavapipe), where
   ///    storage-image stores, shared memory and barriers are slow;
-  ///  - automatic: buffer_copy on a VK_PHYSICAL_DEVICE_TYPE_CPU device, image_store otherwise.
-  enum class Kernel { automatic, image_store, buffer_copy };
+  ///  - host: every brick decoded on the CPU by format::decode_payload, converted to 16-bit texels
+  ///    (Atlas::value_to_texel) and copied into its slot with vkCmdCopyBufferToImage (36³ · 2
+  ///    bytes of staging per brick);
+  ///  - automatic: host on a VK_PHYSICAL_DEVICE_TYPE_CPU device, image_store otherwise.
+  enum class Kernel { automatic, image_store, buffer_copy, host };
   Kernel kernel = Kernel::automatic;
   /// buffer_copy: bricks decoded per dispatch (the decoded-brick buffer holds this many 36³
   /// bricks of 16-bit texels, rows padded from 6 to 8 texels: 124 416 bytes each).
   std::uint32_t bricks_per_copy = 256;
 };
+
+/// "image_store (decode_bricks.comp)", "buffer_copy (…)", "host (CPU decoder, …)", "automatic".
+const char* kernel_name(DecoderOptions::Kernel kernel);
 
 /// Identifies a submission; 0 means "nothing", always complete. Increases with each submission.
 using Ticket = std::uint64_t;
@@ -97,13 +106,16 @@ class AtlasDecoder {
   std::vector<float> read_slots(std::span<const std::uint32_t> slots) const;
   std::vector<float> read_slot(std::uint32_t slot) const { return read_slots({&slot, 1}); }
 
-  /// Bytes that uploading `brick` takes in a staging buffer (its record included).
-  static std::uint64_t upload_bytes(const BrickUpload& brick);
+  /// Bytes that uploading `brick` takes in a staging buffer with `kernel` (its record included).
+  static std::uint64_t upload_bytes(
+      const BrickUpload& brick,
+      DecoderOptions::Kernel kernel = DecoderOptions::Kernel::image_store);
 
   struct Stats {
     std::uint64_t bricks = 0, submissions = 0;
     std::uint64_t uploaded_bytes = 0;  ///< staging bytes written (records, payloads, zfp floats)
     double cpu_zfp_seconds = 0;        ///< CPU time decoding zfp bricks in submit
+    double cpu_decode_seconds = 0;     ///< host kernel: wall time decoding bricks in submit
   };
   const Stats& stats() const { return stats_; }
   const DecoderOptions& options() const { return options_; }
@@ -116,6 +128,12 @@ class AtlasDecoder {
   void write_descriptors(RingEntry& entry) const;
   void make_atoms_view();
   void record_decode(VkCommandBuffer commands, const std::uint32_t* records, std::uint32_t bricks);
+  void record_host_copies(VkCommandBuffer commands, VkBuffer texels,
+                          std::span<const BrickUpload> bricks);
+  /// host: decodes `bricks` into `texels` (36³ per brick) on the CPU; throws FormatError naming
+  /// "brick upload first + i" for a bad payload.
+  void decode_on_host(std::span<const BrickUpload> bricks, std::size_t first,
+                      std::uint16_t* texels);
 
   const Context& context_;
   const Atlas& atlas_;
@@ -131,6 +149,7 @@ class AtlasDecoder {
   /// buffer_copy: atoms_ as a uniform texel buffer of RGBA32F (4 values of an atom a texel).
   detail::DeviceHandle<VkBufferView, vkDestroyBufferView> atoms_view_;
   std::uint32_t atom_count_ = 0;
+  std::vector<float> host_atoms_;  ///< host: the dictionary's values, for the CPU decoder
   std::vector<RingEntry> ring_;
   std::size_t next_entry_ = 0;
   Ticket last_ticket_ = 0;

@@ -43,6 +43,7 @@ class VulkanFrameLoop final : public loop::FrameLoop {
   loop::FrameReport frame(const player::OrbitCamera& camera, double playhead,
                           const cpu_render::TransferFunction& transfer,
                           bool readback = false) override;
+  loop::FrameReport stream(const player::OrbitCamera& camera, double playhead) override;
   cpu_render::RgbaImage read_back(Ticket ticket) const override {
     return raycaster_->read_back(ticket);
   }
@@ -52,7 +53,7 @@ class VulkanFrameLoop final : public loop::FrameLoop {
   /// Transfer-function culling from the next frame on (FrameLoopOptions::transfer_culling).
   void set_transfer_culling(bool on) { options_.transfer_culling = on; }
   void resize(int width, int height) override;
-  std::string describe() const override { return context_.describe(); }
+  std::string describe() const override;
 
   std::uint32_t slot_count() const override { return atlas_->slot_count(); }
   stream::StreamScheduler& scheduler() override { return *scheduler_; }
@@ -75,6 +76,9 @@ class VulkanFrameLoop final : public loop::FrameLoop {
   VulkanFrameLoop(std::unique_ptr<vulkan::Context>&& owned, const vulkan::Context& context,
                   const format::Container& container, const loop::FrameLoopOptions& options);
   void retire_completed();
+  /// Steps 1–3 of a frame: retire, the scheduler's update, the decode of the uploads.
+  stream::FrameUpdate update_and_decode(const player::OrbitCamera& camera, double playhead,
+                                        loop::FrameReport& report);
   void decode_uploads(const std::vector<stream::BrickUpload>& uploads,
                       std::vector<std::string>& errors);
   std::uint64_t histogram_of(const stream::KeyframeKey& key) const;
@@ -90,7 +94,7 @@ class VulkanFrameLoop final : public loop::FrameLoop {
   std::unique_ptr<stream::StreamScheduler> scheduler_;
   std::vector<std::uint64_t> slot_histograms_;  ///< per atlas slot, its brick's node histogram
   std::vector<std::uint64_t> leaf_histograms_;
-  std::vector<std::uint32_t> changed_slots_;
+  std::vector<std::uint32_t> changed_slots_;  ///< decoded since the last rendered frame
   stream::FrameUpdate last_update_;
   Ticket retired_ = 0;
 };
