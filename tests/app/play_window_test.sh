@@ -10,7 +10,8 @@
 # installed, that it reports no error). Then: the CPU reference renderer in the same window draws
 # keyframe 0 like the Vulkan ray caster (PSNR > 30 dB); a copy with a truncated frame file plays to
 # the end with the problem reported; without a display the command says how to get one. Real
-# mouse input and minimizing are tested by play_input_test.sh.
+# mouse input and minimizing are tested by play_input_test.sh. Frame-time control: while playing
+# the volume image is smaller, paused and settled it is at full size.
 # Exits 77 (skipped) without xvfb-run or without a Vulkan device that can present to a window.
 # Usage: play_window_test.sh PATH/TO/volreel
 set -euo pipefail
@@ -154,6 +155,19 @@ psnr = 10 * np.log10(255 ** 2 / max(mse, 1e-12))
 print(f"CPU vs Vulkan renderer in the window: PSNR {psnr:.1f} dB")
 sys.exit(0 if psnr > 30 else 1)
 PY
+
+# Frame-time control: while playing, the volume image is rendered smaller to hold --frame-ms (here
+# an unreachable 1 ms: the smallest scale, 1/8 of the side) and scaled up; paused and settled,
+# at the window's full size.
+timeout 60 xvfb-run -a -s "-screen 0 1280x800x24" "$volreel" play "$work/a.vreel" --size 320x240 \
+  --frame-ms 1 --fixed-frame-time 0.05 --loop ${VOLREEL_PLAY_TEST_ARGS:-} --script-inline \
+  "0 key h; 0 key space; 12f screenshot $work/busy.png; +1f key space; 0 settle 30; 0 screenshot $work/still.png; 0 quit" \
+  > "$work/out_res.txt" 2> "$work/err_res.txt" || fail "play --frame-ms 1: $(cat "$work/err_res.txt")"
+grep -q "screenshot: $work/busy.png (volume image 40x30)" "$work/out_res.txt" \
+  || fail "playing did not reduce the volume image to 40x30: $(grep "screenshot:" "$work/out_res.txt")"
+grep -q "screenshot: $work/still.png (volume image 320x240)" "$work/out_res.txt" \
+  || fail "the still view is not at full size: $(grep "screenshot:" "$work/out_res.txt")"
+echo "frame-time control: busy 40x30, still 320x240"
 
 # A truncated frame file: reported (HUD and stderr), playback continues to the last keyframe.
 cp -r "$work/a.vreel" "$work/b.vreel"

@@ -2,7 +2,10 @@
 // split (schedule, upload, decode, render) while playing forward, reversing and seeking along a
 // built-in script with an orbiting camera, the throughput when the CPU work of a frame overlaps
 // the GPU work of the previous one, and the time from a random seek until every visible node is
-// drawn at its target LOD.
+// drawn at its target LOD. With a frame-time target (--frame-ms, the player's default), frames
+// while the camera orbits, the playhead runs or a seek streams in are rendered at the resolution
+// that holds the target (loop::ResolutionControl) and the still view at full resolution, as in
+// the player window; --frame-ms 0 renders every frame at full resolution.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -20,6 +23,7 @@
 #include "volreel/loop/auto_transfer.hpp"
 #include "volreel/loop/frame_loop.hpp"
 #include "volreel/loop/loop_settings.hpp"
+#include "volreel/loop/resolution_control.hpp"
 #include "volreel/vulkan_render/open_frame_loop.hpp"
 
 namespace volreel::cli {
@@ -39,6 +43,7 @@ struct BenchPlayOptions {
   double speed = 10;           ///< keyframes per second of playback
   double frame_dt = 1.0 / 30;  ///< playback time per rendered frame, seconds
   double timeout = 60;         ///< seconds a seek may take to reach full quality
+  double frame_ms = 100;       ///< frame-time target while busy (0: always full resolution)
   std::string transfer = "auto";
   bool cpu = false;
   std::uint64_t seed = 1;
@@ -48,10 +53,11 @@ struct BenchPlayOptions {
 struct PhaseStats {
   std::size_t frames = 0;
   double wall_s = 0, schedule = 0, upload = 0, decode = 0, render = 0, at_target = 0,
-         min_at_target = 1;
+         min_at_target = 1, scale = 0;
   std::uint64_t loaded_before = 0, loaded_after = 0;
-  void add(const loop::FrameReport& r) {
+  void add(const loop::FrameReport& r, double frame_scale) {
     ++frames;
+    scale += frame_scale;
     schedule += r.timings.schedule_ms;
     upload += r.timings.upload_ms;
     decode += r.timings.decode_ms;
@@ -62,10 +68,10 @@ struct PhaseStats {
   }
   void print(const char* name) const {
     const double n = static_cast<double>(std::max<std::size_t>(frames, 1));
-    std::printf("%-18s %6zu %8.2f %9.1f %9.2f %8.2f %8.2f %8.1f %9.1f %8.0f%% %7.0f%%\n", name,
-                frames, n / wall_s, 1000 * wall_s / n, schedule / n, upload / n, decode / n,
-                render / n, double(loaded_after - loaded_before) * 1e-6, 100 * at_target / n,
-                100 * min_at_target);
+    std::printf("%-18s %6zu %8.2f %9.1f %6.0f%% %9.2f %8.2f %8.2f %8.1f %9.1f %8.0f%% %7.0f%%\n",
+                name, frames, n / wall_s, 1000 * wall_s / n, 100 * scale / n, schedule / n,
+                upload / n, decode / n, render / n, double(loaded_after - loaded_before) * 1e-6,
+                100 * at_target / n, 100 * min_at_target);
   }
 };
 
@@ -117,41 +123,90 @@ void run_bench_play(const BenchPlayOptions& o) {
     return camera;
   };
 
+  // Frames at the resolution the frame-time control chooses: busy frames (camera or playhead
+  // moving, data streaming in) reduced, still ones full; the camera takes the image size.
+  loop::ResolutionControl control(loop::ResolutionSettings{o.frame_ms > 0 ? o.frame_ms : 100});
+  const int full_width = options.width, full_height = options.height;
+  int width = full_width, height = full_height;
+  double scale = 1;
+  Clock::time_point previous_start;
+  bool previous_drawn = false;
+  const auto draw = [&](player::OrbitCamera view, double at, bool busy) {
+    scale = o.frame_ms > 0 ? control.next(busy) : 1.0;
+    const auto [w, h] = loop::scaled_size(full_width, full_height, scale);
+    if (w != width || h != height) {
+      loop->resize(w, h);
+      width = w;
+      height = h;
+    }
+    view.width = w;
+    view.height = h;
+    const auto start = Clock::now();
+    loop::FrameReport r = loop->frame(view, at, tf);
+    // Serial frames: their own time; overlapped ones: the time between frame starts.
+    const double ms = loop->options().pipelined && previous_drawn
+                          ? 1000 * std::chrono::duration<double>(start - previous_start).count()
+                          : 1000 * seconds_since(start);
+    control.measured(scale, ms);
+    previous_start = start;
+    previous_drawn = true;
+    return r;
+  };
+  /// Frames at a still view until one at full resolution shows every visible node at its target
+  /// LOD (busy, so reduced, while bricks stream in); false on the timeout.
+  const auto until_full_quality = [&](double at, std::size_t& frames, loop::FrameReport& r,
+                                      Clock::time_point start) {
+    bool complete = false;
+    do {
+      r = draw(camera, at, !complete);
+      ++frames;
+      complete = r.stats.fraction_at_target >= 1.0 && r.stats.arrivals_waiting == 0;
+      if (complete && scale == 1.0) return true;
+    } while (seconds_since(start) < o.timeout);
+    return false;
+  };
+
   // 2. Cold start: playhead 0, fixed camera, until everything visible is at its target LOD.
   double playhead = 0;
   {
     const auto start = Clock::now();
     std::size_t frames = 0;
     loop::FrameReport r;
-    do {
-      r = loop->frame(camera, playhead, tf);
-      ++frames;
-    } while (r.stats.fraction_at_target < 1.0 && seconds_since(start) < o.timeout);
+    until_full_quality(playhead, frames, r, start);
     std::printf(
         "cold start to full quality: %.2f s, %zu frames (%.0f%% at target, %.1f MB loaded)\n\n",
         seconds_since(start), frames, 100 * r.stats.fraction_at_target,
         double(r.stats.bytes_loaded) * 1e-6);
   }
 
-  // 3. Phases along the script; serial frames give the exact time split.
-  std::printf("%-18s %6s %8s %9s %9s %8s %8s %8s %9s %9s %8s\n", "phase", "frames", "fps",
-              "frame ms", "schedule", "upload", "decode", "render", "MB read", "at target",
+  // 3. Phases along the script (the camera orbits: busy); serial frames give the exact time
+  //    split. After each, the view stops: the time to the full-resolution image.
+  std::printf("%-18s %6s %8s %9s %7s %9s %8s %8s %8s %9s %9s %8s\n", "phase", "frames", "fps",
+              "frame ms", "scale", "schedule", "upload", "decode", "render", "MB read", "at target",
               "worst");
   SplitMix64 rng(o.seed);
+  std::vector<double> refine_s;
   const auto run_phase = [&](const char* name, auto&& advance, bool pipelined) {
     PhaseStats s;
     loop->set_pipelined(pipelined);
-    loop::FrameReport r =
-        loop->frame(next_camera(), playhead, tf);  // not counted: settles the mode
+    previous_drawn = false;
+    loop::FrameReport r = draw(next_camera(), playhead, true);  // not counted: settles the mode
     s.loaded_before = r.stats.bytes_loaded;
     const auto start = Clock::now();
     for (std::size_t i = 0; i < o.frames_per_phase; ++i) {
       playhead = std::clamp(advance(i), 0.0, last);
-      s.add(loop->frame(next_camera(), playhead, tf));
+      s.add(draw(next_camera(), playhead, true), scale);
     }
     loop->finish();
     s.wall_s = seconds_since(start);
     s.print(name);
+    if (!pipelined) {
+      const auto stop = Clock::now();
+      camera.azimuth = azimuth0 + glm::radians(static_cast<double>(frame_number - 1));
+      draw(camera, playhead, false);
+      loop->finish();
+      refine_s.push_back(seconds_since(stop));
+    }
   };
   const double step = o.speed * o.frame_dt;
   run_phase(
@@ -171,26 +226,41 @@ void run_bench_play(const BenchPlayOptions& o) {
         " render columns are not measured per frame)\n");
   }
   loop->set_pipelined(false);
+  std::printf("(scale: mean side of the rendered image relative to %dx%d; %s)\n", full_width,
+              full_height,
+              o.frame_ms > 0 ? ("frame-time target " + std::to_string(o.frame_ms) + " ms").c_str()
+                             : "--frame-ms 0: always full resolution");
+  if (!refine_s.empty())
+    std::printf("full-resolution image after the view stops: %s s (each phase)\n",
+                [&] {
+                  std::string list;
+                  for (double t : refine_s) {
+                    char b[32];
+                    std::snprintf(b, sizeof b, "%s%.3f", list.empty() ? "" : ", ", t);
+                    list += b;
+                  }
+                  return list;
+                }()
+                    .c_str());
 
-  // 4. Random seeks: how long until every visible node is drawn at its target LOD.
+  // 4. Random seeks: how long until every visible node is drawn at its target LOD, at full
+  //    resolution (the frames while bricks stream in are busy ones).
   std::printf("\nrandom seek to full quality (camera still; %zu seeks):\n", o.seeks);
+  camera.azimuth = azimuth0;
   std::vector<double> times;
   for (std::size_t k = 0; k < o.seeks; ++k) {
     // Spread over the timeline (golden-ratio steps from a seeded start), never the same twice.
     playhead = last * std::fmod(0.5 + 0.6180339887 * double(k + 1) + 0.1 * double(o.seed), 1.0);
+    const std::uint64_t before = loop->scheduler().loader().bytes_read();
     const auto start = Clock::now();
     std::size_t frames = 0;
     loop::FrameReport r;
-    const std::uint64_t before = loop->frame(camera, playhead, tf).stats.bytes_loaded;
-    do {
-      r = loop->frame(camera, playhead, tf);
-      ++frames;
-    } while (r.stats.fraction_at_target < 1.0 && seconds_since(start) < o.timeout);
+    const bool reached = until_full_quality(playhead, frames, r, start);
     const double t = seconds_since(start);
     times.push_back(t);
     std::printf("  seek to keyframe %7.2f: %.3f s, %4zu frames, %.1f MB read%s\n", playhead, t,
                 frames, double(r.stats.bytes_loaded - before) * 1e-6,
-                r.stats.fraction_at_target < 1.0 ? " (timed out)" : "");
+                reached ? "" : " (timed out)");
   }
   if (!times.empty()) {
     double sum = 0;
@@ -219,6 +289,11 @@ void add_bench_play_command(CLI::App& bench) {
   cmd->add_option("--speed", o->speed, "Playback rate, keyframes per second")
       ->capture_default_str();
   cmd->add_option("--timeout", o->timeout, "Seconds a seek may take to reach full quality")
+      ->capture_default_str();
+  cmd->add_option("--frame-ms", o->frame_ms,
+                  "Frame-time target while the view is busy (reduced resolution, full when "
+                  "still), milliseconds; 0: every frame at full resolution")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option("--transfer", o->transfer,
                   "Transfer function: auto (data quantiles), a preset or a JSON file")

@@ -25,7 +25,7 @@ struct PlayCommandOptions {
   std::string size = "1024x720";
   double atlas_mb = 256, upload_mb = 8;
   std::string bandwidth = "0", latency = "0";
-  std::string renderer = "auto";
+  std::string renderer = "auto", decode = "auto";
   std::string script_file, script_inline, screenshot_on_exit;
   RemoteCli remote;
 };
@@ -45,6 +45,7 @@ void run_play(PlayCommandOptions& o) {
       std::max<std::uint64_t>(static_cast<std::uint64_t>(o.upload_mb * 1024 * 1024), 1);
   p.bandwidth_bytes_per_s = loop::parse_bandwidth(o.bandwidth);
   p.latency_s = loop::parse_latency(o.latency);
+  p.decode = loop::parse_decode(o.decode);
   p.renderer = o.renderer == "cpu"      ? app::RendererKind::cpu
                : o.renderer == "vulkan" ? app::RendererKind::vulkan
                                         : app::RendererKind::automatic;
@@ -127,6 +128,17 @@ void add_play_command(CLI::App& app) {
   cmd->add_option("--render-scale", o->player.render_scale,
                   "Volume image size relative to the window")
       ->check(CLI::Range(0.05, 1.0))
+      ->capture_default_str();
+  cmd->add_option("--frame-ms", o->player.frame_ms,
+                  "Frame-time target while the view is busy (orbiting, playing, streaming): the "
+                  "volume is rendered smaller to hold it and at full size once the view is still, "
+                  "milliseconds (0: always full size)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_option("--decode", o->decode,
+                  "Where bricks are decoded: auto (on the CPU with a CPU Vulkan implementation "
+                  "such as lavapipe, in the compute shader on a GPU), gpu or cpu")
+      ->check(CLI::IsMember({"auto", "gpu", "cpu"}))
       ->capture_default_str();
   cmd->add_option("--script", o->script_file, "Replay the timed actions of this file");
   cmd->add_option("--script-inline", o->script_inline,

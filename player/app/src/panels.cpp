@@ -92,7 +92,8 @@ void Player::draw_hud() {
       ImGui::Text("keyframe %.2f / %.0f  %s %s %.2gx", t, playhead_.last(),
                   playhead_.playing() ? "playing" : "paused", playhead_.reversed() ? "back" : "fwd",
                   playhead_.speed());
-      ImGui::Text("%.1f fps  %.1f ms  %.2f MB/s", fps_.value, 1e3 * t_frame_.value, mb_per_s_);
+      ImGui::Text("%.1f fps  %.1f ms  %.2f MB/s  %ux%u", fps_.value, 1e3 * t_frame_.value,
+                  mb_per_s_, render_extent_.width, render_extent_.height);
       ImGui::Text(
           "atlas %.0f%%  at target %.0f%%  holes %u",
           stats_.atlas_capacity ? 100.0 * stats_.atlas_occupied / stats_.atlas_capacity : 0.0,
@@ -121,6 +122,11 @@ void Player::draw_hud() {
       ImGui::Text("schedule %.2f  upload %.2f  decode %s  render %s  wait %.2f ms",
                   t_schedule_.value, t_upload_.value, ms(decode_measured_, t_decode_).c_str(),
                   ms(render_measured_, t_render_).c_str(), 1e3 * t_wait_.value);
+      ImGui::Text("image %ux%u (%.0f%% of the side, %s)", render_extent_.width,
+                  render_extent_.height, 100.0 * options_.render_scale * frame_scale_,
+                  options_.frame_ms <= 0 ? "fixed"
+                  : busy_                ? "busy: reduced to hold the frame time"
+                                         : "still: full");
       ImGui::Checkbox("exact timings (no overlap)", &exact_timings_);
       ImGui::Text(
           "atlas %u / %u slots (%.0f%%)", stats_.atlas_occupied, stats_.atlas_capacity,

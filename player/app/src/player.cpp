@@ -48,7 +48,8 @@ Player::Player(const PlayerOptions& options)
       script_(parse_script(options.script)),
       window_(options.width, options.height, "volreel — " + options.container.filename().string()),
       playhead_(std::max<std::size_t>(container_.frame_count(), 1),
-                stream::PlayheadOptions{options.keyframes_per_second, options.loop}) {
+                stream::PlayheadOptions{options.keyframes_per_second, options.loop}),
+      resolution_(loop::ResolutionSettings{options.frame_ms > 0 ? options.frame_ms : 100}) {
   const format::Manifest& m = container_.manifest();
   // 1. Vulkan: a device whose queue can present to the window's surface.
   vulkan::keep_vulkan_drivers_loaded();  // before GLFW's own first Vulkan calls
@@ -92,6 +93,7 @@ Player::Player(const PlayerOptions& options)
   setup.scheduler.loader.latency_s = options.latency_s;
   setup.scheduler.loader.max_in_flight = options.max_requests;
   setup.scheduler.upload_budget_bytes = options.upload_bytes;
+  setup.decode = options.decode;
   setup.width = render_size(swapchain_->extent()).width;
   setup.height = render_size(swapchain_->extent()).height;
   if (options.renderer == RendererKind::cpu) {
@@ -172,10 +174,19 @@ void Player::rebuild_transfer() {
 }
 
 VkExtent2D Player::render_size(VkExtent2D window) const {
-  const auto scaled = [&](std::uint32_t n) {
-    return std::max(1u, static_cast<std::uint32_t>(std::lround(n * options_.render_scale)));
-  };
-  return {scaled(window.width), scaled(window.height)};
+  const auto [w, h] =
+      loop::scaled_size(static_cast<int>(window.width), static_cast<int>(window.height),
+                        options_.render_scale * frame_scale_);
+  return {static_cast<std::uint32_t>(w), static_cast<std::uint32_t>(h)};
+}
+
+bool Player::view_busy() const {
+  const player::OrbitCamera& a = camera_;
+  const player::OrbitCamera& b = previous_camera_;
+  const bool moved = a.target != b.target || a.distance != b.distance || a.azimuth != b.azimuth ||
+                     a.elevation != b.elevation || a.fov_y != b.fov_y;
+  const bool streaming = stats_.fraction_at_target < 1.0 || stats_.arrivals_waiting > 0;
+  return moved || playhead_.position() != previous_playhead_ || streaming;
 }
 
 bool Player::window_hidden() const {
@@ -292,7 +303,8 @@ void Player::finish_screenshots(FrameSlot& slot) {
     try {
       image::write_png(path, shot);
       if (!options_.quiet) {
-        std::printf("screenshot: %s\n", path.string().c_str());
+        std::printf("screenshot: %s (volume image %ux%u)\n", path.string().c_str(),
+                    slot.shot_volume.width, slot.shot_volume.height);
         std::fflush(stdout);
       }
     } catch (const std::exception& e) {
@@ -308,13 +320,14 @@ void Player::print_status(bool force) {
   if (options_.quiet || (!force && seconds_between(last_status_, now) < 1.0)) return;
   last_status_ = now;
   std::printf(
-      "frame %llu  keyframe %.2f  %s  %.1f fps  schedule %.1f upload %.1f decode %.1f render "
-      "%.1f ms  atlas %u/%u  in flight %zu  %.2f MB/s  at target %.0f%%  errors %zu\n",
+      "frame %llu  keyframe %.2f  %s  %.1f fps  image %ux%u  schedule %.1f upload %.1f decode "
+      "%.1f render %.1f ms  atlas %u/%u  in flight %zu  %.2f MB/s  at target %.0f%%  errors "
+      "%zu\n",
       static_cast<unsigned long long>(frame_number_), playhead_.position(),
-      playhead_.playing() ? "playing" : "paused", fps_.value, t_schedule_.value, t_upload_.value,
-      t_decode_.value, t_render_.value, stats_.atlas_occupied, stats_.atlas_capacity,
-      stats_.requests_in_flight, mb_per_s_, 100.0 * stats_.fraction_at_target,
-      renderer_->scheduler().error_count());
+      playhead_.playing() ? "playing" : "paused", fps_.value, render_extent_.width,
+      render_extent_.height, t_schedule_.value, t_upload_.value, t_decode_.value, t_render_.value,
+      stats_.atlas_occupied, stats_.atlas_capacity, stats_.requests_in_flight, mb_per_s_,
+      100.0 * stats_.fraction_at_target, renderer_->scheduler().error_count());
   std::fflush(stdout);
 }
 
@@ -350,7 +363,10 @@ bool Player::submit_and_present(FrameSlot& slot, VkExtent2D extent) {
 
   const bool capture = !pending_screenshots_.empty() && swapchain_->readable();
   record(slot, index, capture);
-  if (capture) slot.screenshots = std::move(pending_screenshots_);
+  if (capture) {
+    slot.screenshots = std::move(pending_screenshots_);
+    slot.shot_volume = render_extent_;
+  }
   pending_screenshots_.clear();
   slot.done.reset();
   const VkSemaphore wait_semaphore = slot.image_acquired.handle();
@@ -443,7 +459,6 @@ int Player::run() {
       if (recreate_) continue;  // minimized or zero-sized again: the next pass waits
     }
     const VkExtent2D extent = swapchain_->extent();
-    const VkExtent2D wanted = render_size(extent);
     const std::uint32_t slot_index = static_cast<std::uint32_t>(frame_number_ % frames_in_flight);
     FrameSlot& slot = slots_[slot_index];
 
@@ -453,22 +468,33 @@ int Player::run() {
     const double waited = seconds_between(wait_start, Clock::now());
     if (slot.gpu_frame > 0) renderer_->retired(slot.gpu_frame);
     finish_screenshots(slot);
-    if (wanted.width != render_extent_.width || wanted.height != render_extent_.height) {
-      context_->wait_idle();
-      renderer_->resize(wanted.width, wanted.height);
-      render_extent_ = renderer_->extent();
-    }
 
     // 3. Input, script, playhead.
     const auto now = Clock::now();
     const double dt = seconds_between(previous, now);
     previous = now;
+    // The last frame's period at its scale feeds the frame-time control (not across a pause).
+    if (frame_number_ > 0 && !resumed_) resolution_.measured(frame_scale_, 1e3 * dt);
     ImGui_ImplVulkan_NewFrame();
     ImGui_ImplGlfw_NewFrame();
     ImGui::NewFrame();
     handle_input();
     run_script(frame_number_ == 0 ? 0.0 : dt);
     playhead_.advance(options_.fixed_frame_seconds > 0 ? options_.fixed_frame_seconds : dt);
+
+    // The volume image's size: reduced while the view is busy, full once it is still; a new size
+    // waits for the frames in flight (the output image is re-created). A screenshot shows what
+    // the window shows.
+    busy_ = view_busy();
+    frame_scale_ = options_.frame_ms > 0 ? resolution_.next(busy_) : 1.0;
+    previous_camera_ = camera_;
+    previous_playhead_ = playhead_.position();
+    const VkExtent2D wanted = render_size(extent);
+    if (wanted.width != render_extent_.width || wanted.height != render_extent_.height) {
+      context_->wait_idle();
+      renderer_->resize(wanted.width, wanted.height);
+      render_extent_ = renderer_->extent();
+    }
 
     // 4. Scheduler, decode and render (the renderer's CPU work and its own submissions).
     const FrameOutput output = render_volume(slot_index);

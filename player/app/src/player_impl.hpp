@@ -20,6 +20,7 @@
 #include "volreel/app/script.hpp"
 #include "volreel/cpu_render/transfer_function.hpp"
 #include "volreel/format/container.hpp"
+#include "volreel/loop/resolution_control.hpp"
 #include "volreel/player/camera.hpp"
 #include "volreel/stream/playhead.hpp"
 #include "volreel/stream/scheduler.hpp"
@@ -46,6 +47,7 @@ struct FrameSlot {
   vulkan::Buffer readback;
   std::vector<std::filesystem::path> screenshots;  ///< paths for the frame read back
   VkExtent2D shot_extent{};
+  VkExtent2D shot_volume{};  ///< the volume image's size in that frame
   bool shot_bgr = false;
 };
 
@@ -131,8 +133,19 @@ class Player {
   Clock::time_point last_status_;
 
   VkExtent2D render_extent_{};
+  /// Frame-time control: the volume image's scale while the view is busy (options.frame_ms).
+  loop::ResolutionControl resolution_;
+  double frame_scale_ = 1.0;  ///< of the frame being drawn
+  player::OrbitCamera previous_camera_;
+  double previous_playhead_ = -1;
+  bool busy_ = true;  ///< the view was busy at the last frame
 
+  /// The volume image size for the window at the scale of this frame (render_scale ×
+  /// frame_scale_).
   VkExtent2D render_size(VkExtent2D window) const;
+  /// Whether the view is busy: the camera moved or the playhead changed since the last frame, or
+  /// what it shows is still streaming in.
+  bool view_busy() const;
   bool window_hidden() const;
   void wait_while_hidden();
   void recreate_swapchain();

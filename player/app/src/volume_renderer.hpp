@@ -23,6 +23,7 @@
 
 #include "volreel/cpu_render/transfer_function.hpp"
 #include "volreel/format/container.hpp"
+#include "volreel/loop/frame_loop.hpp"
 #include "volreel/player/camera.hpp"
 #include "volreel/stream/scheduler.hpp"
 #include "volreel/vulkan/context.hpp"
@@ -77,6 +78,7 @@ struct RendererSetup {
   std::uint64_t atlas_bytes = 0;        ///< memory budget of the atlas
   std::uint32_t frames_in_flight = 2;
   std::uint32_t width = 1, height = 1;  ///< first image size
+  loop::FrameLoopOptions::Decode decode = loop::FrameLoopOptions::Decode::automatic;  ///< Vulkan
 };
 
 std::unique_ptr<VolumeRenderer> make_cpu_renderer(const RendererSetup& setup);

@@ -74,6 +74,7 @@ class VulkanRenderer final : public VolumeRenderer {
     o.height = static_cast<int>(setup.height);
     o.gpu.frames_in_flight = setup.frames_in_flight + 1;
     o.pipelined = true;
+    o.gpu.decode = setup.decode;
     return std::make_unique<vulkan_render::VulkanFrameLoop>(*setup.context, *setup.container, o);
   }
 };

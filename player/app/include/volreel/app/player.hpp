@@ -22,6 +22,7 @@
 #include <string>
 
 #include "volreel/format/source.hpp"
+#include "volreel/loop/frame_loop.hpp"
 
 namespace volreel::app {
 
@@ -48,7 +49,13 @@ struct PlayerOptions {
   bool loop = false;                   ///< wrap around at the ends of the timeline
   bool vsync = true;                   ///< FIFO presentation (else immediate when available)
   RendererKind renderer = RendererKind::automatic;
-  double render_scale = 1.0;     ///< volume image size / window size, (0, 1]
+  double render_scale = 1.0;  ///< volume image size / window size, (0, 1]
+  /// Frame-time target while the view is busy (camera moving, playing, bricks streaming in),
+  /// milliseconds: the volume image is rendered smaller to hold it and at full size once the
+  /// view is still (loop::ResolutionControl). 0: always full size.
+  double frame_ms = 100;
+  /// Where the Vulkan renderer decodes bricks (loop::FrameLoopOptions::Decode).
+  loop::FrameLoopOptions::Decode decode = loop::FrameLoopOptions::Decode::automatic;
   std::string script;            ///< script text (script.hpp), empty for none
   std::uint64_t max_frames = 0;  ///< quit after this many frames (0: never)
   std::optional<std::filesystem::path> screenshot_on_exit;  ///< PNG of the last frame

@@ -20,7 +20,7 @@
 namespace volreel::loop {
 
 struct ResolutionSettings {
-  double frame_ms = 100;   ///< target frame time while the view is busy, milliseconds (> 0)
+  double frame_ms = 100;     ///< target frame time while the view is busy, milliseconds (> 0)
   double min_scale = 0.125;  ///< smallest scale of the image side, (0, 1]
   /// A busy scale is changed only when its predicted frame time is off the target by more than
   /// this fraction (either way).
@@ -47,7 +47,7 @@ class ResolutionControl {
   ResolutionSettings settings_;
   double scale_ = 1.0;
   double busy_scale_ = 1.0;  ///< the scale used while busy (kept across still periods)
-  double fixed_ms_ = 0, per_full_frame_ms_ = 0;  ///< the cost model
+  double fixed_ms_ = 0, per_full_frame_ms_ = 0;    ///< the cost model
   std::deque<std::pair<double, double>> samples_;  ///< (s², ms) of recent frames
   void fit();
 };
