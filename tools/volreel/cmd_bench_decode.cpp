@@ -207,6 +207,7 @@ void run_bench_decode(const BenchDecodeOptions& o) {
     // one wait; slots reused round-robin.
     std::vector<vulkan::BrickUpload> uploads;
     const std::uint64_t bytes_before = decoder.stats().uploaded_bytes;
+    const double host_before = decoder.stats().cpu_decode_seconds;
     std::size_t passes = 0;
     const double gpu = time_passes(o.min_seconds, [&] {
       ++passes;
@@ -224,9 +225,14 @@ void run_bench_decode(const BenchDecodeOptions& o) {
     const double bytes_per_pass =
         static_cast<double>(decoder.stats().uploaded_bytes - bytes_before) /
         static_cast<double>(passes);
-    std::printf("%7zu | %12.1f %15.0f | %12.1f %15.0f %15.1f\n", batch, total_mvoxel / cpu,
+    std::printf("%7zu | %12.1f %15.0f | %12.1f %15.0f %15.1f", batch, total_mvoxel / cpu,
                 static_cast<double>(bricks.size()) / cpu, total_mvoxel / gpu,
                 static_cast<double>(bricks.size()) / gpu, bytes_per_pass * 1e-6 / gpu);
+    if (decoder.kernel() == vulkan::DecoderOptions::Kernel::host)
+      std::printf("   (%.0f%% decoding on the CPU, the rest copying into the atlas)",
+                  100 * (decoder.stats().cpu_decode_seconds - host_before) /
+                      (gpu * static_cast<double>(passes)));
+    std::printf("\n");
   }
   std::printf(
       "\nMVoxel/s counts the stored 36^3 voxels of each brick (apron included). upload MB/s: bytes "

@@ -146,10 +146,23 @@ float Atlas::texel_to_value(std::uint16_t texel) const {
 }
 
 std::uint16_t Atlas::value_to_texel(float value) const {
-  if (options_.format == AtlasFormat::r16_sfloat) return float_to_half(value);
-  const float x = (value - options_.value_min) / (options_.value_max - options_.value_min);
-  const float n = std::isnan(x) ? 0.0f : std::clamp(x, 0.0f, 1.0f);  // NaN: the lowest value
-  return static_cast<std::uint16_t>(std::lround(n * 65535.0f));
+  std::uint16_t texel = 0;
+  values_to_texels({&value, 1}, &texel);
+  return texel;
+}
+
+void Atlas::values_to_texels(std::span<const float> values, std::uint16_t* out) const {
+  if (options_.format == AtlasFormat::r16_sfloat) {
+    for (std::size_t i = 0; i < values.size(); ++i) out[i] = float_to_half(values[i]);
+    return;
+  }
+  // The same arithmetic as value_to_texel, in a loop the compiler vectorizes.
+  const float lo = options_.value_min, inv = 1.0f / (options_.value_max - options_.value_min);
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    const float x = (values[i] - lo) * inv;
+    const float n = x > 0.0f ? (x < 1.0f ? x : 1.0f) : 0.0f;  // NaN: the lowest value
+    out[i] = static_cast<std::uint16_t>(n * 65535.0f + 0.5f);   // n ≥ 0: round to nearest
+  }
 }
 
 float Atlas::round_trip(float value) const {

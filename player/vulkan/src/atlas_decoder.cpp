@@ -515,9 +515,7 @@ void AtlasDecoder::decode_on_host(std::span<const BrickUpload> bricks, std::size
         }
         continue;
       }
-      std::uint16_t* out = texels + static_cast<std::size_t>(i) * format::brick_voxels;
-      for (std::size_t v = 0; v < format::brick_voxels; ++v)
-        out[v] = atlas_.value_to_texel(values[v]);
+      atlas_.values_to_texels(values, texels + static_cast<std::size_t>(i) * format::brick_voxels);
     }
   }
   stats_.cpu_decode_seconds +=

@@ -12,6 +12,7 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "volreel/vulkan/context.hpp"
@@ -71,6 +72,8 @@ class Atlas {
   float texel_to_value(std::uint16_t texel) const;
   /// The texel that `value` is stored as (round to nearest; r16_unorm clamps to the range).
   std::uint16_t value_to_texel(float value) const;
+  /// value_to_texel of each value, into out[0 .. values.size()).
+  void values_to_texels(std::span<const float> values, std::uint16_t* out) const;
   /// The value a voxel of `value` reads back as (the format's rounding, round-to-nearest).
   float round_trip(float value) const;
   /// Largest |round_trip(v) − v| for v of magnitude ≤ |value| (half a unit of the format, for
