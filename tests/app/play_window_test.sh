@@ -67,7 +67,7 @@ done
 validation=${VOLREEL_PLAY_TEST_VALIDATION:-$validation}
 
 set +e
-VOLREEL_VULKAN_VALIDATION=$validation timeout 120 xvfb-run -a -s "-screen 0 1280x800x24" "$volreel" play "$work/a.vreel" --size 320x240 \
+VOLREEL_VULKAN_VALIDATION=$validation timeout 120 xvfb-run -a -s "-screen 0 1280x800x24" "$volreel" play "$work/a.vreel" --size 320x240 --renderer vulkan \
   --script "$work/script.txt" --fixed-frame-time 0.05 --screenshot-on-exit "$work/exit.png" \
   ${VOLREEL_PLAY_TEST_ARGS:-} > "$work/out.txt" 2> "$work/err.txt"
 rc=$?

@@ -34,7 +34,8 @@ check_run() {  # $1 output folder; the tour has 20 frames
     "$out/metrics.csv"
 }
 
-"$volreel" render "$dir/test.vreel" --tour "$dir/tour.json" --out "$dir/gpu" > "$dir/gpu.log" 2>&1 \
+"$volreel" render "$dir/test.vreel" --tour "$dir/tour.json" --out "$dir/gpu" --renderer vulkan \
+  > "$dir/gpu.log" 2>&1 \
   || { cat "$dir/gpu.log"; exit 1; }
 check_run "$dir/gpu"
 "$volreel" render "$dir/test.vreel" --tour "$dir/tour.json" --out "$dir/cpu" --cpu \

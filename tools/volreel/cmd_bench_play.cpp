@@ -45,6 +45,7 @@ struct BenchPlayOptions {
   double timeout = 60;         ///< seconds a seek may take to reach full quality
   double frame_ms = 100;       ///< frame-time target while busy (0: always full resolution)
   std::string transfer = "auto";
+  std::string renderer = "auto";
   bool cpu = false;
   std::uint64_t seed = 1;
 };
@@ -87,8 +88,11 @@ void run_bench_play(const BenchPlayOptions& o) {
     throw InputError(e.what());
   }
   const std::unique_ptr<loop::FrameLoop> loop = vulkan_render::open_frame_loop(
-      container, options, o.cpu, vulkan_render::NoDevice::fail,
-      "(bench play measures the Vulkan player; --cpu measures the CPU renderer)");
+      container, options,
+      o.cpu ? vulkan_render::RendererChoice::cpu : vulkan_render::parse_renderer(o.renderer),
+      vulkan_render::NoDevice::fail,
+      "(bench play measures the player's Vulkan or CPU ray caster; --renderer cpu measures the "
+      "CPU one without a Vulkan device)");
   const std::string device = loop->describe();
   const std::uint32_t slots = loop->slot_count();
   const std::size_t keyframes = container.frame_count();
@@ -156,7 +160,10 @@ void run_bench_play(const BenchPlayOptions& o) {
   /// LOD (busy, so reduced, while bricks stream in); false on the timeout.
   const auto until_full_quality = [&](double at, std::size_t& frames, loop::FrameReport& r,
                                       Clock::time_point start) {
-    bool complete = false;
+    // The stream step first: a view whose bricks are all there is drawn at full resolution at
+    // once (as in the player, whose previous frame says so).
+    const loop::FrameReport probe = loop->stream(camera, at);
+    bool complete = probe.stats.fraction_at_target >= 1.0 && probe.stats.arrivals_waiting == 0;
     do {
       r = draw(camera, at, !complete);
       ++frames;
@@ -279,7 +286,8 @@ void add_bench_play_command(CLI::App& bench) {
       bench.add_subcommand("play",
                            "Player frame rate and frame-time split while playing forward, "
                            "reversing and seeking, and the time from a "
-                           "random seek to full quality (Vulkan; --cpu for the CPU renderer)");
+                           "random seek to full quality (--renderer: Vulkan or the CPU ray "
+                           "caster)");
   o->loop.size = "512x512";
   cmd->add_option("CONTAINER", o->container, "The container directory NAME.vreel")->required();
   cmd->add_option("--size", o->loop.size, "Image size WxH")->capture_default_str();
@@ -299,7 +307,13 @@ void add_bench_play_command(CLI::App& bench) {
                   "Transfer function: auto (data quantiles), a preset or a JSON file")
       ->capture_default_str();
   add_loop_options(*cmd, o->loop);
-  cmd->add_flag("--cpu", o->cpu, "Measure the CPU reference renderer instead of Vulkan");
+  cmd->add_option(
+         "--renderer", o->renderer,
+         "Ray caster: auto (Vulkan on a GPU; the CPU reference renderer where Vulkan runs on "
+         "the CPU, as lavapipe does, or where there is no Vulkan device), vulkan or cpu")
+      ->check(CLI::IsMember({"auto", "vulkan", "cpu"}))
+      ->capture_default_str();
+  cmd->add_flag("--cpu", o->cpu, "The same as --renderer cpu");
   cmd->add_option("--seed", o->seed, "Seed of the seek positions")->capture_default_str();
   cmd->callback([o] { run_bench_play(*o); });
 }

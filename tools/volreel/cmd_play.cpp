@@ -122,7 +122,9 @@ void add_play_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_flag("--loop", o->player.loop, "Wrap around at the ends of the timeline");
   cmd->add_flag("!--no-vsync", o->player.vsync, "Present as fast as possible (mailbox/immediate)");
-  cmd->add_option("--renderer", o->renderer, "Volume renderer: auto, cpu or vulkan")
+  cmd->add_option("--renderer", o->renderer,
+                  "Volume renderer: auto (the Vulkan ray caster on a GPU, the CPU one where Vulkan "
+                  "runs on the CPU, as lavapipe does), cpu or vulkan")
       ->check(CLI::IsMember({"auto", "cpu", "vulkan"}))
       ->capture_default_str();
   cmd->add_option("--render-scale", o->player.render_scale,

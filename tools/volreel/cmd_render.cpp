@@ -1,6 +1,6 @@
 // cmd_render.cpp: `volreel render NAME.vreel` — headless rendering of a tour (no window, no
 // display): every frame drives the streaming loop (scheduler → uploads → decode → ray casting) on
-// the Vulkan device, or on the CPU where there is none (--cpu), and writes DIR/frame_NNNNN.png and
+// the Vulkan device, or on the CPU (--renderer), and writes DIR/frame_NNNNN.png and
 // a row of DIR/metrics.csv; optionally encodes the frames with ffmpeg (--video) and measures each
 // frame against a ground-truth render of the original series (--compare). Without --realtime a
 // frame is drawn once the bricks it needs have arrived (loop::wait_for_view, within
@@ -45,6 +45,7 @@ using Clock = std::chrono::steady_clock;
 
 struct RenderCommandOptions {
   std::string container, tour, out, video, compare, transfer;
+  std::string renderer = "auto";
   bool cpu = false, realtime = false;
   double wait_timeout = 30;  ///< seconds a frame waits for its bricks (not with --realtime)
   std::size_t max_frames = 0;
@@ -96,7 +97,9 @@ void run_render(const RenderCommandOptions& o) {
   // 2. The renderer: Vulkan, or the CPU where there is no device.
   // Vulkan frames with readback (serial: the time split is exact), or the CPU loop.
   const std::unique_ptr<loop::FrameLoop> renderer = vulkan_render::open_frame_loop(
-      container, options, o.cpu, vulkan_render::NoDevice::use_cpu, "");
+      container, options,
+      o.cpu ? vulkan_render::RendererChoice::cpu : vulkan_render::parse_renderer(o.renderer),
+      vulkan_render::NoDevice::use_cpu, "");
   const std::size_t frames =
       o.max_frames ? std::min(o.max_frames, tour.frame_count()) : tour.frame_count();
   std::printf("volreel render\nmachine: %s\ndevice:  %s\ninput:   %s: %ux%ux%u, %zu frames, %s\n",
@@ -293,6 +296,12 @@ void add_render_command(CLI::App& app) {
       "cool-warm, fire, turbulence) or a JSON file; default: the tour's, or auto without --tour");
   cmd->add_option("--video", o->video,
                   "Also encode the frames into this video with ffmpeg (H.264)");
+  cmd->add_option(
+         "--renderer", o->renderer,
+         "Ray caster: auto (Vulkan on a GPU; the CPU reference renderer where Vulkan runs on "
+         "the CPU, as lavapipe does, or where there is no Vulkan device), vulkan or cpu")
+      ->check(CLI::IsMember({"auto", "vulkan", "cpu"}))
+      ->capture_default_str();
   cmd->add_flag("--cpu", o->cpu,
                 "Render on the CPU (CPU atlas and reference ray caster) instead of Vulkan");
   add_loop_options(*cmd, o->loop);

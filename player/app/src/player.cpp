@@ -100,6 +100,15 @@ Player::Player(const PlayerOptions& options)
     renderer_ = make_cpu_renderer(setup);
   } else if (options.renderer == RendererKind::vulkan) {
     renderer_ = make_vulkan_renderer(setup);
+  } else if (context_->properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU) {
+    // Vulkan itself runs on the CPU (lavapipe): the C++ ray caster draws the same image several
+    // times faster there; the window still presents through Vulkan.
+    if (!options.quiet)
+      std::printf(
+          "volreel play: Vulkan runs on the CPU here (%s): drawing with the CPU reference "
+          "renderer, faster there (--renderer vulkan to use the Vulkan ray caster)\n",
+          context_->device_name().c_str());
+    renderer_ = make_cpu_renderer(setup);
   } else {
     try {
       renderer_ = make_vulkan_renderer(setup);

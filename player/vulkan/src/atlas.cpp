@@ -160,8 +160,8 @@ void Atlas::values_to_texels(std::span<const float> values, std::uint16_t* out) 
   const float lo = options_.value_min, inv = 1.0f / (options_.value_max - options_.value_min);
   for (std::size_t i = 0; i < values.size(); ++i) {
     const float x = (values[i] - lo) * inv;
-    const float n = x > 0.0f ? (x < 1.0f ? x : 1.0f) : 0.0f;  // NaN: the lowest value
-    out[i] = static_cast<std::uint16_t>(n * 65535.0f + 0.5f);   // n ≥ 0: round to nearest
+    const float n = x > 0.0f ? (x < 1.0f ? x : 1.0f) : 0.0f;   // NaN: the lowest value
+    out[i] = static_cast<std::uint16_t>(n * 65535.0f + 0.5f);  // n ≥ 0: round to nearest
   }
 }
 

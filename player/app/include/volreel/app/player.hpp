@@ -28,9 +28,11 @@ namespace volreel::app {
 
 /// Which volume renderer draws the frame.
 enum class RendererKind {
-  automatic,  ///< the Vulkan ray caster; the CPU reference renderer if it cannot be created
-  cpu,        ///< CPU reference renderer (cpu_render::render_svo), image uploaded each frame
-  vulkan,     ///< the Vulkan compute ray caster
+  /// The Vulkan ray caster on a GPU; the CPU reference renderer where Vulkan runs on the CPU
+  /// (lavapipe) or the Vulkan ray caster cannot be created.
+  automatic,
+  cpu,     ///< CPU reference renderer (cpu_render::render_svo), image uploaded each frame
+  vulkan,  ///< the Vulkan compute ray caster
 };
 
 struct PlayerOptions {
