@@ -112,22 +112,69 @@ TransferFunction::TransferFunction(std::vector<ControlPoint> points, float lo, f
   }
 }
 
-TransferFunction TransferFunction::from_quantiles(std::vector<float> values, float lo, float hi) {
+TransferFunction TransferFunction::from_quantiles(std::vector<float> values, float lo, float hi,
+                                                  double path_voxels) {
   if (!(hi > lo) || values.empty()) return preset("cool-warm", lo, hi > lo ? hi : lo + 1);
+  values.erase(
+      std::remove_if(values.begin(), values.end(), [](float v) { return !std::isfinite(v); }),
+      values.end());
+  if (values.empty()) return preset("cool-warm", lo, hi);
   std::sort(values.begin(), values.end());
   const auto q = [&](double p) {
     const auto i = static_cast<std::size_t>(p * static_cast<double>(values.size() - 1));
     return std::clamp(values[i], lo, hi);
   };
-  // Moreland's cool-warm ends, clear in between; opacity per voxel of ray.
-  std::vector<ControlPoint> points = {
-      {lo, 0.10f, 0.20f, 0.80f, 0.70f},       {q(0.001), 0.15f, 0.35f, 0.95f, 0.45f},
-      {q(0.01), 0.35f, 0.65f, 1.00f, 0.12f},  {q(0.04), 0.60f, 0.80f, 1.00f, 0.0f},
-      {q(0.96), 1.00f, 0.80f, 0.60f, 0.0f},   {q(0.99), 1.00f, 0.55f, 0.25f, 0.05f},
-      {q(0.999), 0.90f, 0.20f, 0.10f, 0.25f}, {hi, 0.70f, 0.02f, 0.15f, 0.50f}};
+  // 1. Which tails are structures: each tail's extent from the median against the other's. A
+  //    tail shorter than half the other fades out, gone at a quarter.
+  const double median = q(0.5);
+  const double low_extent = median - double(q(0.001)), high_extent = double(q(0.999)) - median;
+  const auto weight = [](double extent, double other) {
+    if (!(other > 0)) return extent > 0 ? 1.0 : 0.0;
+    return std::clamp((extent / other - 0.25) / 0.25, 0.0, 1.0);
+  };
+  const auto w_low = static_cast<float>(weight(low_extent, high_extent));
+  const auto w_high = static_cast<float>(weight(high_extent, low_extent));
+  // 2. Moreland's cool-warm ends, clear in between; opacity per voxel of ray.
+  std::vector<ControlPoint> points = {{lo, 0.10f, 0.20f, 0.80f, 0.70f * w_low},
+                                      {q(0.001), 0.15f, 0.35f, 0.95f, 0.45f * w_low},
+                                      {q(0.01), 0.35f, 0.65f, 1.00f, 0.12f * w_low},
+                                      {q(0.04), 0.60f, 0.80f, 1.00f, 0.0f},
+                                      {q(0.96), 1.00f, 0.80f, 0.60f, 0.0f},
+                                      {q(0.99), 1.00f, 0.55f, 0.25f, 0.05f * w_high},
+                                      {q(0.999), 0.90f, 0.20f, 0.10f, 0.25f * w_high},
+                                      {hi, 0.70f, 0.02f, 0.15f, 0.50f * w_high}};
   for (std::size_t i = 1; i < points.size(); ++i)
     points[i].value = std::max(points[i].value, points[i - 1].value);
-  return TransferFunction(points, lo, hi, 256);
+  TransferFunction tf(points, lo, hi, 256);
+  // 3. The average ray's optical depth: the mean extinction −ln(1 − α) per voxel over the
+  //    sampled values times the path. Above the limit, every point's opacity becomes
+  //    1 − (1 − α)^k, k found by bisection so that the table (which interpolates the points)
+  //    gives the limit.
+  constexpr double max_depth = 2.0;
+  if (path_voxels > 0) {
+    const std::size_t stride = std::max<std::size_t>(1, values.size() / 65536);
+    const auto depth_of = [&](const TransferFunction& t) {
+      double extinction = 0;
+      std::size_t n = 0;
+      for (std::size_t i = 0; i < values.size(); i += stride, ++n)
+        extinction -= std::log1p(-std::min(double(t.lookup(values[i])[3]), 0.999999));
+      return extinction / static_cast<double>(n) * path_voxels;
+    };
+    if (depth_of(tf) > max_depth) {
+      const auto scaled = [&](double k) {
+        std::vector<ControlPoint> p = points;
+        for (ControlPoint& c : p) c.a = static_cast<float>(1.0 - std::pow(1.0 - double(c.a), k));
+        return TransferFunction(std::move(p), lo, hi, 256);
+      };
+      double k_lo = 0, k_hi = 1;
+      for (int i = 0; i < 40; ++i) {
+        const double k = 0.5 * (k_lo + k_hi);
+        (depth_of(scaled(k)) > max_depth ? k_hi : k_lo) = k;
+      }
+      tf = scaled(k_lo);
+    }
+  }
+  return tf;
 }
 
 TransferFunction TransferFunction::preset(const std::string& name, float lo, float hi,

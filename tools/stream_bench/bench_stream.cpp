@@ -206,9 +206,10 @@ std::optional<cpu_render::TransferFunction> bench_transfer(const std::string& sp
   const format::Manifest& m = container.manifest();
   if (spec == "tour") return std::nullopt;
   if (spec == "auto")
-    return cpu_render::TransferFunction::from_quantiles(truth.frame(container.frame_count() / 2),
-                                                        static_cast<float>(m.value_min),
-                                                        static_cast<float>(m.value_max));
+    return cpu_render::TransferFunction::from_quantiles(
+        truth.frame(container.frame_count() / 2), static_cast<float>(m.value_min),
+        static_cast<float>(m.value_max),
+        (double(m.dims[0]) + double(m.dims[1]) + double(m.dims[2])) / 3.0);
   return loop::transfer_from_spec(spec, container, "--transfer");
 }
 

@@ -63,8 +63,10 @@ cpu_render::TransferFunction quantile_transfer(const format::Container& containe
       values.clear();
     }
   }
-  // 2. Colour and opacity at quantiles of those values.
-  return cpu_render::TransferFunction::from_quantiles(std::move(values), lo, hi);
+  // 2. Colour and opacity at quantiles of those values, for rays about as long as the volume's
+  //    mean side.
+  const double path = (double(m.dims[0]) + double(m.dims[1]) + double(m.dims[2])) / 3.0;
+  return cpu_render::TransferFunction::from_quantiles(std::move(values), lo, hi, path);
 }
 
 cpu_render::TransferFunction transfer_from_spec(const std::string& spec,

@@ -97,12 +97,20 @@ class TransferFunction {
   /// entry count); the points are a's when w < 0.5, else b's. Used by tours between keys.
   static TransferFunction blend(const TransferFunction& a, const TransferFunction& b, float w);
 
-  /// A transfer function placed at quantiles of sample values, for signed fields with heavy tails
-  /// such as turbulence pressure, whose bulk fills the middle of the range while the structures
-  /// of interest (low-pressure vortex cores, high-pressure stagnation regions) are the rare
-  /// extremes: the lowest 4 % blue rising to opaque, the highest 4 % orange to red, the bulk
-  /// clear. Spans [lo, hi]; "cool-warm" when there are no values or the range is empty.
-  static TransferFunction from_quantiles(std::vector<float> values, float lo, float hi);
+  /// A transfer function placed at quantiles of sample values that shows what a scientist looks
+  /// for first — the tails of the distribution (low-pressure vortex cores, high vorticity, the
+  /// inside of blobs) — and leaves the bulk clear:
+  ///   - the lowest 4 % blue rising to opaque, the highest 4 % orange to red, the bulk clear;
+  ///   - a tail that is short next to the other (measured from the median to the 0.1 % and
+  ///     99.9 % quantiles; the values near 0 of a magnitude, the background around blobs) is
+  ///     faded out, since there it is the bulk's edge, not a structure;
+  ///   - with `path_voxels` > 0 (the length of a typical ray through the volume, voxels) the
+  ///     opacities are scaled down where the sampled values would make the average ray's optical
+  ///     depth exceed 2 (transmittance e^-2), so that structure in front does not hide all the
+  ///     rest and the volume never draws as an opaque block.
+  /// Spans [lo, hi]; "cool-warm" when there are no values or the range is empty.
+  static TransferFunction from_quantiles(std::vector<float> values, float lo, float hi,
+                                         double path_voxels = 0);
 
   friend bool operator==(const TransferFunction&, const TransferFunction&) = default;
 

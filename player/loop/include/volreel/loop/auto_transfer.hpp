@@ -2,7 +2,9 @@
 // tails such as turbulence pressure, whose bulk fills the middle of the value range while the
 // structures of interest (low-pressure vortex cores, high-pressure stagnation regions) are the
 // rare extremes. Colour and opacity are placed at quantiles of the decoded values, so the bulk
-// is clear whatever the range: the lowest 4 % blue rising to opaque, the highest 4 % orange to red.
+// is clear whatever the range: the lowest 4 % blue rising to opaque, the highest 4 % orange to red,
+// a tail that is only the bulk's edge faded out and the opacity bounded so that the average ray
+// through the volume keeps some transmittance (TransferFunction::from_quantiles).
 #pragma once
 
 #include <cstddef>
