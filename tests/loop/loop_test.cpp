@@ -20,8 +20,8 @@
 namespace volreel {
 namespace {
 
-TEST(CpuFrameLoop, ConvergesAndKeepsTheLastImage) {
-  test::TempDir dir("loop-cpu");
+/// A small zfp container of blobs (40×36×30, 4 frames) in `dir`.
+void make_container(const test::TempDir& dir) {
   const Dims dims{40, 36, 30};
   {
     datasets::AnalyticParams p;
@@ -35,6 +35,11 @@ TEST(CpuFrameLoop, ConvergesAndKeepsTheLastImage) {
   job.coding.codec = format::Codec::zfp;
   job.coding.zfp_accuracy = 1e-3;
   encoder::encode_series(*datasets::open_series(dir / "series"), dir / "test.vreel", job);
+}
+
+TEST(CpuFrameLoop, ConvergesAndKeepsTheLastImage) {
+  test::TempDir dir("loop-cpu");
+  make_container(dir);
   const format::Container container(dir / "test.vreel");
   const format::Manifest& m = container.manifest();
 
@@ -70,6 +75,40 @@ TEST(CpuFrameLoop, ConvergesAndKeepsTheLastImage) {
   frames.resize(64, 32);
   EXPECT_EQ(frames.options().width, 64);
   EXPECT_EQ(frames.options().height, 32);
+}
+
+TEST(CpuFrameLoop, WaitingForAViewDrawsItCompleteOnTheFirstFrame) {
+  test::TempDir dir("loop-wait");
+  make_container(dir);
+  const format::Container container(dir / "test.vreel");
+  loop::FrameLoopOptions o;
+  o.width = 48;
+  o.height = 40;
+  o.scheduler.loader.bandwidth_bytes_per_s = 2e6;  // a slow link: bricks take a while
+  o.scheduler.loader.latency_s = 0.01;
+  const auto camera = player::OrbitCamera::framing({40, 36, 30}, 48, 40);
+  const auto tf = cpu_render::TransferFunction::preset("cool-warm", -1, 1);
+  {
+    // Without waiting, the first frame has nothing yet.
+    loop::CpuFrameLoop frames(container, o);
+    EXPECT_LT(frames.frame(camera, 1.5, tf).stats.fraction_at_target, 1.0);
+  }
+  loop::CpuFrameLoop frames(container, o);
+  // A timeout too short for the link: reported, not complete.
+  const loop::ViewWait early = loop::wait_for_view(frames, camera, 1.5, 0.0);
+  EXPECT_TRUE(early.timed_out);
+  EXPECT_FALSE(early.complete);
+  const loop::ViewWait wait = loop::wait_for_view(frames, camera, 1.5, 30.0);
+  ASSERT_TRUE(wait.complete) << "at target " << wait.stats.fraction_at_target << " after "
+                             << wait.seconds << " s";
+  EXPECT_FALSE(wait.timed_out);
+  EXPECT_GT(wait.steps, 1u);
+  EXPECT_TRUE(wait.new_errors.empty());
+  // Streaming steps render nothing; the first frame draws everything they decoded.
+  const loop::FrameReport first = frames.frame(camera, 1.5, tf);
+  EXPECT_EQ(first.ticket, 1u);
+  EXPECT_EQ(first.stats.fraction_at_target, 1.0);
+  EXPECT_EQ(first.stats.holes, 0u);
 }
 
 TEST(LoopSettings, ParsesSizesRatesAndDurations) {

@@ -691,6 +691,69 @@ TEST_F(VulkanRender, FrameLoopConvergesAndMatchesTheCpuRenderer) {
   expect_frame_loop_matches_cpu(context(), format::Container(dir / "test.vreel"), 2.25);
 }
 
+TEST_F(VulkanRender, AViewWaitedForDrawsCompleteOnItsFirstFrame) {
+  // loop::wait_for_view streams and decodes without drawing; the first frame then draws every
+  // brick those steps decoded (their block ranges included) as a loop that drew all along does.
+  test::TempDir dir("vulkan-render-wait");
+  const Dims dims{70, 50, 40};
+  {
+    datasets::AnalyticParams p;
+    p.field = datasets::AnalyticField::blobs;
+    p.dims = dims;
+    p.frames = 4;
+    datasets::RawSeriesWriter w(dir / "series", dims, "test");
+    datasets::generate_analytic(p, w);
+  }
+  encoder::EncodeJob job;
+  job.coding.codec = format::Codec::zfp;
+  job.coding.zfp_accuracy = 1e-3;
+  encoder::encode_series(*datasets::open_series(dir / "series"), dir / "test.vreel", job);
+  const format::Container container(dir / "test.vreel");
+  const format::Manifest& m = container.manifest();
+  loop::FrameLoopOptions o;
+  o.width = 80;
+  o.height = 60;
+  const auto camera = player::OrbitCamera::framing({70, 50, 40}, 80, 60);
+  // Clear in the lower 30 % of the range (the background): block skipping matters.
+  const float lo = static_cast<float>(m.value_min), hi = static_cast<float>(m.value_max);
+  const TransferFunction tf(
+      {{lo, 0, 0, 0, 0}, {lo + 0.3f * (hi - lo), 0.2f, 0.4f, 1, 0}, {hi, 1, 0.5f, 0.2f, 0.8f}}, lo,
+      hi);
+  // A small atlas (two views need 52 keyframe nodes): the second view reuses slots.
+  o.atlas_bytes = std::uint64_t{40} * 93312;
+  const auto converge = [&](loop::FrameLoop& l, double playhead) {
+    loop::FrameReport r;
+    for (int i = 0; i < 2000; ++i) {
+      r = l.frame(camera, playhead, tf, true);
+      if (r.stats.fraction_at_target == 1.0 && r.stats.requests_in_flight == 0 &&
+          r.stats.arrivals_waiting == 0 && r.stats.uploads == 0)
+        break;
+    }
+    return r;
+  };
+  for (const auto decode :
+       {loop::FrameLoopOptions::Decode::gpu, loop::FrameLoopOptions::Decode::cpu}) {
+    o.gpu.decode = decode;
+    const char* name = decode == loop::FrameLoopOptions::Decode::cpu ? "cpu" : "gpu";
+    vulkan_render::VulkanFrameLoop waited(context(), container, o);
+    vulkan_render::VulkanFrameLoop drawing(context(), container, o);
+    for (const double playhead : {0.5, 2.5}) {
+      const loop::ViewWait wait = loop::wait_for_view(waited, camera, playhead, 60);
+      ASSERT_TRUE(wait.complete) << name << " decode, playhead " << playhead;
+      const loop::FrameReport first = waited.frame(camera, playhead, tf, true);
+      EXPECT_EQ(first.stats.fraction_at_target, 1.0);
+      const RgbaImage got = waited.read_back(first.ticket);
+      EXPECT_GT(drawn_fraction(got), 0.01);
+      const loop::FrameReport r = converge(drawing, playhead);
+      const psnr::ImageComparison c = compare(got, drawing.read_back(r.ticket));
+      EXPECT_GE(c.psnr, 50.0) << name << " decode, playhead " << playhead;
+    }
+    EXPECT_EQ(waited.raycaster().last_ticket(), 2u) << "one frame drawn per view";
+    waited.finish();
+    drawing.finish();
+  }
+}
+
 TEST_F(VulkanRender, SparseKeyframesMatchTheCpuRenderer) {
   // Sparse keyframe lists: the still nodes have keyframes 0 and 8 only, the others one at every
   // step; at 2.25 the still nodes interpolate 0 and 8, the others 2 and 3.
