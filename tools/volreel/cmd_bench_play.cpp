@@ -145,6 +145,10 @@ void run_bench_play(const BenchPlayOptions& o) {
     }
     view.width = w;
     view.height = h;
+    // The level of detail of the full-size image (as the player does): the screen-space error
+    // is measured in the reduced image's pixels.
+    loop->scheduler().priority_settings().sse_target =
+        options.scheduler.priority.sse_target * scale;
     const auto start = Clock::now();
     loop::FrameReport r = loop->frame(view, at, tf);
     // Serial frames: their own time; overlapped ones: the time between frame starts.
@@ -163,11 +167,11 @@ void run_bench_play(const BenchPlayOptions& o) {
     // The stream step first: a view whose bricks are all there is drawn at full resolution at
     // once (as in the player, whose previous frame says so).
     const loop::FrameReport probe = loop->stream(camera, at);
-    bool complete = probe.stats.fraction_at_target >= 1.0 && probe.stats.arrivals_waiting == 0;
+    bool complete = probe.stats.fraction_at_target >= 1.0;
     do {
       r = draw(camera, at, !complete);
       ++frames;
-      complete = r.stats.fraction_at_target >= 1.0 && r.stats.arrivals_waiting == 0;
+      complete = r.stats.fraction_at_target >= 1.0;
       if (complete && scale == 1.0) return true;
     } while (seconds_since(start) < o.timeout);
     return false;

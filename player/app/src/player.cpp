@@ -194,7 +194,7 @@ bool Player::view_busy() const {
   const player::OrbitCamera& b = previous_camera_;
   const bool moved = a.target != b.target || a.distance != b.distance || a.azimuth != b.azimuth ||
                      a.elevation != b.elevation || a.fov_y != b.fov_y;
-  const bool streaming = stats_.fraction_at_target < 1.0 || stats_.arrivals_waiting > 0;
+  const bool streaming = stats_.fraction_at_target < 1.0;
   return moved || playhead_.position() != previous_playhead_ || streaming;
 }
 
@@ -341,7 +341,10 @@ void Player::print_status(bool force) {
 }
 
 FrameOutput Player::render_volume(std::uint32_t slot_index) {
-  renderer_->scheduler().priority_settings().sse_target = sse_target_;
+  // The level of detail follows the full-size image: a frame reduced by the frame-time control
+  // measures its screen-space error in its own smaller pixels, so its target shrinks with it
+  // (else the still view's full-size frame would want finer bricks than the busy frames loaded).
+  renderer_->scheduler().priority_settings().sse_target = double{sse_target_} * frame_scale_;
   renderer_->set_exact_timings(exact_timings_);
   FrameInputs inputs;
   inputs.slot = slot_index;

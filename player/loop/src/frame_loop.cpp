@@ -19,7 +19,7 @@ ViewWait wait_for_view(FrameLoop& loop, const player::OrbitCamera& camera, doubl
     wait.stats = r.stats;
     for (std::string& e : r.new_errors) wait.new_errors.push_back(std::move(e));
     const stream::StreamStats& s = r.stats;
-    if (s.fraction_at_target >= 1.0 && s.arrivals_waiting == 0) {
+    if (s.fraction_at_target >= 1.0) {
       wait.complete = true;
       break;
     }

@@ -106,7 +106,7 @@ struct ViewWait {
   stream::StreamStats stats;  ///< of the last stream step
   double seconds = 0;         ///< spent waiting
   std::size_t steps = 0;      ///< stream steps taken
-  bool complete = false;      ///< every visible node at its target LOD, everything uploaded
+  bool complete = false;      ///< every visible node drawn at its target LOD
   bool timed_out = false;     ///< stopped by the timeout
   std::vector<std::string> new_errors;
 };
