@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "../blobs_container.hpp"
 #include "../test_util.hpp"
 #include "volreel/datasets/analytic.hpp"
 #include "volreel/datasets/series.hpp"
@@ -22,19 +23,7 @@ namespace {
 
 /// A small zfp container of blobs (40×36×30, 4 frames) in `dir`.
 void make_container(const test::TempDir& dir) {
-  const Dims dims{40, 36, 30};
-  {
-    datasets::AnalyticParams p;
-    p.field = datasets::AnalyticField::blobs;
-    p.dims = dims;
-    p.frames = 4;
-    datasets::RawSeriesWriter w(dir / "series", dims, "test");
-    datasets::generate_analytic(p, w);
-  }
-  encoder::EncodeJob job;
-  job.coding.codec = format::Codec::zfp;
-  job.coding.zfp_accuracy = 1e-3;
-  encoder::encode_series(*datasets::open_series(dir / "series"), dir / "test.vreel", job);
+  test::write_blobs_container(dir.path(), {40, 36, 30}, 4);
 }
 
 TEST(CpuFrameLoop, ConvergesAndKeepsTheLastImage) {

@@ -22,6 +22,7 @@
 #include <memory>
 #include <vector>
 
+#include "../blobs_container.hpp"
 #include "../cpu_render/svo_builder.hpp"
 #include "../dictionary_test_data.hpp"
 #include "../keyframe_series.hpp"
@@ -674,20 +675,7 @@ void expect_frame_loop_matches_cpu(const vulkan::Context& context,
 TEST_F(VulkanRender, FrameLoopConvergesAndMatchesTheCpuRenderer) {
   // A zfp container of 6 frames, between keyframes 2 and 3: time interpolation.
   test::TempDir dir("vulkan-render-loop");
-  const Dims dims{70, 50, 40};
-  {
-    datasets::AnalyticParams p;
-    p.field = datasets::AnalyticField::blobs;
-    p.dims = dims;
-    p.frames = 6;
-    datasets::RawSeriesWriter w(dir / "series", dims, "test");
-    datasets::generate_analytic(p, w);
-  }
-  encoder::EncodeJob job;
-  job.coding.codec = format::Codec::zfp;
-  job.coding.zfp_accuracy = 1e-3;
-  const auto series = datasets::open_series(dir / "series");
-  encoder::encode_series(*series, dir / "test.vreel", job);
+  test::write_blobs_container(dir.path(), {70, 50, 40}, 6);
   expect_frame_loop_matches_cpu(context(), format::Container(dir / "test.vreel"), 2.25);
 }
 
@@ -695,19 +683,7 @@ TEST_F(VulkanRender, AViewWaitedForDrawsCompleteOnItsFirstFrame) {
   // loop::wait_for_view streams and decodes without drawing; the first frame then draws every
   // brick those steps decoded (their block ranges included) as a loop that drew all along does.
   test::TempDir dir("vulkan-render-wait");
-  const Dims dims{70, 50, 40};
-  {
-    datasets::AnalyticParams p;
-    p.field = datasets::AnalyticField::blobs;
-    p.dims = dims;
-    p.frames = 4;
-    datasets::RawSeriesWriter w(dir / "series", dims, "test");
-    datasets::generate_analytic(p, w);
-  }
-  encoder::EncodeJob job;
-  job.coding.codec = format::Codec::zfp;
-  job.coding.zfp_accuracy = 1e-3;
-  encoder::encode_series(*datasets::open_series(dir / "series"), dir / "test.vreel", job);
+  test::write_blobs_container(dir.path(), {70, 50, 40}, 4);
   const format::Container container(dir / "test.vreel");
   const format::Manifest& m = container.manifest();
   loop::FrameLoopOptions o;

@@ -311,13 +311,7 @@ void add_bench_play_command(CLI::App& bench) {
                   "Transfer function: auto (data quantiles), a preset or a JSON file")
       ->capture_default_str();
   add_loop_options(*cmd, o->loop);
-  cmd->add_option(
-         "--renderer", o->renderer,
-         "Ray caster: auto (Vulkan on a GPU; the CPU reference renderer where Vulkan runs on "
-         "the CPU, as lavapipe does, or where there is no Vulkan device), vulkan or cpu")
-      ->check(CLI::IsMember({"auto", "vulkan", "cpu"}))
-      ->capture_default_str();
-  cmd->add_flag("--cpu", o->cpu, "The same as --renderer cpu");
+  add_renderer_options(*cmd, o->renderer, o->cpu);
   cmd->add_option("--seed", o->seed, "Seed of the seek positions")->capture_default_str();
   cmd->callback([o] { run_bench_play(*o); });
 }

@@ -296,14 +296,7 @@ void add_render_command(CLI::App& app) {
       "cool-warm, fire, turbulence) or a JSON file; default: the tour's, or auto without --tour");
   cmd->add_option("--video", o->video,
                   "Also encode the frames into this video with ffmpeg (H.264)");
-  cmd->add_option(
-         "--renderer", o->renderer,
-         "Ray caster: auto (Vulkan on a GPU; the CPU reference renderer where Vulkan runs on "
-         "the CPU, as lavapipe does, or where there is no Vulkan device), vulkan or cpu")
-      ->check(CLI::IsMember({"auto", "vulkan", "cpu"}))
-      ->capture_default_str();
-  cmd->add_flag("--cpu", o->cpu,
-                "Render on the CPU (CPU atlas and reference ray caster) instead of Vulkan");
+  add_renderer_options(*cmd, o->renderer, o->cpu);
   add_loop_options(*cmd, o->loop);
   cmd->add_flag("--realtime", o->realtime,
                 "Start frame i no earlier than i/fps seconds in and draw it with whatever has "

@@ -4,6 +4,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include <string>
+
 #include "volreel/loop/loop_settings.hpp"
 
 namespace volreel::cli {
@@ -37,6 +39,16 @@ inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
                  "(the CPU decoder, texels copied into the atlas)")
       ->check(CLI::IsMember({"auto", "gpu", "cpu"}))
       ->capture_default_str();
+}
+
+/// --renderer auto|vulkan|cpu (vulkan_render::parse_renderer) and --cpu, its shorthand.
+inline void add_renderer_options(CLI::App& cmd, std::string& renderer, bool& cpu) {
+  cmd.add_option("--renderer", renderer,
+                 "Ray caster: auto (Vulkan on a GPU; the CPU reference renderer where Vulkan runs "
+                 "on the CPU, as lavapipe does, or where there is no Vulkan device), vulkan or cpu")
+      ->check(CLI::IsMember({"auto", "vulkan", "cpu"}))
+      ->capture_default_str();
+  cmd.add_flag("--cpu", cpu, "The same as --renderer cpu");
 }
 
 }  // namespace volreel::cli

@@ -345,14 +345,7 @@ Ticket AtlasDecoder::submit(std::span<const BrickUpload> batch) {
       const VkCommandBuffer commands = entry.commands;
       begin_commands(commands);
       record_host_copies(commands, entry.staging.handle(), chunk);
-      end_commands(commands);
-      entry.fence.reset();
-      VkSubmitInfo info{VK_STRUCTURE_TYPE_SUBMIT_INFO};
-      info.commandBufferCount = 1;
-      info.pCommandBuffers = &commands;
-      context_.submit(info, entry.fence.handle());
-      entry.ticket = ++last_ticket_;
-      ++stats_.submissions;
+      end_and_submit(entry);
       stats_.bricks += count;
       stats_.uploaded_bytes += bytes;
       next = end;
@@ -423,6 +416,11 @@ void AtlasDecoder::record_and_submit(RingEntry& entry, std::uint32_t bricks, std
                  VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
                  VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT |
                      VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
+  end_and_submit(entry);
+}
+
+void AtlasDecoder::end_and_submit(RingEntry& entry) {
+  const VkCommandBuffer commands = entry.commands;
   end_commands(commands);
   entry.fence.reset();
   VkSubmitInfo info{VK_STRUCTURE_TYPE_SUBMIT_INFO};
@@ -473,21 +471,27 @@ void AtlasDecoder::record_decode(VkCommandBuffer commands, const std::uint32_t* 
         r.imageExtent = {VR_BLOCK_SIZE, VR_BRICK_SIZE, VR_BRICK_SIZE};
       }
     }
-    // The atlas leaves GENERAL only for the copy (the layout copies are fastest in), as in
-    // read_slots.
-    const VkImage image = atlas_.image().handle();
-    image_barrier(commands, image, VK_IMAGE_LAYOUT_GENERAL, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
-                  VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
-                  VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT,
-                  VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT);
-    vkCmdCopyBufferToImage(commands, decoded_.handle(), image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
-                           static_cast<std::uint32_t>(regions.size()), regions.data());
-    image_barrier(commands, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_GENERAL,
-                  VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
-                  VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
-                  VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT |
-                      VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
+    copy_into_atlas(commands, decoded_.handle(), regions);
   }
+}
+
+void AtlasDecoder::copy_into_atlas(VkCommandBuffer commands, VkBuffer source,
+                                   const std::vector<VkBufferImageCopy>& regions) const {
+  // After all earlier compute and transfer work on the queue (a ray caster sampling these slots,
+  // earlier writes to them). The atlas leaves GENERAL only for the copy (the layout copies are
+  // fastest in), as in read_slots.
+  const VkImage image = atlas_.image().handle();
+  image_barrier(commands, image, VK_IMAGE_LAYOUT_GENERAL, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT,
+                VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT);
+  vkCmdCopyBufferToImage(commands, source, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                         static_cast<std::uint32_t>(regions.size()), regions.data());
+  image_barrier(commands, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_GENERAL,
+                VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT |
+                    VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
 }
 
 void AtlasDecoder::decode_on_host(std::span<const BrickUpload> bricks, std::size_t first,
@@ -525,13 +529,7 @@ void AtlasDecoder::decode_on_host(std::span<const BrickUpload> bricks, std::size
 
 void AtlasDecoder::record_host_copies(VkCommandBuffer commands, VkBuffer texels,
                                       std::span<const BrickUpload> bricks) {
-  // After all earlier compute and transfer work on this queue (a ray caster sampling the slots,
-  // earlier copies into them), then each brick's texels into its slot.
-  const VkImage image = atlas_.image().handle();
-  image_barrier(commands, image, VK_IMAGE_LAYOUT_GENERAL, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
-                VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
-                VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT,
-                VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT);
+  // Each brick's texels (36³, x fastest) into its slot.
   std::vector<VkBufferImageCopy>& regions = copy_regions_;
   regions.resize(bricks.size());
   for (std::size_t i = 0; i < bricks.size(); ++i) {
@@ -542,13 +540,7 @@ void AtlasDecoder::record_host_copies(VkCommandBuffer commands, VkBuffer texels,
     r.imageOffset = atlas_.slot_origin(bricks[i].slot);
     r.imageExtent = {VR_ATLAS_SLOT_SIZE, VR_ATLAS_SLOT_SIZE, VR_ATLAS_SLOT_SIZE};
   }
-  vkCmdCopyBufferToImage(commands, texels, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
-                         static_cast<std::uint32_t>(regions.size()), regions.data());
-  image_barrier(commands, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_GENERAL,
-                VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
-                VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
-                VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT |
-                    VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
+  copy_into_atlas(commands, texels, regions);
 }
 
 bool AtlasDecoder::poll(Ticket ticket) const {

@@ -125,11 +125,16 @@ class AtlasDecoder {
  private:
   struct RingEntry;
   void record_and_submit(RingEntry& entry, std::uint32_t bricks, std::uint64_t bytes);
+  /// Ends the entry's command buffer and submits it with the entry's fence (a new ticket).
+  void end_and_submit(RingEntry& entry);
   void write_descriptors(RingEntry& entry) const;
   void make_atoms_view();
   void record_decode(VkCommandBuffer commands, const std::uint32_t* records, std::uint32_t bricks);
   void record_host_copies(VkCommandBuffer commands, VkBuffer texels,
                           std::span<const BrickUpload> bricks);
+  /// Barriers around a copy of `regions` of `source` into the atlas.
+  void copy_into_atlas(VkCommandBuffer commands, VkBuffer source,
+                       const std::vector<VkBufferImageCopy>& regions) const;
   /// host: decodes `bricks` into `texels` (36³ per brick) on the CPU; throws FormatError naming
   /// "brick upload first + i" for a bad payload.
   void decode_on_host(std::span<const BrickUpload> bricks, std::size_t first,
