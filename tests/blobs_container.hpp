@@ -13,8 +13,7 @@
 namespace volreel::test {
 
 /// Writes the raw series dir/series and its zfp container dir/test.vreel (accuracy 1e-3).
-inline void write_blobs_container(const std::filesystem::path& dir, Dims dims,
-                                  std::size_t frames) {
+inline void write_blobs_container(const std::filesystem::path& dir, Dims dims, std::size_t frames) {
   {
     datasets::AnalyticParams p;
     p.field = datasets::AnalyticField::blobs;
