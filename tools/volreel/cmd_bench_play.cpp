@@ -237,10 +237,12 @@ void run_bench_play(const BenchPlayOptions& o) {
         " render columns are not measured per frame)\n");
   }
   loop->set_pipelined(false);
-  std::printf("(scale: mean side of the rendered image relative to %dx%d; %s)\n", full_width,
-              full_height,
-              o.frame_ms > 0 ? ("frame-time target " + std::to_string(o.frame_ms) + " ms").c_str()
-                             : "--frame-ms 0: always full resolution");
+  if (o.frame_ms > 0)
+    std::printf(
+        "(scale: mean side of the rendered image relative to %dx%d; frame-time target %g ms)\n",
+        full_width, full_height, o.frame_ms);
+  else
+    std::printf("(scale: every frame at %dx%d: --frame-ms 0)\n", full_width, full_height);
   if (!refine_s.empty())
     std::printf("full-resolution image after the view stops: %s s (each phase)\n",
                 [&] {
