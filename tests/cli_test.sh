@@ -68,5 +68,15 @@ grep -q "^At equal bps" "$work/rd.txt" || fail "bench rd prints no equal-bps tab
 # zfp only: 7 bps rows x 2 zfp families, and a header.
 [ "$(wc -l < "$work/rd/rd_equal_bps.csv")" = 15 ] || fail "rd_equal_bps.csv should have a header and 14 rows"
 head -c 4 "$work/rd/rd.png" | grep -q PNG || fail "rd.png is not a PNG"
+# With sparse keyframes: one curve per gap, every time step decoded as the player draws it. Gap 1
+# stores every brick, so it delivers exactly the frame-by-frame variable rate's PSNR.
+"$volreel" bench rd "$work/a" --out "$work/rdk" --dictionary dct --tolerances 0.004 --sparsities 2 \
+  --keyframe-gaps 1 3 --ssim-frames 0 --no-plot > "$work/rdk.txt" 2>/dev/null
+psnr_of() { awk -v f="$1" 'index($0, f) == 1 { print $(NF - 6); exit }' "$work/rdk.txt"; }
+[ -n "$(psnr_of "volreel keyframes G=3")" ] || fail "bench rd lacks the gap-3 keyframe curve"
+[ "$(psnr_of "volreel keyframes G=1")" = "$(psnr_of "volreel variable-rate")" ] ||
+  fail "keyframes at gap 1 should deliver the frame-by-frame PSNR: $(cat "$work/rdk.txt")"
+[ ! -e "$work/rdk/keyframes.vreel" ] || fail "bench rd left its keyframe container behind"
+expect_error "--keyframe-gaps needs --dictionary" "$volreel" bench rd "$work/a" --keyframe-gaps 2
 
 echo "cli_end_to_end: all checks passed"

@@ -55,6 +55,23 @@ class HalvingCodec final : public vp::FrameCodec {
   std::size_t shared_bytes() const override { return 1000; }
 };
 
+/// Another series' frames at half amplitude: what HalvingCodec decodes, as a whole series.
+class HalvedSeries final : public vd::SeriesReader {
+ public:
+  HalvedSeries(const vd::SeriesReader& original, std::size_t frames) : original_(original) {
+    info_ = original.info();
+    info_.frames = frames;
+  }
+  using vd::SeriesReader::read_frame;
+  void read_frame(std::size_t t, std::span<float> out) const override {
+    original_.read_frame(t, out);
+    for (float& v : out) v *= 0.5f;
+  }
+
+ private:
+  const vd::SeriesReader& original_;
+};
+
 }  // namespace
 
 TEST(ZfpCodec, FixedAccuracyMeetsTolerance) {
@@ -118,6 +135,31 @@ TEST(RateDistortion, HarnessFiguresAreExactForAKnownCodec) {
   EXPECT_DOUBLE_EQ(zfp.bps, 2.0);
   EXPECT_GT(zfp.psnr, 20.0);
   EXPECT_GT(zfp.compress_mvoxels_per_s, 0.0);
+}
+
+TEST(RateDistortion, ADecodedSeriesMeasuresAsTheSameFrameCodec) {
+  const Dims d{16, 16, 12};
+  MemorySeries series(d, 3);
+  std::vector<std::unique_ptr<vp::FrameCodec>> codecs;
+  codecs.push_back(std::make_unique<HalvingCodec>());
+  vp::RdOptions options;
+  options.ssim_frames = 2;
+  const vp::RdPoint framewise = vp::run_rate_distortion(series, codecs, options).at(0);
+  vp::RdPoint whole;
+  whole.bytes = framewise.bytes;
+  vp::measure_decoded_series(series, HalvedSeries(series, 3), options, whole);
+  EXPECT_EQ(whole.frames, 3u);
+  EXPECT_DOUBLE_EQ(whole.bps, framewise.bps);
+  EXPECT_DOUBLE_EQ(whole.psnr, framewise.psnr);
+  EXPECT_DOUBLE_EQ(whole.psnr_zfp, framewise.psnr_zfp);
+  EXPECT_DOUBLE_EQ(whole.max_abs_error, framewise.max_abs_error);
+  EXPECT_DOUBLE_EQ(whole.ssim, framewise.ssim);
+  EXPECT_GT(whole.decompress_mvoxels_per_s, 0.0);
+  // A decoded series with fewer frames, or other dimensions, is refused by name.
+  EXPECT_THROW(vp::measure_decoded_series(series, HalvedSeries(series, 2), options, whole),
+               volreel::InputError);
+  MemorySeries other(Dims{16, 16, 8}, 3);
+  EXPECT_THROW(vp::measure_decoded_series(series, other, options, whole), volreel::InputError);
 }
 
 TEST(RateDistortion, CsvAndPlotAreWritten) {

@@ -137,6 +137,48 @@ std::vector<RdPoint> run_rate_distortion(const datasets::SeriesReader& series,
   return points;
 }
 
+void measure_decoded_series(const datasets::SeriesReader& original,
+                            const datasets::SeriesReader& decoded, const RdOptions& options,
+                            RdPoint& point, const Progress& progress) {
+  const Dims dims = original.info().dims;
+  if (decoded.info().dims != dims)
+    throw InputError("the decoded series '" + decoded.info().source + "' has " +
+                     to_string(decoded.info().dims) + " voxels per frame; the original '" +
+                     original.info().source + "' has " + to_string(dims));
+  const std::size_t frames = frames_used(original, options);
+  if (decoded.info().frames < frames)
+    throw InputError("the decoded series '" + decoded.info().source + "' has " +
+                     std::to_string(decoded.info().frames) + " frames; expected " +
+                     std::to_string(frames));
+  const std::vector<std::size_t> ssim_picks = spread(frames, options.ssim_frames);
+  ErrorAccumulator errors;
+  double ssim_sum = 0, decompress_s = 0;
+  std::vector<float> frame(dims.voxels()), out(dims.voxels());
+  for (std::size_t t = 0; t < frames; ++t) {
+    original.read_frame(t, frame);
+    const auto start = std::chrono::steady_clock::now();
+    decoded.read_frame(t, out);
+    decompress_s += seconds_since(start);
+    errors.add(frame, out);
+    if (std::find(ssim_picks.begin(), ssim_picks.end(), t) != ssim_picks.end())
+      ssim_sum += ssim(dims, frame, out);
+    progress.report(static_cast<double>(t + 1), static_cast<double>(frames),
+                    "frame " + std::to_string(t + 1));
+  }
+  const ErrorStats e = errors.result();
+  const double voxels = static_cast<double>(dims.voxels()) * static_cast<double>(frames);
+  point.frames = frames;
+  point.bps = 8.0 * static_cast<double>(point.bytes) / voxels;
+  point.psnr = e.psnr;
+  point.psnr_zfp = e.psnr_zfp;
+  point.rmse = e.rmse;
+  point.max_abs_error = e.max_abs_error;
+  point.ssim_frames = ssim_picks.size();
+  point.ssim =
+      ssim_picks.empty() ? std::nan("") : ssim_sum / static_cast<double>(ssim_picks.size());
+  point.decompress_mvoxels_per_s = voxels / 1e6 / std::max(decompress_s, 1e-9);
+}
+
 void print_rd_table(std::ostream& out, std::span<const RdPoint> points) {
   char line[256];
   std::snprintf(line, sizeof line, "%-20s %-14s %9s %9s %10s %8s %10s %10s %9s %9s\n", "codec",

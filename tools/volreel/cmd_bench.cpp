@@ -7,7 +7,9 @@
 #include <memory>
 
 #include "commands.hpp"
+#include "container_series.hpp"
 #include "progress.hpp"
+#include "volreel/encoder/encode.hpp"
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/psnr/rate_distortion.hpp"
 #include "volreel_codecs.hpp"
@@ -36,9 +38,57 @@ struct RdCommandOptions {
   double level_factor = encoder::CodingSettings{}.level_tolerance_factor;
   double coef_step = encoder::CodingSettings{}.coef_step_factor;
   std::vector<double> zfp_bricks;  ///< zfp inside the container, accuracy / range (default none)
+  /// Also variable rate through a container with sparse keyframes, one curve per gap.
+  std::vector<std::uint32_t> keyframe_gaps;
   /// Rows of the equal-bps table: the span MTV-Player's Table 1 reports (0.3 to 0.6 bps).
   std::vector<double> at_bps = {0.30, 0.35, 0.40, 0.45, 0.50, 0.55, 0.60};
 };
+
+/// volreel variable rate with sparse keyframes: each tolerance encoded into a container as
+/// `volreel encode --max-keyframe-gap G` writes it (every byte counted), then every time step
+/// decoded as the player draws it, interpolated nodes included.
+std::vector<psnr::RdPoint> keyframe_points(const datasets::SeriesReader& series,
+                                           const RdCommandOptions& o, double range) {
+  std::vector<psnr::RdPoint> points;
+  const std::filesystem::path container = std::filesystem::path(o.out) / "keyframes.vreel";
+  std::filesystem::create_directories(o.out);
+  const double runs = static_cast<double>(o.keyframe_gaps.size() * o.tolerances.size() *
+                                          o.lagrangian_factors.size());
+  ProgressBar bar("keyframes", "encodes");
+  double done = 0;
+  for (const std::uint32_t gap : o.keyframe_gaps)
+    for (const double factor : o.lagrangian_factors)
+      for (const double relative : o.tolerances) {
+        encoder::EncodeRequest request;
+        request.coding.rule = encoder::VariableRateRule::lagrangian;
+        request.coding.lagrangian_factor = factor;
+        request.coding.selection = dictionary::pursuit_from_name(o.pursuit);
+        request.coding.level_tolerance_factor = o.level_factor;
+        request.coding.coef_step_factor = o.coef_step;
+        request.tolerance.tolerance = relative * range;
+        request.dictionary = o.dictionary;
+        request.half_atoms = o.atom_storage == "f16";
+        request.overwrite = true;
+        request.max_frames = o.rd.max_frames;
+        request.max_keyframe_gap = gap;
+        const encoder::EncodeSummary summary = encoder::encode(series, container, request);
+        psnr::RdPoint p;
+        p.family = "volreel keyframes G=" + std::to_string(gap);
+        if (o.lagrangian_factors.size() > 1) p.family += " k=" + std::to_string(factor);
+        char setting[48];
+        std::snprintf(setting, sizeof setting, "eps=%.2e", relative * range);
+        p.setting = setting;
+        p.bytes = summary.container_bytes;
+        p.compress_mvoxels_per_s = summary.mvoxels_per_s;
+        psnr::measure_decoded_series(series, ContainerSeries(container), o.rd, p);
+        points.push_back(std::move(p));
+        done += 1;
+        bar.progress().report(done, runs, points.back().setting);
+      }
+  bar.finish();
+  std::filesystem::remove_all(container);
+  return points;
+}
 
 void run_rd(const RdCommandOptions& o) {
   const auto series = datasets::open_series(o.series, o.reader.to_open_options());
@@ -88,6 +138,12 @@ void run_rd(const RdCommandOptions& o) {
     ProgressBar bar("compressing", "frames");
     points = psnr::run_rate_distortion(*series, codecs, o.rd, bar.progress());
     bar.finish();
+  }
+  if (!o.keyframe_gaps.empty()) {
+    if (o.dictionary.empty())
+      throw InputError("--keyframe-gaps needs --dictionary (a dictionary file or 'dct')");
+    for (auto& p : keyframe_points(*series, o, range.second - range.first))
+      points.push_back(std::move(p));
   }
   std::cout << '\n';
   psnr::print_rd_table(std::cout, points);
@@ -194,6 +250,14 @@ void add_bench_command(CLI::App& app) {
       ->capture_default_str();
   rd->add_option("--zfp-bricks", o->zfp_bricks,
                  "Also zfp per brick inside the container, accuracy as fractions of the range");
+  rd->add_option("--keyframe-gaps", o->keyframe_gaps,
+                 "Also volreel variable rate with sparse keyframes, one curve per gap G: each "
+                 "--tolerances value encoded\n"
+                 "into OUT/keyframes.vreel as volreel encode --max-keyframe-gap G writes it "
+                 "(every byte counted) and every\n"
+                 "time step decoded as the player draws it, interpolated nodes included "
+                 "(needs --dictionary)")
+      ->check(CLI::Range(1u, 65535u));
   o->reader.add_to(*rd);
   rd->callback([o] { run_rd(*o); });
   add_bench_train_command(*bench);

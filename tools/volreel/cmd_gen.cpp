@@ -114,8 +114,12 @@ void add_gen_command(CLI::App& app) {
   auto a = std::make_shared<AnalyticOptions>();
   CLI::App* analytic = gen->add_subcommand("analytic",
                                            "Small deterministic time-varying fields for tests: "
-                                           "moving blobs, a rotating pattern, drifting noise");
-  analytic->add_option("--field", a->field, "blobs, rotating or noise")->capture_default_str();
+                                           "moving blobs, a rotating pattern, drifting noise, "
+                                           "a plume rising into a still box");
+  analytic
+      ->add_option("--field", a->field,
+                   "blobs, rotating, noise or plume (a plume rising into a still box)")
+      ->capture_default_str();
   analytic->add_option("--size", a->size, "Voxels per side of a cube")->capture_default_str();
   analytic->add_option("--dims", a->dims, "XxYxZ instead of a cube, e.g. 96x64x48");
   analytic->add_option("--frames", a->frames, "Frames")->capture_default_str();

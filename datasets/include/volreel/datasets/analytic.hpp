@@ -15,8 +15,10 @@ enum class AnalyticField {
   blobs,     ///< Gaussian blobs of different sizes moving on closed paths through the box
   rotating,  ///< a banded pattern rotating about the z axis, with a slowly pulsing radial term
   noise,     ///< smooth value noise (4 octaves) from volreel's PRNG, drifting in time
+  plume,     ///< a turbulent plume rising into a still, stratified box (still regions beside
+             ///< active ones)
 };
-/// "blobs" | "rotating" | "noise"; throws InputError otherwise.
+/// "blobs" | "rotating" | "noise" | "plume"; throws InputError otherwise.
 AnalyticField parse_analytic_field(const std::string& name);
 std::string to_string(AnalyticField field);
 

@@ -65,6 +65,15 @@ std::vector<RdPoint> run_rate_distortion(const datasets::SeriesReader& series,
                                          std::span<const std::unique_ptr<FrameCodec>> codecs,
                                          const RdOptions& options, const Progress& progress = {});
 
+/// A codec whose time steps depend on each other (volreel's container with sparse keyframes) is
+/// run over the whole series by its caller; this measures the series it decoded against the
+/// original as run_rate_distortion measures a FrameCodec. `point` comes with family, setting,
+/// bytes and compress_mvoxels_per_s set; frames, bps, the errors, SSIM and the decoding speed
+/// (reading `decoded`) are filled in.
+void measure_decoded_series(const datasets::SeriesReader& original,
+                            const datasets::SeriesReader& decoded, const RdOptions& options,
+                            RdPoint& point, const Progress& progress = {});
+
 /// zfp fixed-accuracy at tolerances range·2^-k, k = −1, 0, 1, …, 12 (zfp rounds a tolerance down
 /// to a power of two, so no finer steps exist; k = −1 reaches below 0.3 bps on turbulence), and
 /// fixed-rate at 0.125, 0.25, 0.5, 1, 2, 4, 8 bits per value: 21 settings, about 0.1 to 10 bps.
