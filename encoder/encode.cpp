@@ -5,10 +5,12 @@
 
 #include <atomic>
 #include <cstdio>
+#include <cstring>
 #include <utility>
 
 #include "volreel/dictionary/training.hpp"
 #include "volreel/format/dictionary_file.hpp"
+#include "volreel/format/file_io.hpp"
 #include "volreel/format/frame_file.hpp"
 
 namespace volreel::encoder {
@@ -125,7 +127,9 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   const auto& info = series.info();
   const std::size_t frames =
       request.max_frames ? std::min(request.max_frames, info.frames) : info.frames;
+  const Ranks& ranks = request.ranks ? *request.ranks : single_process();
   EncodeJob job;
+  job.ranks = &ranks;
   job.resume = request.resume;
   job.overwrite = request.overwrite;
   job.max_frames = frames;
@@ -148,7 +152,7 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   auto& c = job.coding;
   {
     Stage stage(events, "value range", "frames");
-    std::tie(c.value_min, c.value_max) = value_range(series, frames, stage.progress());
+    std::tie(c.value_min, c.value_max) = value_range(series, frames, stage.progress(), ranks);
   }
   check_value_range(c.value_min, c.value_max, info.source);
   const double range = tolerance_range(c.value_min, c.value_max);
@@ -160,45 +164,72 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
     c.zfp_accuracy = request.zfp_accuracy.value_or(range * 1e-3);
     say(printed("codec zfp, fixed accuracy %.4g per brick", c.zfp_accuracy));
   } else {
-    // The dictionary: given, the container's own (resume), or trained here.
-    fs::path dict_path = request.dictionary;
-    std::optional<TemporaryFile> trained;
-    if (dict_path.empty() && request.resume && fs::exists(out / "dictionary.bin"))
-      dict_path = out / "dictionary.bin";
-    if (dict_path.empty() && !(c.value_max > c.value_min)) dict_path = "dct";  // nothing to learn
-    if (dict_path.empty()) {
-      const double eps = tolerance_to_train_at(request.tolerance, range);
-      trained.emplace("volreel-dictionary");
-      say(printed("no dictionary given: training one with volreel train's defaults at eps %.4g, ",
-                  eps) +
-          (request.atoms ? "K = " + std::to_string(request.atoms)
-                         : std::string("K chosen by the total size it gives")));
-      train_dictionary(series, request, eps, frames, events, trained->path());
-      dict_path = trained->path();
-    }
-    // A copy, so that the container's own dictionary.bin can be used to resume.
+    // The dictionary: given, the container's own (resume), or trained here; with several
+    // processes rank 0 finds it and chooses ε, and sends both to the others.
     copy.emplace("volreel-dictionary-copy");
-    if (dict_path == "dct")
-      format::write_dictionary_file(copy->path(), format::dct_dictionary(6, VOLREEL_VERSION));
-    else
-      fs::copy_file(dict_path, copy->path(), fs::copy_options::overwrite_existing);
     job.dictionary_file = copy->path();
-    auto file = format::read_dictionary_file(copy->path());
-    if ((job.half_atoms && !file.half_atoms) || !file.dct_atoms) {
-      // Stored as the container will store it, so that a size target measures what is written.
-      file = format::container_dictionary(std::move(file), job.half_atoms);
-      format::write_dictionary_file(copy->path(), file);
+    std::vector<std::byte> dictionary_bytes;
+    std::string failure;
+    if (ranks.root()) {
+      try {
+        fs::path dict_path = request.dictionary;
+        std::optional<TemporaryFile> trained;
+        if (dict_path.empty() && request.resume && fs::exists(out / "dictionary.bin"))
+          dict_path = out / "dictionary.bin";
+        if (dict_path.empty() && !(c.value_max > c.value_min))
+          dict_path = "dct";  // nothing to learn
+        if (dict_path.empty()) {
+          const double eps = tolerance_to_train_at(request.tolerance, range);
+          trained.emplace("volreel-dictionary");
+          say(printed("no dictionary given: training one with volreel train's defaults at eps "
+                      "%.4g, ",
+                      eps) +
+              (request.atoms ? "K = " + std::to_string(request.atoms)
+                             : std::string("K chosen by the total size it gives")));
+          train_dictionary(series, request, eps, frames, events, trained->path());
+          dict_path = trained->path();
+        }
+        // A copy, so that the container's own dictionary.bin can be used to resume.
+        if (dict_path == "dct")
+          format::write_dictionary_file(copy->path(), format::dct_dictionary(6, VOLREEL_VERSION));
+        else
+          fs::copy_file(dict_path, copy->path(), fs::copy_options::overwrite_existing);
+        auto file = format::read_dictionary_file(copy->path());
+        if ((job.half_atoms && !file.half_atoms) || !file.dct_atoms) {
+          // Stored as the container will store it, so that a size target measures what is
+          // written.
+          file = format::container_dictionary(std::move(file), job.half_atoms);
+          format::write_dictionary_file(copy->path(), file);
+        }
+        ToleranceChoice eps;
+        {
+          std::optional<Stage> stage;
+          if (request.tolerance.bps && c.fixed_sparsity == 0)
+            stage.emplace(events, "rate control", "steps");
+          eps = choose_tolerance(series, file, fs::file_size(copy->path()), c, frames,
+                                 request.tolerance, stage ? stage->progress() : Progress{});
+        }
+        c.tolerance = eps.tolerance;
+        if (events.tolerance_chosen) events.tolerance_chosen(eps, c, file.atom_count);
+        dictionary_bytes =
+            format::detail::read_whole_file(copy->path(), format::detail::max_dictionary_bytes);
+      } catch (const std::exception& e) {
+        if (ranks.size() == 1) throw;
+        failure = e.what();
+      }
     }
-    ToleranceChoice eps;
-    {
-      std::optional<Stage> stage;
-      if (request.tolerance.bps && c.fixed_sparsity == 0)
-        stage.emplace(events, "rate control", "steps");
-      eps = choose_tolerance(series, file, fs::file_size(copy->path()), c, frames,
-                             request.tolerance, stage ? stage->progress() : Progress{});
+    if (ranks.size() > 1) {
+      // The dictionary file's bytes, or (empty) rank 0's error; then ε.
+      std::vector<std::byte> message(failure.size());
+      std::memcpy(message.data(), failure.data(), failure.size());
+      ranks.broadcast(message);
+      if (!message.empty())
+        throw InputError(
+            std::string(reinterpret_cast<const char*>(message.data()), message.size()));
+      ranks.broadcast(dictionary_bytes);
+      c.tolerance = ranks.broadcast_value(c.tolerance);
+      if (!ranks.root()) format::detail::write_file_atomically(copy->path(), dictionary_bytes);
     }
-    c.tolerance = eps.tolerance;
-    if (events.tolerance_chosen) events.tolerance_chosen(eps, c, file.atom_count);
   }
   job.provenance = std::move(request.provenance);
   if (!job.provenance.is_object()) job.provenance = nlohmann::json::object();

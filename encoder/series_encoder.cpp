@@ -4,13 +4,16 @@
 #include "volreel/encoder/series_encoder.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <limits>
 #include <set>
+#include <stdexcept>
 #include <string>
 
 #include "detail.hpp"
@@ -224,14 +227,13 @@ bool prepare_container(const fs::path& out, const EncodeJob& job, format::Manife
   return resuming;
 }
 
-/// Which frames of a resumed container are already there and valid: the manifest's CRC, or
-/// (written but not yet in the manifest) a full structural and CRC check. Updates m's frame list
-/// (valid frames in, the rest out) and returns a flag per frame.
+/// Which frames of [first, last) of a resumed container are already there and valid: the
+/// manifest's CRC, or (written but not yet in the manifest) a full structural and CRC check.
+/// Updates m's frame list there (valid frames in, the rest out) and returns a flag per frame.
 std::vector<char> frames_already_written(const fs::path& out, format::Codec codec,
-                                         format::Manifest& m) {
-  const std::size_t frames = m.frames.size();
-  std::vector<char> done(frames, 0);
-  for (std::size_t t = 0; t < frames; ++t) {
+                                         format::Manifest& m, std::size_t first, std::size_t last) {
+  std::vector<char> done(m.frames.size(), 0);
+  for (std::size_t t = first; t < last; ++t) {
     const fs::path path = out / format::frame_file_name(t);
     if (!fs::exists(path)) {
       m.frames[t].reset();
@@ -310,18 +312,22 @@ std::optional<double> EncodeSummary::finest_owned_codes_bps() const {
 }
 
 std::pair<double, double> value_range(const datasets::SeriesReader& series, std::size_t frames,
-                                      const Progress& progress) {
+                                      const Progress& progress, const Ranks& ranks) {
   const std::size_t n = frames ? std::min(frames, series.info().frames) : series.info().frames;
+  const auto [first, last] = ranks.share(n);
   std::vector<float> frame(series.info().dims.voxels());
-  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-  for (std::size_t t = 0; t < n; ++t) {
+  std::array<double, 1> lo = {std::numeric_limits<double>::infinity()}, hi = {-lo[0]};
+  for (std::size_t t = first; t < last; ++t) {
     series.read_frame(t, frame);
     const auto [mn, mx] = std::minmax_element(frame.begin(), frame.end());
-    lo = std::min(lo, static_cast<double>(*mn));
-    hi = std::max(hi, static_cast<double>(*mx));
-    progress.report(static_cast<double>(t + 1), static_cast<double>(n), "value range");
+    lo[0] = std::min(lo[0], static_cast<double>(*mn));
+    hi[0] = std::max(hi[0], static_cast<double>(*mx));
+    progress.report(static_cast<double>(t + 1 - first), static_cast<double>(last - first),
+                    "value range");
   }
-  return {lo, hi};
+  ranks.min(lo);
+  ranks.max(hi);
+  return {lo[0], hi[0]};
 }
 
 void check_value_range(double value_min, double value_max, const std::string& source) {
@@ -336,14 +342,136 @@ void check_value_range(double value_min, double value_max, const std::string& so
   throw InputError(source + text);
 }
 
+namespace {
+
+/// Runs f on rank 0 alone; an exception there is thrown on every rank, with its message, so that
+/// no rank waits for a root that gave up. Returns f's flag on every rank.
+bool on_root(const Ranks& ranks, const std::function<bool()>& f) {
+  std::vector<std::byte> answer(1, std::byte{0});
+  if (ranks.root()) {
+    try {
+      answer[0] = std::byte{static_cast<unsigned char>(f() ? 1 : 0)};
+    } catch (const std::exception& e) {
+      if (ranks.size() == 1) throw;
+      const std::string what = e.what();
+      answer.assign(1, std::byte{2});
+      for (char ch : what) answer.push_back(static_cast<std::byte>(ch));
+      ranks.broadcast(answer);
+      throw;
+    }
+  }
+  ranks.broadcast(answer);
+  if (answer[0] == std::byte{2})
+    throw InputError(
+        std::string(reinterpret_cast<const char*>(answer.data()) + 1, answer.size() - 1));
+  return answer[0] == std::byte{1};
+}
+
+/// The additive figures of a summary, in a fixed order, for summing across ranks.
+std::vector<double> additive_figures(const EncodeSummary& s) {
+  std::vector<double> v = {static_cast<double>(s.encoded),
+                           static_cast<double>(s.skipped),
+                           s.unquantized_squared_error,
+                           s.quantized_squared_error,
+                           static_cast<double>(s.breakdown.frame_tables),
+                           static_cast<double>(s.breakdown.constant_bricks),
+                           static_cast<double>(s.breakdown.brick_headers),
+                           static_cast<double>(s.breakdown.block_entries),
+                           static_cast<double>(s.breakdown.codes),
+                           static_cast<double>(s.breakdown.alignment),
+                           static_cast<double>(s.breakdown.zfp_streams),
+                           static_cast<double>(s.breakdown.coarse_levels),
+                           s.breakdown.aprons_and_padding,
+                           s.breakdown.finest_owned_codes,
+                           static_cast<double>(s.code_bits),
+                           static_cast<double>(s.blocks_over_bound),
+                           s.seconds_pyramid,
+                           s.seconds_bricks,
+                           s.seconds_omp,
+                           s.seconds_quantize,
+                           static_cast<double>(s.delivered.frames),
+                           s.delivered.squared_error,
+                           s.delivered.voxels,
+                           static_cast<double>(s.delivered.frames_coded_again),
+                           static_cast<double>(s.bricks_stored),
+                           static_cast<double>(s.nodes_interpolated),
+                           s.process_seconds};
+  for (std::size_t n : s.sparsity_histogram) v.push_back(static_cast<double>(n));
+  for (std::size_t n : s.mean_bits_histogram) v.push_back(static_cast<double>(n));
+  for (std::size_t n : s.coef_bits_histogram) v.push_back(static_cast<double>(n));
+  return v;
+}
+
+void set_additive_figures(EncodeSummary& s, std::span<const double> v) {
+  std::size_t i = 0;
+  const auto count = [&] { return static_cast<std::size_t>(std::llround(v[i++])); };
+  s.encoded = count();
+  s.skipped = count();
+  s.unquantized_squared_error = v[i++];
+  s.quantized_squared_error = v[i++];
+  s.breakdown.frame_tables = count();
+  s.breakdown.constant_bricks = count();
+  s.breakdown.brick_headers = count();
+  s.breakdown.block_entries = count();
+  s.breakdown.codes = count();
+  s.breakdown.alignment = count();
+  s.breakdown.zfp_streams = count();
+  s.breakdown.coarse_levels = count();
+  s.breakdown.aprons_and_padding = v[i++];
+  s.breakdown.finest_owned_codes = v[i++];
+  s.code_bits = count();
+  s.blocks_over_bound = count();
+  s.seconds_pyramid = v[i++];
+  s.seconds_bricks = v[i++];
+  s.seconds_omp = v[i++];
+  s.seconds_quantize = v[i++];
+  s.delivered.frames = count();
+  s.delivered.squared_error = v[i++];
+  s.delivered.voxels = v[i++];
+  s.delivered.frames_coded_again = count();
+  s.bricks_stored = count();
+  s.nodes_interpolated = count();
+  s.process_seconds = v[i++];
+  for (std::size_t& n : s.sparsity_histogram) n = count();
+  for (std::size_t& n : s.mean_bits_histogram) n = count();
+  for (std::size_t& n : s.coef_bits_histogram) n = count();
+}
+
+/// Every rank's summary into one, on every rank: sums, the slowest rank's time, the worst frame.
+void combine_summaries(const Ranks& ranks, EncodeSummary& s) {
+  s.processes = static_cast<std::size_t>(ranks.size());
+  s.process_seconds = s.seconds;
+  if (ranks.size() == 1) return;
+  std::vector<double> sums = additive_figures(s);
+  ranks.sum(sums);
+  set_additive_figures(s, sums);
+  std::array<double, 2> largest = {s.seconds, s.delivered.max_abs_error};
+  ranks.max(largest);
+  s.seconds = largest[0];
+  s.delivered.max_abs_error = largest[1];
+  std::array<double, 2> smallest = {s.delivered.worst_frame_psnr, s.delivered.tolerance_scale};
+  ranks.min(smallest);
+  // The worst frame: the smallest index among the ranks whose worst is the worst PSNR.
+  const bool mine = s.delivered.frames > 0 && s.delivered.worst_frame_psnr == smallest[0];
+  std::array<double, 1> frame = {mine ? static_cast<double>(s.delivered.worst_frame)
+                                      : std::numeric_limits<double>::infinity()};
+  ranks.min(frame);
+  s.delivered.worst_frame_psnr = smallest[0];
+  s.delivered.tolerance_scale = smallest[1];
+  if (std::isfinite(frame[0])) s.delivered.worst_frame = static_cast<std::size_t>(frame[0]);
+}
+
+}  // namespace
+
 EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path& out,
                             const EncodeJob& job, const Progress& progress) {
+  const Ranks& ranks = job.ranks ? *job.ranks : single_process();
   const auto& info = series.info();
   const std::size_t frames = job.max_frames ? std::min(job.max_frames, info.frames) : info.frames;
   if (frames == 0) throw InputError("the series has no frames");
   CodingSettings coding = job.coding;
   if (coding.value_min == 0 && coding.value_max == 0)
-    std::tie(coding.value_min, coding.value_max) = value_range(series, frames);
+    std::tie(coding.value_min, coding.value_max) = value_range(series, frames, {}, ranks);
   check_value_range(coding.value_min, coding.value_max, info.source);
 
   format::Manifest m = new_manifest(info, frames, coding, job.max_keyframe_gap, job.provenance);
@@ -365,6 +493,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   // The encoder at the ε of the frame at hand (a smaller one after a frame missed psnr_target).
   std::optional<FrameEncoder> encoder;
   encoder.emplace(dict ? &dict->dictionary : nullptr, coding);
+  double encoder_scale = 1;  // its ε against coding.tolerance
   const bool holds_psnr =
       job.psnr_target > 0 && coding.codec == format::Codec::ksvd && coding.fixed_sparsity == 0;
   const double range = coding.value_max - coding.value_min;
@@ -374,27 +503,48 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
                                static_cast<std::uint32_t>(dict->dictionary.atom_count())}
            : format::AtomTable{};
 
-  // 1. An existing container: resume (same settings) or refuse unless told to overwrite.
+  // 1. An existing container: resume (same settings) or refuse unless told to overwrite. Rank 0
+  //    prepares the folder, its manifest and dictionary while the others wait.
   const std::vector<std::byte> no_dictionary;
-  const bool resuming = prepare_container(out, job, m, dict ? dict->bytes : no_dictionary);
+  const bool resuming = on_root(ranks, [&] {
+    const bool r = prepare_container(out, job, m, dict ? dict->bytes : no_dictionary);
+    m.complete = false;
+    format::write_manifest(out, m);
+    return r;
+  });
 
-  // 2. Which frames are already there and valid.
+  // 2. The stretches this process codes, [s, e] with s = k·G and e = s + G (the series' last
+  //    frame at most), for k in its share; it writes frames (s, e] of each (and frame 0), so that
+  //    every frame file is written by one process. Frames of its share already there and valid
+  //    are kept when resuming.
+  const std::size_t gap = std::max<std::uint32_t>(job.max_keyframe_gap, 1);
+  const std::size_t stretches = frames == 1 ? 1 : (frames - 1 + gap - 1) / gap;
+  const auto [first_stretch, last_stretch] = ranks.share(stretches);
+  const std::size_t first_frame = first_stretch == 0 ? 0 : first_stretch * gap + 1;
+  const std::size_t end_frame =
+      last_stretch == first_stretch ? first_frame : std::min(last_stretch * gap, frames - 1) + 1;
   EncodeSummary summary;
   summary.frames = frames;
-  std::vector<char> done(frames, 0);
+  std::vector<char> done(frames, 1);  // 1: not to be written by this process
+  std::fill(done.begin() + static_cast<std::ptrdiff_t>(first_frame),
+            done.begin() + static_cast<std::ptrdiff_t>(end_frame), 0);
   if (resuming) {
-    done = frames_already_written(out, coding.codec, m);
-    summary.skipped = static_cast<std::size_t>(std::count(done.begin(), done.end(), 1));
+    const std::vector<char> there =
+        frames_already_written(out, coding.codec, m, first_frame, end_frame);
+    for (std::size_t t = first_frame; t < end_frame; ++t)
+      if (there[t]) {
+        done[t] = 1;
+        ++summary.skipped;
+      }
   }
-  m.complete = false;
-  format::write_manifest(out, m);
 
-  // 3. Encode the rest, a stretch of at most max_keyframe_gap + 1 frames in memory at a time:
-  //    [s, e] with e = s + G (the series' last frame at most). Each frame is coded in full (coded
-  //    again at a smaller ε while it falls short of psnr_target); then each node keeps its brick
-  //    at the steps its interpolation cannot stand in for (keyframes.hpp); s and e store every
-  //    node, so a stretch is resumed whole and decodes without frames outside it.
-  const std::size_t gap = std::max<std::uint32_t>(job.max_keyframe_gap, 1);
+  // 3. Encode, a stretch of at most G + 1 frames in memory at a time. Each frame is coded in full
+  //    (coded again at a smaller ε while it falls short of psnr_target); then each node keeps its
+  //    brick at the steps its interpolation cannot stand in for (keyframes.hpp); s and e store
+  //    every node, so a stretch is resumed whole and decodes without frames outside it. A
+  //    stretch's ends are coded from the job's ε and the frames between from the ε their
+  //    predecessor needed: every frame's coding depends on its stretch alone, so a resumed
+  //    stretch, or one coded by another process, comes out the same.
   const double voxels = static_cast<double>(info.dims.voxels());
   const double voxel_count = voxels;
   const auto frame_psnr = [&](double e) {
@@ -404,129 +554,160 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   struct Step {
     Volume volume;
     CodedFrame coded;
-    bool measured = false;  ///< its delivered error counted (as the end of the previous stretch)
+    double scale = 1;  ///< the ε it was coded at, against the job's
   };
-  // Codes frame t (read into step.volume), again at a smaller ε while it misses psnr_target.
-  const auto code_step = [&](std::size_t t, Step& step) {
+  // Codes frame t (read into step.volume) from ε·scale, again at a smaller ε while it misses
+  // psnr_target.
+  const auto code_step = [&](std::size_t t, Step& step, double scale) {
     if (step.volume.data.size() != info.dims.voxels()) step.volume = Volume(info.dims);
     series.read_frame(t, step.volume.data);
-    step.measured = false;
+    const auto use_scale = [&](double wanted) {
+      if (wanted == encoder_scale) return;
+      CodingSettings scaled = coding;
+      scaled.tolerance = coding.tolerance * wanted;
+      encoder.emplace(dict ? &dict->dictionary : nullptr, scaled);
+      encoder_scale = wanted;
+    };
+    use_scale(scale);
     encoder->code_into(t, step.volume, step.coded, gap > 1);
     for (int retry = 0; holds_psnr && retry < max_tolerance_retries; ++retry) {
       const auto [squared, worst] =
           finest_level_error(encoder->write(step.coded), atoms, step.volume, t);
       if (frame_psnr(squared) >= job.psnr_target) break;
-      if (retry == 0) ++summary.delivered.frames_coded_again;
+      if (retry == 0 && !done[t]) ++summary.delivered.frames_coded_again;
       // 0.1 dB more than the shortfall, so that the next try lands above the target.
-      summary.delivered.tolerance_scale *=
-          std::pow(10.0, -(job.psnr_target - frame_psnr(squared) + 0.1) / 20);
-      CodingSettings smaller = coding;
-      smaller.tolerance = coding.tolerance * summary.delivered.tolerance_scale;
-      encoder.emplace(&dict->dictionary, smaller);
+      scale *= std::pow(10.0, -(job.psnr_target - frame_psnr(squared) + 0.1) / 20);
+      use_scale(scale);
       encoder->code_into(t, step.volume, step.coded, gap > 1);
     }
-  };
-  const auto opener = [&](std::size_t t) {
-    return format::FrameFile(out / format::frame_file_name(t));
+    step.scale = scale;
+    summary.delivered.tolerance_scale = std::min(summary.delivered.tolerance_scale, scale);
   };
   std::optional<Step> carried;  // the last frame of the previous stretch
   std::vector<Step> pool;       // the other frames of the previous stretch: their buffers reused
-  std::size_t coded_frames = summary.skipped;
-  for (std::size_t s = 0;;) {
-    const std::size_t e = std::min(s + gap, frames - 1);
+  std::size_t coded_frames = 0;
+  const std::size_t share_frames = end_frame - first_frame;
+  for (std::size_t k = first_stretch; k < last_stretch; ++k) {
+    const std::size_t s = k * gap, e = std::min(s + gap, frames - 1);
     if (std::all_of(done.begin() + static_cast<std::ptrdiff_t>(s),
                     done.begin() + static_cast<std::ptrdiff_t>(e + 1),
                     [](char d) { return d != 0; })) {
       carried.reset();
-    } else {
-      const auto start = Clock::now();
-      std::vector<Step> steps(e - s + 1);
-      for (std::size_t t = s; t <= e; ++t) {
-        if (t == s && carried) {
-          steps[0] = std::move(*carried);
-          continue;
-        }
-        if (!pool.empty()) {
-          steps[t - s] = std::move(pool.back());
-          pool.pop_back();
-        }
-        code_step(t, steps[t - s]);
-        if (!done[t]) ++coded_frames;
-        char status[64];
-        std::snprintf(status, sizeof status, "coding frame %zu, %.1f MVoxel/s", t,
-                      voxels * static_cast<double>(coded_frames - summary.skipped) / 1e6 /
-                          std::max(1e-9, summary.seconds + seconds_since(start)));
-        progress.report(static_cast<double>(std::min(coded_frames, frames)),
-                        static_cast<double>(frames), status);
-      }
-      std::vector<std::vector<char>> keep(steps.size());
-      if (gap > 1 && steps.size() > 2) {
-        std::vector<const CodedFrame*> coded;
-        for (const Step& st : steps) coded.push_back(&st.coded);
-        KeyframeRule rule;
-        rule.within_coded_error = holds_psnr;
-        keep = choose_keyframes(coded, atoms, rule);
-      }
-      summary.seconds += seconds_since(start);
-      for (std::size_t t = s; t <= e; ++t) {
-        Step& step = steps[t - s];
-        if (done[t]) continue;  // the end of a stretch already written
-        const auto write_start = Clock::now();
-        FrameStats st;
-        std::vector<std::byte> bytes = encoder->write(step.coded, keep[t - s], &st);
-        // Never write a frame that a reader would refuse.
-        try {
-          format::validate_payloads(format::FrameView(bytes, format::frame_file_name(t)), atoms);
-        } catch (const format::FormatError& err) {
-          throw std::runtime_error(
-              "frame " + std::to_string(t) +
-              " was coded into bytes that do not decode, so it was not written (" + err.what() +
-              ")");
-        }
-        format::write_container_file(out, format::frame_file_name(t), bytes);
-        m.frames[t] = format::ManifestFrame{format::frame_file_name(t), bytes.size(),
-                                            format::manifest_crc(bytes)};
-        format::write_manifest(out, m);
-        done[t] = 1;
-        summary.seconds += seconds_since(write_start);
-        add_frame(st, summary);
-      }
-      // The delivered error of every step of the stretch, decoded from the files as a reader
-      // does (interpolated nodes included).
-      format::TimeStepDecoder decoder(frames, static_cast<std::uint32_t>(gap), atoms, opener);
-      std::vector<float> decoded(info.dims.voxels());
-      const std::uint32_t finest = static_cast<std::uint32_t>(steps[0].coded.geometry.size() - 1);
-      for (std::size_t t = s; t <= e; ++t) {
-        Step& step = steps[t - s];
-        if (step.measured) continue;
-        decoder.decode(t, finest, decoded);
-        double squared = 0, worst = 0;
-        for (std::size_t i = 0; i < decoded.size(); ++i) {
-          const double d =
-              static_cast<double>(decoded[i]) - static_cast<double>(step.volume.data[i]);
-          squared += d * d;
-          worst = std::max(worst, std::abs(d));
-        }
-        step.measured = true;
-        DeliveredQuality& q = summary.delivered;
-        ++q.frames;
-        q.squared_error += squared;
-        q.voxels += voxel_count;
-        q.max_abs_error = std::max(q.max_abs_error, worst);
-        if (frame_psnr(squared) < q.worst_frame_psnr) {
-          q.worst_frame_psnr = frame_psnr(squared);
-          q.worst_frame = t;
-        }
-      }
-      carried = std::move(steps.back());
-      steps.pop_back();
-      pool = std::move(steps);
+      continue;
     }
-    if (e + 1 >= frames) break;
-    s = e;
+    const auto start = Clock::now();
+    std::vector<Step> steps(e - s + 1);
+    for (std::size_t t = s; t <= e; ++t) {
+      if (t == s && carried) {
+        steps[0] = std::move(*carried);
+        continue;
+      }
+      if (!pool.empty()) {
+        steps[t - s] = std::move(pool.back());
+        pool.pop_back();
+      }
+      code_step(t, steps[t - s], t == s || t == e ? 1.0 : steps[t - s - 1].scale);
+      if (!done[t]) ++coded_frames;
+      char status[64];
+      std::snprintf(status, sizeof status, "coding frame %zu, %.1f MVoxel/s", t,
+                    voxels * static_cast<double>(coded_frames) / 1e6 /
+                        std::max(1e-9, summary.seconds + seconds_since(start)));
+      progress.report(static_cast<double>(std::min(coded_frames + summary.skipped, share_frames)),
+                      static_cast<double>(share_frames), status);
+    }
+    std::vector<std::vector<char>> keep(steps.size());
+    if (gap > 1 && steps.size() > 2) {
+      std::vector<const CodedFrame*> coded;
+      for (const Step& st : steps) coded.push_back(&st.coded);
+      KeyframeRule rule;
+      rule.within_coded_error = holds_psnr;
+      keep = choose_keyframes(coded, atoms, rule);
+    }
+    summary.seconds += seconds_since(start);
+    // Every frame of the stretch as bytes (the measurement below reads them from memory, since
+    // the frames this process does not write may not be on disk yet); this process writes its own.
+    std::vector<std::vector<std::byte>> bytes(steps.size());
+    std::vector<char> wrote(steps.size(), 0);
+    for (std::size_t t = s; t <= e; ++t) {
+      const auto write_start = Clock::now();
+      FrameStats st;
+      bytes[t - s] = encoder->write(steps[t - s].coded, keep[t - s], &st);
+      if (done[t]) continue;
+      // Never write a frame that a reader would refuse.
+      try {
+        format::validate_payloads(format::FrameView(bytes[t - s], format::frame_file_name(t)),
+                                  atoms);
+      } catch (const format::FormatError& err) {
+        throw std::runtime_error("frame " + std::to_string(t) +
+                                 " was coded into bytes that do not decode, so it was not "
+                                 "written (" +
+                                 err.what() + ")");
+      }
+      format::write_container_file(out, format::frame_file_name(t), bytes[t - s]);
+      m.frames[t] = format::ManifestFrame{format::frame_file_name(t), bytes[t - s].size(),
+                                          format::manifest_crc(bytes[t - s])};
+      // One process alone keeps the manifest current, so that an interrupted encode resumes
+      // from it; with several, rank 0 writes it once every frame is there.
+      if (ranks.size() == 1) format::write_manifest(out, m);
+      done[t] = 1;
+      wrote[t - s] = 1;
+      summary.seconds += seconds_since(write_start);
+      add_frame(st, summary);
+    }
+    // The delivered error of every step this process wrote, decoded as a reader does
+    // (interpolated nodes included).
+    const auto opener = [&](std::size_t t) {
+      if (t < s || t > e) throw std::logic_error("a stretch's step refers to a frame outside it");
+      return format::FrameFile(bytes[t - s], format::frame_file_name(t), bytes[t - s].size());
+    };
+    format::TimeStepDecoder decoder(frames, static_cast<std::uint32_t>(gap), atoms, opener);
+    std::vector<float> decoded(info.dims.voxels());
+    const std::uint32_t finest = static_cast<std::uint32_t>(steps[0].coded.geometry.size() - 1);
+    for (std::size_t t = s; t <= e; ++t) {
+      if (!wrote[t - s]) continue;
+      const Step& step = steps[t - s];
+      decoder.decode(t, finest, decoded);
+      double squared = 0, worst = 0;
+      for (std::size_t i = 0; i < decoded.size(); ++i) {
+        const double d = static_cast<double>(decoded[i]) - static_cast<double>(step.volume.data[i]);
+        squared += d * d;
+        worst = std::max(worst, std::abs(d));
+      }
+      DeliveredQuality& q = summary.delivered;
+      ++q.frames;
+      q.squared_error += squared;
+      q.voxels += voxel_count;
+      q.max_abs_error = std::max(q.max_abs_error, worst);
+      if (frame_psnr(squared) < q.worst_frame_psnr) {
+        q.worst_frame_psnr = frame_psnr(squared);
+        q.worst_frame = t;
+      }
+    }
+    carried = std::move(steps.back());
+    steps.pop_back();
+    pool = std::move(steps);
   }
-  m.complete = true;
-  format::write_manifest(out, m);
+
+  // 4. The manifest, complete: rank 0 lists every frame from what each process wrote or kept.
+  std::vector<std::uint64_t> records;  // frame, bytes, CRC of each frame of this share
+  for (std::size_t t = first_frame; t < end_frame; ++t) {
+    if (!m.frames[t]) throw std::logic_error("a frame of this process's share has no record");
+    records.insert(records.end(), {t, m.frames[t]->bytes, m.frames[t]->crc32c});
+  }
+  records = ranks.gather(records);
+  combine_summaries(ranks, summary);
+  on_root(ranks, [&] {
+    for (auto& f : m.frames) f.reset();
+    for (std::size_t i = 0; i + 2 < records.size(); i += 3)
+      m.frames[records[i]] =
+          format::ManifestFrame{format::frame_file_name(records[i]), records[i + 1],
+                                static_cast<std::uint32_t>(records[i + 2])};
+    for (std::size_t t = 0; t < frames; ++t)
+      if (!m.frames[t]) throw std::logic_error("no process wrote frame " + std::to_string(t));
+    m.complete = true;
+    format::write_manifest(out, m);
+    return true;
+  });
   const format::Container written(out);
   summary.container_bytes = written.total_bytes();
   summary.bps =

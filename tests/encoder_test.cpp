@@ -22,6 +22,7 @@
 #include "volreel/dictionary/dictionary.hpp"
 #include "volreel/dictionary/training.hpp"
 #include "volreel/encoder/encoder.hpp"
+#include "volreel/encoder/ranks.hpp"
 #include "volreel/format/brick_decode.h"
 #include "volreel/format/container.hpp"
 #include "volreel/format/crc32c.hpp"
@@ -1141,6 +1142,49 @@ TEST(Encoder, FixedRateBeyondFifteenAtomsReadsBack) {
   EXPECT_GT(finest_level_error(bytes, d, v).first, 30.0);
   s.fixed_sparsity = 217;
   EXPECT_THROW(encoder::FrameEncoder(&d, s), InputError);
+}
+
+}  // namespace
+}  // namespace volreel
+
+namespace volreel {
+namespace {
+
+/// Rank r of n, for Ranks::share (the collectives are never called).
+class PretendRank final : public encoder::Ranks {
+ public:
+  PretendRank(int rank, int size) : rank_(rank), size_(size) {}
+  int rank() const override { return rank_; }
+  int size() const override { return size_; }
+  void sum(std::span<double>) const override {}
+  void min(std::span<double>) const override {}
+  void max(std::span<double>) const override {}
+  void broadcast(std::vector<std::byte>&) const override {}
+  std::vector<std::uint64_t> gather(std::span<const std::uint64_t> v) const override {
+    return {v.begin(), v.end()};
+  }
+  void barrier() const override {}
+
+ private:
+  int rank_, size_;
+};
+
+TEST(Ranks, SharesCoverEveryItemOnceInOrderAndEvenly) {
+  for (int size : {1, 2, 3, 4, 7})
+    for (std::size_t n : {0u, 1u, 2u, 5u, 13u, 100u}) {
+      std::size_t next = 0, smallest = n, largest = 0;
+      for (int r = 0; r < size; ++r) {
+        const auto [first, last] = PretendRank(r, size).share(n);
+        EXPECT_EQ(first, next) << "rank " << r << " of " << size << ", " << n << " items";
+        EXPECT_LE(first, last);
+        smallest = std::min(smallest, last - first);
+        largest = std::max(largest, last - first);
+        next = last;
+      }
+      EXPECT_EQ(next, n) << size << " ranks, " << n << " items";
+      EXPECT_LE(largest - smallest, 1u);
+    }
+  EXPECT_EQ(encoder::single_process().share(9), (std::pair<std::size_t, std::size_t>{0, 9}));
 }
 
 }  // namespace

@@ -15,6 +15,7 @@
 
 #include "commands.hpp"
 #include "encode_report.hpp"
+#include "mpi_ranks.hpp"
 #include "progress.hpp"
 #include "volreel/dictionary/training.hpp"
 #include "volreel/encoder/encoder.hpp"
@@ -88,12 +89,8 @@ encoder::ToleranceRequest tolerance_request(const EncodeOptions& o) {
   return r;
 }
 
-void run_encode(const EncodeOptions& o) {
-  const auto series = datasets::open_series(o.series, o.reader.to_open_options());
-  const auto& info = series->info();
-  const std::size_t frames = o.max_frames ? std::min(o.max_frames, info.frames) : info.frames;
-  std::printf("volreel encode: %s, %s x %zu frames, variable '%s'\n", info.source.c_str(),
-              to_string(info.dims).c_str(), frames, info.variable.c_str());
+/// The request of `volreel encode` with these options (the same on every MPI rank).
+encoder::EncodeRequest encode_request(const EncodeOptions& o, std::size_t frames) {
   encoder::EncodeRequest r;
   r.coding = coding_settings(o);
   r.tolerance = tolerance_request(o);
@@ -107,6 +104,28 @@ void run_encode(const EncodeOptions& o) {
   if (o.keyframe_gap_opt->count() > 0) r.max_keyframe_gap = o.max_keyframe_gap;
   r.provenance = {
       {"program", "volreel " VOLREEL_VERSION}, {"series", o.series}, {"coef_bits", o.coef_bits}};
+  return r;
+}
+
+void run_encode(const EncodeOptions& o) {
+  // Under mpirun every rank runs this with the same options; rank 0 alone prints.
+  const encoder::Ranks* ranks = mpi_ranks();
+  const auto series = datasets::open_series(o.series, o.reader.to_open_options());
+  const auto& info = series->info();
+  const std::size_t frames = o.max_frames ? std::min(o.max_frames, info.frames) : info.frames;
+  if (ranks && !ranks->root()) {
+    encoder::EncodeRequest r = encode_request(o, frames);
+    r.ranks = ranks;
+    encoder::encode(*series, o.out, r);
+    return;
+  }
+  std::printf("volreel encode: %s, %s x %zu frames, variable '%s'\n", info.source.c_str(),
+              to_string(info.dims).c_str(), frames, info.variable.c_str());
+  if (ranks)
+    std::printf("%d MPI processes, each coding a share of the frames; rank 0's progress shown\n",
+                ranks->size());
+  encoder::EncodeRequest r = encode_request(o, frames);
+  r.ranks = ranks;
   encoder::EncodeEvents events;
   events.message = [](const std::string& line) { std::printf("%s\n", line.c_str()); };
   std::optional<ProgressBar> bar;
@@ -148,7 +167,8 @@ void add_encode_command(CLI::App& app) {
       "sparse-coded against the dictionary (variable rate: each block\nkeeps the atoms that lower "
       "its squared error by at least 0.25*216*eps^2, the rate-distortion optimal\nallocation; or, "
       "--rate-rule tolerance, atoms until its RMS error <= eps; fixed rate: S atoms) and\n"
-      "quantized, or each brick coded by zfp (--codec zfp).");
+      "quantized, or each brick coded by zfp (--codec zfp).\nUnder mpirun -n N the ranks share "
+      "the frames and write the same container as one process.");
   cmd->add_option(
          "SERIES", o->series,
          "Raw series directory, HDF5 file, raw file or quoted pattern of raw files (see below)")

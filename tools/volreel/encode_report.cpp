@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <string>
 #include <utility>
 
 namespace volreel::cli {
@@ -122,11 +123,13 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
                    s.blocks_over_bound, c.max_error);
   }
   std::printf(
-      "encoding time: pyramid %.2f s, brick extraction + histograms %.2f s, batch-OMP %.2f s, "
+      "encoding time%s: pyramid %.2f s, brick extraction + histograms %.2f s, batch-OMP %.2f s, "
       "quantization %.2f s, "
       "other (reading excluded) %.2f s\n",
-      s.seconds_pyramid, s.seconds_bricks, s.seconds_omp, s.seconds_quantize,
-      s.seconds - s.seconds_pyramid - s.seconds_bricks - s.seconds_omp - s.seconds_quantize);
+      s.processes > 1 ? " (summed over the processes)" : "", s.seconds_pyramid, s.seconds_bricks,
+      s.seconds_omp, s.seconds_quantize,
+      s.process_seconds - s.seconds_pyramid - s.seconds_bricks - s.seconds_omp -
+          s.seconds_quantize);
   if (s.unquantized_squared_error > 0)
     std::printf(
         "quantization: %.3f dB lost against the unquantized sparse approximation (squared error "
@@ -139,9 +142,11 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
   print_breakdown(s);
   std::printf(
       "wrote %s: %zu frames (%zu encoded, %zu already there), %ju bytes, %.4f bps; encoding %.1f "
-      "s, %.2f MVoxel/s on %d threads\n",
+      "s, %.2f MVoxel/s on %s%d threads\n",
       out.c_str(), s.frames, s.encoded, s.skipped, static_cast<std::uintmax_t>(s.container_bytes),
-      s.bps, s.seconds, s.mvoxels_per_s, omp_get_max_threads());
+      s.bps, s.seconds, s.mvoxels_per_s,
+      s.processes > 1 ? (std::to_string(s.processes) + " processes x ").c_str() : "",
+      omp_get_max_threads());
   const std::size_t node_steps = s.bricks_stored + s.nodes_interpolated;
   if (s.nodes_interpolated > 0)
     std::printf(
@@ -166,8 +171,9 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
                    "warning: target PSNR %.2f dB missed: frame %zu reached %.2f dB after %d "
                    "smaller tolerances",
                    psnr_target, q.worst_frame, q.worst_frame_psnr, encoder::max_tolerance_retries);
-    std::printf("; %zu frames coded again at a smaller eps (last eps %.4g, %.3f of the first)\n",
-                q.frames_coded_again, c.tolerance * q.tolerance_scale, q.tolerance_scale);
+    std::printf(
+        "; %zu frames coded again at a smaller eps (smallest eps %.4g, %.3f of the first)\n",
+        q.frames_coded_again, c.tolerance * q.tolerance_scale, q.tolerance_scale);
   }
 }
 

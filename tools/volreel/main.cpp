@@ -7,8 +7,11 @@
 #include <CLI/CLI.hpp>
 
 #include "commands.hpp"
+#include "mpi_ranks.hpp"
 
 int main(int argc, char** argv) {
+  // Under mpirun, MPI for `encode`'s ranks (mpi_ranks.hpp); otherwise nothing.
+  volreel::cli::MpiSession mpi(argc, argv);
   CLI::App app{"volreel " VOLREEL_VERSION
                ": encode time-varying simulation volumes into a compact, GPU-decodable form and "
                "explore them\n"
@@ -36,9 +39,11 @@ int main(int argc, char** argv) {
                  "volreel: error: out of memory: the input asks for more memory than this machine "
                  "can give (check the dimensions in its manifest or series.json, or decode a "
                  "coarser --level)\n");
+    volreel::cli::MpiSession::abort_job(1);
     return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "volreel: error: %s\n", e.what());
+    volreel::cli::MpiSession::abort_job(1);
     return 1;
   }
   return 0;

@@ -42,6 +42,11 @@ struct EncodeRequest {
   /// codes whole frames).
   std::optional<std::uint32_t> max_keyframe_gap;
   nlohmann::json provenance;  ///< stored under "encoder" in the manifest, with the program's
+  /// The processes that encode together (MPI ranks); null: this process alone. Each reads its
+  /// share of the frames for the value range; rank 0 trains the dictionary and chooses ε, and
+  /// the others receive them; then each codes its share of the frames (EncodeJob::ranks). Every
+  /// process must call encode() with the same request.
+  const Ranks* ranks = nullptr;
 };
 
 /// What encode() tells its caller as it goes; every member may be empty.
@@ -63,7 +68,8 @@ struct EncodeEvents {
 /// EncodeRequest::max_keyframe_gap); `lowered` says whether memory lowered it.
 std::uint32_t default_keyframe_gap(const Dims& dims, bool size_target, bool* lowered = nullptr);
 
-/// Encodes `series` into the container `out` as asked. Temporary dictionary files are removed
+/// Encodes `series` into the container `out` as asked. With several ranks, only rank 0 should be
+/// given events (one progress bar, one report). Temporary dictionary files are removed
 /// whatever happens. Throws InputError/FormatError with what was wrong.
 EncodeSummary encode(const datasets::SeriesReader& series, const std::filesystem::path& out,
                      EncodeRequest request, const EncodeEvents& events = {});

@@ -18,6 +18,7 @@
 #include "volreel/encoder/coding_settings.hpp"
 #include "volreel/encoder/frame_encoder.hpp"
 #include "volreel/encoder/keyframes.hpp"
+#include "volreel/encoder/ranks.hpp"
 
 namespace volreel::encoder {
 
@@ -43,8 +44,13 @@ struct EncodeJob {
   /// > 0 (dB, ksvd variable rate): every frame's finest-level PSNR over the sequence's value range
   /// at least this (volreel encode --psnr). A frame that falls short is coded again at a smaller
   /// ε (ε·10^(−shortfall/20), a little less), up to max_tolerance_retries times; the next frame
-  /// starts from the ε that sufficed.
+  /// of its keyframe stretch starts from the ε that sufficed, a stretch's end frames from the
+  /// job's ε (so that a stretch codes alike whichever process codes it, and when resumed).
   double psnr_target = 0;
+  /// The processes that encode together (MPI ranks); null: this process alone. Each codes a
+  /// contiguous share of the keyframe stretches and writes their frames; rank 0 prepares the
+  /// container and writes the manifest. The container is the same for any number of processes.
+  const Ranks* ranks = nullptr;
 };
 
 /// How often encode_series codes a frame again for EncodeJob::psnr_target.
@@ -65,7 +71,7 @@ struct DeliveredQuality {
   double worst_frame_psnr = std::numeric_limits<double>::infinity();
   std::size_t worst_frame = 0;
   std::size_t frames_coded_again = 0;  ///< frames coded more than once for psnr_target
-  double tolerance_scale = 1;          ///< of the last frame's ε against the job's
+  double tolerance_scale = 1;          ///< the smallest ε a frame needed, against the job's
   /// PSNR of all measured voxels together, 10·log10(range²/MSE) (∞ when lossless).
   double sequence_psnr(double range) const;
 };
@@ -73,7 +79,9 @@ struct EncodeSummary {
   std::size_t frames = 0, encoded = 0, skipped = 0;
   std::uint64_t container_bytes = 0;
   double bps = 0;
-  double seconds = 0;  ///< encoding only (skipped frames excluded)
+  double seconds = 0;          ///< encoding only (skipped frames excluded); the slowest process's
+  std::size_t processes = 1;   ///< that coded frames together (EncodeJob::ranks)
+  double process_seconds = 0;  ///< seconds summed over the processes (the parts below are too)
   double mvoxels_per_s = 0;
   double unquantized_squared_error = 0, quantized_squared_error = 0;  ///< FrameStats', summed
   ByteBreakdown breakdown;                                            ///< of the frames encoded
@@ -103,12 +111,13 @@ struct EncodeSummary {
 EncodeSummary encode_series(const datasets::SeriesReader& series, const std::filesystem::path& out,
                             const EncodeJob& job, const Progress& progress = {});
 
-/// Value range of the first `frames` frames (0: all).
 /// Throws InputError naming `source` (the series) when a value of [value_min, value_max] is beyond
 /// max_input_magnitude.
 void check_value_range(double value_min, double value_max, const std::string& source);
 
+/// Value range of the first `frames` frames (0: all); with ranks, each process reads its share.
 std::pair<double, double> value_range(const datasets::SeriesReader& series, std::size_t frames,
-                                      const Progress& progress = {});
+                                      const Progress& progress = {},
+                                      const Ranks& ranks = single_process());
 
 }  // namespace volreel::encoder

@@ -1,0 +1,89 @@
+#!/usr/bin/env bash
+# mpi_encode_test.sh: `mpirun -n N volreel encode` writes the very container the serial encoder
+# writes (every file byte for byte) for 2 and 4 ranks, with keyframe gaps, a PSNR target, zfp and
+# training; a rank killed mid-encode fails the job with a message, and --resume under mpirun
+# completes the same container. Usage: mpi_encode_test.sh PATH/TO/volreel PATH/TO/mpiexec
+set -euo pipefail
+volreel=$1
+mpiexec=$2
+work=$(mktemp -d)
+trap 'pkill -9 -f "$work" 2>/dev/null || true; rm -rf "$work"' EXIT
+fail() { echo "FAIL: $*" >&2; exit 1; }
+# Containers and CI machines run this as root, which OpenMPI refuses unless told.
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+# One thread per rank, as many ranks as asked even on a 2-core machine.
+export OMP_NUM_THREADS=1
+mpi() { local n=$1; shift; "$mpiexec" -n "$n" --oversubscribe "$@"; }
+same() {  # two containers, every file
+  diff -r "$1" "$2" > /dev/null || fail "$3: $(diff -r "$1" "$2" | head -3)"
+}
+
+# A non-cube with a still region (the plume), 13 frames: stretches of gap 3 split unevenly.
+"$volreel" gen analytic --field plume --dims 40x36x44 --frames 13 --out "$work/s" > /dev/null 2>&1
+
+"$volreel" encode "$work/s" --out "$work/serial.vreel" --dictionary dct --max-keyframe-gap 3 \
+  > /dev/null 2>&1
+for n in 2 4; do
+  mpi "$n" "$volreel" encode "$work/s" --out "$work/mpi$n.vreel" --dictionary dct \
+    --max-keyframe-gap 3 > "$work/mpi$n.txt" 2>&1 || fail "mpirun -n $n: $(tail -5 "$work/mpi$n.txt")"
+  same "$work/serial.vreel" "$work/mpi$n.vreel" "-n $n differs from the serial container"
+done
+grep -q "2 MPI processes" "$work/mpi2.txt" || fail "rank 0 does not say it runs with 2 processes"
+[ "$(grep -c '^wrote' "$work/mpi2.txt")" = 1 ] || fail "the report should be printed once"
+grep -q "on 2 processes" "$work/mpi2.txt" || fail "the report does not count the processes"
+"$volreel" verify "$work/mpi4.vreel" > /dev/null 2>&1 || fail "verify refuses the -n 4 container"
+
+# A PSNR target (frames coded again at smaller tolerances) and zfp.
+"$volreel" encode "$work/s" --out "$work/psnr.vreel" --dictionary dct --psnr 62 \
+  --max-keyframe-gap 4 > "$work/psnr.txt" 2>&1
+mpi 3 "$volreel" encode "$work/s" --out "$work/psnr3.vreel" --dictionary dct --psnr 62 \
+  --max-keyframe-gap 4 > "$work/psnr3.txt" 2>&1 || fail "mpirun --psnr: $(tail -5 "$work/psnr3.txt")"
+same "$work/psnr.vreel" "$work/psnr3.vreel" "--psnr under -n 3 differs"
+grep -q "coded again" "$work/psnr.txt" || fail "the PSNR case should code frames again"
+"$volreel" encode "$work/s" --out "$work/zfp.vreel" --codec zfp > /dev/null 2>&1
+mpi 2 "$volreel" encode "$work/s" --out "$work/zfp2.vreel" --codec zfp > /dev/null 2>&1
+same "$work/zfp.vreel" "$work/zfp2.vreel" "zfp under -n 2 differs"
+
+# Training (rank 0 trains, the others receive the dictionary) on a few frames.
+"$volreel" encode "$work/s" --out "$work/train.vreel" --max-frames 4 > /dev/null 2>&1
+mpi 2 "$volreel" encode "$work/s" --out "$work/train2.vreel" --max-frames 4 > /dev/null 2>&1
+same "$work/train.vreel" "$work/train2.vreel" "training under -n 2 differs"
+
+# An error on rank 0 ends the job with its message (no rank left waiting).
+if out=$(timeout 60 "$mpiexec" -n 2 --oversubscribe "$volreel" encode "$work/s" \
+  --out "$work/mpi2.vreel" --dictionary dct 2>&1); then
+  fail "encoding over an existing container should fail"
+fi
+echo "$out" | grep -q "already holds a container" || fail "no message for an existing container: $out"
+
+# A rank killed mid-encode: the job fails; --resume under mpirun completes the same container.
+"$volreel" gen analytic --field noise --size 48 --frames 30 --out "$work/n" > /dev/null 2>&1
+args=(encode "$work/n" --dictionary dct --max-keyframe-gap 2 --psnr 70)
+"$volreel" "${args[@]}" --out "$work/whole.vreel" > /dev/null 2>&1
+( mpi 2 "$volreel" "${args[@]}" --out "$work/killed.vreel" > "$work/killed.txt" 2>&1
+  echo "rc=$?" >> "$work/killed.txt" ) &
+job=$!
+killed=
+for _ in $(seq 1 600); do
+  frames=$(find "$work/killed.vreel/frames" -name '*.vrf' 2> /dev/null | wc -l || true)
+  if [ "$frames" -ge 2 ]; then
+    for pid in $(pgrep -f "$work/killed.vreel"); do
+      if tr '\0' '\n' < "/proc/$pid/environ" 2> /dev/null | grep -qx "OMPI_COMM_WORLD_RANK=1"; then
+        kill -9 "$pid" && killed=$pid
+      fi
+    done
+    [ -n "$killed" ] && break
+  fi
+  sleep 0.05
+done
+wait "$job" || true
+[ -n "$killed" ] || fail "found no rank 1 to kill: $(cat "$work/killed.txt")"
+grep -q "rc=0" "$work/killed.txt" && fail "the job should fail when a rank is killed"
+written=$(find "$work/killed.vreel/frames" -name '*.vrf' | wc -l)
+[ "$written" -lt 30 ] || fail "the killed job wrote every frame; kill came too late"
+mpi 2 "$volreel" "${args[@]}" --out "$work/killed.vreel" --resume > "$work/resumed.txt" 2>&1 ||
+  fail "--resume under mpirun: $(tail -5 "$work/resumed.txt")"
+grep -q "already there" "$work/resumed.txt" || fail "resume did not keep the frames written"
+same "$work/whole.vreel" "$work/killed.vreel" "the resumed container differs from the serial one"
+
+echo "mpi_encode: all checks passed"
