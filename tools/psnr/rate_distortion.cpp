@@ -51,6 +51,22 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
+/// What a point measured over `frames` frames: bps from its bytes, the errors, the mean SSIM of
+/// the `ssim_frames` frames sampled, and the decoding speed.
+void set_measured(RdPoint& p, const ErrorStats& e, std::size_t frames, Dims dims, double ssim_sum,
+                  std::size_t ssim_frames, double decompress_s) {
+  const double voxels = static_cast<double>(dims.voxels()) * static_cast<double>(frames);
+  p.frames = frames;
+  p.bps = 8.0 * static_cast<double>(p.bytes) / voxels;
+  p.psnr = e.psnr;
+  p.psnr_zfp = e.psnr_zfp;
+  p.rmse = e.rmse;
+  p.max_abs_error = e.max_abs_error;
+  p.ssim_frames = ssim_frames;
+  p.ssim = ssim_frames == 0 ? std::nan("") : ssim_sum / static_cast<double>(ssim_frames);
+  p.decompress_mvoxels_per_s = voxels / 1e6 / std::max(decompress_s, 1e-9);
+}
+
 }  // namespace
 
 std::pair<double, double> series_range(const datasets::SeriesReader& series,
@@ -113,22 +129,12 @@ std::vector<RdPoint> run_rate_distortion(const datasets::SeriesReader& series,
   const double voxels = static_cast<double>(dims.voxels()) * static_cast<double>(frames);
   for (std::size_t c = 0; c < codecs.size(); ++c) {
     const State& s = states[c];
-    const ErrorStats e = s.errors.result();
     RdPoint p;
     p.family = codecs[c]->family();
     p.setting = codecs[c]->setting();
-    p.frames = frames;
     p.bytes = s.bytes + codecs[c]->shared_bytes();
-    p.bps = 8.0 * static_cast<double>(p.bytes) / voxels;
-    p.psnr = e.psnr;
-    p.psnr_zfp = e.psnr_zfp;
-    p.rmse = e.rmse;
-    p.max_abs_error = e.max_abs_error;
-    p.ssim_frames = ssim_picks.size();
-    p.ssim =
-        ssim_picks.empty() ? std::nan("") : s.ssim_sum / static_cast<double>(ssim_picks.size());
     p.compress_mvoxels_per_s = voxels / 1e6 / std::max(s.compress_s, 1e-9);
-    p.decompress_mvoxels_per_s = voxels / 1e6 / std::max(s.decompress_s, 1e-9);
+    set_measured(p, s.errors.result(), frames, dims, s.ssim_sum, ssim_picks.size(), s.decompress_s);
     points.push_back(std::move(p));
   }
   std::stable_sort(points.begin(), points.end(), [](const RdPoint& a, const RdPoint& b) {
@@ -165,18 +171,7 @@ void measure_decoded_series(const datasets::SeriesReader& original,
     progress.report(static_cast<double>(t + 1), static_cast<double>(frames),
                     "frame " + std::to_string(t + 1));
   }
-  const ErrorStats e = errors.result();
-  const double voxels = static_cast<double>(dims.voxels()) * static_cast<double>(frames);
-  point.frames = frames;
-  point.bps = 8.0 * static_cast<double>(point.bytes) / voxels;
-  point.psnr = e.psnr;
-  point.psnr_zfp = e.psnr_zfp;
-  point.rmse = e.rmse;
-  point.max_abs_error = e.max_abs_error;
-  point.ssim_frames = ssim_picks.size();
-  point.ssim =
-      ssim_picks.empty() ? std::nan("") : ssim_sum / static_cast<double>(ssim_picks.size());
-  point.decompress_mvoxels_per_s = voxels / 1e6 / std::max(decompress_s, 1e-9);
+  set_measured(point, errors.result(), frames, dims, ssim_sum, ssim_picks.size(), decompress_s);
 }
 
 void print_rd_table(std::ostream& out, std::span<const RdPoint> points) {

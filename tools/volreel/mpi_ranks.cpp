@@ -29,7 +29,8 @@ void check(int code, const char* call) {
   char text[MPI_MAX_ERROR_STRING];
   int length = 0;
   MPI_Error_string(code, text, &length);
-  throw std::runtime_error(std::string(call) + " failed: " + std::string(text, static_cast<std::size_t>(length)));
+  throw std::runtime_error(std::string(call) +
+                           " failed: " + std::string(text, static_cast<std::size_t>(length)));
 }
 
 int to_count(std::size_t n) {
@@ -78,8 +79,7 @@ class WorldRanks final : public encoder::Ranks {
 
  private:
   void reduce(std::span<double> v, MPI_Op op) const {
-    check(MPI_Allreduce(MPI_IN_PLACE, v.data(), to_count(v.size()), MPI_DOUBLE, op,
-                        MPI_COMM_WORLD),
+    check(MPI_Allreduce(MPI_IN_PLACE, v.data(), to_count(v.size()), MPI_DOUBLE, op, MPI_COMM_WORLD),
           "MPI_Allreduce");
   }
   int rank_ = 0, size_ = 1;
