@@ -88,6 +88,9 @@ void train_dictionary(const datasets::SeriesReader& series, const EncodeRequest&
   d.sample_frames = request.tolerance.rate_sample_frames;
   d.half_atoms = request.half_atoms;
   d.coding = request.coding;
+  // The coreset from the frames this encode codes (--max-frames), not the whole series.
+  if (d.coreset.candidate_frames.empty())
+    for (std::size_t t = 0; t < frames; ++t) d.coreset.candidate_frames.push_back(t);
   dictionary::CoresetHierarchy h;
   {
     Stage stage(events, "coreset", "frames");
