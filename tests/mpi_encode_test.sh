@@ -31,6 +31,8 @@ done
 grep -q "2 MPI processes" "$work/mpi2.txt" || fail "rank 0 does not say it runs with 2 processes"
 [ "$(grep -c '^wrote' "$work/mpi2.txt")" = 1 ] || fail "the report should be printed once"
 grep -q "on 2 processes" "$work/mpi2.txt" || fail "the report does not count the processes"
+grep -Eq "^peak resident memory per rank: [0-9]+ MiB [0-9]+ MiB$" "$work/mpi2.txt" ||
+  fail "no peak memory of each of the 2 ranks: $(grep peak "$work/mpi2.txt")"
 "$volreel" verify "$work/mpi4.vreel" > /dev/null 2>&1 || fail "verify refuses the -n 4 container"
 
 # A PSNR target (frames coded again at smaller tolerances) and zfp.

@@ -117,6 +117,8 @@ void run_encode(const EncodeOptions& o) {
     encoder::EncodeRequest r = encode_request(o, frames);
     r.ranks = ranks;
     encoder::encode(*series, o.out, r);
+    const std::uint64_t rss = peak_resident_bytes();
+    ranks->gather({&rss, 1});
     return;
   }
   std::printf("volreel encode: %s, %s x %zu frames, variable '%s'\n", info.source.c_str(),
@@ -154,6 +156,12 @@ void run_encode(const EncodeOptions& o) {
   };
   const encoder::EncodeSummary s = encoder::encode(*series, o.out, r, events);
   print_encode_summary(s, s.coding, o.out, r.tolerance.psnr.value_or(0));
+  const std::uint64_t rss = peak_resident_bytes();
+  const std::vector<std::uint64_t> each =
+      ranks ? ranks->gather({&rss, 1}) : std::vector<std::uint64_t>{rss};
+  std::string line = ranks ? "peak resident memory per rank:" : "peak resident memory:";
+  for (const std::uint64_t b : each) line += " " + std::to_string((b + (1u << 19)) >> 20) + " MiB";
+  std::printf("%s\n", line.c_str());
 }
 
 }  // namespace

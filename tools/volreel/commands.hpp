@@ -1,6 +1,7 @@
 // commands.hpp: the subcommands of the volreel program.
 #pragma once
 
+#include <cstdint>
 #include <optional>
 #include <string>
 
@@ -52,5 +53,8 @@ struct ReaderOptions {
 
 /// "CPU model, N cores; build type; volreel version" for benchmark headers.
 std::string describe_machine();
+
+/// The largest resident set this process has had (VmHWM), in bytes; 0 where /proc cannot say.
+std::uint64_t peak_resident_bytes();
 
 }  // namespace volreel::cli

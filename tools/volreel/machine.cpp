@@ -24,4 +24,11 @@ std::string describe_machine() {
          " OpenMP threads; volreel " VOLREEL_VERSION ", " + build + " build";
 }
 
+std::uint64_t peak_resident_bytes() {
+  std::ifstream status("/proc/self/status");
+  for (std::string line; std::getline(status, line);)
+    if (line.rfind("VmHWM:", 0) == 0) return std::stoull(line.substr(6)) * 1024;  // in kB
+  return 0;
+}
+
 }  // namespace volreel::cli
