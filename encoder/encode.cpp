@@ -5,7 +5,6 @@
 
 #include <atomic>
 #include <cstdio>
-#include <cstring>
 #include <utility>
 
 #include "volreel/dictionary/training.hpp"
@@ -223,8 +222,8 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
     }
     if (ranks.size() > 1) {
       // The dictionary file's bytes, or (empty) rank 0's error; then ε.
-      std::vector<std::byte> message(failure.size());
-      std::memcpy(message.data(), failure.data(), failure.size());
+      std::vector<std::byte> message;
+      for (const char ch : failure) message.push_back(static_cast<std::byte>(ch));
       ranks.broadcast(message);
       if (!message.empty())
         throw InputError(

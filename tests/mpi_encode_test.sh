@@ -13,7 +13,11 @@ fail() { echo "FAIL: $*" >&2; exit 1; }
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 # One thread per rank, as many ranks as asked even on a 2-core machine.
 export OMP_NUM_THREADS=1
-mpi() { local n=$1; shift; "$mpiexec" -n "$n" --oversubscribe "$@"; }
+# Under AddressSanitizer the ranks run without leak detection: OpenMPI keeps allocations until
+# the process ends, in plugins it unloads, which LeakSanitizer cannot tell from volreel's. The
+# same encoder code is leak-checked in every serial test.
+rank_asan="${ASAN_OPTIONS:+$ASAN_OPTIONS:}detect_leaks=0"
+mpi() { local n=$1; shift; "$mpiexec" -n "$n" --oversubscribe -x ASAN_OPTIONS="$rank_asan" "$@"; }
 same() {  # two containers, every file
   diff -r "$1" "$2" > /dev/null || fail "$3: $(diff -r "$1" "$2" | head -3)"
 }
@@ -46,21 +50,23 @@ grep -q "coded again" "$work/psnr.txt" || fail "the PSNR case should code frames
 mpi 2 "$volreel" encode "$work/s" --out "$work/zfp2.vreel" --codec zfp > /dev/null 2>&1
 same "$work/zfp.vreel" "$work/zfp2.vreel" "zfp under -n 2 differs"
 
-# Training (rank 0 trains, the others receive the dictionary) on a few frames.
-"$volreel" encode "$work/s" --out "$work/train.vreel" --max-frames 4 > /dev/null 2>&1
-mpi 2 "$volreel" encode "$work/s" --out "$work/train2.vreel" --max-frames 4 > /dev/null 2>&1
+# Training (rank 0 trains, the others receive the dictionary) on a few frames; K given, since the
+# automatic choice trains four dictionaries (the same code on rank 0).
+"$volreel" encode "$work/s" --out "$work/train.vreel" --max-frames 4 --atoms 64 > /dev/null 2>&1
+mpi 2 "$volreel" encode "$work/s" --out "$work/train2.vreel" --max-frames 4 --atoms 64 \
+  > /dev/null 2>&1
 same "$work/train.vreel" "$work/train2.vreel" "training under -n 2 differs"
 
 # An error on rank 0 ends the job with its message (no rank left waiting).
-if out=$(timeout 60 "$mpiexec" -n 2 --oversubscribe "$volreel" encode "$work/s" \
-  --out "$work/mpi2.vreel" --dictionary dct 2>&1); then
+if out=$(timeout 120 "$mpiexec" -n 2 --oversubscribe -x ASAN_OPTIONS="$rank_asan" "$volreel" \
+  encode "$work/s" --out "$work/mpi2.vreel" --dictionary dct 2>&1); then
   fail "encoding over an existing container should fail"
 fi
 echo "$out" | grep -q "already holds a container" || fail "no message for an existing container: $out"
 
 # A rank killed mid-encode: the job fails; --resume under mpirun completes the same container.
-"$volreel" gen analytic --field noise --size 48 --frames 30 --out "$work/n" > /dev/null 2>&1
-args=(encode "$work/n" --dictionary dct --max-keyframe-gap 2 --psnr 70)
+"$volreel" gen analytic --field noise --size 36 --frames 40 --out "$work/n" > /dev/null 2>&1
+args=(encode "$work/n" --dictionary dct --max-keyframe-gap 2 --tolerance 0.002)
 "$volreel" "${args[@]}" --out "$work/whole.vreel" > /dev/null 2>&1
 ( mpi 2 "$volreel" "${args[@]}" --out "$work/killed.vreel" > "$work/killed.txt" 2>&1
   echo "rc=$?" >> "$work/killed.txt" ) &
@@ -82,7 +88,7 @@ wait "$job" || true
 [ -n "$killed" ] || fail "found no rank 1 to kill: $(cat "$work/killed.txt")"
 grep -q "rc=0" "$work/killed.txt" && fail "the job should fail when a rank is killed"
 written=$(find "$work/killed.vreel/frames" -name '*.vrf' | wc -l)
-[ "$written" -lt 30 ] || fail "the killed job wrote every frame; kill came too late"
+[ "$written" -lt 40 ] || fail "the killed job wrote every frame; kill came too late"
 mpi 2 "$volreel" "${args[@]}" --out "$work/killed.vreel" --resume > "$work/resumed.txt" 2>&1 ||
   fail "--resume under mpirun: $(tail -5 "$work/resumed.txt")"
 grep -q "already there" "$work/resumed.txt" || fail "resume did not keep the frames written"
