@@ -597,11 +597,15 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     }
     const auto start = Clock::now();
     std::vector<Step> steps(e - s + 1);
+    // Without gaps a stretch's first frame serves nothing when another process writes it (no
+    // keyframe choice, and its last frame stores every node): it is not coded here.
+    const bool skip_first = gap == 1 && done[s] && !carried;
     for (std::size_t t = s; t <= e; ++t) {
       if (t == s && carried) {
         steps[0] = std::move(*carried);
         continue;
       }
+      if (t == s && skip_first) continue;
       if (!pool.empty()) {
         steps[t - s] = std::move(pool.back());
         pool.pop_back();
@@ -629,6 +633,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     std::vector<std::vector<std::byte>> bytes(steps.size());
     std::vector<char> wrote(steps.size(), 0);
     for (std::size_t t = s; t <= e; ++t) {
+      if (t == s && skip_first) continue;
       const auto write_start = Clock::now();
       FrameStats st;
       bytes[t - s] = encoder->write(steps[t - s].coded, keep[t - s], &st);
@@ -657,12 +662,13 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     // The delivered error of every step this process wrote, decoded as a reader does
     // (interpolated nodes included).
     const auto opener = [&](std::size_t t) {
-      if (t < s || t > e) throw std::logic_error("a stretch's step refers to a frame outside it");
+      if (t < s || t > e || (t == s && skip_first))
+        throw std::logic_error("a stretch's step refers to a frame not coded with it");
       return format::FrameFile(bytes[t - s], format::frame_file_name(t), bytes[t - s].size());
     };
     format::TimeStepDecoder decoder(frames, static_cast<std::uint32_t>(gap), atoms, opener);
     std::vector<float> decoded(info.dims.voxels());
-    const std::uint32_t finest = static_cast<std::uint32_t>(steps[0].coded.geometry.size() - 1);
+    const std::uint32_t finest = static_cast<std::uint32_t>(steps.back().coded.geometry.size() - 1);
     for (std::size_t t = s; t <= e; ++t) {
       if (!wrote[t - s]) continue;
       const Step& step = steps[t - s];

@@ -32,6 +32,12 @@ for n in 2 4; do
     --max-keyframe-gap 3 > "$work/mpi$n.txt" 2>&1 || fail "mpirun -n $n: $(tail -5 "$work/mpi$n.txt")"
   same "$work/serial.vreel" "$work/mpi$n.vreel" "-n $n differs from the serial container"
 done
+# Without gaps (a rank does not code the frame before its share).
+"$volreel" encode "$work/s" --out "$work/g1.vreel" --dictionary dct --max-keyframe-gap 1 \
+  > /dev/null 2>&1
+mpi 3 "$volreel" encode "$work/s" --out "$work/g1-3.vreel" --dictionary dct --max-keyframe-gap 1 \
+  > /dev/null 2>&1
+same "$work/g1.vreel" "$work/g1-3.vreel" "-n 3 without keyframe gaps differs"
 grep -q "2 MPI processes" "$work/mpi2.txt" || fail "rank 0 does not say it runs with 2 processes"
 [ "$(grep -c '^wrote' "$work/mpi2.txt")" = 1 ] || fail "the report should be printed once"
 grep -q "on 2 processes" "$work/mpi2.txt" || fail "the report does not count the processes"
