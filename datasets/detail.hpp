@@ -12,10 +12,15 @@
 
 namespace volreel::datasets::detail {
 
-/// Throw InputError naming `what` and the first non-finite voxel, or replace every non-finite
-/// value when `replacement` is set.
+/// Throw InputError naming `what` and the first non-finite voxel (values: planes from z_begin
+/// on), or replace every non-finite value when `replacement` is set.
 void check_finite(std::span<float> values, Dims dims, const std::string& what,
-                  std::optional<float> replacement);
+                  std::optional<float> replacement, std::size_t z_begin = 0);
+
+/// Throw InputError unless t is a frame of the series, [z_begin, z_end) a non-empty range of its
+/// planes and out_size the slab's voxel count.
+void check_slab(const SeriesInfo& info, std::size_t t, std::size_t z_begin, std::size_t z_end,
+                std::size_t out_size);
 
 /// Convert `count` little-endian values of `dtype` from `bytes` to float32.
 void convert_to_float(const unsigned char* bytes, Dtype dtype, std::span<float> out);

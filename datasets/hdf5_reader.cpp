@@ -158,12 +158,9 @@ class Hdf5Reader final : public SeriesReader {
         "HDF5 " + file_.string() + " (" + (four_d_ ? "4D dataset " : "datasets ") + pattern + ")";
   }
 
-  void read_frame(std::size_t t, std::span<float> out) const override {
-    if (t >= info_.frames)
-      throw InputError("frame " + std::to_string(t) + " is out of range: " + info_.source +
-                       " has " + std::to_string(info_.frames) + " frames");
-    if (out.size() != info_.dims.voxels())
-      throw InputError("read_frame: output has the wrong size");
+  void read_slab(std::size_t t, std::size_t z_begin, std::size_t z_end,
+                 std::span<float> out) const override {
+    check_slab(info_, t, z_begin, z_end, out.size());
     const FrameSource& frame = frames_[t];
     {
       std::lock_guard lock(hdf5_mutex());
@@ -171,25 +168,29 @@ class Hdf5Reader final : public SeriesReader {
       if (!f.valid()) throw InputError("'" + file_.string() + "' cannot be opened as an HDF5 file");
       Handle ds(H5Dopen2(f.get(), frame.dataset.c_str(), H5P_DEFAULT), H5Dclose);
       if (!ds.valid()) throw InputError(where(frame.dataset) + "cannot be opened");
-      herr_t status;
-      if (four_d_) {
-        Handle file_space(H5Dget_space(ds.get()), H5Sclose);
-        const hsize_t start[4] = {frame.index, 0, 0, 0};
-        const hsize_t count[4] = {1, static_cast<hsize_t>(info_.dims.z),
-                                  static_cast<hsize_t>(info_.dims.y),
-                                  static_cast<hsize_t>(info_.dims.x)};
-        H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start, nullptr, count, nullptr);
-        Handle memory_space(H5Screate_simple(4, count, nullptr), H5Sclose);
+      // The planes as a hyperslab: [t][z][y][x] of the 4D dataset (its frame), or [z][y][x] of
+      // a 3D one and [z][y][x][1] of a one-component cutout.
+      Handle file_space(H5Dget_space(ds.get()), H5Sclose);
+      const hsize_t start[5] = {frame.index, z_begin, 0, 0, 0};
+      const hsize_t count[5] = {1, static_cast<hsize_t>(z_end - z_begin),
+                                static_cast<hsize_t>(info_.dims.y),
+                                static_cast<hsize_t>(info_.dims.x), 1};
+      const int skip = four_d_ ? 0 : 1;
+      const int rank = four_d_ ? 4 : H5Sget_simple_extent_ndims(file_space.get());
+      herr_t status = rank == 3 || rank == 4 ? 0 : -1;
+      if (status >= 0)
+        status = H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start + skip, nullptr,
+                                     count + skip, nullptr);
+      if (status >= 0) {
+        Handle memory_space(H5Screate_simple(rank, count + skip, nullptr), H5Sclose);
         status = H5Dread(ds.get(), H5T_NATIVE_FLOAT, memory_space.get(), file_space.get(),
                          H5P_DEFAULT, out.data());
-      } else {
-        status = H5Dread(ds.get(), H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data());
       }
       if (status < 0)
         throw InputError(where(frame.dataset) + "could not be read (corrupt or truncated file?)");
     }
-    check_finite(out, info_.dims, where(frame.dataset) + "frame " + std::to_string(t),
-                 replace_nan_);
+    check_finite(out, info_.dims, where(frame.dataset) + "frame " + std::to_string(t), replace_nan_,
+                 z_begin);
   }
 
  private:

@@ -47,19 +47,16 @@ class NetcdfReader final : public SeriesReader {
   NetcdfReader(const NetcdfReader&) = delete;
   NetcdfReader& operator=(const NetcdfReader&) = delete;
 
-  void read_frame(std::size_t t, std::span<float> out) const override {
-    if (t >= info_.frames)
-      throw InputError("frame " + std::to_string(t) + " is out of range: " + info_.source +
-                       " has " + std::to_string(info_.frames) + " frames");
-    if (out.size() != info_.dims.voxels())
-      throw InputError("read_frame: output has the wrong size");
+  void read_slab(std::size_t t, std::size_t z_begin, std::size_t z_end,
+                 std::span<float> out) const override {
+    check_slab(info_, t, z_begin, z_end, out.size());
     std::vector<std::size_t> start(static_cast<std::size_t>(rank_), 0),
         count(static_cast<std::size_t>(rank_), 1);
-    for (int a = 0; a < 3; ++a)
-      count[static_cast<std::size_t>(rank_ - 3 + a)] =
-          static_cast<std::size_t>(a == 0   ? info_.dims.z
-                                   : a == 1 ? info_.dims.y
-                                            : info_.dims.x);
+    const auto z = static_cast<std::size_t>(rank_ - 3);
+    start[z] = z_begin;
+    count[z] = z_end - z_begin;
+    count[z + 1] = static_cast<std::size_t>(info_.dims.y);
+    count[z + 2] = static_cast<std::size_t>(info_.dims.x);
     if (rank_ == 4) start[0] = t;
     {
       std::lock_guard lock(netcdf_mutex());
@@ -77,7 +74,7 @@ class NetcdfReader final : public SeriesReader {
     }
     check_finite(out, info_.dims,
                  "'" + file_.string() + "' variable '" + variable_ + "' frame " + std::to_string(t),
-                 replace_nan_);
+                 replace_nan_, z_begin);
   }
 
  private:

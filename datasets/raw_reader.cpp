@@ -126,15 +126,13 @@ class RawSeriesReader final : public SeriesReader {
     }
   }
 
-  void read_frame(std::size_t t, std::span<float> out) const override {
-    if (t >= info_.frames)
-      throw InputError("frame " + std::to_string(t) + " is out of range: " + info_.source +
-                       " has " + std::to_string(info_.frames) + " frames");
-    if (out.size() != info_.dims.voxels())
-      throw InputError("read_frame: output has the wrong size");
+  void read_slab(std::size_t t, std::size_t z_begin, std::size_t z_end,
+                 std::span<float> out) const override {
+    check_slab(info_, t, z_begin, z_end, out.size());
     const fs::path file = dir_ / frame_files_[t];
-    read_exact(file, 0, {reinterpret_cast<unsigned char*>(out.data()), out.size_bytes()});
-    check_finite(out, info_.dims, "'" + file.string() + "'", replace_nan_);
+    read_exact(file, z_begin * info_.dims.plane() * sizeof(float),
+               {reinterpret_cast<unsigned char*>(out.data()), out.size_bytes()});
+    check_finite(out, info_.dims, "'" + file.string() + "'", replace_nan_, z_begin);
   }
 
  private:
@@ -193,21 +191,19 @@ class RawFileReader final : public SeriesReader {
                              " files, " + to_string(dtype_) + ")";
   }
 
-  void read_frame(std::size_t t, std::span<float> out) const override {
-    if (t >= info_.frames)
-      throw InputError("frame " + std::to_string(t) + " is out of range: " + info_.source +
-                       " has " + std::to_string(info_.frames) + " frames");
-    if (out.size() != info_.dims.voxels())
-      throw InputError("read_frame: output has the wrong size");
+  void read_slab(std::size_t t, std::size_t z_begin, std::size_t z_end,
+                 std::span<float> out) const override {
+    check_slab(info_, t, z_begin, z_end, out.size());
     const fs::path& file = files_[t / frames_per_file_];
     const std::size_t within = t % frames_per_file_;
-    std::vector<unsigned char> bytes(frame_bytes_);
-    read_exact(file, within * frame_bytes_, bytes);
+    const std::size_t plane_bytes = info_.dims.plane() * dtype_size(dtype_);
+    std::vector<unsigned char> bytes(plane_bytes * (z_end - z_begin));
+    read_exact(file, within * frame_bytes_ + z_begin * plane_bytes, bytes);
     convert_to_float(bytes.data(), dtype_, out);
     check_finite(out, info_.dims,
                  "'" + file.string() + "'" +
                      (frames_per_file_ > 1 ? " frame " + std::to_string(within) : std::string()),
-                 replace_nan_);
+                 replace_nan_, z_begin);
   }
 
  private:

@@ -70,6 +70,25 @@ Volume SeriesReader::read_frame(std::size_t t) const {
   return volume;
 }
 
+void SeriesReader::read_frame(std::size_t t, std::span<float> out) const {
+  if (out.size() != info_.dims.voxels()) throw InputError("read_frame: output has the wrong size");
+  read_slab(t, 0, info_.dims.planes(), out);
+}
+
+void SeriesReader::read_slab(std::size_t t, std::size_t z_begin, std::size_t z_end,
+                             std::span<float> out) const {
+  detail::check_slab(info_, t, z_begin, z_end, out.size());
+  const std::size_t plane = info_.dims.plane();
+  if (z_begin == 0 && z_end == info_.dims.planes()) {
+    read_frame(t, out);
+    return;
+  }
+  std::vector<float> frame(info_.dims.voxels());
+  read_frame(t, frame);
+  std::copy(frame.begin() + static_cast<std::ptrdiff_t>(z_begin * plane),
+            frame.begin() + static_cast<std::ptrdiff_t>(z_end * plane), out.begin());
+}
+
 std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOptions& options) {
   std::error_code ec;
   if (!fs::exists(path, ec) && detail::is_glob(path.string()))
@@ -94,8 +113,21 @@ std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOption
 
 namespace detail {
 
+void check_slab(const SeriesInfo& info, std::size_t t, std::size_t z_begin, std::size_t z_end,
+                std::size_t out_size) {
+  if (t >= info.frames)
+    throw InputError("frame " + std::to_string(t) + " is out of range: " + info.source + " has " +
+                     std::to_string(info.frames) + " frames");
+  if (z_begin >= z_end || z_end > info.dims.planes())
+    throw InputError("planes [" + std::to_string(z_begin) + ", " + std::to_string(z_end) +
+                     ") are not a slab of " + info.source + ", whose frames have " +
+                     std::to_string(info.dims.planes()) + " planes");
+  if (out_size != info.dims.plane() * (z_end - z_begin))
+    throw InputError("read_slab: output has the wrong size");
+}
+
 void check_finite(std::span<float> values, Dims dims, const std::string& what,
-                  std::optional<float> replacement) {
+                  std::optional<float> replacement, std::size_t z_begin) {
   for (std::size_t i = 0; i < values.size(); ++i) {
     if (std::isfinite(values[i])) continue;
     if (replacement) {
@@ -104,7 +136,7 @@ void check_finite(std::span<float> values, Dims dims, const std::string& what,
     }
     const auto x = static_cast<std::int64_t>(i) % dims.x;
     const auto y = static_cast<std::int64_t>(i) / dims.x % dims.y;
-    const auto z = static_cast<std::int64_t>(i) / (dims.x * dims.y);
+    const auto z = i / dims.plane() + z_begin;
     throw InputError(what + ": value " + std::to_string(values[i]) + " at voxel (" +
                      std::to_string(x) + ", " + std::to_string(y) + ", " + std::to_string(z) +
                      ") is not finite; use --replace-nan V to substitute a value");

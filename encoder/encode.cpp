@@ -109,14 +109,24 @@ void train_dictionary(const datasets::SeriesReader& series, const EncodeRequest&
 
 }  // namespace
 
-std::uint32_t default_keyframe_gap(const Dims& dims, bool size_target, bool* lowered) {
+std::uint64_t default_encode_memory() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
+  if (pages <= 0 || page <= 0) return 0;
+  return static_cast<std::uint64_t>(pages) * static_cast<std::uint64_t>(page) / 2;
+}
+
+double whole_frame_bytes(const Dims& dims) {
+  return 2.0 * 4.0 * static_cast<double>(dims.voxels());
+}
+
+std::uint32_t default_keyframe_gap(const Dims& dims, bool size_target, std::uint64_t memory,
+                                   bool* lowered) {
   if (lowered) *lowered = false;
   if (size_target) return 1;
-  const double memory =
-      static_cast<double>(::sysconf(_SC_PHYS_PAGES)) * static_cast<double>(::sysconf(_SC_PAGESIZE));
+  if (memory == 0) memory = default_encode_memory();
   const double per_frame = stretch_bytes_per_frame(dims);
   std::uint32_t gap = default_max_keyframe_gap;
-  while (gap > 1 && memory > 0 && (gap + 1) * per_frame > memory / 2) --gap;
+  while (gap > 1 && memory > 0 && (gap + 1) * per_frame > static_cast<double>(memory)) --gap;
   if (lowered) *lowered = gap < default_max_keyframe_gap;
   return gap;
 }
@@ -138,18 +148,49 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   job.coding = request.coding;
   job.half_atoms = request.half_atoms;
   if (request.tolerance.psnr) job.psnr_target = *request.tolerance.psnr;
-  if (request.max_keyframe_gap) {
+  const std::uint64_t memory = request.memory ? request.memory : default_encode_memory();
+  const std::string memory_text =
+      request.memory ? printed("--memory (%.3g MiB)", static_cast<double>(memory) / 1048576)
+                     : std::string("half the memory");
+  job.piecewise = memory > 0 && whole_frame_bytes(info.dims) > static_cast<double>(memory);
+  if (job.piecewise) {
+    const std::string frame_size =
+        printed("frames of %.3g MiB do not fit ",
+                4.0 * static_cast<double>(info.dims.voxels()) / 1048576) +
+        memory_text + " whole";
+    if (request.max_keyframe_gap && *request.max_keyframe_gap > 1)
+      throw InputError(frame_size +
+                       ", so they are coded piecewise, which needs --max-keyframe-gap 1 (a "
+                       "keyframe stretch holds its frames whole); or give more --memory");
+    if (request.tolerance.bps)
+      throw InputError(frame_size +
+                       ", and --bps codes sample frames whole: ask for --psnr or --tolerance, or "
+                       "give more --memory");
+    if (request.dictionary.empty() && !(request.resume && fs::exists(out / "dictionary.bin")))
+      throw InputError(frame_size +
+                       ", and training a dictionary reads frames whole: give one (--dictionary "
+                       "FILE from volreel train on a smaller series, or --dictionary dct), or "
+                       "give more --memory");
+    // A row of bricks' planes (36, and as many again while the next row reads) on every level.
+    const double window = 4.0 * static_cast<double>(info.dims.plane()) * 72 * 4 / 3;
+    if (window > static_cast<double>(memory))
+      throw InputError(frame_size + printed(", and coding them piecewise holds about %.3g MiB of "
+                                            "planes: give at least that --memory",
+                                            window / 1048576));
+    job.max_keyframe_gap = 1;
+    say(frame_size + ": each is coded piecewise, a row of bricks at a time (keyframe gap 1)");
+  } else if (request.max_keyframe_gap) {
     job.max_keyframe_gap = *request.max_keyframe_gap;
   } else {
     bool lowered = false;
     job.max_keyframe_gap =
-        default_keyframe_gap(info.dims, request.tolerance.bps.has_value(), &lowered);
+        default_keyframe_gap(info.dims, request.tolerance.bps.has_value(), memory, &lowered);
     if (lowered)
       say("keyframe gap " + std::to_string(job.max_keyframe_gap) + " (not " +
           std::to_string(default_max_keyframe_gap) +
           "): " + std::to_string(job.max_keyframe_gap + 1) +
-          printed(" frames of %.0f MB each fit in half the memory",
-                  stretch_bytes_per_frame(info.dims) / 1e6));
+          printed(" frames of %.0f MB each fit in ", stretch_bytes_per_frame(info.dims) / 1e6) +
+          memory_text);
   }
   auto& c = job.coding;
   {

@@ -6,12 +6,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <stdexcept>
 #include <string>
 
 #include "detail.hpp"
 #include "volreel/encoder/pyramid.hpp"
 #include "volreel/format/brick_decode.h"
+#include "volreel/format/decoder.hpp"
 #include "volreel/format/dictionary_file.hpp"
 
 namespace volreel::encoder {
@@ -19,6 +21,7 @@ namespace volreel::encoder {
 using detail::Clock;
 using detail::QuantizeOptions;
 using detail::seconds_since;
+using format::brick_interior;
 using format::brick_voxels;
 
 namespace {
@@ -53,6 +56,8 @@ struct BrickCoding {
   /// Lagrangian rule: each block's atom gains are weighed by the share of its voxels the decoder
   /// reads and by its level's 1/F^(2d) (coded to ε·F^d, d levels above the finest).
   bool weighted = false;
+  bool measure_finest = false;       ///< PlaneCoding::measure_finest
+  format::AtomTable decode_atoms{};  ///< ksvd, measure_finest: the atoms payloads decode with
 
   bool ksvd() const { return settings.codec == format::Codec::ksvd; }
   /// F^d for a brick of `level`: the factor on its level's ε (1 unless the Lagrangian rule).
@@ -115,14 +120,14 @@ void add_to_breakdown(const Cell& c, const std::array<std::uint32_t, 3>& level_d
 }
 
 /// Step 1: every cell of every level, breadth-first, Morton order inside a level.
-OctreeCells octree_cells(const Pyramid& pyramid) {
-  const std::size_t levels = pyramid.geometry.size();
+OctreeCells octree_cells(const std::vector<format::LevelGeometry>& geometry) {
+  const std::size_t levels = geometry.size();
   OctreeCells octree;
   std::vector<Cell>& cells = octree.cells;
   octree.level_begin.assign(levels + 1, 0);
   for (std::size_t l = 0; l < levels; ++l) {
     octree.level_begin[l] = cells.size();
-    const auto& g = pyramid.geometry[l].grid;
+    const auto& g = geometry[l].grid;
     for (std::uint32_t z = 0; z < g[2]; ++z)
       for (std::uint32_t y = 0; y < g[1]; ++y)
         for (std::uint32_t x = 0; x < g[0]; ++x) {
@@ -141,14 +146,14 @@ OctreeCells octree_cells(const Pyramid& pyramid) {
 
 /// Step 2a: the stored voxels of each cell of a chunk into `bricks`, its histogram over
 /// [lo, hi], the constant test; constant bricks and (zfp) every brick get their payload here.
-void extract_chunk(const Pyramid& pyramid, std::span<Cell> chunk, float* bricks, float lo, float hi,
-                   const BrickCoding& coding) {
+void extract_chunk(const PyramidWindow& window, std::span<Cell> chunk, float* bricks, float lo,
+                   float hi, const BrickCoding& coding) {
   const bool ksvd = coding.ksvd();
 #pragma omp parallel for schedule(dynamic, 1)
   for (std::ptrdiff_t j = 0; j < static_cast<std::ptrdiff_t>(chunk.size()); ++j) {
     Cell& c = chunk[static_cast<std::size_t>(j)];
     float* brick = bricks + static_cast<std::size_t>(j) * brick_voxels;
-    extract_brick(pyramid, c.level, c.x, c.y, c.z, {brick, brick_voxels});
+    window.extract_brick(c.level, c.x, c.y, c.z, {brick, brick_voxels});
     float mn = brick[0], mx = brick[0];
     std::uint64_t hist = 0;
     for (std::uint32_t v = 0; v < brick_voxels; ++v) {
@@ -169,7 +174,7 @@ void extract_chunk(const Pyramid& pyramid, std::span<Cell> chunk, float* bricks,
 /// Step 2b (ksvd): the blocks of the chunk's non-constant bricks (`coded`, indices into the chunk)
 /// and their weights, batch-OMP on all of them at once, then each brick quantized into its
 /// payload. `part` is when the chunk's extraction began (its time counts as brick extraction).
-void code_ksvd_chunk(const Pyramid& pyramid, std::span<Cell> chunk,
+void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::span<Cell> chunk,
                      const std::vector<std::size_t>& coded, const BrickCoding& coding,
                      ChunkWorkspace& work, Clock::time_point part, FrameStats& st) {
   const auto blocks = static_cast<Eigen::Index>(coded.size() * VR_BLOCKS_PER_BRICK);
@@ -186,7 +191,7 @@ void code_ksvd_chunk(const Pyramid& pyramid, std::span<Cell> chunk,
       const Cell& c = chunk[coded[kk]];
       float* w = work.weights.data() + kk * VR_BLOCKS_PER_BRICK;
       if (coding.settings.weight_owned_voxels)
-        detail::owned_block_weights(c.x, c.y, c.z, pyramid.geometry[c.level].dims, w);
+        detail::owned_block_weights(c.x, c.y, c.z, geometry[c.level].dims, w);
       else
         std::fill(w, w + VR_BLOCKS_PER_BRICK, 1.0f);
       const double scale = coding.level_scale(c.level);
@@ -228,30 +233,116 @@ void code_ksvd_chunk(const Pyramid& pyramid, std::span<Cell> chunk,
   st.blocks += static_cast<std::size_t>(blocks);
 }
 
-/// Step 2: bricks in chunks: extract, histogram, constant test; then code the non-constant ones.
-void code_bricks(const Pyramid& pyramid, std::vector<Cell>& cells, float lo, float hi,
-                 const BrickCoding& coding, FrameStats& st, std::vector<float>* originals) {
-  ChunkWorkspace work;
+/// Step 2 for one chunk: extract, histogram, constant test; then code the non-constant bricks.
+/// `originals`: where the chunk's stored voxels go, brick by brick (null: nowhere).
+void code_chunk(const PyramidWindow& window, std::span<Cell> chunk, float lo, float hi,
+                const BrickCoding& coding, ChunkWorkspace& work, FrameStats& st,
+                const std::function<float*(std::size_t j)>& originals) {
+  const auto part = Clock::now();
+  extract_chunk(window, chunk, work.bricks.data(), lo, hi, coding);
+  if (originals)
+    for (std::size_t j = 0; j < chunk.size(); ++j)
+      std::copy_n(work.bricks.data() + j * brick_voxels, brick_voxels, originals(j));
+  if (!coding.ksvd()) {
+    st.seconds_bricks += seconds_since(part);
+    return;
+  }
+  std::vector<std::size_t> coded;
+  for (std::size_t j = 0; j < chunk.size(); ++j)
+    if (!chunk[j].constant) coded.push_back(j);
+  if (!coded.empty()) code_ksvd_chunk(window.geometry(), chunk, coded, coding, work, part, st);
+}
+
+/// PlaneCoding::measure_finest for a chunk of finest bricks whose stored voxels are in `bricks`:
+/// each payload decoded, compared over the brick's interior inside the level.
+void measure_chunk(std::span<const Cell> chunk, const float* bricks,
+                   const std::array<std::uint32_t, 3>& dims, const BrickCoding& coding,
+                   FrameStats& st) {
+  double squared = 0, worst = 0;
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : squared) reduction(max : worst)
+  for (std::ptrdiff_t j = 0; j < static_cast<std::ptrdiff_t>(chunk.size()); ++j) {
+    const Cell& c = chunk[static_cast<std::size_t>(j)];
+    std::vector<float> decoded(brick_voxels);
+    format::decode_payload(c.payload, coding.settings.codec, coding.settings.zfp_accuracy,
+                           coding.decode_atoms, decoded, "<frame being coded>", 0);
+    const float* original = bricks + static_cast<std::size_t>(j) * brick_voxels;
+    // Brick voxel a ∈ [1, 35) is level voxel 34·x + a − 1 on each axis.
+    const std::uint32_t cell[3] = {c.x, c.y, c.z};
+    std::uint32_t end[3];
+    for (int a = 0; a < 3; ++a)
+      end[a] = std::min<std::uint32_t>(
+          brick_interior, dims[static_cast<std::size_t>(a)] - brick_interior * cell[a]);
+    for (std::uint32_t k = 0; k < end[2]; ++k)
+      for (std::uint32_t jj = 0; jj < end[1]; ++jj)
+        for (std::uint32_t i = 0; i < end[0]; ++i) {
+          const std::size_t v =
+              ((std::size_t{k} + 1) * format::brick_size + jj + 1) * format::brick_size + i + 1;
+          const double e = static_cast<double>(decoded[v]) - static_cast<double>(original[v]);
+          squared += e * e;
+          worst = std::max(worst, std::abs(e));
+        }
+  }
+  st.finest_squared_error += squared;
+  st.finest_max_error = std::max(st.finest_max_error, worst);
+}
+
+/// Step 2: the bricks row by row (bricks of one level and one z), each row as soon as the window
+/// holds its planes, in chunks; planes no row needs any more leave the window.
+void code_bricks(PyramidWindow& window, std::vector<Cell>& cells,
+                 const std::vector<std::size_t>& level_begin, float lo, float hi,
+                 const BrickCoding& coding, FrameStats& st, std::vector<float>* originals,
+                 const std::function<void(double)>& progress) {
+  const std::vector<format::LevelGeometry>& geometry = window.geometry();
+  const std::size_t levels = geometry.size(), finest = levels - 1;
   // A buffer of the right size is reused as it is (every value is overwritten below).
   if (originals && originals->size() != cells.size() * brick_voxels)
     originals->resize(cells.size() * brick_voxels);
-  for (std::size_t begin = 0; begin < cells.size(); begin += chunk_bricks) {
-    const std::span<Cell> chunk(cells.data() + begin, std::min(chunk_bricks, cells.size() - begin));
+  std::vector<std::vector<std::vector<std::size_t>>> rows(levels);  // rows[l][z]: cells, Morton
+  for (std::size_t l = 0; l < levels; ++l) {
+    rows[l].resize(geometry[l].grid[2]);
+    for (std::size_t i = level_begin[l]; i < level_begin[l + 1]; ++i)
+      rows[l][cells[i].z].push_back(i);
+  }
+  // The planes row z of a level needs: its bricks' 36 planes, 34z − 1 .. 34z + 34, clamped.
+  const auto row_end = [&](std::size_t l, std::size_t z) {
+    return std::min<std::size_t>(brick_interior * (z + 1) + 1, window.planes(l));
+  };
+  ChunkWorkspace work;
+  std::vector<Cell> chunk;
+  std::vector<std::size_t> next(levels, 0);  // per level, the next row to code
+  for (;;) {
     const auto part = Clock::now();
-    extract_chunk(pyramid, chunk, work.bricks.data(), lo, hi, coding);
-    if (originals)
-      std::copy(work.bricks.begin(),
-                work.bricks.begin() + static_cast<std::ptrdiff_t>(chunk.size() * brick_voxels),
-                originals->begin() + static_cast<std::ptrdiff_t>(begin * brick_voxels));
-    if (!coding.ksvd()) {
-      st.seconds_bricks += seconds_since(part);
-      continue;
+    window.advance(next[finest] < rows[finest].size() ? row_end(finest, next[finest])
+                                                      : window.planes(finest));
+    st.seconds_pyramid += seconds_since(part);
+    bool more = false;
+    for (std::size_t l = 0; l < levels; ++l) {
+      for (; next[l] < rows[l].size() && window.end(l) >= row_end(l, next[l]); ++next[l]) {
+        const std::vector<std::size_t>& row = rows[l][next[l]];
+        for (std::size_t begin = 0; begin < row.size(); begin += chunk_bricks) {
+          const std::size_t n = std::min(chunk_bricks, row.size() - begin);
+          chunk.clear();
+          for (std::size_t j = 0; j < n; ++j) chunk.push_back(std::move(cells[row[begin + j]]));
+          std::function<float*(std::size_t)> place;
+          if (originals)
+            place = [&](std::size_t j) {
+              return originals->data() + row[begin + j] * brick_voxels;
+            };
+          code_chunk(window, chunk, lo, hi, coding, work, st, place);
+          if (coding.measure_finest && l == finest)
+            measure_chunk(chunk, work.bricks.data(), geometry[l].dims, coding, st);
+          for (std::size_t j = 0; j < n; ++j) cells[row[begin + j]] = std::move(chunk[j]);
+        }
+      }
+      more = more || next[l] < rows[l].size();
+      // Row z's bricks start at plane 34z − 1.
+      window.release(l, next[l] < rows[l].size()
+                            ? std::max<std::size_t>(brick_interior * next[l], 1) - 1
+                            : window.planes(l));
     }
-    std::vector<std::size_t> coded;
-    for (std::size_t j = 0; j < chunk.size(); ++j)
-      if (!chunk[j].constant) coded.push_back(j);
-    if (coded.empty()) continue;
-    code_ksvd_chunk(pyramid, chunk, coded, coding, work, part, st);
+    if (progress)
+      progress(static_cast<double>(next[finest]) / static_cast<double>(rows[finest].size()));
+    if (!more) break;
   }
 }
 
@@ -476,41 +567,62 @@ CodedFrame FrameEncoder::code(std::size_t t, const Volume& frame, bool keep_orig
 
 void FrameEncoder::code_into(std::size_t t, const Volume& frame, CodedFrame& coded,
                              bool keep_originals) const {
+  const std::size_t plane = frame.dims.plane();
+  PlaneCoding options;
+  options.keep_originals = keep_originals;
+  code_planes(
+      t, frame.dims,
+      [&](std::size_t z_begin, std::size_t z_end, std::span<float> out) {
+        std::copy_n(frame.data.data() + z_begin * plane, (z_end - z_begin) * plane, out.data());
+      },
+      coded, options);
+}
+
+void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
+                               const PyramidWindow::ReadPlanes& read, CodedFrame& coded,
+                               const PlaneCoding& options) const {
+  const bool keep_originals = options.keep_originals;
   const auto start = Clock::now();
-  const Pyramid pyramid = build_pyramid(frame);
+  PyramidWindow window(format::level_geometry({static_cast<std::uint32_t>(dims.x),
+                                               static_cast<std::uint32_t>(dims.y),
+                                               static_cast<std::uint32_t>(dims.z)}),
+                       read);
   std::vector<float> originals = std::move(coded.originals);
   coded = CodedFrame{};
   if (keep_originals) coded.originals = std::move(originals);  // its storage, reused
   FrameStats& st = coded.stats;
-  st.seconds_pyramid = seconds_since(start);
   const auto lo = static_cast<float>(settings_.value_min),
              hi = static_cast<float>(settings_.value_max);
   const bool ksvd = settings_.codec == format::Codec::ksvd;
+  const std::vector<format::LevelGeometry>& geometry = window.geometry();
 
-  OctreeCells octree = octree_cells(pyramid);  // 1.
+  OctreeCells octree = octree_cells(geometry);  // 1.
 
   BrickCoding coding{settings_,  // 2.
-                     omp_.get(),
-                     ksvd ? &dictionary_->atoms : nullptr,
-                     quantize_options(),
-                     atom_gain_threshold(),
-                     pyramid.geometry.size(),
-                     false};
+                     omp_.get(),         ksvd ? &dictionary_->atoms : nullptr,
+                     quantize_options(), atom_gain_threshold(),
+                     geometry.size(),    false};
   coding.weighted = ksvd && coding.atom_gain_threshold > 0 &&
                     (settings_.weight_owned_voxels || settings_.level_tolerance_factor != 1);
-  code_bricks(pyramid, octree.cells, lo, hi, coding, st,
-              keep_originals ? &coded.originals : nullptr);
+  if (options.measure_finest && ksvd)
+    coding.decode_atoms = format::AtomTable{
+        {dictionary_->atoms.data(), static_cast<std::size_t>(dictionary_->atoms.size())},
+        static_cast<std::uint32_t>(dictionary_->atom_count())};
+  coding.measure_finest = options.measure_finest;
+  code_bricks(window, octree.cells, octree.level_begin, lo, hi, coding, st,
+              keep_originals ? &coded.originals : nullptr, options.progress);
+  coded.window_bytes = window.peak_bytes();
 
   coded.children = merge_subtrees(octree);  // 3.
   coded.parent.assign(octree.cells.size(), 0);
   for (std::size_t i = 0; i < coded.children.size(); ++i)
     for (std::size_t c : coded.children[i]) coded.parent[c] = i;
   coded.t = t;
-  coded.geometry = pyramid.geometry;
+  coded.geometry = geometry;
   coded.bricks = std::move(octree.cells);
   coded.level_begin = std::move(octree.level_begin);
   const bool variable = ksvd && settings_.fixed_sparsity == 0;
-  for (std::size_t l = 0; l < pyramid.geometry.size(); ++l)
+  for (std::size_t l = 0; l < geometry.size(); ++l)
     coded.level_tolerance.push_back(
         variable ? settings_.tolerance * coding.level_scale(static_cast<std::uint32_t>(l)) : 0.0);
   coded.max_abs_error = ksvd ? settings_.max_error : settings_.zfp_accuracy;
@@ -518,9 +630,9 @@ void FrameEncoder::code_into(std::size_t t, const Volume& frame, CodedFrame& cod
   format::FrameHeader& h = coded.header;
   h.codec = static_cast<std::uint32_t>(settings_.codec);
   h.frame_index = static_cast<std::uint32_t>(t);
-  h.dims[0] = static_cast<std::uint32_t>(frame.dims.x);
-  h.dims[1] = static_cast<std::uint32_t>(frame.dims.y);
-  h.dims[2] = static_cast<std::uint32_t>(frame.dims.z);
+  h.dims[0] = static_cast<std::uint32_t>(dims.x);
+  h.dims[1] = static_cast<std::uint32_t>(dims.y);
+  h.dims[2] = static_cast<std::uint32_t>(dims.z);
   h.block_size = ksvd ? 6 : 0;
   h.atom_count = ksvd ? static_cast<std::uint32_t>(dictionary_->atom_count()) : 0;
   h.value_min = lo;

@@ -3,6 +3,8 @@
 #include "volreel/encoder/pyramid.hpp"
 
 #include <algorithm>
+#include <stdexcept>
+#include <string>
 
 namespace volreel::encoder {
 
@@ -16,6 +18,33 @@ std::size_t clamp_index(std::int64_t i, std::uint32_t n) {
 }
 
 }  // namespace
+
+void downsample_planes(const std::array<std::uint32_t, 3>& fine_dims,
+                       const std::array<std::uint32_t, 3>& dims,
+                       const std::function<const float*(std::size_t z)>& fine_plane,
+                       std::size_t k_begin, std::size_t k_end, float* out) {
+  const std::size_t plane = std::size_t{dims[0]} * dims[1];
+  for (std::size_t k = k_begin; k < k_end; ++k) {
+    const float* fine_z[2] = {
+        fine_plane(clamp_index(2 * static_cast<std::int64_t>(k), fine_dims[2])),
+        fine_plane(clamp_index(2 * static_cast<std::int64_t>(k) + 1, fine_dims[2]))};
+    float* coarse = out + (k - k_begin) * plane;
+    const auto ny = static_cast<std::ptrdiff_t>(dims[1]);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t jj = 0; jj < ny; ++jj) {
+      const auto j = static_cast<std::uint32_t>(jj);
+      for (std::uint32_t i = 0; i < dims[0]; ++i) {
+        double sum = 0;
+        for (std::uint32_t c = 0; c < 8; ++c) {
+          const std::size_t x = clamp_index(2 * std::int64_t{i} + (c & 1), fine_dims[0]);
+          const std::size_t y = clamp_index(2 * std::int64_t{j} + ((c >> 1) & 1), fine_dims[1]);
+          sum += static_cast<double>(fine_z[c >> 2][y * fine_dims[0] + x]);
+        }
+        coarse[std::size_t{j} * dims[0] + i] = static_cast<float>(sum / 8);
+      }
+    }
+  }
+}
 
 Pyramid build_pyramid(const Volume& frame) {
   Pyramid p;
@@ -31,43 +60,113 @@ Pyramid build_pyramid(const Volume& frame) {
     const std::vector<float>& fine = p.levels[l];
     std::vector<float>& coarse = p.levels[l - 1];
     coarse.resize(std::size_t{dims[0]} * dims[1] * dims[2]);
-    const auto nz = static_cast<std::ptrdiff_t>(dims[2]);
-#pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t k = 0; k < nz; ++k)
-      for (std::uint32_t j = 0; j < dims[1]; ++j)
-        for (std::uint32_t i = 0; i < dims[0]; ++i) {
-          double sum = 0;
-          for (std::uint32_t c = 0; c < 8; ++c) {
-            const std::size_t x = clamp_index(2 * std::int64_t{i} + (c & 1), fine_dims[0]);
-            const std::size_t y = clamp_index(2 * std::int64_t{j} + ((c >> 1) & 1), fine_dims[1]);
-            const std::size_t z = clamp_index(2 * k + (c >> 2), fine_dims[2]);
-            sum += static_cast<double>(fine[(z * fine_dims[1] + y) * fine_dims[0] + x]);
-          }
-          coarse[(static_cast<std::size_t>(k) * dims[1] + j) * dims[0] + i] =
-              static_cast<float>(sum / 8);
-        }
+    const std::size_t fine_plane = std::size_t{fine_dims[0]} * fine_dims[1];
+    downsample_planes(
+        fine_dims, dims, [&](std::size_t z) { return fine.data() + z * fine_plane; }, 0, dims[2],
+        coarse.data());
   }
   return p;
 }
 
-void extract_brick(const Pyramid& pyramid, std::size_t level, std::uint32_t x, std::uint32_t y,
-                   std::uint32_t z, std::span<float> out) {
-  const auto& dims = pyramid.geometry[level].dims;
-  const std::vector<float>& v = pyramid.levels[level];
+namespace {
+
+/// extract_brick's voxels from the planes `plane(z)` returns of a level of size `dims`.
+template <class Plane>
+void extract_from_planes(const std::array<std::uint32_t, 3>& dims, std::uint32_t x, std::uint32_t y,
+                         std::uint32_t z, const Plane& plane, std::span<float> out) {
   const std::int64_t x0 = std::int64_t{x} * brick_interior - 1,
                      y0 = std::int64_t{y} * brick_interior - 1,
                      z0 = std::int64_t{z} * brick_interior - 1;
   std::size_t xs[brick_size];
   for (std::uint32_t a = 0; a < brick_size; ++a) xs[a] = clamp_index(x0 + a, dims[0]);
   for (std::uint32_t c = 0; c < brick_size; ++c) {
-    const std::size_t zz = clamp_index(z0 + c, dims[2]);
+    const float* level_plane = plane(clamp_index(z0 + c, dims[2]));
     for (std::uint32_t b = 0; b < brick_size; ++b) {
       const std::size_t yy = clamp_index(y0 + b, dims[1]);
-      const float* row = v.data() + (zz * dims[1] + yy) * dims[0];
+      const float* row = level_plane + yy * dims[0];
       float* dst = out.data() + (std::size_t{c} * brick_size + b) * brick_size;
       for (std::uint32_t a = 0; a < brick_size; ++a) dst[a] = row[xs[a]];
     }
   }
+}
+
+}  // namespace
+
+void extract_brick(const Pyramid& pyramid, std::size_t level, std::uint32_t x, std::uint32_t y,
+                   std::uint32_t z, std::span<float> out) {
+  const auto& dims = pyramid.geometry[level].dims;
+  const std::vector<float>& v = pyramid.levels[level];
+  const std::size_t plane = std::size_t{dims[0]} * dims[1];
+  extract_from_planes(
+      dims, x, y, z, [&](std::size_t zz) { return v.data() + zz * plane; }, out);
+}
+
+PyramidWindow::PyramidWindow(std::vector<format::LevelGeometry> geometry, ReadPlanes read)
+    : geometry_(std::move(geometry)), read_(std::move(read)), levels_(geometry_.size()) {}
+
+const float* PyramidWindow::plane(std::size_t level, std::size_t z) const {
+  const Level& v = levels_[level];
+  if (z < v.begin || z >= v.end)
+    throw std::logic_error("PyramidWindow: plane " + std::to_string(z) + " of level " +
+                           std::to_string(level) + " is not in the window [" +
+                           std::to_string(v.begin) + ", " + std::to_string(v.end) + ")");
+  return v.planes[z - v.begin].data();
+}
+
+void PyramidWindow::append_planes(std::size_t level, std::size_t end) {
+  Level& v = levels_[level];
+  end = std::min(end, planes(level));
+  const auto& dims = geometry_[level].dims;
+  const std::size_t plane_size = std::size_t{dims[0]} * dims[1];
+  for (; v.end < end; ++v.end) {
+    std::vector<float> p;
+    if (!v.spare.empty()) {
+      p = std::move(v.spare.back());
+      v.spare.pop_back();
+    }
+    p.resize(plane_size);
+    if (level + 1 == geometry_.size())
+      read_(v.end, v.end + 1, p);
+    else
+      downsample_planes(
+          geometry_[level + 1].dims, dims, [&](std::size_t z) { return plane(level + 1, z); },
+          v.end, v.end + 1, p.data());
+    v.planes.push_back(std::move(p));
+    bytes_ += plane_size * sizeof(float);
+    peak_bytes_ = std::max(peak_bytes_, bytes_);
+  }
+}
+
+void PyramidWindow::advance(std::size_t finest_end) {
+  const std::size_t finest = geometry_.size() - 1;
+  append_planes(finest, finest_end);
+  for (std::size_t l = finest; l-- > 0;) {
+    // Coarse plane k averages finer planes 2k and 2k + 1 (clamped to the finer level).
+    const std::size_t fine_end = levels_[l + 1].end;
+    append_planes(l, fine_end == planes(l + 1) ? planes(l) : fine_end / 2);
+  }
+}
+
+void PyramidWindow::release(std::size_t level, std::size_t begin) {
+  Level& v = levels_[level];
+  // The next coarser plane still to be averaged reads finer planes from 2·end on.
+  if (level > 0 && levels_[level - 1].end < planes(level - 1))
+    begin = std::min(begin, 2 * levels_[level - 1].end);
+  begin = std::min(begin, v.end);
+  const std::size_t plane_size = std::size_t{geometry_[level].dims[0]} * geometry_[level].dims[1];
+  for (; v.begin < begin; ++v.begin) {
+    // A released plane's storage serves the next plane appended (the window's planes are always
+    // about one brick's worth, so one spare is enough).
+    if (v.spare.empty()) v.spare.push_back(std::move(v.planes.front()));
+    v.planes.pop_front();
+    bytes_ -= plane_size * sizeof(float);
+  }
+}
+
+void PyramidWindow::extract_brick(std::size_t level, std::uint32_t x, std::uint32_t y,
+                                  std::uint32_t z, std::span<float> out) const {
+  extract_from_planes(
+      geometry_[level].dims, x, y, z, [&](std::size_t zz) { return plane(level, zz); }, out);
 }
 
 }  // namespace volreel::encoder

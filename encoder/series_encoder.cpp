@@ -315,15 +315,24 @@ std::pair<double, double> value_range(const datasets::SeriesReader& series, std:
                                       const Progress& progress, const Ranks& ranks) {
   const std::size_t n = frames ? std::min(frames, series.info().frames) : series.info().frames;
   const auto [first, last] = ranks.share(n);
-  std::vector<float> frame(series.info().dims.voxels());
+  // A slab of at most 64 MiB at a time (a plane at least), so that no frame is read whole.
+  const Dims dims = series.info().dims;
+  const std::size_t slab =
+      std::clamp<std::size_t>((std::size_t{64} << 20) / 4 / dims.plane(), 1, dims.planes());
+  std::vector<float> values(slab * dims.plane());
   std::array<double, 1> lo = {std::numeric_limits<double>::infinity()}, hi = {-lo[0]};
   for (std::size_t t = first; t < last; ++t) {
-    series.read_frame(t, frame);
-    const auto [mn, mx] = std::minmax_element(frame.begin(), frame.end());
-    lo[0] = std::min(lo[0], static_cast<double>(*mn));
-    hi[0] = std::max(hi[0], static_cast<double>(*mx));
-    progress.report(static_cast<double>(t + 1 - first), static_cast<double>(last - first),
-                    "value range");
+    for (std::size_t z = 0; z < dims.planes(); z += slab) {
+      const std::size_t z_end = std::min(z + slab, dims.planes());
+      const std::span<float> part(values.data(), (z_end - z) * dims.plane());
+      series.read_slab(t, z, z_end, part);
+      const auto [mn, mx] = std::minmax_element(part.begin(), part.end());
+      lo[0] = std::min(lo[0], static_cast<double>(*mn));
+      hi[0] = std::max(hi[0], static_cast<double>(*mx));
+      progress.report(static_cast<double>(t - first) +
+                          static_cast<double>(z_end) / static_cast<double>(dims.planes()),
+                      static_cast<double>(last - first), "value range");
+    }
   }
   ranks.min(lo);
   ranks.max(hi);
@@ -518,6 +527,11 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   //    every frame file is written by one process. Frames of its share already there and valid
   //    are kept when resuming.
   const std::size_t gap = std::max<std::uint32_t>(job.max_keyframe_gap, 1);
+  if (job.piecewise && gap > 1)
+    throw InputError(
+        "coding frames piecewise needs --max-keyframe-gap 1 (a stretch with gaps "
+        "holds its frames whole), not " +
+        std::to_string(gap));
   const std::size_t stretches = frames == 1 ? 1 : (frames - 1 + gap - 1) / gap;
   const auto [first_stretch, last_stretch] = ranks.share(stretches);
   const std::size_t first_frame = first_stretch == 0 ? 0 : first_stretch * gap + 1;
@@ -558,9 +572,28 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   };
   // Codes frame t (read into step.volume) from ε·scale, again at a smaller ε while it misses
   // psnr_target.
+  // A piecewise frame is read plane by plane as it is coded (progress: within the frame).
+  std::function<void(double)> frame_progress;
+  const auto code = [&](std::size_t t, Step& step) {
+    if (!job.piecewise) {
+      encoder->code_into(t, step.volume, step.coded, gap > 1);
+      return;
+    }
+    PlaneCoding options;
+    options.measure_finest = true;
+    options.progress = frame_progress;
+    encoder->code_planes(
+        t, info.dims,
+        [&](std::size_t z_begin, std::size_t z_end, std::span<float> planes) {
+          series.read_slab(t, z_begin, z_end, planes);
+        },
+        step.coded, options);
+  };
   const auto code_step = [&](std::size_t t, Step& step, double scale) {
-    if (step.volume.data.size() != info.dims.voxels()) step.volume = Volume(info.dims);
-    series.read_frame(t, step.volume.data);
+    if (!job.piecewise) {
+      if (step.volume.data.size() != info.dims.voxels()) step.volume = Volume(info.dims);
+      series.read_frame(t, step.volume.data);
+    }
     const auto use_scale = [&](double wanted) {
       if (wanted == encoder_scale) return;
       CodingSettings scaled = coding;
@@ -569,16 +602,18 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       encoder_scale = wanted;
     };
     use_scale(scale);
-    encoder->code_into(t, step.volume, step.coded, gap > 1);
+    code(t, step);
     for (int retry = 0; holds_psnr && retry < max_tolerance_retries; ++retry) {
-      const auto [squared, worst] =
-          finest_level_error(encoder->write(step.coded), atoms, step.volume, t);
+      const double squared =
+          job.piecewise
+              ? step.coded.stats.finest_squared_error
+              : finest_level_error(encoder->write(step.coded), atoms, step.volume, t).first;
       if (frame_psnr(squared) >= job.psnr_target) break;
       if (retry == 0 && !done[t]) ++summary.delivered.frames_coded_again;
       // 0.1 dB more than the shortfall, so that the next try lands above the target.
       scale *= std::pow(10.0, -(job.psnr_target - frame_psnr(squared) + 0.1) / 20);
       use_scale(scale);
-      encoder->code_into(t, step.volume, step.coded, gap > 1);
+      code(t, step);
     }
     step.scale = scale;
     summary.delivered.tolerance_scale = std::min(summary.delivered.tolerance_scale, scale);
@@ -610,14 +645,21 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
         steps[t - s] = std::move(pool.back());
         pool.pop_back();
       }
+      const auto report = [&](double frames_coded) {
+        char status[64];
+        std::snprintf(
+            status, sizeof status, "coding frame %zu, %.1f MVoxel/s", t,
+            voxels * frames_coded / 1e6 / std::max(1e-9, summary.seconds + seconds_since(start)));
+        progress.report(std::min(frames_coded + static_cast<double>(summary.skipped),
+                                 static_cast<double>(share_frames)),
+                        static_cast<double>(share_frames), status);
+      };
+      frame_progress = [&](double fraction) {
+        if (!done[t]) report(static_cast<double>(coded_frames) + fraction);
+      };
       code_step(t, steps[t - s], t == s || t == e ? 1.0 : steps[t - s - 1].scale);
       if (!done[t]) ++coded_frames;
-      char status[64];
-      std::snprintf(status, sizeof status, "coding frame %zu, %.1f MVoxel/s", t,
-                    voxels * static_cast<double>(coded_frames) / 1e6 /
-                        std::max(1e-9, summary.seconds + seconds_since(start)));
-      progress.report(static_cast<double>(std::min(coded_frames + summary.skipped, share_frames)),
-                      static_cast<double>(share_frames), status);
+      report(static_cast<double>(coded_frames));
     }
     std::vector<std::vector<char>> keep(steps.size());
     if (gap > 1 && steps.size() > 2) {
@@ -667,17 +709,23 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       return format::FrameFile(bytes[t - s], format::frame_file_name(t), bytes[t - s].size());
     };
     format::TimeStepDecoder decoder(frames, static_cast<std::uint32_t>(gap), atoms, opener);
-    std::vector<float> decoded(info.dims.voxels());
+    std::vector<float> decoded(job.piecewise ? 0 : info.dims.voxels());
     const std::uint32_t finest = static_cast<std::uint32_t>(steps.back().coded.geometry.size() - 1);
     for (std::size_t t = s; t <= e; ++t) {
       if (!wrote[t - s]) continue;
       const Step& step = steps[t - s];
-      decoder.decode(t, finest, decoded);
       double squared = 0, worst = 0;
-      for (std::size_t i = 0; i < decoded.size(); ++i) {
-        const double d = static_cast<double>(decoded[i]) - static_cast<double>(step.volume.data[i]);
-        squared += d * d;
-        worst = std::max(worst, std::abs(d));
+      if (job.piecewise) {  // measured as it was coded: every node keeps its brick
+        squared = step.coded.stats.finest_squared_error;
+        worst = step.coded.stats.finest_max_error;
+      } else {
+        decoder.decode(t, finest, decoded);
+        for (std::size_t i = 0; i < decoded.size(); ++i) {
+          const double d =
+              static_cast<double>(decoded[i]) - static_cast<double>(step.volume.data[i]);
+          squared += d * d;
+          worst = std::max(worst, std::abs(d));
+        }
       }
       DeliveredQuality& q = summary.delivered;
       ++q.frames;

@@ -6,8 +6,10 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <stdexcept>
 #include <string>
 
 #include "volreel/format/error.hpp"
@@ -116,6 +118,37 @@ void write_file_atomically(const fs::path& path, std::span<const std::byte> byte
     fs::remove(tmp, ignored);
     throw FormatError(path, "cannot rename '" + tmp.string() + "' to it: " + ec.message());
   }
+}
+
+std::uint64_t parse_byte_size(const std::string& text, const std::string& option) {
+  const auto bad = [&] {
+    return std::invalid_argument(option + " " + text +
+                                 ": expected a size such as 2G, 500M, 64k or a number of bytes");
+  };
+  double value = 0;
+  std::size_t used = 0;
+  try {
+    value = std::stod(text, &used);
+  } catch (const std::exception&) {
+    throw bad();
+  }
+  std::string unit = text.substr(used);
+  if (!unit.empty() && (unit.back() == 'B' || unit.back() == 'b')) unit.pop_back();
+  if (!unit.empty() && unit.back() == 'i') unit.pop_back();
+  double scale = 1;
+  if (unit == "k" || unit == "K")
+    scale = 1024.0;
+  else if (unit == "M" || unit == "m")
+    scale = 1024.0 * 1024;
+  else if (unit == "G" || unit == "g")
+    scale = 1024.0 * 1024 * 1024;
+  else if (unit == "T" || unit == "t")
+    scale = 1024.0 * 1024 * 1024 * 1024;
+  else if (!unit.empty())
+    throw bad();
+  const double bytes = value * scale;
+  if (!std::isfinite(bytes) || bytes < 0 || bytes > 1e18) throw bad();
+  return static_cast<std::uint64_t>(bytes);
 }
 
 }  // namespace volreel::format::detail

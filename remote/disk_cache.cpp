@@ -59,37 +59,6 @@ std::optional<std::vector<std::byte>> parse_entry(std::span<const std::byte> b,
 
 }  // namespace
 
-std::uint64_t parse_cache_size(const std::string& text, const std::string& option) {
-  const auto bad = [&] {
-    return std::invalid_argument(option + " " + text +
-                                 ": expected a size such as 2G, 500M, 64k or a number of bytes");
-  };
-  double value = 0;
-  std::size_t used = 0;
-  try {
-    value = std::stod(text, &used);
-  } catch (const std::exception&) {
-    throw bad();
-  }
-  std::string unit = text.substr(used);
-  if (!unit.empty() && (unit.back() == 'B' || unit.back() == 'b')) unit.pop_back();
-  if (!unit.empty() && unit.back() == 'i') unit.pop_back();
-  double scale = 1;
-  if (unit == "k" || unit == "K")
-    scale = 1024.0;
-  else if (unit == "M" || unit == "m")
-    scale = 1024.0 * 1024;
-  else if (unit == "G" || unit == "g")
-    scale = 1024.0 * 1024 * 1024;
-  else if (unit == "T" || unit == "t")
-    scale = 1024.0 * 1024 * 1024 * 1024;
-  else if (!unit.empty())
-    throw bad();
-  const double bytes = value * scale;
-  if (!std::isfinite(bytes) || bytes < 0 || bytes > 1e18) throw bad();
-  return static_cast<std::uint64_t>(bytes);
-}
-
 std::string DiskCache::file_name(const std::string& key) {
   char name[17];
   std::snprintf(name, sizeof name, "%016llx", static_cast<unsigned long long>(fnv1a(key)));

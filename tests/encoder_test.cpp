@@ -699,6 +699,94 @@ TEST(Encoder, NodeTableIsBreadthFirstWithBottomUpHistograms) {
   ASSERT_EQ(root.data.size(), p.levels[0].size());
 }
 
+TEST(PyramidWindow, HoldsAFewPlanesAndExtractsThePyramidsBricks) {
+  const Volume v = analytic_volume(datasets::AnalyticField::noise, {41, 36, 300});
+  const auto p = encoder::build_pyramid(v);
+  const std::size_t plane = v.dims.plane();
+  std::vector<int> reads(v.dims.planes(), 0);
+  encoder::PyramidWindow w(p.geometry, [&](std::size_t z0, std::size_t z1, std::span<float> out) {
+    ASSERT_EQ(out.size(), (z1 - z0) * plane);
+    for (std::size_t z = z0; z < z1; ++z) ++reads[z];
+    std::copy_n(v.data.data() + z0 * plane, out.size(), out.data());
+  });
+  const std::size_t levels = p.geometry.size();
+  std::vector<std::uint32_t> next(levels, 0);
+  std::vector<float> a(brick_voxels), b(brick_voxels);
+  for (std::size_t end = 1;; end += 7) {
+    w.advance(end);
+    bool more = false;
+    for (std::size_t l = 0; l < levels; ++l) {
+      const auto& g = p.geometry[l];
+      // Row z is there once its planes up to 34(z + 1) + 1 (clamped) are.
+      for (; next[l] < g.grid[2] &&
+             w.end(l) >= std::min<std::size_t>(34 * (next[l] + 1) + 1, g.dims[2]);
+           ++next[l])
+        for (std::uint32_t y = 0; y < g.grid[1]; ++y)
+          for (std::uint32_t x = 0; x < g.grid[0]; ++x) {
+            encoder::extract_brick(p, l, x, y, next[l], a);
+            w.extract_brick(l, x, y, next[l], b);
+            ASSERT_EQ(a, b) << "level " << l << " brick " << x << ", " << y << ", " << next[l];
+          }
+      more = more || next[l] < g.grid[2];
+      w.release(l, next[l] < g.grid[2] ? std::max<std::size_t>(34 * next[l], 1) - 1 : g.dims[2]);
+    }
+    if (!more) break;
+  }
+  // Every plane read once; at most a few rows of bricks' planes held at a time.
+  EXPECT_TRUE(std::all_of(reads.begin(), reads.end(), [](int n) { return n == 1; }));
+  EXPECT_LT(w.peak_bytes(), v.data.size() * sizeof(float) / 2);
+  EXPECT_GT(w.peak_bytes(), 36 * plane * sizeof(float));
+  // A brick whose planes have left the window is not handed out.
+  EXPECT_THROW(w.extract_brick(levels - 1, 0, 0, 0, b), std::logic_error);
+}
+
+TEST(Encoder, APiecewiseFrameMeasuresItsFinestLevelAsDecoded) {
+  const Volume v = analytic_volume(datasets::AnalyticField::blobs, {70, 40, 110});
+  const auto d = random_dictionary(128, 9);
+  encoder::CodingSettings zfp;
+  zfp.codec = format::Codec::zfp;
+  zfp.zfp_accuracy = 2e-3;
+  zfp.value_min = -2;
+  zfp.value_max = 2;
+  for (const encoder::CodingSettings& s : {ksvd_settings(0.01, v), zfp}) {
+    const bool ksvd = s.codec == format::Codec::ksvd;
+    const encoder::FrameEncoder enc(ksvd ? &d : nullptr, s);
+    encoder::PlaneCoding options;
+    options.measure_finest = true;
+    std::vector<double> progress;
+    options.progress = [&](double f) { progress.push_back(f); };
+    const std::size_t plane = v.dims.plane();
+    encoder::CodedFrame coded;
+    std::size_t largest_read = 0;
+    enc.code_planes(
+        3, v.dims,
+        [&](std::size_t z0, std::size_t z1, std::span<float> out) {
+          largest_read = std::max(largest_read, z1 - z0);
+          std::copy_n(v.data.data() + z0 * plane, out.size(), out.data());
+        },
+        coded, options);
+    const auto bytes = enc.write(coded);
+    EXPECT_EQ(bytes, enc.encode(3, v)) << "codec " << (ksvd ? "ksvd" : "zfp");
+    EXPECT_LE(coded.window_bytes, v.data.size() * sizeof(float));
+    ASSERT_FALSE(progress.empty());
+    EXPECT_TRUE(std::is_sorted(progress.begin(), progress.end()));
+    EXPECT_EQ(progress.back(), 1.0);
+    // The measurement equals the decoded finest level's error.
+    const format::FrameView f(bytes, "piecewise.vrf");
+    const auto decoded =
+        format::decode_level(f, f.level_count() - 1, ksvd ? atom_table(d) : format::AtomTable{});
+    double squared = 0, worst = 0;
+    for (std::size_t i = 0; i < v.data.size(); ++i) {
+      const double e = static_cast<double>(decoded.data[i]) - static_cast<double>(v.data[i]);
+      squared += e * e;
+      worst = std::max(worst, std::abs(e));
+    }
+    ASSERT_GT(squared, 0);
+    EXPECT_NEAR(coded.stats.finest_squared_error, squared, squared * 1e-9);
+    EXPECT_EQ(coded.stats.finest_max_error, worst);
+  }
+}
+
 TEST(Encoder, ZfpBricksMeetTheirAccuracy) {
   const Volume v = analytic_volume(datasets::AnalyticField::rotating, {40, 40, 40});
   encoder::CodingSettings s;

@@ -455,3 +455,89 @@ TEST(NetCdf, MissingValuesAndWrongChoicesAreClearErrors) {
 
 }  // namespace
 }  // namespace volreel
+
+namespace volreel {
+namespace {
+
+/// Every slab of every frame equals the planes read_frame delivers, and a slab out of range or of
+/// the wrong size is an InputError.
+void expect_slabs_equal_frames(const datasets::SeriesReader& s) {
+  const Dims d = s.info().dims;
+  for (std::size_t t = 0; t < s.info().frames; ++t) {
+    const Volume whole = s.read_frame(t);
+    for (std::size_t z0 = 0; z0 < d.planes(); ++z0)
+      for (std::size_t z1 = z0 + 1; z1 <= d.planes(); ++z1) {
+        std::vector<float> slab((z1 - z0) * d.plane());
+        s.read_slab(t, z0, z1, slab);
+        ASSERT_TRUE(std::equal(slab.begin(), slab.end(),
+                               whole.data.begin() + static_cast<std::ptrdiff_t>(z0 * d.plane())))
+            << s.info().source << " frame " << t << " planes [" << z0 << ", " << z1 << ")";
+      }
+  }
+  std::vector<float> plane(d.plane());
+  expect_error([&] { s.read_slab(0, d.planes(), d.planes() + 1, plane); }, {"not a slab"});
+  expect_error([&] { s.read_slab(s.info().frames, 0, 1, plane); }, {"out of range"});
+  expect_error([&] { s.read_slab(0, 0, 2, plane); }, {"wrong size"});
+}
+
+TEST(Slabs, EveryReaderReadsPlanesAsItsFrames) {
+  test::TempDir dir("slabs");
+  const Dims d{5, 3, 4};
+  expect_slabs_equal_frames(*datasets::open_series(write_series(dir, d, 2)));
+  {  // one raw file of u16 frames back to back, and a pattern of f64 files
+    std::vector<std::uint16_t> u16(2 * d.voxels());
+    for (std::size_t i = 0; i < u16.size(); ++i) u16[i] = static_cast<std::uint16_t>(7 * i);
+    write_bytes(dir / "u16.raw", u16.data(), u16.size() * 2);
+    datasets::OpenOptions o;
+    o.dims = d;
+    o.dtype = datasets::Dtype::u16;
+    o.frames = 2;
+    expect_slabs_equal_frames(*datasets::open_series(dir / "u16.raw", o));
+    for (int t = 0; t < 2; ++t) {
+      const std::vector<double> v = counting(d.voxels(), 1000.0 * t);
+      write_bytes(dir / ("f_" + std::to_string(t) + ".f64"), v.data(), v.size() * 8);
+    }
+    o.dtype = datasets::Dtype::f64;
+    o.frames.reset();
+    expect_slabs_equal_frames(*datasets::open_series((dir / "f_*.f64").string(), o));
+  }
+  {  // HDF5: 3D datasets and one 4D dataset
+    const fs::path path = dir / "s.h5";
+    const hid_t f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    h5_write(f, "a_1", {4, 3, 5}, counting(60, 0));
+    h5_write(f, "a_2", {4, 3, 5}, counting(60, 500));
+    h5_write(f, "p", {2, 4, 3, 5}, counting(120, 7));
+    H5Fclose(f);
+    datasets::OpenOptions o;
+    o.dataset = "a_*";
+    expect_slabs_equal_frames(*datasets::open_series(path, o));
+    o.dataset = "p";
+    expect_slabs_equal_frames(*datasets::open_series(path, o));
+  }
+  {  // NetCDF: a packed 4D variable and a 3D one
+    const fs::path file = dir.path() / "ocean.nc";
+    write_netcdf(file, false);
+    datasets::OpenOptions o;
+    o.variable = "temp";
+    expect_slabs_equal_frames(*datasets::open_series(file, o));
+    o.variable = "depth";
+    expect_slabs_equal_frames(*datasets::open_series(file, o));
+  }
+}
+
+TEST(Slabs, ANonFiniteValueIsNamedByItsPlaneInTheFrame) {
+  test::TempDir dir("slabs-nan");
+  const Dims d{3, 2, 4};
+  auto data = ramp(d, 0);
+  data[d.index(1, 0, 3)] = std::numeric_limits<float>::quiet_NaN();
+  datasets::RawSeriesWriter w(dir / "s", d, "p");
+  w.write_frame(0, 0, data);
+  w.finish();
+  const auto s = datasets::open_series(dir / "s");
+  std::vector<float> slab(2 * d.plane());
+  s->read_slab(0, 0, 2, slab);  // planes without it read
+  expect_error([&] { s->read_slab(0, 2, 4, slab); }, {"000000.f32", "voxel (1, 0, 3)"});
+}
+
+}  // namespace
+}  // namespace volreel

@@ -15,6 +15,7 @@
 #include "volreel/format/container.hpp"
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/error.hpp"
+#include "volreel/format/file_io.hpp"
 #include "volreel/loop/cpu_frame_loop.hpp"
 #include "volreel/player/camera.hpp"
 #include "volreel/remote/disk_cache.hpp"
@@ -98,11 +99,11 @@ TEST(RemoteCache, KeepsEntriesAndEvictsTheLeastRecentlyUsed) {
   }
   EXPECT_FALSE(again.get("a"));
   EXPECT_EQ(again.entries(), 1u);
-  EXPECT_EQ(parse_cache_size("2G"), std::uint64_t{2} << 30);
-  EXPECT_EQ(parse_cache_size("500MiB"), std::uint64_t{500} << 20);
-  EXPECT_EQ(parse_cache_size("4096"), 4096u);
-  EXPECT_THROW(parse_cache_size("lots"), std::invalid_argument);
-  EXPECT_THROW(parse_cache_size("-1G"), std::invalid_argument);
+  EXPECT_EQ(format::detail::parse_byte_size("2G", "--cache-size"), std::uint64_t{2} << 30);
+  EXPECT_EQ(format::detail::parse_byte_size("500MiB", "--cache-size"), std::uint64_t{500} << 20);
+  EXPECT_EQ(format::detail::parse_byte_size("4096", "--cache-size"), 4096u);
+  EXPECT_THROW(format::detail::parse_byte_size("lots", "--cache-size"), std::invalid_argument);
+  EXPECT_THROW(format::detail::parse_byte_size("-1G", "--cache-size"), std::invalid_argument);
 }
 
 // ---------------------------------------------------------------------------------------------

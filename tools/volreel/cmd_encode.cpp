@@ -20,6 +20,7 @@
 #include "volreel/dictionary/training.hpp"
 #include "volreel/encoder/encoder.hpp"
 #include "volreel/format/dictionary_file.hpp"
+#include "volreel/format/file_io.hpp"
 #include "volreel/format/frame_file.hpp"
 
 namespace volreel::cli {
@@ -39,6 +40,7 @@ struct EncodeOptions {
          coef_step_factor = encoder::CodingSettings{}.coef_step_factor;
   int fixed_sparsity = 0, max_atoms = encoder::default_max_atoms, atoms = 0;
   std::size_t max_frames = 0, rate_sample_frames = 3;
+  std::string memory;
   std::uint32_t max_keyframe_gap = encoder::default_max_keyframe_gap;
   bool resume = false, overwrite = false, no_refit = false, extend = false;
   CLI::Option *tolerance_opt = nullptr, *psnr_opt = nullptr, *bps_opt = nullptr, *zfp_opt = nullptr,
@@ -102,6 +104,14 @@ encoder::EncodeRequest encode_request(const EncodeOptions& o, std::size_t frames
   r.overwrite = o.overwrite;
   r.max_frames = frames;
   if (o.keyframe_gap_opt->count() > 0) r.max_keyframe_gap = o.max_keyframe_gap;
+  if (!o.memory.empty()) {
+    try {
+      r.memory = format::detail::parse_byte_size(o.memory, "--memory");
+    } catch (const std::invalid_argument& e) {
+      throw InputError(e.what());
+    }
+    if (r.memory == 0) throw InputError("--memory " + o.memory + ": expected more than 0 bytes");
+  }
   r.provenance = {
       {"program", "volreel " VOLREEL_VERSION}, {"series", o.series}, {"coef_bits", o.coef_bits}};
   return r;
@@ -274,9 +284,16 @@ void add_encode_command(CLI::App& app) {
                       "rate search codes\n"
                       "whole frames); without the option it is lowered where G + 1 frames would "
                       "take more than\n"
-                      "half the memory")
+                      "--memory")
           ->check(CLI::Range(1, 65535))
           ->capture_default_str();
+  cmd->add_option("--memory", o->memory,
+                  "The memory the encode may hold for frames, e.g. 2G, 512M (default: half the "
+                  "machine's). Frames that do\n"
+                  "not fit whole (twice their float32 size) are read and coded piecewise, a row "
+                  "of bricks at a time,\n"
+                  "with keyframe gap 1 and a dictionary given; smaller frames lower the default "
+                  "keyframe gap to fit");
   cmd->add_option("--rate-sample-frames", o->rate_sample_frames, "--bps: frames encoded per trial")
       ->capture_default_str();
   cmd->add_flag("--resume", o->resume,

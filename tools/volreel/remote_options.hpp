@@ -11,6 +11,7 @@
 #include <CLI/CLI.hpp>
 
 #include "volreel/datasets/volume.hpp"
+#include "volreel/format/file_io.hpp"
 #include "volreel/format/source.hpp"
 #include "volreel/remote/http_source.hpp"
 
@@ -57,7 +58,7 @@ inline std::shared_ptr<const format::ContainerSource> open_container_source(
   try {
     if (!o.cache.empty()) {
       options.cache_dir = o.cache;
-      options.cache_bytes = remote::parse_cache_size(o.cache_size);
+      options.cache_bytes = format::detail::parse_byte_size(o.cache_size, "--cache-size");
     }
     return remote::open_source(location, options);
   } catch (const std::invalid_argument& e) {

@@ -61,9 +61,17 @@ class SeriesReader {
 
   /// Read frame t (0-based) into out (size dims.voxels()), converting to float32.
   /// Throws InputError naming the file on a missing frame, a short file, an I/O error, or a
-  /// NaN/Inf value (unless OpenOptions::replace_nan is set).
-  virtual void read_frame(std::size_t t, std::span<float> out) const = 0;
+  /// NaN/Inf value (unless OpenOptions::replace_nan is set). The default reads the slab of every
+  /// plane (read_slab); a reader overrides at least one of the two.
+  virtual void read_frame(std::size_t t, std::span<float> out) const;
   Volume read_frame(std::size_t t) const;
+  /// Read planes [z_begin, z_end) of frame t into out (size dims.x·dims.y·(z_end − z_begin)),
+  /// as read_frame would deliver them; a voxel named in an error has its z within the frame.
+  /// The raw, HDF5 and NetCDF readers read only those planes (by file offset, hyperslab or
+  /// vara), so a frame larger than memory can be worked through in pieces; the default reads
+  /// the whole frame and copies the planes.
+  virtual void read_slab(std::size_t t, std::size_t z_begin, std::size_t z_end,
+                         std::span<float> out) const;
 
  protected:
   SeriesInfo info_;

@@ -22,6 +22,11 @@ struct Dims {
   constexpr std::size_t voxels() const noexcept {
     return static_cast<std::size_t>(x) * static_cast<std::size_t>(y) * static_cast<std::size_t>(z);
   }
+  /// Voxels of one plane (constant z).
+  constexpr std::size_t plane() const noexcept {
+    return static_cast<std::size_t>(x) * static_cast<std::size_t>(y);
+  }
+  constexpr std::size_t planes() const noexcept { return static_cast<std::size_t>(z); }
   constexpr std::size_t index(std::int64_t i, std::int64_t j, std::int64_t k) const noexcept {
     return static_cast<std::size_t>(i + x * (j + y * k));
   }

@@ -38,9 +38,14 @@ struct EncodeRequest {
   bool resume = false, overwrite = false;
   std::size_t max_frames = 0;  ///< 0: every frame
   /// The most time steps between keyframes of a node. Unset: default_max_keyframe_gap, lowered
-  /// until G + 1 frames take at most half the machine's memory; 1 with a size target (its search
-  /// codes whole frames).
+  /// until G + 1 frames take at most `memory`; 1 with a size target (its search codes whole
+  /// frames) and for frames coded piecewise.
   std::optional<std::uint32_t> max_keyframe_gap;
+  /// The bytes the encode may hold for frames (0: half the machine's memory). A frame that does
+  /// not fit whole (whole_frame_bytes) is coded piecewise (EncodeJob::piecewise), a few planes at a
+  /// time, without keyframe gaps; that needs a dictionary given (training and --bps read whole
+  /// frames).
+  std::uint64_t memory = 0;
   nlohmann::json provenance;  ///< stored under "encoder" in the manifest, with the program's
   /// The processes that encode together (MPI ranks); null: this process alone. Each reads its
   /// share of the frames for the value range; rank 0 trains the dictionary and chooses ε, and
@@ -65,8 +70,15 @@ struct EncodeEvents {
 };
 
 /// The keyframe gap an encode of frames of `dims` uses when none is asked for (see
-/// EncodeRequest::max_keyframe_gap); `lowered` says whether memory lowered it.
-std::uint32_t default_keyframe_gap(const Dims& dims, bool size_target, bool* lowered = nullptr);
+/// EncodeRequest::max_keyframe_gap) with `memory` bytes (0: half the machine's); `lowered` says
+/// whether memory lowered it.
+std::uint32_t default_keyframe_gap(const Dims& dims, bool size_target, std::uint64_t memory = 0,
+                                   bool* lowered = nullptr);
+/// What coding a frame of `dims` whole holds: the frame, and its finest level decoded to measure
+/// it (float32 each). Frames larger than EncodeRequest::memory are coded piecewise.
+double whole_frame_bytes(const Dims& dims);
+/// EncodeRequest::memory when 0: half the machine's physical memory.
+std::uint64_t default_encode_memory();
 
 /// Encodes `series` into the container `out` as asked. With several ranks, only rank 0 should be
 /// given events (one progress bar, one report). Temporary dictionary files are removed

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstddef>
+#include <functional>
 #include <memory>
 #include <span>
 #include <vector>
@@ -13,6 +14,7 @@
 #include "volreel/dictionary/dictionary.hpp"
 #include "volreel/dictionary/omp.hpp"
 #include "volreel/encoder/coding_settings.hpp"
+#include "volreel/encoder/pyramid.hpp"
 #include "volreel/format/frame_file.hpp"
 
 namespace volreel::encoder {
@@ -66,6 +68,8 @@ struct FrameStats {
   /// Blocks that missed the pointwise bound (CodingSettings::max_error) even with 16-bit
   /// coefficients and Smax atoms: 0 whenever the bound holds.
   std::size_t blocks_over_bound = 0;
+  /// PlaneCoding::measure_finest: the finest level's squared error summed and largest error.
+  double finest_squared_error = 0, finest_max_error = 0;
 };
 
 /// One node of a frame's full octree, coded: what the keyframe choice (keyframes.hpp) and the
@@ -97,8 +101,19 @@ struct CodedFrame {
   /// the pointwise bound (--max-error or the zfp accuracy; 0 for none).
   std::vector<double> level_tolerance;
   double max_abs_error = 0;
+  std::size_t window_bytes = 0;  ///< the most bytes of planes held while coding (PyramidWindow)
   format::FrameHeader header{};
   FrameStats stats;  ///< of the coding (bytes and the byte breakdown come with the frame file)
+};
+
+/// What FrameEncoder::code_planes does besides coding.
+struct PlaneCoding {
+  bool keep_originals = false;  ///< CodedFrame::originals
+  /// FrameStats::finest_*: every finest brick's payload decoded by the CPU reference decoder
+  /// against the voxels it stores, over the voxels that are its own: the frame's finest level as
+  /// a reader decodes it when every node keeps its brick (no keyframe gaps), without a second pass.
+  bool measure_finest = false;
+  std::function<void(double)> progress;  ///< the fraction of the finest rows of bricks done
 };
 
 /// Encodes frames with fixed settings and dictionary; safe to use from one thread at a time
@@ -116,6 +131,12 @@ class FrameEncoder {
   /// after another allocates them once).
   void code_into(std::size_t t, const Volume& frame, CodedFrame& coded,
                  bool keep_originals = false) const;
+  /// The same for a frame of size `dims` read a few planes at a time (`read`: the finest planes
+  /// [z_begin, z_end), as SeriesReader::read_slab delivers them): each level holds about one row
+  /// of bricks' planes (PyramidWindow), so a frame larger than memory is coded in pieces. The
+  /// bricks come out as code_into's.
+  void code_planes(std::size_t t, const Dims& dims, const PyramidWindow::ReadPlanes& read,
+                   CodedFrame& coded, const PlaneCoding& options = {}) const;
   /// The frame file of a coded frame, with the bricks of the nodes keep[i] (one flag per brick of
   /// coded.bricks; empty: every node) and no brick for the other nodes of its tree (they are
   /// interpolated: format/SPEC.md, "Keyframes"). An empty node always keeps its brick. stats: the

@@ -3,8 +3,11 @@
 // (34³ interior with a 1-voxel apron).
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
+#include <deque>
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -25,5 +28,55 @@ Pyramid build_pyramid(const Volume& frame);
 /// (34x − 1 + a, 34y − 1 + b, 34z − 1 + c) for a, b, c in [0, 36), clamped to the level.
 void extract_brick(const Pyramid& pyramid, std::size_t level, std::uint32_t x, std::uint32_t y,
                    std::uint32_t z, std::span<float> out);
+
+/// Level l−1 planes [k_begin, k_end) of a level whose finer level l has dims `fine_dims`, from
+/// the finer planes (global z) that `fine_plane` returns: the averages build_pyramid computes.
+/// `out` holds the coarse planes from k_begin on.
+void downsample_planes(const std::array<std::uint32_t, 3>& fine_dims,
+                       const std::array<std::uint32_t, 3>& dims,
+                       const std::function<const float*(std::size_t z)>& fine_plane,
+                       std::size_t k_begin, std::size_t k_end, float* out);
+
+/// The same levels as build_pyramid, held a window of planes at a time, so that a frame larger
+/// than memory is worked through in pieces: the finest level's planes come from a reader (a
+/// series' read_slab), each coarser level's are averaged from the finer planes as soon as these
+/// are there. The window of level l is planes [begin(l), end(l)); a brick of level l may be
+/// extracted while its 36 planes (clamped to the level) are in it.
+class PyramidWindow {
+ public:
+  /// read(z_begin, z_end, out): the finest level's planes [z_begin, z_end) into out.
+  using ReadPlanes = std::function<void(std::size_t z_begin, std::size_t z_end, std::span<float>)>;
+  PyramidWindow(std::vector<format::LevelGeometry> geometry, ReadPlanes read);
+
+  const std::vector<format::LevelGeometry>& geometry() const { return geometry_; }
+  std::size_t planes(std::size_t level) const { return geometry_[level].dims[2]; }
+  std::size_t begin(std::size_t level) const { return levels_[level].begin; }
+  std::size_t end(std::size_t level) const { return levels_[level].end; }
+  /// Reads the finest level up to plane finest_end (clamped to the level) and averages every
+  /// coarser plane whose finer planes are then all there.
+  void advance(std::size_t finest_end);
+  /// Lets level l's planes below `begin` go, except those the next coarser level still needs.
+  void release(std::size_t level, std::size_t begin);
+  /// extract_brick's voxels of brick (x, y, z) of level l from the window (InputError-free:
+  /// std::logic_error if a plane it needs is not in the window).
+  void extract_brick(std::size_t level, std::uint32_t x, std::uint32_t y, std::uint32_t z,
+                     std::span<float> out) const;
+  /// The most bytes of planes the window held at once.
+  std::size_t peak_bytes() const { return peak_bytes_; }
+
+ private:
+  struct Level {
+    std::size_t begin = 0, end = 0;
+    std::deque<std::vector<float>> planes;  ///< planes[z − begin]
+    std::vector<std::vector<float>> spare;  ///< a released plane's storage, reused
+  };
+  const float* plane(std::size_t level, std::size_t z) const;
+  void append_planes(std::size_t level, std::size_t end);
+
+  std::vector<format::LevelGeometry> geometry_;
+  ReadPlanes read_;
+  std::vector<Level> levels_;
+  std::size_t bytes_ = 0, peak_bytes_ = 0;
+};
 
 }  // namespace volreel::encoder

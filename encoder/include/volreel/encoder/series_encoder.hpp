@@ -41,6 +41,10 @@ struct EncodeJob {
   /// (keyframes.hpp). 1: every frame stores every brick. Memory: G + 1 frames with their bricks.
   std::uint32_t max_keyframe_gap = default_max_keyframe_gap;
   nlohmann::json provenance;  ///< stored under "encoder" in the manifest
+  /// Code each frame a few planes at a time (SeriesReader::read_slab, FrameEncoder::code_planes)
+  /// and measure its delivered error as it is coded, so that no whole frame is ever in memory:
+  /// the container is the same. Needs max_keyframe_gap 1 (a stretch with gaps holds its frames).
+  bool piecewise = false;
   /// > 0 (dB, ksvd variable rate): every frame's finest-level PSNR over the sequence's value range
   /// at least this (volreel encode --psnr). A frame that falls short is coded again at a smaller
   /// ε (ε·10^(−shortfall/20), a little less), up to max_tolerance_retries times; the next frame

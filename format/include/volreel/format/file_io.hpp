@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <span>
+#include <string>
 #include <vector>
 
 namespace volreel::format::detail {
@@ -36,5 +37,9 @@ constexpr std::uint64_t max_dictionary_bytes = std::uint64_t{1} << 30;
 /// Writes bytes to "PATH.tmp-PID" and renames it to PATH, so that a reader never sees a half
 /// written file; throws FormatError (and removes the temporary) on failure.
 void write_file_atomically(const std::filesystem::path& path, std::span<const std::byte> bytes);
+
+/// "2G", "500M", "64k", "1T" or a number of bytes -> bytes (powers of 1024), for options such as
+/// --cache-size and --memory. Throws std::invalid_argument naming `option`.
+std::uint64_t parse_byte_size(const std::string& text, const std::string& option);
 
 }  // namespace volreel::format::detail

@@ -64,8 +64,4 @@ class DiskCache {
   void evict();
 };
 
-/// "2G", "500M", "64k", "1T" or a number of bytes -> bytes (powers of 1024). Throws
-/// std::invalid_argument naming `option`.
-std::uint64_t parse_cache_size(const std::string& text, const std::string& option = "--cache-size");
-
 }  // namespace volreel::remote
