@@ -622,6 +622,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   std::vector<Step> pool;       // the other frames of the previous stretch: their buffers reused
   std::size_t coded_frames = 0;
   const std::size_t share_frames = end_frame - first_frame;
+  double reported = 0;  // this process's frames added to the job's progress count
   for (std::size_t k = first_stretch; k < last_stretch; ++k) {
     const std::size_t s = k * gap, e = std::min(s + gap, frames - 1);
     if (std::all_of(done.begin() + static_cast<std::ptrdiff_t>(s),
@@ -650,9 +651,17 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
         std::snprintf(
             status, sizeof status, "coding frame %zu, %.1f MVoxel/s", t,
             voxels * frames_coded / 1e6 / std::max(1e-9, summary.seconds + seconds_since(start)));
-        progress.report(std::min(frames_coded + static_cast<double>(summary.skipped),
-                                 static_cast<double>(share_frames)),
-                        static_cast<double>(share_frames), status);
+        const double mine = std::min(frames_coded + static_cast<double>(summary.skipped),
+                                     static_cast<double>(share_frames));
+        if (ranks.size() == 1) {
+          progress.report(mine, static_cast<double>(share_frames), status);
+          return;
+        }
+        // One bar for the job: the frames every process has done (rank 0's status).
+        ranks.add_progress(mine - reported);
+        reported = mine;
+        if (ranks.root())
+          progress.report(ranks.progress_count(), static_cast<double>(frames), status);
       };
       frame_progress = [&](double fraction) {
         if (!done[t]) report(static_cast<double>(coded_frames) + fraction);
@@ -748,8 +757,13 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     if (!m.frames[t]) throw std::logic_error("a frame of this process's share has no record");
     records.insert(records.end(), {t, m.frames[t]->bytes, m.frames[t]->crc32c});
   }
+  // The rest of this process's frames (those found written) in the job's count before the
+  // gather, so that rank 0 reads every process's count after it.
+  if (ranks.size() > 1) ranks.add_progress(static_cast<double>(share_frames) - reported);
   records = ranks.gather(records);
   combine_summaries(ranks, summary);
+  if (ranks.size() > 1 && ranks.root())
+    progress.report(ranks.progress_count(), static_cast<double>(frames), "every frame written");
   on_root(ranks, [&] {
     for (auto& f : m.frames) f.reset();
     for (std::size_t i = 0; i + 2 < records.size(); i += 3)

@@ -44,6 +44,16 @@ grep -q "on 2 processes" "$work/mpi2.txt" || fail "the report does not count the
 grep -Eq "^peak resident memory per rank: [0-9]+ MiB [0-9]+ MiB$" "$work/mpi2.txt" ||
   fail "no peak memory of each of the 2 ranks: $(grep peak "$work/mpi2.txt")"
 "$volreel" verify "$work/mpi4.vreel" > /dev/null 2>&1 || fail "verify refuses the -n 4 container"
+# One progress bar for the job: every process's frames, not rank 0's share (5 of 13).
+grep -Eq "encoding .* 13/13 frames" "$work/mpi2.txt" || fail "the progress bar does not reach 13/13 frames"
+grep -Eq "encoding .* [0-9]+/[0-9] frames" "$work/mpi2.txt" && fail "a progress bar counts a share of the frames"
+# Frames larger than --memory, coded piecewise by each rank.
+"$volreel" gen analytic --field blobs --dims 40x36x120 --frames 5 --out "$work/tall" > /dev/null 2>&1
+"$volreel" encode "$work/tall" --out "$work/tall1.vreel" --dictionary dct --memory 1M > /dev/null 2>&1
+mpi 2 "$volreel" encode "$work/tall" --out "$work/tall2.vreel" --dictionary dct --memory 1M \
+  > "$work/tall2.txt" 2>&1 || fail "mpirun piecewise: $(tail -5 "$work/tall2.txt")"
+grep -q "coded piecewise" "$work/tall2.txt" || fail "-n 2 --memory 1M did not code piecewise"
+same "$work/tall1.vreel" "$work/tall2.vreel" "piecewise under -n 2 differs"
 
 # A PSNR target (frames coded again at smaller tolerances) and zfp.
 "$volreel" encode "$work/s" --out "$work/psnr.vreel" --dictionary dct --psnr 62 \

@@ -133,9 +133,7 @@ void run_encode(const EncodeOptions& o) {
   }
   std::printf("volreel encode: %s, %s x %zu frames, variable '%s'\n", info.source.c_str(),
               to_string(info.dims).c_str(), frames, info.variable.c_str());
-  if (ranks)
-    std::printf("%d MPI processes, each coding a share of the frames; rank 0's progress shown\n",
-                ranks->size());
+  if (ranks) std::printf("%d MPI processes, each coding a share of the frames\n", ranks->size());
   encoder::EncodeRequest r = encode_request(o, frames);
   r.ranks = ranks;
   encoder::EncodeEvents events;

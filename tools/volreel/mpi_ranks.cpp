@@ -45,7 +45,17 @@ class WorldRanks final : public encoder::Ranks {
   WorldRanks() {
     MPI_Comm_rank(MPI_COMM_WORLD, &rank_);
     MPI_Comm_size(MPI_COMM_WORLD, &size_);
+    // The job's progress count: one double in rank 0's window, which every rank adds to.
+    double* count = nullptr;
+    check(MPI_Win_allocate(rank_ == 0 ? sizeof(double) : 0, sizeof(double), MPI_INFO_NULL,
+                           MPI_COMM_WORLD, &count, &progress_),
+          "MPI_Win_allocate");
+    if (rank_ == 0) *count = 0;
+    check(MPI_Barrier(MPI_COMM_WORLD), "MPI_Barrier");
   }
+  ~WorldRanks() override { MPI_Win_free(&progress_); }
+  WorldRanks(const WorldRanks&) = delete;
+  WorldRanks& operator=(const WorldRanks&) = delete;
   int rank() const override { return rank_; }
   int size() const override { return size_; }
   void sum(std::span<double> v) const override { reduce(v, MPI_SUM); }
@@ -76,6 +86,20 @@ class WorldRanks final : public encoder::Ranks {
     return all;
   }
   void barrier() const override { check(MPI_Barrier(MPI_COMM_WORLD), "MPI_Barrier"); }
+  void add_progress(double amount) const override {
+    check(MPI_Win_lock(MPI_LOCK_SHARED, 0, 0, progress_), "MPI_Win_lock");
+    check(MPI_Accumulate(&amount, 1, MPI_DOUBLE, 0, 0, 1, MPI_DOUBLE, MPI_SUM, progress_),
+          "MPI_Accumulate");
+    check(MPI_Win_unlock(0, progress_), "MPI_Win_unlock");
+  }
+  double progress_count() const override {
+    double none = 0, value = 0;
+    check(MPI_Win_lock(MPI_LOCK_SHARED, 0, 0, progress_), "MPI_Win_lock");
+    check(MPI_Fetch_and_op(&none, &value, MPI_DOUBLE, 0, 0, MPI_NO_OP, progress_),
+          "MPI_Fetch_and_op");
+    check(MPI_Win_unlock(0, progress_), "MPI_Win_unlock");
+    return value;
+  }
 
  private:
   void reduce(std::span<double> v, MPI_Op op) const {
@@ -83,6 +107,7 @@ class WorldRanks final : public encoder::Ranks {
           "MPI_Allreduce");
   }
   int rank_ = 0, size_ = 1;
+  MPI_Win progress_ = MPI_WIN_NULL;
 };
 
 bool initialised_here = false;

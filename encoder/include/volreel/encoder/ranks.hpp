@@ -28,6 +28,12 @@ class Ranks {
   virtual std::vector<std::uint64_t> gather(std::span<const std::uint64_t> values) const = 0;
   /// Returns when every process has called it.
   virtual void barrier() const = 0;
+  /// A job-wide count (frames coded, for one progress bar): each process adds what it did;
+  /// progress_count() is the sum of what every process added so far. Neither waits for the
+  /// other processes (one-sided), so they need not be called in the same order everywhere.
+  /// A single process keeps no count (it reports its own work).
+  virtual void add_progress(double amount) const = 0;
+  virtual double progress_count() const = 0;
 
   bool root() const { return rank() == 0; }
   /// The part [first, last) of n items (frames, stretches) that this process takes: contiguous,
@@ -50,6 +56,8 @@ class SingleProcess final : public Ranks {
     return {values.begin(), values.end()};
   }
   void barrier() const override {}
+  void add_progress(double) const override {}
+  double progress_count() const override { return 0; }
 };
 
 /// The SingleProcess every encode uses unless given other Ranks.
