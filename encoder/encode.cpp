@@ -5,8 +5,11 @@
 
 #include <atomic>
 #include <cstdio>
+#include <optional>
+#include <span>
 #include <utility>
 
+#include "volreel/dictionary/coreset.hpp"
 #include "volreel/dictionary/training.hpp"
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/file_io.hpp"
@@ -76,10 +79,9 @@ double stretch_bytes_per_frame(const Dims& dims) {
                 static_cast<double>(bricks) * static_cast<double>(format::brick_voxels));
 }
 
-/// Trains the dictionary of an encode given none into `path`.
-void train_dictionary(const datasets::SeriesReader& series, const EncodeRequest& request,
-                      double eps, std::size_t frames, const EncodeEvents& events,
-                      const fs::path& path) {
+/// The training settings of an encode given no dictionary (volreel train's defaults).
+DefaultDictionaryOptions training_options(const EncodeRequest& request, double eps,
+                                          std::size_t frames) {
   DefaultDictionaryOptions d;
   d.tolerance = eps;
   d.atoms = request.atoms;
@@ -90,11 +92,36 @@ void train_dictionary(const datasets::SeriesReader& series, const EncodeRequest&
   // The coreset from the frames this encode codes (--max-frames), not the whole series.
   if (d.coreset.candidate_frames.empty())
     for (std::size_t t = 0; t < frames; ++t) d.coreset.candidate_frames.push_back(t);
-  dictionary::CoresetHierarchy h;
-  {
-    Stage stage(events, "coreset", "frames");
-    h = dictionary::build_coreset_hierarchy(series, d.coreset, stage.progress());
+  return d;
+}
+
+/// The coreset of an encode that trains, drawn by every process from its share of the chosen
+/// frames and merged on rank 0 (the same draw as one process's, coreset.hpp); empty elsewhere.
+std::optional<dictionary::CoresetHierarchy> draw_training_coreset(
+    const datasets::SeriesReader& series, const EncodeRequest& request, std::size_t frames,
+    const Ranks& ranks, const EncodeEvents& events) {
+  const dictionary::CoresetOptions options = training_options(request, 0, frames).coreset;
+  Stage stage(events, "coreset", "frames");
+  const std::vector<std::size_t> chosen = dictionary::coreset_frames(series, options);
+  const auto [first, last] = ranks.share(chosen.size());
+  dictionary::CoresetDraw draw = dictionary::draw_coreset(
+      series, options, std::span(chosen).subspan(first, last - first), stage.progress());
+  if (ranks.size() > 1) {
+    const auto parts = ranks.gather_to_root(draw.to_bytes());
+    if (!ranks.root()) return std::nullopt;
+    for (std::size_t r = 1; r < parts.size(); ++r)
+      draw.merge(dictionary::CoresetDraw::from_bytes(parts[r], options));
   }
+  dictionary::CoresetHierarchy h = draw.finish(options.levels);
+  h.frames = chosen;
+  return h;
+}
+
+/// Trains the dictionary of an encode given none into `path`, on its coreset `h`.
+void train_dictionary(const datasets::SeriesReader& series, const EncodeRequest& request,
+                      double eps, std::size_t frames, const dictionary::CoresetHierarchy& h,
+                      const EncodeEvents& events, const fs::path& path) {
+  const DefaultDictionaryOptions d = training_options(request, eps, frames);
   const auto chosen = train_default_dictionary(series, h, d, events.candidate);
   if (chosen.dct_only) {
     format::write_dictionary_file(path, format::dct_dictionary(6, VOLREEL_VERSION));
@@ -213,6 +240,20 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
     job.dictionary_file = copy->path();
     std::vector<std::byte> dictionary_bytes;
     std::string failure;
+    // Training (no dictionary given, none to resume with, values not constant): every process
+    // draws its share of the coreset first.
+    const bool trains = request.dictionary.empty() &&
+                        !(request.resume && fs::exists(out / "dictionary.bin")) &&
+                        c.value_max > c.value_min;
+    std::optional<dictionary::CoresetHierarchy> coreset;
+    const double train_eps = tolerance_to_train_at(request.tolerance, range);
+    if (trains) {
+      say(printed("no dictionary given: training one with volreel train's defaults at eps %.4g, ",
+                  train_eps) +
+          (request.atoms ? "K = " + std::to_string(request.atoms)
+                         : std::string("K chosen by the total size it gives")));
+      coreset = draw_training_coreset(series, request, frames, ranks, events);
+    }
     if (ranks.root()) {
       try {
         fs::path dict_path = request.dictionary;
@@ -221,15 +262,9 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
           dict_path = out / "dictionary.bin";
         if (dict_path.empty() && !(c.value_max > c.value_min))
           dict_path = "dct";  // nothing to learn
-        if (dict_path.empty()) {
-          const double eps = tolerance_to_train_at(request.tolerance, range);
+        if (trains) {
           trained.emplace("volreel-dictionary");
-          say(printed("no dictionary given: training one with volreel train's defaults at eps "
-                      "%.4g, ",
-                      eps) +
-              (request.atoms ? "K = " + std::to_string(request.atoms)
-                             : std::string("K chosen by the total size it gives")));
-          train_dictionary(series, request, eps, frames, events, trained->path());
+          train_dictionary(series, request, train_eps, frames, *coreset, events, trained->path());
           dict_path = trained->path();
         }
         // A copy, so that the container's own dictionary.bin can be used to resume.

@@ -190,12 +190,33 @@ TEST(Coreset, FromASeriesOnDiskMatchesInMemory) {
   o.frame_factor = 3 * 8000.0 / static_cast<double>(o.coreset_voxels);  // three frames' worth
   const CoresetHierarchy from_disk = build_coreset_hierarchy(*series, o);
   ASSERT_EQ(from_disk.frames, (std::vector<std::size_t>{4, 2, 6}));
-  const CoresetHierarchy in_memory =
-      build_coreset_hierarchy(std::vector<Volume>{volumes[4], volumes[2], volumes[6]}, o);
-  for (std::size_t l = 0; l < in_memory.levels.size(); ++l) {
-    EXPECT_EQ(from_disk.levels[l].blocks, in_memory.levels[l].blocks);
-    EXPECT_EQ(from_disk.levels[l].weights, in_memory.levels[l].weights);
+  // The draw depends on the frames' indices, not on the order they are visited in, nor on who
+  // visits them: one draw over 6, 2, 4 in memory, and two draws (two processes: 4; 2 and 6) sent
+  // as bytes and merged, give the hierarchy read from disk.
+  CoresetDraw one(o);
+  for (std::size_t t : {6u, 2u, 4u}) one.add_frame(t, volumes[t].data, dims);
+  CoresetDraw first(o), second(o);
+  first.add_frame(4, volumes[4].data, dims);
+  second.add_frame(2, volumes[2].data, dims);
+  second.add_frame(6, volumes[6].data, dims);
+  CoresetDraw merged = CoresetDraw::from_bytes(second.to_bytes(), o);
+  merged.merge(CoresetDraw::from_bytes(first.to_bytes(), o));
+  const CoresetHierarchy drawn[2] = {one.finish(o.levels), merged.finish(o.levels)};
+  for (const CoresetHierarchy& in_memory : drawn) {
+    SCOPED_TRACE(&in_memory == drawn ? "one draw over every frame" : "two draws merged");
+    EXPECT_EQ(in_memory.population_energy, from_disk.population_energy);
+    for (std::size_t l = 0; l < in_memory.levels.size(); ++l) {
+      EXPECT_EQ(from_disk.levels[l].blocks, in_memory.levels[l].blocks);
+      EXPECT_EQ(from_disk.levels[l].weights, in_memory.levels[l].weights);
+    }
   }
+  // A draw of other options, or bytes cut short, are refused.
+  CoresetOptions other = o;
+  other.coreset_voxels *= 2;
+  EXPECT_THROW(merged.merge(CoresetDraw(other)), std::invalid_argument);
+  std::vector<std::byte> cut = first.to_bytes();
+  cut.resize(cut.size() - 1);
+  EXPECT_THROW(CoresetDraw::from_bytes(cut, o), std::invalid_argument);
   float lo = volumes[4].data[0], hi = lo;
   for (int t : {4, 2, 6})
     for (float x : volumes[static_cast<std::size_t>(t)].data) {

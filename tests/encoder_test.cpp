@@ -1251,6 +1251,9 @@ class PretendRank final : public encoder::Ranks {
   std::vector<std::uint64_t> gather(std::span<const std::uint64_t> v) const override {
     return {v.begin(), v.end()};
   }
+  std::vector<std::vector<std::byte>> gather_to_root(std::span<const std::byte> b) const override {
+    return {{b.begin(), b.end()}};
+  }
   void barrier() const override {}
   void add_progress(double) const override {}
   double progress_count() const override { return 0; }

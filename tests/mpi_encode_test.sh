@@ -66,12 +66,14 @@ grep -q "coded again" "$work/psnr.txt" || fail "the PSNR case should code frames
 mpi 2 "$volreel" encode "$work/s" --out "$work/zfp2.vreel" --codec zfp > /dev/null 2>&1
 same "$work/zfp.vreel" "$work/zfp2.vreel" "zfp under -n 2 differs"
 
-# Training (rank 0 trains, the others receive the dictionary) on a few frames; K given, since the
-# automatic choice trains four dictionaries (the same code on rank 0).
+# Training: each rank draws the coreset from its share of the frames, rank 0 merges the draws and
+# trains, the others receive the dictionary; the same dictionary and container as one process
+# (-n 3: shares of 2, 1 and 1 frames). K given, since the automatic choice trains four
+# dictionaries (the same code on rank 0).
 "$volreel" encode "$work/s" --out "$work/train.vreel" --max-frames 4 --atoms 64 > /dev/null 2>&1
-mpi 2 "$volreel" encode "$work/s" --out "$work/train2.vreel" --max-frames 4 --atoms 64 \
+mpi 3 "$volreel" encode "$work/s" --out "$work/train2.vreel" --max-frames 4 --atoms 64 \
   > /dev/null 2>&1
-same "$work/train.vreel" "$work/train2.vreel" "training under -n 2 differs"
+same "$work/train.vreel" "$work/train2.vreel" "training under -n 3 differs"
 
 # An error on rank 0 ends the job with its message (no rank left waiting).
 if out=$(timeout 120 "$mpiexec" -n 2 --oversubscribe -x ASAN_OPTIONS="$rank_asan" "$volreel" \

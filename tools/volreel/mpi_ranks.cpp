@@ -85,6 +85,31 @@ class WorldRanks final : public encoder::Ranks {
           "MPI_Allgatherv");
     return all;
   }
+  std::vector<std::vector<std::byte>> gather_to_root(
+      std::span<const std::byte> bytes) const override {
+    const unsigned long long mine = bytes.size();
+    std::vector<unsigned long long> sizes(static_cast<std::size_t>(size_));
+    check(MPI_Gather(&mine, 1, MPI_UNSIGNED_LONG_LONG, sizes.data(), 1, MPI_UNSIGNED_LONG_LONG, 0,
+                     MPI_COMM_WORLD),
+          "MPI_Gather");
+    std::vector<int> counts(sizes.size()), offsets(sizes.size());
+    std::size_t total = 0;
+    for (std::size_t r = 0; r < sizes.size() && rank_ == 0; ++r) {
+      counts[r] = to_count(static_cast<std::size_t>(sizes[r]));
+      offsets[r] = to_count(total);
+      total += static_cast<std::size_t>(sizes[r]);
+    }
+    std::vector<std::byte> all(total);
+    check(MPI_Gatherv(bytes.data(), to_count(bytes.size()), MPI_BYTE, all.data(), counts.data(),
+                      offsets.data(), MPI_BYTE, 0, MPI_COMM_WORLD),
+          "MPI_Gatherv");
+    std::vector<std::vector<std::byte>> parts;
+    for (std::size_t r = 0; r < sizes.size() && rank_ == 0; ++r) {
+      const auto* first = all.data() + offsets[r];
+      parts.emplace_back(first, first + counts[r]);
+    }
+    return parts;
+  }
   void barrier() const override { check(MPI_Barrier(MPI_COMM_WORLD), "MPI_Barrier"); }
   void add_progress(double amount) const override {
     check(MPI_Win_lock(MPI_LOCK_SHARED, 0, 0, progress_), "MPI_Win_lock");

@@ -10,9 +10,14 @@
 //     n = floor(C / M³) sample slots; each slot holds one independent draw from the distribution
 //     p_b = e_b / E, E = Σ e_b over all blocks of the chosen frames (sampling with replacement,
 //     probability proportional to energy, so flat blocks — e_b = 0 — are never kept; they need
-//     no atoms anyway). The draws are made in one pass by a weighted reservoir per slot: when
-//     block b arrives, each slot independently takes it with probability e_b / (e_1 + … + e_b),
-//     visited by geometric skips so that a block costs O(1 + n·e_b/E_b). Memory: n·M³ floats = C.
+//     no atoms anyway). A slot draws once per frame f: a block of f by the inverse of f's
+//     cumulative energies at u·E_f (E_f = Σ e_b over f), with the key −ln(1 − u')/E_f, an
+//     exponential variable of rate E_f; it keeps the draw with the smallest key. The smallest of
+//     independent exponentials of rates E_f falls on frame f with probability E_f / E, so the slot
+//     holds block b with probability e_b / E. u and u' are hashes of (seed, frame, slot), so the
+//     draw does not depend on the order the frames are visited in nor on the process that visits
+//     them: processes draw from their own frames (CoresetDraw) and merging keeps each slot's
+//     smaller key, which gives the draw of one process over all frames. Memory: n·M³ floats = C.
 //  3. Levels: the slots are independent, so the first n_l = n / 2^(L−l) slots are themselves a
 //     sample of size n_l; level l ∈ [0, L] takes them, merges slots that hold the same block, and
 //     gives each distinct block the Hansen–Hurwitz weight w = (copies) · E / (n_l · e_b). Then
@@ -23,6 +28,8 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
+#include <span>
 #include <vector>
 
 #include <Eigen/Core>
@@ -64,6 +71,36 @@ struct CoresetHierarchy {
 /// min_voxels voxels of voxels_per_frame each (all of them if there are too few).
 std::vector<std::size_t> halton_frames(const std::vector<std::size_t>& candidates,
                                        std::size_t voxels_per_frame, double min_voxels);
+
+/// A coreset draw over some frames (coreset.hpp, step 2), to be merged with draws over others;
+/// finish() gives the hierarchy of every frame drawn from.
+class CoresetDraw {
+ public:
+  explicit CoresetDraw(const CoresetOptions& options);  ///< InputError on bad options
+  ~CoresetDraw();
+  CoresetDraw(CoresetDraw&&) noexcept;
+  CoresetDraw& operator=(CoresetDraw&&) noexcept;
+  /// Draws from frame t (its index in the series: the draw depends on it).
+  void add_frame(std::size_t t, std::span<const float> volume, Dims dims);
+  /// Takes the other draw's frames: each slot keeps the smaller key.
+  void merge(const CoresetDraw& other);
+  /// The draw as bytes (to send to another process), and back with the same options.
+  std::vector<std::byte> to_bytes() const;
+  static CoresetDraw from_bytes(std::span<const std::byte> bytes, const CoresetOptions& options);
+  /// The levels (step 3); `frames` of the result is left empty.
+  CoresetHierarchy finish(int levels) const;
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
+/// The frames of the series the hierarchy is drawn from (Halton sampling, step 1).
+std::vector<std::size_t> coreset_frames(const datasets::SeriesReader& series,
+                                        const CoresetOptions& options);
+/// A draw over `frames` of the series (a share of coreset_frames() when processes draw together).
+CoresetDraw draw_coreset(const datasets::SeriesReader& series, const CoresetOptions& options,
+                         std::span<const std::size_t> frames, const Progress& progress = {});
 
 /// Builds the hierarchy in one pass over the chosen frames. Throws InputError if C is smaller
 /// than 2^L blocks or a frame cannot be read; the levels are empty if every block is flat.

@@ -26,6 +26,9 @@ class Ranks {
   virtual void broadcast(std::vector<std::byte>& bytes) const = 0;
   /// Every process's values, concatenated in rank order, on every process.
   virtual std::vector<std::uint64_t> gather(std::span<const std::uint64_t> values) const = 0;
+  /// Every process's bytes, in rank order, on rank 0 (an empty list elsewhere).
+  virtual std::vector<std::vector<std::byte>> gather_to_root(
+      std::span<const std::byte> bytes) const = 0;
   /// Returns when every process has called it.
   virtual void barrier() const = 0;
   /// A job-wide count (frames coded, for one progress bar): each process adds what it did;
@@ -54,6 +57,10 @@ class SingleProcess final : public Ranks {
   void broadcast(std::vector<std::byte>&) const override {}
   std::vector<std::uint64_t> gather(std::span<const std::uint64_t> values) const override {
     return {values.begin(), values.end()};
+  }
+  std::vector<std::vector<std::byte>> gather_to_root(
+      std::span<const std::byte> bytes) const override {
+    return {{bytes.begin(), bytes.end()}};
   }
   void barrier() const override {}
   void add_progress(double) const override {}
