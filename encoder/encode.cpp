@@ -67,6 +67,12 @@ std::string printed(const char* format, double a, double b = 0) {
   return text;
 }
 
+/// Bytes in MiB, to three significant digits ("0.527 MiB", "4096 MiB").
+std::string mebibytes(double bytes) {
+  const double mib = bytes / 1048576;
+  return mib >= 100 ? printed("%.0f MiB", mib) : printed("%.3g MiB", mib);
+}
+
 /// What the encoder holds per frame of a stretch with keyframe gaps: the frame and the original
 /// voxels of every brick of its octree.
 double stretch_bytes_per_frame(const Dims& dims) {
@@ -176,15 +182,14 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   job.half_atoms = request.half_atoms;
   if (request.tolerance.psnr) job.psnr_target = *request.tolerance.psnr;
   const std::uint64_t memory = request.memory ? request.memory : default_encode_memory();
-  const std::string memory_text =
-      request.memory ? printed("--memory (%.3g MiB)", static_cast<double>(memory) / 1048576)
-                     : std::string("half the memory");
+  const std::string memory_text = request.memory
+                                      ? "--memory (" + mebibytes(static_cast<double>(memory)) + ")"
+                                      : std::string("half the memory");
   job.piecewise = memory > 0 && whole_frame_bytes(info.dims) > static_cast<double>(memory);
   if (job.piecewise) {
-    const std::string frame_size =
-        printed("frames of %.3g MiB do not fit ",
-                4.0 * static_cast<double>(info.dims.voxels()) / 1048576) +
-        memory_text + " whole";
+    const std::string frame_size = "frames of " +
+                                   mebibytes(4.0 * static_cast<double>(info.dims.voxels())) +
+                                   " do not fit " + memory_text + " whole";
     if (request.max_keyframe_gap && *request.max_keyframe_gap > 1)
       throw InputError(frame_size +
                        ", so they are coded piecewise, which needs --max-keyframe-gap 1 (a "
@@ -201,9 +206,8 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
     // A row of bricks' planes (36, and as many again while the next row reads) on every level.
     const double window = 4.0 * static_cast<double>(info.dims.plane()) * 72 * 4 / 3;
     if (window > static_cast<double>(memory))
-      throw InputError(frame_size + printed(", and coding them piecewise holds about %.3g MiB of "
-                                            "planes: give at least that --memory",
-                                            window / 1048576));
+      throw InputError(frame_size + ", and coding them piecewise holds about " + mebibytes(window) +
+                       " of planes: give at least that --memory");
     job.max_keyframe_gap = 1;
     say(frame_size + ": each is coded piecewise, a row of bricks at a time (keyframe gap 1)");
   } else if (request.max_keyframe_gap) {
