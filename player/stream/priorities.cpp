@@ -53,7 +53,7 @@ double combined_priority(double sse_priority_value, double temporal_priority_val
               lerp(settings.temporal_lerp_min, 1.0, temporal_priority_value));
 }
 
-void due_seconds(std::span<const KeyframeNode> keyframes, double playhead, double velocity,
+void due_seconds(const KeyframeList& keyframes, double playhead, double velocity,
                  double lookahead_s, std::vector<double>& seconds) {
   seconds.assign(keyframes.size(), -1.0);
   if (keyframes.empty()) return;
@@ -142,7 +142,7 @@ void ViewTraversal::run(const SpatialIndex& index, const player::OrbitCamera& ca
     std::fill(stamp_.begin(), stamp_.end(), 0u);
     generation_ = 1;
   }
-  if (index.node_count() == 0) return;
+  if (index.node_count() == 0 || !index.node(0).present()) return;
   const Frustum frustum(camera);
   // Depth-first preorder with an explicit stack (children pushed in reverse octant order).
   std::vector<std::uint32_t> stack{0};

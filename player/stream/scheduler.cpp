@@ -17,9 +17,13 @@ SchedulerSettings reading_from(const format::Container& container, SchedulerSett
 }  // namespace
 
 StreamScheduler::StreamScheduler(const format::Container& container, SchedulerSettings settings)
+    : StreamScheduler(container, std::move(settings), IndexOptions{}) {}
+
+StreamScheduler::StreamScheduler(const format::Container& container, SchedulerSettings settings,
+                                 const IndexOptions& index_options)
     : StreamScheduler(SpatialIndex{}, reading_from(container, std::move(settings))) {
   std::vector<std::string> errors;
-  index_ = build_spatial_index(container, &errors);
+  index_ = build_spatial_index(container, &errors, index_options);
   random_table_ = random_selection_table(index_.frame_count());
   for (std::string& e : errors) add_error(std::move(e));
 }
@@ -56,9 +60,9 @@ void StreamScheduler::fill_heap(const player::OrbitCamera& camera, double playhe
   view_.run(index_, camera, settings_.priority.sse_target);
   const PrioritySettings& ps = settings_.priority;
   const std::size_t frames = index_.frame_count();
-  // The temporal priority depends on the keyframe only: once per keyframe per frame.
+  // The temporal priority depends on the keyframe only: once per held keyframe per frame.
   temporal_.resize(frames);
-  for (std::size_t t = 0; t < frames; ++t)
+  for (std::size_t t = index_.held_begin(); t < index_.held_end(); ++t)
     temporal_[t] =
         temporal_priority(static_cast<double>(t), playhead, frames, ps.temporal_exponent);
   const bool patent = ps.policy == PriorityPolicy::patent;
@@ -81,14 +85,14 @@ void StreamScheduler::fill_heap(const player::OrbitCamera& camera, double playhe
                         : patent   ? ps.sse_weight * sse_p + 1.0
                                    : 1.0;
     if (heap_.full() && best < heap_.min().priority) continue;
-    const auto keyframes = index_.keyframes(v.node);
+    const KeyframeList& keyframes = index_.keyframes(v.node);
     if (due_window) due_seconds(keyframes, playhead, velocity, ps.lookahead_s, due_);
     for (std::uint32_t i = 0; i < keyframes.size(); ++i) {
       const std::uint32_t t = keyframes[i].t;
       const bool due = due_window && due_[i] >= 0;
       const double priority = due ? due_priority(due_[i], ps)
                                   : combined_priority(sse_p, temporal_[t], random_table_[t], ps);
-      heap_.push({priority, n.key.level, n.first_keyframe + i, due});
+      heap_.push({priority, n.key.level, keyframe_id(v.node, t), due});
     }
   }
 }
@@ -110,8 +114,14 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     waiting_.insert_or_assign(id, std::move(a));
   }
 
-  // 2. Priorities into the heap; its contents are the selected set.
+  // 2. The index's time window follows the playhead; priorities into the heap; its contents are
+  // the selected set.
   motion_.observe(loader_.now_seconds(), playhead);
+  {
+    std::vector<std::string> index_errors;
+    index_.follow(playhead, motion_.velocity(), &index_errors);
+    for (std::string& e : index_errors) add_error(std::move(e));
+  }
   fill_heap(camera, playhead);
   selected_.clear();
   for (const HeapEntry& e : heap_.items()) selected_.insert(e.keyframe);
@@ -216,8 +226,10 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     out.svo_leaves = std::move(svo.leaves);
     out.stats.target_nodes = svo_stats.target_nodes;
     out.stats.at_target_nodes = svo_stats.at_target_nodes;
+    out.stats.index_ready = index_.holds_around(playhead);
     out.stats.fraction_at_target =
-        svo_stats.target_nodes > 0
+        !out.stats.index_ready ? 0.0
+        : svo_stats.target_nodes > 0
             ? static_cast<double>(svo_stats.at_target_nodes) / svo_stats.target_nodes
             : 1.0;
     out.stats.holes = svo_stats.holes;

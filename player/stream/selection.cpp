@@ -67,7 +67,7 @@ KeyframePick nearest_on_side(const SpatialIndex& index, std::span<const Resident
 /// when there is none.
 double stored_time(const SpatialIndex& index, std::uint32_t node, double p, Side side,
                    bool constant_only, double limit) {
-  const std::span<const KeyframeNode> list = index.keyframes(node);
+  const KeyframeList& list = index.keyframes(node);
   // First keyframe node after p.
   const auto after = std::upper_bound(
       list.begin(), list.end(), p,

@@ -2,7 +2,12 @@
 #include "volreel/stream/spatial_index.hpp"
 
 #include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <mutex>
 #include <optional>
+#include <stdexcept>
 #include <thread>
 
 #include "volreel/format/error.hpp"
@@ -29,29 +34,65 @@ std::size_t KeyframeKeyHash::operator()(const KeyframeKey& k) const noexcept {
   return mix(mix(mix(mix(mix(0, k.level), k.x), k.y), k.z), k.t);
 }
 
-SpatialIndexBuilder::SpatialIndexBuilder(std::array<std::uint32_t, 3> dims, std::size_t frame_count)
-    : dims_(dims),
-      frame_count_(frame_count),
-      geometry_(format::level_geometry(dims)),
-      files_(frame_count) {}
+namespace {
 
-void SpatialIndexBuilder::add_frame(std::uint32_t t, const format::FrameView& frame,
-                                    std::filesystem::path file) {
+std::shared_ptr<const IndexGeometry> make_geometry(std::array<std::uint32_t, 3> dims) {
+  auto g = std::make_shared<IndexGeometry>();
+  g->dims = dims;
+  g->levels = format::level_geometry(dims);
+  const auto levels = static_cast<std::uint32_t>(g->levels.size());
+  for (std::uint32_t l = 0; l < levels; ++l) {
+    const auto& grid = g->levels[l].grid;
+    std::vector<std::pair<std::uint64_t, NodeKey>> keys;
+    keys.reserve(std::size_t{grid[0]} * grid[1] * grid[2]);
+    for (std::uint32_t z = 0; z < grid[2]; ++z)
+      for (std::uint32_t y = 0; y < grid[1]; ++y)
+        for (std::uint32_t x = 0; x < grid[0]; ++x)
+          keys.push_back({format::morton3(x, y, z), NodeKey{l, x, y, z}});
+    std::sort(keys.begin(), keys.end(),
+              [](const auto& a, const auto& b) { return a.first < b.first; });
+    const std::uint64_t span = std::uint64_t{format::brick_interior} << (levels - 1 - l);
+    for (const auto& [morton, key] : keys) {
+      SpatialNode n;
+      n.key = key;
+      const std::uint32_t c[3] = {key.x, key.y, key.z};
+      for (std::size_t a = 0; a < 3; ++a) {
+        n.lo[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>(c[a] * span, dims[a]));
+        n.hi[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>((c[a] + 1) * span, dims[a]));
+      }
+      if (l > 0) n.parent = g->lookup.at(NodeKey{l - 1, key.x / 2, key.y / 2, key.z / 2});
+      g->lookup.emplace(key, static_cast<std::uint32_t>(g->nodes.size()));
+      g->nodes.push_back(n);
+    }
+  }
+  return g;
+}
+
+/// Frame t's nodes and bricks. Throws format::FormatError if the frame's dims or levels disagree
+/// with the geometry.
+HeldFrame read_frame(const IndexGeometry& g, std::uint32_t t, const format::FrameView& frame,
+                     const std::filesystem::path& file) {
   const format::FrameHeader& h = frame.header();
-  if (t >= frame_count_)
-    throw format::FormatError(file, format::FormatError::no_offset,
-                              "time step below " + str(frame_count_), str(t));
   for (int a = 0; a < 3; ++a)
-    if (h.dims[a] != dims_[static_cast<std::size_t>(a)])
+    if (h.dims[a] != g.dims[static_cast<std::size_t>(a)])
       throw format::FormatError(file, offsetof(format::FrameHeader, dims), "dims of the series",
                                 "another size");
-  if (frame.level_count() != geometry_.size())
+  if (frame.level_count() != g.levels.size())
     throw format::FormatError(file, offsetof(format::FrameHeader, level_count),
-                              str(geometry_.size()) + " levels", str(frame.level_count()));
+                              str(g.levels.size()) + " levels", str(frame.level_count()));
+  HeldFrame out;
+  out.t = t;
+  out.nodes.reserve(frame.node_count());
+  out.keyframes.reserve(frame.brick_count());
   for (std::uint32_t i = 0; i < frame.node_count(); ++i) {
+    const format::NodePosition& p = frame.position(i);
+    const auto it = g.lookup.find(NodeKey{p.level, p.x, p.y, p.z});
+    if (it == g.lookup.end())
+      throw format::FormatError(file, format::FormatError::no_offset,
+                                "nodes inside the level grids", "a node outside");
+    out.nodes.push_back(it->second);
     const format::Node n = frame.node(i);
     if (n.brick == format::no_brick) continue;  // not a keyframe of the node at step t
-    const format::NodePosition& p = frame.position(i);
     KeyframeNode k;
     k.t = t;
     k.brick = n.brick;
@@ -61,72 +102,373 @@ void SpatialIndexBuilder::add_frame(std::uint32_t t, const format::FrameView& fr
     k.constant = k.bytes == 4;
     k.subtree_constant = n.type() == format::NodeType::empty;
     k.histogram = n.histogram;
-    entries_.push_back({{p.level, p.x, p.y, p.z}, k});
+    out.keyframes.emplace_back(it->second, k);
   }
+  return out;
+}
+
+HeldFrame failed_frame(std::uint32_t t, std::string error) {
+  HeldFrame f;
+  f.t = t;
+  f.error = std::move(error);
+  return f;
+}
+
+/// Frame t of a container as a HeldFrame; a frame not written or failing validation holds its
+/// error.
+HeldFrame read_container_frame(const format::Container& container, const IndexGeometry& g,
+                               std::uint32_t t) {
+  const auto& m = container.manifest();
+  if (!m.frames[t])
+    return failed_frame(t, format::frame_file_name(t) + ": frame not written (incomplete encode)");
+  try {
+    const format::FrameFile f = container.open_frame_index(t);
+    return read_frame(g, t, f.view(), container.source().name(m.frames[t]->file));
+  } catch (const std::exception& e) {
+    return failed_frame(t, e.what());
+  }
+}
+
+}  // namespace
+
+// ---- The background reader of a windowed index ------------------------------------------------
+
+struct SpatialIndex::Reader {
+  enum State : std::uint8_t { idle, reading, ready, held };
+
+  Reader(std::shared_ptr<const format::Container> c, std::shared_ptr<const IndexGeometry> g,
+         std::size_t frames, std::size_t window)
+      : container(std::move(c)), geometry(std::move(g)), state(frames, idle), capacity(window) {
+    thread = std::thread([this] { run(); });
+  }
+  ~Reader() {
+    {
+      const std::lock_guard lock(mutex);
+      stop = true;
+    }
+    wake.notify_all();
+    thread.join();
+  }
+  Reader(const Reader&) = delete;
+  Reader& operator=(const Reader&) = delete;
+
+  /// The next frame to read: the idle one in the wanted range nearest the centre, those ahead in
+  /// the direction of travel counting half; none while `capacity` frames wait to be held.
+  std::optional<std::uint32_t> next() const {
+    if (ready_frames.size() >= capacity) return std::nullopt;
+    std::optional<std::uint32_t> best;
+    std::uint64_t best_cost = ~std::uint64_t{0};
+    for (std::uint32_t t = want_begin; t < want_end; ++t) {
+      if (state[t] != idle) continue;
+      const bool ahead = backwards ? t <= center : t >= center;
+      const std::uint64_t d = t >= center ? t - center : center - t;
+      const std::uint64_t cost = ahead ? d : 2 * d + 1;
+      if (cost < best_cost) {
+        best_cost = cost;
+        best = t;
+      }
+    }
+    return best;
+  }
+
+  void run() {
+    std::unique_lock lock(mutex);
+    while (!stop) {
+      const std::optional<std::uint32_t> t = next();
+      if (!t) {
+        wake.wait(lock);
+        continue;
+      }
+      state[*t] = reading;
+      lock.unlock();
+      HeldFrame f = read_container_frame(*container, *geometry, *t);
+      lock.lock();
+      if (state[*t] == reading && *t >= want_begin && *t < want_end) {
+        state[*t] = ready;
+        ready_frames.emplace(*t, std::move(f));
+      } else if (state[*t] == reading) {
+        state[*t] = idle;
+      }
+    }
+  }
+
+  /// Takes frame t if it was read (under the lock).
+  std::optional<HeldFrame> take(std::uint32_t t) {
+    const auto it = ready_frames.find(t);
+    if (it == ready_frames.end()) return std::nullopt;
+    HeldFrame f = std::move(it->second);
+    ready_frames.erase(it);
+    state[t] = held;
+    return f;
+  }
+
+  std::shared_ptr<const format::Container> container;
+  std::shared_ptr<const IndexGeometry> geometry;
+  std::mutex mutex;
+  std::condition_variable wake;
+  std::vector<std::uint8_t> state;  ///< per frame
+  std::unordered_map<std::uint32_t, HeldFrame> ready_frames;
+  std::size_t capacity;
+  std::uint32_t want_begin = 0, want_end = 0, center = 0;
+  bool backwards = false, stop = false;
+  std::thread thread;
+};
+
+// ---- SpatialIndexBuilder ------------------------------------------------------------------------
+
+SpatialIndexBuilder::SpatialIndexBuilder(std::array<std::uint32_t, 3> dims, std::size_t frame_count)
+    : geometry_(make_geometry(dims)), files_(frame_count), frames_(frame_count) {}
+
+void SpatialIndexBuilder::add_frame(std::uint32_t t, const format::FrameView& frame,
+                                    std::filesystem::path file) {
+  if (t >= frames_.size())
+    throw format::FormatError(file, format::FormatError::no_offset,
+                              "time step below " + str(frames_.size()), str(t));
+  frames_[t] = read_frame(*geometry_, t, frame, file);
   files_[t] = std::move(file);
 }
 
 SpatialIndex SpatialIndexBuilder::build() && {
   SpatialIndex index;
-  index.dims_ = dims_;
   index.geometry_ = std::move(geometry_);
   index.files_ = std::move(files_);
-  const std::uint32_t levels = index.level_count();
-
-  // 1. Sort entries by node (level, then Morton order inside a level), then time step.
-  std::sort(entries_.begin(), entries_.end(), [](const Entry& a, const Entry& b) {
-    if (a.key.level != b.key.level) return a.key.level < b.key.level;
-    const std::uint64_t ma = format::morton3(a.key.x, a.key.y, a.key.z),
-                        mb = format::morton3(b.key.x, b.key.y, b.key.z);
-    if (ma != mb) return ma < mb;
-    return a.keyframe.t < b.keyframe.t;
-  });
-
-  // 2. One spatial node per distinct key, its keyframes contiguous.
-  index.keyframes_.reserve(entries_.size());
-  index.keyframe_node_.reserve(entries_.size());
-  for (std::size_t i = 0; i < entries_.size(); ++i) {
-    const Entry& e = entries_[i];
-    if (index.nodes_.empty() || !(index.nodes_.back().key == e.key)) {
-      SpatialNode n;
-      n.key = e.key;
-      const std::uint64_t span = std::uint64_t{format::brick_interior}
-                                 << (levels - 1 - e.key.level);
-      const std::uint32_t c[3] = {e.key.x, e.key.y, e.key.z};
-      for (std::size_t a = 0; a < 3; ++a) {
-        n.lo[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>(c[a] * span, dims_[a]));
-        n.hi[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>((c[a] + 1) * span, dims_[a]));
-      }
-      n.first_keyframe = static_cast<std::uint32_t>(index.keyframes_.size());
-      index.lookup_.emplace(e.key, static_cast<std::uint32_t>(index.nodes_.size()));
-      index.nodes_.push_back(n);
-    }
-    index.keyframes_.push_back(e.keyframe);
-    index.keyframe_node_.push_back(static_cast<std::uint32_t>(index.nodes_.size() - 1));
-    ++index.nodes_.back().keyframe_count;
-  }
-  entries_.clear();
-
-  // 3. Parent and child links.
-  for (std::uint32_t id = 0; id < index.nodes_.size(); ++id) {
-    SpatialNode& n = index.nodes_[id];
-    if (n.key.level + 1 >= levels) continue;
-    for (std::uint32_t i = 0; i < 8; ++i) {
-      const NodeKey ck{n.key.level + 1, 2 * n.key.x + (i & 1u), 2 * n.key.y + ((i >> 1) & 1u),
-                       2 * n.key.z + (i >> 2)};
-      const std::uint32_t c = index.find(ck);
-      if (c == no_node) continue;
-      n.children[i] = c;
-      n.has_children = true;
-      index.nodes_[c].parent = id;
-    }
-  }
+  index.window_ = index.files_.size();
+  index.reset_nodes();
+  for (std::size_t t = 0; t < frames_.size(); ++t)
+    index.hold(frames_[t] ? *frames_[t] : HeldFrame{static_cast<std::uint32_t>(t), {}, {}, {}},
+               false);
+  frames_.clear();
   return index;
 }
 
+// ---- SpatialIndex -------------------------------------------------------------------------------
+
+SpatialIndex::SpatialIndex() = default;
+SpatialIndex::~SpatialIndex() = default;
+SpatialIndex::SpatialIndex(SpatialIndex&&) noexcept = default;
+SpatialIndex& SpatialIndex::operator=(SpatialIndex&&) noexcept = default;
+
+SpatialIndex::SpatialIndex(const SpatialIndex& other) {
+  *this = other;
+}
+
+SpatialIndex& SpatialIndex::operator=(const SpatialIndex& other) {
+  if (this == &other) return *this;
+  reader_.reset();
+  geometry_ = other.geometry_;
+  files_ = other.files_;
+  nodes_ = other.nodes_;
+  keyframes_ = other.keyframes_;
+  keyframe_count_ = other.keyframe_count_;
+  held_begin_ = other.held_begin_;
+  held_end_ = other.held_end_;
+  window_ = other.window_;
+  max_gap_ = other.max_gap_;
+  options_ = other.options_;
+  held_nodes_ = other.held_nodes_;
+  container_ = other.container_;
+  if (container_) {
+    start_reader();
+    const std::lock_guard lock(reader_->mutex);
+    for (std::uint32_t t = held_begin_; t < held_end_; ++t) reader_->state[t] = Reader::held;
+  }
+  return *this;
+}
+
+std::array<std::uint32_t, 3> SpatialIndex::dims() const {
+  return geometry_ ? geometry_->dims : std::array<std::uint32_t, 3>{};
+}
+
+std::uint32_t SpatialIndex::level_count() const {
+  return geometry_ ? static_cast<std::uint32_t>(geometry_->levels.size()) : 0;
+}
+
+void SpatialIndex::reset_nodes() {
+  nodes_ = geometry_->nodes;
+  keyframes_.assign(nodes_.size(), KeyframeList{});
+  keyframe_count_ = 0;
+  held_nodes_.clear();
+  held_begin_ = held_end_ = 0;
+}
+
+void SpatialIndex::start_reader() {
+  reader_ = std::make_unique<Reader>(container_, geometry_, files_.size(), window_);
+}
+
+namespace {
+
+std::uint32_t octant_of(const NodeKey& k) {
+  return (k.x & 1u) | ((k.y & 1u) << 1) | ((k.z & 1u) << 2);
+}
+
+}  // namespace
+
+void SpatialIndex::hold(const HeldFrame& frame, bool at_front) {
+  for (const std::uint32_t id : frame.nodes) {
+    SpatialNode& n = nodes_[id];
+    if (n.held_frames++ == 0 && n.parent != no_node) {
+      SpatialNode& p = nodes_[n.parent];
+      p.children[octant_of(n.key)] = id;
+      p.has_children = true;
+    }
+  }
+  for (const auto& [id, k] : frame.keyframes) {
+    if (at_front)
+      keyframes_[id].push_front(k);
+    else
+      keyframes_[id].push_back(k);
+  }
+  keyframe_count_ += frame.keyframes.size();
+  if (held_begin_ == held_end_) {
+    held_begin_ = frame.t;
+    held_end_ = frame.t + 1;
+  } else if (at_front) {
+    held_begin_ = frame.t;
+  } else {
+    held_end_ = frame.t + 1;
+  }
+  if (windowed()) {
+    if (at_front)
+      held_nodes_.push_front(frame.nodes);
+    else
+      held_nodes_.push_back(frame.nodes);
+  }
+}
+
+void SpatialIndex::drop(bool front) {
+  const std::uint32_t t = front ? held_begin_ : held_end_ - 1;
+  const std::vector<std::uint32_t> ids =
+      front ? std::move(held_nodes_.front()) : std::move(held_nodes_.back());
+  if (front)
+    held_nodes_.pop_front();
+  else
+    held_nodes_.pop_back();
+  for (const std::uint32_t id : ids) {
+    KeyframeList& list = keyframes_[id];
+    if (!list.empty() && (front ? list.front().t : list.back().t) == t) {
+      if (front)
+        list.pop_front();
+      else
+        list.pop_back();
+      --keyframe_count_;
+    }
+    SpatialNode& n = nodes_[id];
+    if (--n.held_frames == 0 && n.parent != no_node) {
+      SpatialNode& p = nodes_[n.parent];
+      p.children[octant_of(n.key)] = no_node;
+      p.has_children = std::any_of(p.children.begin(), p.children.end(),
+                                   [](std::uint32_t c) { return c != no_node; });
+    }
+  }
+  if (front)
+    ++held_begin_;
+  else
+    --held_end_;
+  {
+    const std::lock_guard lock(reader_->mutex);
+    reader_->state[t] = Reader::idle;
+  }
+}
+
+bool SpatialIndex::holds_around(double playhead) const {
+  if (!windowed()) return true;
+  const auto last = static_cast<double>(frame_count() - 1);
+  const double p = std::clamp(playhead, 0.0, last);
+  const auto lo = static_cast<std::uint32_t>(std::max(0.0, std::floor(p) - max_gap_));
+  const auto hi = static_cast<std::uint32_t>(std::min(last, std::ceil(p) + max_gap_));
+  return held_begin_ <= lo && hi < held_end_;
+}
+
+void SpatialIndex::follow(double playhead, double velocity, std::vector<std::string>* errors) {
+  if (!reader_ || frame_count() == 0) return;
+  const auto frames = static_cast<std::uint32_t>(frame_count());
+  const auto window = static_cast<std::uint32_t>(window_);
+  const double p = std::clamp(playhead, 0.0, static_cast<double>(frames - 1));
+  const auto center = static_cast<std::uint32_t>(std::floor(p));
+  // The window: a quarter behind the playhead while playing (at least the frames the selection
+  // reaches, max_keyframe_gap from floor and ceil of the playhead), half while still.
+  const std::uint32_t trail = std::max(max_gap_ + 2, window / 4);
+  const std::uint32_t behind = velocity > 0   ? trail
+                               : velocity < 0 ? window - std::min(window, trail)
+                                              : window / 2;
+  std::uint32_t begin = center - std::min(center, behind);
+  const std::uint32_t end = std::min(frames, begin + window);
+  begin = end - std::min(end, window);
+
+  // A seek outside the held range starts again at the playhead.
+  if (held_begin_ < held_end_ && (center < held_begin_ || center >= held_end_))
+    while (held_begin_ < held_end_) drop(false);
+  while (held_begin_ < held_end_ && held_begin_ < begin) drop(true);
+  while (held_begin_ < held_end_ && held_end_ > end) drop(false);
+  if (held_begin_ == held_end_) held_begin_ = held_end_ = center;
+
+  // Add what the reader has at either end of the held range, ahead first.
+  const auto started = std::chrono::steady_clock::now();
+  const bool backwards = velocity < 0;
+  for (bool first = true;; first = false) {
+    if (!first &&
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() >=
+            options_.follow_budget_s)
+      break;
+    std::optional<HeldFrame> f;
+    bool at_front = false;
+    {
+      const std::lock_guard lock(reader_->mutex);
+      // An empty range starts with the playhead's own frame.
+      const bool empty = held_begin_ == held_end_;
+      for (const bool front : {backwards && !empty, !backwards || empty}) {
+        if (front && held_begin_ > begin && held_begin_ <= end)
+          f = reader_->take(held_begin_ - 1);
+        else if (!front && held_end_ < end && held_end_ >= begin)
+          f = reader_->take(held_end_);
+        if (f) {
+          at_front = front;
+          break;
+        }
+      }
+    }
+    if (!f) break;
+    if (!f->error.empty() && errors) errors->push_back(f->error);
+    hold(*f, at_front);
+  }
+
+  // Tell the reader what to read next; frames read for another window are dropped.
+  {
+    const std::lock_guard lock(reader_->mutex);
+    reader_->want_begin = begin;
+    reader_->want_end = end;
+    reader_->center = center;
+    reader_->backwards = backwards;
+    for (auto it = reader_->ready_frames.begin(); it != reader_->ready_frames.end();) {
+      if (it->first < begin || it->first >= end) {
+        reader_->state[it->first] = Reader::idle;
+        it = reader_->ready_frames.erase(it);
+      } else {
+        ++it;
+      }
+    }
+  }
+  reader_->wake.notify_all();
+}
+
+std::uint64_t SpatialIndex::memory_bytes() const {
+  // A deque keeps at least a map and one 512-byte block.
+  std::uint64_t bytes = nodes_.size() * (sizeof(SpatialNode) + sizeof(KeyframeList) + 576) +
+                        keyframe_count_ * sizeof(KeyframeNode);
+  for (const auto& ids : held_nodes_) bytes += ids.capacity() * sizeof(std::uint32_t);
+  if (reader_) {
+    const std::lock_guard lock(reader_->mutex);
+    for (const auto& [t, f] : reader_->ready_frames)
+      bytes += f.nodes.capacity() * sizeof(std::uint32_t) +
+               f.keyframes.capacity() * sizeof(f.keyframes[0]);
+  }
+  return bytes;
+}
+
 std::uint32_t SpatialIndex::find(const NodeKey& key) const {
-  const auto it = lookup_.find(key);
-  return it == lookup_.end() ? no_node : it->second;
+  if (!geometry_) return no_node;
+  const auto it = geometry_->lookup.find(key);
+  return it == geometry_->lookup.end() ? no_node : it->second;
 }
 
 std::uint32_t SpatialIndex::ancestor(std::uint32_t id, std::uint32_t up) const {
@@ -134,17 +476,32 @@ std::uint32_t SpatialIndex::ancestor(std::uint32_t id, std::uint32_t up) const {
   return id;
 }
 
-std::span<const KeyframeNode> SpatialIndex::keyframes(std::uint32_t node) const {
-  const SpatialNode& n = nodes_[node];
-  return {keyframes_.data() + n.first_keyframe, n.keyframe_count};
+const KeyframeNode& SpatialIndex::keyframe(KeyframeId id) const {
+  const KeyframeList& list = keyframes_[node_of(id)];
+  const auto t = static_cast<std::uint32_t>(id & 0xFFFFFFFFu);
+  const auto it = std::lower_bound(list.begin(), list.end(), t,
+                                   [](const KeyframeNode& k, std::uint32_t v) { return k.t < v; });
+  if (it == list.end() || it->t != t)
+    throw std::logic_error("keyframe node " + str(node_of(id)) + " at t " + str(t) +
+                           " is not held by the index");
+  return *it;
+}
+
+std::vector<KeyframeId> SpatialIndex::held_keyframes() const {
+  std::vector<KeyframeId> ids;
+  ids.reserve(keyframe_count_);
+  for (std::uint32_t n = 0; n < keyframes_.size(); ++n)
+    for (const KeyframeNode& k : keyframes_[n]) ids.push_back(keyframe_id(n, k.t));
+  return ids;
 }
 
 KeyframeId SpatialIndex::find_keyframe(std::uint32_t node, std::uint32_t t) const {
-  const auto list = keyframes(node);
+  if (node >= keyframes_.size()) return no_keyframe;
+  const KeyframeList& list = keyframes_[node];
   const auto it = std::lower_bound(list.begin(), list.end(), t,
                                    [](const KeyframeNode& k, std::uint32_t v) { return k.t < v; });
   if (it == list.end() || it->t != t) return no_keyframe;
-  return nodes_[node].first_keyframe + static_cast<KeyframeId>(it - list.begin());
+  return keyframe_id(node, t);
 }
 
 KeyframeId SpatialIndex::find_keyframe(const KeyframeKey& key) const {
@@ -153,34 +510,48 @@ KeyframeId SpatialIndex::find_keyframe(const KeyframeKey& key) const {
 }
 
 KeyframeKey SpatialIndex::key(KeyframeId id) const {
-  const NodeKey& n = nodes_[keyframe_node_[id]].key;
-  return {n.level, n.x, n.y, n.z, keyframes_[id].t};
+  const NodeKey& n = nodes_[node_of(id)].key;
+  return {n.level, n.x, n.y, n.z, static_cast<std::uint32_t>(id & 0xFFFFFFFFu)};
 }
 
 SpatialIndex build_spatial_index(const format::Container& container,
-                                 std::vector<std::string>* errors) {
+                                 std::vector<std::string>* errors, const IndexOptions& options) {
   const auto& m = container.manifest();
   const std::size_t frames = container.frame_count();
-  SpatialIndexBuilder builder(m.dims, frames);
+  SpatialIndex index;
+  index.geometry_ = make_geometry(m.dims);
+  index.files_.resize(frames);
+  for (std::size_t t = 0; t < frames; ++t)
+    if (m.frames[t]) index.files_[t] = container.source().name(m.frames[t]->file);
+  index.options_ = options;
+  index.max_gap_ = std::max<std::uint32_t>(1, m.max_keyframe_gap);
+  index.reset_nodes();
+  // Keyframe nodes per frame at most (every node stored), with a node id to drop them again.
+  const std::uint64_t frame_bytes =
+      index.nodes_.size() * (sizeof(KeyframeNode) + sizeof(std::uint32_t));
+  const std::uint64_t fit = options.memory_bytes / std::max<std::uint64_t>(1, frame_bytes);
+  if (fit < frames) {
+    const std::uint64_t least = std::min<std::uint64_t>(frames, 2ull * index.max_gap_ + 4);
+    index.window_ = static_cast<std::size_t>(std::max(fit, least));
+  } else {
+    index.window_ = frames;
+  }
+  if (index.windowed()) {
+    index.container_ = std::make_shared<const format::Container>(container);
+    index.start_reader();
+    return index;
+  }
   // A remote container's indexes are fetched a window at a time by several threads (each one a
   // round trip or two); local ones are mapped in order.
-  const std::size_t window = container.source().local_directory() ? 1 : 16;
-  std::vector<std::optional<format::FrameFile>> opened(frames);
-  std::vector<std::string> failures(frames);
-  for (std::size_t first = 0; first < frames; first += window) {
-    const std::size_t end = std::min(frames, first + window);
+  const std::size_t batch = container.source().local_directory() ? 1 : 16;
+  std::vector<HeldFrame> read(batch);
+  for (std::size_t first = 0; first < frames; first += batch) {
+    const std::size_t end = std::min(frames, first + batch);
     const auto open = [&](std::size_t t) {
-      if (!m.frames[t]) {
-        failures[t] = format::frame_file_name(t) + ": frame not written (incomplete encode)";
-        return;
-      }
-      try {
-        opened[t].emplace(container.open_frame_index(t));
-      } catch (const std::exception& e) {
-        failures[t] = e.what();
-      }
+      read[t - first] =
+          read_container_frame(container, *index.geometry_, static_cast<std::uint32_t>(t));
     };
-    if (window == 1) {
+    if (batch == 1) {
       open(first);
     } else {
       std::vector<std::thread> threads;
@@ -188,19 +559,13 @@ SpatialIndex build_spatial_index(const format::Container& container,
       for (std::thread& th : threads) th.join();
     }
     for (std::size_t t = first; t < end; ++t) {
-      if (opened[t]) {
-        try {
-          builder.add_frame(static_cast<std::uint32_t>(t), opened[t]->view(),
-                            container.source().name(m.frames[t]->file));
-        } catch (const std::exception& e) {
-          failures[t] = e.what();
-        }
-      }
-      if (!failures[t].empty() && errors) errors->push_back(failures[t]);
-      opened[t].reset();
+      HeldFrame& f = read[t - first];
+      if (!f.error.empty() && errors) errors->push_back(f.error);
+      index.hold(f, false);
+      f = HeldFrame{};
     }
   }
-  return std::move(builder).build();
+  return index;
 }
 
 }  // namespace volreel::stream

@@ -1,7 +1,9 @@
 // index_test.cpp: the spatial octree with its keyframe nodes, built from a container.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <fstream>
+#include <thread>
 
 #include "stream_test_util.hpp"
 #include "volreel/stream/spatial_index.hpp"
@@ -85,6 +87,127 @@ TEST(StreamIndex, ABadFrameBecomesAnErrorAndIsLeftOut) {
   EXPECT_EQ(index.keyframes(0).size(), 2u);
   EXPECT_EQ(index.find_keyframe(0, 1), no_keyframe);
   EXPECT_NE(index.find_keyframe(0, 2), no_keyframe);
+}
+
+/// Follows the playhead until the index holds the frames around it (the reader runs on its own
+/// thread); false after 10 s.
+bool follow_until_held(SpatialIndex& index, double playhead, double velocity,
+                       std::vector<std::string>* errors = nullptr) {
+  for (int i = 0; i < 10000; ++i) {
+    index.follow(playhead, velocity, errors);
+    if (index.holds_around(playhead)) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  return false;
+}
+
+/// Every keyframe node the windowed index holds is the whole index's, and the held nodes are
+/// present in both with the same children.
+void expect_held_agree(const SpatialIndex& window, const SpatialIndex& whole) {
+  std::size_t held = 0;
+  for (std::uint32_t n = 0; n < window.node_count(); ++n) {
+    for (const KeyframeNode& k : window.keyframes(n)) {
+      ASSERT_GE(k.t, window.held_begin());
+      ASSERT_LT(k.t, window.held_end());
+      const KeyframeId id = whole.find_keyframe(n, k.t);
+      ASSERT_NE(id, no_keyframe);
+      const KeyframeNode& w = whole.keyframe(id);
+      EXPECT_EQ(k.offset, w.offset);
+      EXPECT_EQ(k.bytes, w.bytes);
+      EXPECT_EQ(k.crc32c, w.crc32c);
+      EXPECT_EQ(k.histogram, w.histogram);
+      ++held;
+    }
+    if (window.node(n).present()) {
+      EXPECT_TRUE(whole.node(n).present());
+      for (std::size_t i = 0; i < 8; ++i) {
+        if (window.node(n).children[i] != no_node) {
+          EXPECT_EQ(window.node(n).children[i], whole.node(n).children[i]);
+        }
+      }
+    }
+  }
+  EXPECT_EQ(held, window.keyframe_count());
+  // Every frame in the held range is whole.
+  for (std::uint32_t n = 0; n < whole.node_count(); ++n)
+    for (const KeyframeNode& k : whole.keyframes(n)) {
+      if (k.t >= window.held_begin() && k.t < window.held_end()) {
+        EXPECT_NE(window.find_keyframe(n, k.t), no_keyframe) << "node " << n << " t " << k.t;
+      }
+    }
+}
+
+TEST(StreamIndex, AWindowFollowsThePlayheadForwardBackwardAndAcrossSeeks) {
+  test::TempDir dir("stream-index-window");
+  const auto path =
+      test::make_container(dir.path(), {80, 40, 36}, 30, datasets::AnalyticField::blobs, 3);
+  const format::Container c(path);
+  const SpatialIndex whole = build_spatial_index(c);
+  ASSERT_FALSE(whole.windowed());
+  ASSERT_EQ(whole.held_begin(), 0u);
+  ASSERT_EQ(whole.held_end(), 30u);
+  // Room for 10 frames of every node.
+  IndexOptions o;
+  o.memory_bytes = 10 * whole.node_count() * (sizeof(KeyframeNode) + sizeof(std::uint32_t));
+  SpatialIndex index = build_spatial_index(c, nullptr, o);
+  ASSERT_TRUE(index.windowed());
+  EXPECT_EQ(index.window_frames(), 10u);
+  EXPECT_EQ(index.keyframe_count(), 0u);  // nothing read at open
+  EXPECT_FALSE(index.holds_around(0));
+  std::vector<std::string> errors;
+  const auto check = [&](double p, double v) {
+    SCOPED_TRACE("playhead " + std::to_string(p));
+    ASSERT_TRUE(follow_until_held(index, p, v, &errors));
+    EXPECT_LE(index.held_end() - index.held_begin(), 10u);
+    EXPECT_LE(index.held_begin(), static_cast<std::uint32_t>(p));
+    EXPECT_GT(index.held_end(), static_cast<std::uint32_t>(p));
+    expect_held_agree(index, whole);
+  };
+  for (double p = 0; p <= 29; p += 1.5) check(p, 15);  // playing forward
+  EXPECT_GE(index.held_end(), 29u);
+  for (double p = 29; p >= 0; p -= 2.5) check(p, -25);  // backward
+  EXPECT_LE(index.held_begin(), 1u);
+  check(24.5, 0);  // seeks, paused
+  check(3, 0);
+  check(17.25, 0);
+  // Played forward, the window keeps max_keyframe_gap + 2 frames behind the playhead (more than
+  // a quarter of 10) and the rest ahead.
+  check(18, 1);
+  for (int i = 0; i < 2000 && index.held_end() < 23; ++i) {
+    index.follow(18, 1, &errors);
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  EXPECT_EQ(index.held_end(), 23u);
+  EXPECT_EQ(index.held_begin(), 13u);
+  EXPECT_TRUE(errors.empty());
+  EXPECT_GT(index.memory_bytes(), 0u);
+  // A copy reads with its own thread.
+  SpatialIndex copy = index;
+  check(18, 1);
+  ASSERT_TRUE(follow_until_held(copy, 5, 0));
+  expect_held_agree(copy, whole);
+}
+
+TEST(StreamIndex, AWindowReportsABadFrameOnceAndHoldsTheRest) {
+  test::TempDir dir("stream-index-window-bad");
+  const auto path = test::make_container(dir.path(), {40, 40, 40}, 12);
+  {
+    std::fstream f(path / "frames/000005.vrf", std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(200);
+    f.put('\x5a');
+  }
+  const format::Container c(path);
+  const SpatialIndex whole = build_spatial_index(c);
+  IndexOptions o;
+  o.memory_bytes = 2 * whole.node_count() * (sizeof(KeyframeNode) + sizeof(std::uint32_t));
+  SpatialIndex index = build_spatial_index(c, nullptr, o);
+  ASSERT_EQ(index.window_frames(), 6u);  // the least: 2·max_keyframe_gap + 4
+  std::vector<std::string> errors;
+  for (double p = 0; p <= 11; p += 0.5) ASSERT_TRUE(follow_until_held(index, p, 2, &errors));
+  ASSERT_EQ(errors.size(), 1u);
+  EXPECT_NE(errors[0].find("000005.vrf"), std::string::npos) << errors[0];
+  EXPECT_EQ(index.find_keyframe(0, 5), no_keyframe);
+  EXPECT_NE(index.find_keyframe(0, 10), no_keyframe);
 }
 
 }  // namespace

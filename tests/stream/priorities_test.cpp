@@ -107,8 +107,8 @@ TEST(StreamPriorities, TraversalRefinesWhileTheSseExceedsTheTarget) {
 }
 
 /// Keyframe nodes at the given time steps (only t matters to the due window).
-std::vector<KeyframeNode> at_times(std::initializer_list<std::uint32_t> times) {
-  std::vector<KeyframeNode> k;
+KeyframeList at_times(std::initializer_list<std::uint32_t> times) {
+  KeyframeList k;
   for (const std::uint32_t t : times) k.push_back({.t = t});
   return k;
 }

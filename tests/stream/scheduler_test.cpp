@@ -176,6 +176,58 @@ TEST(StreamScheduler, ASeekIntoALongGapDrawsTheInterpolatedState) {
   EXPECT_EQ(q.b.t, 4u);
 }
 
+/// The keyframe pair of every present node from the scheduler's occupied slots.
+std::vector<std::pair<std::uint32_t, std::uint32_t>> drawn_pairs(const StreamScheduler& s,
+                                                                 double playhead) {
+  std::vector<ResidentKeyframe> entries;
+  for (std::uint32_t slot = 0; slot < s.atlas().capacity(); ++slot)
+    if (const auto key = s.atlas().key(slot);
+        key && s.atlas().state(slot) == AtlasSlots::State::occupied)
+      entries.push_back({s.index().find_keyframe(*key), slot});
+  ResidentKeyframes resident;
+  resident.assign(s.index(), entries);
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> out;
+  for (std::uint32_t n = 0; n < s.index().node_count(); ++n) {
+    if (!s.index().node(n).present()) continue;
+    const KeyframePair pair = select_keyframe_pair(s.index(), n, playhead, resident);
+    EXPECT_TRUE(pair.at_full_detail()) << "node " << n;
+    out.emplace_back(pair.a.t, pair.b.t);
+  }
+  return out;
+}
+
+TEST(StreamScheduler, AWindowedIndexStreamsWhatTheWholeIndexDoesAfterSeeks) {
+  // A container held as a 10-frame time window draws, once settled, every node from the same two
+  // keyframes as with the whole index held.
+  test::TempDir dir("stream-scheduler-window");
+  const Dims wide{80, 40, 36};
+  const auto path = test::make_container(dir.path(), wide, 30, datasets::AnalyticField::blobs, 3);
+  const format::Container c(path);
+  SchedulerSettings settings;
+  settings.atlas_slots = 512;
+  StreamScheduler whole(c, settings);
+  ASSERT_FALSE(whole.index().windowed());
+  IndexOptions o;
+  o.memory_bytes = 10 * whole.index().node_count() * (sizeof(KeyframeNode) + sizeof(std::uint32_t));
+  StreamScheduler windowed(c, settings, o);
+  ASSERT_TRUE(windowed.index().windowed());
+  const auto cam = test::close_camera(wide);
+  std::uint64_t frame = 1, whole_frame = 1;
+  for (const double playhead : {20.5, 4.0, 27.25, 0.0}) {
+    SCOPED_TRACE("playhead " + std::to_string(playhead));
+    const auto settled = [](const FrameUpdate& f) {
+      return f.stats.index_ready && f.stats.fraction_at_target == 1.0 &&
+             f.stats.requests_in_flight == 0 && f.stats.arrivals_waiting == 0;
+    };
+    const FrameUpdate u = run_until(windowed, cam, playhead, frame, settled);
+    expect_svo_references_resident_slots(windowed, u);
+    EXPECT_LE(windowed.index().held_end() - windowed.index().held_begin(), 10u);
+    run_until(whole, cam, playhead, whole_frame, settled);
+    EXPECT_EQ(drawn_pairs(windowed, playhead), drawn_pairs(whole, playhead));
+    EXPECT_TRUE(windowed.errors().empty());
+  }
+}
+
 TEST(StreamScheduler, TheRootArrivesFirstAndTheUploadBudgetHolds) {
   test::TempDir dir("stream-scheduler-budget");
   const auto path = test::make_container(dir.path(), dims, 4);
@@ -321,7 +373,7 @@ TEST(StreamScheduler, SpeculativeRequestsGoOutOnlyWhileTheLinkBacklogIsShort) {
     settings.loader.bandwidth_bytes_per_s = 200000;
     StreamScheduler s(c, settings);
     std::uint32_t largest = 0;
-    for (KeyframeId k = 0; k < s.index().keyframe_count(); ++k)
+    for (const KeyframeId k : s.index().held_keyframes())
       largest = std::max(largest, s.index().keyframe(k).bytes);
     const auto cam = test::close_camera(dims);
     const double bound = std::max(200000.0 * speculative_link_s, static_cast<double>(largest));

@@ -317,8 +317,8 @@ SchedulerSetup scheduler_setup(const BenchStreamSettings& o, double bandwidth, d
   const std::size_t keyframe_nodes = index.keyframe_count();
   {
     std::uint64_t total = 0;
-    for (std::size_t k = 0; k < keyframe_nodes; ++k)
-      total += index.keyframe(static_cast<stream::KeyframeId>(k)).bytes;
+    for (std::uint32_t n = 0; n < index.node_count(); ++n)
+      for (const stream::KeyframeNode& k : index.keyframes(n)) total += k.bytes;
     if (keyframe_nodes > 0)
       r.brick_bytes = static_cast<double>(total) / static_cast<double>(keyframe_nodes);
   }

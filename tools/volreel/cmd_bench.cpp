@@ -266,6 +266,7 @@ void add_bench_command(CLI::App& app) {
 #endif
 #ifdef VOLREEL_HAVE_PLAYER
   add_bench_stream_command(*bench);
+  add_bench_index_command(*bench);
 #endif
 #ifdef VOLREEL_HAVE_VULKAN
   add_bench_play_command(*bench);

@@ -29,6 +29,8 @@ void add_bench_train_command(CLI::App& bench);
 void add_bench_decode_command(CLI::App& bench);
 /// `bench stream` (cmd_bench_stream.cpp; the stream scheduler and the CPU renderer).
 void add_bench_stream_command(CLI::App& bench);
+/// `bench index` (cmd_bench_index.cpp; the stream scheduler at scale, no renderer).
+void add_bench_index_command(CLI::App& bench);
 /// `play` (cmd_play.cpp; needs the player: a window, Vulkan, ImGui).
 void add_play_command(CLI::App& app);
 /// `render` (cmd_render.cpp; headless tours on the player's Vulkan renderer or the CPU).

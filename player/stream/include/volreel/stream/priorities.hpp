@@ -102,7 +102,7 @@ double combined_priority(double sse_priority_value, double temporal_priority_val
 /// ≥ playhead; (t − playhead)/velocity for those the playhead reaches within lookahead_s;
 /// lookahead_s for the next one beyond those two on each side (where a step, a start of playback
 /// or a change of direction goes first) — or a negative value when keyframes[i] is not due.
-void due_seconds(std::span<const KeyframeNode> keyframes, double playhead, double velocity,
+void due_seconds(const KeyframeList& keyframes, double playhead, double velocity,
                  double lookahead_s, std::vector<double>& seconds);
 /// The priority of a due keyframe node needed in `seconds` (see above): in
 /// (settings.sse_weight + 1, settings.sse_weight + 2], decreasing with seconds.

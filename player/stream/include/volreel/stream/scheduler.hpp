@@ -73,7 +73,9 @@ struct BrickUpload {
 struct StreamStats {
   std::uint32_t target_nodes = 0;     ///< visible nodes at their target LOD (SvoStats)
   std::uint32_t at_target_nodes = 0;  ///< of those, drawn with both keyframes at full detail
-  double fraction_at_target = 0;      ///< at_target_nodes / target_nodes (1 when none)
+  double fraction_at_target = 0;      ///< at_target_nodes / target_nodes (1 when none; 0 while
+                                      ///< the index does not hold the frames around the playhead)
+  bool index_ready = true;            ///< the index holds the frames around the playhead
   std::uint32_t holes = 0;            ///< target nodes with nothing to draw yet
   std::uint32_t selected = 0;         ///< keyframe nodes in the heap this frame
   std::size_t requests_sent = 0;      ///< this frame
@@ -102,6 +104,9 @@ class StreamScheduler {
  public:
   /// Indexes the container (bad frames become messages, not exceptions).
   StreamScheduler(const format::Container& container, SchedulerSettings settings);
+  /// With the index's options (the memory it may hold: a time window beyond it).
+  StreamScheduler(const format::Container& container, SchedulerSettings settings,
+                  const IndexOptions& index_options);
   StreamScheduler(SpatialIndex index, SchedulerSettings settings);
 
   /// One rendered frame: camera, playhead (keyframe units) and the GPU frame number that will
