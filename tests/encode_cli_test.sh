@@ -61,6 +61,32 @@ echo "$out" | json '1 if d["sequence"]["max_abs_error"] <= 1e-3 else exit(1)' > 
 bps=$("$volreel" info "$work/r.vreel" --json | json 'd["bps"]')
 /usr/bin/python3 -c "import sys; b=$bps; sys.exit(0 if abs(b-8)/8 <= 0.05 else 1)" || fail "--bps 8 gave $bps bps"
 
+# gen mosaic: a larger valid container repeating a.vreel's bricks; never over an existing one.
+"$volreel" gen mosaic --from "$work/a.vreel" --size 70x50x40 --frames 6 --max-keyframe-gap 2 --out "$work/mosaic.vreel" \
+  > "$work/mosaic.txt" 2>/dev/null || fail "gen mosaic: $(cat "$work/mosaic.txt")"
+grep -q "15 nodes a frame in 3 levels" "$work/mosaic.txt" || fail "gen mosaic report: $(cat "$work/mosaic.txt")"
+"$volreel" verify "$work/mosaic.vreel" 2>/dev/null | grep -q OK || fail "verify of a mosaic"
+[ "$("$volreel" info "$work/mosaic.vreel" --json | json 'd["max_keyframe_gap"]')" = 2 ] || fail "mosaic keyframe gap"
+expect_error "already exists" "$volreel" gen mosaic --from "$work/a.vreel" --size 8 --frames 1 --out "$work/mosaic.vreel"
+expect_error "is not a volreel container" "$volreel" gen mosaic --from "$work/s" --size 8 --frames 1 --out "$work/x.vreel"
+expect_error "frames must be at least 1" "$volreel" gen mosaic --from "$work/a.vreel" --size 8 --frames 0 --out "$work/x.vreel"
+expect_error "size must be 1" "$volreel" gen mosaic --from "$work/a.vreel" --size 0 --frames 1 --out "$work/x.vreel"
+expect_error "not of the form XxYxZ" "$volreel" gen mosaic --from "$work/a.vreel" --size 8x8 --frames 1 --out "$work/x.vreel"
+
+# bench index (where the player is built): a mosaic of 40 frames indexed as an 8-frame time window
+# (--index-memory far below its keyframe nodes) plays and seeks without errors.
+if "$volreel" bench index --help > /dev/null 2>&1; then
+  "$volreel" gen mosaic --from "$work/a.vreel" --size 70x50x40 --frames 40 --max-keyframe-gap 2 \
+    --out "$work/mosaic40.vreel" > /dev/null 2>&1 || fail "gen mosaic of 40 frames"
+  "$volreel" bench index "$work/mosaic40.vreel" --index-memory 1K --size 64x64 --play-seconds 1 \
+    --seeks 3 --settle-seconds 5 > "$work/bench-index.txt" 2>&1 || fail "bench index: $(cat "$work/bench-index.txt")"
+  grep -q "index: time window, 8 frames held at once" "$work/bench-index.txt" \
+    || fail "bench index window: $(cat "$work/bench-index.txt")"
+  grep -q "scheduler errors: 0" "$work/bench-index.txt" || fail "bench index errors: $(cat "$work/bench-index.txt")"
+  grep -q "not settled" "$work/bench-index.txt" && fail "bench index seeks: $(cat "$work/bench-index.txt")"
+  expect_error "expected WIDTHxHEIGHT" "$volreel" bench index "$work/mosaic40.vreel" --size 64
+fi
+
 # The pointwise bound: every value of the finest level within E (compare's max error), and a
 # container of format version 3 refused with the message to encode again.
 "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/m.vreel" --max-error 2e-3 \

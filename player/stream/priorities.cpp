@@ -53,10 +53,10 @@ double combined_priority(double sse_priority_value, double temporal_priority_val
               lerp(settings.temporal_lerp_min, 1.0, temporal_priority_value));
 }
 
-void due_seconds(const KeyframeList& keyframes, double playhead, double velocity,
-                 double lookahead_s, std::vector<double>& seconds) {
-  seconds.assign(keyframes.size(), -1.0);
-  if (keyframes.empty()) return;
+std::size_t due_range(const KeyframeList& keyframes, double playhead, double velocity,
+                      double lookahead_s, std::vector<double>& seconds) {
+  seconds.clear();
+  if (keyframes.empty()) return 0;
   // The last time step ≤ playhead and the first ≥ playhead (the pre-render selection's picks).
   const auto after = std::lower_bound(
       keyframes.begin(), keyframes.end(), playhead,
@@ -68,26 +68,52 @@ void due_seconds(const KeyframeList& keyframes, double playhead, double velocity
       i_after < n &&
       static_cast<double>(keyframes[static_cast<std::size_t>(i_after)].t) == playhead;
   const std::ptrdiff_t i_before = on_keyframe ? i_after : i_after - 1;
+  // Those the playhead reaches within the lookahead, in its direction of travel: [first, last]
+  // of the keyframe nodes that can be due.
+  const double reach = velocity * std::max(0.0, lookahead_s);
+  const bool reaching = std::abs(reach) > 0 && std::isfinite(reach);
+  std::ptrdiff_t first = i_before - 1, last = i_after + 1;
+  if (reaching && reach > 0) {
+    const auto end = std::upper_bound(
+        after, keyframes.end(), playhead + reach,
+        [](double v, const KeyframeNode& k) { return v < static_cast<double>(k.t); });
+    last = std::max(last, static_cast<std::ptrdiff_t>(end - keyframes.begin()) - 1);
+  } else if (reaching) {
+    const auto begin = std::lower_bound(
+        keyframes.begin(), after, playhead + reach,
+        [](const KeyframeNode& k, double v) { return static_cast<double>(k.t) < v; });
+    first = std::min(first, static_cast<std::ptrdiff_t>(begin - keyframes.begin()));
+  }
+  first = std::max<std::ptrdiff_t>(first, 0);
+  last = std::min(last, n - 1);
+  if (last < first) return 0;
+  seconds.assign(static_cast<std::size_t>(last - first + 1), -1.0);
   const auto mark = [&](std::ptrdiff_t i, double s) {
-    if (i >= 0 && i < n && seconds[static_cast<std::size_t>(i)] < 0)
-      seconds[static_cast<std::size_t>(i)] = s;
+    if (i >= first && i <= last && seconds[static_cast<std::size_t>(i - first)] < 0)
+      seconds[static_cast<std::size_t>(i - first)] = s;
   };
   mark(i_before, 0);
   mark(i_after, 0);
-  // Those the playhead reaches within the lookahead, in its direction of travel.
-  const double reach = velocity * std::max(0.0, lookahead_s);
-  if (std::abs(reach) > 0 && std::isfinite(reach))
-    for (std::size_t i = 0; i < keyframes.size(); ++i) {
-      if (seconds[i] >= 0) continue;
-      const double d = static_cast<double>(keyframes[i].t) - playhead;
+  if (reaching)
+    for (std::ptrdiff_t i = first; i <= last; ++i) {
+      const double d = static_cast<double>(keyframes[static_cast<std::size_t>(i)].t) - playhead;
       if (d != 0 && (d > 0) == (reach > 0) && std::abs(d) <= std::abs(reach))
-        seconds[i] = std::abs(d / velocity);
+        mark(i, std::abs(d / velocity));
     }
   // The next one beyond those on each side, where a step, a start of playback or a change of
   // direction goes first: due last (as if needed at the end of the lookahead).
-  const double last = std::max(0.0, lookahead_s);
-  mark(i_before - 1, last);
-  mark(i_after + 1, last);
+  const double at_end = std::max(0.0, lookahead_s);
+  mark(i_before - 1, at_end);
+  mark(i_after + 1, at_end);
+  return static_cast<std::size_t>(first);
+}
+
+void due_seconds(const KeyframeList& keyframes, double playhead, double velocity,
+                 double lookahead_s, std::vector<double>& seconds) {
+  std::vector<double> range;
+  const std::size_t first = due_range(keyframes, playhead, velocity, lookahead_s, range);
+  seconds.assign(keyframes.size(), -1.0);
+  std::copy(range.begin(), range.end(), seconds.begin() + static_cast<std::ptrdiff_t>(first));
 }
 
 double due_priority(double seconds, const PrioritySettings& settings) {

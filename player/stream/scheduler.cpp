@@ -77,6 +77,15 @@ void StreamScheduler::fill_heap(const player::OrbitCamera& camera, double playhe
       sse = std::max(sse, v.sse);
     }
   }
+  // A keyframe node's priority outside the due window is its node's SSE part plus a part of its
+  // time step alone ([0045]), so every node takes the held time steps in one order (that part
+  // descending) and stops at the first whose priority cannot enter the full heap.
+  by_time_.clear();
+  for (std::uint32_t t = index_.held_begin(); t < index_.held_end(); ++t)
+    by_time_.emplace_back(combined_priority(0.0, temporal_[t], random_table_[t], ps), t);
+  std::sort(by_time_.begin(), by_time_.end(), [](const auto& a, const auto& b) {
+    return a.first != b.first ? a.first > b.first : a.second < b.second;
+  });
   for (const ViewTraversal::Visit& v : view_.visits()) {
     const SpatialNode& n = index_.node(v.node);
     const double sse_p = sse_priority(level_sse ? level_sse_[n.key.level] : v.sse);
@@ -86,13 +95,32 @@ void StreamScheduler::fill_heap(const player::OrbitCamera& camera, double playhe
                                    : 1.0;
     if (heap_.full() && best < heap_.min().priority) continue;
     const KeyframeList& keyframes = index_.keyframes(v.node);
-    if (due_window) due_seconds(keyframes, playhead, velocity, ps.lookahead_s, due_);
-    for (std::uint32_t i = 0; i < keyframes.size(); ++i) {
-      const std::uint32_t t = keyframes[i].t;
-      const bool due = due_window && due_[i] >= 0;
-      const double priority = due ? due_priority(due_[i], ps)
-                                  : combined_priority(sse_p, temporal_[t], random_table_[t], ps);
-      heap_.push({priority, n.key.level, keyframe_id(v.node, t), due});
+    if (keyframes.empty()) continue;
+    std::size_t due_first = 0;
+    due_.clear();
+    if (due_window) {
+      // Soonest due first, until one cannot enter the full heap.
+      due_first = due_range(keyframes, playhead, velocity, ps.lookahead_s, due_);
+      due_order_.clear();
+      for (std::size_t j = 0; j < due_.size(); ++j)
+        if (due_[j] >= 0) due_order_.emplace_back(due_[j], j);
+      std::sort(due_order_.begin(), due_order_.end());
+      for (const auto& [seconds, j] : due_order_) {
+        const double priority = due_priority(seconds, ps);
+        if (heap_.full() && priority < heap_.min().priority) break;
+        heap_.push({priority, n.key.level, keyframe_id(v.node, keyframes[due_first + j].t), true});
+      }
+    }
+    for (const auto& [part, t] : by_time_) {
+      const double priority = combined_priority(sse_p, temporal_[t], random_table_[t], ps);
+      if (heap_.full() && priority < heap_.min().priority) break;
+      const auto it =
+          std::lower_bound(keyframes.begin(), keyframes.end(), t,
+                           [](const KeyframeNode& k, std::uint32_t value) { return k.t < value; });
+      if (it == keyframes.end() || it->t != t) continue;
+      const auto i = static_cast<std::size_t>(it - keyframes.begin());
+      if (i >= due_first && i - due_first < due_.size() && due_[i - due_first] >= 0) continue;
+      heap_.push({priority, n.key.level, keyframe_id(v.node, t), false});
     }
   }
 }

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <condition_variable>
 #include <mutex>
+#include <numeric>
 #include <optional>
 #include <stdexcept>
 #include <thread>
@@ -42,6 +43,11 @@ std::shared_ptr<const IndexGeometry> make_geometry(std::array<std::uint32_t, 3> 
   g->levels = format::level_geometry(dims);
   const auto levels = static_cast<std::uint32_t>(g->levels.size());
   for (std::uint32_t l = 0; l < levels; ++l) {
+    g->first.push_back(static_cast<std::uint32_t>(g->ids.size()));
+    const auto& gl = g->levels[l].grid;
+    g->ids.resize(g->ids.size() + std::size_t{gl[0]} * gl[1] * gl[2], no_node);
+  }
+  for (std::uint32_t l = 0; l < levels; ++l) {
     const auto& grid = g->levels[l].grid;
     std::vector<std::pair<std::uint64_t, NodeKey>> keys;
     keys.reserve(std::size_t{grid[0]} * grid[1] * grid[2]);
@@ -60,8 +66,9 @@ std::shared_ptr<const IndexGeometry> make_geometry(std::array<std::uint32_t, 3> 
         n.lo[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>(c[a] * span, dims[a]));
         n.hi[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>((c[a] + 1) * span, dims[a]));
       }
-      if (l > 0) n.parent = g->lookup.at(NodeKey{l - 1, key.x / 2, key.y / 2, key.z / 2});
-      g->lookup.emplace(key, static_cast<std::uint32_t>(g->nodes.size()));
+      if (l > 0) n.parent = g->find(NodeKey{l - 1, key.x / 2, key.y / 2, key.z / 2});
+      g->ids[g->first[l] + key.x + grid[0] * (key.y + std::size_t{grid[1]} * key.z)] =
+          static_cast<std::uint32_t>(g->nodes.size());
       g->nodes.push_back(n);
     }
   }
@@ -86,11 +93,11 @@ HeldFrame read_frame(const IndexGeometry& g, std::uint32_t t, const format::Fram
   out.keyframes.reserve(frame.brick_count());
   for (std::uint32_t i = 0; i < frame.node_count(); ++i) {
     const format::NodePosition& p = frame.position(i);
-    const auto it = g.lookup.find(NodeKey{p.level, p.x, p.y, p.z});
-    if (it == g.lookup.end())
+    const std::uint32_t id = g.find(NodeKey{p.level, p.x, p.y, p.z});
+    if (id == no_node)
       throw format::FormatError(file, format::FormatError::no_offset,
                                 "nodes inside the level grids", "a node outside");
-    out.nodes.push_back(it->second);
+    out.nodes.push_back(id);
     const format::Node n = frame.node(i);
     if (n.brick == format::no_brick) continue;  // not a keyframe of the node at step t
     KeyframeNode k;
@@ -102,7 +109,7 @@ HeldFrame read_frame(const IndexGeometry& g, std::uint32_t t, const format::Fram
     k.constant = k.bytes == 4;
     k.subtree_constant = n.type() == format::NodeType::empty;
     k.histogram = n.histogram;
-    out.keyframes.emplace_back(it->second, k);
+    out.keyframes.emplace_back(id, k);
   }
   return out;
 }
@@ -235,8 +242,9 @@ SpatialIndex SpatialIndexBuilder::build() && {
   index.window_ = index.files_.size();
   index.reset_nodes();
   for (std::size_t t = 0; t < frames_.size(); ++t)
-    index.hold(frames_[t] ? *frames_[t] : HeldFrame{static_cast<std::uint32_t>(t), {}, {}, {}},
-               false);
+    index.hold(
+        frames_[t] ? std::move(*frames_[t]) : HeldFrame{static_cast<std::uint32_t>(t), {}, {}, {}},
+        false);
   frames_.clear();
   return index;
 }
@@ -265,7 +273,8 @@ SpatialIndex& SpatialIndex::operator=(const SpatialIndex& other) {
   window_ = other.window_;
   max_gap_ = other.max_gap_;
   options_ = other.options_;
-  held_nodes_ = other.held_nodes_;
+  held_ = other.held_;
+  whole_frames_ = other.whole_frames_;
   container_ = other.container_;
   if (container_) {
     start_reader();
@@ -287,7 +296,8 @@ void SpatialIndex::reset_nodes() {
   nodes_ = geometry_->nodes;
   keyframes_.assign(nodes_.size(), KeyframeList{});
   keyframe_count_ = 0;
-  held_nodes_.clear();
+  held_.clear();
+  whole_frames_ = 0;
   held_begin_ = held_end_ = 0;
 }
 
@@ -303,20 +313,39 @@ std::uint32_t octant_of(const NodeKey& k) {
 
 }  // namespace
 
-void SpatialIndex::hold(const HeldFrame& frame, bool at_front) {
-  for (const std::uint32_t id : frame.nodes) {
+void SpatialIndex::count_nodes(std::span<const std::uint32_t> ids, int delta) {
+  for (const std::uint32_t id : ids) {
     SpatialNode& n = nodes_[id];
-    if (n.held_frames++ == 0 && n.parent != no_node) {
-      SpatialNode& p = nodes_[n.parent];
-      p.children[octant_of(n.key)] = id;
-      p.has_children = true;
-    }
+    const bool was = n.held_frames > 0;
+    n.held_frames = static_cast<std::uint32_t>(static_cast<int>(n.held_frames) + delta);
+    if (was == (n.held_frames > 0) || n.parent == no_node) continue;
+    SpatialNode& p = nodes_[n.parent];
+    p.children[octant_of(n.key)] = was ? no_node : id;
+    p.has_children = std::any_of(p.children.begin(), p.children.end(),
+                                 [](std::uint32_t c) { return c != no_node; });
   }
+}
+
+void SpatialIndex::hold(HeldFrame frame, bool at_front) {
+  // A frame with every node of the geometry (the usual case) counts once for all of them while
+  // any such frame is held: adding and dropping it touches its bricks only.
+  const bool whole = frame.nodes.size() == nodes_.size();
+  if (!whole) {
+    count_nodes(frame.nodes, +1);
+  } else if (whole_frames_++ == 0) {
+    std::vector<std::uint32_t> all(nodes_.size());
+    std::iota(all.begin(), all.end(), 0u);
+    count_nodes(all, +1);
+  }
+  HeldRecord record;
+  record.whole = whole;
+  record.keyframe_nodes.reserve(frame.keyframes.size());
   for (const auto& [id, k] : frame.keyframes) {
     if (at_front)
       keyframes_[id].push_front(k);
     else
       keyframes_[id].push_back(k);
+    record.keyframe_nodes.push_back(id);
   }
   keyframe_count_ += frame.keyframes.size();
   if (held_begin_ == held_end_) {
@@ -328,37 +357,35 @@ void SpatialIndex::hold(const HeldFrame& frame, bool at_front) {
     held_end_ = frame.t + 1;
   }
   if (windowed()) {
+    if (!whole) record.nodes = std::move(frame.nodes);
     if (at_front)
-      held_nodes_.push_front(frame.nodes);
+      held_.push_front(std::move(record));
     else
-      held_nodes_.push_back(frame.nodes);
+      held_.push_back(std::move(record));
   }
 }
 
 void SpatialIndex::drop(bool front) {
   const std::uint32_t t = front ? held_begin_ : held_end_ - 1;
-  const std::vector<std::uint32_t> ids =
-      front ? std::move(held_nodes_.front()) : std::move(held_nodes_.back());
+  const HeldRecord record = front ? std::move(held_.front()) : std::move(held_.back());
   if (front)
-    held_nodes_.pop_front();
+    held_.pop_front();
   else
-    held_nodes_.pop_back();
-  for (const std::uint32_t id : ids) {
+    held_.pop_back();
+  for (const std::uint32_t id : record.keyframe_nodes) {
     KeyframeList& list = keyframes_[id];
-    if (!list.empty() && (front ? list.front().t : list.back().t) == t) {
-      if (front)
-        list.pop_front();
-      else
-        list.pop_back();
-      --keyframe_count_;
-    }
-    SpatialNode& n = nodes_[id];
-    if (--n.held_frames == 0 && n.parent != no_node) {
-      SpatialNode& p = nodes_[n.parent];
-      p.children[octant_of(n.key)] = no_node;
-      p.has_children = std::any_of(p.children.begin(), p.children.end(),
-                                   [](std::uint32_t c) { return c != no_node; });
-    }
+    if (front)
+      list.pop_front();
+    else
+      list.pop_back();
+  }
+  keyframe_count_ -= record.keyframe_nodes.size();
+  if (!record.whole) {
+    count_nodes(record.nodes, -1);
+  } else if (--whole_frames_ == 0) {
+    std::vector<std::uint32_t> all(nodes_.size());
+    std::iota(all.begin(), all.end(), 0u);
+    count_nodes(all, -1);
   }
   if (front)
     ++held_begin_;
@@ -429,7 +456,7 @@ void SpatialIndex::follow(double playhead, double velocity, std::vector<std::str
     }
     if (!f) break;
     if (!f->error.empty() && errors) errors->push_back(f->error);
-    hold(*f, at_front);
+    hold(std::move(*f), at_front);
   }
 
   // Tell the reader what to read next; frames read for another window are dropped.
@@ -455,7 +482,8 @@ std::uint64_t SpatialIndex::memory_bytes() const {
   // A deque keeps at least a map and one 512-byte block.
   std::uint64_t bytes = nodes_.size() * (sizeof(SpatialNode) + sizeof(KeyframeList) + 576) +
                         keyframe_count_ * sizeof(KeyframeNode);
-  for (const auto& ids : held_nodes_) bytes += ids.capacity() * sizeof(std::uint32_t);
+  for (const HeldRecord& r : held_)
+    bytes += (r.nodes.capacity() + r.keyframe_nodes.capacity()) * sizeof(std::uint32_t);
   if (reader_) {
     const std::lock_guard lock(reader_->mutex);
     for (const auto& [t, f] : reader_->ready_frames)
@@ -465,10 +493,15 @@ std::uint64_t SpatialIndex::memory_bytes() const {
   return bytes;
 }
 
+std::uint32_t IndexGeometry::find(const NodeKey& key) const {
+  if (key.level >= levels.size()) return no_node;
+  const auto& grid = levels[key.level].grid;
+  if (key.x >= grid[0] || key.y >= grid[1] || key.z >= grid[2]) return no_node;
+  return ids[first[key.level] + key.x + grid[0] * (key.y + std::size_t{grid[1]} * key.z)];
+}
+
 std::uint32_t SpatialIndex::find(const NodeKey& key) const {
-  if (!geometry_) return no_node;
-  const auto it = geometry_->lookup.find(key);
-  return it == geometry_->lookup.end() ? no_node : it->second;
+  return geometry_ ? geometry_->find(key) : no_node;
 }
 
 std::uint32_t SpatialIndex::ancestor(std::uint32_t id, std::uint32_t up) const {
@@ -561,7 +594,7 @@ SpatialIndex build_spatial_index(const format::Container& container,
     for (std::size_t t = first; t < end; ++t) {
       HeldFrame& f = read[t - first];
       if (!f.error.empty() && errors) errors->push_back(f.error);
-      index.hold(f, false);
+      index.hold(std::move(f), false);
       f = HeldFrame{};
     }
   }

@@ -123,6 +123,18 @@ INSTANTIATE_TEST_SUITE_P(Stream, StreamSchedulerPolicy,
                                       : std::string("nearest");
                          });
 
+/// The scheduler's occupied slots as the selection sees them.
+ResidentKeyframes resident_of(const StreamScheduler& s) {
+  std::vector<ResidentKeyframe> entries;
+  for (std::uint32_t slot = 0; slot < s.atlas().capacity(); ++slot)
+    if (const auto key = s.atlas().key(slot);
+        key && s.atlas().state(slot) == AtlasSlots::State::occupied)
+      entries.push_back({s.index().find_keyframe(*key), slot});
+  ResidentKeyframes resident;
+  resident.assign(s.index(), entries);
+  return resident;
+}
+
 TEST(StreamScheduler, ASeekIntoALongGapDrawsTheInterpolatedState) {
   // Sparse keyframes: the finest nodes of grid column 0 never change, so they store bricks at
   // steps 0 and 8 only; column 2 at every step. After a seek to 4, the still nodes are drawn from
@@ -156,13 +168,7 @@ TEST(StreamScheduler, ASeekIntoALongGapDrawsTheInterpolatedState) {
            f.stats.arrivals_waiting == 0;
   });
   expect_svo_references_resident_slots(s, u);
-  std::vector<ResidentKeyframe> entries;
-  for (std::uint32_t slot = 0; slot < s.atlas().capacity(); ++slot)
-    if (const auto key = s.atlas().key(slot);
-        key && s.atlas().state(slot) == AtlasSlots::State::occupied)
-      entries.push_back({s.index().find_keyframe(*key), slot});
-  ResidentKeyframes resident;
-  resident.assign(s.index(), entries);
+  const ResidentKeyframes resident = resident_of(s);
   const KeyframePair p = select_keyframe_pair(s.index(), still, playhead, resident);
   EXPECT_TRUE(p.at_full_detail());
   EXPECT_EQ(p.a.t, 0u);
@@ -179,13 +185,7 @@ TEST(StreamScheduler, ASeekIntoALongGapDrawsTheInterpolatedState) {
 /// The keyframe pair of every present node from the scheduler's occupied slots.
 std::vector<std::pair<std::uint32_t, std::uint32_t>> drawn_pairs(const StreamScheduler& s,
                                                                  double playhead) {
-  std::vector<ResidentKeyframe> entries;
-  for (std::uint32_t slot = 0; slot < s.atlas().capacity(); ++slot)
-    if (const auto key = s.atlas().key(slot);
-        key && s.atlas().state(slot) == AtlasSlots::State::occupied)
-      entries.push_back({s.index().find_keyframe(*key), slot});
-  ResidentKeyframes resident;
-  resident.assign(s.index(), entries);
+  const ResidentKeyframes resident = resident_of(s);
   std::vector<std::pair<std::uint32_t, std::uint32_t>> out;
   for (std::uint32_t n = 0; n < s.index().node_count(); ++n) {
     if (!s.index().node(n).present()) continue;

@@ -104,6 +104,10 @@ double combined_priority(double sse_priority_value, double temporal_priority_val
 /// or a change of direction goes first) — or a negative value when keyframes[i] is not due.
 void due_seconds(const KeyframeList& keyframes, double playhead, double velocity,
                  double lookahead_s, std::vector<double>& seconds);
+/// The same for the keyframe nodes that can be due only, which are consecutive: returns the index
+/// of the first and sets seconds for it and those after it (the rest are not due).
+std::size_t due_range(const KeyframeList& keyframes, double playhead, double velocity,
+                      double lookahead_s, std::vector<double>& seconds);
 /// The priority of a due keyframe node needed in `seconds` (see above): in
 /// (settings.sse_weight + 1, settings.sse_weight + 2], decreasing with seconds.
 double due_priority(double seconds, const PrioritySettings& settings);

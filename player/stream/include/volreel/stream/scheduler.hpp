@@ -28,6 +28,7 @@
 #include <string>
 #include <unordered_map>
 #include <unordered_set>
+#include <utility>
 #include <vector>
 
 #include "volreel/format/container.hpp"
@@ -154,6 +155,8 @@ class StreamScheduler {
   BrickLoader loader_;
   MinMaxHeap<HeapEntry, HeapLess> heap_;
   std::vector<double> random_table_, temporal_, due_;
+  std::vector<std::pair<double, std::uint32_t>> by_time_;  ///< held steps by priority part
+  std::vector<std::pair<double, std::size_t>> due_order_;  ///< a node's due ones, soonest first
   std::vector<double> level_sse_;  ///< SseScope::level: per level, this frame
   PlayheadMotion motion_;
   /// Requests in flight: bytes and whether speculative (outside the due window when requested).

@@ -34,6 +34,7 @@
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <unordered_map>
 #include <utility>
@@ -113,7 +114,10 @@ struct IndexGeometry {
   std::array<std::uint32_t, 3> dims{};
   std::vector<format::LevelGeometry> levels;
   std::vector<SpatialNode> nodes;
-  std::unordered_map<NodeKey, std::uint32_t, NodeKeyHash> lookup;
+  /// Node id of brick (x, y, z) of level l: ids[first[l] + x + grid_x·(y + grid_y·z)].
+  std::vector<std::uint32_t> first, ids;
+  /// no_node outside the level grids.
+  std::uint32_t find(const NodeKey& key) const;
 };
 
 /// One frame's part of the index, read from its file.
@@ -219,13 +223,21 @@ class SpatialIndex {
   std::size_t window_ = 0;
   std::uint32_t max_gap_ = 1;
   IndexOptions options_;
-  /// Per held frame (windowed index only): the nodes it has, to drop it again.
-  std::deque<std::vector<std::uint32_t>> held_nodes_;
+  /// Per held frame (windowed index only), to drop it again: the nodes with its bricks, and the
+  /// nodes it has unless it has every node of the geometry (whole).
+  struct HeldRecord {
+    bool whole = false;
+    std::vector<std::uint32_t> nodes, keyframe_nodes;
+  };
+  std::deque<HeldRecord> held_;
+  std::size_t whole_frames_ = 0;  ///< held frames with every node, counted once in held_frames
   std::shared_ptr<const format::Container> container_;  ///< windowed: where frames are read
   std::unique_ptr<Reader> reader_;
 
   void reset_nodes();
-  void hold(const HeldFrame& frame, bool at_front);
+  void hold(HeldFrame frame, bool at_front);
+  /// Adds delta to the held_frames of `ids`, linking or unlinking those that appear or vanish.
+  void count_nodes(std::span<const std::uint32_t> ids, int delta);
   void drop(bool front);
   void start_reader();
 };
