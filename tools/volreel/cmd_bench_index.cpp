@@ -20,6 +20,8 @@
 #include "volreel/datasets/volume.hpp"
 #include "volreel/format/container.hpp"
 #include "volreel/format/file_io.hpp"
+#include "volreel/loop/cpu_frame_loop.hpp"
+#include "volreel/loop/loop_settings.hpp"
 #include "volreel/player/camera.hpp"
 #include "volreel/stream/scheduler.hpp"
 
@@ -36,7 +38,7 @@ struct BenchIndexOptions {
   std::size_t seeks = 10;
   double settle_seconds = 10;
   std::string index_memory = "128M";
-  double atlas_mib = 256;
+  double atlas_mb = 256;
   std::uint64_t seed = 1;
 };
 
@@ -70,9 +72,8 @@ double mib(std::uint64_t bytes) {
 }
 
 void run_bench_index(const BenchIndexOptions& o) {
-  int width = 0, height = 0;
-  if (std::sscanf(o.size.c_str(), "%dx%d", &width, &height) != 2 || width <= 0 || height <= 0)
-    throw InputError("--size: expected WIDTHxHEIGHT (e.g. 512x512), found \"" + o.size + "\"");
+  const auto [width, height] = loop::parse_size(o.size);
+  if (!(o.atlas_mb > 0)) throw InputError("--atlas-mb: expected a positive size");
   stream::IndexOptions index_options;
   index_options.memory_bytes = format::detail::parse_byte_size(o.index_memory, "--index-memory");
 
@@ -81,9 +82,10 @@ void run_bench_index(const BenchIndexOptions& o) {
   const auto open_start = Clock::now();
   const format::Container container(o.container);
   stream::SchedulerSettings settings;
-  // The player's atlas: 16-bit voxels, a 36³ brick a slot.
-  settings.atlas_slots = static_cast<std::uint32_t>(std::clamp(
-      o.atlas_mib * 1024 * 1024 / (36.0 * 36 * 36 * 2), 1.0, static_cast<double>(1u << 20)));
+  // The player's atlas: as many slots as its 16-bit GPU atlas of --atlas-mb.
+  settings.atlas_slots = static_cast<std::uint32_t>(std::clamp<std::uint64_t>(
+      static_cast<std::uint64_t>(o.atlas_mb * 1024 * 1024) / loop::CpuFrameLoop::gpu_slot_bytes, 1,
+      1u << 20));
   stream::StreamScheduler scheduler(container, settings, index_options);
   const double open_s = seconds_since(open_start);
   const stream::SpatialIndex& index = scheduler.index();
@@ -99,7 +101,7 @@ void run_bench_index(const BenchIndexOptions& o) {
   std::printf("index: %s, %zu frames held at once (--index-memory %s)\n",
               index.windowed() ? "time window" : "whole container", index.window_frames(),
               o.index_memory.c_str());
-  std::printf("atlas: %u brick slots (--atlas-mib %g)\n", settings.atlas_slots, o.atlas_mib);
+  std::printf("atlas: %u brick slots (--atlas-mb %g)\n", settings.atlas_slots, o.atlas_mb);
   std::printf("open (manifest, dictionary, index): %.3f s\n\n", open_s);
 
   player::OrbitCamera camera =
@@ -238,16 +240,15 @@ void add_bench_index_command(CLI::App& bench) {
       ->capture_default_str();
   cmd->add_option("--seeks", o->seeks, "Random seeks after playing")->capture_default_str();
   cmd->add_option("--settle-seconds", o->settle_seconds,
-                  "Longest wait after a seek for full detail")
+                  "Longest wait after a seek for the view to settle")
       ->check(CLI::Range(0.1, 600.0))
       ->capture_default_str();
   cmd->add_option("--index-memory", o->index_memory,
                   "Keyframe nodes the index may hold (e.g. 128M, 1G); a container that needs "
                   "more is indexed as a time window around the playhead")
       ->capture_default_str();
-  cmd->add_option("--atlas-mib", o->atlas_mib,
-                  "Atlas memory as the player's (16-bit voxels, 36^3 a brick): its slots")
-      ->check(CLI::Range(0.1, 1e6))
+  cmd->add_option("--atlas-mb", o->atlas_mb,
+                  "Brick atlas memory budget, MiB, as the player's: its slots")
       ->capture_default_str();
   cmd->add_option("--seed", o->seed, "Seed of the random seeks")->capture_default_str();
   cmd->callback([o] { run_bench_index(*o); });
