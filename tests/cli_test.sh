@@ -27,8 +27,8 @@ out=$("$volreel" compare "$work/a" "$work/a" --json 2>/dev/null)
 out=$("$volreel" compare "$work/a" "$work/b" --json 2>/dev/null)
 [ "$(echo "$out" | json 'len(d["frames"])')" = 4 ] || fail "expected 4 frames"
 echo "$out" | json '1 if 0 < d["sequence"]["psnr"] < 60 else exit(1)' > /dev/null || fail "PSNR of different series out of range"
-"$volreel" compare "$work/a" "$work/b" --csv 2>/dev/null | grep -q '^all,' || fail "CSV lacks the sequence row"
-"$volreel" compare "$work/a" "$work/b" 2>/dev/null | grep -q 'PSNR' || fail "table lacks PSNR"
+grep -q '^all,' <<< "$("$volreel" compare "$work/a" "$work/b" --csv 2>/dev/null)" || fail "CSV lacks the sequence row"
+grep -q 'PSNR' <<< "$("$volreel" compare "$work/a" "$work/b" 2>/dev/null)" || fail "table lacks PSNR"
 
 # A raw file read with --dims compares equal to the series frame it was copied from.
 cp "$work/a/000002.f32" "$work/frame.raw"
@@ -40,7 +40,7 @@ expect_error() {
   local pattern=$1; shift
   local msg
   if msg=$("$@" 2>&1 >/dev/null); then fail "expected failure: $*"; fi
-  echo "$msg" | grep -q -e "$pattern" || fail "message for '$*' lacks '$pattern': $msg"
+  grep -q -e "$pattern" <<< "$msg" || fail "message for '$*' lacks '$pattern': $msg"
 }
 expect_error "does not exist" "$volreel" compare "$work/a" "$work/nowhere"
 expect_error "--dims" "$volreel" compare "$work/frame.raw" "$work/frame.raw"

@@ -16,7 +16,7 @@ expect_error() {
   [ "$rc" != 0 ] || fail "expected failure: $*"
   [ "$rc" != 124 ] || fail "hung (killed after 20 s): $*"
   [ "$rc" -lt 128 ] || fail "crashed (status $rc): $*: $msg"
-  echo "$msg" | grep -q -e "$pattern" || fail "message for '$*' lacks '$pattern': $msg"
+  grep -q -e "$pattern" <<< "$msg" || fail "message for '$*' lacks '$pattern': $msg"
 }
 
 "$volreel" gen analytic --field blobs --dims 40x36x30 --frames 3 --out "$work/s" > /dev/null 2>&1

@@ -11,7 +11,7 @@ expect_error() {
   local pattern=$1; shift
   local msg
   if msg=$("$@" 2>&1 >/dev/null); then fail "expected failure: $*"; fi
-  echo "$msg" | grep -q -e "$pattern" || fail "message for '$*' lacks '$pattern': $msg"
+  grep -q -e "$pattern" <<< "$msg" || fail "message for '$*' lacks '$pattern': $msg"
 }
 
 "$volreel" gen analytic --field blobs --dims 40x36x30 --frames 3 --out "$work/s" 2>/dev/null
@@ -21,10 +21,10 @@ expect_error() {
 "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/a.vreel" > "$work/enc.txt" 2>/dev/null
 grep -q "quantization:.*dB lost" "$work/enc.txt" || fail "encode does not report the quantization loss"
 grep -q "MVoxel/s" "$work/enc.txt" || fail "encode does not report its speed"
-"$volreel" info "$work/a.vreel" | grep -q "ksvd" || fail "info lacks the codec"
+grep -q "ksvd" <<< "$("$volreel" info "$work/a.vreel")" || fail "info lacks the codec"
 [ "$("$volreel" info "$work/a.vreel" --json | json 'd["frame_count"]')" = 3 ] || fail "info --json frame count"
 [ "$("$volreel" info "$work/a.vreel" --json | json 'd["levels"]')" = 2 ] || fail "info --json levels"
-"$volreel" verify "$work/a.vreel" 2>/dev/null | grep -q OK || fail "verify of a good container"
+grep -q OK <<< "$("$volreel" verify "$work/a.vreel" 2>/dev/null)" || fail "verify of a good container"
 out=$("$volreel" compare "$work/s" "$work/a.vreel" --json 2>/dev/null)
 echo "$out" | json '1 if d["bps"] > 0 and d["sequence"]["psnr"] > 35 else exit(1)' > /dev/null || fail "compare with a container: $out"
 "$volreel" decode "$work/a.vreel" --frame 2 --out "$work/f2.f32" > /dev/null
@@ -52,7 +52,7 @@ expect_error "manifest.json: not valid JSON" "$volreel" info "$work/b.vreel"
 
 # Fixed rate, zfp, and rate control by --bps.
 "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/fixed.vreel" --fixed-sparsity 2 > /dev/null 2>&1
-"$volreel" info "$work/fixed.vreel" | grep -q "fixed rate S = 2" || fail "fixed rate"
+grep -q "fixed rate S = 2" <<< "$("$volreel" info "$work/fixed.vreel")" || fail "fixed rate"
 "$volreel" encode "$work/s" --codec zfp --zfp-accuracy 1e-3 --out "$work/z.vreel" > /dev/null 2>&1
 "$volreel" verify "$work/z.vreel" > /dev/null 2>&1 || fail "verify zfp"
 out=$("$volreel" compare "$work/s" "$work/z.vreel" --json --no-ssim 2>/dev/null)
@@ -65,7 +65,7 @@ bps=$("$volreel" info "$work/r.vreel" --json | json 'd["bps"]')
 "$volreel" gen mosaic --from "$work/a.vreel" --size 70x50x40 --frames 6 --max-keyframe-gap 2 --out "$work/mosaic.vreel" \
   > "$work/mosaic.txt" 2>/dev/null || fail "gen mosaic: $(cat "$work/mosaic.txt")"
 grep -q "15 nodes a frame in 3 levels" "$work/mosaic.txt" || fail "gen mosaic report: $(cat "$work/mosaic.txt")"
-"$volreel" verify "$work/mosaic.vreel" 2>/dev/null | grep -q OK || fail "verify of a mosaic"
+grep -q OK <<< "$("$volreel" verify "$work/mosaic.vreel" 2>/dev/null)" || fail "verify of a mosaic"
 [ "$("$volreel" info "$work/mosaic.vreel" --json | json 'd["max_keyframe_gap"]')" = 2 ] || fail "mosaic keyframe gap"
 expect_error "already exists" "$volreel" gen mosaic --from "$work/a.vreel" --size 8 --frames 1 --out "$work/mosaic.vreel"
 expect_error "is not a volreel container" "$volreel" gen mosaic --from "$work/s" --size 8 --frames 1 --out "$work/x.vreel"

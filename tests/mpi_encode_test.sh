@@ -80,7 +80,7 @@ if out=$(timeout 120 "$mpiexec" -n 2 --oversubscribe -x ASAN_OPTIONS="$rank_asan
   encode "$work/s" --out "$work/mpi2.vreel" --dictionary dct 2>&1); then
   fail "encoding over an existing container should fail"
 fi
-echo "$out" | grep -q "already holds a container" || fail "no message for an existing container: $out"
+grep -q "already holds a container" <<< "$out" || fail "no message for an existing container: $out"
 
 # A rank killed mid-encode: the job fails; --resume under mpirun completes the same container.
 "$volreel" gen analytic --field noise --size 36 --frames 40 --out "$work/n" > /dev/null 2>&1
@@ -94,7 +94,7 @@ for _ in $(seq 1 600); do
   frames=$(find "$work/killed.vreel/frames" -name '*.vrf' 2> /dev/null | wc -l || true)
   if [ "$frames" -ge 2 ]; then
     for pid in $(pgrep -f "$work/killed.vreel"); do
-      if tr '\0' '\n' < "/proc/$pid/environ" 2> /dev/null | grep -qx "OMPI_COMM_WORLD_RANK=1"; then
+      if grep -qx "OMPI_COMM_WORLD_RANK=1" <<< "$(tr "\0" "\n" < "/proc/$pid/environ" 2> /dev/null)"; then
         kill -9 "$pid" && killed=$pid
       fi
     done

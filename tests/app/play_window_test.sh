@@ -185,6 +185,6 @@ msg=$(env -u DISPLAY -u WAYLAND_DISPLAY "$volreel" play "$work/a.vreel" 2>&1)
 rc=$?
 set -e
 [ $rc = 3 ] || fail "without a display: exit code $rc, expected 3"
-echo "$msg" | grep -q "xvfb-run" || fail "without a display, no hint at xvfb-run: $msg"
+grep -q "xvfb-run" <<< "$msg" || fail "without a display, no hint at xvfb-run: $msg"
 
 echo "play_window: all checks passed"

@@ -12,7 +12,7 @@ expect_error() {
   local pattern=$1; shift
   local msg
   if msg=$("$@" 2>&1 >/dev/null); then fail "expected failure: $*"; fi
-  echo "$msg" | grep -q -e "$pattern" || fail "message for '$*' lacks '$pattern': $msg"
+  grep -q -e "$pattern" <<< "$msg" || fail "message for '$*' lacks '$pattern': $msg"
 }
 
 # A tiny container: 2 octree levels (root + 8 bricks), 6 frames.
