@@ -255,13 +255,14 @@ void code_chunk(const PyramidWindow& window, std::span<Cell> chunk, float lo, fl
 
 /// PlaneCoding::measure_finest for a chunk of finest bricks whose stored voxels are in `bricks`:
 /// each payload decoded, compared over the brick's interior inside the level.
-void measure_chunk(std::span<const Cell> chunk, const float* bricks,
+void measure_chunk(std::span<Cell> chunk, const float* bricks,
                    const std::array<std::uint32_t, 3>& dims, const BrickCoding& coding,
                    FrameStats& st) {
-  double squared = 0, worst = 0;
-#pragma omp parallel for schedule(dynamic, 1) reduction(+ : squared) reduction(max : worst)
+  double worst = 0;
+#pragma omp parallel for schedule(dynamic, 1) reduction(max : worst)
   for (std::ptrdiff_t j = 0; j < static_cast<std::ptrdiff_t>(chunk.size()); ++j) {
-    const Cell& c = chunk[static_cast<std::size_t>(j)];
+    Cell& c = chunk[static_cast<std::size_t>(j)];
+    double squared = 0;
     std::vector<float> decoded(brick_voxels);
     format::decode_payload(c.payload, coding.settings.codec, coding.settings.zfp_accuracy,
                            coding.decode_atoms, decoded, "<frame being coded>", 0);
@@ -281,9 +282,16 @@ void measure_chunk(std::span<const Cell> chunk, const float* bricks,
           squared += e * e;
           worst = std::max(worst, std::abs(e));
         }
+    c.squared_error = squared;
   }
-  st.finest_squared_error += squared;
   st.finest_max_error = std::max(st.finest_max_error, worst);
+}
+
+/// FrameStats::finest_squared_error: the bricks' own, summed in brick order.
+double finest_squared_error(std::span<const Cell> cells) {
+  double sum = 0;
+  for (const Cell& c : cells) sum += c.squared_error;
+  return sum;
 }
 
 /// Step 2: the bricks row by row (bricks of one level and one z), each row as soon as the window
@@ -291,7 +299,8 @@ void measure_chunk(std::span<const Cell> chunk, const float* bricks,
 void code_bricks(PyramidWindow& window, std::vector<Cell>& cells,
                  const std::vector<std::size_t>& level_begin, float lo, float hi,
                  const BrickCoding& coding, FrameStats& st, std::vector<float>* originals,
-                 const std::function<void(double)>& progress) {
+                 const PlaneCoding& options) {
+  const std::function<void(double)>& progress = options.progress;
   const std::vector<format::LevelGeometry>& geometry = window.geometry();
   const std::size_t levels = geometry.size(), finest = levels - 1;
   // A buffer of the right size is reused as it is (every value is overwritten below).
@@ -301,7 +310,7 @@ void code_bricks(PyramidWindow& window, std::vector<Cell>& cells,
   for (std::size_t l = 0; l < levels; ++l) {
     rows[l].resize(geometry[l].grid[2]);
     for (std::size_t i = level_begin[l]; i < level_begin[l + 1]; ++i)
-      rows[l][cells[i].z].push_back(i);
+      if (i % options.members == options.member) rows[l][cells[i].z].push_back(i);
   }
   // The planes row z of a level needs: its bricks' 36 planes, 34z − 1 .. 34z + 34, clamped.
   const auto row_end = [&](std::size_t l, std::size_t z) {
@@ -370,6 +379,17 @@ std::vector<std::vector<std::size_t>> merge_subtrees(OctreeCells& octree) {
     }
   }
   return children;
+}
+
+/// Step 3 for a coded frame: merge_subtrees over its bricks, and each brick's parent.
+void link_tree(CodedFrame& coded) {
+  OctreeCells octree{std::move(coded.bricks), std::move(coded.level_begin)};
+  coded.children = merge_subtrees(octree);
+  coded.bricks = std::move(octree.cells);
+  coded.level_begin = std::move(octree.level_begin);
+  coded.parent.assign(coded.bricks.size(), 0);
+  for (std::size_t i = 0; i < coded.children.size(); ++i)
+    for (std::size_t c : coded.children[i]) coded.parent[c] = i;
 }
 
 /// Step 4: keep the nodes not under an empty node; number them breadth-first; link first
@@ -609,18 +629,24 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
         {dictionary_->atoms.data(), static_cast<std::size_t>(dictionary_->atoms.size())},
         static_cast<std::uint32_t>(dictionary_->atom_count())};
   coding.measure_finest = options.measure_finest;
+  if (options.members == 0 || options.member >= options.members)
+    throw std::invalid_argument("FrameEncoder::code_planes: member " +
+                                std::to_string(options.member) + " of " +
+                                std::to_string(options.members));
+  if (keep_originals && options.members > 1)
+    throw std::invalid_argument("FrameEncoder::code_planes: a team keeps no originals");
   code_bricks(window, octree.cells, octree.level_begin, lo, hi, coding, st,
-              keep_originals ? &coded.originals : nullptr, options.progress);
+              keep_originals ? &coded.originals : nullptr, options);
   coded.window_bytes = window.peak_bytes();
 
-  coded.children = merge_subtrees(octree);  // 3.
-  coded.parent.assign(octree.cells.size(), 0);
-  for (std::size_t i = 0; i < coded.children.size(); ++i)
-    for (std::size_t c : coded.children[i]) coded.parent[c] = i;
   coded.t = t;
   coded.geometry = geometry;
   coded.bricks = std::move(octree.cells);
   coded.level_begin = std::move(octree.level_begin);
+  if (options.members == 1) {  // 3. (a team's writer: join_team_parts)
+    link_tree(coded);
+    st.finest_squared_error = finest_squared_error(coded.bricks);
+  }
   const bool variable = ksvd && settings_.fixed_sparsity == 0;
   for (std::size_t l = 0; l < geometry.size(); ++l)
     coded.level_tolerance.push_back(
@@ -664,6 +690,120 @@ std::vector<std::byte> FrameEncoder::write(const CodedFrame& coded, std::span<co
 std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
                                             FrameStats* stats) const {
   return write(code(t, frame), {}, stats);
+}
+
+namespace {
+
+/// A team part's bytes: little-endian fields one after another (every member runs the same build).
+template <typename T>
+void put(std::vector<std::byte>& out, const T& value) {
+  const std::size_t at = out.size();
+  out.resize(at + sizeof(T));
+  std::memcpy(out.data() + at, &value, sizeof(T));
+}
+
+template <typename T>
+T take(std::span<const std::byte> in, std::size_t& at, std::size_t member) {
+  if (in.size() - at < sizeof(T))
+    throw std::runtime_error("the part of frame coding from team member " + std::to_string(member) +
+                             " ends early, at byte " + std::to_string(at) + " of " +
+                             std::to_string(in.size()));
+  T value;
+  std::memcpy(&value, in.data() + at, sizeof(T));
+  at += sizeof(T);
+  return value;
+}
+
+/// The statistics a member's bricks add up to (code_bricks), in a fixed order: the parts of the
+/// coding time are summed over the team as they are over the processes of a job.
+std::array<double, 10> team_statistics(const FrameStats& st) {
+  return {st.seconds_pyramid,
+          st.seconds_bricks,
+          st.seconds_omp,
+          st.seconds_quantize,
+          static_cast<double>(st.blocks),
+          static_cast<double>(st.codes),
+          static_cast<double>(st.blocks_over_bound),
+          st.unquantized_squared_error,
+          st.quantized_squared_error,
+          st.finest_max_error};
+}
+
+}  // namespace
+
+std::vector<std::byte> team_part(const CodedFrame& coded, const PlaneCoding& options) {
+  std::vector<std::byte> out;
+  put(out, std::uint64_t{coded.t});
+  put(out, std::uint64_t{options.member});
+  put(out, std::uint64_t{coded.bricks.size()});
+  for (double v : team_statistics(coded.stats)) put(out, v);
+  for (std::size_t i = options.member; i < coded.bricks.size(); i += options.members) {
+    const CodedBrick& b = coded.bricks[i];
+    put(out, std::uint64_t{b.codes});
+    put(out, b.histogram);
+    put(out, static_cast<std::uint8_t>(b.constant));
+    put(out, b.value);
+    put(out, b.squared_error);
+    put(out, std::uint64_t{b.payload.size()});
+    const std::size_t at = out.size();
+    out.resize(at + b.payload.size());
+    if (!b.payload.empty()) std::memcpy(out.data() + at, b.payload.data(), b.payload.size());
+  }
+  return out;
+}
+
+void join_team_parts(CodedFrame& coded, std::span<const std::vector<std::byte>> parts,
+                     const PlaneCoding& options) {
+  if (parts.size() + 1 != options.members)
+    throw std::invalid_argument("join_team_parts: one part from each member but the writer");
+  for (std::size_t p = 0; p < parts.size(); ++p) {
+    const std::size_t member = p + 1;
+    const std::span<const std::byte> in = parts[p];
+    std::size_t at = 0;
+    const auto t = take<std::uint64_t>(in, at, member);
+    const auto from = take<std::uint64_t>(in, at, member);
+    const auto bricks = take<std::uint64_t>(in, at, member);
+    if (t != coded.t || from != member || bricks != coded.bricks.size())
+      throw std::runtime_error("team member " + std::to_string(member) + " sent frame " +
+                               std::to_string(t) + " as member " + std::to_string(from) + " with " +
+                               std::to_string(bricks) + " bricks; expected frame " +
+                               std::to_string(coded.t) + " as member " + std::to_string(member) +
+                               " with " + std::to_string(coded.bricks.size()));
+    std::array<double, 10> v{};
+    for (double& x : v) x = take<double>(in, at, member);
+    FrameStats& st = coded.stats;
+    st.seconds_pyramid += v[0];
+    st.seconds_bricks += v[1];
+    st.seconds_omp += v[2];
+    st.seconds_quantize += v[3];
+    st.blocks += static_cast<std::size_t>(v[4]);
+    st.codes += static_cast<std::size_t>(v[5]);
+    st.blocks_over_bound += static_cast<std::size_t>(v[6]);
+    st.unquantized_squared_error += v[7];
+    st.quantized_squared_error += v[8];
+    st.finest_max_error = std::max(st.finest_max_error, v[9]);
+    for (std::size_t i = member; i < coded.bricks.size(); i += options.members) {
+      CodedBrick& b = coded.bricks[i];
+      b.codes = static_cast<std::size_t>(take<std::uint64_t>(in, at, member));
+      b.histogram = take<std::uint64_t>(in, at, member);
+      b.constant = take<std::uint8_t>(in, at, member) != 0;
+      b.value = take<float>(in, at, member);
+      b.squared_error = take<double>(in, at, member);
+      const auto size = take<std::uint64_t>(in, at, member);
+      if (size == 0 || size > in.size() - at)
+        throw std::runtime_error("team member " + std::to_string(member) + " sent brick " +
+                                 std::to_string(i) + " of " + std::to_string(size) +
+                                 " bytes, with " + std::to_string(in.size() - at) + " left");
+      const auto first = in.begin() + static_cast<std::ptrdiff_t>(at);
+      b.payload.assign(first, first + static_cast<std::ptrdiff_t>(size));
+      at += static_cast<std::size_t>(size);
+    }
+    if (at != in.size())
+      throw std::runtime_error("team member " + std::to_string(member) + " sent " +
+                               std::to_string(in.size() - at) + " bytes more than its bricks");
+  }
+  link_tree(coded);
+  coded.stats.finest_squared_error = finest_squared_error(coded.bricks);
 }
 
 }  // namespace volreel::encoder

@@ -6,8 +6,12 @@
 namespace volreel::encoder {
 
 std::pair<std::size_t, std::size_t> Ranks::share(std::size_t n) const {
-  const auto r = static_cast<std::size_t>(rank()), p = static_cast<std::size_t>(size());
-  return {n * r / p, n * (r + 1) / p};
+  return share_of(n, static_cast<std::size_t>(rank()), static_cast<std::size_t>(size()));
+}
+
+std::pair<std::size_t, std::size_t> Ranks::share_of(std::size_t n, std::size_t part,
+                                                    std::size_t parts) {
+  return {n * part / parts, n * (part + 1) / parts};
 }
 
 double Ranks::broadcast_value(double value) const {

@@ -454,10 +454,12 @@ void combine_summaries(const Ranks& ranks, EncodeSummary& s) {
   std::vector<double> sums = additive_figures(s);
   ranks.sum(sums);
   set_additive_figures(s, sums);
-  std::array<double, 2> largest = {s.seconds, s.delivered.max_abs_error};
+  std::array<double, 3> largest = {s.seconds, s.delivered.max_abs_error,
+                                   static_cast<double>(s.team_size)};
   ranks.max(largest);
   s.seconds = largest[0];
   s.delivered.max_abs_error = largest[1];
+  s.team_size = static_cast<std::size_t>(largest[2]);
   std::array<double, 2> smallest = {s.delivered.worst_frame_psnr, s.delivered.tolerance_scale};
   ranks.min(smallest);
   // The worst frame: the smallest index among the ranks whose worst is the worst PSNR.
@@ -533,22 +535,43 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
         "holds its frames whole), not " +
         std::to_string(gap));
   const std::size_t stretches = frames == 1 ? 1 : (frames - 1 + gap - 1) / gap;
-  const auto [first_stretch, last_stretch] = ranks.share(stretches);
+  //    Teams: frames coded piecewise, fewer stretches than processes: consecutive processes form
+  //    a team per stretch share and code each of its frames together, brick by brick, the
+  //    team's first process (its writer) writing. Otherwise every process is a team of its own.
+  const auto process_count = static_cast<std::size_t>(ranks.size());
+  const std::size_t teams = job.piecewise ? std::min(process_count, stretches) : process_count;
+  std::size_t team_index = 0;
+  while (Ranks::share_of(process_count, team_index, teams).second <=
+         static_cast<std::size_t>(ranks.rank()))
+    ++team_index;
+  const std::unique_ptr<Ranks> team = ranks.split(static_cast<int>(team_index));
+  const bool writer = team->root();
+  const auto [first_stretch, last_stretch] = Ranks::share_of(stretches, team_index, teams);
   const std::size_t first_frame = first_stretch == 0 ? 0 : first_stretch * gap + 1;
   const std::size_t end_frame =
       last_stretch == first_stretch ? first_frame : std::min(last_stretch * gap, frames - 1) + 1;
   EncodeSummary summary;
   summary.frames = frames;
-  std::vector<char> done(frames, 1);  // 1: not to be written by this process
+  summary.team_size = static_cast<std::size_t>(team->size());
+  // 1: not to be written by this team (a team's other members code what its writer writes).
+  std::vector<char> done(frames, 1);
   std::fill(done.begin() + static_cast<std::ptrdiff_t>(first_frame),
             done.begin() + static_cast<std::ptrdiff_t>(end_frame), 0);
   if (resuming) {
-    const std::vector<char> there =
-        frames_already_written(out, coding.codec, m, first_frame, end_frame);
+    std::vector<char> there(frames, 0);
+    if (writer) there = frames_already_written(out, coding.codec, m, first_frame, end_frame);
+    if (team->size() > 1) {  // what the writer found, to every member
+      std::vector<std::byte> found(frames);
+      std::transform(there.begin(), there.end(), found.begin(),
+                     [](char c) { return std::byte(c != 0); });
+      team->broadcast(found);
+      std::transform(found.begin(), found.end(), there.begin(),
+                     [](std::byte b) { return static_cast<char>(b != std::byte{0}); });
+    }
     for (std::size_t t = first_frame; t < end_frame; ++t)
       if (there[t]) {
         done[t] = 1;
-        ++summary.skipped;
+        if (writer) ++summary.skipped;
       }
   }
 
@@ -582,12 +605,23 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     PlaneCoding options;
     options.measure_finest = true;
     options.progress = frame_progress;
+    options.members = static_cast<std::size_t>(team->size());
+    options.member = static_cast<std::size_t>(team->rank());
     encoder->code_planes(
         t, info.dims,
         [&](std::size_t z_begin, std::size_t z_end, std::span<float> planes) {
           series.read_slab(t, z_begin, z_end, planes);
         },
         step.coded, options);
+    if (options.members == 1) return;
+    // The writer completes the frame from the others' bricks; every member learns its error
+    // (the PSNR target's decision is the team's).
+    const std::vector<std::byte> part =
+        writer ? std::vector<std::byte>{} : team_part(step.coded, options);
+    const std::vector<std::vector<std::byte>> parts = team->gather_to_root(part);
+    if (writer) join_team_parts(step.coded, std::span(parts).subspan(1), options);
+    step.coded.stats.finest_squared_error =
+        team->broadcast_value(step.coded.stats.finest_squared_error);
   };
   const auto code_step = [&](std::size_t t, Step& step, double scale) {
     if (!job.piecewise) {
@@ -609,7 +643,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
               ? step.coded.stats.finest_squared_error
               : finest_level_error(encoder->write(step.coded), atoms, step.volume, t).first;
       if (frame_psnr(squared) >= job.psnr_target) break;
-      if (retry == 0 && !done[t]) ++summary.delivered.frames_coded_again;
+      if (retry == 0 && !done[t] && writer) ++summary.delivered.frames_coded_again;
       // 0.1 dB more than the shortfall, so that the next try lands above the target.
       scale *= std::pow(10.0, -(job.psnr_target - frame_psnr(squared) + 0.1) / 20);
       use_scale(scale);
@@ -621,7 +655,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   std::optional<Step> carried;  // the last frame of the previous stretch
   std::vector<Step> pool;       // the other frames of the previous stretch: their buffers reused
   std::size_t coded_frames = 0;
-  const std::size_t share_frames = end_frame - first_frame;
+  const std::size_t share_frames = writer ? end_frame - first_frame : 0;
   double reported = 0;  // this process's frames added to the job's progress count
   for (std::size_t k = first_stretch; k < last_stretch; ++k) {
     const std::size_t s = k * gap, e = std::min(s + gap, frames - 1);
@@ -647,6 +681,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
         pool.pop_back();
       }
       const auto report = [&](double frames_coded) {
+        if (!writer) return;  // a team's progress is its writer's
         char status[64];
         std::snprintf(
             status, sizeof status, "coding frame %zu, %.1f MVoxel/s", t,
@@ -679,6 +714,12 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       keep = choose_keyframes(coded, atoms, rule);
     }
     summary.seconds += seconds_since(start);
+    if (!writer) {  // the writer holds the frames whole
+      carried = std::move(steps.back());
+      steps.pop_back();
+      pool = std::move(steps);
+      continue;
+    }
     // Every frame of the stretch as bytes (the measurement below reads them from memory, since
     // the frames this process does not write may not be on disk yet); this process writes its own.
     std::vector<std::vector<std::byte>> bytes(steps.size());
@@ -753,7 +794,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
 
   // 4. The manifest, complete: rank 0 lists every frame from what each process wrote or kept.
   std::vector<std::uint64_t> records;  // frame, bytes, CRC of each frame of this share
-  for (std::size_t t = first_frame; t < end_frame; ++t) {
+  for (std::size_t t = writer ? first_frame : end_frame; t < end_frame; ++t) {
     if (!m.frames[t]) throw std::logic_error("a frame of this process's share has no record");
     records.insert(records.end(), {t, m.frames[t]->bytes, m.frames[t]->crc32c});
   }

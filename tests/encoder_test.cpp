@@ -787,6 +787,51 @@ TEST(Encoder, APiecewiseFrameMeasuresItsFinestLevelAsDecoded) {
   }
 }
 
+TEST(Encoder, ATeamCodesAFrameBrickByBrickIntoTheSameFrameFile) {
+  const Volume v = analytic_volume(datasets::AnalyticField::blobs, {70, 40, 110});
+  const auto d = random_dictionary(128, 9);
+  const std::size_t plane = v.dims.plane();
+  const auto read = [&](std::size_t z0, std::size_t, std::span<float> out) {
+    std::copy_n(v.data.data() + z0 * plane, out.size(), out.data());
+  };
+  const encoder::FrameEncoder enc(&d, ksvd_settings(0.01, v));
+  encoder::PlaneCoding alone;
+  alone.measure_finest = true;
+  encoder::CodedFrame whole;
+  enc.code_planes(5, v.dims, read, whole, alone);
+  const auto expected = enc.write(whole);
+  for (std::size_t members : {2u, 3u}) {
+    std::vector<encoder::CodedFrame> coded(members);
+    std::vector<std::vector<std::byte>> parts;
+    encoder::PlaneCoding options = alone;
+    options.members = members;
+    for (std::size_t m = 0; m < members; ++m) {
+      options.member = m;
+      enc.code_planes(5, v.dims, read, coded[m], options);
+      if (m > 0) parts.push_back(encoder::team_part(coded[m], options));
+    }
+    options.member = 0;
+    // A member codes only its share.
+    std::size_t empty = 0;
+    for (const auto& b : coded[1].bricks) empty += b.payload.empty();
+    EXPECT_GE(empty, coded[1].bricks.size() / 2) << members << " members";
+    // A damaged part is refused, saying what it holds.
+    encoder::CodedFrame writer = coded[0];
+    auto damaged = parts;
+    damaged.back().resize(damaged.back().size() - 3);
+    EXPECT_THROW(encoder::join_team_parts(writer, damaged, options), std::runtime_error);
+    damaged = parts;
+    damaged.front()[8] = std::byte{7};  // the member's number
+    EXPECT_THROW(encoder::join_team_parts(writer, damaged, options), std::runtime_error);
+    encoder::join_team_parts(coded[0], parts, options);
+    EXPECT_EQ(enc.write(coded[0]), expected) << members << " members";
+    EXPECT_EQ(coded[0].stats.finest_squared_error, whole.stats.finest_squared_error);
+    EXPECT_EQ(coded[0].stats.finest_max_error, whole.stats.finest_max_error);
+    EXPECT_EQ(coded[0].stats.codes, whole.stats.codes);
+    EXPECT_EQ(coded[0].stats.blocks, whole.stats.blocks);
+  }
+}
+
 TEST(Encoder, ZfpBricksMeetTheirAccuracy) {
   const Volume v = analytic_volume(datasets::AnalyticField::rotating, {40, 40, 40});
   encoder::CodingSettings s;
@@ -1257,6 +1302,9 @@ class PretendRank final : public encoder::Ranks {
   void barrier() const override {}
   void add_progress(double) const override {}
   double progress_count() const override { return 0; }
+  std::unique_ptr<encoder::Ranks> split(int) const override {
+    return std::make_unique<PretendRank>(0, 1);
+  }
 
  private:
   int rank_, size_;

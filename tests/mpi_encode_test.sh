@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # mpi_encode_test.sh: `mpirun -n N volreel encode` writes the very container the serial encoder
-# writes (every file byte for byte) for 2 and 4 ranks, with keyframe gaps, a PSNR target, zfp and
-# training; a rank killed mid-encode fails the job with a message, and --resume under mpirun
-# completes the same container. Usage: mpi_encode_test.sh PATH/TO/volreel PATH/TO/mpiexec
+# writes (every file byte for byte) for 2 and 4 ranks, with keyframe gaps, a PSNR target, zfp,
+# training and frames shared by teams of ranks; a rank killed mid-encode fails the job with a
+# message, and --resume under mpirun completes the same container. Usage: mpi_encode_test.sh PATH/TO/volreel PATH/TO/mpiexec
 set -euo pipefail
 volreel=$1
 mpiexec=$2
@@ -54,6 +54,31 @@ mpi 2 "$volreel" encode "$work/tall" --out "$work/tall2.vreel" --dictionary dct 
   > "$work/tall2.txt" 2>&1 || fail "mpirun piecewise: $(tail -5 "$work/tall2.txt")"
 grep -q "coded piecewise" "$work/tall2.txt" || fail "-n 2 --memory 1M did not code piecewise"
 same "$work/tall1.vreel" "$work/tall2.vreel" "piecewise under -n 2 differs"
+# Fewer keyframe stretches than ranks: a team of ranks codes each frame together, brick by brick
+# (one frame, -n 2 and -n 3; three frames, two stretches, -n 4: two teams of 2), with a PSNR
+# target whose retries the team decides on together; a team resumes what a team wrote.
+"$volreel" gen analytic --field blobs --dims 40x36x120 --frames 1 --out "$work/one" > /dev/null 2>&1
+"$volreel" encode "$work/one" --out "$work/one1.vreel" --dictionary dct --memory 1M > /dev/null 2>&1
+for n in 2 3; do
+  mpi "$n" "$volreel" encode "$work/one" --out "$work/one$n.vreel" --dictionary dct --memory 1M \
+    > "$work/one$n.txt" 2>&1 || fail "mpirun -n $n, one frame: $(tail -5 "$work/one$n.txt")"
+  grep -q "each frame coded by $n processes together" "$work/one$n.txt" ||
+    fail "-n $n did not share the frame: $(grep wrote "$work/one$n.txt")"
+  same "$work/one1.vreel" "$work/one$n.vreel" "one frame shared by $n ranks differs"
+done
+"$volreel" gen analytic --field blobs --dims 40x36x120 --frames 3 --out "$work/three" > /dev/null 2>&1
+targs=(encode "$work/three" --dictionary dct --memory 1M --psnr 62)
+"$volreel" "${targs[@]}" --out "$work/three1.vreel" > "$work/three1.txt" 2>&1
+grep -q "coded again" "$work/three1.txt" || fail "the shared PSNR case should code frames again"
+mpi 4 "$volreel" "${targs[@]}" --out "$work/three4.vreel" > "$work/three4.txt" 2>&1 ||
+  fail "mpirun -n 4, teams: $(tail -5 "$work/three4.txt")"
+grep -q "each frame coded by 2 processes together" "$work/three4.txt" || fail "-n 4 formed no teams of 2"
+same "$work/three1.vreel" "$work/three4.vreel" "teams of 2 with a PSNR target differ"
+rm "$work/three4.vreel/frames/000001.vrf"
+mpi 4 "$volreel" "${targs[@]}" --out "$work/three4.vreel" --resume > "$work/three4r.txt" 2>&1 ||
+  fail "--resume with teams: $(tail -5 "$work/three4r.txt")"
+grep -q "(1 encoded, 2 already there)" "$work/three4r.txt" || fail "teams did not resume the one frame missing"
+same "$work/three1.vreel" "$work/three4.vreel" "teams' resumed container differs"
 
 # A PSNR target (frames coded again at smaller tolerances) and zfp.
 "$volreel" encode "$work/s" --out "$work/psnr.vreel" --dictionary dct --psnr 62 \

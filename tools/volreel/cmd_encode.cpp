@@ -133,7 +133,11 @@ void run_encode(const EncodeOptions& o) {
   }
   std::printf("volreel encode: %s, %s x %zu frames, variable '%s'\n", info.source.c_str(),
               to_string(info.dims).c_str(), frames, info.variable.c_str());
-  if (ranks) std::printf("%d MPI processes, each coding a share of the frames\n", ranks->size());
+  if (ranks)
+    std::printf(
+        "%d MPI processes, each coding a share of the frames (frames coded piecewise are shared "
+        "brick by brick when there are fewer keyframe stretches than processes)\n",
+        ranks->size());
   encoder::EncodeRequest r = encode_request(o, frames);
   r.ranks = ranks;
   encoder::EncodeEvents events;
@@ -184,7 +188,9 @@ void add_encode_command(CLI::App& app) {
       "its squared error by at least 0.25*216*eps^2, the rate-distortion optimal\nallocation; or, "
       "--rate-rule tolerance, atoms until its RMS error <= eps; fixed rate: S atoms) and\n"
       "quantized, or each brick coded by zfp (--codec zfp).\nUnder mpirun -n N the ranks share "
-      "the frames and write the same container as one process.");
+      "the frames and write the same container as one process;\nframes coded piecewise "
+      "(--memory) are shared brick by brick when there are fewer keyframe stretches\nthan "
+      "ranks.");
   cmd->add_option(
          "SERIES", o->series,
          "Raw series directory, HDF5 file, raw file or quoted pattern of raw files (see below)")

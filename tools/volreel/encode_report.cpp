@@ -142,11 +142,14 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
   print_breakdown(s);
   std::printf(
       "wrote %s: %zu frames (%zu encoded, %zu already there), %ju bytes, %.4f bps; encoding %.1f "
-      "s, %.2f MVoxel/s on %s%d threads\n",
+      "s, %.2f MVoxel/s on %s%d threads%s\n",
       out.c_str(), s.frames, s.encoded, s.skipped, static_cast<std::uintmax_t>(s.container_bytes),
       s.bps, s.seconds, s.mvoxels_per_s,
       s.processes > 1 ? (std::to_string(s.processes) + " processes x ").c_str() : "",
-      omp_get_max_threads());
+      omp_get_max_threads(),
+      s.team_size > 1
+          ? (", each frame coded by " + std::to_string(s.team_size) + " processes together").c_str()
+          : "");
   const std::size_t node_steps = s.bricks_stored + s.nodes_interpolated;
   if (s.nodes_interpolated > 0)
     std::printf(

@@ -40,22 +40,31 @@ int to_count(std::size_t n) {
   return static_cast<int>(n);
 }
 
-class WorldRanks final : public encoder::Ranks {
+/// The processes of one communicator: MPI_COMM_WORLD, which holds the job's progress count, or a
+/// team split from it (`job`: the world's ranks, where its progress goes).
+class CommRanks final : public encoder::Ranks {
  public:
-  WorldRanks() {
-    MPI_Comm_rank(MPI_COMM_WORLD, &rank_);
-    MPI_Comm_size(MPI_COMM_WORLD, &size_);
+  CommRanks() : comm_(MPI_COMM_WORLD) {
+    MPI_Comm_rank(comm_, &rank_);
+    MPI_Comm_size(comm_, &size_);
     // The job's progress count: one double in rank 0's window, which every rank adds to.
     double* count = nullptr;
-    check(MPI_Win_allocate(rank_ == 0 ? sizeof(double) : 0, sizeof(double), MPI_INFO_NULL,
-                           MPI_COMM_WORLD, &count, &progress_),
+    check(MPI_Win_allocate(rank_ == 0 ? sizeof(double) : 0, sizeof(double), MPI_INFO_NULL, comm_,
+                           &count, &progress_),
           "MPI_Win_allocate");
     if (rank_ == 0) *count = 0;
-    check(MPI_Barrier(MPI_COMM_WORLD), "MPI_Barrier");
+    check(MPI_Barrier(comm_), "MPI_Barrier");
   }
-  ~WorldRanks() override { MPI_Win_free(&progress_); }
-  WorldRanks(const WorldRanks&) = delete;
-  WorldRanks& operator=(const WorldRanks&) = delete;
+  CommRanks(MPI_Comm team, const CommRanks* job) : comm_(team), job_(job) {
+    MPI_Comm_rank(comm_, &rank_);
+    MPI_Comm_size(comm_, &size_);
+  }
+  ~CommRanks() override {
+    if (progress_ != MPI_WIN_NULL) MPI_Win_free(&progress_);
+    if (comm_ != MPI_COMM_WORLD) MPI_Comm_free(&comm_);
+  }
+  CommRanks(const CommRanks&) = delete;
+  CommRanks& operator=(const CommRanks&) = delete;
   int rank() const override { return rank_; }
   int size() const override { return size_; }
   void sum(std::span<double> v) const override { reduce(v, MPI_SUM); }
@@ -63,16 +72,14 @@ class WorldRanks final : public encoder::Ranks {
   void max(std::span<double> v) const override { reduce(v, MPI_MAX); }
   void broadcast(std::vector<std::byte>& bytes) const override {
     unsigned long long n = bytes.size();
-    check(MPI_Bcast(&n, 1, MPI_UNSIGNED_LONG_LONG, 0, MPI_COMM_WORLD), "MPI_Bcast");
+    check(MPI_Bcast(&n, 1, MPI_UNSIGNED_LONG_LONG, 0, comm_), "MPI_Bcast");
     bytes.resize(static_cast<std::size_t>(n));
-    check(MPI_Bcast(bytes.data(), to_count(bytes.size()), MPI_BYTE, 0, MPI_COMM_WORLD),
-          "MPI_Bcast");
+    check(MPI_Bcast(bytes.data(), to_count(bytes.size()), MPI_BYTE, 0, comm_), "MPI_Bcast");
   }
   std::vector<std::uint64_t> gather(std::span<const std::uint64_t> values) const override {
     const int mine = to_count(values.size());
     std::vector<int> counts(static_cast<std::size_t>(size_)), offsets(counts.size());
-    check(MPI_Allgather(&mine, 1, MPI_INT, counts.data(), 1, MPI_INT, MPI_COMM_WORLD),
-          "MPI_Allgather");
+    check(MPI_Allgather(&mine, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_), "MPI_Allgather");
     std::size_t total = 0;
     for (std::size_t r = 0; r < counts.size(); ++r) {
       offsets[r] = to_count(total);
@@ -81,7 +88,7 @@ class WorldRanks final : public encoder::Ranks {
     std::vector<std::uint64_t> all(total);
     static_assert(sizeof(unsigned long long) == sizeof(std::uint64_t));
     check(MPI_Allgatherv(values.data(), mine, MPI_UNSIGNED_LONG_LONG, all.data(), counts.data(),
-                         offsets.data(), MPI_UNSIGNED_LONG_LONG, MPI_COMM_WORLD),
+                         offsets.data(), MPI_UNSIGNED_LONG_LONG, comm_),
           "MPI_Allgatherv");
     return all;
   }
@@ -90,7 +97,7 @@ class WorldRanks final : public encoder::Ranks {
     const unsigned long long mine = bytes.size();
     std::vector<unsigned long long> sizes(static_cast<std::size_t>(size_));
     check(MPI_Gather(&mine, 1, MPI_UNSIGNED_LONG_LONG, sizes.data(), 1, MPI_UNSIGNED_LONG_LONG, 0,
-                     MPI_COMM_WORLD),
+                     comm_),
           "MPI_Gather");
     std::vector<int> counts(sizes.size()), offsets(sizes.size());
     std::size_t total = 0;
@@ -101,7 +108,7 @@ class WorldRanks final : public encoder::Ranks {
     }
     std::vector<std::byte> all(total);
     check(MPI_Gatherv(bytes.data(), to_count(bytes.size()), MPI_BYTE, all.data(), counts.data(),
-                      offsets.data(), MPI_BYTE, 0, MPI_COMM_WORLD),
+                      offsets.data(), MPI_BYTE, 0, comm_),
           "MPI_Gatherv");
     std::vector<std::vector<std::byte>> parts;
     for (std::size_t r = 0; r < sizes.size() && rank_ == 0; ++r) {
@@ -110,14 +117,16 @@ class WorldRanks final : public encoder::Ranks {
     }
     return parts;
   }
-  void barrier() const override { check(MPI_Barrier(MPI_COMM_WORLD), "MPI_Barrier"); }
+  void barrier() const override { check(MPI_Barrier(comm_), "MPI_Barrier"); }
   void add_progress(double amount) const override {
+    if (job_) return job_->add_progress(amount);
     check(MPI_Win_lock(MPI_LOCK_SHARED, 0, 0, progress_), "MPI_Win_lock");
     check(MPI_Accumulate(&amount, 1, MPI_DOUBLE, 0, 0, 1, MPI_DOUBLE, MPI_SUM, progress_),
           "MPI_Accumulate");
     check(MPI_Win_unlock(0, progress_), "MPI_Win_unlock");
   }
   double progress_count() const override {
+    if (job_) return job_->progress_count();
     double none = 0, value = 0;
     check(MPI_Win_lock(MPI_LOCK_SHARED, 0, 0, progress_), "MPI_Win_lock");
     check(MPI_Fetch_and_op(&none, &value, MPI_DOUBLE, 0, 0, MPI_NO_OP, progress_),
@@ -125,18 +134,25 @@ class WorldRanks final : public encoder::Ranks {
     check(MPI_Win_unlock(0, progress_), "MPI_Win_unlock");
     return value;
   }
+  std::unique_ptr<encoder::Ranks> split(int color) const override {
+    MPI_Comm team = MPI_COMM_NULL;
+    check(MPI_Comm_split(comm_, color, rank_, &team), "MPI_Comm_split");
+    return std::make_unique<CommRanks>(team, job_ ? job_ : this);
+  }
 
  private:
   void reduce(std::span<double> v, MPI_Op op) const {
-    check(MPI_Allreduce(MPI_IN_PLACE, v.data(), to_count(v.size()), MPI_DOUBLE, op, MPI_COMM_WORLD),
+    check(MPI_Allreduce(MPI_IN_PLACE, v.data(), to_count(v.size()), MPI_DOUBLE, op, comm_),
           "MPI_Allreduce");
   }
+  MPI_Comm comm_;
+  const CommRanks* job_ = nullptr;
   int rank_ = 0, size_ = 1;
   MPI_Win progress_ = MPI_WIN_NULL;
 };
 
 bool initialised_here = false;
-std::unique_ptr<WorldRanks> world;
+std::unique_ptr<CommRanks> world;
 
 }  // namespace
 
@@ -148,7 +164,7 @@ MpiSession::MpiSession(int& argc, char**& argv) {
   initialised_here = true;
   // Errors come back as codes (check() turns them into exceptions) rather than ending the job.
   MPI_Comm_set_errhandler(MPI_COMM_WORLD, MPI_ERRORS_RETURN);
-  world = std::make_unique<WorldRanks>();
+  world = std::make_unique<CommRanks>();
 }
 
 MpiSession::~MpiSession() {

@@ -83,6 +83,9 @@ struct CodedBrick {
   bool constant = false;           ///< every stored voxel one value
   bool subtree_constant = false;   ///< the brick and every descendant that value (an empty node)
   float value = 0;                 ///< the constant (constant bricks)
+  /// PlaneCoding::measure_finest, finest bricks: the squared error over the voxels that are its
+  /// own (FrameStats::finest_squared_error sums them in brick order, the same for any threads).
+  double squared_error = 0;
 };
 
 /// A frame coded brick by brick, before its frame file is written (FrameEncoder::code).
@@ -114,7 +117,22 @@ struct PlaneCoding {
   /// a reader decodes it when every node keeps its brick (no keyframe gaps), without a second pass.
   bool measure_finest = false;
   std::function<void(double)> progress;  ///< the fraction of the finest rows of bricks done
+  /// A team of `members` processes codes the frame together (spatial decomposition): this one,
+  /// `member`, codes the bricks whose index in CodedFrame::bricks is member modulo members and
+  /// leaves the others' payloads empty. The team's writer completes the frame with the others'
+  /// parts (team_part, join_team_parts).
+  std::size_t members = 1, member = 0;
 };
+
+/// What a team member coded of a frame (PlaneCoding::members > 1): its bricks and its share of the
+/// coding's statistics, as bytes for the team's writer.
+std::vector<std::byte> team_part(const CodedFrame& coded, const PlaneCoding& options);
+/// The writer's frame, coded as member 0 of PlaneCoding::members, completed from the other
+/// members' parts (in member order): their bricks and statistics added, then the tree's
+/// histograms and empty subtrees merged bottom-up as code_planes does for a frame coded alone.
+/// Throws std::runtime_error when a part does not fit the frame.
+void join_team_parts(CodedFrame& coded, std::span<const std::vector<std::byte>> parts,
+                     const PlaneCoding& options);
 
 /// Encodes frames with fixed settings and dictionary; safe to use from one thread at a time
 /// (it parallelizes inside with OpenMP).

@@ -5,6 +5,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <utility>
 #include <vector>
@@ -37,11 +38,17 @@ class Ranks {
   /// A single process keeps no count (it reports its own work).
   virtual void add_progress(double amount) const = 0;
   virtual double progress_count() const = 0;
+  /// The processes that called it with the same `color` (collective over every process), ranked
+  /// as here. A team keeps no progress count: add_progress and progress_count go to the job's.
+  virtual std::unique_ptr<Ranks> split(int color) const = 0;
 
   bool root() const { return rank() == 0; }
   /// The part [first, last) of n items (frames, stretches) that this process takes: contiguous,
   /// sizes differing by at most one.
   std::pair<std::size_t, std::size_t> share(std::size_t n) const;
+  /// Part `part` of `parts` of n items: [n·part/parts, n·(part+1)/parts).
+  static std::pair<std::size_t, std::size_t> share_of(std::size_t n, std::size_t part,
+                                                      std::size_t parts);
   /// A double from rank 0 to every process.
   double broadcast_value(double value) const;
 };
@@ -65,6 +72,7 @@ class SingleProcess final : public Ranks {
   void barrier() const override {}
   void add_progress(double) const override {}
   double progress_count() const override { return 0; }
+  std::unique_ptr<Ranks> split(int) const override { return std::make_unique<SingleProcess>(); }
 };
 
 /// The SingleProcess every encode uses unless given other Ranks.

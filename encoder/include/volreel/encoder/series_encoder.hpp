@@ -53,7 +53,10 @@ struct EncodeJob {
   double psnr_target = 0;
   /// The processes that encode together (MPI ranks); null: this process alone. Each codes a
   /// contiguous share of the keyframe stretches and writes their frames; rank 0 prepares the
-  /// container and writes the manifest. The container is the same for any number of processes.
+  /// container and writes the manifest. When frames are coded piecewise and there are fewer
+  /// stretches than processes, the processes form as many teams as there are stretches, and a
+  /// team codes each frame of its share together, brick by brick (spatial decomposition), its
+  /// first process writing. The container is the same for any number of processes.
   const Ranks* ranks = nullptr;
 };
 
@@ -85,6 +88,7 @@ struct EncodeSummary {
   double bps = 0;
   double seconds = 0;          ///< encoding only (skipped frames excluded); the slowest process's
   std::size_t processes = 1;   ///< that coded frames together (EncodeJob::ranks)
+  std::size_t team_size = 1;   ///< the most processes that coded one frame together
   double process_seconds = 0;  ///< seconds summed over the processes (the parts below are too)
   double mvoxels_per_s = 0;
   double unquantized_squared_error = 0, quantized_squared_error = 0;  ///< FrameStats', summed
