@@ -111,14 +111,22 @@ void StreamScheduler::fill_heap(const player::OrbitCamera& camera, double playhe
         heap_.push({priority, n.key.level, keyframe_id(v.node, keyframes[due_first + j].t), true});
       }
     }
+    bool positioned = false;  // position_ filled for this node (on its first step that enters)
     for (const auto& [part, t] : by_time_) {
       const double priority = combined_priority(sse_p, temporal_[t], random_table_[t], ps);
       if (heap_.full() && priority < heap_.min().priority) break;
-      const auto it =
-          std::lower_bound(keyframes.begin(), keyframes.end(), t,
-                           [](const KeyframeNode& k, std::uint32_t value) { return k.t < value; });
-      if (it == keyframes.end() || it->t != t) continue;
-      const auto i = static_cast<std::size_t>(it - keyframes.begin());
+      if (!positioned) {
+        position_.assign(index_.held_end() - index_.held_begin(), -1);
+        for (std::size_t i = 0; i < keyframes.size(); ++i) {
+          const std::uint32_t kt = keyframes[i].t;
+          if (kt >= index_.held_begin() && kt < index_.held_end())
+            position_[kt - index_.held_begin()] = static_cast<std::int32_t>(i);
+        }
+        positioned = true;
+      }
+      const std::int32_t at = position_[t - index_.held_begin()];
+      if (at < 0) continue;
+      const auto i = static_cast<std::size_t>(at);
       if (i >= due_first && i - due_first < due_.size() && due_[i - due_first] >= 0) continue;
       heap_.push({priority, n.key.level, keyframe_id(v.node, t), false});
     }
@@ -248,7 +256,8 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     }
     resident_.assign(index_, resident);
     SvoStats svo_stats;
-    SvoArrays svo = build_svo(index_, view_, resident_, playhead, settings_.selection, &svo_stats);
+    SvoArrays svo = build_svo(index_, view_, resident_, playhead, settings_.selection, &svo_stats,
+                              &stored_times_);
     for (const std::uint32_t slot : svo_stats.used_slots) atlas_.mark_used(slot, gpu_frame_number);
     out.svo_nodes = std::move(svo.nodes);
     out.svo_leaves = std::move(svo.leaves);

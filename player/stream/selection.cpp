@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 namespace volreel::stream {
 
@@ -63,10 +64,9 @@ KeyframePick nearest_on_side(const SpatialIndex& index, std::span<const Resident
 }
 
 /// The time step on `side` of p nearest it at which `node` has a keyframe node in the index (with
-/// constant_only, a constant subtree's), not beyond `limit` (a nearer one found elsewhere); -1
-/// when there is none.
+/// constant_only, a constant subtree's); -1 when there is none.
 double stored_time(const SpatialIndex& index, std::uint32_t node, double p, Side side,
-                   bool constant_only, double limit) {
+                   bool constant_only) {
   const KeyframeList& list = index.keyframes(node);
   // First keyframe node after p.
   const auto after = std::upper_bound(
@@ -75,7 +75,6 @@ double stored_time(const SpatialIndex& index, std::uint32_t node, double p, Side
   if (side == Side::before) {
     for (auto it = after; it != list.begin();) {
       --it;
-      if (limit >= 0 && static_cast<double>(it->t) < limit) break;
       if (!constant_only || it->subtree_constant) return static_cast<double>(it->t);
     }
   } else {
@@ -83,7 +82,6 @@ double stored_time(const SpatialIndex& index, std::uint32_t node, double p, Side
     auto it = after;
     while (it != list.begin() && static_cast<double>(std::prev(it)->t) == p) --it;
     for (; it != list.end(); ++it) {
-      if (limit >= 0 && static_cast<double>(it->t) > limit) break;
       if (!constant_only || it->subtree_constant) return static_cast<double>(it->t);
     }
   }
@@ -92,10 +90,12 @@ double stored_time(const SpatialIndex& index, std::uint32_t node, double p, Side
 
 /// The time step on `side` of p nearest it at which the node's state is stored: its own keyframe
 /// nodes and the constant subtrees of its ancestors (exact data for it); -1 when none is.
-double stored_state_time(const SpatialIndex& index, std::uint32_t node, double p, Side side) {
-  double best = stored_time(index, node, p, side, false, -1);
+double stored_state_time(const SpatialIndex& index, std::uint32_t node, Side side,
+                         StoredTimes& stored) {
+  const bool after = side == Side::after;
+  double best = stored.nearest(node, after, false);
   for (std::uint32_t a = index.node(node).parent; a != no_node; a = index.node(a).parent) {
-    const double t = stored_time(index, a, p, side, true, best);
+    const double t = stored.nearest(a, after, true);
     if (t >= 0 && (best < 0 || (side == Side::before ? t > best : t < best))) best = t;
   }
   return best;
@@ -103,14 +103,14 @@ double stored_state_time(const SpatialIndex& index, std::uint32_t node, double p
 
 KeyframePick pick_side(const SpatialIndex& index, std::uint32_t node, double p,
                        const ResidentKeyframes& resident, Side side,
-                       const SelectionSettings& settings) {
+                       const SelectionSettings& settings, StoredTimes& stored) {
   KeyframePick best;
   best.score = std::numeric_limits<double>::infinity();
   // The nearest time step on this side, and the step at which this node's state is stored
   // nearest it: a node without a brick at every step is drawn between its stored states, so its
   // nearest stored state counts as if it were at the nearest step (distance from p to that step).
   const double step = side == Side::before ? std::floor(p) : std::ceil(p);
-  const double own_reference = stored_state_time(index, node, p, side);
+  const double own_reference = stored_state_time(index, node, side, stored);
   std::uint32_t up = 0;
   for (std::uint32_t n = node; n != no_node; n = index.node(n).parent, ++up) {
     KeyframePick c = nearest_on_side(index, resident.of_node(n), p, side, settings);
@@ -120,7 +120,8 @@ KeyframePick pick_side(const SpatialIndex& index, std::uint32_t node, double p,
     c.exact = up == 0 || k.subtree_constant;
     const double t = static_cast<double>(k.t);
     if (side == Side::before ? t <= p : t >= p) {
-      const double reference = c.exact ? own_reference : stored_time(index, n, p, side, false, -1);
+      const double reference =
+          c.exact ? own_reference : stored.nearest(n, side == Side::after, false);
       if (reference >= 0) c.score = std::abs(reference - t) + std::abs(step - p);
     }
     if (!c.exact) c.score *= std::exp(settings.ancestor_handicap * static_cast<double>(up));
@@ -135,12 +136,41 @@ KeyframePick pick_side(const SpatialIndex& index, std::uint32_t node, double p,
 
 }  // namespace
 
+void StoredTimes::start(const SpatialIndex& index, double playhead, bool remember) {
+  index_ = &index;
+  playhead_ = playhead;
+  const std::size_t entries = remember ? 4 * index.node_count() : 0;
+  if (stamp_.size() != entries || generation_ == std::numeric_limits<std::uint32_t>::max()) {
+    stamp_.assign(entries, 0);
+    values_.assign(entries, -1);
+    generation_ = 0;
+  }
+  ++generation_;
+}
+
+double StoredTimes::nearest(std::uint32_t node, bool after, bool constant_only) {
+  const Side side = after ? Side::after : Side::before;
+  if (stamp_.empty()) return stored_time(*index_, node, playhead_, side, constant_only);
+  const std::size_t i = 4 * std::size_t{node} + 2 * std::size_t{after} + std::size_t{constant_only};
+  if (i >= stamp_.size()) throw std::logic_error("StoredTimes: a node outside the index started");
+  if (stamp_[i] != generation_) {
+    values_[i] = stored_time(*index_, node, playhead_, side, constant_only);
+    stamp_[i] = generation_;
+  }
+  return values_[i];
+}
+
 KeyframePair select_keyframe_pair(const SpatialIndex& index, std::uint32_t node, double playhead,
                                   const ResidentKeyframes& resident,
-                                  const SelectionSettings& settings) {
+                                  const SelectionSettings& settings, StoredTimes* stored) {
+  StoredTimes alone;
+  if (!stored) {
+    alone.start(index, playhead, false);
+    stored = &alone;
+  }
   KeyframePair pair;
-  pair.a = pick_side(index, node, playhead, resident, Side::before, settings);
-  pair.b = pick_side(index, node, playhead, resident, Side::after, settings);
+  pair.a = pick_side(index, node, playhead, resident, Side::before, settings, *stored);
+  pair.b = pick_side(index, node, playhead, resident, Side::after, settings, *stored);
   if (pair.valid() && pair.a.t != pair.b.t) {
     const double f = (playhead - static_cast<double>(pair.a.t)) /
                      (static_cast<double>(pair.b.t) - static_cast<double>(pair.a.t));

@@ -17,13 +17,16 @@ struct ChildResult {
 class Builder {
  public:
   Builder(const SpatialIndex& index, const ViewTraversal& view, const ResidentKeyframes& resident,
-          double playhead, const SelectionSettings& settings, SvoStats& stats)
+          double playhead, const SelectionSettings& settings, SvoStats& stats, StoredTimes& stored)
       : index_(index),
         view_(view),
         resident_(resident),
         playhead_(playhead),
         settings_(settings),
-        stats_(stats) {}
+        stats_(stats),
+        stored_(stored) {
+    stored_.start(index_, playhead_);
+  }
 
   SvoArrays run() {
     if (index_.node_count() == 0 || !view_.visited(0)) {
@@ -60,6 +63,7 @@ class Builder {
   double playhead_;
   const SelectionSettings& settings_;
   SvoStats& stats_;
+  StoredTimes& stored_;
   SvoArrays out_;
   std::vector<std::uint32_t> used_;
 
@@ -91,7 +95,8 @@ class Builder {
 
   ChildResult visit(std::uint32_t id, vr_uint parent_record) {
     const ViewTraversal::Visit& v = view_.visit(id);
-    const KeyframePair pair = select_keyframe_pair(index_, id, playhead_, resident_, settings_);
+    const KeyframePair pair =
+        select_keyframe_pair(index_, id, playhead_, resident_, settings_, &stored_);
     if (!v.refine) {
       ++stats_.target_nodes;
       if (pair.at_full_detail()) ++stats_.at_target_nodes;
@@ -138,11 +143,12 @@ class Builder {
 
 SvoArrays build_svo(const SpatialIndex& index, const ViewTraversal& view,
                     const ResidentKeyframes& resident, double playhead,
-                    const SelectionSettings& settings, SvoStats* stats) {
+                    const SelectionSettings& settings, SvoStats* stats, StoredTimes* stored) {
   SvoStats local;
   SvoStats& s = stats ? *stats : local;
   s = SvoStats{};
-  return Builder(index, view, resident, playhead, settings, s).run();
+  StoredTimes fresh;
+  return Builder(index, view, resident, playhead, settings, s, stored ? *stored : fresh).run();
 }
 
 std::vector<std::string> validate_svo(std::span<const std::uint32_t> nodes,

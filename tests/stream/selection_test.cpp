@@ -129,6 +129,23 @@ TEST(StreamSelectionConstant, AConstantAncestorIsExactData) {
   EXPECT_DOUBLE_EQ(pair.b.score, 0.25);
   EXPECT_TRUE(pair.at_full_detail());
   EXPECT_FLOAT_EQ(pair.factor, 0.75f);
+  // Stored times remembered over a pass (and started again for each playhead) pick the same.
+  StoredTimes stored;
+  for (const double at : {0.0, 0.75, 1.0, 1.5, 2.0, 0.25}) {
+    stored.start(index, at);
+    for (const std::uint32_t n : {std::uint32_t{0}, child, index.find({1, 0, 0, 0})}) {
+      const KeyframePair alone = select_keyframe_pair(index, n, at, r);
+      const KeyframePair shared = select_keyframe_pair(index, n, at, r, {}, &stored);
+      EXPECT_EQ(shared.a.keyframe, alone.a.keyframe) << "node " << n << " at " << at;
+      EXPECT_EQ(shared.b.keyframe, alone.b.keyframe) << "node " << n << " at " << at;
+      EXPECT_EQ(shared.a.score, alone.a.score) << "node " << n << " at " << at;
+      EXPECT_EQ(shared.b.score, alone.b.score) << "node " << n << " at " << at;
+      EXPECT_EQ(shared.factor, alone.factor) << "node " << n << " at " << at;
+    }
+  }
+  EXPECT_EQ(stored.nearest(child, true, false), 2.0);   // after 0.25: the child's own at 2
+  EXPECT_EQ(stored.nearest(0, true, true), 1.0);        // the constant root at 1
+  EXPECT_EQ(stored.nearest(child, false, true), -1.0);  // the child is never constant
 }
 
 TEST_F(StreamSelection, SvoOfPartlyResidentData) {

@@ -157,6 +157,9 @@ class StreamScheduler {
   std::vector<double> random_table_, temporal_, due_;
   std::vector<std::pair<double, std::uint32_t>> by_time_;  ///< held steps by priority part
   std::vector<std::pair<double, std::size_t>> due_order_;  ///< a node's due ones, soonest first
+  /// A node's keyframe node at held step held_begin + i: its index in the node's list, or −1.
+  std::vector<std::int32_t> position_;
+  StoredTimes stored_times_;       ///< the selection's, kept from frame to frame (its memory)
   std::vector<double> level_sse_;  ///< SseScope::level: per level, this frame
   PlayheadMotion motion_;
   /// Requests in flight: bytes and whether speculative (outside the due window when requested).

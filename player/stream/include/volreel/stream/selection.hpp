@@ -81,9 +81,32 @@ struct KeyframePair {
   bool at_full_detail() const { return valid() && a.exact && b.exact; }
 };
 
+/// The time steps nearest a playhead at which nodes store their state (a keyframe node, or a
+/// constant subtree's), remembered for one playhead: every descendant of a node asks for its
+/// ancestors' times, so one selection pass over a view looks each node up once per side.
+class StoredTimes {
+ public:
+  /// Starts over for `index` (which must not change until the next start) and playhead p;
+  /// remember = false: every question is looked up afresh (no memory per node).
+  void start(const SpatialIndex& index, double playhead, bool remember = true);
+  /// The nearest step on the before (t ≤ p) or after (t ≥ p) side at which `node` has a keyframe
+  /// node (constant_only: one that is a constant subtree); −1 when it has none there.
+  double nearest(std::uint32_t node, bool after, bool constant_only);
+
+ private:
+  const SpatialIndex* index_ = nullptr;
+  double playhead_ = 0;
+  std::uint32_t generation_ = 0;
+  std::vector<std::uint32_t> stamp_;  ///< 4 per node: generation_ when values_ holds the answer
+  std::vector<double> values_;
+};
+
 /// Two keyframe nodes for spatial node `node` at playhead p (keyframe units), from `resident`.
+/// `stored`: a StoredTimes started for this index and playhead, shared by the calls of one pass
+/// (null: looked up for this call alone).
 KeyframePair select_keyframe_pair(const SpatialIndex& index, std::uint32_t node, double playhead,
                                   const ResidentKeyframes& resident,
-                                  const SelectionSettings& settings = {});
+                                  const SelectionSettings& settings = {},
+                                  StoredTimes* stored = nullptr);
 
 }  // namespace volreel::stream

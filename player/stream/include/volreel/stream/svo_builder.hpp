@@ -47,7 +47,8 @@ struct SvoStats {
 /// Builds the SVO for the nodes visited by `view` at playhead p from the resident keyframe nodes.
 SvoArrays build_svo(const SpatialIndex& index, const ViewTraversal& view,
                     const ResidentKeyframes& resident, double playhead,
-                    const SelectionSettings& settings = {}, SvoStats* stats = nullptr);
+                    const SelectionSettings& settings = {}, SvoStats* stats = nullptr,
+                    StoredTimes* stored = nullptr);
 
 /// Structural checks of an SVO: record 0 is a root without parent; every child word's index is in
 /// range and every node record is reached exactly once, from the parent it names; word 9 holds a
