@@ -314,25 +314,27 @@ std::optional<double> EncodeSummary::finest_owned_codes_bps() const {
 std::pair<double, double> value_range(const datasets::SeriesReader& series, std::size_t frames,
                                       const Progress& progress, const Ranks& ranks) {
   const std::size_t n = frames ? std::min(frames, series.info().frames) : series.info().frames;
-  const auto [first, last] = ranks.share(n);
-  // A slab of at most 64 MiB at a time (a plane at least), so that no frame is read whole.
+  // A slab of at most 64 MiB at a time (a plane at least), so that no frame is read whole; the
+  // processes share the slabs of all frames (one large frame too).
   const Dims dims = series.info().dims;
   const std::size_t slab =
       std::clamp<std::size_t>((std::size_t{64} << 20) / 4 / dims.plane(), 1, dims.planes());
+  const std::size_t per_frame = (dims.planes() + slab - 1) / slab;
+  const auto [first, last] = ranks.share(n * per_frame);
   std::vector<float> values(slab * dims.plane());
   std::array<double, 1> lo = {std::numeric_limits<double>::infinity()}, hi = {-lo[0]};
-  for (std::size_t t = first; t < last; ++t) {
-    for (std::size_t z = 0; z < dims.planes(); z += slab) {
-      const std::size_t z_end = std::min(z + slab, dims.planes());
-      const std::span<float> part(values.data(), (z_end - z) * dims.plane());
-      series.read_slab(t, z, z_end, part);
-      const auto [mn, mx] = std::minmax_element(part.begin(), part.end());
-      lo[0] = std::min(lo[0], static_cast<double>(*mn));
-      hi[0] = std::max(hi[0], static_cast<double>(*mx));
-      progress.report(static_cast<double>(t - first) +
-                          static_cast<double>(z_end) / static_cast<double>(dims.planes()),
-                      static_cast<double>(last - first), "value range");
-    }
+  for (std::size_t u = first; u < last; ++u) {
+    const std::size_t t = u / per_frame, z = u % per_frame * slab;
+    const std::size_t z_end = std::min(z + slab, dims.planes());
+    const std::span<float> part(values.data(), (z_end - z) * dims.plane());
+    series.read_slab(t, z, z_end, part);
+    const auto [mn, mx] = std::minmax_element(part.begin(), part.end());
+    lo[0] = std::min(lo[0], static_cast<double>(*mn));
+    hi[0] = std::max(hi[0], static_cast<double>(*mx));
+    const auto frames_of = [&](std::size_t units) {
+      return static_cast<double>(units) / static_cast<double>(per_frame);
+    };
+    progress.report(frames_of(u + 1 - first), frames_of(last - first), "value range");
   }
   ranks.min(lo);
   ranks.max(hi);
