@@ -13,6 +13,7 @@
 #include "detail.hpp"
 #include "volreel/encoder/pyramid.hpp"
 #include "volreel/format/brick_decode.h"
+#include "volreel/format/bytes.hpp"
 #include "volreel/format/decoder.hpp"
 #include "volreel/format/dictionary_file.hpp"
 
@@ -694,14 +695,8 @@ std::vector<std::byte> FrameEncoder::encode(std::size_t t, const Volume& frame,
 
 namespace {
 
-/// A team part's bytes: little-endian fields one after another (every member runs the same build).
-template <typename T>
-void put(std::vector<std::byte>& out, const T& value) {
-  const std::size_t at = out.size();
-  out.resize(at + sizeof(T));
-  std::memcpy(out.data() + at, &value, sizeof(T));
-}
-
+/// A team part's bytes: little-endian fields one after another (every member runs the same build),
+/// written with format::detail::append_value.
 template <typename T>
 T take(std::span<const std::byte> in, std::size_t& at, std::size_t member) {
   if (in.size() - at < sizeof(T))
@@ -733,18 +728,18 @@ std::array<double, 10> team_statistics(const FrameStats& st) {
 
 std::vector<std::byte> team_part(const CodedFrame& coded, const PlaneCoding& options) {
   std::vector<std::byte> out;
-  put(out, std::uint64_t{coded.t});
-  put(out, std::uint64_t{options.member});
-  put(out, std::uint64_t{coded.bricks.size()});
-  for (double v : team_statistics(coded.stats)) put(out, v);
+  format::detail::append_value(out, std::uint64_t{coded.t});
+  format::detail::append_value(out, std::uint64_t{options.member});
+  format::detail::append_value(out, std::uint64_t{coded.bricks.size()});
+  for (double v : team_statistics(coded.stats)) format::detail::append_value(out, v);
   for (std::size_t i = options.member; i < coded.bricks.size(); i += options.members) {
     const CodedBrick& b = coded.bricks[i];
-    put(out, std::uint64_t{b.codes});
-    put(out, b.histogram);
-    put(out, static_cast<std::uint8_t>(b.constant));
-    put(out, b.value);
-    put(out, b.squared_error);
-    put(out, std::uint64_t{b.payload.size()});
+    format::detail::append_value(out, std::uint64_t{b.codes});
+    format::detail::append_value(out, b.histogram);
+    format::detail::append_value(out, static_cast<std::uint8_t>(b.constant));
+    format::detail::append_value(out, b.value);
+    format::detail::append_value(out, b.squared_error);
+    format::detail::append_value(out, std::uint64_t{b.payload.size()});
     const std::size_t at = out.size();
     out.resize(at + b.payload.size());
     if (!b.payload.empty()) std::memcpy(out.data() + at, b.payload.data(), b.payload.size());

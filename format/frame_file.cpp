@@ -12,6 +12,7 @@
 #include <cstring>
 #include <string>
 
+#include "volreel/format/bytes.hpp"
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/error.hpp"
@@ -57,13 +58,6 @@ std::uint32_t histogram_bin(float v, float lo, float hi) {
 namespace {
 
 template <class T>
-void append(std::vector<std::byte>& out, const T& value) {
-  const std::size_t at = out.size();
-  out.resize(at + sizeof(T));
-  std::memcpy(out.data() + at, &value, sizeof(T));
-}
-
-template <class T>
 T load(std::span<const std::byte> bytes, std::uint64_t offset) {
   T value;
   std::memcpy(&value, bytes.data() + offset, sizeof(T));
@@ -107,23 +101,23 @@ std::vector<std::byte> serialize_frame(const FrameContents& frame) {
 
   std::vector<std::byte> out;
   out.reserve(h.payload_offset + payload_bytes + 4);
-  append(out, h);
+  detail::append_value(out, h);
   for (std::size_t l = 0; l < frame.levels.size(); ++l) {
     LevelEntry e = frame.levels[l];
     for (int a = 0; a < 3; ++a) {
       e.dims[a] = geometry[l].dims[static_cast<std::size_t>(a)];
       e.grid[a] = geometry[l].grid[static_cast<std::size_t>(a)];
     }
-    append(out, e);
+    detail::append_value(out, e);
   }
-  for (const Node& n : frame.nodes) append(out, n);
+  for (const Node& n : frame.nodes) detail::append_value(out, n);
   std::uint64_t offset = 0;
-  append(out, offset);
+  detail::append_value(out, offset);
   for (const auto& p : frame.payloads) {
     offset += p.size();
-    append(out, offset);
+    detail::append_value(out, offset);
   }
-  for (const auto& p : frame.payloads) append(out, crc32c(p));
+  for (const auto& p : frame.payloads) detail::append_value(out, crc32c(p));
   out.resize(h.payload_offset, std::byte{0});
   const std::uint32_t index_crc = crc32c(std::span<const std::byte>(out).subspan(
       h.level_table_offset, h.payload_offset - h.level_table_offset));
@@ -134,7 +128,7 @@ std::vector<std::byte> serialize_frame(const FrameContents& frame) {
     if (!p.empty()) std::memcpy(out.data() + at, p.data(), p.size());
   }
   const std::uint32_t crc = crc32c(out);
-  append(out, crc);
+  detail::append_value(out, crc);
   return out;
 }
 

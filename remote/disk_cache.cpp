@@ -10,6 +10,7 @@
 #include <cstring>
 #include <stdexcept>
 
+#include "volreel/format/bytes.hpp"
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
@@ -30,12 +31,6 @@ std::uint64_t fnv1a(std::string_view s) {
     h *= 0x100000001b3ull;
   }
   return h;
-}
-
-template <class T>
-void append(std::vector<std::byte>& out, const T& v) {
-  const auto* p = reinterpret_cast<const std::byte*>(&v);
-  out.insert(out.end(), p, p + sizeof v);
 }
 
 /// The data of an entry file's bytes if they are intact and hold `key`.
@@ -156,12 +151,12 @@ void DiskCache::put(const std::string& key, std::span<const std::byte> data) {
   file.reserve(8 + 4 + key.size() + 8 + data.size() + 4);
   file.insert(file.end(), reinterpret_cast<const std::byte*>(cache_magic),
               reinterpret_cast<const std::byte*>(cache_magic) + 8);
-  append(file, static_cast<std::uint32_t>(key.size()));
+  format::detail::append_value(file, static_cast<std::uint32_t>(key.size()));
   file.insert(file.end(), reinterpret_cast<const std::byte*>(key.data()),
               reinterpret_cast<const std::byte*>(key.data()) + key.size());
-  append(file, static_cast<std::uint64_t>(data.size()));
+  format::detail::append_value(file, static_cast<std::uint64_t>(data.size()));
   file.insert(file.end(), data.begin(), data.end());
-  append(file, format::crc32c(file));
+  format::detail::append_value(file, format::crc32c(file));
   if (file.size() > max_bytes_) return;
   const std::string name = file_name(key);
   std::lock_guard lock(mutex_);
