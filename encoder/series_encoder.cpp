@@ -716,10 +716,14 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       keep = choose_keyframes(coded, atoms, rule);
     }
     summary.seconds += seconds_since(start);
-    if (!writer) {  // the writer holds the frames whole
+    // The stretch's last frame starts the next one; the others' buffers are reused.
+    const auto next_stretch = [&] {
       carried = std::move(steps.back());
       steps.pop_back();
       pool = std::move(steps);
+    };
+    if (!writer) {  // the writer holds the frames whole
+      next_stretch();
       continue;
     }
     // Every frame of the stretch as bytes (the measurement below reads them from memory, since
@@ -789,9 +793,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
         q.worst_frame = t;
       }
     }
-    carried = std::move(steps.back());
-    steps.pop_back();
-    pool = std::move(steps);
+    next_stretch();
   }
 
   // 4. The manifest, complete: rank 0 lists every frame from what each process wrote or kept.

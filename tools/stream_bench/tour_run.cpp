@@ -123,10 +123,12 @@ std::uint32_t current_target_nodes(const stream::StreamScheduler& scheduler,
   resident.assign(index, entries);
   const double p = std::clamp(playhead, 0.0, static_cast<double>(index.frame_count() - 1));
   std::uint32_t current = 0;
+  stream::StoredTimes stored;  // shared by the view's nodes, as in the scheduler's SVO pass
+  stored.start(index, p);
   for (const stream::ViewTraversal::Visit& v : view.visits()) {
     if (v.refine) continue;
-    const stream::KeyframePair pair =
-        stream::select_keyframe_pair(index, v.node, p, resident, scheduler.settings().selection);
+    const stream::KeyframePair pair = stream::select_keyframe_pair(
+        index, v.node, p, resident, scheduler.settings().selection, &stored);
     if (!pair.at_full_detail()) continue;
     // The time steps with data nearest the playhead on each side (p itself when it has data).
     std::int64_t before = static_cast<std::int64_t>(std::floor(p));
