@@ -56,17 +56,16 @@ double combined_priority(double sse_priority_value, double temporal_priority_val
 std::size_t due_range(const KeyframeList& keyframes, double playhead, double velocity,
                       double lookahead_s, std::vector<double>& seconds) {
   seconds.clear();
-  if (keyframes.empty()) return 0;
+  const std::span<const std::uint32_t> times = keyframes.times();
+  if (times.empty()) return 0;
   // The last time step ≤ playhead and the first ≥ playhead (the pre-render selection's picks).
-  const auto after = std::lower_bound(
-      keyframes.begin(), keyframes.end(), playhead,
-      [](const KeyframeNode& k, double p) { return static_cast<double>(k.t) < p; });
-  const auto n = static_cast<std::ptrdiff_t>(keyframes.size());
-  const auto i_after = static_cast<std::ptrdiff_t>(after - keyframes.begin());
+  const auto after = std::lower_bound(times.begin(), times.end(), playhead,
+                                      [](std::uint32_t t, double p) { return t < p; });
+  const auto n = static_cast<std::ptrdiff_t>(times.size());
+  const auto i_after = static_cast<std::ptrdiff_t>(after - times.begin());
   // On a keyframe it is both sides' pick.
   const bool on_keyframe =
-      i_after < n &&
-      static_cast<double>(keyframes[static_cast<std::size_t>(i_after)].t) == playhead;
+      i_after < n && static_cast<double>(times[static_cast<std::size_t>(i_after)]) == playhead;
   const std::ptrdiff_t i_before = on_keyframe ? i_after : i_after - 1;
   // Those the playhead reaches within the lookahead, in its direction of travel: [first, last]
   // of the keyframe nodes that can be due.
@@ -74,15 +73,13 @@ std::size_t due_range(const KeyframeList& keyframes, double playhead, double vel
   const bool reaching = std::abs(reach) > 0 && std::isfinite(reach);
   std::ptrdiff_t first = i_before - 1, last = i_after + 1;
   if (reaching && reach > 0) {
-    const auto end = std::upper_bound(
-        after, keyframes.end(), playhead + reach,
-        [](double v, const KeyframeNode& k) { return v < static_cast<double>(k.t); });
-    last = std::max(last, static_cast<std::ptrdiff_t>(end - keyframes.begin()) - 1);
+    const auto end = std::upper_bound(after, times.end(), playhead + reach,
+                                      [](double v, std::uint32_t t) { return v < t; });
+    last = std::max(last, static_cast<std::ptrdiff_t>(end - times.begin()) - 1);
   } else if (reaching) {
-    const auto begin = std::lower_bound(
-        keyframes.begin(), after, playhead + reach,
-        [](const KeyframeNode& k, double v) { return static_cast<double>(k.t) < v; });
-    first = std::min(first, static_cast<std::ptrdiff_t>(begin - keyframes.begin()));
+    const auto begin = std::lower_bound(times.begin(), after, playhead + reach,
+                                        [](std::uint32_t t, double v) { return t < v; });
+    first = std::min(first, static_cast<std::ptrdiff_t>(begin - times.begin()));
   }
   first = std::max<std::ptrdiff_t>(first, 0);
   last = std::min(last, n - 1);
@@ -96,7 +93,7 @@ std::size_t due_range(const KeyframeList& keyframes, double playhead, double vel
   mark(i_after, 0);
   if (reaching)
     for (std::ptrdiff_t i = first; i <= last; ++i) {
-      const double d = static_cast<double>(keyframes[static_cast<std::size_t>(i)].t) - playhead;
+      const double d = static_cast<double>(times[static_cast<std::size_t>(i)]) - playhead;
       if (d != 0 && (d > 0) == (reach > 0) && std::abs(d) <= std::abs(reach))
         mark(i, std::abs(d / velocity));
     }

@@ -55,19 +55,49 @@ void StreamScheduler::end_request(KeyframeId id) {
   in_flight_.erase(it);
 }
 
-void StreamScheduler::fill_heap(const player::OrbitCamera& camera, double playhead) {
+void StreamScheduler::select(const player::OrbitCamera& camera, double playhead) {
   heap_.clear();
+  selection_.clear();
   view_.run(index_, camera, settings_.priority.sse_target);
   const PrioritySettings& ps = settings_.priority;
   const std::size_t frames = index_.frame_count();
+  const bool patent = ps.policy == PriorityPolicy::patent;
+  const bool due_window = patent && ps.due_window;
+  const double velocity = motion_.velocity();
+  const auto higher_first = [](const HeapEntry& a, const HeapEntry& b) { return HeapLess{}(b, a); };
+
+  // Keyframe nodes in the due window. Their priorities lie above every other's
+  // (due_priority > sse_weight + 1 ≥ combined_priority when sse_weight ≥ 0): when there are at
+  // least as many as the atlas has slots, the selection is the best of them and nothing else is
+  // looked at. Otherwise they all enter the heap.
+  if (due_window) {
+    for (const ViewTraversal::Visit& v : view_.visits()) {
+      const KeyframeList& keyframes = index_.keyframes(v.node);
+      const std::size_t first = due_range(keyframes, playhead, velocity, ps.lookahead_s, due_);
+      const std::uint32_t level = index_.node(v.node).key.level;
+      for (std::size_t j = 0; j < due_.size(); ++j)
+        if (due_[j] >= 0)
+          selection_.push_back({due_priority(due_[j], ps), level,
+                                keyframe_id(v.node, keyframes.times()[first + j]), true});
+    }
+    const std::size_t slots = heap_.capacity();
+    if (selection_.size() >= slots && ps.sse_weight >= 0) {
+      const auto kept = selection_.begin() + static_cast<std::ptrdiff_t>(slots);
+      if (selection_.size() > slots)
+        std::nth_element(selection_.begin(), kept, selection_.end(), higher_first);
+      selection_.erase(kept, selection_.end());
+      std::sort(selection_.begin(), selection_.end(), higher_first);
+      return;
+    }
+    for (const HeapEntry& e : selection_) heap_.push(e);
+    selection_.clear();
+  }
+
   // The temporal priority depends on the keyframe only: once per held keyframe per frame.
   temporal_.resize(frames);
   for (std::size_t t = index_.held_begin(); t < index_.held_end(); ++t)
     temporal_[t] =
         temporal_priority(static_cast<double>(t), playhead, frames, ps.temporal_exponent);
-  const bool patent = ps.policy == PriorityPolicy::patent;
-  const bool due_window = patent && ps.due_window;
-  const double velocity = motion_.velocity();
   // SseScope::level: one SSE per level, the largest of its visited nodes.
   const bool level_sse = patent && ps.sse_scope == SseScope::level;
   if (level_sse) {
@@ -90,38 +120,28 @@ void StreamScheduler::fill_heap(const player::OrbitCamera& camera, double playhe
     const SpatialNode& n = index_.node(v.node);
     const double sse_p = sse_priority(level_sse ? level_sse_[n.key.level] : v.sse);
     // A node whose best possible priority cannot enter a full heap is skipped whole.
-    const double best = due_window ? ps.sse_weight + 2.0
-                        : patent   ? ps.sse_weight * sse_p + 1.0
-                                   : 1.0;
+    const double best = patent ? ps.sse_weight * sse_p + 1.0 : 1.0;
     if (heap_.full() && best < heap_.min().priority) continue;
     const KeyframeList& keyframes = index_.keyframes(v.node);
     if (keyframes.empty()) continue;
     std::size_t due_first = 0;
-    due_.clear();
-    if (due_window) {
-      // Soonest due first, until one cannot enter the full heap.
-      due_first = due_range(keyframes, playhead, velocity, ps.lookahead_s, due_);
-      due_order_.clear();
-      for (std::size_t j = 0; j < due_.size(); ++j)
-        if (due_[j] >= 0) due_order_.emplace_back(due_[j], j);
-      std::sort(due_order_.begin(), due_order_.end());
-      for (const auto& [seconds, j] : due_order_) {
-        const double priority = due_priority(seconds, ps);
-        if (heap_.full() && priority < heap_.min().priority) break;
-        heap_.push({priority, n.key.level, keyframe_id(v.node, keyframes[due_first + j].t), true});
-      }
-    }
-    bool positioned = false;  // position_ filled for this node (on its first step that enters)
+    bool positioned = false;  // position_ and due_ filled for this node (on its first step in)
     for (const auto& [part, t] : by_time_) {
       const double priority = combined_priority(sse_p, temporal_[t], random_table_[t], ps);
       if (heap_.full() && priority < heap_.min().priority) break;
       if (!positioned) {
         position_.assign(index_.held_end() - index_.held_begin(), -1);
-        for (std::size_t i = 0; i < keyframes.size(); ++i) {
-          const std::uint32_t kt = keyframes[i].t;
+        const std::span<const std::uint32_t> times = keyframes.times();
+        for (std::size_t i = 0; i < times.size(); ++i) {
+          const std::uint32_t kt = times[i];
           if (kt >= index_.held_begin() && kt < index_.held_end())
             position_[kt - index_.held_begin()] = static_cast<std::int32_t>(i);
         }
+        // The due ones entered above.
+        if (due_window)
+          due_first = due_range(keyframes, playhead, velocity, ps.lookahead_s, due_);
+        else
+          due_.clear();
         positioned = true;
       }
       const std::int32_t at = position_[t - index_.held_begin()];
@@ -131,6 +151,13 @@ void StreamScheduler::fill_heap(const player::OrbitCamera& camera, double playhe
       heap_.push({priority, n.key.level, keyframe_id(v.node, t), false});
     }
   }
+  while (!heap_.empty()) selection_.push_back(heap_.pop_max());
+}
+
+bool StreamScheduler::selected(KeyframeId id) const {
+  const auto it = std::lower_bound(selected_.begin(), selected_.end(), id,
+                                   [](const auto& s, KeyframeId v) { return s.first < v; });
+  return it != selected_.end() && it->first == id;
 }
 
 FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double playhead,
@@ -158,35 +185,41 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     index_.follow(playhead, motion_.velocity(), &index_errors);
     for (std::string& e : index_errors) add_error(std::move(e));
   }
-  fill_heap(camera, playhead);
+  select(camera, playhead);
   selected_.clear();
-  for (const HeapEntry& e : heap_.items()) selected_.insert(e.keyframe);
+  for (std::size_t i = 0; i < selection_.size(); ++i)
+    selected_.emplace_back(selection_[i].keyframe, static_cast<std::uint32_t>(i));
+  std::sort(selected_.begin(), selected_.end());
 
   // 3. Atlas lists: release what is no longer selected, re-occupy what is selected again.
   for (const std::uint32_t slot : atlas_.occupied_slots()) {
     const auto key = atlas_.key(slot);
-    if (!key || !selected_.count(index_.find_keyframe(*key))) atlas_.release_slot(slot);
+    if (!key || !selected(index_.find_keyframe(*key))) atlas_.release_slot(slot);
   }
-  for (const KeyframeId id : selected_) atlas_.reoccupy(index_.key(id));
+  // Every occupied slot now holds a selected keyframe node: where each one is, by its position
+  // in the selection (nothing else changes them this frame but the uploads below).
+  slot_of_.assign(selection_.size(), no_slot);
+  for (const auto& [id, i] : selected_)
+    if (const auto slot = atlas_.reoccupy(index_.key(id))) slot_of_[i] = *slot;
 
   // 4. Arrivals into slots, within the upload budget (highest priority first).
   {
-    std::vector<HeapEntry> entries;
-    entries.reserve(heap_.size());
-    while (!heap_.empty()) entries.push_back(heap_.pop_max());
+    const std::vector<HeapEntry>& entries = selection_;
     std::uint64_t budget_used = 0;
-    for (const HeapEntry& e : entries) {
+    for (std::size_t i = 0; i < entries.size(); ++i) {
+      const HeapEntry& e = entries[i];
       const auto it = waiting_.find(e.keyframe);
       if (it == waiting_.end()) continue;
       const KeyframeKey key = index_.key(e.keyframe);
       const std::uint64_t bytes = it->second.bytes.size();
       if (!out.uploads.empty() && budget_used + bytes > settings_.upload_budget_bytes) break;
-      if (atlas_.is_occupied(key)) {  // already resident (re-requested meanwhile)
+      if (slot_of_[i] != no_slot) {  // already resident (re-requested meanwhile)
         waiting_.erase(it);
         continue;
       }
       const auto slot = atlas_.acquire(key);
       if (!slot) break;  // no slot free of in-flight GPU frames: next frame
+      slot_of_[i] = *slot;
       BrickUpload u;
       u.slot = *slot;
       u.key = key;
@@ -200,7 +233,7 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     }
     // Arrivals whose keyframe node is no longer selected are discarded ([0037]).
     for (auto it = waiting_.begin(); it != waiting_.end();) {
-      if (!selected_.count(it->first)) {
+      if (!selected(it->first)) {
         it = waiting_.erase(it);
         ++out.stats.arrivals_discarded;
       } else {
@@ -211,7 +244,7 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
 
     // 5. Requests in priority order ([0063]); queued ones no longer selected are cancelled.
     loader_.cancel_queued([&](const BrickRequest& r) {
-      const bool keep = selected_.count(r.keyframe) != 0;
+      const bool keep = selected(r.keyframe);
       if (!keep) end_request(r.keyframe);
       return keep;
     });
@@ -221,10 +254,9 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
                          settings_.priority.due_window && bandwidth > 0 &&
                          settings_.speculative_link_s > 0;
     const double speculative_limit = bounded ? bandwidth * settings_.speculative_link_s : 0;
-    for (const HeapEntry& e : entries) {
-      if (waiting_.count(e.keyframe)) continue;
-      const KeyframeKey key = index_.key(e.keyframe);
-      if (atlas_.is_occupied(key)) continue;
+    for (std::size_t i = 0; i < entries.size(); ++i) {
+      const HeapEntry& e = entries[i];
+      if (slot_of_[i] != no_slot || waiting_.count(e.keyframe)) continue;
       const KeyframeNode& k = index_.keyframe(e.keyframe);
       // Entries come highest priority first and due ones before all others: once a speculative
       // one does not fit the bound, none after it does (one is allowed on an idle link).
@@ -248,12 +280,9 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
   // 6. Pre-render selection and the SVO, from occupied slots only.
   {
     std::vector<ResidentKeyframe> resident;
-    for (const std::uint32_t slot : atlas_.occupied_slots()) {
-      const auto key = atlas_.key(slot);
-      if (!key) continue;
-      const KeyframeId id = index_.find_keyframe(*key);
-      if (id != no_keyframe) resident.push_back({id, slot});
-    }
+    resident.reserve(selection_.size());
+    for (std::size_t i = 0; i < selection_.size(); ++i)
+      if (slot_of_[i] != no_slot) resident.push_back({selection_[i].keyframe, slot_of_[i]});
     resident_.assign(index_, resident);
     SvoStats svo_stats;
     SvoArrays svo = build_svo(index_, view_, resident_, playhead, settings_.selection, &svo_stats,

@@ -68,22 +68,22 @@ KeyframePick nearest_on_side(const SpatialIndex& index, std::span<const Resident
 double stored_time(const SpatialIndex& index, std::uint32_t node, double p, Side side,
                    bool constant_only) {
   const KeyframeList& list = index.keyframes(node);
+  if (constant_only && list.subtree_constants() == 0) return -1;
   // First keyframe node after p.
-  const auto after = std::upper_bound(
-      list.begin(), list.end(), p,
-      [](double v, const KeyframeNode& k) { return v < static_cast<double>(k.t); });
+  const std::span<const std::uint32_t> times = list.times();
+  const auto after = static_cast<std::size_t>(
+      std::upper_bound(times.begin(), times.end(), p,
+                       [](double v, std::uint32_t t) { return v < static_cast<double>(t); }) -
+      times.begin());
   if (side == Side::before) {
-    for (auto it = after; it != list.begin();) {
-      --it;
-      if (!constant_only || it->subtree_constant) return static_cast<double>(it->t);
-    }
+    for (std::size_t i = after; i > 0; --i)
+      if (!constant_only || list[i - 1].subtree_constant) return static_cast<double>(times[i - 1]);
   } else {
     // Keyframe nodes at p itself are on both sides.
-    auto it = after;
-    while (it != list.begin() && static_cast<double>(std::prev(it)->t) == p) --it;
-    for (; it != list.end(); ++it) {
-      if (!constant_only || it->subtree_constant) return static_cast<double>(it->t);
-    }
+    std::size_t i = after;
+    while (i > 0 && static_cast<double>(times[i - 1]) == p) --i;
+    for (; i < times.size(); ++i)
+      if (!constant_only || list[i].subtree_constant) return static_cast<double>(times[i]);
   }
   return -1;
 }

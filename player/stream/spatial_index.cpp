@@ -35,6 +35,79 @@ std::size_t KeyframeKeyHash::operator()(const KeyframeKey& k) const noexcept {
   return mix(mix(mix(mix(mix(0, k.level), k.x), k.y), k.z), k.t);
 }
 
+std::size_t KeyframeList::lower_bound(std::uint32_t t) const {
+  const std::span<const std::uint32_t> held = times();
+  return static_cast<std::size_t>(std::lower_bound(held.begin(), held.end(), t) - held.begin());
+}
+
+void KeyframeList::make_room(bool front) {
+  const std::size_t n = size();
+  // A block whose free room is short of half the held nodes grows to hold one and a half times
+  // as many; three quarters of the room go to the side that grows. A window sliding one way
+  // then moves its nodes once per 3n/8 or more added.
+  std::size_t capacity = nodes_.size();
+  if (capacity - n < n / 2 + 2) capacity = n + n / 2 + 8;
+  const std::size_t room = capacity - n;
+  const std::size_t first = front ? room - room / 4 : room / 4;
+  if (capacity != nodes_.size()) {
+    std::vector<KeyframeNode> nodes(capacity);
+    std::vector<std::uint32_t> times(capacity);
+    std::copy(nodes_.begin() + static_cast<std::ptrdiff_t>(begin_),
+              nodes_.begin() + static_cast<std::ptrdiff_t>(end_),
+              nodes.begin() + static_cast<std::ptrdiff_t>(first));
+    std::copy(times_.begin() + static_cast<std::ptrdiff_t>(begin_),
+              times_.begin() + static_cast<std::ptrdiff_t>(end_),
+              times.begin() + static_cast<std::ptrdiff_t>(first));
+    nodes_ = std::move(nodes);
+    times_ = std::move(times);
+  } else if (first < begin_) {
+    std::copy(nodes_.begin() + static_cast<std::ptrdiff_t>(begin_),
+              nodes_.begin() + static_cast<std::ptrdiff_t>(end_),
+              nodes_.begin() + static_cast<std::ptrdiff_t>(first));
+    std::copy(times_.begin() + static_cast<std::ptrdiff_t>(begin_),
+              times_.begin() + static_cast<std::ptrdiff_t>(end_),
+              times_.begin() + static_cast<std::ptrdiff_t>(first));
+  } else if (first > begin_) {
+    std::copy_backward(nodes_.begin() + static_cast<std::ptrdiff_t>(begin_),
+                       nodes_.begin() + static_cast<std::ptrdiff_t>(end_),
+                       nodes_.begin() + static_cast<std::ptrdiff_t>(first + n));
+    std::copy_backward(times_.begin() + static_cast<std::ptrdiff_t>(begin_),
+                       times_.begin() + static_cast<std::ptrdiff_t>(end_),
+                       times_.begin() + static_cast<std::ptrdiff_t>(first + n));
+  }
+  begin_ = first;
+  end_ = first + n;
+}
+
+void KeyframeList::push_front(const KeyframeNode& k) {
+  if (begin_ == 0) make_room(true);
+  --begin_;
+  nodes_[begin_] = k;
+  times_[begin_] = k.t;
+  if (k.subtree_constant) ++subtree_constants_;
+}
+
+void KeyframeList::push_back(const KeyframeNode& k) {
+  if (end_ == nodes_.size()) make_room(false);
+  nodes_[end_] = k;
+  times_[end_] = k.t;
+  ++end_;
+  if (k.subtree_constant) ++subtree_constants_;
+}
+
+void KeyframeList::pop_front() {
+  if (nodes_[begin_].subtree_constant) --subtree_constants_;
+  ++begin_;
+  // An emptied list starts again in the middle, with room on both sides.
+  if (begin_ == end_) begin_ = end_ = nodes_.size() / 2;
+}
+
+void KeyframeList::pop_back() {
+  --end_;
+  if (nodes_[end_].subtree_constant) --subtree_constants_;
+  if (begin_ == end_) begin_ = end_ = nodes_.size() / 2;
+}
+
 namespace {
 
 std::shared_ptr<const IndexGeometry> make_geometry(std::array<std::uint32_t, 3> dims) {
@@ -296,6 +369,7 @@ void SpatialIndex::reset_nodes() {
   nodes_ = geometry_->nodes;
   keyframes_.assign(nodes_.size(), KeyframeList{});
   keyframe_count_ = 0;
+  keyframe_capacity_ = 0;
   held_.clear();
   whole_frames_ = 0;
   held_begin_ = held_end_ = 0;
@@ -341,10 +415,13 @@ void SpatialIndex::hold(HeldFrame frame, bool at_front) {
   record.whole = whole;
   record.keyframe_nodes.reserve(frame.keyframes.size());
   for (const auto& [id, k] : frame.keyframes) {
+    KeyframeList& list = keyframes_[id];
+    const std::size_t capacity = list.capacity();
     if (at_front)
-      keyframes_[id].push_front(k);
+      list.push_front(k);
     else
-      keyframes_[id].push_back(k);
+      list.push_back(k);
+    keyframe_capacity_ += list.capacity() - capacity;
     record.keyframe_nodes.push_back(id);
   }
   keyframe_count_ += frame.keyframes.size();
@@ -479,9 +556,8 @@ void SpatialIndex::follow(double playhead, double velocity, std::vector<std::str
 }
 
 std::uint64_t SpatialIndex::memory_bytes() const {
-  // A deque keeps at least a map and one 512-byte block.
-  std::uint64_t bytes = nodes_.size() * (sizeof(SpatialNode) + sizeof(KeyframeList) + 576) +
-                        keyframe_count_ * sizeof(KeyframeNode);
+  std::uint64_t bytes = nodes_.size() * (sizeof(SpatialNode) + sizeof(KeyframeList)) +
+                        keyframe_capacity_ * (sizeof(KeyframeNode) + sizeof(std::uint32_t));
   for (const HeldRecord& r : held_)
     bytes += (r.nodes.capacity() + r.keyframe_nodes.capacity()) * sizeof(std::uint32_t);
   if (reader_) {
@@ -512,12 +588,11 @@ std::uint32_t SpatialIndex::ancestor(std::uint32_t id, std::uint32_t up) const {
 const KeyframeNode& SpatialIndex::keyframe(KeyframeId id) const {
   const KeyframeList& list = keyframes_[node_of(id)];
   const auto t = static_cast<std::uint32_t>(id & 0xFFFFFFFFu);
-  const auto it = std::lower_bound(list.begin(), list.end(), t,
-                                   [](const KeyframeNode& k, std::uint32_t v) { return k.t < v; });
-  if (it == list.end() || it->t != t)
+  const std::size_t i = list.lower_bound(t);
+  if (i == list.size() || list.times()[i] != t)
     throw std::logic_error("keyframe node " + str(node_of(id)) + " at t " + str(t) +
                            " is not held by the index");
-  return *it;
+  return list[i];
 }
 
 std::vector<KeyframeId> SpatialIndex::held_keyframes() const {
@@ -531,9 +606,8 @@ std::vector<KeyframeId> SpatialIndex::held_keyframes() const {
 KeyframeId SpatialIndex::find_keyframe(std::uint32_t node, std::uint32_t t) const {
   if (node >= keyframes_.size()) return no_keyframe;
   const KeyframeList& list = keyframes_[node];
-  const auto it = std::lower_bound(list.begin(), list.end(), t,
-                                   [](const KeyframeNode& k, std::uint32_t v) { return k.t < v; });
-  if (it == list.end() || it->t != t) return no_keyframe;
+  const std::size_t i = list.lower_bound(t);
+  if (i == list.size() || list.times()[i] != t) return no_keyframe;
   return keyframe_id(node, t);
 }
 
@@ -559,9 +633,11 @@ SpatialIndex build_spatial_index(const format::Container& container,
   index.options_ = options;
   index.max_gap_ = std::max<std::uint32_t>(1, m.max_keyframe_gap);
   index.reset_nodes();
-  // Keyframe nodes per frame at most (every node stored), with a node id to drop them again.
+  // Keyframe nodes per frame at most (every node stored): the node and its time step, a node id
+  // to drop them again, and the lists' room to grow (up to half as much again).
   const std::uint64_t frame_bytes =
-      index.nodes_.size() * (sizeof(KeyframeNode) + sizeof(std::uint32_t));
+      index.nodes_.size() *
+      (3 * (sizeof(KeyframeNode) + sizeof(std::uint32_t)) / 2 + sizeof(std::uint32_t));
   const std::uint64_t fit = options.memory_bytes / std::max<std::uint64_t>(1, frame_bytes);
   if (fit < frames) {
     const std::uint64_t least = std::min<std::uint64_t>(frames, 2ull * index.max_gap_ + 4);

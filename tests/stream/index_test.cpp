@@ -2,7 +2,9 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <deque>
 #include <fstream>
+#include <random>
 #include <thread>
 
 #include "stream_test_util.hpp"
@@ -10,6 +12,74 @@
 
 namespace volreel::stream {
 namespace {
+
+TEST(StreamIndex, KeyframeListGrowsAndShrinksAtBothEndsLikeADeque) {
+  // A window that slides forward, backward, empties and starts again, against std::deque.
+  KeyframeList list;
+  std::deque<KeyframeNode> reference;
+  std::mt19937 random(7);
+  std::uint32_t lo = 5000, hi = 5000;  // held time steps [lo, hi)
+  std::size_t capacity_seen = 0;
+  const auto check = [&] {
+    ASSERT_EQ(list.size(), reference.size());
+    ASSERT_EQ(list.times().size(), reference.size());
+    std::size_t constants = 0;
+    for (std::size_t i = 0; i < reference.size(); ++i) {
+      ASSERT_EQ(list[i].t, reference[i].t);
+      ASSERT_EQ(list[i].brick, reference[i].brick);
+      ASSERT_EQ(list.times()[i], reference[i].t);
+      if (reference[i].subtree_constant) ++constants;
+    }
+    ASSERT_EQ(list.subtree_constants(), constants);
+    if (!reference.empty()) {
+      EXPECT_EQ(list.front().t, reference.front().t);
+      EXPECT_EQ(list.back().t, reference.back().t);
+      EXPECT_EQ(list.lower_bound(reference.front().t), 0u);
+      EXPECT_EQ(list.lower_bound(reference.back().t + 1), list.size());
+      EXPECT_EQ(list.lower_bound((lo + hi) / 2), (hi - lo) / 2);
+    }
+    capacity_seen = std::max(capacity_seen, list.capacity());
+  };
+  const auto node = [](std::uint32_t t) {
+    KeyframeNode k;
+    k.t = t;
+    k.brick = t * 3 + 1;
+    k.subtree_constant = t % 5 == 0;
+    return k;
+  };
+  for (int step = 0; step < 20000; ++step) {
+    const int phase = (step / 2500) % 4;  // forward, backward, forward again, jumpy
+    const bool forward = phase == 0 || phase == 2 || (phase == 3 && random() % 2 == 0);
+    if (forward) {
+      list.push_back(node(hi));
+      reference.push_back(node(hi++));
+      if (hi - lo > 88) {
+        list.pop_front();
+        reference.pop_front();
+        ++lo;
+      }
+    } else {
+      list.push_front(node(--lo));
+      reference.push_front(node(lo));
+      if (hi - lo > 88) {
+        list.pop_back();
+        reference.pop_back();
+        --hi;
+      }
+    }
+    ASSERT_NO_FATAL_FAILURE(check());
+    if (step % 3000 == 2999) {  // a seek: everything dropped
+      while (!reference.empty()) {
+        list.pop_back();
+        reference.pop_back();
+      }
+      lo = hi = lo + 400;
+      ASSERT_NO_FATAL_FAILURE(check());
+    }
+  }
+  // The room it keeps stays within half as much again as the nodes it holds (and a few).
+  EXPECT_LE(capacity_seen, 88u + 44u + 8u);
+}
 
 TEST(StreamIndex, UnionOfTheFramesOctreesWithBoundsLinksAndKeyframes) {
   test::TempDir dir("stream-index");

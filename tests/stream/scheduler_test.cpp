@@ -3,6 +3,7 @@
 // stale arrivals, and I/O errors reported and retried without blocking the rest.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 #include <map>
@@ -301,6 +302,35 @@ TEST(StreamScheduler, TheDueWindowLoadsTheKeyframesAroundThePlayheadFirst) {
   ASSERT_EQ(patent_only.size(), 18u);
   EXPECT_TRUE(std::any_of(patent_only.begin(), patent_only.end(),
                           [](const KeyframeKey& k) { return k.t != 4 && k.t != 5; }));
+}
+
+TEST(StreamScheduler, MoreDueKeyframeNodesThanSlotsKeepTheBestOfThemInTheHeapsOrder) {
+  test::TempDir dir("stream-scheduler-due-full");
+  const auto path = test::make_container(dir.path(), dims, 9);
+  const format::Container c(path);
+  // Paused at 4.5, every node's keyframe nodes 3, 4, 5 and 6 are due (36), 4 and 5 soonest (18):
+  // 12 slots keep the two roots (coarser first on ties), then the leaves by ascending id (node,
+  // then t), so nodes 1 to 5 at both time steps.
+  SchedulerSettings settings;
+  settings.atlas_slots = 12;
+  StreamScheduler s(c, settings);
+  ASSERT_EQ(s.index().node_count(), 9u);
+  const auto cam = test::close_camera(dims);
+  std::uint64_t frame = 0;
+  run_until(s, cam, 4.5, frame, [&](const FrameUpdate& f) {
+    return f.stats.requests_in_flight == 0 && f.stats.arrivals_waiting == 0 &&
+           f.stats.atlas_occupied == 12;
+  });
+  std::vector<KeyframeId> resident;
+  for (std::uint32_t slot = 0; slot < 12; ++slot) {
+    ASSERT_EQ(s.atlas().state(slot), AtlasSlots::State::occupied);
+    resident.push_back(s.index().find_keyframe(*s.atlas().key(slot)));
+  }
+  std::sort(resident.begin(), resident.end());
+  std::vector<KeyframeId> expected;
+  for (std::uint32_t node = 0; node <= 5; ++node)
+    for (const std::uint32_t t : {4u, 5u}) expected.push_back(keyframe_id(node, t));
+  EXPECT_EQ(resident, expected);
 }
 
 /// Per time step, the finest-level keyframe nodes resident (occupied) once a scheduler with

@@ -27,7 +27,6 @@
 #include <deque>
 #include <string>
 #include <unordered_map>
-#include <unordered_set>
 #include <utility>
 #include <vector>
 
@@ -154,9 +153,9 @@ class StreamScheduler {
   AtlasSlots atlas_;
   BrickLoader loader_;
   MinMaxHeap<HeapEntry, HeapLess> heap_;
+  std::vector<HeapEntry> selection_;  ///< this frame's selected set, highest priority first
   std::vector<double> random_table_, temporal_, due_;
   std::vector<std::pair<double, std::uint32_t>> by_time_;  ///< held steps by priority part
-  std::vector<std::pair<double, std::size_t>> due_order_;  ///< a node's due ones, soonest first
   /// A node's keyframe node at held step held_begin + i: its index in the node's list, or −1.
   std::vector<std::int32_t> position_;
   StoredTimes stored_times_;       ///< the selection's, kept from frame to frame (its memory)
@@ -171,13 +170,19 @@ class StreamScheduler {
   std::uint64_t in_flight_bytes_ = 0, speculative_bytes_ = 0;
   ViewTraversal view_;
   ResidentKeyframes resident_;
-  std::unordered_set<KeyframeId> selected_;
+  /// The ids of selection_, ascending, with their positions in it.
+  std::vector<std::pair<KeyframeId, std::uint32_t>> selected_;
+  static constexpr std::uint32_t no_slot = 0xFFFFFFFFu;
+  std::vector<std::uint32_t> slot_of_;  ///< per selection_ entry: its atlas slot, or no_slot
   std::unordered_map<KeyframeId, BrickArrival> waiting_;  ///< arrived, not uploaded yet
   std::deque<std::string> errors_;
   std::size_t error_count_ = 0;
   std::vector<std::string> frame_errors_;
 
-  void fill_heap(const player::OrbitCamera& camera, double playhead);
+  /// The selected set (Cesium patent [0060]–[0063]): the atlas's worth of keyframe nodes of the
+  /// highest priority among the visible nodes' held ones, into selection_.
+  void select(const player::OrbitCamera& camera, double playhead);
+  bool selected(KeyframeId id) const;
   void add_error(std::string message);
   void end_request(KeyframeId id);
 };

@@ -85,9 +85,44 @@ struct KeyframeNode {
   bool subtree_constant = false;  ///< node type `empty`: the whole subtree is that value
 };
 
-/// A spatial node's held keyframe nodes, sorted by t (a deque: the window grows and shrinks at
-/// both ends).
-using KeyframeList = std::deque<KeyframeNode>;
+/// A spatial node's held keyframe nodes, sorted by t. The time window grows and shrinks the list
+/// at both ends, so it is one contiguous block with room on either side (a slide moves the held
+/// nodes back to the middle now and then: O(1) a node on average). Their time steps are also kept
+/// on their own: the searches by time that the scheduler and the selection run for every visited
+/// node each frame touch a few cache lines (88 time steps are 352 bytes, the nodes 3.5 KB).
+class KeyframeList {
+ public:
+  std::size_t size() const { return end_ - begin_; }
+  bool empty() const { return end_ == begin_; }
+  const KeyframeNode& operator[](std::size_t i) const { return nodes_[begin_ + i]; }
+  const KeyframeNode* begin() const { return nodes_.data() + begin_; }
+  const KeyframeNode* end() const { return nodes_.data() + end_; }
+  const KeyframeNode& front() const { return nodes_[begin_]; }
+  const KeyframeNode& back() const { return nodes_[end_ - 1]; }
+  /// The held time steps, ascending: times()[i] == (*this)[i].t.
+  std::span<const std::uint32_t> times() const { return {times_.data() + begin_, size()}; }
+  /// The position of the first keyframe node at a time step ≥ t (size() if none is).
+  std::size_t lower_bound(std::uint32_t t) const;
+  /// Held keyframe nodes marked subtree_constant.
+  std::size_t subtree_constants() const { return subtree_constants_; }
+  /// Keyframe nodes the list has room for.
+  std::size_t capacity() const { return nodes_.size(); }
+
+  /// At the front, k.t must be below front().t; at the back, above back().t.
+  void push_front(const KeyframeNode& k);
+  void push_back(const KeyframeNode& k);
+  void pop_front();
+  void pop_back();
+
+ private:
+  std::vector<KeyframeNode> nodes_;
+  std::vector<std::uint32_t> times_;
+  std::size_t begin_ = 0, end_ = 0;
+  std::size_t subtree_constants_ = 0;
+  /// Moves the held nodes (into a larger block when they fill half of it) so that the side
+  /// `front` has room for at least one more.
+  void make_room(bool front);
+};
 
 struct SpatialNode {
   NodeKey key;
@@ -102,8 +137,9 @@ struct SpatialNode {
 };
 
 struct IndexOptions {
-  /// Keyframe nodes held at once, in bytes (about 44 bytes each). A container that needs more is
-  /// held as a time window of as many frames as fit (at least 2·max_keyframe_gap + 4).
+  /// Keyframe nodes held at once, in bytes (about 48 bytes each, up to 72 with the lists' room). A
+  /// container that needs more is held as a time window of as many frames as fit (at least
+  /// 2·max_keyframe_gap + 4).
   std::uint64_t memory_bytes = 128ull << 20;
   /// Time follow() spends adding frames, at least one frame when one is ready.
   double follow_budget_s = 0.002;
@@ -219,6 +255,7 @@ class SpatialIndex {
   std::vector<SpatialNode> nodes_;
   std::vector<KeyframeList> keyframes_;
   std::size_t keyframe_count_ = 0;
+  std::size_t keyframe_capacity_ = 0;  ///< the lists' room, in keyframe nodes
   std::uint32_t held_begin_ = 0, held_end_ = 0;
   std::size_t window_ = 0;
   std::uint32_t max_gap_ = 1;
