@@ -111,8 +111,12 @@ KeyframePick pick_side(const SpatialIndex& index, std::uint32_t node, double p,
   // nearest stored state counts as if it were at the nearest step (distance from p to that step).
   const double step = side == Side::before ? std::floor(p) : std::ceil(p);
   const double own_reference = stored_state_time(index, node, side, stored);
+  // exp(ancestor_handicap · up), one level at a time.
+  const double level_handicap = std::exp(settings.ancestor_handicap);
+  double handicap = 1;
   std::uint32_t up = 0;
-  for (std::uint32_t n = node; n != no_node; n = index.node(n).parent, ++up) {
+  for (std::uint32_t n = node; n != no_node;
+       n = index.node(n).parent, ++up, handicap *= level_handicap) {
     KeyframePick c = nearest_on_side(index, resident.of_node(n), p, side, settings);
     if (!c.valid()) continue;
     const KeyframeNode& k = index.keyframe(c.keyframe);
@@ -124,7 +128,7 @@ KeyframePick pick_side(const SpatialIndex& index, std::uint32_t node, double p,
           c.exact ? own_reference : stored.nearest(n, side == Side::after, false);
       if (reference >= 0) c.score = std::abs(reference - t) + std::abs(step - p);
     }
-    if (!c.exact) c.score *= std::exp(settings.ancestor_handicap * static_cast<double>(up));
+    if (!c.exact) c.score *= handicap;
     c.lod_difference = up;
     c.t = k.t;
     // 3. Keep the best (ties keep the finer candidate).
