@@ -341,6 +341,7 @@ SpatialIndex& SpatialIndex::operator=(const SpatialIndex& other) {
   nodes_ = other.nodes_;
   keyframes_ = other.keyframes_;
   keyframe_count_ = other.keyframe_count_;
+  keyframe_capacity_ = other.keyframe_capacity_;
   held_begin_ = other.held_begin_;
   held_end_ = other.held_end_;
   window_ = other.window_;

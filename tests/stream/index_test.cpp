@@ -253,6 +253,7 @@ TEST(StreamIndex, AWindowFollowsThePlayheadForwardBackwardAndAcrossSeeks) {
   EXPECT_GT(index.memory_bytes(), 0u);
   // A copy reads with its own thread.
   SpatialIndex copy = index;
+  EXPECT_EQ(copy.memory_bytes(), index.memory_bytes());
   check(18, 1);
   ASSERT_TRUE(follow_until_held(copy, 5, 0));
   expect_held_agree(copy, whole);
