@@ -96,7 +96,9 @@ void KeyframeList::push_back(const KeyframeNode& k) {
 }
 
 void KeyframeList::pop_front() {
-  if (nodes_[begin_].subtree_constant) --subtree_constants_;
+  // (The node itself is read only when the list has constant subtrees: dropping a frame then
+  // touches the lists' headers alone.)
+  if (subtree_constants_ > 0 && nodes_[begin_].subtree_constant) --subtree_constants_;
   ++begin_;
   // An emptied list starts again in the middle, with room on both sides.
   if (begin_ == end_) begin_ = end_ = nodes_.size() / 2;
@@ -104,7 +106,7 @@ void KeyframeList::pop_front() {
 
 void KeyframeList::pop_back() {
   --end_;
-  if (nodes_[end_].subtree_constant) --subtree_constants_;
+  if (subtree_constants_ > 0 && nodes_[end_].subtree_constant) --subtree_constants_;
   if (begin_ == end_) begin_ = end_ = nodes_.size() / 2;
 }
 
