@@ -509,9 +509,13 @@ void SpatialIndex::follow(double playhead, double velocity, std::vector<std::str
   while (held_begin_ < held_end_ && held_end_ > end) drop(false);
   if (held_begin_ == held_end_) held_begin_ = held_end_ = center;
 
-  // Add what the reader has at either end of the held range, ahead first.
+  // Add what the reader has at either end of the held range: ahead first, except that the frames
+  // the selection needs (max_keyframe_gap around the playhead) come before any others.
   const auto started = std::chrono::steady_clock::now();
   const bool backwards = velocity < 0;
+  const auto need_lo = static_cast<std::uint32_t>(std::max(0.0, std::floor(p) - max_gap_));
+  const auto need_hi =
+      static_cast<std::uint32_t>(std::min<double>(frames - 1, std::ceil(p) + max_gap_));
   for (bool first = true;; first = false) {
     if (!first &&
         std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() >=
@@ -523,7 +527,11 @@ void SpatialIndex::follow(double playhead, double velocity, std::vector<std::str
       const std::lock_guard lock(reader_->mutex);
       // An empty range starts with the playhead's own frame.
       const bool empty = held_begin_ == held_end_;
-      for (const bool front : {backwards && !empty, !backwards || empty}) {
+      const bool front_short = held_begin_ > need_lo, back_short = held_end_ <= need_hi;
+      const bool ahead_short = backwards ? front_short : back_short;
+      const bool behind_short = backwards ? back_short : front_short;
+      const bool front_first = !empty && (backwards != (behind_short && !ahead_short));
+      for (const bool front : {front_first, !front_first}) {
         if (front && held_begin_ > begin && held_begin_ <= end)
           f = reader_->take(held_begin_ - 1);
         else if (!front && held_end_ < end && held_end_ >= begin)
