@@ -49,31 +49,26 @@ void KeyframeList::make_room(bool front) {
   if (capacity - n < n / 2 + 2) capacity = n + n / 2 + 8;
   const std::size_t room = capacity - n;
   const std::size_t first = front ? room - room / 4 : room / 4;
+  // The held entries of one array to [first, first + n) of `to` (the same array, or a new one).
+  const auto move_held = [&](auto& from, auto& to, bool in_place) {
+    const auto held_begin = from.begin() + static_cast<std::ptrdiff_t>(begin_);
+    const auto held_end = from.begin() + static_cast<std::ptrdiff_t>(end_);
+    const auto at = to.begin() + static_cast<std::ptrdiff_t>(first);
+    if (!in_place || first < begin_)
+      std::copy(held_begin, held_end, at);
+    else if (first > begin_)
+      std::copy_backward(held_begin, held_end, at + static_cast<std::ptrdiff_t>(n));
+  };
   if (capacity != nodes_.size()) {
     std::vector<KeyframeNode> nodes(capacity);
     std::vector<std::uint32_t> times(capacity);
-    std::copy(nodes_.begin() + static_cast<std::ptrdiff_t>(begin_),
-              nodes_.begin() + static_cast<std::ptrdiff_t>(end_),
-              nodes.begin() + static_cast<std::ptrdiff_t>(first));
-    std::copy(times_.begin() + static_cast<std::ptrdiff_t>(begin_),
-              times_.begin() + static_cast<std::ptrdiff_t>(end_),
-              times.begin() + static_cast<std::ptrdiff_t>(first));
+    move_held(nodes_, nodes, false);
+    move_held(times_, times, false);
     nodes_ = std::move(nodes);
     times_ = std::move(times);
-  } else if (first < begin_) {
-    std::copy(nodes_.begin() + static_cast<std::ptrdiff_t>(begin_),
-              nodes_.begin() + static_cast<std::ptrdiff_t>(end_),
-              nodes_.begin() + static_cast<std::ptrdiff_t>(first));
-    std::copy(times_.begin() + static_cast<std::ptrdiff_t>(begin_),
-              times_.begin() + static_cast<std::ptrdiff_t>(end_),
-              times_.begin() + static_cast<std::ptrdiff_t>(first));
-  } else if (first > begin_) {
-    std::copy_backward(nodes_.begin() + static_cast<std::ptrdiff_t>(begin_),
-                       nodes_.begin() + static_cast<std::ptrdiff_t>(end_),
-                       nodes_.begin() + static_cast<std::ptrdiff_t>(first + n));
-    std::copy_backward(times_.begin() + static_cast<std::ptrdiff_t>(begin_),
-                       times_.begin() + static_cast<std::ptrdiff_t>(end_),
-                       times_.begin() + static_cast<std::ptrdiff_t>(first + n));
+  } else {
+    move_held(nodes_, nodes_, true);
+    move_held(times_, times_, true);
   }
   begin_ = first;
   end_ = first + n;
