@@ -40,6 +40,11 @@ std::size_t KeyframeList::lower_bound(std::uint32_t t) const {
   return static_cast<std::size_t>(std::lower_bound(held.begin(), held.end(), t) - held.begin());
 }
 
+std::size_t KeyframeList::find(std::uint32_t t) const {
+  const std::size_t i = lower_bound(t);
+  return i < size() && times_[begin_ + i] == t ? i : size();
+}
+
 void KeyframeList::make_room(bool front) {
   const std::size_t n = size();
   // A block whose free room is short of half the held nodes grows to hold one and a half times
@@ -338,7 +343,6 @@ SpatialIndex& SpatialIndex::operator=(const SpatialIndex& other) {
   nodes_ = other.nodes_;
   keyframes_ = other.keyframes_;
   keyframe_count_ = other.keyframe_count_;
-  keyframe_capacity_ = other.keyframe_capacity_;
   held_begin_ = other.held_begin_;
   held_end_ = other.held_end_;
   window_ = other.window_;
@@ -367,7 +371,6 @@ void SpatialIndex::reset_nodes() {
   nodes_ = geometry_->nodes;
   keyframes_.assign(nodes_.size(), KeyframeList{});
   keyframe_count_ = 0;
-  keyframe_capacity_ = 0;
   held_.clear();
   whole_frames_ = 0;
   held_begin_ = held_end_ = 0;
@@ -413,13 +416,10 @@ void SpatialIndex::hold(HeldFrame frame, bool at_front) {
   record.whole = whole;
   record.keyframe_nodes.reserve(frame.keyframes.size());
   for (const auto& [id, k] : frame.keyframes) {
-    KeyframeList& list = keyframes_[id];
-    const std::size_t capacity = list.capacity();
     if (at_front)
-      list.push_front(k);
+      keyframes_[id].push_front(k);
     else
-      list.push_back(k);
-    keyframe_capacity_ += list.capacity() - capacity;
+      keyframes_[id].push_back(k);
     record.keyframe_nodes.push_back(id);
   }
   keyframe_count_ += frame.keyframes.size();
@@ -562,8 +562,9 @@ void SpatialIndex::follow(double playhead, double velocity, std::vector<std::str
 }
 
 std::uint64_t SpatialIndex::memory_bytes() const {
-  std::uint64_t bytes = nodes_.size() * (sizeof(SpatialNode) + sizeof(KeyframeList)) +
-                        keyframe_capacity_ * (sizeof(KeyframeNode) + sizeof(std::uint32_t));
+  std::uint64_t bytes = nodes_.size() * (sizeof(SpatialNode) + sizeof(KeyframeList));
+  for (const KeyframeList& list : keyframes_)
+    bytes += list.capacity() * (sizeof(KeyframeNode) + sizeof(std::uint32_t));
   for (const HeldRecord& r : held_)
     bytes += (r.nodes.capacity() + r.keyframe_nodes.capacity()) * sizeof(std::uint32_t);
   if (reader_) {
@@ -594,8 +595,8 @@ std::uint32_t SpatialIndex::ancestor(std::uint32_t id, std::uint32_t up) const {
 const KeyframeNode& SpatialIndex::keyframe(KeyframeId id) const {
   const KeyframeList& list = keyframes_[node_of(id)];
   const auto t = static_cast<std::uint32_t>(id & 0xFFFFFFFFu);
-  const std::size_t i = list.lower_bound(t);
-  if (i == list.size() || list.times()[i] != t)
+  const std::size_t i = list.find(t);
+  if (i == list.size())
     throw std::logic_error("keyframe node " + str(node_of(id)) + " at t " + str(t) +
                            " is not held by the index");
   return list[i];
@@ -612,8 +613,7 @@ std::vector<KeyframeId> SpatialIndex::held_keyframes() const {
 KeyframeId SpatialIndex::find_keyframe(std::uint32_t node, std::uint32_t t) const {
   if (node >= keyframes_.size()) return no_keyframe;
   const KeyframeList& list = keyframes_[node];
-  const std::size_t i = list.lower_bound(t);
-  if (i == list.size() || list.times()[i] != t) return no_keyframe;
+  if (list.find(t) == list.size()) return no_keyframe;
   return keyframe_id(node, t);
 }
 

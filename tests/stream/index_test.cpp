@@ -37,6 +37,8 @@ TEST(StreamIndex, KeyframeListGrowsAndShrinksAtBothEndsLikeADeque) {
       EXPECT_EQ(list.lower_bound(reference.front().t), 0u);
       EXPECT_EQ(list.lower_bound(reference.back().t + 1), list.size());
       EXPECT_EQ(list.lower_bound((lo + hi) / 2), (hi - lo) / 2);
+      EXPECT_EQ(list.find(reference.back().t), list.size() - 1);
+      EXPECT_EQ(list.find(hi), list.size());  // not held
     }
     capacity_seen = std::max(capacity_seen, list.capacity());
   };

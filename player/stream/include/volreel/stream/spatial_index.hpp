@@ -103,6 +103,8 @@ class KeyframeList {
   std::span<const std::uint32_t> times() const { return {times_.data() + begin_, size()}; }
   /// The position of the first keyframe node at a time step ≥ t (size() if none is).
   std::size_t lower_bound(std::uint32_t t) const;
+  /// The position of the keyframe node at time step t (size() if there is none).
+  std::size_t find(std::uint32_t t) const;
   /// Held keyframe nodes marked subtree_constant.
   std::size_t subtree_constants() const { return subtree_constants_; }
   /// Keyframe nodes the list has room for.
@@ -256,7 +258,6 @@ class SpatialIndex {
   std::vector<SpatialNode> nodes_;
   std::vector<KeyframeList> keyframes_;
   std::size_t keyframe_count_ = 0;
-  std::size_t keyframe_capacity_ = 0;  ///< the lists' room, in keyframe nodes
   std::uint32_t held_begin_ = 0, held_end_ = 0;
   std::size_t window_ = 0;
   std::uint32_t max_gap_ = 1;
