@@ -53,64 +53,58 @@ double combined_priority(double sse_priority_value, double temporal_priority_val
               lerp(settings.temporal_lerp_min, 1.0, temporal_priority_value));
 }
 
-std::size_t due_range(const KeyframeList& keyframes, double playhead, double velocity,
-                      double lookahead_s, std::vector<double>& seconds) {
-  seconds.clear();
-  const std::span<const std::uint32_t> times = keyframes.times();
-  if (times.empty()) return 0;
-  // The last time step ≤ playhead and the first ≥ playhead (the pre-render selection's picks).
-  const auto after = std::lower_bound(times.begin(), times.end(), playhead,
-                                      [](std::uint32_t t, double p) { return t < p; });
-  const auto n = static_cast<std::ptrdiff_t>(times.size());
-  const auto i_after = static_cast<std::ptrdiff_t>(after - times.begin());
-  // On a keyframe it is both sides' pick.
-  const bool on_keyframe =
-      i_after < n && static_cast<double>(times[static_cast<std::size_t>(i_after)]) == playhead;
-  const std::ptrdiff_t i_before = on_keyframe ? i_after : i_after - 1;
-  // Those the playhead reaches within the lookahead, in its direction of travel: [first, last]
-  // of the keyframe nodes that can be due.
-  const double reach = velocity * std::max(0.0, lookahead_s);
-  const bool reaching = std::abs(reach) > 0 && std::isfinite(reach);
-  std::ptrdiff_t first = i_before - 1, last = i_after + 1;
-  if (reaching && reach > 0) {
-    const auto end = std::upper_bound(after, times.end(), playhead + reach,
-                                      [](double v, std::uint32_t t) { return v < t; });
-    last = std::max(last, static_cast<std::ptrdiff_t>(end - times.begin()) - 1);
-  } else if (reaching) {
-    const auto begin = std::lower_bound(times.begin(), after, playhead + reach,
-                                        [](std::uint32_t t, double v) { return t < v; });
-    first = std::min(first, static_cast<std::ptrdiff_t>(begin - times.begin()));
-  }
-  first = std::max<std::ptrdiff_t>(first, 0);
-  last = std::min(last, n - 1);
-  if (last < first) return 0;
-  seconds.assign(static_cast<std::size_t>(last - first + 1), -1.0);
-  const auto mark = [&](std::ptrdiff_t i, double s) {
-    if (i >= first && i <= last && seconds[static_cast<std::size_t>(i - first)] < 0)
-      seconds[static_cast<std::size_t>(i - first)] = s;
-  };
-  mark(i_before, 0);
-  mark(i_after, 0);
-  if (reaching)
-    for (std::ptrdiff_t i = first; i <= last; ++i) {
-      const double d = static_cast<double>(times[static_cast<std::size_t>(i)]) - playhead;
-      if (d != 0 && (d > 0) == (reach > 0) && std::abs(d) <= std::abs(reach))
-        mark(i, std::abs(d / velocity));
-    }
-  // The next one beyond those on each side, where a step, a start of playback or a change of
-  // direction goes first: due last (as if needed at the end of the lookahead).
-  const double at_end = std::max(0.0, lookahead_s);
-  mark(i_before - 1, at_end);
-  mark(i_after + 1, at_end);
-  return static_cast<std::size_t>(first);
+namespace {
+
+/// The time step ⌊v⌋ and ⌈v⌉, within [0, no_time − 1].
+std::uint32_t step_floor(double v) {
+  constexpr double top = static_cast<double>(no_time - 1);
+  return v <= 0 ? 0 : v >= top ? no_time - 1 : static_cast<std::uint32_t>(std::floor(v));
+}
+std::uint32_t step_ceil(double v) {
+  constexpr double top = static_cast<double>(no_time - 1);
+  return v <= 0 ? 0 : v >= top ? no_time - 1 : static_cast<std::uint32_t>(std::ceil(v));
 }
 
-void due_seconds(const KeyframeList& keyframes, double playhead, double velocity,
-                 double lookahead_s, std::vector<double>& seconds) {
-  std::vector<double> range;
-  const std::size_t first = due_range(keyframes, playhead, velocity, lookahead_s, range);
-  seconds.assign(keyframes.size(), -1.0);
-  std::copy(range.begin(), range.end(), seconds.begin() + static_cast<std::ptrdiff_t>(first));
+}  // namespace
+
+void due_times(const HeldTimes& times, double playhead, double velocity, double lookahead_s,
+               std::vector<DueTime>& due) {
+  due.clear();
+  if (times.empty() || !std::isfinite(playhead)) return;
+  // The last time step ≤ playhead and the first ≥ playhead (the pre-render selection's picks; on
+  // a keyframe, the same one), and the next one beyond each.
+  const std::uint32_t before = playhead < 0 ? no_time : times.at_or_before(step_floor(playhead));
+  const std::uint32_t after = times.at_or_after(step_ceil(playhead));
+  const std::uint32_t before_next =
+      before == no_time || before == 0 ? no_time : times.at_or_before(before - 1);
+  const std::uint32_t after_next = after == no_time ? no_time : times.at_or_after(after + 1);
+  // Those the playhead reaches within the lookahead, in its direction of travel.
+  const double reach = velocity * std::max(0.0, lookahead_s);
+  const bool reaching = std::abs(reach) > 0 && std::isfinite(reach);
+  const auto first_of = [](std::initializer_list<std::uint32_t> ts) {
+    for (const std::uint32_t t : ts)
+      if (t != no_time) return t;
+    return no_time;
+  };
+  std::uint32_t lo = first_of({before_next, before, after});
+  std::uint32_t hi = first_of({after_next, after, before});
+  if (reaching && reach > 0) hi = std::max(hi, step_floor(playhead + reach));
+  if (reaching && reach < 0) lo = std::min(lo, step_ceil(playhead + reach));
+  // A step, a start of playback or a change of direction goes first to the next ones beyond:
+  // due last (as if needed at the end of the lookahead).
+  const double at_end = std::max(0.0, lookahead_s);
+  times.for_each(lo, hi, [&](std::uint32_t t) {
+    double s = -1;
+    if (t == before || t == after) {
+      s = 0;
+    } else if (reaching) {
+      const double d = static_cast<double>(t) - playhead;
+      if (d != 0 && (d > 0) == (reach > 0) && std::abs(d) <= std::abs(reach))
+        s = std::abs(d / velocity);
+    }
+    if (s < 0 && (t == before_next || t == after_next)) s = at_end;
+    if (s >= 0) due.push_back({t, s});
+  });
 }
 
 double due_priority(double seconds, const PrioritySettings& settings) {

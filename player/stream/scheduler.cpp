@@ -72,13 +72,10 @@ void StreamScheduler::select(const player::OrbitCamera& camera, double playhead)
   // looked at. Otherwise they all enter the heap.
   if (due_window) {
     for (const ViewTraversal::Visit& v : view_.visits()) {
-      const KeyframeList& keyframes = index_.keyframes(v.node);
-      const std::size_t first = due_range(keyframes, playhead, velocity, ps.lookahead_s, due_);
+      due_times(index_.times(v.node), playhead, velocity, ps.lookahead_s, due_);
       const std::uint32_t level = index_.node(v.node).key.level;
-      for (std::size_t j = 0; j < due_.size(); ++j)
-        if (due_[j] >= 0)
-          selection_.push_back({due_priority(due_[j], ps), level,
-                                keyframe_id(v.node, keyframes.times()[first + j]), true});
+      for (const DueTime& d : due_)
+        selection_.push_back({due_priority(d.seconds, ps), level, keyframe_id(v.node, d.t), true});
     }
     const std::size_t slots = heap_.capacity();
     if (selection_.size() >= slots && ps.sse_weight >= 0) {
@@ -122,32 +119,23 @@ void StreamScheduler::select(const player::OrbitCamera& camera, double playhead)
     // A node whose best possible priority cannot enter a full heap is skipped whole.
     const double best = patent ? ps.sse_weight * sse_p + 1.0 : 1.0;
     if (heap_.full() && best < heap_.min().priority) continue;
-    const KeyframeList& keyframes = index_.keyframes(v.node);
-    if (keyframes.empty()) continue;
-    std::size_t due_first = 0;
-    bool positioned = false;  // position_ and due_ filled for this node (on its first step in)
+    const HeldTimes times = index_.times(v.node);
+    if (times.empty()) continue;
+    bool due_known = false;  // due_ filled for this node (on its first step in)
     for (const auto& [part, t] : by_time_) {
       const double priority = combined_priority(sse_p, temporal_[t], random_table_[t], ps);
       if (heap_.full() && priority < heap_.min().priority) break;
-      if (!positioned) {
-        position_.assign(index_.held_end() - index_.held_begin(), -1);
-        const std::span<const std::uint32_t> times = keyframes.times();
-        for (std::size_t i = 0; i < times.size(); ++i) {
-          const std::uint32_t kt = times[i];
-          if (kt >= index_.held_begin() && kt < index_.held_end())
-            position_[kt - index_.held_begin()] = static_cast<std::int32_t>(i);
-        }
-        // The due ones entered above.
+      if (!times.contains(t)) continue;
+      if (!due_known) {
         if (due_window)
-          due_first = due_range(keyframes, playhead, velocity, ps.lookahead_s, due_);
+          due_times(times, playhead, velocity, ps.lookahead_s, due_);
         else
           due_.clear();
-        positioned = true;
+        due_known = true;
       }
-      const std::int32_t at = position_[t - index_.held_begin()];
-      if (at < 0) continue;
-      const auto i = static_cast<std::size_t>(at);
-      if (i >= due_first && i - due_first < due_.size() && due_[i - due_first] >= 0) continue;
+      // The due ones entered above.
+      if (std::any_of(due_.begin(), due_.end(), [t](const DueTime& d) { return d.t == t; }))
+        continue;
       heap_.push({priority, n.key.level, keyframe_id(v.node, t), false});
     }
   }

@@ -67,25 +67,14 @@ KeyframePick nearest_on_side(const SpatialIndex& index, std::span<const Resident
 /// constant_only, a constant subtree's); -1 when there is none.
 double stored_time(const SpatialIndex& index, std::uint32_t node, double p, Side side,
                    bool constant_only) {
-  const KeyframeList& list = index.keyframes(node);
-  if (constant_only && list.subtree_constants() == 0) return -1;
-  // First keyframe node after p.
-  const std::span<const std::uint32_t> times = list.times();
-  const auto after = static_cast<std::size_t>(
-      std::upper_bound(times.begin(), times.end(), p,
-                       [](double v, std::uint32_t t) { return v < static_cast<double>(t); }) -
-      times.begin());
-  if (side == Side::before) {
-    for (std::size_t i = after; i > 0; --i)
-      if (!constant_only || list[i - 1].subtree_constant) return static_cast<double>(times[i - 1]);
-  } else {
-    // Keyframe nodes at p itself are on both sides.
-    std::size_t i = after;
-    while (i > 0 && static_cast<double>(times[i - 1]) == p) --i;
-    for (; i < times.size(); ++i)
-      if (!constant_only || list[i].subtree_constant) return static_cast<double>(times[i]);
-  }
-  return -1;
+  const HeldTimes times = constant_only ? index.constant_times(node) : index.times(node);
+  if (times.empty() || !(p >= 0)) return -1;
+  // Keyframe nodes at p itself are on both sides.
+  const double q = std::min(p, static_cast<double>(no_time - 1));
+  const std::uint32_t t = side == Side::before
+                              ? times.at_or_before(static_cast<std::uint32_t>(std::floor(q)))
+                              : times.at_or_after(static_cast<std::uint32_t>(std::ceil(q)));
+  return t == no_time ? -1 : static_cast<double>(t);
 }
 
 /// The time step on `side` of p nearest it at which the node's state is stored: its own keyframe

@@ -35,79 +35,56 @@ std::size_t KeyframeKeyHash::operator()(const KeyframeKey& k) const noexcept {
   return mix(mix(mix(mix(mix(0, k.level), k.x), k.y), k.z), k.t);
 }
 
-std::size_t KeyframeList::lower_bound(std::uint32_t t) const {
-  const std::span<const std::uint32_t> held = times();
-  return static_cast<std::size_t>(std::lower_bound(held.begin(), held.end(), t) - held.begin());
-}
+namespace {
 
-std::size_t KeyframeList::find(std::uint32_t t) const {
-  const std::size_t i = lower_bound(t);
-  return i < size() && times_[begin_ + i] == t ? i : size();
-}
-
-void KeyframeList::make_room(bool front) {
-  const std::size_t n = size();
-  // A block whose free room is short of half the held nodes grows to hold one and a half times
-  // as many; three quarters of the room go to the side that grows. A window sliding one way
-  // then moves its nodes once per 3n/8 or more added.
-  std::size_t capacity = nodes_.size();
-  if (capacity - n < n / 2 + 2) capacity = n + n / 2 + 8;
-  const std::size_t room = capacity - n;
-  const std::size_t first = front ? room - room / 4 : room / 4;
-  // The held entries of one array to [first, first + n) of `to` (the same array, or a new one).
-  const auto move_held = [&](auto& from, auto& to, bool in_place) {
-    const auto held_begin = from.begin() + static_cast<std::ptrdiff_t>(begin_);
-    const auto held_end = from.begin() + static_cast<std::ptrdiff_t>(end_);
-    const auto at = to.begin() + static_cast<std::ptrdiff_t>(first);
-    if (!in_place || first < begin_)
-      std::copy(held_begin, held_end, at);
-    else if (first > begin_)
-      std::copy_backward(held_begin, held_end, at + static_cast<std::ptrdiff_t>(n));
-  };
-  if (capacity != nodes_.size()) {
-    std::vector<KeyframeNode> nodes(capacity);
-    std::vector<std::uint32_t> times(capacity);
-    move_held(nodes_, nodes, false);
-    move_held(times_, times, false);
-    nodes_ = std::move(nodes);
-    times_ = std::move(times);
-  } else {
-    move_held(nodes_, nodes_, true);
-    move_held(times_, times_, true);
+/// The highest set bit of slots [a, b] (a ≤ b), or -1.
+std::int64_t last_bit(const std::uint64_t* words, std::uint32_t a, std::uint32_t b) {
+  for (std::uint32_t w = b >> 6;; --w) {
+    std::uint64_t bits = words[w];
+    if (w == b >> 6) bits &= ~std::uint64_t{0} >> (63 - (b & 63));
+    if (w == a >> 6) bits &= ~std::uint64_t{0} << (a & 63);
+    if (bits != 0) return std::int64_t{w} * 64 + 63 - std::countl_zero(bits);
+    if (w == a >> 6) return -1;
   }
-  begin_ = first;
-  end_ = first + n;
 }
 
-void KeyframeList::push_front(const KeyframeNode& k) {
-  if (begin_ == 0) make_room(true);
-  --begin_;
-  nodes_[begin_] = k;
-  times_[begin_] = k.t;
-  if (k.subtree_constant) ++subtree_constants_;
+/// The lowest set bit of slots [a, b] (a ≤ b), or -1.
+std::int64_t first_bit(const std::uint64_t* words, std::uint32_t a, std::uint32_t b) {
+  for (std::uint32_t w = a >> 6;; ++w) {
+    std::uint64_t bits = words[w];
+    if (w == a >> 6) bits &= ~std::uint64_t{0} << (a & 63);
+    if (w == b >> 6) bits &= ~std::uint64_t{0} >> (63 - (b & 63));
+    if (bits != 0) return std::int64_t{w} * 64 + std::countr_zero(bits);
+    if (w == b >> 6) return -1;
+  }
 }
 
-void KeyframeList::push_back(const KeyframeNode& k) {
-  if (end_ == nodes_.size()) make_room(false);
-  nodes_[end_] = k;
-  times_[end_] = k.t;
-  ++end_;
-  if (k.subtree_constant) ++subtree_constants_;
+}  // namespace
+
+std::uint32_t HeldTimes::at_or_before(std::uint32_t t) const {
+  if (count_ == 0 || t < begin_) return no_time;
+  t = std::min(t, end_ - 1);
+  // Slots (last − n, last] of the ring, descending, in at most two runs.
+  const std::uint32_t n = t - begin_ + 1, last = t % ring_;
+  const std::uint32_t run = std::min(n, last + 1);
+  std::int64_t slot = last_bit(words_, last + 1 - run, last);
+  if (slot >= 0) return t - (last - static_cast<std::uint32_t>(slot));
+  if (run == n) return no_time;
+  slot = last_bit(words_, ring_ - (n - run), ring_ - 1);
+  return slot < 0 ? no_time : t - run - (ring_ - 1 - static_cast<std::uint32_t>(slot));
 }
 
-void KeyframeList::pop_front() {
-  // (The node itself is read only when the list has constant subtrees: dropping a frame then
-  // touches the lists' headers alone.)
-  if (subtree_constants_ > 0 && nodes_[begin_].subtree_constant) --subtree_constants_;
-  ++begin_;
-  // An emptied list starts again in the middle, with room on both sides.
-  if (begin_ == end_) begin_ = end_ = nodes_.size() / 2;
-}
-
-void KeyframeList::pop_back() {
-  --end_;
-  if (subtree_constants_ > 0 && nodes_[end_].subtree_constant) --subtree_constants_;
-  if (begin_ == end_) begin_ = end_ = nodes_.size() / 2;
+std::uint32_t HeldTimes::at_or_after(std::uint32_t t) const {
+  if (count_ == 0 || t >= end_) return no_time;
+  t = std::max(t, begin_);
+  // Slots [first, first + n) of the ring, ascending, in at most two runs.
+  const std::uint32_t n = end_ - t, first = t % ring_;
+  const std::uint32_t run = std::min(n, ring_ - first);
+  std::int64_t slot = first_bit(words_, first, first + run - 1);
+  if (slot >= 0) return t + (static_cast<std::uint32_t>(slot) - first);
+  if (run == n) return no_time;
+  slot = first_bit(words_, 0, n - run - 1);
+  return slot < 0 ? no_time : t + run + static_cast<std::uint32_t>(slot);
 }
 
 namespace {
@@ -166,6 +143,7 @@ HeldFrame read_frame(const IndexGeometry& g, std::uint32_t t, const format::Fram
   out.t = t;
   out.nodes.reserve(frame.node_count());
   out.keyframes.reserve(frame.brick_count());
+  out.positions.assign(g.nodes.size(), no_node);
   for (std::uint32_t i = 0; i < frame.node_count(); ++i) {
     const format::NodePosition& p = frame.position(i);
     const std::uint32_t id = g.find(NodeKey{p.level, p.x, p.y, p.z});
@@ -184,8 +162,14 @@ HeldFrame read_frame(const IndexGeometry& g, std::uint32_t t, const format::Fram
     k.constant = k.bytes == 4;
     k.subtree_constant = n.type() == format::NodeType::empty;
     k.histogram = n.histogram;
+    if (out.positions[id] != no_node)
+      throw format::FormatError(file, format::FormatError::no_offset, "one brick per node",
+                                "two at level " + str(p.level) + " (" + str(p.x) + ", " + str(p.y) +
+                                    ", " + str(p.z) + ")");
+    out.positions[id] = static_cast<std::uint32_t>(out.keyframes.size());
     out.keyframes.emplace_back(id, k);
   }
+  out.keyframes.shrink_to_fit();  // (a brick can serve several nodes)
   return out;
 }
 
@@ -316,10 +300,11 @@ SpatialIndex SpatialIndexBuilder::build() && {
   index.files_ = std::move(files_);
   index.window_ = index.files_.size();
   index.reset_nodes();
-  for (std::size_t t = 0; t < frames_.size(); ++t)
-    index.hold(
-        frames_[t] ? std::move(*frames_[t]) : HeldFrame{static_cast<std::uint32_t>(t), {}, {}, {}},
-        false);
+  for (std::size_t t = 0; t < frames_.size(); ++t) {
+    HeldFrame f;
+    f.t = static_cast<std::uint32_t>(t);
+    index.hold(frames_[t] ? std::move(*frames_[t]) : std::move(f), false);
+  }
   frames_.clear();
   return index;
 }
@@ -341,14 +326,19 @@ SpatialIndex& SpatialIndex::operator=(const SpatialIndex& other) {
   geometry_ = other.geometry_;
   files_ = other.files_;
   nodes_ = other.nodes_;
-  keyframes_ = other.keyframes_;
+  held_ = other.held_;
+  ring_ = other.ring_;
+  words_ = other.words_;
+  time_bits_ = other.time_bits_;
+  constant_bits_ = other.constant_bits_;
+  held_counts_ = other.held_counts_;
+  constant_counts_ = other.constant_counts_;
   keyframe_count_ = other.keyframe_count_;
   held_begin_ = other.held_begin_;
   held_end_ = other.held_end_;
   window_ = other.window_;
   max_gap_ = other.max_gap_;
   options_ = other.options_;
-  held_ = other.held_;
   whole_frames_ = other.whole_frames_;
   container_ = other.container_;
   if (container_) {
@@ -369,9 +359,14 @@ std::uint32_t SpatialIndex::level_count() const {
 
 void SpatialIndex::reset_nodes() {
   nodes_ = geometry_->nodes;
-  keyframes_.assign(nodes_.size(), KeyframeList{});
+  ring_ = static_cast<std::uint32_t>((std::max<std::size_t>(window_, 1) + 63) / 64 * 64);
+  words_ = ring_ / 64;
+  held_.assign(ring_, HeldFrame{});
+  time_bits_.assign(nodes_.size() * words_, 0);
+  constant_bits_.assign(nodes_.size() * words_, 0);
+  held_counts_.assign(nodes_.size(), 0);
+  constant_counts_.assign(nodes_.size(), 0);
   keyframe_count_ = 0;
-  held_.clear();
   whole_frames_ = 0;
   held_begin_ = held_end_ = 0;
 }
@@ -404,23 +399,26 @@ void SpatialIndex::count_nodes(std::span<const std::uint32_t> ids, int delta) {
 void SpatialIndex::hold(HeldFrame frame, bool at_front) {
   // A frame with every node of the geometry (the usual case) counts once for all of them while
   // any such frame is held: adding and dropping it touches its bricks only.
-  const bool whole = frame.nodes.size() == nodes_.size();
-  if (!whole) {
+  frame.whole = frame.nodes.size() == nodes_.size();
+  if (!frame.whole) {
     count_nodes(frame.nodes, +1);
   } else if (whole_frames_++ == 0) {
     std::vector<std::uint32_t> all(nodes_.size());
     std::iota(all.begin(), all.end(), 0u);
     count_nodes(all, +1);
   }
-  HeldRecord record;
-  record.whole = whole;
-  record.keyframe_nodes.reserve(frame.keyframes.size());
+  // A whole frame's nodes are all of them; a frame of a whole index is never dropped.
+  if (frame.whole || !windowed()) frame.nodes = std::vector<std::uint32_t>();
+  const std::uint32_t slot = frame.t % ring_;
+  const std::uint64_t bit = std::uint64_t{1} << (slot & 63);
+  std::uint64_t* const times = time_bits_.data() + (slot >> 6);
   for (const auto& [id, k] : frame.keyframes) {
-    if (at_front)
-      keyframes_[id].push_front(k);
-    else
-      keyframes_[id].push_back(k);
-    record.keyframe_nodes.push_back(id);
+    times[id * words_] |= bit;
+    ++held_counts_[id];
+    if (k.subtree_constant) {
+      constant_bits_[id * words_ + (slot >> 6)] |= bit;
+      ++constant_counts_[id];
+    }
   }
   keyframe_count_ += frame.keyframes.size();
   if (held_begin_ == held_end_) {
@@ -431,32 +429,27 @@ void SpatialIndex::hold(HeldFrame frame, bool at_front) {
   } else {
     held_end_ = frame.t + 1;
   }
-  if (windowed()) {
-    if (!whole) record.nodes = std::move(frame.nodes);
-    if (at_front)
-      held_.push_front(std::move(record));
-    else
-      held_.push_back(std::move(record));
-  }
+  held_[slot] = std::move(frame);
 }
 
 void SpatialIndex::drop(bool front) {
   const std::uint32_t t = front ? held_begin_ : held_end_ - 1;
-  const HeldRecord record = front ? std::move(held_.front()) : std::move(held_.back());
-  if (front)
-    held_.pop_front();
-  else
-    held_.pop_back();
-  for (const std::uint32_t id : record.keyframe_nodes) {
-    KeyframeList& list = keyframes_[id];
-    if (front)
-      list.pop_front();
-    else
-      list.pop_back();
+  const std::uint32_t slot = t % ring_;
+  const HeldFrame frame = std::move(held_[slot]);
+  held_[slot] = HeldFrame{};
+  const std::uint64_t keep = ~(std::uint64_t{1} << (slot & 63));
+  std::uint64_t* const times = time_bits_.data() + (slot >> 6);
+  for (const auto& [id, k] : frame.keyframes) {
+    times[id * words_] &= keep;
+    --held_counts_[id];
+    if (k.subtree_constant) {
+      constant_bits_[id * words_ + (slot >> 6)] &= keep;
+      --constant_counts_[id];
+    }
   }
-  keyframe_count_ -= record.keyframe_nodes.size();
-  if (!record.whole) {
-    count_nodes(record.nodes, -1);
+  keyframe_count_ -= frame.keyframes.size();
+  if (!frame.whole) {
+    count_nodes(frame.nodes, -1);
   } else if (--whole_frames_ == 0) {
     std::vector<std::uint32_t> all(nodes_.size());
     std::iota(all.begin(), all.end(), 0u);
@@ -562,16 +555,17 @@ void SpatialIndex::follow(double playhead, double velocity, std::vector<std::str
 }
 
 std::uint64_t SpatialIndex::memory_bytes() const {
-  std::uint64_t bytes = nodes_.size() * (sizeof(SpatialNode) + sizeof(KeyframeList));
-  for (const KeyframeList& list : keyframes_)
-    bytes += list.capacity() * (sizeof(KeyframeNode) + sizeof(std::uint32_t));
-  for (const HeldRecord& r : held_)
-    bytes += (r.nodes.capacity() + r.keyframe_nodes.capacity()) * sizeof(std::uint32_t);
+  const auto frame_bytes = [](const HeldFrame& f) {
+    return (f.nodes.capacity() + f.positions.capacity()) * sizeof(std::uint32_t) +
+           f.keyframes.capacity() * sizeof(f.keyframes[0]);
+  };
+  std::uint64_t bytes = nodes_.size() * (sizeof(SpatialNode) + 2 * sizeof(std::uint32_t)) +
+                        (time_bits_.size() + constant_bits_.size()) * sizeof(std::uint64_t) +
+                        held_.size() * sizeof(HeldFrame);
+  for (const HeldFrame& f : held_) bytes += frame_bytes(f);
   if (reader_) {
     const std::lock_guard lock(reader_->mutex);
-    for (const auto& [t, f] : reader_->ready_frames)
-      bytes += f.nodes.capacity() * sizeof(std::uint32_t) +
-               f.keyframes.capacity() * sizeof(f.keyframes[0]);
+    for (const auto& [t, f] : reader_->ready_frames) bytes += frame_bytes(f);
   }
   return bytes;
 }
@@ -593,27 +587,27 @@ std::uint32_t SpatialIndex::ancestor(std::uint32_t id, std::uint32_t up) const {
 }
 
 const KeyframeNode& SpatialIndex::keyframe(KeyframeId id) const {
-  const KeyframeList& list = keyframes_[node_of(id)];
+  const std::uint32_t node = node_of(id);
   const auto t = static_cast<std::uint32_t>(id & 0xFFFFFFFFu);
-  const std::size_t i = list.find(t);
-  if (i == list.size())
-    throw std::logic_error("keyframe node " + str(node_of(id)) + " at t " + str(t) +
-                           " is not held by the index");
-  return list[i];
+  if (t >= held_begin_ && t < held_end_) {
+    const HeldFrame& f = held_[t % ring_];
+    if (node < f.positions.size() && f.positions[node] != no_node)
+      return f.keyframes[f.positions[node]].second;
+  }
+  throw std::logic_error("keyframe node " + str(node) + " at t " + str(t) +
+                         " is not held by the index");
 }
 
 std::vector<KeyframeId> SpatialIndex::held_keyframes() const {
   std::vector<KeyframeId> ids;
   ids.reserve(keyframe_count_);
-  for (std::uint32_t n = 0; n < keyframes_.size(); ++n)
-    for (const KeyframeNode& k : keyframes_[n]) ids.push_back(keyframe_id(n, k.t));
+  for (std::uint32_t n = 0; n < nodes_.size(); ++n)
+    times(n).for_each([&](std::uint32_t t) { ids.push_back(keyframe_id(n, t)); });
   return ids;
 }
 
 KeyframeId SpatialIndex::find_keyframe(std::uint32_t node, std::uint32_t t) const {
-  if (node >= keyframes_.size()) return no_keyframe;
-  const KeyframeList& list = keyframes_[node];
-  if (list.find(t) == list.size()) return no_keyframe;
+  if (node >= nodes_.size() || !times(node).contains(t)) return no_keyframe;
   return keyframe_id(node, t);
 }
 
@@ -638,12 +632,11 @@ SpatialIndex build_spatial_index(const format::Container& container,
     if (m.frames[t]) index.files_[t] = container.source().name(m.frames[t]->file);
   index.options_ = options;
   index.max_gap_ = std::max<std::uint32_t>(1, m.max_keyframe_gap);
-  index.reset_nodes();
-  // Keyframe nodes per frame at most (every node stored): the node and its time step, a node id
-  // to drop them again, and the lists' room to grow (up to half as much again).
+  // Keyframe nodes per frame at most (every node stored): the node with its node id, its entry
+  // in the frame's positions, and a node id to drop the frame's nodes again.
   const std::uint64_t frame_bytes =
-      index.nodes_.size() *
-      (3 * (sizeof(KeyframeNode) + sizeof(std::uint32_t)) / 2 + sizeof(std::uint32_t));
+      index.geometry_->nodes.size() *
+      (sizeof(std::pair<std::uint32_t, KeyframeNode>) + 2 * sizeof(std::uint32_t));
   const std::uint64_t fit = options.memory_bytes / std::max<std::uint64_t>(1, frame_bytes);
   if (fit < frames) {
     const std::uint64_t least = std::min<std::uint64_t>(frames, 2ull * index.max_gap_ + 4);
@@ -651,6 +644,7 @@ SpatialIndex build_spatial_index(const format::Container& container,
   } else {
     index.window_ = frames;
   }
+  index.reset_nodes();
   if (index.windowed()) {
     index.container_ = std::make_shared<const format::Container>(container);
     index.start_reader();

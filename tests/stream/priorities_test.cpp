@@ -2,6 +2,7 @@
 // and the SSE-driven traversal.
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cmath>
 
 #include "stream_test_util.hpp"
@@ -106,51 +107,59 @@ TEST(StreamPriorities, TraversalRefinesWhileTheSseExceedsTheTarget) {
   EXPECT_TRUE(view.visits().empty());
 }
 
-/// Keyframe nodes at the given time steps (only t matters to the due window).
-KeyframeList at_times(std::initializer_list<std::uint32_t> times) {
-  KeyframeList k;
-  for (const std::uint32_t t : times) k.push_back({.t = t});
-  return k;
+/// A node's held time steps (all that matters to the due window), held range [begin, 10).
+struct Times {
+  Times(std::initializer_list<std::uint32_t> times, std::uint32_t begin_at = 0) : begin(begin_at) {
+    for (const std::uint32_t t : times) bits |= std::uint64_t{1} << t;
+  }
+  HeldTimes view() const {
+    return {&bits, 64, begin, 10, static_cast<std::uint32_t>(std::popcount(bits))};
+  }
+  std::uint64_t bits = 0;
+  std::uint32_t begin = 0;
+};
+
+/// (t, seconds) of the due window.
+std::vector<std::pair<std::uint32_t, double>> due(const Times& times, double playhead,
+                                                  double velocity, double lookahead_s) {
+  std::vector<DueTime> d;
+  due_times(times.view(), playhead, velocity, lookahead_s, d);
+  std::vector<std::pair<std::uint32_t, double>> out;
+  for (const DueTime& x : d) out.emplace_back(x.t, x.seconds);
+  return out;
 }
+using Due = std::vector<std::pair<std::uint32_t, double>>;
 
 TEST(StreamPriorities, DueWindowIsTheTwoAroundThePlayheadAndTheirNeighboursWhenPaused) {
-  const auto k = at_times({0, 1, 2, 3, 4, 5, 6, 7, 8});
-  std::vector<double> s;
-  due_seconds(k, 2.5, 0.0, 1.0, s);
-  EXPECT_EQ(s, (std::vector<double>{-1, 1, 0, 0, 1, -1, -1, -1, -1}));
+  const Times k({0, 1, 2, 3, 4, 5, 6, 7, 8});
+  EXPECT_EQ(due(k, 2.5, 0.0, 1.0), (Due{{1, 1}, {2, 0}, {3, 0}, {4, 1}}));
   // On a keyframe: that keyframe (both sides' pick) and its neighbours.
-  due_seconds(k, 4.0, 0.0, 1.0, s);
-  EXPECT_EQ(s, (std::vector<double>{-1, -1, -1, 1, 0, 1, -1, -1, -1}));
-  due_seconds(k, 0.0, 0.0, 1.0, s);
-  EXPECT_EQ(s, (std::vector<double>{0, 1, -1, -1, -1, -1, -1, -1, -1}));
+  EXPECT_EQ(due(k, 4.0, 0.0, 1.0), (Due{{3, 1}, {4, 0}, {5, 1}}));
+  EXPECT_EQ(due(k, 0.0, 0.0, 1.0), (Due{{0, 0}, {1, 1}}));
   // Before the node's first time step / after its last: the nearest one and the next.
-  const auto sparse = at_times({3, 6, 9});
-  due_seconds(sparse, 1.0, 0.0, 1.0, s);
-  EXPECT_EQ(s, (std::vector<double>{0, 1, -1}));
-  due_seconds(sparse, 9.5, 0.0, 1.0, s);
-  EXPECT_EQ(s, (std::vector<double>{-1, 1, 0}));
+  const Times sparse({3, 6, 9});
+  EXPECT_EQ(due(sparse, 1.0, 0.0, 1.0), (Due{{3, 0}, {6, 1}}));
+  EXPECT_EQ(due(sparse, 9.5, 0.0, 1.0), (Due{{6, 1}, {9, 0}}));
   // A gap in the node's time steps: the data nearest on each side.
-  due_seconds(sparse, 4.0, 0.0, 2.0, s);
-  EXPECT_EQ(s, (std::vector<double>{0, 0, 2}));
-  std::vector<double> none;
-  due_seconds({}, 2.5, 0.0, 1.0, none);
-  EXPECT_TRUE(none.empty());
+  EXPECT_EQ(due(sparse, 4.0, 0.0, 2.0), (Due{{3, 0}, {6, 0}, {9, 2}}));
+  // Only held time steps count: with the window from 4 on, 6 is the first.
+  EXPECT_EQ(due(Times({3, 6, 9}, 4), 4.0, 0.0, 2.0), (Due{{6, 0}, {9, 2}}));
+  EXPECT_TRUE(due(Times({}), 2.5, 0.0, 1.0).empty());
 }
 
 TEST(StreamPriorities, DueWindowLooksAheadInTheDirectionOfPlay) {
-  const auto k = at_times({0, 1, 2, 3, 4, 5, 6, 7, 8});
-  std::vector<double> s;
+  const Times k({0, 1, 2, 3, 4, 5, 6, 7, 8});
   // Forward at 2 keyframes/s for 1.5 s: reaches 5.5; keyframes 3, 4, 5 due in 0.25, 0.75, 1.25 s
   // (3 is the playhead's pick after it: 0); 1 and 6 are the next ones beyond.
-  due_seconds(k, 2.5, 2.0, 1.5, s);
-  EXPECT_EQ(s, (std::vector<double>{-1, 1.5, 0, 0, 0.75, 1.25, -1, -1, -1}));
+  EXPECT_EQ(due(k, 2.5, 2.0, 1.5), (Due{{1, 1.5}, {2, 0}, {3, 0}, {4, 0.75}, {5, 1.25}}));
   // Backwards: the keyframes behind it instead; ahead only the next one.
-  due_seconds(k, 6.5, -4.0, 1.0, s);
-  EXPECT_EQ(s, (std::vector<double>{-1, -1, -1, 0.875, 0.625, 0.375, 0, 0, 1}));
+  EXPECT_EQ(due(k, 6.5, -4.0, 1.0),
+            (Due{{3, 0.875}, {4, 0.625}, {5, 0.375}, {6, 0}, {7, 0}, {8, 1}}));
   // No lookahead: the two around the playhead and their neighbours (all due now), whatever the
   // speed.
-  due_seconds(k, 2.5, 8.0, 0.0, s);
-  EXPECT_EQ(s, (std::vector<double>{-1, 0, 0, 0, 0, -1, -1, -1, -1}));
+  EXPECT_EQ(due(k, 2.5, 8.0, 0.0), (Due{{1, 0}, {2, 0}, {3, 0}, {4, 0}}));
+  // Sparse steps ahead: those within reach, not the first one beyond it.
+  EXPECT_EQ(due(Times({0, 2, 5, 9}), 2.0, 2.0, 2.0), (Due{{0, 2}, {2, 0}, {5, 1.5}}));
 }
 
 TEST(StreamPriorities, DuePriorityOutranksEveryPatentPriorityAndFallsWithTime) {

@@ -159,8 +159,8 @@ TEST(StreamScheduler, ASeekIntoALongGapDrawsTheInterpolatedState) {
   const std::uint32_t moving = s.index().find({finest, 2, 1, 1});
   ASSERT_NE(still, no_node);
   ASSERT_NE(moving, no_node);
-  ASSERT_EQ(s.index().keyframes(still).size(), 2u);
-  EXPECT_EQ(s.index().keyframes(moving).size(), 9u);
+  ASSERT_EQ(s.index().times(still).size(), 2u);
+  EXPECT_EQ(s.index().times(moving).size(), 9u);
   const auto cam = test::close_camera(gap_dims);
   std::uint64_t frame = 0;
   const double playhead = 4.0;

@@ -117,7 +117,7 @@ TEST(StreamSelectionConstant, AConstantAncestorIsExactData) {
   ASSERT_TRUE(index.keyframe(index.find_keyframe(0, 1)).subtree_constant);
   EXPECT_TRUE(index.keyframe(index.find_keyframe(0, 1)).constant);
   EXPECT_EQ(index.find_keyframe(child, 1), no_keyframe);  // nothing below a constant root
-  EXPECT_EQ(index.keyframes(child).size(), 2u);
+  EXPECT_EQ(index.times(child).size(), 2u);
   // Playhead 0.75: the child's own 0 before; after, the constant root at 1 is exact (no
   // handicap: 0.25 beats the child's own 2 at 1.25).
   const auto r = resident(index, {{child, 0}, {child, 2}, {0, 1}});

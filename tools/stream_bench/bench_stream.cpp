@@ -318,7 +318,7 @@ SchedulerSetup scheduler_setup(const BenchStreamSettings& o, double bandwidth, d
   {
     std::uint64_t total = 0;
     for (std::uint32_t n = 0; n < index.node_count(); ++n)
-      for (const stream::KeyframeNode& k : index.keyframes(n)) total += k.bytes;
+      index.for_each_keyframe(n, [&](const stream::KeyframeNode& k) { total += k.bytes; });
     if (keyframe_nodes > 0)
       r.brick_bytes = static_cast<double>(total) / static_cast<double>(keyframe_nodes);
   }

@@ -96,18 +96,21 @@ double temporal_priority(double keyframe, double playhead, std::size_t keyframes
 double combined_priority(double sse_priority_value, double temporal_priority_value,
                          double random_priority_value, const PrioritySettings& settings);
 
-/// Due window for one spatial node's keyframe nodes (sorted by time step; only `t` is read):
-/// seconds[i] = seconds until the playhead at `playhead` moving at `velocity` keyframes per second
-/// (negative: backwards) needs keyframes[i] — 0 for the last time step ≤ playhead and the first
-/// ≥ playhead; (t − playhead)/velocity for those the playhead reaches within lookahead_s;
+/// A keyframe node that can be due: its time step, and the seconds until the playhead needs it.
+struct DueTime {
+  std::uint32_t t = 0;
+  double seconds = 0;
+  friend bool operator==(const DueTime&, const DueTime&) = default;
+};
+
+/// Due window for one spatial node's held time steps: the keyframe nodes that the playhead at
+/// `playhead` moving at `velocity` keyframes per second (negative: backwards) needs soon, by
+/// ascending t, with the seconds until it does — 0 for the last time step ≤ playhead and the
+/// first ≥ playhead; (t − playhead)/velocity for those the playhead reaches within lookahead_s;
 /// lookahead_s for the next one beyond those two on each side (where a step, a start of playback
-/// or a change of direction goes first) — or a negative value when keyframes[i] is not due.
-void due_seconds(const KeyframeList& keyframes, double playhead, double velocity,
-                 double lookahead_s, std::vector<double>& seconds);
-/// The same for the keyframe nodes that can be due only, which are consecutive: returns the index
-/// of the first and sets seconds for it and those after it (the rest are not due).
-std::size_t due_range(const KeyframeList& keyframes, double playhead, double velocity,
-                      double lookahead_s, std::vector<double>& seconds);
+/// or a change of direction goes first). The others are not due.
+void due_times(const HeldTimes& times, double playhead, double velocity, double lookahead_s,
+               std::vector<DueTime>& due);
 /// The priority of a due keyframe node needed in `seconds` (see above): in
 /// (settings.sse_weight + 1, settings.sse_weight + 2], decreasing with seconds.
 double due_priority(double seconds, const PrioritySettings& settings);

@@ -154,10 +154,9 @@ class StreamScheduler {
   BrickLoader loader_;
   MinMaxHeap<HeapEntry, HeapLess> heap_;
   std::vector<HeapEntry> selection_;  ///< this frame's selected set, highest priority first
-  std::vector<double> random_table_, temporal_, due_;
+  std::vector<double> random_table_, temporal_;
+  std::vector<DueTime> due_;                               ///< one node's due window
   std::vector<std::pair<double, std::uint32_t>> by_time_;  ///< held steps by priority part
-  /// A node's keyframe node at held step held_begin + i: its index in the node's list, or −1.
-  std::vector<std::int32_t> position_;
   StoredTimes stored_times_;       ///< the selection's, kept from frame to frame (its memory)
   std::vector<double> level_sse_;  ///< SseScope::level: per level, this frame
   PlayheadMotion motion_;

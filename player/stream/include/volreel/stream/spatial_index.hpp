@@ -1,12 +1,14 @@
 // spatial_index.hpp: the spatial octree and its keyframe nodes (Cesium patent [0034], [0058]–
 // [0059]; docs/design.md, "Streaming"). The spatial octree is the same for every frame: the
 // frame geometry's nodes (format/SPEC.md "Frame file"), of which those that a held frame has are
-// present (the union of the held frames' brick octrees). Each spatial node (level, x, y, z) lists
-// its keyframe nodes, one per held time step whose frame file has a brick there (a frame may leave
-// a node without one: the node is then drawn by interpolating its neighbouring keyframes,
-// format/SPEC.md "Keyframes"), sorted by time step; a keyframe node points at that brick's bytes
-// (file, absolute offset, length). Residency in the atlas is keyed by (level, x, y, z, keyframe),
-// so a node that leaves the view and comes back finds its brick where it left it.
+// present (the union of the held frames' brick octrees). Each spatial node (level, x, y, z) has
+// keyframe nodes, one per held time step whose frame file has a brick there (a frame may leave a
+// node without one: the node is then drawn by interpolating its neighbouring keyframes,
+// format/SPEC.md "Keyframes"); a keyframe node points at that brick's bytes (file, absolute
+// offset, length). They are kept by frame (each held frame's array, as read) with one bit per
+// node and held frame saying which frames have one (HeldTimes). Residency in the atlas is keyed by
+// (level, x, y, z, keyframe), so a node that leaves the view and comes back finds its brick where
+// it left it.
 //
 // Time window. A container whose keyframe nodes fit IndexOptions::memory_bytes is held whole from
 // the start. A larger one (a 1024³ frame has 34,472 nodes; ten thousand of them would hold
@@ -27,10 +29,11 @@
 // exact data for the descendants (selection.hpp).
 #pragma once
 
+#include <algorithm>
 #include <array>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
-#include <deque>
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -85,45 +88,68 @@ struct KeyframeNode {
   bool subtree_constant = false;  ///< node type `empty`: the whole subtree is that value
 };
 
-/// A spatial node's held keyframe nodes, sorted by t. The time window grows and shrinks the list
-/// at both ends, so it is one contiguous block with room on either side (a slide moves the held
-/// nodes back to the middle now and then: O(1) a node on average). Their time steps are also kept
-/// on their own: the searches by time that the scheduler and the selection run for every visited
-/// node each frame touch a tenth of the cache lines (a time step is 4 bytes, a keyframe node 40).
-class KeyframeList {
- public:
-  std::size_t size() const { return end_ - begin_; }
-  bool empty() const { return end_ == begin_; }
-  const KeyframeNode& operator[](std::size_t i) const { return nodes_[begin_ + i]; }
-  const KeyframeNode* begin() const { return nodes_.data() + begin_; }
-  const KeyframeNode* end() const { return nodes_.data() + end_; }
-  const KeyframeNode& front() const { return nodes_[begin_]; }
-  const KeyframeNode& back() const { return nodes_[end_ - 1]; }
-  /// The held time steps, ascending: times()[i] == (*this)[i].t.
-  std::span<const std::uint32_t> times() const { return {times_.data() + begin_, size()}; }
-  /// The position of the first keyframe node at a time step ≥ t (size() if none is).
-  std::size_t lower_bound(std::uint32_t t) const;
-  /// The position of the keyframe node at time step t (size() if there is none).
-  std::size_t find(std::uint32_t t) const;
-  /// Held keyframe nodes marked subtree_constant.
-  std::size_t subtree_constants() const { return subtree_constants_; }
-  /// Keyframe nodes the list has room for.
-  std::size_t capacity() const { return nodes_.size(); }
+inline constexpr std::uint32_t no_time = 0xFFFFFFFFu;
 
-  /// At the front, k.t must be below front().t; at the back, above back().t.
-  void push_front(const KeyframeNode& k);
-  void push_back(const KeyframeNode& k);
-  void pop_front();
-  void pop_back();
+/// A spatial node's held time steps (those of its keyframe nodes), as a view of one bit per held
+/// frame: time step t is bit t mod ring of the node's words, for t in the held range [begin, end),
+/// which is at most ring long. Adding or dropping a frame sets or clears one bit per node it has a
+/// brick at, in a table small enough to stay in cache, where a list per node would take a cache
+/// miss per node. The view is valid until the index's window next moves.
+class HeldTimes {
+ public:
+  HeldTimes() = default;
+  /// words: ring / 64 words of bits; count: the bits set among those of [begin, end).
+  HeldTimes(const std::uint64_t* words, std::uint32_t ring, std::uint32_t begin, std::uint32_t end,
+            std::uint32_t count)
+      : words_(words), ring_(ring), begin_(begin), end_(end), count_(count) {}
+
+  std::size_t size() const { return count_; }
+  bool empty() const { return count_ == 0; }
+  bool contains(std::uint32_t t) const {
+    if (t < begin_ || t >= end_) return false;
+    const std::uint32_t slot = t % ring_;
+    return (words_[slot >> 6] >> (slot & 63)) & 1u;
+  }
+  /// The latest held time step ≤ t, or no_time.
+  std::uint32_t at_or_before(std::uint32_t t) const;
+  /// The earliest held time step ≥ t, or no_time.
+  std::uint32_t at_or_after(std::uint32_t t) const;
+  /// Calls f(t) for the held time steps in [lo, hi], ascending.
+  template <class F>
+  void for_each(std::uint32_t lo, std::uint32_t hi, F&& f) const {
+    if (count_ == 0) return;
+    lo = std::max(lo, begin_);
+    hi = std::min(hi, end_ - 1);
+    if (lo > hi) return;
+    const std::uint32_t first = lo % ring_, n = hi - lo + 1;
+    // Slots [first, first + n) of the ring, in at most two runs.
+    const std::uint32_t run = std::min(n, ring_ - first);
+    for_each_bit(first, first + run - 1, [&](std::uint32_t slot) { f(lo + (slot - first)); });
+    if (run < n) for_each_bit(0, n - run - 1, [&](std::uint32_t slot) { f(lo + run + slot); });
+  }
+  /// Every held time step, ascending.
+  template <class F>
+  void for_each(F&& f) const {
+    for_each(begin_, end_ == 0 ? 0 : end_ - 1, f);
+  }
 
  private:
-  std::vector<KeyframeNode> nodes_;
-  std::vector<std::uint32_t> times_;
-  std::size_t begin_ = 0, end_ = 0;
-  std::size_t subtree_constants_ = 0;
-  /// Moves the held nodes (into a larger block when they fill half of it) so that the side
-  /// `front` has room for at least one more.
-  void make_room(bool front);
+  const std::uint64_t* words_ = nullptr;
+  std::uint32_t ring_ = 64, begin_ = 0, end_ = 0, count_ = 0;
+
+  /// Calls f(slot) for the set bits of slots [a, b], ascending.
+  template <class F>
+  void for_each_bit(std::uint32_t a, std::uint32_t b, F&& f) const {
+    for (std::uint32_t w = a >> 6; w <= b >> 6; ++w) {
+      std::uint64_t bits = words_[w];
+      if (w == a >> 6) bits &= ~std::uint64_t{0} << (a & 63);
+      if (w == b >> 6) bits &= ~std::uint64_t{0} >> (63 - (b & 63));
+      while (bits != 0) {
+        f(w * 64 + static_cast<std::uint32_t>(std::countr_zero(bits)));
+        bits &= bits - 1;
+      }
+    }
+  }
 };
 
 struct SpatialNode {
@@ -139,10 +165,10 @@ struct SpatialNode {
 };
 
 struct IndexOptions {
-  /// Keyframe nodes held at once, in bytes, counted as 70 bytes each: the node and its time step
-  /// with the room its list keeps to grow (half as much again), and the node id that drops it. A
-  /// container that needs more is held as a time window of as many frames as fit (at least
-  /// 2·max_keyframe_gap + 4).
+  /// Keyframe nodes held at once, in bytes, counted as 56 bytes for each node of each held frame:
+  /// the keyframe node with its node id, the node's entry in the frame's table of positions, and
+  /// the node id that drops it. A container that needs more is held as a time window of as many
+  /// frames as fit (at least 2·max_keyframe_gap + 4).
   std::uint64_t memory_bytes = 128ull << 20;
   /// Time follow() spends adding frames, at least one frame when one is ready.
   double follow_budget_s = 0.002;
@@ -164,7 +190,11 @@ struct HeldFrame {
   std::uint32_t t = 0;
   std::vector<std::uint32_t> nodes;                               ///< node ids it has
   std::vector<std::pair<std::uint32_t, KeyframeNode>> keyframes;  ///< node id, its brick
+  /// Per node id of the geometry, its brick's position in `keyframes` (no_node: none).
+  std::vector<std::uint32_t> positions;
   std::string error;  ///< not empty: the frame could not be read (it holds nothing)
+  /// Set when held: it has every node of the geometry (its node list is then not kept).
+  bool whole = false;
 };
 
 class SpatialIndex;
@@ -215,8 +245,20 @@ class SpatialIndex {
   std::size_t keyframe_count() const { return keyframe_count_; }
   /// The ids of the keyframe nodes held, in id order (by node, then t).
   std::vector<KeyframeId> held_keyframes() const;
-  /// The node's held keyframe nodes, sorted by t.
-  const KeyframeList& keyframes(std::uint32_t node) const { return keyframes_[node]; }
+  /// The time steps of the node's held keyframe nodes.
+  HeldTimes times(std::uint32_t node) const {
+    return {time_bits_.data() + node * words_, ring_, held_begin_, held_end_, held_counts_[node]};
+  }
+  /// Those of them marked subtree_constant.
+  HeldTimes constant_times(std::uint32_t node) const {
+    return {constant_bits_.data() + node * words_, ring_, held_begin_, held_end_,
+            constant_counts_[node]};
+  }
+  /// Calls f(const KeyframeNode&) for the node's held keyframe nodes, by ascending t.
+  template <class F>
+  void for_each_keyframe(std::uint32_t node, F&& f) const {
+    times(node).for_each([&](std::uint32_t t) { f(keyframe(keyframe_id(node, t))); });
+  }
   /// A held keyframe node (find_keyframe returned its id).
   const KeyframeNode& keyframe(KeyframeId id) const;
   static std::uint32_t node_of(KeyframeId id) { return static_cast<std::uint32_t>(id >> 32); }
@@ -256,19 +298,18 @@ class SpatialIndex {
   std::shared_ptr<const IndexGeometry> geometry_;
   std::vector<std::filesystem::path> files_;
   std::vector<SpatialNode> nodes_;
-  std::vector<KeyframeList> keyframes_;
+  /// The held frames by time step t mod ring_ (ring_ ≥ window_, a multiple of 64); a slot's
+  /// frame has the time step t only while t is in the held range.
+  std::vector<HeldFrame> held_;
+  std::uint32_t ring_ = 64;
+  std::size_t words_ = 1;  ///< ring_ / 64: words of time bits per node
+  std::vector<std::uint64_t> time_bits_, constant_bits_;
+  std::vector<std::uint32_t> held_counts_, constant_counts_;  ///< bits set per node
   std::size_t keyframe_count_ = 0;
   std::uint32_t held_begin_ = 0, held_end_ = 0;
   std::size_t window_ = 0;
   std::uint32_t max_gap_ = 1;
   IndexOptions options_;
-  /// Per held frame (windowed index only), to drop it again: the nodes with its bricks, and the
-  /// nodes it has unless it has every node of the geometry (whole).
-  struct HeldRecord {
-    bool whole = false;
-    std::vector<std::uint32_t> nodes, keyframe_nodes;
-  };
-  std::deque<HeldRecord> held_;
   std::size_t whole_frames_ = 0;  ///< held frames with every node, counted once in held_frames
   std::shared_ptr<const format::Container> container_;  ///< windowed: where frames are read
   std::unique_ptr<Reader> reader_;
