@@ -3,6 +3,7 @@
 #include "volreel/cpu_render/renderer.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <limits>
@@ -15,6 +16,9 @@
 namespace volreel::cpu_render {
 namespace {
 
+/// Sample::feedback_entry of a sample not read from an SVO leaf record.
+constexpr std::uint32_t no_entry = 0xFFFFFFFFu;
+
 /// A sample: whether the point is drawn at all (an empty child is not), its value and, for the
 /// step (renderer.hpp step 2), how often the base step may be doubled there (before the cap) and
 /// the region it lies in — the box [lo, lo + size)³ whose exit ends a coarse step.
@@ -24,6 +28,10 @@ struct Sample {
   std::uint32_t doublings = 0;
   glm::dvec3 region_lo{0.0};
   double region_size = 0;
+  /// Its entry in the feedback table (renderer.hpp; no_entry for the dense oracle) and how many
+  /// levels above the region's the data it read lies (its LOD difference, Thiele et al. §3.1).
+  std::uint32_t feedback_entry = no_entry;
+  std::uint32_t lod_difference = 0;
 };
 
 /// The largest max_step_doublings (2^16 fine steps: k stays exact in a float on the GPU).
@@ -80,7 +88,7 @@ void check_options(const RenderOptions& o, const player::OrbitCamera& camera) {
 template <class Sampler>
 RgbaImage cast_rays(const VolumeGeometry& geometry, const player::OrbitCamera& camera,
                     const TransferFunction& transfer, const RenderOptions& options,
-                    const Sampler& sample) {
+                    const Sampler& sample, std::vector<std::uint32_t>* feedback = nullptr) {
   check_options(options, camera);
   const TransferFunction tf = transfer.opacity_corrected(options.step / options.reference_step);
   RgbaImage image;
@@ -115,6 +123,7 @@ RgbaImage cast_rays(const VolumeGeometry& geometry, const player::OrbitCamera& c
       if (!std::isfinite(t0) || !std::isfinite(t1)) t1 = -1;
       float color[3] = {0, 0, 0};
       float alpha = 0;
+      std::uint32_t last_entry = no_entry;  // feedback: the entry this ray wrote last
       if (t0 < t1) {
         // 2. Samples at multiples of the step inside [t0, t1): k from the first to k_end, the
         //    first k with k·step ≥ t1 (the quotient's rounding corrected).
@@ -131,6 +140,16 @@ RgbaImage cast_rays(const VolumeGeometry& geometry, const player::OrbitCamera& c
           k_next = k + 1;
           if (!s.drawn) continue;
           ++samples;
+          // Feedback (Thiele et al. §3.1): as the ray begins sampling a leaf, the largest LOD
+          // difference of the rays that sample it, plus one.
+          if (feedback && s.feedback_entry != last_entry && s.feedback_entry < feedback->size()) {
+            last_entry = s.feedback_entry;
+            std::atomic_ref<std::uint32_t> entry((*feedback)[s.feedback_entry]);
+            std::uint32_t seen = entry.load(std::memory_order_relaxed);
+            const std::uint32_t value = s.lod_difference + 1;
+            while (seen < value && !entry.compare_exchange_weak(seen, value)) {
+            }
+          }
           // 2a–c. The next sample: the next multiple of 2^e, but not past the region's exit or
           //       the segment's end (raycast.comp step 3 computes the same in float).
           const std::uint32_t e = std::min(s.doublings, options.max_step_doublings);
@@ -202,6 +221,8 @@ class SvoSampler {
     // its node's: a coarse step ends where the up child does, as raycast.comp's region does).
     std::uint32_t region[3] = {0, 0, 0};
     vr_uint region_level = 0;
+    bool up = false;
+    vr_uint up_octant = 0;
     for (;;) {
       const std::uint32_t half = (format::brick_interior / 2) << (levels_ - 1 - level);
       const std::uint32_t child[3] = {q[0] / half, q[1] / half, q[2] / half};
@@ -214,6 +235,8 @@ class SvoSampler {
       region_level = level + 1;
       if (kind == VR_SVO_CHILD_UP) {  // drawn from this node's own leaf record
         leaf = svo_.nodes[node * VR_SVO_NODE_WORDS + 9];
+        up = true;
+        up_octant = octant;
         break;
       }
       for (int a = 0; a < 3; ++a) c[a] = child[a];
@@ -244,12 +267,21 @@ class SvoSampler {
     //    the region's box.
     // (region_level ≤ levels_: the octants of a one-level volume's root are half a brick.)
     const double region_size = double((format::brick_interior / 2) << (levels_ - region_level));
+    // The LOD difference: the levels from the region's node (the child an "up" region is) up to
+    // the brick read, the finer one while both keyframes are read.
+    const vr_uint d_a = vr_svo_lod_a(record[2]), d_b = vr_svo_lod_b(record[2]);
+    const vr_uint d = f == 0.0f ? d_a : f == 1.0f ? d_b : std::min(d_a, d_b);
+    // (At the finest level an "up" octant is a part of the node's own brick.)
+    const std::uint32_t region_node_level = up && level + 1 < levels_ ? level + 1 : level;
     return {true,
             f == 0.0f   ? a
             : f == 1.0f ? b
                         : mix_keyframes(a, b, f),
             vr_svo_step_doublings(levels_, level, record[2], f, max_doublings_allowed),
-            glm::dvec3(region[0], region[1], region[2]) * region_size, region_size};
+            glm::dvec3(region[0], region[1], region[2]) * region_size,
+            region_size,
+            VR_SVO_FEEDBACK_ENTRIES * leaf + up_octant,
+            region_node_level - level + d};
   }
 
  private:
@@ -376,9 +408,12 @@ void validate_svo(const SvoView& svo, std::uint32_t slot_count, const VolumeGeom
 
 RgbaImage render_svo(const SvoView& svo, const CpuAtlas& atlas, const VolumeGeometry& geometry,
                      const player::OrbitCamera& camera, const TransferFunction& transfer,
-                     const RenderOptions& options) {
+                     const RenderOptions& options, std::vector<std::uint32_t>* feedback) {
   validate_svo(svo, atlas.slot_count(), geometry);
-  return cast_rays(geometry, camera, transfer, options, SvoSampler(svo, atlas, geometry, transfer));
+  if (feedback)
+    feedback->assign(VR_SVO_FEEDBACK_ENTRIES * (svo.leaves.size() / VR_SVO_LEAF_WORDS), 0);
+  return cast_rays(geometry, camera, transfer, options, SvoSampler(svo, atlas, geometry, transfer),
+                   feedback);
 }
 
 RgbaImage render_reference(const DenseLevel& a, const DenseLevel& b, float factor,

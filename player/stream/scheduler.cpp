@@ -2,6 +2,8 @@
 #include "volreel/stream/scheduler.hpp"
 
 #include <algorithm>
+#include <stdexcept>
+#include <string>
 #include <utility>
 
 namespace volreel::stream {
@@ -59,6 +61,16 @@ void StreamScheduler::select(const player::OrbitCamera& camera, double playhead)
   heap_.clear();
   selection_.clear();
   view_.run(index_, camera, settings_.priority.sse_target);
+  // Ray-guided feedback: visited nodes no ray reached in the last frame drawn (not the root).
+  for (const std::uint32_t n : hidden_list_) hidden_[n] = 0;
+  hidden_list_.clear();
+  hidden_.resize(index_.node_count(), 0);
+  if (settings_.ray_feedback && feedback_stamp_ != 0 && feedback_stamp_ == svo_stamp_)
+    for (const ViewTraversal::Visit& v : view_.visits())
+      if (v.node != 0 && ray_priority(v.node) == priority_hidden) {
+        hidden_[v.node] = 1;
+        hidden_list_.push_back(v.node);
+      }
   const PrioritySettings& ps = settings_.priority;
   const std::size_t frames = index_.frame_count();
   const bool patent = ps.policy == PriorityPolicy::patent;
@@ -72,6 +84,7 @@ void StreamScheduler::select(const player::OrbitCamera& camera, double playhead)
   // looked at. Otherwise they all enter the heap.
   if (due_window) {
     for (const ViewTraversal::Visit& v : view_.visits()) {
+      if (hidden_[v.node]) continue;
       due_times(index_.times(v.node), playhead, velocity, ps.lookahead_s, due_);
       const std::uint32_t level = index_.node(v.node).key.level;
       for (const DueTime& d : due_)
@@ -114,6 +127,7 @@ void StreamScheduler::select(const player::OrbitCamera& camera, double playhead)
     return a.first != b.first ? a.first > b.first : a.second < b.second;
   });
   for (const ViewTraversal::Visit& v : view_.visits()) {
+    if (hidden_[v.node]) continue;
     const SpatialNode& n = index_.node(v.node);
     const double sse_p = sse_priority(level_sse ? level_sse_[n.key.level] : v.sse);
     // A node whose best possible priority cannot enter a full heap is skipped whole.
@@ -274,8 +288,11 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     resident_.assign(index_, resident);
     SvoStats svo_stats;
     SvoArrays svo = build_svo(index_, view_, resident_, playhead, settings_.selection, &svo_stats,
-                              &stored_times_);
+                              &stored_times_, hidden_);
     for (const std::uint32_t slot : svo_stats.used_slots) atlas_.mark_used(slot, gpu_frame_number);
+    keep_svo_regions(svo);
+    out.stats.hidden_nodes = static_cast<std::uint32_t>(hidden_list_.size());
+    out.stats.hidden_targets = svo_stats.hidden_targets;
     out.svo_nodes = std::move(svo.nodes);
     out.svo_leaves = std::move(svo.leaves);
     out.stats.target_nodes = svo_stats.target_nodes;
@@ -303,6 +320,109 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
   out.new_errors = std::move(frame_errors_);
   frame_errors_.clear();
   return out;
+}
+
+// ---- Ray-guided feedback (Thiele, Matthes, Froehlich, §3) -------------------------------------
+
+void StreamScheduler::keep_svo_regions(const SvoArrays& svo) {
+  ++svo_stamp_;
+  svo_regions_.clear();
+  svo_record_nodes_ = svo.node_ids;
+  svo_record_parents_.clear();
+  svo_leaf_count_ = svo.leaves.size() / VR_SVO_LEAF_WORDS;
+  for (std::uint32_t r = 0; r < svo.node_ids.size(); ++r) {
+    const std::uint32_t* words = svo.nodes.data() + std::size_t{r} * VR_SVO_NODE_WORDS;
+    svo_record_parents_.push_back(words[0]);
+    const std::uint32_t id = svo.node_ids[r];
+    if (id == no_node) continue;
+    const SpatialNode& n = index_.node(id);
+    // A record that is not refined in the view (the root drawn as a leaf) and a record without
+    // children draw their own region in every octant.
+    const bool own = !view_.visited(id) || !view_.visit(id).refine || !n.has_children;
+    for (std::uint32_t i = 0; i < 8; ++i) {
+      const std::uint32_t word = words[1 + i];
+      const std::uint32_t child = own ? id : n.children[i];
+      if (child == no_node) continue;  // outside the volume
+      switch (vr_svo_child_kind(word)) {
+        case VR_SVO_CHILD_LEAF:
+          svo_regions_.push_back({r, child, VR_SVO_FEEDBACK_ENTRIES * vr_svo_child_index(word)});
+          break;
+        case VR_SVO_CHILD_UP:
+          // Outside the view: no ray could have gone there.
+          svo_regions_.push_back(
+              {r, child,
+               own || view_.visited(child) ? VR_SVO_FEEDBACK_ENTRIES * words[9] + i : no_entry});
+          break;
+        case VR_SVO_CHILD_EMPTY:
+          svo_regions_.push_back({r, child, no_entry});  // a hole: nothing could be sampled
+          break;
+        default:
+          break;  // a node record: its own regions
+      }
+    }
+  }
+}
+
+void StreamScheduler::feedback(std::span<const std::uint32_t> leaves) {
+  if (leaves.size() != VR_SVO_FEEDBACK_ENTRIES * svo_leaf_count_)
+    throw std::invalid_argument(
+        "ray feedback: expected " + std::to_string(VR_SVO_FEEDBACK_ENTRIES * svo_leaf_count_) +
+        " entries (" + std::to_string(VR_SVO_FEEDBACK_ENTRIES) +
+        " per leaf record of the last SVO), found " + std::to_string(leaves.size()));
+  if (priority_stamps_.size() != index_.node_count()) {
+    priority_stamps_.assign(index_.node_count(), 0);
+    ray_priority_.assign(index_.node_count(), priority_hidden);
+  }
+  const auto up = [](std::int32_t p) {  // one level up: +1, ±∞ stay
+    return p == priority_hidden || p == priority_unknown ? p : p + 1;
+  };
+  const auto set = [&](std::uint32_t node, std::int32_t p) {
+    if (priority_stamps_[node] != svo_stamp_) {
+      priority_stamps_[node] = svo_stamp_;
+      ray_priority_[node] = p;
+    } else {
+      ray_priority_[node] = std::max(ray_priority_[node], p);
+    }
+  };
+  // A region's priority is its leaf's feedback: the largest LOD difference its rays sampled,
+  // −∞ when none did.
+  record_priority_.assign(svo_record_nodes_.size(), priority_hidden);
+  for (const SvoRegion& g : svo_regions_) {
+    const std::int32_t p =
+        g.entry == no_entry ? priority_unknown
+        : leaves[g.entry] == 0
+            ? priority_hidden
+            : static_cast<std::int32_t>(std::min<std::uint32_t>(leaves[g.entry] - 1, 64));
+    std::int32_t& r = record_priority_[g.record];
+    if (g.node == svo_record_nodes_[g.record]) {
+      r = std::max(r, p);  // the record's own region
+    } else {
+      set(g.node, p);
+      r = std::max(r, up(p));
+    }
+  }
+  // Algorithm 1, bottom to top: a node record's priority is the largest of its children's + 1
+  // (records come parents first).
+  for (std::size_t r = svo_record_nodes_.size(); r-- > 0;) {
+    const std::uint32_t parent = svo_record_parents_[r];
+    if (parent != VR_SVO_NO_PARENT && parent < record_priority_.size())
+      record_priority_[parent] = std::max(record_priority_[parent], up(record_priority_[r]));
+    if (svo_record_nodes_[r] != no_node) set(svo_record_nodes_[r], record_priority_[r]);
+  }
+  feedback_stamp_ = svo_stamp_;
+}
+
+std::int32_t StreamScheduler::ray_priority(std::uint32_t node) const {
+  if (feedback_stamp_ == 0 || feedback_stamp_ != svo_stamp_) return priority_unknown;
+  // Top to bottom: a node below the last SVO's region or record has its priority − 1 a level.
+  std::int32_t below = 0;
+  for (std::uint32_t n = node; n != no_node && n < priority_stamps_.size();
+       n = index_.node(n).parent, ++below)
+    if (priority_stamps_[n] == feedback_stamp_) {
+      const std::int32_t p = ray_priority_[n];
+      return p == priority_hidden || p == priority_unknown ? p : p - below;
+    }
+  return priority_unknown;
 }
 
 }  // namespace volreel::stream

@@ -17,28 +17,30 @@ struct ChildResult {
 class Builder {
  public:
   Builder(const SpatialIndex& index, const ViewTraversal& view, const ResidentKeyframes& resident,
-          double playhead, const SelectionSettings& settings, SvoStats& stats, StoredTimes& stored)
+          double playhead, const SelectionSettings& settings, SvoStats& stats, StoredTimes& stored,
+          std::span<const std::uint8_t> hidden)
       : index_(index),
         view_(view),
         resident_(resident),
         playhead_(playhead),
         settings_(settings),
         stats_(stats),
-        stored_(stored) {
+        stored_(stored),
+        hidden_(hidden) {
     stored_.start(index_, playhead_);
   }
 
   SvoArrays run() {
     if (index_.node_count() == 0 || !view_.visited(0)) {
       // 4. Nothing visible: a root that draws nothing.
-      append_node(VR_SVO_NO_PARENT);
+      append_node(VR_SVO_NO_PARENT, no_node);
       for (vr_uint i = 0; i < 8; ++i) out_.nodes[1 + i] = vr_svo_child_word(VR_SVO_CHILD_EMPTY, 0);
       return std::move(out_);
     }
     const ChildResult root = visit(0, VR_SVO_NO_PARENT);
     if (root.kind != VR_SVO_CHILD_NODE) {
       // 4. The root is a leaf (or draws nothing): one record whose octants all defer to it.
-      append_node(VR_SVO_NO_PARENT);
+      append_node(VR_SVO_NO_PARENT, 0);
       const SpatialNode& n = index_.node(0);
       const bool drawn = root.kind == VR_SVO_CHILD_LEAF;
       for (vr_uint i = 0; i < 8; ++i) {
@@ -64,12 +66,14 @@ class Builder {
   const SelectionSettings& settings_;
   SvoStats& stats_;
   StoredTimes& stored_;
+  std::span<const std::uint8_t> hidden_;
   SvoArrays out_;
   std::vector<std::uint32_t> used_;
 
-  vr_uint append_node(vr_uint parent) {
+  vr_uint append_node(vr_uint parent, std::uint32_t id) {
     const auto record = static_cast<vr_uint>(out_.nodes.size() / VR_SVO_NODE_WORDS);
     out_.nodes.resize(out_.nodes.size() + VR_SVO_NODE_WORDS, 0);
+    out_.node_ids.push_back(id);
     out_.nodes[record * VR_SVO_NODE_WORDS] = parent;
     out_.nodes[record * VR_SVO_NODE_WORDS + 9] = VR_SVO_NO_LEAF;
     return record;
@@ -98,8 +102,12 @@ class Builder {
     const KeyframePair pair =
         select_keyframe_pair(index_, id, playhead_, resident_, settings_, &stored_);
     if (!v.refine) {
-      ++stats_.target_nodes;
-      if (pair.at_full_detail()) ++stats_.at_target_nodes;
+      if (id < hidden_.size() && hidden_[id] != 0) {
+        ++stats_.hidden_targets;
+      } else {
+        ++stats_.target_nodes;
+        if (pair.at_full_detail()) ++stats_.at_target_nodes;
+      }
       if (!pair.valid())
         ++stats_.holes;
       else if (pair.drawn_by_ancestor())
@@ -107,7 +115,7 @@ class Builder {
       return as_leaf(pair);
     }
     // 2. A node record for the refined node; children first, then this node's own leaf.
-    const vr_uint record = append_node(parent_record);
+    const vr_uint record = append_node(parent_record, id);
     const SpatialNode& n = index_.node(id);
     ChildResult children[8];
     bool any_deeper = false;
@@ -124,6 +132,7 @@ class Builder {
     if (!any_deeper) {
       // 3. Nothing deeper: collapse. The record is the last one appended (no child appended any).
       out_.nodes.resize(out_.nodes.size() - VR_SVO_NODE_WORDS);
+      out_.node_ids.pop_back();
       return as_leaf(pair);
     }
     bool any_up = false;
@@ -143,12 +152,14 @@ class Builder {
 
 SvoArrays build_svo(const SpatialIndex& index, const ViewTraversal& view,
                     const ResidentKeyframes& resident, double playhead,
-                    const SelectionSettings& settings, SvoStats* stats, StoredTimes* stored) {
+                    const SelectionSettings& settings, SvoStats* stats, StoredTimes* stored,
+                    std::span<const std::uint8_t> hidden) {
   SvoStats local;
   SvoStats& s = stats ? *stats : local;
   s = SvoStats{};
   StoredTimes fresh;
-  return Builder(index, view, resident, playhead, settings, s, stored ? *stored : fresh).run();
+  return Builder(index, view, resident, playhead, settings, s, stored ? *stored : fresh, hidden)
+      .run();
 }
 
 std::vector<std::string> validate_svo(std::span<const std::uint32_t> nodes,

@@ -500,6 +500,58 @@ TEST(CpuRender, EmptyChildrenAreTransparent) {
   EXPECT_GT(drawn_fraction(part), 0.03);
 }
 
+TEST(CpuRender, FeedbackMarksTheRegionsRaysSampleAndNotThoseBehindOpaqueMaterial) {
+  // Looking down the long axis from +x: 8 finest bricks one behind the other along each ray.
+  const Scene& s = elongated();
+  const CpuAtlas atlas = s.exact_atlas();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  const auto leaf_for = [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
+  };
+  auto camera = test_camera(s);
+  camera.azimuth = 0;
+  camera.elevation = 0;
+  camera.distance = 400;
+  const TransferFunction clear({{s.lo, 0.5f, 0.5f, 0.5f, 1e-4f}, {s.hi, 1, 1, 1, 1e-4f}}, s.lo,
+                               s.hi);
+  const TransferFunction opaque({{s.lo, 0.5f, 0.5f, 0.5f, 1}, {s.hi, 1, 1, 1, 1}}, s.lo, s.hi);
+  // Leaf children: the leaf record's first entry, LOD difference 0 (entry 1).
+  const auto leaves = build_uniform_svo(s.levels, finest, leaf_for);
+  const std::size_t count = leaves.leaves.size() / VR_SVO_LEAF_WORDS;
+  std::vector<std::uint32_t> through, front;
+  cpu_render::render_svo(leaves.view(), atlas, s.geometry, camera, clear, {}, &through);
+  cpu_render::render_svo(leaves.view(), atlas, s.geometry, camera, opaque, {}, &front);
+  ASSERT_EQ(through.size(), VR_SVO_FEEDBACK_ENTRIES * count);
+  ASSERT_EQ(front.size(), through.size());
+  std::size_t reached = 0, reached_opaque = 0;
+  for (std::size_t i = 0; i < through.size(); ++i) {
+    if (i % VR_SVO_FEEDBACK_ENTRIES != 0) {
+      EXPECT_EQ(through[i], 0u) << i;  // no "up" regions in this tree
+      continue;
+    }
+    EXPECT_LE(through[i], 1u);
+    EXPECT_LE(front[i], through[i]) << "leaf " << i / VR_SVO_FEEDBACK_ENTRIES;
+    reached += through[i];
+    reached_opaque += front[i];
+  }
+  EXPECT_EQ(reached, count);  // every brick is in view: rays cross them all
+  EXPECT_GT(reached_opaque, 0u);
+  EXPECT_LE(reached_opaque, count / 4);  // only the bricks at the +x face (2 of 8 along x)
+  // "Up" children: a node's own leaf drawn in its octants, one level finer (entry 2), each
+  // octant in its own entry.
+  const auto up = build_uniform_svo(s.levels, finest - 1, leaf_for, true);
+  std::vector<std::uint32_t> octants;
+  cpu_render::render_svo(up.view(), atlas, s.geometry, camera, clear, {}, &octants);
+  std::size_t up_entries = 0, above_zero = 0;
+  for (std::size_t i = 0; i < octants.size(); ++i) {
+    EXPECT_TRUE(octants[i] == 0 || octants[i] == 2) << i << ": " << octants[i];
+    up_entries += octants[i] == 2 ? 1u : 0u;
+    above_zero += octants[i] == 2 && i % VR_SVO_FEEDBACK_ENTRIES != 0 ? 1u : 0u;
+  }
+  EXPECT_GT(above_zero, 0u);
+  EXPECT_EQ(up_entries, count);  // as many regions as the finest bricks
+}
+
 TEST(CpuRender, HistogramCullingKeepsTheImage) {
   // Only the top 65 % of the range visible: leaves whose histogram hull lies below are skipped.
   const Scene& s = elongated();

@@ -310,6 +310,7 @@ SchedulerSetup scheduler_setup(const BenchStreamSettings& o, double bandwidth, d
   ss.priority.lookahead_s = o.lookahead;
   ss.speculative_link_s = o.speculative_link;
   ss.selection.ancestor_handicap = o.ancestor_handicap;
+  ss.ray_feedback = o.ray_feedback;
   ss.upload_budget_bytes = static_cast<std::uint64_t>(o.upload_budget_mb * 1e6);
   ss.loader.bandwidth_bytes_per_s = bandwidth;
   ss.loader.latency_s = latency;
@@ -471,6 +472,7 @@ nlohmann::json bench_summary_json(const BenchStreamSettings& o, const std::strin
       {"lookahead_s", o.lookahead},
       {"speculative_link_s", o.speculative_link},
       {"ancestor_handicap", o.ancestor_handicap},
+      {"ray_feedback", o.ray_feedback},
       {"size", {setup.width, setup.height}},
       {"ground_truth", original_truth ? "original series" : "container finest level"}};
   if (tours.size() == 1) {

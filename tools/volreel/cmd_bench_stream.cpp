@@ -195,6 +195,12 @@ void add_bench_stream_command(CLI::App& bench) {
                   "flight, so the\n"
                   "keyframes the playhead needs next never wait behind more (0: no bound)")
       ->capture_default_str();
+  cmd->add_option("--ray-feedback", o->s.ray_feedback,
+                  "Both policies: leave out of the selection the nodes no ray reached in the "
+                  "last frame drawn\n"
+                  "(behind opaque material, outside the image), from the renderer's feedback "
+                  "(true/false)")
+      ->capture_default_str();
   cmd->add_option(
          "--ancestor-handicap", o->s.ancestor_handicap,
          "Both policies, pre-render selection: an ancestor's keyframe distance is multiplied by\n"

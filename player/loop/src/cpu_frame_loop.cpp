@@ -92,7 +92,11 @@ FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhe
   cpu_render::SvoView svo;
   svo.nodes = update.svo_nodes;
   svo.leaves = update.svo_leaves;
-  image_ = cpu_render::render_svo(svo, *atlas_, geometry_, camera, transfer, options_.render);
+  // The rays' feedback (which leaves they sampled) guides the next frame's selection.
+  const bool feedback = options_.scheduler.ray_feedback;
+  image_ = cpu_render::render_svo(svo, *atlas_, geometry_, camera, transfer, options_.render,
+                                  feedback ? &feedback_ : nullptr);
+  if (feedback) scheduler_->feedback(feedback_);
   report.timings.render_ms = ms_since(t);
   // 4. Retire: nothing reads the atlas after render_svo returned.
   scheduler_->retire(report.ticket);

@@ -33,6 +33,14 @@
 //                 spatial node the keyframe node's brick lies (0: the node's own brick)
 //   word 3        interpolation factor f (float bits): value = (1 − f)·A + f·B
 //
+// Feedback table (ray-guided feedback, written by a renderer, read by the scheduler):
+// VR_SVO_FEEDBACK_ENTRIES 32-bit entries per leaf record, one per region the leaf draws — entry
+// 8·leaf for a VR_SVO_CHILD_LEAF child (the child's spatial node), entry 8·leaf + i for octant i
+// drawn from a node's own leaf as VR_SVO_CHILD_UP (the child of octant i, or the node itself at
+// the finest level and for a root drawn as a leaf). An entry is 0 when no ray sampled the region,
+// else 1 + the largest LOD difference of its samples: the levels from the region's node up to
+// the brick read (the finer of A and B while both are read).
+//
 // Leaf histograms (a third array, optional), VR_SVO_HISTOGRAM_WORDS words per leaf record: the OR
 // of the 64-bin value histograms (format's Node::histogram, bins over the sequence's value range)
 // of the spatial nodes whose bricks A and B are, low word first. A renderer may skip a leaf's
@@ -60,6 +68,7 @@ typedef std::uint32_t vr_uint;
 #define VR_SVO_NODE_WORDS 10u
 #define VR_SVO_LEAF_WORDS 4u
 #define VR_SVO_HISTOGRAM_WORDS 2u
+#define VR_SVO_FEEDBACK_ENTRIES 8u
 #define VR_SVO_NO_PARENT 0xFFFFFFFFu
 #define VR_SVO_NO_LEAF 0xFFFFFFFFu
 #define VR_SVO_CHILD_NODE 0u

@@ -110,9 +110,16 @@ void validate_svo(const SvoView& svo, std::uint32_t slot_count, const VolumeGeom
 /// the SVO first (validate_svo) and the options (std::invalid_argument). With leaf histograms,
 /// samples in leaves whose histogram hull the transfer function makes invisible are skipped
 /// (TransferFunction::visible_hull) — the same image, fewer samples. OpenMP over rows.
+///
+/// Ray-guided feedback (Thiele, Matthes, Froehlich, §3.1): with `feedback`, it is set to the
+/// feedback table of svo_layout.h (VR_SVO_FEEDBACK_ENTRIES entries per leaf record, one per region
+/// the leaf draws): 0 where no ray took a sample in the region (occluded behind opaque material,
+/// culled by the transfer function, outside the image), else 1 + the largest LOD difference of
+/// those samples: how many levels above the region's node the brick read lies.
 RgbaImage render_svo(const SvoView& svo, const CpuAtlas& atlas, const VolumeGeometry& geometry,
                      const player::OrbitCamera& camera, const TransferFunction& transfer,
-                     const RenderOptions& options = {});
+                     const RenderOptions& options = {},
+                     std::vector<std::uint32_t>* feedback = nullptr);
 
 /// A dense volume of one octree level (format::decode_level's output or a pyramid level).
 struct DenseLevel {

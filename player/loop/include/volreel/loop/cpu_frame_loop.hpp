@@ -5,6 +5,7 @@
 #pragma once
 
 #include <memory>
+#include <vector>
 
 #include "volreel/cpu_render/cpu_atlas.hpp"
 #include "volreel/format/container.hpp"
@@ -63,6 +64,7 @@ class CpuFrameLoop final : public FrameLoop {
   std::unique_ptr<cpu_render::CpuAtlas> atlas_;
   std::unique_ptr<stream::StreamScheduler> scheduler_;
   cpu_render::RgbaImage image_;
+  std::vector<std::uint32_t> feedback_;  ///< the rays' feedback per leaf record, last frame
   stream::FrameUpdate last_update_;
   Ticket ticket_ = 0;
 };

@@ -17,6 +17,11 @@
 //      selected are cancelled;
 //   6. pre-render selection and the array-encoded SVO (selection.hpp, svo_builder.hpp) from the
 //      occupied slots only; the slots it references are marked used by this GPU frame.
+// Ray-guided feedback (Thiele, Matthes, Froehlich, §3): a renderer that records, per leaf record of
+// the SVO, whether rays sampled it (cpu_render::render_svo's feedback) hands the table to
+// feedback(); priorities are distributed from it over that SVO (their Algorithm 1), and at the next
+// update a visited node that no ray reached (behind opaque material, outside the image) is
+// hidden: none of its keyframe nodes is selected, so none is requested.
 // The caller decodes each upload's payload into its slot before rendering with the SVO, and reports
 // completed GPU frames with retire(). Problems (a bad frame file at index time, a failed read)
 // become messages in errors(); update() does not throw on bad data.
@@ -25,6 +30,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <deque>
+#include <span>
 #include <string>
 #include <unordered_map>
 #include <utility>
@@ -58,6 +64,8 @@ struct SchedulerSettings {
   std::uint64_t upload_budget_bytes = 64ull << 20;  ///< payload bytes uploaded per frame at most
                                                     ///< (at least one upload per frame)
   std::size_t max_messages = 64;                    ///< messages kept for the UI (newest)
+  /// Use the renderer's feedback (feedback()) to leave hidden nodes out of the selected set.
+  bool ray_feedback = true;
 };
 
 /// One brick for the caller to decode into an atlas slot before rendering.
@@ -73,12 +81,15 @@ struct BrickUpload {
 struct StreamStats {
   std::uint32_t target_nodes = 0;     ///< visible nodes at their target LOD (SvoStats)
   std::uint32_t at_target_nodes = 0;  ///< of those, drawn with both keyframes at full detail
-  double fraction_at_target = 0;      ///< at_target_nodes / target_nodes (1 when none; 0 while
-                                      ///< the index does not hold the frames around the playhead)
-  bool index_ready = true;            ///< the index holds the frames around the playhead
-  std::uint32_t holes = 0;            ///< target nodes with nothing to draw yet
-  std::uint32_t selected = 0;         ///< keyframe nodes in the heap this frame
-  std::size_t requests_sent = 0;      ///< this frame
+  /// Visited nodes hidden by the ray feedback (none of their keyframe nodes selected), and of
+  /// the target nodes those hidden (not in target_nodes).
+  std::uint32_t hidden_nodes = 0, hidden_targets = 0;
+  double fraction_at_target = 0;  ///< at_target_nodes / target_nodes (1 when none; 0 while
+                                  ///< the index does not hold the frames around the playhead)
+  bool index_ready = true;        ///< the index holds the frames around the playhead
+  std::uint32_t holes = 0;        ///< target nodes with nothing to draw yet
+  std::uint32_t selected = 0;     ///< keyframe nodes in the heap this frame
+  std::size_t requests_sent = 0;  ///< this frame
   std::size_t requests_in_flight = 0;
   std::size_t arrivals_discarded = 0;  ///< this frame: no longer selected
   std::size_t arrivals_waiting = 0;    ///< arrived, not yet uploaded (budget or no free slot)
@@ -117,6 +128,16 @@ class StreamScheduler {
   void retire(std::uint64_t frame_number) { atlas_.retire(frame_number); }
   /// A problem found by the caller (a payload that failed to decode, …) for the message list.
   void report_error(std::string message);
+  /// Ray-guided feedback for the SVO of the last update(): the feedback table of svo_layout.h
+  /// (per region a leaf draws, 0 where no ray sampled it, else 1 + the largest LOD difference
+  /// sampled; cpu_render::render_svo writes it).
+  /// Priorities are distributed over that SVO (Algorithm 1: a region's is its entry − 1,
+  /// or −∞ when no ray sampled it; a node record's the largest of its children's + 1; a node
+  /// below a region the region's − 1 a level). At the next update a visited node whose priority
+  /// is −∞ is hidden, except the root. Regions with nothing drawn (holes) or outside the view are
+  /// unknown and never hide anything. Throws std::invalid_argument when the table's size is not
+  /// VR_SVO_FEEDBACK_ENTRIES per leaf record of the SVO.
+  void feedback(std::span<const std::uint32_t> leaves);
 
   const SpatialIndex& index() const { return index_; }
   const AtlasSlots& atlas() const { return atlas_; }
@@ -177,6 +198,30 @@ class StreamScheduler {
   std::deque<std::string> errors_;
   std::size_t error_count_ = 0;
   std::vector<std::string> frame_errors_;
+
+  // Ray-guided feedback. The last SVO's regions (the spatial node each octant drawn stands for,
+  // and its leaf record) and node records (spatial node, parent record), by SVO stamp; Algorithm
+  // 1's priorities per spatial node for the SVO whose feedback came, by the same stamp.
+  static constexpr std::int32_t priority_hidden = -(1 << 30);  ///< −∞: no ray reached it
+  static constexpr std::int32_t priority_unknown = 1 << 30;    ///< no feedback can tell
+  static constexpr std::uint32_t no_entry = 0xFFFFFFFFu;       ///< a region of unknown reach
+  struct SvoRegion {
+    std::uint32_t record = 0, node = 0, entry = no_entry;  ///< entry: in the feedback table
+  };
+  std::vector<SvoRegion> svo_regions_;
+  std::vector<std::uint32_t> svo_record_nodes_, svo_record_parents_;
+  std::size_t svo_leaf_count_ = 0;
+  std::uint32_t svo_stamp_ = 0, feedback_stamp_ = 0;
+  std::vector<std::uint32_t> priority_stamps_;  ///< per spatial node
+  std::vector<std::int32_t> ray_priority_;      ///< per spatial node
+  std::vector<std::uint8_t> hidden_;            ///< per spatial node, this frame
+  std::vector<std::uint32_t> hidden_list_;      ///< the nodes hidden_ marks
+  std::vector<std::int32_t> record_priority_;   ///< scratch: per node record
+
+  /// The ray priority of a visited node (priority_unknown without feedback for the last SVO).
+  std::int32_t ray_priority(std::uint32_t node) const;
+  /// Keeps the regions of an SVO just built for feedback().
+  void keep_svo_regions(const SvoArrays& svo);
 
   /// The selected set (Cesium patent [0060]–[0063]): the atlas's worth of keyframe nodes of the
   /// highest priority among the visible nodes' held ones, into selection_.

@@ -33,11 +33,17 @@ namespace volreel::stream {
 struct SvoArrays {
   std::vector<std::uint32_t> nodes;   ///< VR_SVO_NODE_WORDS words per node record
   std::vector<std::uint32_t> leaves;  ///< VR_SVO_LEAF_WORDS words per leaf record
+  /// Per node record, the spatial node it stands for (no_node: the root of an SVO that draws
+  /// nothing; a root that is a leaf itself is node 0's record).
+  std::vector<std::uint32_t> node_ids;
 };
 
 struct SvoStats {
   std::uint32_t target_nodes = 0;     ///< visited nodes that are not refined: the desired LOD
   std::uint32_t at_target_nodes = 0;  ///< of those, drawn with both keyframes at full detail
+  /// Visited nodes that are not refined but hidden (no ray reached them in the last frame drawn):
+  /// not in target_nodes.
+  std::uint32_t hidden_targets = 0;
   std::uint32_t node_records = 0, leaf_records = 0;
   std::uint32_t ancestor_drawn = 0;       ///< target nodes drawn by an ancestor
   std::uint32_t holes = 0;                ///< target nodes with nothing resident at all
@@ -45,10 +51,12 @@ struct SvoStats {
 };
 
 /// Builds the SVO for the nodes visited by `view` at playhead p from the resident keyframe nodes.
+/// `hidden` (per spatial node, nonzero: no ray reached it; empty: none is) only moves target
+/// nodes from SvoStats::target_nodes to hidden_targets; they are drawn alike.
 SvoArrays build_svo(const SpatialIndex& index, const ViewTraversal& view,
                     const ResidentKeyframes& resident, double playhead,
                     const SelectionSettings& settings = {}, SvoStats* stats = nullptr,
-                    StoredTimes* stored = nullptr);
+                    StoredTimes* stored = nullptr, std::span<const std::uint8_t> hidden = {});
 
 /// Structural checks of an SVO: record 0 is a root without parent; every child word's index is in
 /// range and every node record is reached exactly once, from the parent it names; word 9 holds a

@@ -118,6 +118,7 @@ struct BenchStreamSettings {
   double lookahead = stream::PrioritySettings{}.lookahead_s;
   double speculative_link = stream::SchedulerSettings{}.speculative_link_s;
   double ancestor_handicap = stream::SelectionSettings{}.ancestor_handicap;
+  bool ray_feedback = stream::SchedulerSettings{}.ray_feedback;
   double step = 1.0;
   double upload_budget_mb = 64;
   std::uint64_t seed = 1;
