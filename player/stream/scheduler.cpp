@@ -127,21 +127,25 @@ void StreamScheduler::select(const player::OrbitCamera& camera, double playhead)
     return a.first != b.first ? a.first > b.first : a.second < b.second;
   });
   for (const ViewTraversal::Visit& v : view_.visits()) {
-    if (hidden_[v.node]) continue;
+    // A hidden node's keyframe nodes come after every other's and are never requested: those
+    // resident stay while the atlas has room for them.
+    const bool hidden = hidden_[v.node] != 0;
+    const double demotion = hidden ? hidden_demotion : 0.0;
     const SpatialNode& n = index_.node(v.node);
     const double sse_p = sse_priority(level_sse ? level_sse_[n.key.level] : v.sse);
     // A node whose best possible priority cannot enter a full heap is skipped whole.
-    const double best = patent ? ps.sse_weight * sse_p + 1.0 : 1.0;
+    const double best = (patent ? ps.sse_weight * sse_p + 1.0 : 1.0) - demotion;
     if (heap_.full() && best < heap_.min().priority) continue;
     const HeldTimes times = index_.times(v.node);
     if (times.empty()) continue;
     bool due_known = false;  // due_ filled for this node (on its first step in)
     for (const auto& [part, t] : by_time_) {
-      const double priority = combined_priority(sse_p, temporal_[t], random_table_[t], ps);
+      const double priority =
+          combined_priority(sse_p, temporal_[t], random_table_[t], ps) - demotion;
       if (heap_.full() && priority < heap_.min().priority) break;
       if (!times.contains(t)) continue;
       if (!due_known) {
-        if (due_window)
+        if (due_window && !hidden)
           due_times(times, playhead, velocity, ps.lookahead_s, due_);
         else
           due_.clear();
@@ -150,7 +154,7 @@ void StreamScheduler::select(const player::OrbitCamera& camera, double playhead)
       // The due ones entered above.
       if (std::any_of(due_.begin(), due_.end(), [t](const DueTime& d) { return d.t == t; }))
         continue;
-      heap_.push({priority, n.key.level, keyframe_id(v.node, t), false});
+      heap_.push({priority, n.key.level, keyframe_id(v.node, t), false, hidden});
     }
   }
   while (!heap_.empty()) selection_.push_back(heap_.pop_max());
@@ -258,7 +262,7 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     const double speculative_limit = bounded ? bandwidth * settings_.speculative_link_s : 0;
     for (std::size_t i = 0; i < entries.size(); ++i) {
       const HeapEntry& e = entries[i];
-      if (slot_of_[i] != no_slot || waiting_.count(e.keyframe)) continue;
+      if (slot_of_[i] != no_slot || waiting_.count(e.keyframe) || e.hidden) continue;
       const KeyframeNode& k = index_.keyframe(e.keyframe);
       // Entries come highest priority first and due ones before all others: once a speculative
       // one does not fit the bound, none after it does (one is allowed on an idle link).

@@ -101,8 +101,9 @@ bool has_exact_data(const stream::SpatialIndex& index, std::uint32_t node, std::
 
 }  // namespace
 
-/// Target nodes drawn exactly as with everything loaded: both picks at full detail and from the
-/// time steps with data nearest the playhead on each side. StreamStats::fraction_at_target counts
+/// Target nodes drawn exactly as with everything loaded (those the ray feedback did not hide):
+/// both picks at full detail and from the time steps with data nearest the playhead on each
+/// side. StreamStats::fraction_at_target counts
 /// spatial detail only — a node drawn from its own bricks of keyframes far from the playhead
 /// counts there (a stale frame after a seek), not here. Recomputed from the scheduler's atlas
 /// with the same view traversal and selection as its update().
@@ -126,7 +127,8 @@ std::uint32_t current_target_nodes(const stream::StreamScheduler& scheduler,
   stream::StoredTimes stored;  // shared by the view's nodes, as in the scheduler's SVO pass
   stored.start(index, p);
   for (const stream::ViewTraversal::Visit& v : view.visits()) {
-    if (v.refine) continue;
+    // (Nodes the ray feedback hid are not target nodes: StreamStats::hidden_targets.)
+    if (v.refine || scheduler.hidden(v.node)) continue;
     const stream::KeyframePair pair = stream::select_keyframe_pair(
         index, v.node, p, resident, scheduler.settings().selection, &stored);
     if (!pair.at_full_detail()) continue;

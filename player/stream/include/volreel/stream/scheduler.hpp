@@ -21,7 +21,8 @@
 // the SVO, whether rays sampled it (cpu_render::render_svo's feedback) hands the table to
 // feedback(); priorities are distributed from it over that SVO (their Algorithm 1), and at the next
 // update a visited node that no ray reached (behind opaque material, outside the image) is
-// hidden: none of its keyframe nodes is selected, so none is requested.
+// hidden: its keyframe nodes are never requested, and those resident rank below every other's
+// (they stay while the atlas has room).
 // The caller decodes each upload's payload into its slot before rendering with the SVO, and reports
 // completed GPU frames with retire(). Problems (a bad frame file at index time, a failed read)
 // become messages in errors(); update() does not throw on bad data.
@@ -134,10 +135,13 @@ class StreamScheduler {
   /// Priorities are distributed over that SVO (Algorithm 1: a region's is its entry − 1,
   /// or −∞ when no ray sampled it; a node record's the largest of its children's + 1; a node
   /// below a region the region's − 1 a level). At the next update a visited node whose priority
-  /// is −∞ is hidden, except the root. Regions with nothing drawn (holes) or outside the view are
-  /// unknown and never hide anything. Throws std::invalid_argument when the table's size is not
-  /// VR_SVO_FEEDBACK_ENTRIES per leaf record of the SVO.
+  /// is −∞ is hidden, except the root: its keyframe nodes are not requested and rank below every
+  /// other's (kept while resident and the atlas has room). Regions with nothing drawn (holes) or
+  /// outside the view are unknown and never hide anything. Throws std::invalid_argument when the
+  /// table's size is not VR_SVO_FEEDBACK_ENTRIES per leaf record of the SVO.
   void feedback(std::span<const std::uint32_t> leaves);
+  /// Whether the last update hid the node (feedback: no ray reached it).
+  bool hidden(std::uint32_t node) const { return node < hidden_.size() && hidden_[node] != 0; }
 
   const SpatialIndex& index() const { return index_; }
   const AtlasSlots& atlas() const { return atlas_; }
@@ -159,7 +163,8 @@ class StreamScheduler {
     double priority = 0;
     std::uint32_t level = 0;
     KeyframeId keyframe = no_keyframe;
-    bool due = false;  ///< in the due window (priorities.hpp)
+    bool due = false;     ///< in the due window (priorities.hpp)
+    bool hidden = false;  ///< of a node no ray reached: kept if resident, never requested
   };
   struct HeapLess {
     bool operator()(const HeapEntry& a, const HeapEntry& b) const {
@@ -203,8 +208,10 @@ class StreamScheduler {
   // and its leaf record) and node records (spatial node, parent record), by SVO stamp; Algorithm
   // 1's priorities per spatial node for the SVO whose feedback came, by the same stamp.
   static constexpr std::int32_t priority_hidden = -(1 << 30);  ///< −∞: no ray reached it
-  static constexpr std::int32_t priority_unknown = 1 << 30;    ///< no feedback can tell
-  static constexpr std::uint32_t no_entry = 0xFFFFFFFFu;       ///< a region of unknown reach
+  /// Subtracted from a hidden node's priorities: below every other's (they are O(sse_weight)).
+  static constexpr double hidden_demotion = 1e6;
+  static constexpr std::int32_t priority_unknown = 1 << 30;  ///< no feedback can tell
+  static constexpr std::uint32_t no_entry = 0xFFFFFFFFu;     ///< a region of unknown reach
   struct SvoRegion {
     std::uint32_t record = 0, node = 0, entry = no_entry;  ///< entry: in the feedback table
   };
