@@ -169,7 +169,8 @@ HeldFrame read_frame(const IndexGeometry& g, std::uint32_t t, const format::Fram
     out.positions[id] = static_cast<std::uint32_t>(out.keyframes.size());
     out.keyframes.emplace_back(id, k);
   }
-  out.keyframes.shrink_to_fit();  // (a brick can serve several nodes)
+  // Reserved for every brick of the file; the index counts what it holds.
+  out.keyframes.shrink_to_fit();
   return out;
 }
 
@@ -409,18 +410,7 @@ void SpatialIndex::hold(HeldFrame frame, bool at_front) {
   }
   // A whole frame's nodes are all of them; a frame of a whole index is never dropped.
   if (frame.whole || !windowed()) frame.nodes = std::vector<std::uint32_t>();
-  const std::uint32_t slot = frame.t % ring_;
-  const std::uint64_t bit = std::uint64_t{1} << (slot & 63);
-  std::uint64_t* const times = time_bits_.data() + (slot >> 6);
-  for (const auto& [id, k] : frame.keyframes) {
-    times[id * words_] |= bit;
-    ++held_counts_[id];
-    if (k.subtree_constant) {
-      constant_bits_[id * words_ + (slot >> 6)] |= bit;
-      ++constant_counts_[id];
-    }
-  }
-  keyframe_count_ += frame.keyframes.size();
+  mark_times(frame, true);
   if (held_begin_ == held_end_) {
     held_begin_ = frame.t;
     held_end_ = frame.t + 1;
@@ -429,7 +419,29 @@ void SpatialIndex::hold(HeldFrame frame, bool at_front) {
   } else {
     held_end_ = frame.t + 1;
   }
-  held_[slot] = std::move(frame);
+  held_[frame.t % ring_] = std::move(frame);
+}
+
+void SpatialIndex::mark_times(const HeldFrame& frame, bool held) {
+  const std::uint32_t slot = frame.t % ring_;
+  const std::uint64_t bit = std::uint64_t{1} << (slot & 63);
+  const std::size_t word = slot >> 6;
+  const int delta = held ? 1 : -1;
+  for (const auto& [id, k] : frame.keyframes) {
+    std::uint64_t& times = time_bits_[id * words_ + word];
+    times = held ? times | bit : times & ~bit;
+    held_counts_[id] = static_cast<std::uint32_t>(static_cast<int>(held_counts_[id]) + delta);
+    if (k.subtree_constant) {
+      std::uint64_t& constants = constant_bits_[id * words_ + word];
+      constants = held ? constants | bit : constants & ~bit;
+      constant_counts_[id] =
+          static_cast<std::uint32_t>(static_cast<int>(constant_counts_[id]) + delta);
+    }
+  }
+  if (held)
+    keyframe_count_ += frame.keyframes.size();
+  else
+    keyframe_count_ -= frame.keyframes.size();
 }
 
 void SpatialIndex::drop(bool front) {
@@ -437,17 +449,7 @@ void SpatialIndex::drop(bool front) {
   const std::uint32_t slot = t % ring_;
   const HeldFrame frame = std::move(held_[slot]);
   held_[slot] = HeldFrame{};
-  const std::uint64_t keep = ~(std::uint64_t{1} << (slot & 63));
-  std::uint64_t* const times = time_bits_.data() + (slot >> 6);
-  for (const auto& [id, k] : frame.keyframes) {
-    times[id * words_] &= keep;
-    --held_counts_[id];
-    if (k.subtree_constant) {
-      constant_bits_[id * words_ + (slot >> 6)] &= keep;
-      --constant_counts_[id];
-    }
-  }
-  keyframe_count_ -= frame.keyframes.size();
+  mark_times(frame, false);
   if (!frame.whole) {
     count_nodes(frame.nodes, -1);
   } else if (--whole_frames_ == 0) {

@@ -316,6 +316,8 @@ class SpatialIndex {
 
   void reset_nodes();
   void hold(HeldFrame frame, bool at_front);
+  /// Sets (held) or clears the bits of the frame's keyframe nodes, with their counts.
+  void mark_times(const HeldFrame& frame, bool held);
   /// Adds delta to the held_frames of `ids`, linking or unlinking those that appear or vanish.
   void count_nodes(std::span<const std::uint32_t> ids, int delta);
   void drop(bool front);
