@@ -32,6 +32,8 @@ struct Sample {
   /// levels above the region's the data it read lies (its LOD difference, Thiele et al. §3.1).
   std::uint32_t feedback_entry = no_entry;
   std::uint32_t lod_difference = 0;
+  /// The level of the data read (RgbaImage::levels; no_level for the dense oracle).
+  std::uint8_t data_level = RgbaImage::no_level;
 };
 
 /// The largest max_step_doublings (2^16 fine steps: k stays exact in a float on the GPU).
@@ -103,6 +105,10 @@ RgbaImage cast_rays(const VolumeGeometry& geometry, const player::OrbitCamera& c
                           std::nextafter(box.z, 0.0)};
   const double step = options.step;
   std::uint64_t samples = 0;
+  if (options.level_map)
+    image.levels.assign(
+        static_cast<std::size_t>(camera.width) * static_cast<std::size_t>(camera.height),
+        RgbaImage::no_level);
 
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : samples)
   for (int y = 0; y < image.height; ++y) {
@@ -124,6 +130,8 @@ RgbaImage cast_rays(const VolumeGeometry& geometry, const player::OrbitCamera& c
       float color[3] = {0, 0, 0};
       float alpha = 0;
       std::uint32_t last_entry = no_entry;  // feedback: the entry this ray wrote last
+      float most = 0;                       // the level map: the largest opacity added
+      std::uint8_t level = RgbaImage::no_level;
       if (t0 < t1) {
         // 2. Samples at multiples of the step inside [t0, t1): k from the first to k_end, the
         //    first k with k·step ≥ t1 (the quotient's rounding corrected).
@@ -169,6 +177,10 @@ RgbaImage cast_rays(const VolumeGeometry& geometry, const player::OrbitCamera& c
           if (!(c[3] > 0)) continue;
           // 4. Front to back.
           const float w = (1.0f - alpha) * c[3];
+          if (w > most) {
+            most = w;
+            level = s.data_level;
+          }
           color[0] += w * c[0];
           color[1] += w * c[1];
           color[2] += w * c[2];
@@ -183,6 +195,9 @@ RgbaImage cast_rays(const VolumeGeometry& geometry, const player::OrbitCamera& c
       for (std::size_t c = 0; c < 3; ++c)
         out[c] = color[c] + (1.0f - alpha) * options.background[c];
       out[3] = alpha;
+      if (!image.levels.empty())
+        image.levels[static_cast<std::size_t>(y) * static_cast<std::size_t>(image.width) +
+                     static_cast<std::size_t>(x)] = level;
     }
   }
   image.samples = samples;
@@ -263,6 +278,19 @@ class SvoSampler {
     };
     const float a = f == 1.0f ? 0.0f : keyframe(record[0], vr_svo_lod_a(record[2]));
     const float b = f == 0.0f ? 0.0f : keyframe(record[1], vr_svo_lod_b(record[2]));
+    float value = f == 0.0f ? a : f == 1.0f ? b : mix_keyframes(a, b, f);
+    // 3a. Level-of-detail blending: the parent's drawing (the coarse pair) weighted by the
+    //     corners' weights interpolated at u.
+    if (record[7] != VR_SVO_BLEND_NONE || record[8] != VR_SVO_BLEND_NONE) {
+      const float w = vr_svo_blend_weight(record[7], record[8], u[0], u[1], u[2]);
+      if (w < 1.0f) {
+        const float g = std::bit_cast<float>(record[6]);
+        const float ca = g == 1.0f ? 0.0f : keyframe(record[4], vr_svo_lod_c(record[2]));
+        const float cb = g == 0.0f ? 0.0f : keyframe(record[5], vr_svo_lod_d(record[2]));
+        const float coarse = g == 0.0f ? ca : g == 1.0f ? cb : mix_keyframes(ca, cb, g);
+        value = coarse + w * (value - coarse);
+      }
+    }
     // 4. The step's doublings from the leaf's level (svo_layout.h; the cap is the caller's) and
     //    the region's box.
     // (region_level ≤ levels_: the octants of a one-level volume's root are half a brick.)
@@ -274,14 +302,13 @@ class SvoSampler {
     // (At the finest level an "up" octant is a part of the node's own brick.)
     const std::uint32_t region_node_level = up && level + 1 < levels_ ? level + 1 : level;
     return {true,
-            f == 0.0f   ? a
-            : f == 1.0f ? b
-                        : mix_keyframes(a, b, f),
+            value,
             vr_svo_step_doublings(levels_, level, record[2], f, max_doublings_allowed),
             glm::dvec3(region[0], region[1], region[2]) * region_size,
             region_size,
             VR_SVO_FEEDBACK_ENTRIES * leaf + up_octant,
-            region_node_level - level + d};
+            region_node_level - level + d,
+            static_cast<std::uint8_t>(level - d)};
   }
 
  private:
@@ -350,19 +377,30 @@ void validate_svo(const SvoView& svo, std::uint32_t slot_count, const VolumeGeom
       bad(from() + ": leaf " + std::to_string(leaf) + " of " + std::to_string(leaf_count));
     const vr_uint* r = svo.leaves.data() + std::size_t{leaf} * VR_SVO_LEAF_WORDS;
     const auto at = [&] { return "leaf " + std::to_string(leaf) + " (from " + from() + ")"; };
-    const float f = std::bit_cast<float>(r[3]);
-    if (!(f >= 0 && f <= 1))
-      bad(at() + " word 3: expected a factor in [0, 1], found " + std::to_string(f));
-    const float weight[2] = {1 - f, f};
-    const vr_uint d[2] = {vr_svo_lod_a(r[2]), vr_svo_lod_b(r[2])};
-    for (int k = 0; k < 2; ++k) {
-      if (r[k] >= slot_count && !(r[k] == VR_ATLAS_NO_SLOT && weight[k] == 0))
-        bad(at() + " word " + std::to_string(k) + ": slot " + std::to_string(r[k]) + " of " +
-            std::to_string(slot_count));
-      if (d[k] > level)
-        bad(at() + " word 2: LOD difference " + std::to_string(d[k]) + " of keyframe " +
-            (k == 0 ? "A" : "B") + " exceeds the spatial node's level " + std::to_string(level));
-    }
+    // A keyframe pair: slots at words s0 and s0 + 1, factor at word fw, LOD differences d0, d1
+    // (at least min_d), named n0 and n1.
+    const auto check_pair = [&](vr_uint s0, vr_uint fw, vr_uint d0, vr_uint d1, vr_uint min_d,
+                                const char* n0, const char* n1) {
+      const float f = std::bit_cast<float>(r[fw]);
+      if (!(f >= 0 && f <= 1))
+        bad(at() + " word " + std::to_string(fw) + ": expected a factor in [0, 1], found " +
+            std::to_string(f));
+      const float weight[2] = {1 - f, f};
+      const vr_uint d[2] = {d0, d1};
+      for (vr_uint k = 0; k < 2; ++k) {
+        if (r[s0 + k] >= slot_count && !(r[s0 + k] == VR_ATLAS_NO_SLOT && weight[k] == 0))
+          bad(at() + " word " + std::to_string(s0 + k) + ": slot " + std::to_string(r[s0 + k]) +
+              " of " + std::to_string(slot_count));
+        if (d[k] > level || d[k] < min_d)
+          bad(at() + " word 2: LOD difference " + std::to_string(d[k]) + " of keyframe " +
+              (k == 0 ? n0 : n1) + " outside [" + std::to_string(min_d) + ", " +
+              std::to_string(level) + "] (the spatial node's level)");
+      }
+    };
+    check_pair(0, 3, vr_svo_lod_a(r[2]), vr_svo_lod_b(r[2]), 0, "A", "B");
+    // A blending leaf reads its coarse pair too (an ancestor's: at least one level up).
+    if (r[7] != VR_SVO_BLEND_NONE || r[8] != VR_SVO_BLEND_NONE)
+      check_pair(4, 6, vr_svo_lod_c(r[2]), vr_svo_lod_d(r[2]), 1, "C", "D");
   };
 
   // Walk the tree from the root: every record reached once, at a level that exists.
@@ -439,7 +477,9 @@ RgbaImage render_reference(const DenseLevel& a, const DenseLevel& b, float facto
   if (!(factor >= 0 && factor <= 1))
     throw std::invalid_argument("render_reference: expected a factor in [0, 1], found " +
                                 std::to_string(factor));
-  return cast_rays(geometry, camera, transfer, options, DenseSampler(a, b, factor, geometry));
+  RenderOptions dense = options;
+  dense.level_map = false;  // one level everywhere: no map
+  return cast_rays(geometry, camera, transfer, dense, DenseSampler(a, b, factor, geometry));
 }
 
 image::Image to_image(const RgbaImage& image) {

@@ -291,8 +291,12 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
       if (slot_of_[i] != no_slot) resident.push_back({selection_[i].keyframe, slot_of_[i]});
     resident_.assign(index_, resident);
     SvoStats svo_stats;
-    SvoArrays svo = build_svo(index_, view_, resident_, playhead, settings_.selection, &svo_stats,
-                              &stored_times_, hidden_);
+    blend_.settings = settings_.lod_blend;
+    const bool blends = settings_.lod_blend.fade_s > 0 || settings_.lod_blend.spatial;
+    SvoArrays svo =
+        build_svo(index_, view_, resident_, playhead, settings_.selection, &svo_stats,
+                  &stored_times_, hidden_, blends ? &blend_ : nullptr, loader_.now_seconds());
+    out.stats.blended_leaves = svo_stats.blended_leaves;
     for (const std::uint32_t slot : svo_stats.used_slots) atlas_.mark_used(slot, gpu_frame_number);
     keep_svo_regions(svo);
     out.stats.hidden_nodes = static_cast<std::uint32_t>(hidden_list_.size());

@@ -1,9 +1,12 @@
 // svo_builder.cpp: the array-encoded SVO of svo_layout.h (Cesium patent [0049]).
 #include "volreel/stream/svo_builder.hpp"
 
+#include "volreel/player/atlas_layout.h"
+
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <utility>
 
 namespace volreel::stream {
 
@@ -18,7 +21,7 @@ class Builder {
  public:
   Builder(const SpatialIndex& index, const ViewTraversal& view, const ResidentKeyframes& resident,
           double playhead, const SelectionSettings& settings, SvoStats& stats, StoredTimes& stored,
-          std::span<const std::uint8_t> hidden)
+          std::span<const std::uint8_t> hidden, LodBlendState* blend, double now)
       : index_(index),
         view_(view),
         resident_(resident),
@@ -26,8 +29,14 @@ class Builder {
         settings_(settings),
         stats_(stats),
         stored_(stored),
-        hidden_(hidden) {
+        hidden_(hidden),
+        blend_(blend),
+        now_(now) {
     stored_.start(index_, playhead_);
+    if (blend_) {
+      blend_->reset(index_.node_count());
+      ++blend_->build;
+    }
   }
 
   SvoArrays run() {
@@ -37,7 +46,7 @@ class Builder {
       for (vr_uint i = 0; i < 8; ++i) out_.nodes[1 + i] = vr_svo_child_word(VR_SVO_CHILD_EMPTY, 0);
       return std::move(out_);
     }
-    const ChildResult root = visit(0, VR_SVO_NO_PARENT);
+    const ChildResult root = visit(0, VR_SVO_NO_PARENT, nullptr);
     if (root.kind != VR_SVO_CHILD_NODE) {
       // 4. The root is a leaf (or draws nothing): one record whose octants all defer to it.
       append_node(VR_SVO_NO_PARENT, 0);
@@ -50,6 +59,7 @@ class Builder {
       }
       if (drawn) out_.nodes[9] = root.index;
     }
+    if (blend_) blend_corners();
     std::sort(used_.begin(), used_.end());
     used_.erase(std::unique(used_.begin(), used_.end()), used_.end());
     stats_.used_slots = std::move(used_);
@@ -67,8 +77,39 @@ class Builder {
   SvoStats& stats_;
   StoredTimes& stored_;
   std::span<const std::uint8_t> hidden_;
+  LodBlendState* blend_;
+  double now_;
   SvoArrays out_;
   std::vector<std::uint32_t> used_;
+  /// Leaf records of nodes drawn from their own leaf, for the corner weights.
+  struct OwnLeaf {
+    vr_uint leaf = 0;
+    std::uint32_t node = 0;
+  };
+  std::vector<OwnLeaf> own_leaves_;
+
+  /// The data level a pair draws node `node` (at `level`) at: the coarser keyframe it reads.
+  static std::uint32_t data_level(std::uint32_t level, const KeyframePair& pair) {
+    const std::uint32_t d = pair.factor == 0.0f ? pair.a.lod_difference
+                            : pair.factor == 1.0f
+                                ? pair.b.lod_difference
+                                : std::max(pair.a.lod_difference, pair.b.lod_difference);
+    return level >= d ? level - d : 0;
+  }
+
+  /// Marks `node` as a region drawn at data level `level` with temporal weight t.
+  void mark(std::uint32_t node, std::uint32_t level, float t) {
+    LodBlendState& b = *blend_;
+    b.region_build[node] = b.build;
+    b.region_refined[node] = 0;
+    b.region_level[node] = static_cast<std::uint8_t>(std::min<std::uint32_t>(level, 255));
+    b.region_t[node] = t;
+  }
+  /// Marks the region `node` drawn by `pair` of the node `owner` (itself, or its parent for an
+  /// "up" child).
+  void mark_region(std::uint32_t node, std::uint32_t owner, const KeyframePair& pair) {
+    mark(node, data_level(index_.node(owner).key.level, pair), 1.0f);
+  }
 
   vr_uint append_node(vr_uint parent, std::uint32_t id) {
     const auto record = static_cast<vr_uint>(out_.nodes.size() / VR_SVO_NODE_WORDS);
@@ -79,28 +120,68 @@ class Builder {
     return record;
   }
 
-  vr_uint append_leaf(const KeyframePair& pair) {
+  /// A leaf record; `coarse` (null or invalid: none) is the parent's pair, blended in later by
+  /// blend_corners().
+  vr_uint append_leaf(const KeyframePair& pair, const KeyframePair* coarse = nullptr) {
     const auto record = static_cast<vr_uint>(out_.leaves.size() / VR_SVO_LEAF_WORDS);
-    out_.leaves.push_back(pair.a.slot);
-    out_.leaves.push_back(pair.b.slot);
-    out_.leaves.push_back(vr_svo_lod_pack(pair.a.lod_difference, pair.b.lod_difference));
-    out_.leaves.push_back(std::bit_cast<std::uint32_t>(pair.factor));
+    const bool blends = coarse && coarse->valid();
+    const vr_uint lods =
+        vr_svo_lod_pack(pair.a.lod_difference, pair.b.lod_difference) |
+        (blends ? vr_svo_lod_pack(coarse->a.lod_difference + 1, coarse->b.lod_difference + 1) << 16
+                : 0u);
+    out_.leaves.insert(
+        out_.leaves.end(),
+        {pair.a.slot, pair.b.slot, lods, std::bit_cast<std::uint32_t>(pair.factor),
+         blends ? coarse->a.slot : VR_ATLAS_NO_SLOT, blends ? coarse->b.slot : VR_ATLAS_NO_SLOT,
+         std::bit_cast<std::uint32_t>(blends ? coarse->factor : 0.0f), VR_SVO_BLEND_NONE,
+         VR_SVO_BLEND_NONE});
     used_.push_back(pair.a.slot);
     used_.push_back(pair.b.slot);
     return record;
   }
 
   // 1. A node drawn as a whole: its leaf, or deferred to an ancestor, or nothing to draw.
-  ChildResult as_leaf(const KeyframePair& pair) {
+  ChildResult as_leaf(std::uint32_t id, const KeyframePair& pair, const KeyframePair* parent,
+                      std::uint32_t last_visit) {
     if (!pair.valid()) return {VR_SVO_CHILD_EMPTY, 0};
     if (pair.drawn_by_ancestor()) return {VR_SVO_CHILD_UP, 0};
-    return {VR_SVO_CHILD_LEAF, append_leaf(pair)};
+    if (!blend_) return {VR_SVO_CHILD_LEAF, append_leaf(pair)};
+    LodBlendState& b = *blend_;
+    const vr_uint leaf = append_leaf(pair, parent);
+    // The temporal weight: a node visited in the last build whose region an ancestor's leaf drew
+    // then fades in. The regions marked in the last build tell: walking up from the node, the
+    // first one marked then is the node's own region drawn by its parent's leaf ("up"), or an
+    // ancestor's region, or a node record (the node itself: drawn by its children, a collapse;
+    // an ancestor: an empty octant). Ancestors are marked after their children are visited, so
+    // their marks are still the last build's here.
+    const std::uint32_t last = b.build - 1;
+    const bool continuing = b.own_build[id] == last && last != 0;
+    bool drawn_above = false;
+    if (!continuing && last != 0 && last_visit == last)
+      for (std::uint32_t n = id; n != no_node; n = index_.node(n).parent)
+        if (b.region_build[n] == last) {
+          drawn_above = !b.region_refined[n];
+          break;
+        }
+    const bool fades_in = drawn_above && b.settings.fade_s > 0;
+    if (!continuing) b.since[id] = fades_in ? now_ : -1e300;
+    b.own_build[id] = b.build;
+    const float t =
+        parent && parent->valid() && b.settings.fade_s > 0
+            ? static_cast<float>(std::clamp((now_ - b.since[id]) / b.settings.fade_s, 0.0, 1.0))
+            : 1.0f;
+    mark(id, data_level(index_.node(id).key.level, pair), t);
+    if (parent && parent->valid()) own_leaves_.push_back({leaf, id});
+    return {VR_SVO_CHILD_LEAF, leaf};
   }
 
-  ChildResult visit(std::uint32_t id, vr_uint parent_record) {
+  ChildResult visit(std::uint32_t id, vr_uint parent_record, const KeyframePair* parent) {
     const ViewTraversal::Visit& v = view_.visit(id);
     const KeyframePair pair =
         select_keyframe_pair(index_, id, playhead_, resident_, settings_, &stored_);
+    // The build that visited the node before this one (blending).
+    const std::uint32_t last_visit =
+        blend_ ? std::exchange(blend_->visited_build[id], blend_->build) : 0;
     if (!v.refine) {
       if (id < hidden_.size() && hidden_[id] != 0) {
         ++stats_.hidden_targets;
@@ -112,7 +193,7 @@ class Builder {
         ++stats_.holes;
       else if (pair.drawn_by_ancestor())
         ++stats_.ancestor_drawn;
-      return as_leaf(pair);
+      return as_leaf(id, pair, parent, last_visit);
     }
     // 2. A node record for the refined node; children first, then this node's own leaf.
     const vr_uint record = append_node(parent_record, id);
@@ -126,14 +207,14 @@ class Builder {
       else if (!view_.visited(c))
         children[i] = {VR_SVO_CHILD_UP, 0};  // outside the view
       else
-        children[i] = visit(c, record);
+        children[i] = visit(c, record, &pair);
       any_deeper |= children[i].kind == VR_SVO_CHILD_NODE || children[i].kind == VR_SVO_CHILD_LEAF;
     }
     if (!any_deeper) {
       // 3. Nothing deeper: collapse. The record is the last one appended (no child appended any).
       out_.nodes.resize(out_.nodes.size() - VR_SVO_NODE_WORDS);
       out_.node_ids.pop_back();
-      return as_leaf(pair);
+      return as_leaf(id, pair, parent, last_visit);
     }
     bool any_up = false;
     for (vr_uint i = 0; i < 8; ++i) {
@@ -144,7 +225,82 @@ class Builder {
           vr_svo_child_word(children[i].kind, children[i].index);
     }
     if (any_up) out_.nodes[record * VR_SVO_NODE_WORDS + 9] = append_leaf(pair);
+    if (blend_) {
+      blend_->region_build[id] = blend_->build;
+      blend_->region_refined[id] = 1;
+      for (vr_uint i = 0; i < 8; ++i)
+        if (children[i].kind == VR_SVO_CHILD_UP) mark_region(n.children[i], id, pair);
+    }
     return {VR_SVO_CHILD_NODE, record};
+  }
+
+  /// The region drawing the cell of `node` (a node record's cell: refined), or none: walks up to
+  /// the nearest marked ancestor. Returns false where nothing is drawn (an empty octant).
+  bool region_of(std::uint32_t node, std::uint32_t& region) const {
+    const LodBlendState& b = *blend_;
+    const std::uint32_t start = node;
+    for (; node != no_node; node = index_.node(node).parent) {
+      if (b.region_build[node] != b.build) continue;
+      if (b.region_refined[node] && node != start) return false;  // an empty octant below it
+      region = node;
+      return true;
+    }
+    return false;
+  }
+
+  /// Corner weights of the leaves drawn from their own node (svo_layout.h words 7, 8).
+  void blend_corners() {
+    const LodBlendState& b = *blend_;
+    for (const OwnLeaf& own : own_leaves_) {
+      const SpatialNode& n = index_.node(own.node);
+      const std::uint32_t level = n.key.level;
+      const std::uint8_t mine = b.region_level[own.node];
+      // The 26 neighbouring cells of the same level: −1 coarser, else their temporal weight (1
+      // for a finer or absent neighbour, which blends itself or draws nothing).
+      float near[27];
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int k = (dx + 1) + 3 * (dy + 1) + 9 * (dz + 1);
+            near[k] = 1.0f;
+            if (dx == 0 && dy == 0 && dz == 0) continue;
+            const std::int64_t x = std::int64_t{n.key.x} + dx, y = std::int64_t{n.key.y} + dy,
+                               z = std::int64_t{n.key.z} + dz;
+            if (x < 0 || y < 0 || z < 0) continue;
+            NodeKey key = n.key;
+            key.level = level;
+            key.x = static_cast<std::uint32_t>(x);
+            key.y = static_cast<std::uint32_t>(y);
+            key.z = static_cast<std::uint32_t>(z);
+            const std::uint32_t cell = index_.find(key);
+            std::uint32_t region = no_node;
+            if (cell == no_node || !region_of(cell, region) || b.region_refined[region]) continue;
+            if (b.region_level[region] < mine)
+              near[k] = b.settings.spatial ? -1.0f : 1.0f;
+            else if (b.region_level[region] == mine)
+              near[k] = b.region_t[region];
+          }
+      vr_uint words[2] = {0, 0};
+      for (vr_uint i = 0; i < 8; ++i) {
+        const int sx = (i & 1) ? 1 : -1, sy = (i & 2) ? 1 : -1, sz = (i & 4) ? 1 : -1;
+        float w = b.region_t[own.node];
+        for (int k = 0; k < 8; ++k) {
+          const int dx = (k & 1) ? sx : 0, dy = (k & 2) ? sy : 0, dz = (k & 4) ? sz : 0;
+          w = std::min(w, near[(dx + 1) + 3 * (dy + 1) + 9 * (dz + 1)]);
+        }
+        const auto byte = static_cast<vr_uint>(std::lround(std::clamp(w, 0.0f, 1.0f) * 255.0f));
+        words[i / 4] |= byte << (8 * (i % 4));
+      }
+      vr_uint* record = &out_.leaves[std::size_t{own.leaf} * VR_SVO_LEAF_WORDS];
+      record[7] = words[0];
+      record[8] = words[1];
+      if (words[0] != VR_SVO_BLEND_NONE || words[1] != VR_SVO_BLEND_NONE) {
+        ++stats_.blended_leaves;
+        const float g = std::bit_cast<float>(record[6]);
+        if (g != 1.0f) used_.push_back(record[4]);
+        if (g != 0.0f) used_.push_back(record[5]);
+      }
+    }
   }
 };
 
@@ -153,13 +309,26 @@ class Builder {
 SvoArrays build_svo(const SpatialIndex& index, const ViewTraversal& view,
                     const ResidentKeyframes& resident, double playhead,
                     const SelectionSettings& settings, SvoStats* stats, StoredTimes* stored,
-                    std::span<const std::uint8_t> hidden) {
+                    std::span<const std::uint8_t> hidden, LodBlendState* blend, double now) {
   SvoStats local;
   SvoStats& s = stats ? *stats : local;
   s = SvoStats{};
   StoredTimes fresh;
-  return Builder(index, view, resident, playhead, settings, s, stored ? *stored : fresh, hidden)
+  return Builder(index, view, resident, playhead, settings, s, stored ? *stored : fresh, hidden,
+                 blend, now)
       .run();
+}
+
+void LodBlendState::reset(std::size_t nodes) {
+  if (visited_build.size() == nodes) return;
+  build = 0;
+  visited_build.assign(nodes, 0);
+  own_build.assign(nodes, 0);
+  since.assign(nodes, 0);
+  region_build.assign(nodes, 0);
+  region_level.assign(nodes, 0);
+  region_refined.assign(nodes, 0);
+  region_t.assign(nodes, 1.0f);
 }
 
 std::vector<std::string> validate_svo(std::span<const std::uint32_t> nodes,
@@ -196,10 +365,20 @@ std::vector<std::string> validate_svo(std::span<const std::uint32_t> nodes,
       fail(where + ": leaf " + std::to_string(leaf) + " slot out of range");
     if (vr_svo_lod_a(w[2]) > depth || vr_svo_lod_b(w[2]) > depth)
       fail(where + ": leaf " + std::to_string(leaf) + " LOD difference above the root");
-    if ((w[2] >> 16) != 0) fail(where + ": leaf " + std::to_string(leaf) + " unused LOD bits set");
     const float f = std::bit_cast<float>(w[3]);
     if (!(f >= 0.0f && f <= 1.0f))
       fail(where + ": leaf " + std::to_string(leaf) + " factor outside [0, 1]");
+    if (w[7] == VR_SVO_BLEND_NONE && w[8] == VR_SVO_BLEND_NONE) return;
+    // A blending leaf: its coarse pair is drawn too.
+    if (w[4] >= slot_count || w[5] >= slot_count)
+      fail(where + ": leaf " + std::to_string(leaf) + " coarse slot out of range");
+    for (const std::uint32_t d : {vr_svo_lod_c(w[2]), vr_svo_lod_d(w[2])})
+      if (d == 0 || d > depth)
+        fail(where + ": leaf " + std::to_string(leaf) + " coarse LOD difference " +
+             std::to_string(d) + " outside [1, " + std::to_string(depth) + "]");
+    const float g = std::bit_cast<float>(w[6]);
+    if (!(g >= 0.0f && g <= 1.0f))
+      fail(where + ": leaf " + std::to_string(leaf) + " coarse factor outside [0, 1]");
   };
   // Depth-first from the root.
   struct Item {

@@ -18,8 +18,8 @@
 //     that the transfer function makes visible, is left at once: the next sample is the first
 //     multiple of the step past the region's exit.
 //
-//   - block skipping: a sample whose 6³ atlas blocks (both keyframes) hold only values that map to
-//     zero opacity (block_ranges.comp) is skipped without fetching texels.
+//   - block skipping: a sample whose 6³ atlas blocks (every keyframe it reads) hold only values
+//     that map to zero opacity (block_ranges.comp) is skipped without fetching texels.
 //
 // Bindings (set 0): 0 parameters, 1 node words, 2 leaf words, 3 leaf histograms
 // (2 words per leaf; ignored unless VR_FLAG_HISTOGRAMS), 4 transfer function (RGBA entries, already
@@ -324,9 +324,29 @@ void main() {
         origin_b = slot_origin(slot_b);
         at_b = vec3(origin_b) + slot_texel(vr_svo_lod_b(lods), leaf_c, u);
       }
+      // 4a. Level-of-detail blending (svo_layout.h words 4–8): the coarse pair C, D, weighted
+      //     by 1 − blend, blend the corners' weights interpolated at u.
+      uint w7 = leaf_words[record + 7u], w8 = leaf_words[record + 8u];
+      float blend = 1.0;
+      if (w7 != VR_SVO_BLEND_NONE || w8 != VR_SVO_BLEND_NONE)
+        blend = vr_svo_blend_weight(w7, w8, u.x, u.y, u.z);
+      float g = uintBitsToFloat(leaf_words[record + 6u]);
+      uint slot_c = leaf_words[record + 4u], slot_d = leaf_words[record + 5u];
+      ivec3 origin_c = ivec3(0), origin_d = ivec3(0);
+      vec3 at_c = vec3(0.0), at_d = vec3(0.0);
+      if (blend < 1.0) {
+        if (g != 1.0) {
+          origin_c = slot_origin(slot_c);
+          at_c = vec3(origin_c) + slot_texel(vr_svo_lod_c(lods), leaf_c, u);
+        }
+        if (g != 0.0) {
+          origin_d = slot_origin(slot_d);
+          at_d = vec3(origin_d) + slot_texel(vr_svo_lod_d(lods), leaf_c, u);
+        }
+      }
       if (block_skip) {
-        // 4a. Both keyframes' blocks hold only values the transfer function hides: so does
-        //     their blend. Skip the fetches, keep the sample positions.
+        // 4b. Every keyframe's block read holds only values the transfer function hides: so
+        //     does their blend. Skip the fetches, keep the sample positions.
         vec2 r = vec2(1e30, -1e30);
         if (f != 1.0) {
           vec2 ra = block_range(slot_a, origin_a, at_a);
@@ -336,11 +356,25 @@ void main() {
           vec2 rb = block_range(slot_b, origin_b, at_b);
           r = vec2(min(r.x, rb.x), max(r.y, rb.y));
         }
+        if (blend < 1.0 && g != 1.0) {
+          vec2 rc = block_range(slot_c, origin_c, at_c);
+          r = vec2(min(r.x, rc.x), max(r.y, rc.y));
+        }
+        if (blend < 1.0 && g != 0.0) {
+          vec2 rd = block_range(slot_d, origin_d, at_d);
+          r = vec2(min(r.x, rd.x), max(r.y, rd.y));
+        }
         if (!range_visible(r)) continue;
       }
       float a = f == 1.0 ? 0.0 : keyframe(at_a);
       float b = f == 0.0 ? 0.0 : keyframe(at_b);
       float value = f == 0.0 ? a : f == 1.0 ? b : (1.0 - f) * a + f * b;
+      if (blend < 1.0) {
+        float ca = g == 1.0 ? 0.0 : keyframe(at_c);
+        float cb = g == 0.0 ? 0.0 : keyframe(at_d);
+        float coarse = g == 0.0 ? ca : g == 1.0 ? cb : (1.0 - g) * ca + g * cb;
+        value = coarse + blend * (value - coarse);
+      }
 
       // 5. Transfer function (corrected for the base step), corrected for the n = k' − k fine
       //    steps the sample stands for; front to back, early termination.

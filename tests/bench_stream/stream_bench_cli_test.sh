@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # stream_bench_cli_test.sh: `volreel bench stream` end to end on a tiny container — both policies
 # run, the per-frame CSVs and the summary hold sane numbers (finite image PSNR above 10 dB at the
-# end, every node at its target LOD with unlimited bandwidth), PNGs are written, bad options give
-# clear errors, and two runs on the simulated clock agree frame for frame. Usage: stream_bench_cli_test.sh PATH/TO/volreel
+# end, every node at its target LOD with unlimited bandwidth, popping and seam error in range),
+# PNGs are written, bad options give clear errors, and two runs on the simulated clock agree frame
+# for frame. Usage: stream_bench_cli_test.sh PATH/TO/volreel
 set -euo pipefail
 volreel=$1
 work=$(mktemp -d)
@@ -45,6 +46,14 @@ assert int(last["holes"]) == 0, "holes in the last frame"
 for r in rows:
     assert 0 <= float(r["fraction_at_target"]) <= 1 and 0 <= float(r["ssim"]) <= 1.0001
     assert float(r["time_s"]) <= 3.0 + 1e-9
+# Popping: none for the first frame, a finite RMS in 8-bit units for every later one; the seam
+# error where there is one (NaN where the frame had no level-of-detail boundary).
+assert math.isnan(float(rows[0]["popping"])), f"first frame's popping {rows[0]['popping']}"
+for r in rows[1:]:
+    assert 0 <= float(r["popping"]) <= 255, f"popping {r['popping']}"
+for r in rows:
+    seam = float(r["seam"])
+    assert math.isnan(seam) or 0 <= seam <= 255, f"seam {seam}"
 assert int(last["bytes_loaded"]) > 0, "nothing loaded"
 assert float(last["time_s"]) == 3.0, "the tour did not run to its end"
 PY
@@ -57,13 +66,16 @@ assert [r["policy"] for r in d["runs"]] == ["patent", "nearest"]
 for r in d["runs"]:
     assert r["frames"] >= 3 and r["mean_psnr_db"] > 10 and r["bytes_loaded"] > 0
     assert len(r["seeks"]) == 5
+    assert r["mean_popping_all"] is not None and r["mean_popping_all"] >= 0
+    assert (r["mean_popping"] is None) == (r["popping_frames"] == 0) == (r["max_popping"] is None)
+    assert (r["mean_seam"] is None) == (r["seam_frames"] == 0)
 assert "target_higher_psnr" in d and "target_no_holes" in d
 PY
 
 # 2. A slow link and one policy: less loaded, still sane; the container's own decode as truth.
 mv "$work/s" "$work/s-moved"
 "$volreel" bench stream "$work/a.vreel" --bandwidth 20kB/s --latency 20ms --duration 2 --size 32x32 --policy patent \
-  --out "$work/slow" > "$work/slow.txt" 2>/dev/null || fail "bench stream (slow)"
+  --spatial-blend true --lod-fade 0.5 --out "$work/slow" > "$work/slow.txt" 2>/dev/null || fail "bench stream (slow)"
 grep -q "the container's own finest-level decode" "$work/slow.txt" || fail "no notice of the fallback ground truth"
 grep -q "due window first" "$work/slow.txt" || fail "no due-window line: $(cat "$work/slow.txt")"
 /usr/bin/python3 - "$work/slow/stream_patent.csv" <<'PY' || fail "slow link numbers"
@@ -72,6 +84,12 @@ rows = list(csv.DictReader(open(sys.argv[1])))
 loaded = int(rows[-1]["bytes_loaded"])
 assert 0 < loaded, "nothing loaded"
 assert all(float(r["psnr_db"]) > 0 for r in rows)
+assert all(0 <= int(r["blended_leaves"]) <= int(r["svo_leaves"]) for r in rows)
+PY
+/usr/bin/python3 - "$work/slow/summary.json" <<'PY' || fail "blending settings not in summary.json"
+import json, sys
+d = json.load(open(sys.argv[1]))
+assert d["spatial_blend"] is True and d["lod_fade_s"] == 0.5, d
 PY
 "$volreel" bench stream "$work/a.vreel" --series "$work/s-moved" --bandwidth 0 --duration 1 --size 32x32 --policy nearest \
   --out "$work/n" > "$work/n.txt" 2>/dev/null || fail "bench stream --series"
@@ -84,8 +102,8 @@ for run in 1 2; do
 done
 grep -q "simulated clock, 8 frames per tour second" "$work/r1.txt" || fail "no simulated-clock line: $(cat "$work/r1.txt")"
 [ "$(wc -l < "$work/r1/stream_patent.csv")" -eq 18 ] || fail "expected 17 frames at 8 fps over 2 s, found $(($(wc -l < "$work/r1/stream_patent.csv") - 1))"
-cut -d, -f1-24 "$work/r1/stream_patent.csv" > "$work/r1.cut"
-cut -d, -f1-24 "$work/r2/stream_patent.csv" > "$work/r2.cut"
+cut -d, -f1-26 "$work/r1/stream_patent.csv" > "$work/r1.cut"
+cut -d, -f1-26 "$work/r2/stream_patent.csv" > "$work/r2.cut"
 cmp -s "$work/r1.cut" "$work/r2.cut" || fail "two simulated runs differ: $(diff "$work/r1.cut" "$work/r2.cut" | head -5)"
 /usr/bin/python3 - "$work/r1/stream_patent.csv" <<'PY' || fail "simulated clock: the link's bandwidth is not respected"
 import csv, sys
@@ -136,6 +154,7 @@ expect_error "no such file or folder" "$volreel" bench stream "$work/a.vreel" --
 expect_error "seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --lookahead -1
 expect_error "seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --speculative-link 100
 expect_error "an exponent in \[0, 64\]" "$volreel" bench stream "$work/a.vreel" --ancestor-handicap -2
+expect_error "seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --lod-fade -0.5
 "$volreel" bench stream --help > "$work/help.txt" && grep -q -e "--bandwidth" "$work/help.txt" || fail "--help lacks --bandwidth"
-for o in --due-window --lookahead --speculative-link --ancestor-handicap --sse-priority --seeds; do grep -q -e "$o" "$work/help.txt" || fail "--help lacks $o"; done
+for o in --due-window --lookahead --speculative-link --ancestor-handicap --sse-priority --seeds --lod-fade --spatial-blend; do grep -q -e "$o" "$work/help.txt" || fail "--help lacks $o"; done
 echo "stream bench CLI: OK"

@@ -394,6 +394,185 @@ TEST_P(CpuRenderLodDifference, NodesDrawnAtACoarserLevel) {
 INSTANTIATE_TEST_SUITE_P(D, CpuRenderLodDifference, ::testing::Values(1u, 2u, 3u),
                          [](const auto& param) { return "d" + std::to_string(param.param); });
 
+// --- Level-of-detail blending: the parent's drawing mixed in by corner weights ---------------
+
+TEST(CpuRenderLodMapping, BlendWeightInterpolatesTheCorners) {
+  // Corner i's byte at bits 8·(i mod 4) of word 7 (i < 4) or 8.
+  const vr_uint w7 = 0x3322110Au, w8 = 0x77665544u;
+  EXPECT_EQ(vr_svo_blend_corner(w7, w8, 0), 0x0Au);
+  EXPECT_EQ(vr_svo_blend_corner(w7, w8, 3), 0x33u);
+  EXPECT_EQ(vr_svo_blend_corner(w7, w8, 4), 0x44u);
+  EXPECT_EQ(vr_svo_blend_corner(w7, w8, 7), 0x77u);
+  // At a corner the weight is that corner's; in the middle the mean of all eight; along an edge
+  // the linear mix of its two corners.
+  for (vr_uint i = 0; i < 8; ++i)
+    EXPECT_NEAR(vr_svo_blend_weight(w7, w8, float(i & 1), float((i >> 1) & 1), float(i >> 2)),
+                float(vr_svo_blend_corner(w7, w8, i)) / 255.0f, 1e-6f)
+        << "corner " << i;
+  float mean = 0;
+  for (vr_uint i = 0; i < 8; ++i) mean += float(vr_svo_blend_corner(w7, w8, i)) / 255.0f / 8.0f;
+  EXPECT_NEAR(vr_svo_blend_weight(w7, w8, 0.5f, 0.5f, 0.5f), mean, 1e-6f);
+  EXPECT_NEAR(vr_svo_blend_weight(w7, w8, 0.25f, 0.0f, 0.0f),
+              (0.75f * 0x0A + 0.25f * 0x11) / 255.0f, 1e-6f);
+  EXPECT_FLOAT_EQ(vr_svo_blend_weight(VR_SVO_BLEND_NONE, VR_SVO_BLEND_NONE, 0.3f, 0.6f, 0.9f),
+                  1.0f);
+}
+
+TEST(CpuRenderLodBlending, WeightsMixTheParentsDrawingIntoTheNodes) {
+  const Scene& s = elongated();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  const CpuAtlas atlas = s.exact_atlas();
+  const auto camera = test_camera(s);
+  const auto transfer = test_transfer(s);
+  // Every finest node drawn from frame 0's own brick, its coarse pair the parent's brick of
+  // frame 0 (one level up), every corner weighted `byte`.
+  const auto blended = [&](std::uint8_t byte) {
+    return build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+      LeafSpec spec{s.slot(0, l, c), s.slot(0, l, c), 0, 0, 0.0f};
+      spec.slot_c = spec.slot_d = s.slot(0, l - 1, {c[0] >> 1, c[1] >> 1, c[2] >> 1});
+      spec.d_c = spec.d_d = 1;
+      spec.corners.fill(byte);
+      return spec;
+    });
+  };
+  const auto render = [&](std::uint8_t byte) {
+    return cpu_render::render_svo(blended(byte).view(), atlas, s.geometry, camera, transfer,
+                                  fixed_step());
+  };
+  // Weight w mixes w·fine + (1 − w)·parent: the reference of the finest level and the one above
+  // it interpolated by 1 − w (the oracle mixes values, as the blend does, before the transfer).
+  for (const std::uint8_t byte : {std::uint8_t{0}, std::uint8_t{100}, std::uint8_t{255}}) {
+    const float w = float(byte) / 255.0f;
+    const RgbaImage want = cpu_render::render_reference(s.dense(0, finest), s.dense(0, finest - 1),
+                                                        1.0f - w, s.geometry, camera, transfer);
+    EXPECT_GT(drawn_fraction(want), 0.15);
+    EXPECT_LE(difference(render(byte), want), exact_tolerance) << "weight " << int(byte);
+  }
+  // The parent really differs from the node, so the weights are seen.
+  EXPECT_GT(cpu_render::max_abs_difference(render(0), render(255)), 0.02);
+  // Weights that differ by corner lie between the uniform ones where they do.
+  const auto corners = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    LeafSpec spec{s.slot(0, l, c), s.slot(0, l, c), 0, 0, 0.0f};
+    spec.slot_c = spec.slot_d = s.slot(0, l - 1, {c[0] >> 1, c[1] >> 1, c[2] >> 1});
+    spec.d_c = spec.d_d = 1;
+    spec.corners = {0, 255, 0, 255, 0, 255, 0, 255};  // fine towards +x, the parent towards −x
+    return spec;
+  });
+  const RgbaImage mixed =
+      cpu_render::render_svo(corners.view(), atlas, s.geometry, camera, transfer, fixed_step());
+  EXPECT_GT(cpu_render::max_abs_difference(mixed, render(0)), 1e-3);
+  EXPECT_GT(cpu_render::max_abs_difference(mixed, render(255)), 1e-3);
+  // The level map: a pixel shows the level of the data its strongest sample read — the finest
+  // level here (blending leaves it to the finer keyframe), the level above for an SVO drawn there.
+  cpu_render::RenderOptions mapped = fixed_step();
+  mapped.level_map = true;
+  const auto levels_of = [&](const test::BuiltSvo& svo) {
+    const RgbaImage image =
+        cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, transfer, mapped);
+    EXPECT_EQ(image.levels.size(), std::size_t{96} * 64);
+    std::array<std::size_t, 256> count{};
+    for (std::size_t p = 0; p < image.levels.size(); ++p) {
+      ++count[image.levels[p]];
+      if (image.rgba[4 * p + 3] > 0.05f) {
+        EXPECT_NE(image.levels[p], RgbaImage::no_level) << p;
+      }
+    }
+    return count;
+  };
+  const auto fine_levels = levels_of(blended(0));
+  EXPECT_GT(fine_levels[finest], std::size_t{96 * 64 / 8});
+  EXPECT_EQ(fine_levels[finest] + fine_levels[RgbaImage::no_level], std::size_t{96} * 64);
+  const auto coarse = build_uniform_svo(s.levels, finest - 1, [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l, c), s.slot(0, l, c), 0, 0, 0.0f};
+  });
+  const auto coarse_levels = levels_of(coarse);
+  EXPECT_GT(coarse_levels[finest - 1], std::size_t{96 * 64 / 8});
+  EXPECT_EQ(coarse_levels[finest - 1] + coarse_levels[RgbaImage::no_level], std::size_t{96} * 64);
+  // The dense oracle has no map, and without the option there is none.
+  EXPECT_TRUE(cpu_render::render_reference(s.dense(0, finest), s.dense(0, finest), 0.0f, s.geometry,
+                                           camera, transfer, mapped)
+                  .levels.empty());
+  EXPECT_TRUE(render(0).levels.empty());
+  // A blending leaf with a coarse slot outside the atlas is refused.
+  const auto bad = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    LeafSpec spec{s.slot(0, l, c), s.slot(0, l, c), 0, 0, 0.0f};
+    spec.slot_c = atlas.slot_count();
+    spec.d_c = spec.d_d = 1;
+    spec.corners.fill(7);
+    return spec;
+  });
+  EXPECT_THROW(cpu_render::render_svo(bad.view(), atlas, s.geometry, camera, transfer),
+               std::invalid_argument);
+  // So is a coarse LOD difference of 0 (the coarse pair is an ancestor's).
+  const auto flat = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    LeafSpec spec{s.slot(0, l, c), s.slot(0, l, c), 0, 0, 0.0f};
+    spec.slot_c = spec.slot_d = s.slot(0, l, c);
+    spec.corners.fill(7);
+    return spec;
+  });
+  EXPECT_THROW(cpu_render::render_svo(flat.view(), atlas, s.geometry, camera, transfer),
+               std::invalid_argument);
+}
+
+TEST(CpuRenderLodBlending, SpatialBlendingSmoothsTheErrorStepAtALevelBoundary) {
+  const Scene& s = elongated();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  const CpuAtlas atlas = s.exact_atlas();
+  // From nearly straight above, so that the boundary plane x = 136 projects to a line.
+  auto camera = test_camera(s);
+  camera.elevation = 1.4;
+  const auto transfer = test_transfer(s);
+  // Finest nodes with x < 4 drawn from their own bricks, the others from their parents'; with
+  // blending, the fine nodes next to the coarse ones take the parent's drawing at the corners on
+  // that side (x = 1), as the SVO builder weights them.
+  const auto svo = [&](bool blend) {
+    return build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+      const Coord parent{c[0] >> 1, c[1] >> 1, c[2] >> 1};
+      if (c[0] >= 4)
+        return LeafSpec{s.slot(0, l - 1, parent), s.slot(0, l - 1, parent), 1, 1, 0.0f};
+      LeafSpec spec{s.slot(0, l, c), s.slot(0, l, c), 0, 0, 0.0f};
+      if (blend && c[0] == 3) {
+        spec.slot_c = spec.slot_d = s.slot(0, l - 1, parent);
+        spec.d_c = spec.d_d = 1;
+        for (std::uint32_t i = 0; i < 8; ++i) spec.corners[i] = (i & 1) ? 0 : 255;
+      }
+      return spec;
+    });
+  };
+  cpu_render::RenderOptions mapped = fixed_step();
+  mapped.level_map = true;
+  const RgbaImage want = cpu_render::render_reference(s.dense(0, finest), s.dense(0, finest), 0.0f,
+                                                      s.geometry, camera, transfer);
+  // The step of the error (image − ground truth) between horizontally or vertically adjacent
+  // pixels whose levels differ: the seam.
+  const auto seam = [&](const RgbaImage& image) {
+    double sum = 0;
+    std::size_t pairs = 0;
+    const auto w = static_cast<std::size_t>(image.width);
+    for (std::size_t p = 0; p < image.levels.size(); ++p)
+      for (const std::size_t q : {p + 1, p + w}) {
+        if ((q == p + 1 && (p + 1) % w == 0) || q >= image.levels.size()) continue;
+        if (image.levels[p] == RgbaImage::no_level || image.levels[q] == RgbaImage::no_level ||
+            image.levels[p] == image.levels[q])
+          continue;
+        for (std::size_t c = 0; c < 3; ++c) {
+          const double d = (image.rgba[4 * p + c] - want.rgba[4 * p + c]) -
+                           (image.rgba[4 * q + c] - want.rgba[4 * q + c]);
+          sum += d * d;
+        }
+        ++pairs;
+      }
+    EXPECT_GT(pairs, 20u);
+    return std::sqrt(sum / double(3 * std::max<std::size_t>(pairs, 1)));
+  };
+  const double hard =
+      seam(cpu_render::render_svo(svo(false).view(), atlas, s.geometry, camera, transfer, mapped));
+  const double blended =
+      seam(cpu_render::render_svo(svo(true).view(), atlas, s.geometry, camera, transfer, mapped));
+  std::printf("  error step at the boundary: %.5f without blending, %.5f with\n", hard, blended);
+  EXPECT_LT(blended, 0.85 * hard);  // measured 0.71
+}
+
 // --- Shapes of trees and volumes -----------------------------------------------------------
 
 TEST(CpuRenderSvoShapes, UpChildrenDrawTheSameAsLeafChildren) {

@@ -12,15 +12,21 @@
 #include "volreel/cpu_render/cpu_atlas.hpp"
 #include "volreel/cpu_render/renderer.hpp"
 #include "volreel/format/frame_file.hpp"
+#include "volreel/player/atlas_layout.h"
 #include "volreel/player/svo_layout.h"
 
 namespace volreel::test {
 
-/// The leaf record of a spatial node.
+/// The leaf record of a spatial node: keyframes A and B; with `corners` other than all 255, the
+/// coarse pair C and D blended in by the corner weights (svo_layout.h words 4–8).
 struct LeafSpec {
   vr_uint slot_a = 0, slot_b = 0;
   vr_uint d_a = 0, d_b = 0;
   float factor = 0;
+  vr_uint slot_c = VR_ATLAS_NO_SLOT, slot_d = VR_ATLAS_NO_SLOT;
+  vr_uint d_c = 0, d_d = 0;
+  float coarse_factor = 0;
+  std::array<std::uint8_t, 8> corners{255, 255, 255, 255, 255, 255, 255, 255};
 };
 using LeafFor = std::function<LeafSpec(std::uint32_t level, std::array<std::uint32_t, 3> c)>;
 
@@ -57,8 +63,13 @@ inline BuiltSvo build_uniform_svo(const std::vector<format::LevelGeometry>& geom
   const auto add_leaf = [&](std::uint32_t level, std::array<std::uint32_t, 3> c) {
     const LeafSpec s = leaf_for(level, c);
     const auto index = static_cast<vr_uint>(svo.leaves.size() / VR_SVO_LEAF_WORDS);
-    svo.leaves.insert(svo.leaves.end(), {s.slot_a, s.slot_b, vr_svo_lod_pack(s.d_a, s.d_b),
-                                         std::bit_cast<vr_uint>(s.factor)});
+    vr_uint corners[2] = {0, 0};
+    for (vr_uint i = 0; i < 8; ++i) corners[i / 4] |= vr_uint{s.corners[i]} << (8 * (i % 4));
+    svo.leaves.insert(
+        svo.leaves.end(),
+        {s.slot_a, s.slot_b, vr_svo_lod_pack(s.d_a, s.d_b) | (vr_svo_lod_pack(s.d_c, s.d_d) << 16),
+         std::bit_cast<vr_uint>(s.factor), s.slot_c, s.slot_d,
+         std::bit_cast<vr_uint>(s.coarse_factor), corners[0], corners[1]});
     return index;
   };
   std::function<vr_uint(std::uint32_t, std::array<std::uint32_t, 3>, vr_uint)> add_node =

@@ -107,7 +107,8 @@ TEST_P(StreamSchedulerPolicy, ConvergesToEveryVisibleFinestNodeResident) {
     const NodeKey& child = s.index().node(s.index().node(0).children[i]).key;
     EXPECT_EQ(s.atlas().key(leaf[0]), (KeyframeKey{child.level, child.x, child.y, child.z, 1}));
     EXPECT_EQ(s.atlas().key(leaf[1]), (KeyframeKey{child.level, child.x, child.y, child.z, 2}));
-    EXPECT_EQ(leaf[2], vr_svo_lod_pack(0, 0));
+    EXPECT_EQ(vr_svo_lod_a(leaf[2]), 0u);
+    EXPECT_EQ(vr_svo_lod_b(leaf[2]), 0u);
     EXPECT_EQ(std::bit_cast<float>(leaf[3]), 0.5f);
   }
   // Nothing more is requested or uploaded once everything is resident.

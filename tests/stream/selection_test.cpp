@@ -2,10 +2,12 @@
 // patent [0039], [0046]–[0048]) and the array-encoded SVO built from them ([0049]).
 #include <gtest/gtest.h>
 
+#include <array>
 #include <bit>
 #include <cmath>
 
 #include "stream_test_util.hpp"
+#include "volreel/player/atlas_layout.h"
 #include "volreel/stream/selection.hpp"
 #include "volreel/stream/svo_builder.hpp"
 
@@ -202,11 +204,120 @@ TEST_F(StreamSelection, SvoOfPartlyResidentData) {
   EXPECT_TRUE(none.leaves.empty());
 }
 
+TEST_F(StreamSelection, LodBlendingFadesNewDetailInAndBlendsTowardsCoarserNeighbours) {
+  const player::OrbitCamera cam = test::close_camera({40, 40, 40});
+  ViewTraversal view;
+  view.run(index, cam, 1.0);
+  ASSERT_TRUE(view.visit(0).refine);
+  const std::uint32_t c0 = index.node(0).children[0];
+  // Corner bytes of octant 0's leaf, and the leaf itself.
+  const auto leaf_of = [&](const SvoArrays& svo, std::uint32_t octant) {
+    EXPECT_EQ(vr_svo_child_kind(svo.nodes[1 + octant]), VR_SVO_CHILD_LEAF);
+    return &svo.leaves[vr_svo_child_index(svo.nodes[1 + octant]) * VR_SVO_LEAF_WORDS];
+  };
+  const auto corners = [](const std::uint32_t* leaf) {
+    std::array<std::uint32_t, 8> c{};
+    for (std::uint32_t i = 0; i < 8; ++i) c[i] = vr_svo_blend_corner(leaf[7], leaf[8], i);
+    return c;
+  };
+  LodBlendState blend;
+  blend.settings.fade_s = 1.0;
+  blend.settings.spatial = true;
+  SvoStats stats;
+  const auto build = [&](const ResidentKeyframes& r, double now) {
+    SvoArrays svo = build_svo(index, view, r, 5.25, {}, &stats, nullptr, {}, &blend, now);
+    EXPECT_TRUE(validate_svo(svo.nodes, svo.leaves, static_cast<std::uint32_t>(r.size()),
+                             index.level_count())
+                    .empty());
+    return svo;
+  };
+  // 1. Only the root resident: every octant drawn by the root, nothing blends.
+  const auto root_only = resident(index, {{0, 5}, {0, 6}});
+  EXPECT_EQ(build(root_only, 0.0).leaves.size(), VR_SVO_LEAF_WORDS);
+  EXPECT_EQ(stats.blended_leaves, 0u);
+  // 2. Octant 0's bricks arrive: it fades in from the root's drawing. Its coarse pair is the
+  //    root's (slots 0 and 1, one level up, the root's factor); every corner starts at 0.
+  const auto with_c0 = resident(index, {{0, 5}, {0, 6}, {c0, 5}, {c0, 6}});
+  SvoArrays svo = build(with_c0, 1.0);
+  const std::uint32_t* leaf = leaf_of(svo, 0);
+  EXPECT_EQ(leaf[0], 2u);
+  EXPECT_EQ(leaf[4], 0u);
+  EXPECT_EQ(leaf[5], 1u);
+  EXPECT_EQ(vr_svo_lod_c(leaf[2]), 1u);
+  EXPECT_EQ(vr_svo_lod_d(leaf[2]), 1u);
+  EXPECT_EQ(std::bit_cast<float>(leaf[6]), 0.25f);
+  EXPECT_EQ(corners(leaf), (std::array<std::uint32_t, 8>{0, 0, 0, 0, 0, 0, 0, 0}));
+  EXPECT_EQ(stats.blended_leaves, 1u);
+  EXPECT_EQ(stats.used_slots, (std::vector<std::uint32_t>{0, 1, 2, 3}));
+  // 3. Half way: corner 0 (the volume's corner, no neighbour) at 0.5; the other corners touch
+  //    octants drawn by the root (coarser) and stay 0 (spatial blending).
+  svo = build(with_c0, 1.5);
+  EXPECT_EQ(corners(leaf_of(svo, 0)), (std::array<std::uint32_t, 8>{128, 0, 0, 0, 0, 0, 0, 0}));
+  // 4. Faded in.
+  svo = build(with_c0, 2.5);
+  EXPECT_EQ(corners(leaf_of(svo, 0)), (std::array<std::uint32_t, 8>{255, 0, 0, 0, 0, 0, 0, 0}));
+  // 5. Every octant's bricks: the seven new ones fade in, and octant 0's corners they share take
+  //    their weight (0) — the least of the regions at one data level sharing a corner.
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> all = {{0, 5}, {0, 6}};
+  for (const std::uint32_t c : index.node(0).children) {
+    all.emplace_back(c, 5);
+    all.emplace_back(c, 6);
+  }
+  std::vector<ResidentKeyframe> entries;
+  for (std::uint32_t i = 0; i < all.size(); ++i)
+    entries.push_back({index.find_keyframe(all[i].first, all[i].second), i});
+  ResidentKeyframes everything;
+  everything.assign(index, entries);
+  svo = build(everything, 3.0);
+  EXPECT_EQ(corners(leaf_of(svo, 0)), (std::array<std::uint32_t, 8>{255, 0, 0, 0, 0, 0, 0, 0}));
+  EXPECT_EQ(corners(leaf_of(svo, 7)), (std::array<std::uint32_t, 8>{0, 0, 0, 0, 0, 0, 0, 0}));
+  svo = build(everything, 3.25);
+  EXPECT_EQ(corners(leaf_of(svo, 0)),
+            (std::array<std::uint32_t, 8>{255, 64, 64, 64, 64, 64, 64, 64}));
+  EXPECT_EQ(corners(leaf_of(svo, 7)),
+            (std::array<std::uint32_t, 8>{64, 64, 64, 64, 64, 64, 64, 64}));
+  // 6. All faded in: nothing blends, and the coarse slots are not used.
+  svo = build(everything, 4.5);
+  for (std::uint32_t o = 0; o < 8; ++o) {
+    EXPECT_EQ(leaf_of(svo, o)[7], VR_SVO_BLEND_NONE) << o;
+    EXPECT_EQ(leaf_of(svo, o)[8], VR_SVO_BLEND_NONE) << o;
+  }
+  EXPECT_EQ(stats.blended_leaves, 0u);
+  // 7. A node first seen with its bricks resident (not visited in the last build) is drawn at
+  //    once; without spatial blending its corners next to coarser octants are not lowered.
+  LodBlendState fresh;
+  fresh.settings.fade_s = 1.0;
+  fresh.settings.spatial = false;
+  svo = build_svo(index, view, with_c0, 5.25, {}, &stats, nullptr, {}, &fresh, 10.0);
+  EXPECT_EQ(leaf_of(svo, 0)[7], VR_SVO_BLEND_NONE);
+  EXPECT_EQ(leaf_of(svo, 0)[8], VR_SVO_BLEND_NONE);
+  // 8. At start-up (nothing drawn in the last build, a hole) new bricks are drawn at once: there
+  //    is no drawing to fade from.
+  LodBlendState start;
+  start.settings.fade_s = 1.0;
+  start.settings.spatial = true;
+  build_svo(index, view, resident(index, {}), 5.25, {}, &stats, nullptr, {}, &start, 0.0);
+  svo = build_svo(index, view, with_c0, 5.25, {}, &stats, nullptr, {}, &start, 0.1);
+  EXPECT_EQ(corners(leaf_of(svo, 0)), (std::array<std::uint32_t, 8>{255, 0, 0, 0, 0, 0, 0, 0}));
+  // Without a blend state nothing blends either.
+  svo = build_svo(index, view, with_c0, 5.25, {}, &stats);
+  EXPECT_EQ(leaf_of(svo, 0)[7], VR_SVO_BLEND_NONE);
+  EXPECT_EQ(leaf_of(svo, 0)[4], VR_ATLAS_NO_SLOT);
+}
+
 TEST(StreamSvo, ValidationFindsBrokenTrees) {
   // A root with a node child whose parent word is wrong, a leaf with a slot out of range and a
   // LOD difference deeper than its node.
   std::vector<std::uint32_t> nodes(2 * VR_SVO_NODE_WORDS, 0),
-      leaves{7, 0, vr_svo_lod_pack(0, 3), std::bit_cast<std::uint32_t>(0.5f)};
+      leaves{7,
+             0,
+             vr_svo_lod_pack(0, 3),
+             std::bit_cast<std::uint32_t>(0.5f),
+             VR_ATLAS_NO_SLOT,
+             VR_ATLAS_NO_SLOT,
+             0,
+             VR_SVO_BLEND_NONE,
+             VR_SVO_BLEND_NONE};
   nodes[0] = VR_SVO_NO_PARENT;
   nodes[1] = vr_svo_child_word(VR_SVO_CHILD_NODE, 1);
   for (int i = 2; i <= 8; ++i)
@@ -226,6 +337,15 @@ TEST(StreamSvo, ValidationFindsBrokenTrees) {
   EXPECT_TRUE(validate_svo(nodes, leaves, 4, 3).empty());
   // A record deeper than the octree's levels.
   EXPECT_FALSE(validate_svo(nodes, leaves, 4, 2).empty());
+  // A leaf that blends needs a coarse pair: slots in range, LOD differences in [1, depth].
+  leaves[7] = 0x00FF00FFu;
+  EXPECT_EQ(validate_svo(nodes, leaves, 4, 3).size(), 3u);  // two slots, two LOD differences
+  leaves[4] = 2;
+  leaves[5] = 3;
+  leaves[2] |= vr_svo_lod_pack(1, 2) << 16;
+  EXPECT_TRUE(validate_svo(nodes, leaves, 4, 3).empty());
+  leaves[6] = std::bit_cast<std::uint32_t>(1.5f);
+  EXPECT_EQ(validate_svo(nodes, leaves, 4, 3).size(), 1u);
 }
 
 }  // namespace

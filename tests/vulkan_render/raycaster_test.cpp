@@ -348,6 +348,57 @@ INSTANTIATE_TEST_SUITE_P(LodDifferenceAndFactor, FullyLoaded,
                                   std::to_string(static_cast<int>(param.param.f * 10));
                          });
 
+// --- Level-of-detail blending: corner weights mix in the parent's drawing ----------------------
+
+TEST_F(VulkanRender, LodBlendingMatchesTheCpuReferenceRenderer) {
+  const Scene& s = scene();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  // Every finest node drawn from frames 0 and 1 halfway, its coarse pair the parent's bricks
+  // (frame 0, and frame 1's grandparent at a factor 0.25), with corner weights that differ by
+  // corner and by node (some all 255: those leaves do not blend).
+  const auto svo = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    LeafSpec spec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
+    spec.slot_c = s.slot(0, l - 1, {c[0] >> 1, c[1] >> 1, c[2] >> 1});
+    spec.slot_d = s.slot(1, l - 2, {c[0] >> 2, c[1] >> 2, c[2] >> 2});
+    spec.d_c = 1;
+    spec.d_d = 2;
+    spec.coarse_factor = 0.25f;
+    const std::uint32_t k = c[0] + 3 * c[1] + 5 * c[2];
+    if (k % 4 != 3)
+      for (std::uint32_t i = 0; i < 8; ++i)
+        spec.corners[i] = static_cast<std::uint8_t>((37 * (i + k)) % 256);
+    return spec;
+  });
+  const TransferFunction tf = test_transfer(s);
+  const auto camera = test_camera();
+  const RgbaImage want =
+      cpu_render::render_svo({svo.nodes, svo.leaves}, *s.cpu_atlas, s.geometry, camera, tf);
+  ASSERT_GT(drawn_fraction(want), 0.15);
+  // The blend is seen: without it the image differs.
+  const auto plain = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
+  });
+  EXPECT_GT(cpu_render::max_abs_difference(
+                want, cpu_render::render_svo({plain.nodes, plain.leaves}, *s.cpu_atlas, s.geometry,
+                                             camera, tf)),
+            0.02);
+  GpuScene& g = gpu_scene(context());
+  const FrameInput in = frame_input(s, svo, tf, camera);
+  for (const auto filter :
+       {vulkan_render::AtlasFilter::sampler, vulkan_render::AtlasFilter::fetch}) {
+    const RgbaImage got =
+        render_gpu(context(), *g.from_cpu, in, OutputFormat::rgba16_sfloat, filter);
+    const psnr::ImageComparison c = compare(got, want);
+    std::printf("  blended, %s: PSNR %.1f dB, max |diff| %.4f\n",
+                filter == vulkan_render::AtlasFilter::sampler ? "sampler" : "fetches", c.psnr,
+                cpu_render::max_abs_difference(got, want));
+    EXPECT_GE(c.psnr, min_psnr);
+    EXPECT_GE(c.ssim, min_ssim);
+    EXPECT_LE(cpu_render::max_abs_difference(got, want),
+              filter == vulkan_render::AtlasFilter::fetch ? 3e-3 : 1e-2);
+  }
+}
+
 TEST_F(VulkanRender, LodDifferenceAndFactorChangeTheImage) {
   // The cases above differ from each other: a shader that ignored d or f would fail them.
   const Scene& s = scene();

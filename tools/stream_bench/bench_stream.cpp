@@ -246,6 +246,8 @@ void BenchStreamSettings::check() const {
     bad("--ancestor-handicap", "an exponent in [0, 64]", std::to_string(o.ancestor_handicap));
   if (!(o.speculative_link >= 0) || o.speculative_link > 60)
     bad("--speculative-link", "seconds in [0, 60]", std::to_string(o.speculative_link));
+  if (!(o.lod_fade >= 0) || o.lod_fade > 60)
+    bad("--lod-fade", "seconds in [0, 60]", std::to_string(o.lod_fade));
   if (!(o.lookahead >= 0) || o.lookahead > 60)
     bad("--lookahead", "seconds in [0, 60]", std::to_string(o.lookahead));
   if (!(o.step > 0) || !std::isfinite(o.step))
@@ -311,6 +313,8 @@ SchedulerSetup scheduler_setup(const BenchStreamSettings& o, double bandwidth, d
   ss.speculative_link_s = o.speculative_link;
   ss.selection.ancestor_handicap = o.ancestor_handicap;
   ss.ray_feedback = o.ray_feedback;
+  ss.lod_blend.spatial = o.spatial_blend;
+  ss.lod_blend.fade_s = o.lod_fade;
   ss.upload_budget_bytes = static_cast<std::uint64_t>(o.upload_budget_mb * 1e6);
   ss.loader.bandwidth_bytes_per_s = bandwidth;
   ss.loader.latency_s = latency;
@@ -473,6 +477,8 @@ nlohmann::json bench_summary_json(const BenchStreamSettings& o, const std::strin
       {"speculative_link_s", o.speculative_link},
       {"ancestor_handicap", o.ancestor_handicap},
       {"ray_feedback", o.ray_feedback},
+      {"lod_fade_s", o.lod_fade},
+      {"spatial_blend", o.spatial_blend},
       {"size", {setup.width, setup.height}},
       {"ground_truth", original_truth ? "original series" : "container finest level"}};
   if (tours.size() == 1) {

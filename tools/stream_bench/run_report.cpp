@@ -20,13 +20,11 @@ void write_csv(const std::filesystem::path& path, const RunResult& r,
                const std::vector<std::pair<double, double>>& seeks) {
   std::ofstream csv(path);
   if (!csv) throw InputError("cannot write " + path.string());
-  csv << "frame,time_s,playhead,seek,psnr_db,ssim,fraction_at_target,fraction_current,at_target_"
-         "nodes,current_nodes,"
-         "target_nodes,holes,root_resident,bytes_loaded,bytes_uploaded_total,uploads,bytes_"
-         "uploaded,requests_sent,"
-         "requests_in_flight,arrivals_discarded,atlas_occupied,selected,svo_nodes,svo_leaves,"
-         "hidden_nodes,hidden_targets,update_ms,decode_ms,"
-         "render_ms,measure_ms,frame_ms\n";
+  csv << "frame,time_s,playhead,seek,psnr_db,ssim,popping,seam,fraction_at_target,fraction_current,"
+         "at_target_nodes,current_nodes,target_nodes,holes,root_resident,bytes_loaded,"
+         "bytes_uploaded_total,uploads,bytes_uploaded,requests_sent,requests_in_flight,"
+         "arrivals_discarded,atlas_occupied,selected,svo_nodes,svo_leaves,hidden_nodes,"
+         "hidden_targets,blended_leaves,update_ms,decode_ms,render_ms,measure_ms,frame_ms\n";
   std::size_t next_seek = 0;
   for (std::size_t i = 0; i < r.frames.size(); ++i) {
     const FrameRecord& f = r.frames[i];
@@ -37,18 +35,20 @@ void write_csv(const std::filesystem::path& path, const RunResult& r,
     }
     const auto& s = f.stats;
     char row[512];
-    std::snprintf(row, sizeof row,
-                  "%zu,%.4f,%.4f,%d,%.4f,%.5f,%.5f,%.5f,%u,%u,%u,%u,%d,%llu,%llu,%zu,%llu,%zu,%zu,%"
-                  "zu,%u,%u,%u,%u,%u,%u,%.3f,%.3f,"
-                  "%.3f,%.3f,%.3f\n",
-                  i, f.time, f.playhead, seek ? 1 : 0, f.psnr, f.ssim, s.fraction_at_target,
-                  f.fraction_current, s.at_target_nodes, f.current_nodes, s.target_nodes, s.holes,
-                  f.root_resident ? 1 : 0, static_cast<unsigned long long>(s.bytes_loaded),
-                  static_cast<unsigned long long>(f.bytes_uploaded), s.uploads,
-                  static_cast<unsigned long long>(s.bytes_uploaded), s.requests_sent,
-                  s.requests_in_flight, s.arrivals_discarded, s.atlas_occupied, s.selected,
-                  s.svo_nodes, s.svo_leaves, s.hidden_nodes, s.hidden_targets, f.update_ms,
-                  f.decode_ms, f.render_ms, f.measure_ms, f.frame_ms);
+    std::snprintf(
+        row, sizeof row,
+        "%zu,%.4f,%.4f,%d,%.4f,%.5f,%.4f,%.4f,%.5f,%.5f,%u,%u,%u,%u,%d,%llu,%llu,%zu,%llu,%zu,%zu,%"
+        "zu,%u,%u,%u,%u,%u,%u,%u,%.3f,%.3f,"
+        "%.3f,%.3f,%.3f\n",
+        i, f.time, f.playhead, seek ? 1 : 0, f.psnr, f.ssim, f.popping, f.seam,
+        s.fraction_at_target, f.fraction_current, s.at_target_nodes, f.current_nodes,
+        s.target_nodes, s.holes, f.root_resident ? 1 : 0,
+        static_cast<unsigned long long>(s.bytes_loaded),
+        static_cast<unsigned long long>(f.bytes_uploaded), s.uploads,
+        static_cast<unsigned long long>(s.bytes_uploaded), s.requests_sent, s.requests_in_flight,
+        s.arrivals_discarded, s.atlas_occupied, s.selected, s.svo_nodes, s.svo_leaves,
+        s.hidden_nodes, s.hidden_targets, s.blended_leaves, f.update_ms, f.decode_ms, f.render_ms,
+        f.measure_ms, f.frame_ms);
     csv << row;
   }
   csv.close();
@@ -81,6 +81,12 @@ nlohmann::json summary_json(const RunResult& r) {
           {"mean_psnr_db", r.mean_psnr},
           {"min_psnr_db", finite(r.min_psnr)},
           {"mean_ssim", r.mean_ssim},
+          {"mean_popping", finite(r.mean_popping)},
+          {"max_popping", finite(r.max_popping)},
+          {"popping_frames", r.popping_frames},
+          {"mean_popping_all", finite(r.mean_popping_all)},
+          {"mean_seam", finite(r.mean_seam)},
+          {"seam_frames", r.seam_frames},
           {"mean_fraction_at_target", r.mean_fraction},
           {"full_lod_frames_share", r.full_lod_share},
           {"mean_fraction_current", r.mean_current},
@@ -128,6 +134,14 @@ void print_side_by_side(const std::vector<RunResult>& runs) {
   row("mean image PSNR", [&](const RunResult& r) { return num("%.2f dB", r.mean_psnr); });
   row("min image PSNR", [&](const RunResult& r) { return num("%.2f dB", r.min_psnr); });
   row("mean image SSIM", [&](const RunResult& r) { return num("%.4f", r.mean_ssim); });
+  // Popping and seam error in 8-bit units (RMS); '-' where no frame had a value.
+  const auto units = [&](double v) { return std::isnan(v) ? std::string("-") : num("%.2f", v); };
+  row("popping: uploads RMS, max / all RMS", [&](const RunResult& r) {
+    return units(r.mean_popping) + ", " + units(r.max_popping) + " / " + units(r.mean_popping_all);
+  });
+  row("mean error step at LOD seams (frames)", [&](const RunResult& r) {
+    return units(r.mean_seam) + " (" + std::to_string(r.seam_frames) + ")";
+  });
   row("mean fraction of nodes at target LOD",
       [&](const RunResult& r) { return num("%.3f", r.mean_fraction); });
   row("frames entirely at target LOD",
@@ -183,7 +197,12 @@ void print_side_by_side(const std::vector<RunResult>& runs) {
       "full quality:\n"
       "   also the keyframes around the playhead, as with everything loaded; '-': not reached "
       "before the next\n"
-      "   seek; seek times have the resolution of one rendered frame)\n");
+      "   seek; seek times have the resolution of one rendered frame; popping: RMS change of the "
+      "image error\n"
+      "   from the previous frame, its RMS over frames with uploads and over all; seam: RMS step "
+      "of the image\n"
+      "   error between neighbouring pixels within 2 pixels of a level-of-detail boundary; both in "
+      "8-bit units)\n");
 }
 
 }  // namespace volreel::stream_bench

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 namespace volreel::stream_bench {
 
@@ -36,6 +37,42 @@ void summarize(RunResult& r, const std::vector<std::pair<double, double>>& seeks
   r.full_lod_share = static_cast<double>(full_lod) / n;
   r.bytes_loaded = r.frames.empty() ? 0 : static_cast<double>(r.frames.back().stats.bytes_loaded);
   r.bytes_uploaded = r.frames.empty() ? 0 : static_cast<double>(r.frames.back().bytes_uploaded);
+  // Popping (frames after the first; where bricks were uploaded, and everywhere) and seam error
+  // (frames that have boundary pixels).
+  // The first frame at or after a seek is a cut: its change is the seek's, not popping.
+  std::vector<bool> cut(r.frames.size(), false);
+  for (const auto& [time, keyframe] : seeks)
+    for (std::size_t i = 0; i < r.frames.size(); ++i)
+      if (r.frames[i].time >= time) {
+        cut[i] = true;
+        break;
+      }
+  double popping = 0, popping_all = 0, seam = 0;
+  std::size_t popping_all_frames = 0;
+  r.popping_frames = r.seam_frames = 0;
+  r.max_popping = std::numeric_limits<double>::quiet_NaN();
+  for (std::size_t i = 0; i < r.frames.size(); ++i) {
+    const FrameRecord& f = r.frames[i];
+    if (std::isfinite(f.seam)) {
+      seam += f.seam;
+      ++r.seam_frames;
+    }
+    if (i == 0 || cut[i] || !std::isfinite(f.popping)) continue;
+    popping_all += f.popping * f.popping;
+    ++popping_all_frames;
+    if (f.stats.uploads > 0) {
+      popping += f.popping * f.popping;
+      r.max_popping = r.popping_frames == 0 ? f.popping : std::max(r.max_popping, f.popping);
+      ++r.popping_frames;
+    }
+  }
+  const auto mean = [](double sum, std::size_t count) {
+    return count > 0 ? sum / static_cast<double>(count) : std::numeric_limits<double>::quiet_NaN();
+  };
+  // Quadratic means: a change spread over several frames counts less than the same change at once.
+  r.mean_popping = std::sqrt(mean(popping, r.popping_frames));
+  r.mean_popping_all = std::sqrt(mean(popping_all, popping_all_frames));
+  r.mean_seam = mean(seam, r.seam_frames);
   // 2. Time to full quality after each seek: the first frame at or after the seek whose target
   // nodes are all drawn as with everything loaded, before the next seek (and the same for the
   // target LOD alone).
@@ -54,6 +91,114 @@ void summarize(RunResult& r, const std::vector<std::pair<double, double>>& seeks
     }
     r.seeks.push_back(sr);
   }
+}
+
+namespace {
+
+/// Throws std::invalid_argument unless the frame's reference and image have the same size and
+/// channels and hold that many bytes.
+void check_pair(const image::Image& reference, const image::Image& image, const char* what) {
+  const auto bytes = static_cast<std::size_t>(std::max(image.width, 0)) *
+                     static_cast<std::size_t>(std::max(image.height, 0)) *
+                     static_cast<std::size_t>(std::max(image.channels, 0));
+  if (reference.width != image.width || reference.height != image.height ||
+      reference.channels != image.channels || reference.pixels.size() != bytes ||
+      image.pixels.size() != bytes)
+    throw std::invalid_argument(std::string(what) +
+                                ": the reference and the image differ in size or channels");
+}
+
+}  // namespace
+
+double popping_rms(const image::Image& previous_reference, const image::Image& previous_image,
+                   const image::Image& reference, const image::Image& image) {
+  check_pair(previous_reference, previous_image, "popping_rms (previous frame)");
+  check_pair(reference, image, "popping_rms");
+  if (image.width != previous_image.width || image.height != previous_image.height ||
+      image.channels != previous_image.channels)
+    return std::numeric_limits<double>::quiet_NaN();
+  const std::size_t n = image.pixels.size();
+  if (n == 0) return std::numeric_limits<double>::quiet_NaN();
+  double sum = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const int e = int{image.pixels[k]} - int{reference.pixels[k]};
+    const int e_previous = int{previous_image.pixels[k]} - int{previous_reference.pixels[k]};
+    const auto d = static_cast<double>(e - e_previous);
+    sum += d * d;
+  }
+  return std::sqrt(sum / static_cast<double>(n));
+}
+
+std::vector<std::uint8_t> lod_boundary(std::span<const std::uint8_t> lod_map, int width, int height,
+                                       int radius) {
+  if (width < 0 || height < 0 || radius < 0 ||
+      lod_map.size() != static_cast<std::size_t>(width) * static_cast<std::size_t>(height))
+    throw std::invalid_argument("lod_boundary: the LOD map holds " +
+                                std::to_string(lod_map.size()) + " values for " +
+                                std::to_string(width) + "x" + std::to_string(height) +
+                                " pixels (radius " + std::to_string(radius) + ")");
+  // A pixel's neighbourhood holds a level other than its own exactly when the smallest or the
+  // largest level in it (255 left out) differs from its own: the window's minimum and maximum,
+  // computed separably (rows, then columns), with 255 counting as no level: a window without
+  // any level keeps minimum 255 and maximum 0, which pass neither test below.
+  constexpr std::uint8_t none = 255;
+  const auto w = static_cast<std::size_t>(width), h = static_cast<std::size_t>(height);
+  const auto at = [w](std::size_t x, std::size_t y) { return y * w + x; };
+  const auto r = static_cast<std::size_t>(radius);
+  std::vector<std::uint8_t> row_min(lod_map.size(), none), row_max(lod_map.size(), 0);
+  for (std::size_t y = 0; y < h; ++y)
+    for (std::size_t x = 0; x < w; ++x) {
+      const std::size_t x1 = std::min(x + r, w - 1);
+      for (std::size_t xx = x > r ? x - r : 0; xx <= x1; ++xx) {
+        const std::uint8_t v = lod_map[at(xx, y)];
+        if (v == none) continue;
+        row_min[at(x, y)] = std::min(row_min[at(x, y)], v);
+        row_max[at(x, y)] = std::max(row_max[at(x, y)], v);
+      }
+    }
+  std::vector<std::uint8_t> boundary(lod_map.size(), 0);
+  for (std::size_t y = 0; y < h; ++y)
+    for (std::size_t x = 0; x < w; ++x) {
+      const std::uint8_t v = lod_map[at(x, y)];
+      if (v == none) continue;
+      const std::size_t y1 = std::min(y + r, h - 1);
+      for (std::size_t yy = y > r ? y - r : 0; yy <= y1; ++yy)
+        if (row_min[at(x, yy)] < v || row_max[at(x, yy)] > v) {
+          boundary[at(x, y)] = 1;
+          break;
+        }
+    }
+  return boundary;
+}
+
+double seam_rms(const image::Image& reference, const image::Image& image,
+                std::span<const std::uint8_t> lod_map, int radius) {
+  check_pair(reference, image, "seam_rms");
+  if (lod_map.empty()) return std::numeric_limits<double>::quiet_NaN();
+  const std::vector<std::uint8_t> boundary =
+      lod_boundary(lod_map, image.width, image.height, radius);
+  const auto channels = static_cast<std::size_t>(image.channels);
+  const auto w = static_cast<std::size_t>(image.width);
+  const auto error = [&](std::size_t p, std::size_t c) {
+    return int{image.pixels[p * channels + c]} - int{reference.pixels[p * channels + c]};
+  };
+  double sum = 0;
+  std::size_t values = 0;
+  // Pairs of neighbours (right, below) both on the boundary: the step of the error between them.
+  for (std::size_t p = 0; p < boundary.size(); ++p) {
+    if (!boundary[p]) continue;
+    const std::size_t x = p % w;
+    for (const std::size_t q : {x + 1 < w ? p + 1 : p, p + w < boundary.size() ? p + w : p}) {
+      if (q == p || !boundary[q]) continue;
+      for (std::size_t c = 0; c < channels; ++c) {
+        const auto d = static_cast<double>(error(p, c) - error(q, c));
+        sum += d * d;
+      }
+      values += channels;
+    }
+  }
+  return values > 0 ? std::sqrt(sum / static_cast<double>(values))
+                    : std::numeric_limits<double>::quiet_NaN();
 }
 
 }  // namespace volreel::stream_bench

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <stdexcept>
 
 #include "volreel/datasets/volume.hpp"
@@ -165,6 +166,7 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy, const Progr
   options.width = s.width;
   options.height = s.height;
   options.render = s.render;
+  options.render.level_map = true;  // for the seam metric (measure)
   // Indexing (frame files opened and validated) happened once, before the runs.
   loop::CpuFrameLoop frames(*s.container, *s.index, options);
   const stream::StreamScheduler& scheduler = frames.scheduler();
@@ -202,7 +204,9 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy, const Progr
     rec.update_ms = report.timings.schedule_ms;
     rec.decode_ms = report.timings.decode_ms;
     rec.render_ms = report.timings.render_ms;
-    rec.image = cpu_render::to_image(frames.last_image(report.ticket));
+    const cpu_render::RgbaImage& drawn = frames.last_image(report.ticket);
+    rec.image = cpu_render::to_image(drawn);
+    rec.lod_map = drawn.levels;
     rec.stats = report.stats;
     rec.root_resident = root;
     rec.bytes_uploaded = uploaded;
@@ -259,16 +263,25 @@ void measure(RunResult& r, const RunSetup& s, GroundTruth& truth,
   }
   if (!png.empty()) png.back() = true;
   const std::filesystem::path png_dir = out / ("frames_" + r.name);
+  // Popping compares each frame with the previous one in time order, which the playhead order
+  // visits at some other point: a frame's reference image is kept until both of its neighbours in
+  // time have been visited, so only the frames at the edges of the visited playhead ranges hold
+  // one (a few, unless the playhead jumps back and forth between frames).
+  const std::size_t n = r.frames.size();
+  std::vector<image::Image> references(n);
+  std::vector<bool> visited(n, false);
+  for (FrameRecord& f : r.frames) f.popping = f.seam = std::numeric_limits<double>::quiet_NaN();
   {
     std::size_t done = 0;
     for (const std::size_t i : order) {
       FrameRecord& f = r.frames[i];
       const cpu_render::TourFrame tf = frame_at(s, f.time);
-      const image::Image reference =
+      image::Image reference =
           cpu_render::to_image(truth.render(f.playhead, tf.camera, tf.transfer, s.render));
       const psnr::ImageComparison c = psnr::compare_images(reference, f.image);
       f.psnr = c.psnr;
       f.ssim = c.ssim;
+      f.seam = seam_rms(reference, f.image, f.lod_map);
       if (png[i]) {
         std::filesystem::create_directories(png_dir);
         image::Image both;
@@ -288,11 +301,23 @@ void measure(RunResult& r, const RunSetup& s, GroundTruth& truth,
         std::snprintf(name, sizeof name, "frame_%05zu.png", i);
         image::write_png(png_dir / name, both);
       }
+      // Popping with the neighbours in time already visited; then the references no longer
+      // needed are dropped.
+      references[i] = std::move(reference);
+      visited[i] = true;
+      if (i > 0 && visited[i - 1])
+        f.popping = popping_rms(references[i - 1], r.frames[i - 1].image, references[i], f.image);
+      if (i + 1 < n && visited[i + 1])
+        r.frames[i + 1].popping =
+            popping_rms(references[i], f.image, references[i + 1], r.frames[i + 1].image);
+      for (std::size_t k = i > 0 ? i - 1 : 0; k <= std::min(i + 1, n - 1); ++k)
+        if (visited[k] && (k == 0 || visited[k - 1]) && (k + 1 == n || visited[k + 1]))
+          references[k] = image::Image{};
       ++done;
       if (progress) progress(static_cast<double>(done), static_cast<double>(order.size()), {});
     }
   }
-  // 2. Averages and the time from each seek to full quality.
+  // 2. Averages (popping and seam error among them) and the time from each seek to full quality.
   stream_bench::summarize(r, seeks);
 }
 

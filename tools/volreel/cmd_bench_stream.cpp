@@ -201,6 +201,16 @@ void add_bench_stream_command(CLI::App& bench) {
                   "(behind opaque material, outside the image), from the renderer's feedback "
                   "(true/false)")
       ->capture_default_str();
+  cmd->add_option("--lod-fade", o->s.lod_fade,
+                  "Both policies: a node whose own bricks arrive fades in from its parent's "
+                  "drawing over this\n"
+                  "many seconds instead of replacing it at once (0: at once)")
+      ->capture_default_str();
+  cmd->add_option("--spatial-blend", o->s.spatial_blend,
+                  "Both policies: a node's corners next to a coarser neighbour take its parent's "
+                  "drawing, so\n"
+                  "that the level of detail changes smoothly across the boundary (true/false)")
+      ->capture_default_str();
   cmd->add_option(
          "--ancestor-handicap", o->s.ancestor_handicap,
          "Both policies, pre-render selection: an ancestor's keyframe distance is multiplied by\n"

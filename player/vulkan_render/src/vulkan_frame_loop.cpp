@@ -31,10 +31,13 @@ void leaf_histograms(std::span<const std::uint32_t> svo_leaves,
     const float f = std::bit_cast<float>(r[3]);
     std::uint64_t h = 0;
     bool unknown = false;
-    for (int k = 0; k < 2; ++k) {
-      const float weight = k == 0 ? 1.0f - f : f;
+    // The keyframes read: A and B, and C and D where the leaf blends levels of detail.
+    const bool blends = r[7] != VR_SVO_BLEND_NONE || r[8] != VR_SVO_BLEND_NONE;
+    const float g = std::bit_cast<float>(r[6]);
+    for (int k = 0; k < (blends ? 4 : 2); ++k) {
+      const float weight = k == 0 ? 1.0f - f : k == 1 ? f : k == 2 ? 1.0f - g : g;
       if (weight == 0.0f) continue;
-      const std::uint32_t slot = r[k];
+      const std::uint32_t slot = r[k < 2 ? k : k + 2];
       const std::uint64_t s = slot < slot_histograms.size() ? slot_histograms[slot] : 0;
       unknown = unknown || s == 0;
       h |= s;

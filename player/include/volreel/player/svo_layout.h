@@ -29,9 +29,18 @@
 //   word 0        atlas slot of keyframe node A (atlas_layout.h)
 //   word 1        atlas slot of keyframe node B
 //   word 2        bits 0..7: LOD difference dA of A; bits 8..15: dB of B — how many levels above
-//   the
-//                 spatial node the keyframe node's brick lies (0: the node's own brick)
-//   word 3        interpolation factor f (float bits): value = (1 − f)·A + f·B
+//                 the spatial node the keyframe node's brick lies (0: the node's own brick);
+//                 bits 16..23: dC of C, bits 24..31: dD of D (the coarse pair below)
+//   word 3        interpolation factor f (float bits): fine = (1 − f)·A + f·B
+//   words 4, 5    atlas slots of the coarse pair C and D: the parent's drawing of this region
+//   word 6        the coarse pair's factor g (float bits): coarse = (1 − g)·C + g·D
+//   words 7, 8    level-of-detail blend weights, one byte per corner of the region's spatial node
+//                 (corner i at (i & 1, (i >> 1) & 1, (i >> 2) & 1); word 7 holds corners 0..3,
+//                 word 8 corners 4..7, low byte first), w = byte / 255. At local coordinates u the
+//                 value is coarse + w(u)·(fine − coarse), w(u) the trilinear interpolation of the
+//                 corners' weights (Thiele et al. §4: spatial and temporal LOD blending). All
+//                 bytes 255 (VR_SVO_BLEND_NONE in both words): the fine pair alone, C and D unused
+//                 (their slots may be VR_ATLAS_NO_SLOT).
 //
 // Feedback table (ray-guided feedback, written by a renderer, read by the scheduler):
 // VR_SVO_FEEDBACK_ENTRIES 32-bit entries per leaf record, one per region the leaf draws — entry
@@ -43,7 +52,8 @@
 //
 // Leaf histograms (a third array, optional), VR_SVO_HISTOGRAM_WORDS words per leaf record: the OR
 // of the 64-bin value histograms (format's Node::histogram, bins over the sequence's value range)
-// of the spatial nodes whose bricks A and B are, low word first. A renderer may skip a leaf's
+// of the spatial nodes whose bricks A and B are (and C and D where the leaf blends), low word
+// first. A renderer may skip a leaf's
 // region when no bin from the lowest to the highest set bit (the hull: trilinear interpolation
 // creates values between those present) maps to a nonzero opacity.
 //
@@ -66,7 +76,8 @@ typedef std::uint32_t vr_uint;
 #endif
 
 #define VR_SVO_NODE_WORDS 10u
-#define VR_SVO_LEAF_WORDS 4u
+#define VR_SVO_LEAF_WORDS 9u
+#define VR_SVO_BLEND_NONE 0xFFFFFFFFu
 #define VR_SVO_HISTOGRAM_WORDS 2u
 #define VR_SVO_FEEDBACK_ENTRIES 8u
 #define VR_SVO_NO_PARENT 0xFFFFFFFFu
@@ -94,6 +105,29 @@ VR_INLINE vr_uint vr_svo_lod_a(vr_uint packed) {
 }
 VR_INLINE vr_uint vr_svo_lod_b(vr_uint packed) {
   return (packed >> 8u) & 0xFFu;
+}
+VR_INLINE vr_uint vr_svo_lod_c(vr_uint packed) {
+  return (packed >> 16u) & 0xFFu;
+}
+VR_INLINE vr_uint vr_svo_lod_d(vr_uint packed) {
+  return packed >> 24u;
+}
+/* Corner i's blend weight (0..255) from words 7 and 8. */
+VR_INLINE vr_uint vr_svo_blend_corner(vr_uint w7, vr_uint w8, vr_uint i) {
+  return ((i < 4u ? w7 : w8) >> (8u * (i & 3u))) & 0xFFu;
+}
+/* The blend weight at local coordinates u ∈ [0,1]³: the corners' weights interpolated
+   trilinearly, in [0, 1]. */
+VR_INLINE float vr_svo_blend_weight(vr_uint w7, vr_uint w8, float ux, float uy, float uz) {
+  float w = 0.0f;
+  for (vr_uint i = 0u; i < 8u; ++i) {
+    float c = float(vr_svo_blend_corner(w7, w8, i)) * (1.0f / 255.0f);
+    c *= (i & 1u) != 0u ? ux : 1.0f - ux;
+    c *= (i & 2u) != 0u ? uy : 1.0f - uy;
+    c *= (i & 4u) != 0u ? uz : 1.0f - uz;
+    w += c;
+  }
+  return w;
 }
 
 /* One axis of u' = ((c mod 2^d) + u) / 2^d, for every d (not only d ≤ 1). */

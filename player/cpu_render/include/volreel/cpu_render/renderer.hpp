@@ -29,8 +29,10 @@
 //   render_svo       descends the SVO from the root to the node containing the point (Cesium
 //                    patent [0050]), takes its leaf record, samples keyframes A and B trilinearly
 //                    in their atlas slots at u' = ((c mod 2^d) + u)/2^d for each one's LOD
-//                    difference d (any d), and returns (1 − f)·A + f·B. Empty children are
-//                    transparent.
+//                    difference d (any d), and returns (1 − f)·A + f·B; a leaf that blends
+//                    levels of detail (svo_layout.h words 4–8) mixes in its coarse pair C, D
+//                    the same way, by 1 − w(u), its corner weights interpolated at u. Empty
+//                    children are transparent.
 //   render_reference samples dense volumes of levels k_A and k_B trilinearly at level voxel
 //                    coordinates p/2^(L−1−k) − 0.5, clamped to the level's edge, and returns
 //                    (1 − f)·A + f·B. It always takes every k (e = 0, n = 1): it is the
@@ -65,8 +67,8 @@ struct VolumeGeometry {
 };
 
 /// The word arrays of an array-encoded SVO (svo_layout.h): node records (10 words each, record
-/// 0 the root), leaf records (4 words each) and, optionally, leaf histograms (2 words each, one
-/// per leaf record, bins over histogram_range — the manifest's value range).
+/// 0 the root), leaf records (VR_SVO_LEAF_WORDS words each) and, optionally, leaf histograms (2
+/// words each, one per leaf record, bins over histogram_range — the manifest's value range).
 struct SvoView {
   std::span<const vr_uint> nodes;
   std::span<const vr_uint> leaves;
@@ -83,6 +85,8 @@ struct RenderOptions {
   /// above the finest is step·2^min(e, max_step_doublings); 0 keeps the fixed step everywhere.
   /// At most 16. render_reference ignores it (always the fixed step).
   std::uint32_t max_step_doublings = 3;
+  /// render_svo: fill RgbaImage::levels (for image metrics at level-of-detail boundaries).
+  bool level_map = false;
 };
 
 /// A float RGBA image, rows top to bottom, 4 values per pixel.
@@ -92,6 +96,11 @@ struct RgbaImage {
   /// Samples whose value was computed (drawn SVO regions, every sample of render_reference):
   /// the CPU renderers count them; 0 where nobody counted (a Vulkan read-back).
   std::uint64_t samples = 0;
+  /// With RenderOptions::level_map (render_svo only; else empty): per pixel, row-major, the data
+  /// level of the sample that added the most opacity to it — the spatial node's level minus the
+  /// LOD difference of the finer keyframe it read — or no_level where no sample added any.
+  std::vector<std::uint8_t> levels;
+  static constexpr std::uint8_t no_level = 255;
   const float* pixel(int x, int y) const {
     return rgba.data() + 4 * (static_cast<std::size_t>(y) * static_cast<std::size_t>(width) +
                               static_cast<std::size_t>(x));
@@ -101,7 +110,8 @@ struct RgbaImage {
 /// Checks the SVO before it is walked: node and leaf indices in range, node records only above
 /// the finest level and reached once (a tree, no cycles), leaf records with atlas slots below
 /// `slot_count` (VR_ATLAS_NO_SLOT only where its weight, 1 − f or f, is 0), factors in [0, 1],
-/// LOD differences no larger than the spatial node's level, word 9 set wherever a child is
+/// LOD differences no larger than the spatial node's level, in a blending leaf the coarse pair's
+/// slots likewise and its LOD differences in [1, level], word 9 set wherever a child is
 /// VR_SVO_CHILD_UP, and histograms (when given) 2 words per leaf record. Throws
 /// std::invalid_argument naming the record and word.
 void validate_svo(const SvoView& svo, std::uint32_t slot_count, const VolumeGeometry& geometry);

@@ -16,7 +16,8 @@
 //      window, up to speculative_link_s of the link's bandwidth); queued requests no longer
 //      selected are cancelled;
 //   6. pre-render selection and the array-encoded SVO (selection.hpp, svo_builder.hpp) from the
-//      occupied slots only; the slots it references are marked used by this GPU frame.
+//      occupied slots only, with level-of-detail blending (SchedulerSettings::lod_blend); the
+//      slots it references are marked used by this GPU frame.
 // Ray-guided feedback (Thiele, Matthes, Froehlich, §3): a renderer that records, per leaf record of
 // the SVO, whether rays sampled it (cpu_render::render_svo's feedback) hands the table to
 // feedback(); priorities are distributed from it over that SVO (their Algorithm 1), and at the next
@@ -67,6 +68,8 @@ struct SchedulerSettings {
   std::size_t max_messages = 64;                    ///< messages kept for the UI (newest)
   /// Use the renderer's feedback (feedback()) to leave hidden nodes out of the selected set.
   bool ray_feedback = true;
+  /// Level-of-detail blending in the SVO (svo_builder.hpp; the fade on the loader's clock).
+  LodBlendSettings lod_blend;
 };
 
 /// One brick for the caller to decode into an atlas slot before rendering.
@@ -101,7 +104,8 @@ struct StreamStats {
   std::uint64_t loader_reads = 0;      ///< since construction (a coalesced read counts once)
   std::uint32_t atlas_occupied = 0, atlas_capacity = 0;
   std::uint32_t svo_nodes = 0, svo_leaves = 0;
-  std::size_t errors = 0;  ///< since construction
+  std::uint32_t blended_leaves = 0;  ///< leaf records that blend in their parent's drawing
+  std::size_t errors = 0;            ///< since construction
 };
 
 struct FrameUpdate {
@@ -184,6 +188,7 @@ class StreamScheduler {
   std::vector<DueTime> due_;                               ///< one node's due window
   std::vector<std::pair<double, std::uint32_t>> by_time_;  ///< held steps by priority part
   StoredTimes stored_times_;       ///< the selection's, kept from frame to frame (its memory)
+  LodBlendState blend_;            ///< level-of-detail blending's, kept from frame to frame
   std::vector<double> level_sse_;  ///< SseScope::level: per level, this frame
   PlayheadMotion motion_;
   /// Requests in flight: bytes and whether speculative (outside the due window when requested).

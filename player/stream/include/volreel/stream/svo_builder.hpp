@@ -47,22 +47,65 @@ struct SvoStats {
   std::uint32_t node_records = 0, leaf_records = 0;
   std::uint32_t ancestor_drawn = 0;       ///< target nodes drawn by an ancestor
   std::uint32_t holes = 0;                ///< target nodes with nothing resident at all
+  std::uint32_t blended_leaves = 0;       ///< leaf records whose weights blend (not all 255)
   std::vector<std::uint32_t> used_slots;  ///< atlas slots the leaves reference (unique)
+};
+
+/// Level-of-detail blending (Thiele, Matthes, Froehlich §4.2–4.3; svo_layout.h words 4–8).
+struct LodBlendSettings {
+  /// Temporal blending: a region that was drawn from an ancestor's bricks in the last build and is
+  /// now drawn from its own fades in from its parent's drawing over this many seconds. 0: off.
+  double fade_s = 0.3;
+  /// Spatial blending: a region's corners next to a region drawn coarser take the parent's
+  /// drawing, so that the value goes over smoothly towards the coarser neighbour. Off by default:
+  /// without a restricted working set it lowered image PSNR and did not lower the seam metric in
+  /// `volreel bench stream` (docs/design.md, "Level-of-detail blending").
+  bool spatial = false;
+};
+
+/// What level-of-detail blending keeps from one build to the next, per spatial node, and the
+/// scratch of one build. Pass the same object to every build_svo of one view.
+struct LodBlendState {
+  LodBlendSettings settings;
+  std::uint32_t build = 0;                   ///< builds so far (stamps below: 0 never)
+  std::vector<std::uint32_t> visited_build;  ///< last build the view visited the node in
+  std::vector<std::uint32_t> own_build;      ///< last build it was drawn from a leaf of its own
+  std::vector<double> since;                 ///< when it was first drawn from its own leaf
+  // One build's regions, per spatial node: drawn (own leaf or an ancestor's as "up") at data
+  // level `region_level` with temporal weight `region_t`, or a node record (refined).
+  std::vector<std::uint32_t> region_build;
+  std::vector<std::uint8_t> region_level, region_refined;
+  std::vector<float> region_t;
+  /// Sizes the per-node arrays for an index of `nodes` nodes (clears them when it changes).
+  void reset(std::size_t nodes);
 };
 
 /// Builds the SVO for the nodes visited by `view` at playhead p from the resident keyframe nodes.
 /// `hidden` (per spatial node, nonzero: no ray reached it; empty: none is) only moves target
 /// nodes from SvoStats::target_nodes to hidden_targets; they are drawn alike.
+/// `blend` (null: no blending, every leaf's weights VR_SVO_BLEND_NONE): level-of-detail blending
+/// at time `now` (seconds on the caller's clock). A node drawn from a leaf record of its own (a
+/// VR_SVO_CHILD_LEAF child) gets its parent's keyframe pair as its coarse pair (LOD differences
+/// + 1) and corner weights: the least of its temporal weight min(1, (now − since) / fade_s) and
+/// those of the regions drawn at the same data level that share the corner, or 0 when a region
+/// sharing the corner is drawn at a coarser data level (a region's data level: its node's level
+/// minus the LOD difference of the coarser keyframe it reads). A node's `since` is the build's
+/// `now` when it is first drawn from its own leaf after being visited and drawn from an
+/// ancestor's leaf in the previous build; a node not visited then, drawn by its children (a
+/// collapse) or by nothing (a hole) is drawn at once (weight 1).
 SvoArrays build_svo(const SpatialIndex& index, const ViewTraversal& view,
                     const ResidentKeyframes& resident, double playhead,
                     const SelectionSettings& settings = {}, SvoStats* stats = nullptr,
-                    StoredTimes* stored = nullptr, std::span<const std::uint8_t> hidden = {});
+                    StoredTimes* stored = nullptr, std::span<const std::uint8_t> hidden = {},
+                    LodBlendState* blend = nullptr, double now = 0);
 
 /// Structural checks of an SVO: record 0 is a root without parent; every child word's index is in
 /// range and every node record is reached exactly once, from the parent it names; word 9 holds a
 /// leaf exactly when some octant is VR_SVO_CHILD_UP; depth < level_count; in each leaf record the
 /// slots are < slot_count, both LOD differences ≤ the depth of the node it belongs to, and the
-/// factor is in [0, 1]. Returns the problems found (empty: valid).
+/// factor is in [0, 1]; a leaf that blends (weights not VR_SVO_BLEND_NONE) has a coarse pair whose
+/// slots are < slot_count, whose LOD differences are in [1, depth] and whose factor is in [0, 1].
+/// Returns the problems found (empty: valid).
 std::vector<std::string> validate_svo(std::span<const std::uint32_t> nodes,
                                       std::span<const std::uint32_t> leaves,
                                       std::uint32_t slot_count, std::uint32_t level_count);

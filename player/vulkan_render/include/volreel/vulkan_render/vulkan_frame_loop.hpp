@@ -99,8 +99,9 @@ class VulkanFrameLoop final : public loop::FrameLoop {
   Ticket retired_ = 0;
 };
 
-/// Histogram words of each leaf record: the OR of the histograms of the slots of A and B (those
-/// with a nonzero weight); slots without a histogram (0) make the leaf's histogram 0 (drawn).
+/// Histogram words of each leaf record: the OR of the histograms of the slots of A and B, and of
+/// C and D where the leaf blends levels of detail (those with a nonzero weight); slots without a
+/// histogram (0) make the leaf's histogram 0 (drawn).
 void leaf_histograms(std::span<const std::uint32_t> svo_leaves,
                      std::span<const std::uint64_t> slot_histograms,
                      std::vector<std::uint64_t>& out);

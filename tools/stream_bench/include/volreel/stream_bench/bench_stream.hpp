@@ -119,6 +119,8 @@ struct BenchStreamSettings {
   double speculative_link = stream::SchedulerSettings{}.speculative_link_s;
   double ancestor_handicap = stream::SelectionSettings{}.ancestor_handicap;
   bool ray_feedback = stream::SchedulerSettings{}.ray_feedback;
+  double lod_fade = stream::LodBlendSettings{}.fade_s;  ///< stream::LodBlendSettings
+  bool spatial_blend = stream::LodBlendSettings{}.spatial;
   double step = 1.0;
   double upload_budget_mb = 64;
   std::uint64_t seed = 1;

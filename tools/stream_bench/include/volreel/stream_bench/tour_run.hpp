@@ -1,7 +1,7 @@
 // tour_run.hpp: one run of `volreel bench stream`'s tour with one priority policy — every frame
 // streamed and drawn by loop::CpuFrameLoop on the tour's clock (run_tour) — and its measurement
-// after the timed loop against the ground truth (measure): each frame's image PSNR and SSIM, a
-// few side-by-side PNGs, then summarize().
+// after the timed loop against the ground truth (measure): each frame's image PSNR, SSIM, popping
+// and seam error, a few side-by-side PNGs, then summarize().
 #pragma once
 
 #include <cstddef>
@@ -86,9 +86,10 @@ std::uint32_t current_target_nodes(const stream::StreamScheduler& scheduler,
 /// Plays the setup's tour with `policy` until its end; the scheduler's warnings go to stderr.
 RunResult run_tour(const RunSetup& setup, stream::PriorityPolicy policy, const Progress& progress);
 
-/// The ground truth of every frame of `run` (its image PSNR and SSIM), PNGs (streamed | ground
-/// truth) of every png_every-th frame (0: around each seek and the last) under
-/// out/frames_<policy>/, then summarize(run, seeks).
+/// The ground truth of every frame of `run` (its image PSNR and SSIM, its popping against the
+/// previous frame in time order and its seam error: popping_rms, seam_rms with the frame's
+/// lod_map), PNGs (streamed | ground truth) of every png_every-th frame (0: around each seek and
+/// the last) under out/frames_<policy>/, then summarize(run, seeks).
 void measure(RunResult& run, const RunSetup& setup, GroundTruth& truth,
              const std::vector<std::pair<double, double>>& seeks, const std::filesystem::path& out,
              std::size_t png_every, const Progress& progress);
