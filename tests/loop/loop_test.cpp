@@ -133,6 +133,15 @@ TEST(LoopSettings, AppliesToTheOptions) {
   s.decode = "fpga";
   EXPECT_THROW(loop::apply(s, o), std::invalid_argument);
   s.decode = "gpu";
+  // Level-of-detail blending.
+  s.lod_fade = 0.75;
+  s.spatial_blend = true;
+  loop::apply(s, o);
+  EXPECT_DOUBLE_EQ(o.scheduler.lod_blend.fade_s, 0.75);
+  EXPECT_TRUE(o.scheduler.lod_blend.spatial);
+  s.lod_fade = -1;
+  EXPECT_THROW(loop::apply(s, o), std::invalid_argument);
+  s.lod_fade = 0;
   s.size = "wide";
   EXPECT_THROW(loop::apply(s, o), std::invalid_argument);
 }

@@ -11,7 +11,7 @@
 namespace volreel::cli {
 
 /// --atlas-mb, --bandwidth, --latency, --sse-target, --upload-budget, --step,
-/// --max-step-doublings, --no-culling, --decode.
+/// --max-step-doublings, --no-culling, --decode, --lod-fade, --spatial-blend.
 inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
   cmd.add_option("--atlas-mb", loop.atlas_mb, "Brick atlas memory, MiB (93 312 bytes per slot)")
       ->capture_default_str();
@@ -38,6 +38,14 @@ inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
                  "as lavapipe, in the compute shader on a GPU), gpu (the compute shader) or cpu "
                  "(the CPU decoder, texels copied into the atlas)")
       ->check(CLI::IsMember({"auto", "gpu", "cpu"}))
+      ->capture_default_str();
+  cmd.add_option("--lod-fade", loop.lod_fade,
+                 "A node whose own bricks arrive fades in from its parent's drawing over this many "
+                 "seconds (0: at once)")
+      ->capture_default_str();
+  cmd.add_option("--spatial-blend", loop.spatial_blend,
+                 "A node's corners next to a coarser neighbour take its parent's drawing "
+                 "(true/false)")
       ->capture_default_str();
 }
 

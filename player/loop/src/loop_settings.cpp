@@ -111,6 +111,10 @@ void apply(const LoopSettings& s, FrameLoopOptions& o) {
   o.render.max_step_doublings = s.max_step_doublings;
   o.transfer_culling = !s.no_culling;
   o.gpu.decode = parse_decode(s.decode);
+  if (!(s.lod_fade >= 0) || s.lod_fade > 60)
+    bad("--lod-fade", "seconds in [0, 60]", std::to_string(s.lod_fade));
+  o.scheduler.lod_blend.fade_s = s.lod_fade;
+  o.scheduler.lod_blend.spatial = s.spatial_blend;
 }
 
 }  // namespace volreel::loop

@@ -23,6 +23,9 @@ struct LoopSettings {
   std::uint32_t max_step_doublings = 3;
   bool no_culling = false;      ///< no transfer-function culling
   std::string decode = "auto";  ///< "auto", "gpu" or "cpu" (FrameLoopOptions::Decode)
+  /// Level-of-detail blending (stream::LodBlendSettings): the fade's seconds, spatial blending.
+  double lod_fade = stream::LodBlendSettings{}.fade_s;
+  bool spatial_blend = stream::LodBlendSettings{}.spatial;
 };
 
 /// "512x512" -> {512, 512} (1..16384 each). Throws std::invalid_argument naming `option`.
@@ -36,7 +39,8 @@ FrameLoopOptions::Decode parse_decode(const std::string& text,
 double parse_latency(const std::string& text, const std::string& option = "--latency");
 
 /// Applies the settings to `options` (size, atlas, loader, SSE target, upload budget, step,
-/// culling). Throws std::invalid_argument naming the option on a bad value.
+/// culling, level-of-detail blending). Throws std::invalid_argument naming the option on a bad
+/// value.
 void apply(const LoopSettings& settings, FrameLoopOptions& options);
 
 }  // namespace volreel::loop

@@ -54,8 +54,10 @@ struct SvoStats {
 /// Level-of-detail blending (Thiele, Matthes, Froehlich §4.2–4.3; svo_layout.h words 4–8).
 struct LodBlendSettings {
   /// Temporal blending: a region that was drawn from an ancestor's bricks in the last build and is
-  /// now drawn from its own fades in from its parent's drawing over this many seconds. 0: off.
-  double fade_s = 0.3;
+  /// now drawn from its own fades in from its parent's drawing over this many seconds. 0: off,
+  /// the default: it lowered image PSNR and did not lower popping measurably in `volreel bench
+  /// stream` (docs/design.md, "Level-of-detail blending").
+  double fade_s = 0.0;
   /// Spatial blending: a region's corners next to a region drawn coarser take the parent's
   /// drawing, so that the value goes over smoothly towards the coarser neighbour. Off by default:
   /// without a restricted working set it lowered image PSNR and did not lower the seam metric in
