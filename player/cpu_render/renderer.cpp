@@ -308,7 +308,7 @@ class SvoSampler {
             region_size,
             VR_SVO_FEEDBACK_ENTRIES * leaf + up_octant,
             region_node_level - level + d,
-            static_cast<std::uint8_t>(level - d)};
+            static_cast<std::uint8_t>(level - vr_svo_coarser_lod(record[2], f))};
   }
 
  private:

@@ -35,7 +35,12 @@ class Builder {
     stored_.start(index_, playhead_);
     if (blend_) {
       blend_->reset(index_.node_count());
-      ++blend_->build;
+      // Stamps are builds; at the wrap every stamp is cleared (0: never).
+      if (++blend_->build == 0) {
+        blend_->reset(0);
+        blend_->reset(index_.node_count());
+        blend_->build = 1;
+      }
     }
   }
 
@@ -90,10 +95,8 @@ class Builder {
 
   /// The data level a pair draws node `node` (at `level`) at: the coarser keyframe it reads.
   static std::uint32_t data_level(std::uint32_t level, const KeyframePair& pair) {
-    const std::uint32_t d = pair.factor == 0.0f ? pair.a.lod_difference
-                            : pair.factor == 1.0f
-                                ? pair.b.lod_difference
-                                : std::max(pair.a.lod_difference, pair.b.lod_difference);
+    const std::uint32_t d = vr_svo_coarser_lod(
+        vr_svo_lod_pack(pair.a.lod_difference, pair.b.lod_difference), pair.factor);
     return level >= d ? level - d : 0;
   }
 
@@ -255,6 +258,9 @@ class Builder {
       const SpatialNode& n = index_.node(own.node);
       const std::uint32_t level = n.key.level;
       const std::uint8_t mine = b.region_level[own.node];
+      // A node that has faded in keeps its own weight: a neighbour that starts fading later
+      // must not pull it back to its parent's drawing (which would pop).
+      const bool fading = b.region_t[own.node] < 1.0f;
       // The 26 neighbouring cells of the same level: −1 coarser, else their temporal weight (1
       // for a finer or absent neighbour, which blends itself or draws nothing).
       float near[27];
@@ -277,7 +283,7 @@ class Builder {
             if (cell == no_node || !region_of(cell, region) || b.region_refined[region]) continue;
             if (b.region_level[region] < mine)
               near[k] = b.settings.spatial ? -1.0f : 1.0f;
-            else if (b.region_level[region] == mine)
+            else if (b.region_level[region] == mine && fading)
               near[k] = b.region_t[region];
           }
       vr_uint words[2] = {0, 0};
@@ -369,14 +375,17 @@ std::vector<std::string> validate_svo(std::span<const std::uint32_t> nodes,
     if (!(f >= 0.0f && f <= 1.0f))
       fail(where + ": leaf " + std::to_string(leaf) + " factor outside [0, 1]");
     if (w[7] == VR_SVO_BLEND_NONE && w[8] == VR_SVO_BLEND_NONE) return;
-    // A blending leaf: its coarse pair is drawn too.
-    if (w[4] >= slot_count || w[5] >= slot_count)
+    // A blending leaf: its coarse pair is drawn too (a slot whose weight, 1 − g or g, is 0 may be
+    // VR_ATLAS_NO_SLOT).
+    const float g = std::bit_cast<float>(w[6]);
+    const bool c_bad = w[4] >= slot_count && !(w[4] == VR_ATLAS_NO_SLOT && g == 1.0f);
+    const bool d_bad = w[5] >= slot_count && !(w[5] == VR_ATLAS_NO_SLOT && g == 0.0f);
+    if (c_bad || d_bad)
       fail(where + ": leaf " + std::to_string(leaf) + " coarse slot out of range");
     for (const std::uint32_t d : {vr_svo_lod_c(w[2]), vr_svo_lod_d(w[2])})
       if (d == 0 || d > depth)
         fail(where + ": leaf " + std::to_string(leaf) + " coarse LOD difference " +
              std::to_string(d) + " outside [1, " + std::to_string(depth) + "]");
-    const float g = std::bit_cast<float>(w[6]);
     if (!(g >= 0.0f && g <= 1.0f))
       fail(where + ": leaf " + std::to_string(leaf) + " coarse factor outside [0, 1]");
   };

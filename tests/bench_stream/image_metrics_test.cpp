@@ -281,6 +281,22 @@ TEST(StreamBenchPopping, RunAveragesJsonAndCsv) {
   EXPECT_EQ(seeking.popping_frames, 1u);
   EXPECT_DOUBLE_EQ(seeking.mean_popping_all, std::sqrt((16.0 + 1 + 9) / 3));
 
+  // A frame without uploads whose leaves still blend (a fade in progress) counts as well.
+  RunResult fading = r;
+  fading.frames[2].stats.blended_leaves = 2;
+  stream_bench::summarize(fading, {});
+  EXPECT_DOUBLE_EQ(fading.mean_popping, std::sqrt((16.0 + 1 + 64) / 3));
+  EXPECT_EQ(fading.popping_frames, 3u);
+
+  // Frame 1's predecessor had holes (nothing drawn there yet): frame 1 shows an appearance and is
+  // left out too.
+  RunResult appearing = r;
+  appearing.frames[0].stats.holes = 3;
+  stream_bench::summarize(appearing, {});
+  EXPECT_DOUBLE_EQ(appearing.mean_popping, 8.0);
+  EXPECT_EQ(appearing.popping_frames, 1u);
+  EXPECT_DOUBLE_EQ(appearing.mean_popping_all, std::sqrt((1.0 + 64 + 9) / 3));
+
   // No frame with uploads, no seam: NaN, and null in the JSON.
   RunResult quiet;
   quiet.frames = {frame(0.0, 0, nan, nan), frame(0.1, 0, 2, nan)};

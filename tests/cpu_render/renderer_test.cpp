@@ -462,8 +462,9 @@ TEST(CpuRenderLodBlending, WeightsMixTheParentsDrawingIntoTheNodes) {
       cpu_render::render_svo(corners.view(), atlas, s.geometry, camera, transfer, fixed_step());
   EXPECT_GT(cpu_render::max_abs_difference(mixed, render(0)), 1e-3);
   EXPECT_GT(cpu_render::max_abs_difference(mixed, render(255)), 1e-3);
-  // The level map: a pixel shows the level of the data its strongest sample read — the finest
-  // level here (blending leaves it to the finer keyframe), the level above for an SVO drawn there.
+  // The level map: a pixel shows the level its strongest sample's fine pair is drawn at — the
+  // finest here (the coarse pair blended in does not count), the level above for an SVO drawn
+  // there.
   cpu_render::RenderOptions mapped = fixed_step();
   mapped.level_map = true;
   const auto levels_of = [&](const test::BuiltSvo& svo) {

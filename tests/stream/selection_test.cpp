@@ -224,11 +224,10 @@ TEST_F(StreamSelection, LodBlendingFadesNewDetailInAndBlendsTowardsCoarserNeighb
   blend.settings.fade_s = 1.0;
   blend.settings.spatial = true;
   SvoStats stats;
+  // Slots are numbered in the order the resident list was written: at most 18 (root + 8 × 2).
   const auto build = [&](const ResidentKeyframes& r, double now) {
     SvoArrays svo = build_svo(index, view, r, 5.25, {}, &stats, nullptr, {}, &blend, now);
-    EXPECT_TRUE(validate_svo(svo.nodes, svo.leaves, static_cast<std::uint32_t>(r.size()),
-                             index.level_count())
-                    .empty());
+    EXPECT_TRUE(validate_svo(svo.nodes, svo.leaves, 18, index.level_count()).empty());
     return svo;
   };
   // 1. Only the root resident: every octant drawn by the root, nothing blends.
@@ -256,8 +255,9 @@ TEST_F(StreamSelection, LodBlendingFadesNewDetailInAndBlendsTowardsCoarserNeighb
   // 4. Faded in.
   svo = build(with_c0, 2.5);
   EXPECT_EQ(corners(leaf_of(svo, 0)), (std::array<std::uint32_t, 8>{255, 0, 0, 0, 0, 0, 0, 0}));
-  // 5. Every octant's bricks: the seven new ones fade in, and octant 0's corners they share take
-  //    their weight (0) — the least of the regions at one data level sharing a corner.
+  // 5. Every octant's bricks: the seven new ones fade in, each corner they share taking the
+  //    least weight among them (0); octant 0 has faded in already and keeps its weights (a
+  //    neighbour that starts fading does not pull it back to the root's drawing).
   std::vector<std::pair<std::uint32_t, std::uint32_t>> all = {{0, 5}, {0, 6}};
   for (const std::uint32_t c : index.node(0).children) {
     all.emplace_back(c, 5);
@@ -269,13 +269,31 @@ TEST_F(StreamSelection, LodBlendingFadesNewDetailInAndBlendsTowardsCoarserNeighb
   ResidentKeyframes everything;
   everything.assign(index, entries);
   svo = build(everything, 3.0);
-  EXPECT_EQ(corners(leaf_of(svo, 0)), (std::array<std::uint32_t, 8>{255, 0, 0, 0, 0, 0, 0, 0}));
+  EXPECT_EQ(leaf_of(svo, 0)[7], VR_SVO_BLEND_NONE);
+  EXPECT_EQ(leaf_of(svo, 0)[8], VR_SVO_BLEND_NONE);
   EXPECT_EQ(corners(leaf_of(svo, 7)), (std::array<std::uint32_t, 8>{0, 0, 0, 0, 0, 0, 0, 0}));
   svo = build(everything, 3.25);
-  EXPECT_EQ(corners(leaf_of(svo, 0)),
-            (std::array<std::uint32_t, 8>{255, 64, 64, 64, 64, 64, 64, 64}));
+  EXPECT_EQ(leaf_of(svo, 0)[7], VR_SVO_BLEND_NONE);
   EXPECT_EQ(corners(leaf_of(svo, 7)),
             (std::array<std::uint32_t, 8>{64, 64, 64, 64, 64, 64, 64, 64}));
+  // Two neighbours fading in at different times meet at the later one's weight: octant 1's
+  // bricks leave and come back at 3.5, so it fades in again from 0 while octant 3 is at 0.5.
+  std::vector<ResidentKeyframe> without_1;
+  for (const ResidentKeyframe& e : entries)
+    if (index.node_of(e.keyframe) != index.node(0).children[1]) without_1.push_back(e);
+  ResidentKeyframes missing_1;
+  missing_1.assign(index, without_1);
+  build(missing_1, 3.45);
+  svo = build(everything, 3.5);
+  // Octant 3 at (1, 1, 0) shares its face y = 0 (corners 0, 1, 4, 5) with octant 1 at (1, 0, 0):
+  // those corners take octant 1's weight 0; corners 3 and 7 touch only octants fading since 3.0
+  // or the volume's outside: octant 3's own 0.5.
+  const auto c3 = corners(leaf_of(svo, 3));
+  EXPECT_EQ(c3[0], 0u);
+  EXPECT_EQ(c3[1], 0u);
+  EXPECT_EQ(c3[5], 0u);
+  EXPECT_EQ(c3[3], 128u);
+  EXPECT_EQ(c3[7], 128u);
   // 6. All faded in: nothing blends, and the coarse slots are not used.
   svo = build(everything, 4.5);
   for (std::uint32_t o = 0; o < 8; ++o) {

@@ -57,10 +57,12 @@ void summarize(RunResult& r, const std::vector<std::pair<double, double>>& seeks
       seam += f.seam;
       ++r.seam_frames;
     }
-    if (i == 0 || cut[i] || !std::isfinite(f.popping)) continue;
+    // A frame after one with holes shows what was not drawn before (at start-up, the first
+    // bricks): an appearance, not a change between drawings.
+    if (i == 0 || cut[i] || r.frames[i - 1].stats.holes > 0 || !std::isfinite(f.popping)) continue;
     popping_all += f.popping * f.popping;
     ++popping_all_frames;
-    if (f.stats.uploads > 0) {
+    if (f.stats.uploads > 0 || f.stats.blended_leaves > 0) {
       popping += f.popping * f.popping;
       r.max_popping = r.popping_frames == 0 ? f.popping : std::max(r.max_popping, f.popping);
       ++r.popping_frames;

@@ -202,9 +202,10 @@ void add_bench_stream_command(CLI::App& bench) {
                   "(true/false)")
       ->capture_default_str();
   cmd->add_option("--lod-fade", o->s.lod_fade,
-                  "Both policies: a node whose own bricks arrive fades in from its parent's "
-                  "drawing over this\n"
-                  "many seconds instead of replacing it at once (0: at once)")
+                  "Both policies: a node whose own bricks arrive while an ancestor draws it fades "
+                  "in from the\n"
+                  "parent's drawing over this many seconds instead of replacing it at once (0: at "
+                  "once)")
       ->capture_default_str();
   cmd->add_option("--spatial-blend", o->s.spatial_blend,
                   "Both policies: a node's corners next to a coarser neighbour take its parent's "

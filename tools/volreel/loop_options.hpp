@@ -40,8 +40,8 @@ inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
       ->check(CLI::IsMember({"auto", "gpu", "cpu"}))
       ->capture_default_str();
   cmd.add_option("--lod-fade", loop.lod_fade,
-                 "A node whose own bricks arrive fades in from its parent's drawing over this many "
-                 "seconds (0: at once)")
+                 "A node whose own bricks arrive while an ancestor draws it fades in from the "
+                 "parent's drawing over this many seconds (0: at once)")
       ->capture_default_str();
   cmd.add_option("--spatial-blend", loop.spatial_blend,
                  "A node's corners next to a coarser neighbour take its parent's drawing "

@@ -112,6 +112,13 @@ VR_INLINE vr_uint vr_svo_lod_c(vr_uint packed) {
 VR_INLINE vr_uint vr_svo_lod_d(vr_uint packed) {
   return packed >> 24u;
 }
+/* The LOD difference of the coarser keyframe a leaf's fine pair reads: dA when f = 0, dB when
+   f = 1, else the larger — the level of detail the region is drawn at (level maps, spatial
+   blending's neighbours). */
+VR_INLINE vr_uint vr_svo_coarser_lod(vr_uint packed, float f) {
+  vr_uint d_a = vr_svo_lod_a(packed), d_b = vr_svo_lod_b(packed);
+  return f == 0.0f ? d_a : (f == 1.0f ? d_b : (d_a > d_b ? d_a : d_b));
+}
 /* Corner i's blend weight (0..255) from words 7 and 8. */
 VR_INLINE vr_uint vr_svo_blend_corner(vr_uint w7, vr_uint w8, vr_uint i) {
   return ((i < 4u ? w7 : w8) >> (8u * (i & 3u))) & 0xFFu;

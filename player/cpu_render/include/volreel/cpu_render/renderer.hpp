@@ -98,7 +98,8 @@ struct RgbaImage {
   std::uint64_t samples = 0;
   /// With RenderOptions::level_map (render_svo only; else empty): per pixel, row-major, the data
   /// level of the sample that added the most opacity to it — the spatial node's level minus the
-  /// LOD difference of the finer keyframe it read — or no_level where no sample added any.
+  /// LOD difference of the coarser keyframe its fine pair reads (vr_svo_coarser_lod), as the SVO
+  /// builder's spatial blending counts levels — or no_level where no sample added any.
   std::vector<std::uint8_t> levels;
   static constexpr std::uint8_t no_level = 255;
   const float* pixel(int x, int y) const {

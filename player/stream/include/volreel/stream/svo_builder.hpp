@@ -78,7 +78,8 @@ struct LodBlendState {
   std::vector<std::uint32_t> region_build;
   std::vector<std::uint8_t> region_level, region_refined;
   std::vector<float> region_t;
-  /// Sizes the per-node arrays for an index of `nodes` nodes (clears them when it changes).
+  /// Sizes the per-node arrays for an index of `nodes` nodes (clears them when it changes). The
+  /// state belongs to one index: call reset(0) before using it with another of the same size.
   void reset(std::size_t nodes);
 };
 
@@ -89,7 +90,8 @@ struct LodBlendState {
 /// at time `now` (seconds on the caller's clock). A node drawn from a leaf record of its own (a
 /// VR_SVO_CHILD_LEAF child) gets its parent's keyframe pair as its coarse pair (LOD differences
 /// + 1) and corner weights: the least of its temporal weight min(1, (now − since) / fade_s) and
-/// those of the regions drawn at the same data level that share the corner, or 0 when a region
+/// those of the regions drawn at the same data level that share the corner (only while the node
+/// itself is fading in: one that has faded in keeps 1 when a neighbour starts), or 0 when a region
 /// sharing the corner is drawn at a coarser data level (a region's data level: its node's level
 /// minus the LOD difference of the coarser keyframe it reads). A node's `since` is the build's
 /// `now` when it is first drawn from its own leaf after being visited and drawn from an

@@ -72,17 +72,18 @@ struct RunResult {
   double mean_update_ms = 0, mean_decode_ms = 0, mean_render_ms = 0, mean_frame_ms = 0;
   /// Popping (FrameRecord::popping) where the working set changed: the quadratic mean (root
   /// mean square, so that a change spread over several frames — a fade — counts less than the
-  /// same change at once) and the maximum over the frames i ≥ 1 with a finite popping whose
-  /// stats.uploads > 0, except the first frame at or after each seek (a cut: its change is the
-  /// seek's). Bricks uploaded in a frame are
-  /// drawn in that same frame's image, so the jump they cause lies between frame i − 1 and frame
-  /// i, which is what frame i's popping measures. popping_frames counts those frames; both values
-  /// are NaN when there are none.
+  /// same change at once) and the maximum over the frames i ≥ 1 with a finite popping where
+  /// bricks were uploaded or leaves blend (stats.uploads or stats.blended_leaves > 0: a fade
+  /// spreads an arrival's change over the frames after it), except the first frame at or after each
+  /// seek (a cut: its change is the seek's) and a frame after one with holes (what appears was not
+  /// drawn before, as at start-up). Bricks uploaded in a frame are drawn in that same frame's
+  /// image, so the jump they cause lies between frame i − 1 and frame i, which is what frame i's
+  /// popping measures. popping_frames counts those frames; both values are NaN when there are none.
   double mean_popping = std::numeric_limits<double>::quiet_NaN();
   double max_popping = std::numeric_limits<double>::quiet_NaN();
   std::size_t popping_frames = 0;
-  /// The quadratic mean of popping over every frame i ≥ 1 with a finite popping but the cuts
-  /// (NaN when there is none): the
+  /// The quadratic mean of popping over every frame i ≥ 1 with a finite popping but those left
+  /// out above (NaN when there is none): the
   /// baseline that the camera and the data's own motion leave unexplained anyway.
   double mean_popping_all = std::numeric_limits<double>::quiet_NaN();
   /// Mean seam error (FrameRecord::seam) over the seam_frames frames where it is finite (NaN
