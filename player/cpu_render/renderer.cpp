@@ -276,18 +276,22 @@ class SvoSampler {
                            vr_svo_slot_coord(vr_svo_ancestor_local(c[1], u[1], d)),
                            vr_svo_slot_coord(vr_svo_ancestor_local(c[2], u[2], d)));
     };
-    const float a = f == 1.0f ? 0.0f : keyframe(record[0], vr_svo_lod_a(record[2]));
-    const float b = f == 0.0f ? 0.0f : keyframe(record[1], vr_svo_lod_b(record[2]));
-    float value = f == 0.0f ? a : f == 1.0f ? b : mix_keyframes(a, b, f);
+    // A keyframe pair at slots s0, s1 (LOD differences d0, d1) mixed by factor x; a keyframe
+    // whose weight is 0 is not read.
+    const auto pair_value = [&](vr_uint s0, vr_uint s1, vr_uint d0, vr_uint d1, float x) {
+      if (x == 0.0f) return keyframe(s0, d0);
+      if (x == 1.0f) return keyframe(s1, d1);
+      return mix_keyframes(keyframe(s0, d0), keyframe(s1, d1), x);
+    };
+    float value =
+        pair_value(record[0], record[1], vr_svo_lod_a(record[2]), vr_svo_lod_b(record[2]), f);
     // 3a. Level-of-detail blending: the parent's drawing (the coarse pair) weighted by the
     //     corners' weights interpolated at u.
     if (record[7] != VR_SVO_BLEND_NONE || record[8] != VR_SVO_BLEND_NONE) {
       const float w = vr_svo_blend_weight(record[7], record[8], u[0], u[1], u[2]);
       if (w < 1.0f) {
-        const float g = std::bit_cast<float>(record[6]);
-        const float ca = g == 1.0f ? 0.0f : keyframe(record[4], vr_svo_lod_c(record[2]));
-        const float cb = g == 0.0f ? 0.0f : keyframe(record[5], vr_svo_lod_d(record[2]));
-        const float coarse = g == 0.0f ? ca : g == 1.0f ? cb : mix_keyframes(ca, cb, g);
+        const float coarse = pair_value(record[4], record[5], vr_svo_lod_c(record[2]),
+                                        vr_svo_lod_d(record[2]), std::bit_cast<float>(record[6]));
         value = coarse + w * (value - coarse);
       }
     }
