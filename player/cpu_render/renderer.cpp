@@ -146,8 +146,6 @@ RgbaImage cast_rays(const VolumeGeometry& geometry, const player::OrbitCamera& c
           p = glm::clamp(p, glm::dvec3(0.0), inside);
           const Sample s = sample(p);
           k_next = k + 1;
-          if (!s.drawn) continue;
-          ++samples;
           // Feedback (Thiele et al. §3.1): as the ray begins sampling a leaf, the largest LOD
           // difference of the rays that sample it, plus one.
           if (feedback && s.feedback_entry != last_entry && s.feedback_entry < feedback->size()) {
@@ -158,6 +156,8 @@ RgbaImage cast_rays(const VolumeGeometry& geometry, const player::OrbitCamera& c
             while (seen < value && !entry.compare_exchange_weak(seen, value)) {
             }
           }
+          if (!s.drawn) continue;
+          ++samples;
           // 2a–c. The next sample: the next multiple of 2^e, but not past the region's exit or
           //       the segment's end (raycast.comp step 3 computes the same in float).
           const std::uint32_t e = std::min(s.doublings, options.max_step_doublings);
@@ -262,19 +262,35 @@ class SvoSampler {
       }
       node = vr_svo_child_index(word);
     }
-    if (!leaf_visible_.empty() && !leaf_visible_[leaf]) return {};
+    const vr_uint* record = svo_.leaves.data() + std::size_t{leaf} * VR_SVO_LEAF_WORDS;
+    const float f = std::bit_cast<float>(record[3]);
+    // The LOD difference: the levels from the region's node (the child an "up" region is) up to
+    // the brick read, the finer one while both keyframes are read.
+    const vr_uint d_a = vr_svo_lod_a(record[2]), d_b = vr_svo_lod_b(record[2]);
+    const vr_uint d = f == 0.0f ? d_a : f == 1.0f ? d_b : std::min(d_a, d_b);
+    // (At the finest level an "up" octant is a part of the node's own brick.)
+    const std::uint32_t region_node_level = up && level + 1 < levels_ ? level + 1 : level;
+    const std::uint32_t entry = VR_SVO_FEEDBACK_ENTRIES * leaf + up_octant;
+    const std::uint32_t lod_difference = region_node_level - level + d;
+    // A leaf the transfer function hides is not drawn, but its rays count as having reached it
+    // (the feedback): hidden, its region would be drawn from an ancestor's data, whose wider
+    // histogram may show, and the node would be requested again, frame after frame.
+    if (!leaf_visible_.empty() && !leaf_visible_[leaf]) {
+      Sample culled;
+      culled.feedback_entry = entry;
+      culled.lod_difference = lod_difference;
+      return culled;
+    }
     // 2. Local coordinates u ∈ [0, 1)³ of p in the spatial node (level, c).
     const double size = double(format::brick_interior << (levels_ - 1 - level));
     float u[3];
     for (int a = 0; a < 3; ++a) u[a] = static_cast<float>((p[a] - double(c[a]) * size) / size);
     // 3. Both keyframes at their slot coordinates, each mapped into its brick by its LOD
     //    difference (svo_layout.h), then interpolated with the leaf's factor.
-    const vr_uint* record = svo_.leaves.data() + std::size_t{leaf} * VR_SVO_LEAF_WORDS;
-    const float f = std::bit_cast<float>(record[3]);
-    const auto keyframe = [&](vr_uint slot, vr_uint d) {
-      return atlas_.sample(slot, vr_svo_slot_coord(vr_svo_ancestor_local(c[0], u[0], d)),
-                           vr_svo_slot_coord(vr_svo_ancestor_local(c[1], u[1], d)),
-                           vr_svo_slot_coord(vr_svo_ancestor_local(c[2], u[2], d)));
+    const auto keyframe = [&](vr_uint slot, vr_uint up_levels) {
+      return atlas_.sample(slot, vr_svo_slot_coord(vr_svo_ancestor_local(c[0], u[0], up_levels)),
+                           vr_svo_slot_coord(vr_svo_ancestor_local(c[1], u[1], up_levels)),
+                           vr_svo_slot_coord(vr_svo_ancestor_local(c[2], u[2], up_levels)));
     };
     // A keyframe pair at slots s0, s1 (LOD differences d0, d1) mixed by factor x; a keyframe
     // whose weight is 0 is not read.
@@ -299,19 +315,13 @@ class SvoSampler {
     //    the region's box.
     // (region_level ≤ levels_: the octants of a one-level volume's root are half a brick.)
     const double region_size = double((format::brick_interior / 2) << (levels_ - region_level));
-    // The LOD difference: the levels from the region's node (the child an "up" region is) up to
-    // the brick read, the finer one while both keyframes are read.
-    const vr_uint d_a = vr_svo_lod_a(record[2]), d_b = vr_svo_lod_b(record[2]);
-    const vr_uint d = f == 0.0f ? d_a : f == 1.0f ? d_b : std::min(d_a, d_b);
-    // (At the finest level an "up" octant is a part of the node's own brick.)
-    const std::uint32_t region_node_level = up && level + 1 < levels_ ? level + 1 : level;
     return {true,
             value,
             vr_svo_step_doublings(levels_, level, record[2], f, max_doublings_allowed),
             glm::dvec3(region[0], region[1], region[2]) * region_size,
             region_size,
-            VR_SVO_FEEDBACK_ENTRIES * leaf + up_octant,
-            region_node_level - level + d,
+            entry,
+            lod_difference,
             static_cast<std::uint8_t>(level - vr_svo_coarser_lod(record[2], f))};
   }
 

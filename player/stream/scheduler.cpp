@@ -65,7 +65,7 @@ void StreamScheduler::select(const player::OrbitCamera& camera, double playhead)
   for (const std::uint32_t n : hidden_list_) hidden_[n] = 0;
   hidden_list_.clear();
   hidden_.resize(index_.node_count(), 0);
-  if (settings_.ray_feedback && feedback_stamp_ != 0 && feedback_stamp_ == svo_stamp_)
+  if (settings_.ray_feedback && feedback_current())
     for (const ViewTraversal::Visit& v : view_.visits())
       if (v.node != 0 && ray_priority(v.node) == priority_hidden) {
         hidden_[v.node] = 1;
@@ -298,7 +298,7 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
                   &stored_times_, hidden_, blends ? &blend_ : nullptr, loader_.now_seconds());
     out.stats.blended_leaves = svo_stats.blended_leaves;
     for (const std::uint32_t slot : svo_stats.used_slots) atlas_.mark_used(slot, gpu_frame_number);
-    keep_svo_regions(svo);
+    keep_svo_regions(svo, gpu_frame_number);
     out.stats.hidden_nodes = static_cast<std::uint32_t>(hidden_list_.size());
     out.stats.hidden_targets = svo_stats.hidden_targets;
     out.svo_nodes = std::move(svo.nodes);
@@ -332,15 +332,28 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
 
 // ---- Ray-guided feedback (Thiele, Matthes, Froehlich, §3) -------------------------------------
 
-void StreamScheduler::keep_svo_regions(const SvoArrays& svo) {
-  ++svo_stamp_;
-  svo_regions_.clear();
-  svo_record_nodes_ = svo.node_ids;
-  svo_record_parents_.clear();
-  svo_leaf_count_ = svo.leaves.size() / VR_SVO_LEAF_WORDS;
+void StreamScheduler::keep_svo_regions(const SvoArrays& svo, std::uint64_t gpu_frame_number) {
+  // A later update for the same GPU frame (a stream step before it is drawn) replaces the SVO.
+  if (kept_svos_.empty() || kept_svos_.back().gpu_frame != gpu_frame_number) {
+    const std::size_t keep = std::max<std::uint32_t>(settings_.feedback_frames, 1);
+    if (kept_svos_.size() < keep) {
+      kept_svos_.emplace_back();
+    } else {  // reuse the oldest one's storage
+      KeptSvo oldest = std::move(kept_svos_.front());
+      kept_svos_.pop_front();
+      kept_svos_.push_back(std::move(oldest));
+    }
+    while (kept_svos_.size() > keep) kept_svos_.pop_front();
+  }
+  KeptSvo& k = kept_svos_.back();
+  k.gpu_frame = gpu_frame_number;
+  k.regions.clear();
+  k.record_nodes = svo.node_ids;
+  k.record_parents.clear();
+  k.leaf_count = svo.leaves.size() / VR_SVO_LEAF_WORDS;
   for (std::uint32_t r = 0; r < svo.node_ids.size(); ++r) {
     const std::uint32_t* words = svo.nodes.data() + std::size_t{r} * VR_SVO_NODE_WORDS;
-    svo_record_parents_.push_back(words[0]);
+    k.record_parents.push_back(words[0]);
     const std::uint32_t id = svo.node_ids[r];
     if (id == no_node) continue;
     const SpatialNode& n = index_.node(id);
@@ -353,16 +366,16 @@ void StreamScheduler::keep_svo_regions(const SvoArrays& svo) {
       if (child == no_node) continue;  // outside the volume
       switch (vr_svo_child_kind(word)) {
         case VR_SVO_CHILD_LEAF:
-          svo_regions_.push_back({r, child, VR_SVO_FEEDBACK_ENTRIES * vr_svo_child_index(word)});
+          k.regions.push_back({r, child, VR_SVO_FEEDBACK_ENTRIES * vr_svo_child_index(word)});
           break;
         case VR_SVO_CHILD_UP:
           // Outside the view: no ray could have gone there.
-          svo_regions_.push_back(
+          k.regions.push_back(
               {r, child,
                own || view_.visited(child) ? VR_SVO_FEEDBACK_ENTRIES * words[9] + i : no_entry});
           break;
         case VR_SVO_CHILD_EMPTY:
-          svo_regions_.push_back({r, child, no_entry});  // a hole: nothing could be sampled
+          k.regions.push_back({r, child, no_entry});  // a hole: nothing could be sampled
           break;
         default:
           break;  // a node record: its own regions
@@ -372,21 +385,40 @@ void StreamScheduler::keep_svo_regions(const SvoArrays& svo) {
 }
 
 void StreamScheduler::feedback(std::span<const std::uint32_t> leaves) {
-  if (leaves.size() != VR_SVO_FEEDBACK_ENTRIES * svo_leaf_count_)
+  if (kept_svos_.empty())
+    throw std::invalid_argument("ray feedback: no SVO was built yet (call update() first)");
+  feedback(leaves, kept_svos_.back().gpu_frame);
+}
+
+bool StreamScheduler::feedback(std::span<const std::uint32_t> leaves,
+                               std::uint64_t gpu_frame_number) {
+  const auto kept = std::find_if(kept_svos_.begin(), kept_svos_.end(),
+                                 [&](const KeptSvo& k) { return k.gpu_frame == gpu_frame_number; });
+  if (kept == kept_svos_.end() || (feedback_stamp_ != 0 && gpu_frame_number < feedback_frame_))
+    return false;
+  const KeptSvo& svo = *kept;
+  if (leaves.size() != VR_SVO_FEEDBACK_ENTRIES * svo.leaf_count)
     throw std::invalid_argument(
-        "ray feedback: expected " + std::to_string(VR_SVO_FEEDBACK_ENTRIES * svo_leaf_count_) +
-        " entries (" + std::to_string(VR_SVO_FEEDBACK_ENTRIES) +
-        " per leaf record of the last SVO), found " + std::to_string(leaves.size()));
+        "ray feedback for GPU frame " + std::to_string(gpu_frame_number) + ": expected " +
+        std::to_string(VR_SVO_FEEDBACK_ENTRIES * svo.leaf_count) + " entries (" +
+        std::to_string(VR_SVO_FEEDBACK_ENTRIES) + " per leaf record of its SVO), found " +
+        std::to_string(leaves.size()));
   if (priority_stamps_.size() != index_.node_count()) {
     priority_stamps_.assign(index_.node_count(), 0);
     ray_priority_.assign(index_.node_count(), priority_hidden);
   }
+  if (++priority_stamp_ == 0) {  // wrapped: no node may keep a stamp that looks current
+    std::fill(priority_stamps_.begin(), priority_stamps_.end(), 0u);
+    priority_stamp_ = 1;
+  }
+  feedback_stamp_ = priority_stamp_;
+  feedback_frame_ = gpu_frame_number;
   const auto up = [](std::int32_t p) {  // one level up: +1, ±∞ stay
     return p == priority_hidden || p == priority_unknown ? p : p + 1;
   };
   const auto set = [&](std::uint32_t node, std::int32_t p) {
-    if (priority_stamps_[node] != svo_stamp_) {
-      priority_stamps_[node] = svo_stamp_;
+    if (priority_stamps_[node] != feedback_stamp_) {
+      priority_stamps_[node] = feedback_stamp_;
       ray_priority_[node] = p;
     } else {
       ray_priority_[node] = std::max(ray_priority_[node], p);
@@ -394,15 +426,15 @@ void StreamScheduler::feedback(std::span<const std::uint32_t> leaves) {
   };
   // A region's priority is its leaf's feedback: the largest LOD difference its rays sampled,
   // −∞ when none did.
-  record_priority_.assign(svo_record_nodes_.size(), priority_hidden);
-  for (const SvoRegion& g : svo_regions_) {
+  record_priority_.assign(svo.record_nodes.size(), priority_hidden);
+  for (const SvoRegion& g : svo.regions) {
     const std::int32_t p =
         g.entry == no_entry ? priority_unknown
         : leaves[g.entry] == 0
             ? priority_hidden
             : static_cast<std::int32_t>(std::min<std::uint32_t>(leaves[g.entry] - 1, 64));
     std::int32_t& r = record_priority_[g.record];
-    if (g.node == svo_record_nodes_[g.record]) {
+    if (g.node == svo.record_nodes[g.record]) {
       r = std::max(r, p);  // the record's own region
     } else {
       set(g.node, p);
@@ -411,17 +443,22 @@ void StreamScheduler::feedback(std::span<const std::uint32_t> leaves) {
   }
   // Algorithm 1, bottom to top: a node record's priority is the largest of its children's + 1
   // (records come parents first).
-  for (std::size_t r = svo_record_nodes_.size(); r-- > 0;) {
-    const std::uint32_t parent = svo_record_parents_[r];
+  for (std::size_t r = svo.record_nodes.size(); r-- > 0;) {
+    const std::uint32_t parent = svo.record_parents[r];
     if (parent != VR_SVO_NO_PARENT && parent < record_priority_.size())
       record_priority_[parent] = std::max(record_priority_[parent], up(record_priority_[r]));
-    if (svo_record_nodes_[r] != no_node) set(svo_record_nodes_[r], record_priority_[r]);
+    if (svo.record_nodes[r] != no_node) set(svo.record_nodes[r], record_priority_[r]);
   }
-  feedback_stamp_ = svo_stamp_;
+  return true;
+}
+
+bool StreamScheduler::feedback_current() const {
+  return feedback_stamp_ != 0 && !kept_svos_.empty() &&
+         feedback_frame_ >= kept_svos_.front().gpu_frame;
 }
 
 std::int32_t StreamScheduler::ray_priority(std::uint32_t node) const {
-  if (feedback_stamp_ == 0 || feedback_stamp_ != svo_stamp_) return priority_unknown;
+  if (!feedback_current()) return priority_unknown;
   // Top to bottom: a node below the last SVO's region or record has its priority − 1 a level.
   std::int32_t below = 0;
   for (std::uint32_t n = node; n != no_node && n < priority_stamps_.size();

@@ -37,6 +37,7 @@
 #define VR_FLAG_HISTOGRAMS 1u
 #define VR_FLAG_FETCH_FILTER 2u
 #define VR_FLAG_BLOCK_SKIP 4u
+#define VR_FLAG_FEEDBACK 8u
 #define VR_BLOCKS_PER_AXIS 6u
 #define VR_BRICK_INTERIOR 34u
 
@@ -63,6 +64,7 @@ layout(set = 0, binding = 5) uniform sampler3D atlas;
 layout(set = 0, binding = 6, VR_OUTPUT_QUALIFIER) uniform writeonly image2D out_image;
 layout(std430, set = 0, binding = 7) readonly buffer Ranges { vec2 block_ranges[]; };
 layout(std430, set = 0, binding = 8) readonly buffer Visible { uint visible_prefix[]; };
+layout(std430, set = 0, binding = 9) buffer Feedback { uint feedback[]; };
 
 // Kinds of the region a sample falls in (beyond svo_layout.h's child kinds).
 #define REGION_EMPTY 0u      // nothing drawn: transparent
@@ -72,7 +74,7 @@ layout(std430, set = 0, binding = 8) readonly buffer Visible { uint visible_pref
 // Finest voxels per axis of a node of `level`.
 // Edge of a level's boxes in finest voxels, for level ≤ levels: a child box of the finest level
 // (an octant of a one-level volume's root) is half a brick.
-uint node_size(uint level) { return (VR_BRICK_INTERIOR / 2u) << (params.size_levels.z - level); }
+uint node_size(uint levels, uint level) { return (VR_BRICK_INTERIOR / 2u) << (levels - level); }
 
 bool inside_box(uvec3 q, uvec3 c, uint size) {
   uvec3 lo = c * size;
@@ -179,6 +181,7 @@ void main() {
   const uint levels = params.size_levels.z;
   const bool use_histograms = (params.size_levels.w & VR_FLAG_HISTOGRAMS) != 0u;
   const bool block_skip = (params.size_levels.w & VR_FLAG_BLOCK_SKIP) != 0u;
+  const bool write_feedback = (params.size_levels.w & VR_FLAG_FEEDBACK) != 0u;
   const uvec2 visible = params.grid_mask.zw;
   const uint max_doublings = uint(params.tf_scale_entries.z);
 
@@ -211,11 +214,12 @@ void main() {
     // the region of the last sample: a box (level, c) and what is drawn there.
     uint node = 0u, node_level = 0u;
     uvec3 node_c = uvec3(0u);
-    uint region = REGION_EMPTY, region_level = 0u;
+    uint region = REGION_EMPTY, region_level = 0u, region_size = 0u;
     uvec3 region_c = uvec3(0u);
     bool have_region = false;
     uint leaf = 0u, leaf_level = 0u;  // leaf record and the spatial node it is relative to
     uvec3 leaf_c = uvec3(0u);
+    uint entry = 0u;  // the region's entry in the feedback table (svo_layout.h)
     uint doublings = 0u;     // of a drawn region's step (capped)
     float region_k_exit = 0.0;  // first fine-grid k past a drawn region (when doublings > 0)
 
@@ -230,22 +234,23 @@ void main() {
       vec3 p = clamp(eye + t * dir, vec3(0.0), inside);
       uvec3 q = uvec3(p);
 
-      if (!have_region || !inside_box(q, region_c, node_size(region_level))) {
+      if (!have_region || !inside_box(q, region_c, region_size)) {
         // 2a. Climb to the first node record whose box holds q (the root holds every q).
-        while (node != 0u && !inside_box(q, node_c, node_size(node_level))) {
+        while (node != 0u && !inside_box(q, node_c, node_size(levels, node_level))) {
           node = node_words[node * VR_SVO_NODE_WORDS];
           node_level -= 1u;
           node_c >>= 1u;
         }
         // 2b. Descend to the child holding q until a leaf, an "up" or an empty child.
         for (;;) {
-          uint half_size = node_size(node_level) >> 1u;
+          uint half_size = node_size(levels, node_level) >> 1u;
           uvec3 child = q / half_size;
           uvec3 bit = child - 2u * node_c;
           uint octant = bit.x | (bit.y << 1u) | (bit.z << 2u);
           uint word = node_words[node * VR_SVO_NODE_WORDS + 1u + octant];
           uint kind = vr_svo_child_kind(word);
           region_level = node_level + 1u;
+          region_size = half_size;
           region_c = child;
           if (kind == VR_SVO_CHILD_EMPTY) {
             region = REGION_EMPTY;
@@ -256,6 +261,7 @@ void main() {
             leaf = node_words[node * VR_SVO_NODE_WORDS + 9u];
             leaf_level = node_level;
             leaf_c = node_c;
+            entry = VR_SVO_FEEDBACK_ENTRIES * leaf + octant;
             break;
           }
           if (kind == VR_SVO_CHILD_LEAF) {
@@ -263,6 +269,7 @@ void main() {
             leaf = vr_svo_child_index(word);
             leaf_level = node_level + 1u;
             leaf_c = child;
+            entry = VR_SVO_FEEDBACK_ENTRIES * leaf;
             break;
           }
           node = vr_svo_child_index(word);
@@ -270,6 +277,21 @@ void main() {
           node_c = child;
         }
         have_region = true;
+        // Ray-guided feedback (Thiele et al. §3.1): a ray that begins sampling a drawn region
+        // raises its entry to 1 + the LOD difference it samples — the levels from the region's
+        // node (an "up" octant's child, but the node itself at the finest level) up to the
+        // finer keyframe's brick read. A region the transfer function hides (2c) counts as
+        // sampled, as in the CPU ray caster: hiding it would draw its parent's data there, whose
+        // wider histogram may show, and the node would be requested again, frame after frame.
+        if (region == REGION_DRAWN && write_feedback) {
+          uint lods = leaf_words[leaf * VR_SVO_LEAF_WORDS + 2u];
+          float f = uintBitsToFloat(leaf_words[leaf * VR_SVO_LEAF_WORDS + 3u]);
+          uint d_a = vr_svo_lod_a(lods), d_b = vr_svo_lod_b(lods);
+          uint d = f == 0.0 ? d_a : (f == 1.0 ? d_b : min(d_a, d_b));
+          uint node_level_of_region =
+              region_level > leaf_level && region_level < levels ? region_level : leaf_level;
+          atomicMax(feedback[entry], 1u + node_level_of_region - leaf_level + d);
+        }
         // 2c. A leaf whose values map only to zero opacity is as good as empty.
         if (region == REGION_DRAWN && use_histograms) {
           uvec2 h = uvec2(histogram_words[leaf * VR_SVO_HISTOGRAM_WORDS],
@@ -283,7 +305,7 @@ void main() {
           doublings = vr_svo_step_doublings(levels, leaf_level, leaf_words[record + 2u],
                                             uintBitsToFloat(leaf_words[record + 3u]), max_doublings);
           if (doublings > 0u) {
-            float size = float(node_size(region_level));
+            float size = float(region_size);
             vec3 lo = vec3(region_c) * size;
             region_k_exit = ceil(exit_distance(eye, dir, lo, lo + vec3(size)) / step - 0.01);
           }
@@ -293,7 +315,7 @@ void main() {
       if (region != REGION_DRAWN) {
         // 2d. Skip to the first sample past the region's exit. One sample is re-examined when
         //     rounding puts it on the boundary; k always advances.
-        float size = float(node_size(region_level));
+        float size = float(region_size);
         vec3 lo = vec3(region_c) * size;
         float t_exit = exit_distance(eye, dir, lo, lo + vec3(size));
         k_next = max(k + 1.0, ceil(t_exit / step - 0.01));
@@ -307,7 +329,7 @@ void main() {
       }
 
       // 4. Local coordinates in the leaf's spatial node, both keyframes, the leaf's factor.
-      float size = float(node_size(leaf_level));
+      float size = float(node_size(levels, leaf_level));
       vec3 u = (p - vec3(leaf_c) * size) / size;
       uint record = leaf * VR_SVO_LEAF_WORDS;
       float f = uintBitsToFloat(leaf_words[record + 3u]);

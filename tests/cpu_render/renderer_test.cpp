@@ -760,8 +760,18 @@ TEST(CpuRender, HistogramCullingKeepsTheImage) {
     svo.histograms[i] = 1;
     svo.histograms[i + 1] = 0;
   }
-  const RgbaImage none = cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, high);
+  std::vector<std::uint32_t> culled_feedback, plain_feedback;
+  const RgbaImage none =
+      cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, high, {}, &culled_feedback);
   EXPECT_EQ(drawn_fraction(none), 0.0);
+  // A culled leaf counts as reached by the rays that cross it (the feedback of a tree drawn
+  // without histograms and a transfer function that shows every value just as little).
+  auto plain_svo = svo;
+  plain_svo.histograms.clear();
+  const TransferFunction faint({{s.lo, 1, 1, 1, 1e-6f}, {s.hi, 1, 1, 1, 1e-6f}}, s.lo, s.hi);
+  cpu_render::render_svo(plain_svo.view(), atlas, s.geometry, camera, faint, {}, &plain_feedback);
+  EXPECT_EQ(culled_feedback, plain_feedback);
+  EXPECT_GT(std::count(culled_feedback.begin(), culled_feedback.end(), 1u), 0);
   svo.histograms.pop_back();
   EXPECT_THROW(cpu_render::render_svo(svo.view(), atlas, s.geometry, camera, high),
                std::invalid_argument);

@@ -142,6 +142,11 @@ TEST(LoopSettings, AppliesToTheOptions) {
   s.lod_fade = -1;
   EXPECT_THROW(loop::apply(s, o), std::invalid_argument);
   s.lod_fade = 0;
+  // Ray-guided feedback, on by default.
+  EXPECT_TRUE(o.scheduler.ray_feedback);
+  s.ray_feedback = false;
+  loop::apply(s, o);
+  EXPECT_FALSE(o.scheduler.ray_feedback);
   s.size = "wide";
   EXPECT_THROW(loop::apply(s, o), std::invalid_argument);
 }

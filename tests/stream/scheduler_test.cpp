@@ -203,7 +203,35 @@ TEST(StreamScheduler, NodesNoRayReachedAreNotRequestedAndComeBackWhenReached) {
     ASSERT_TRUE(slot.has_value()) << "t " << t;
     EXPECT_EQ(s.atlas().state(*slot), AtlasSlots::State::occupied) << "t " << t;
   }
-  // Without feedback for the last frame nothing is hidden.
+  // Feedback keeps guiding while its frame is one of the last feedback_frames (a GPU's table
+  // comes frames in flight late); older, nothing is hidden.
+  ASSERT_EQ(settings.feedback_frames, 4u);
+  for (int i = 1; i <= 4; ++i) {
+    u = s.update(cam, playhead, frame);
+    s.retire(frame++);
+    EXPECT_EQ(u.stats.hidden_nodes, i < 4 ? 1u : 0u) << i << " frames after the feedback";
+  }
+  // Late feedback: the table of a frame drawn two updates ago, for that frame's SVO.
+  const std::uint64_t drawn = frame;
+  const FrameUpdate drawn_update = s.update(cam, playhead, frame);
+  s.retire(frame++);
+  for (int i = 0; i < 2; ++i) {
+    // A stream step (the same GPU frame number twice) replaces that frame's SVO.
+    s.update(cam, playhead, frame);
+    u = s.update(cam, playhead, frame);
+    s.retire(frame++);
+    EXPECT_EQ(u.stats.hidden_nodes, 0u);
+  }
+  EXPECT_THROW(s.feedback(std::vector<std::uint32_t>(3), drawn), std::invalid_argument);
+  EXPECT_TRUE(s.feedback(reached_but(drawn_update, 0), drawn));
+  // Older than the feedback given (its SVO still kept), or no longer kept: ignored.
+  EXPECT_FALSE(s.feedback(reached_but(drawn_update, -1), drawn - 1));
+  EXPECT_FALSE(s.feedback(reached_but(drawn_update, -1), 0));
+  u = s.update(cam, playhead, frame);
+  s.retire(frame++);
+  EXPECT_EQ(u.stats.hidden_nodes, 1u);
+  // Forgotten (a stream step that draws nothing): nothing is hidden until the next feedback.
+  s.forget_feedback();
   u = s.update(cam, playhead, frame);
   s.retire(frame++);
   EXPECT_EQ(u.stats.hidden_nodes, 0u);

@@ -348,6 +348,79 @@ INSTANTIATE_TEST_SUITE_P(LodDifferenceAndFactor, FullyLoaded,
                                   std::to_string(static_cast<int>(param.param.f * 10));
                          });
 
+// --- Ray-guided feedback: the table the CPU ray caster writes ------------------------------------
+
+TEST_F(VulkanRender, FeedbackTableMatchesTheCpuRenderers) {
+  const Scene& s = scene();
+  const std::uint32_t finest = s.geometry.levels - 1;
+  const auto camera = test_camera();
+  // A translucent transfer function (every region a ray crosses is sampled) and an opaque one
+  // (rays end in the first bright region, so regions behind it stay 0).
+  const float mid = 0.5f * (s.data_lo + s.data_hi);
+  const TransferFunction translucent = test_transfer(s);
+  const TransferFunction opaque({{s.data_lo, 0.2f, 0.4f, 1.0f, 0.0f},
+                                 {mid, 0.2f, 0.4f, 1.0f, 1.0f},
+                                 {s.data_hi, 1.0f, 0.3f, 0.1f, 1.0f}},
+                                s.data_lo, s.data_hi);
+  // Leaf children at the finest level (entries 1, or 2 for B one level up), and a level above
+  // drawn through "up" octants (one entry per octant, 2: the octant's child is one level finer).
+  const auto finest_leaves = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+    return LeafSpec{s.slot(0, l, c), s.slot(1, l - 1, {c[0] >> 1, c[1] >> 1, c[2] >> 1}), 0, 1,
+                    (c[0] + c[1]) % 2 == 0 ? 1.0f : 0.0f};
+  });
+  const auto up_octants = build_uniform_svo(
+      s.levels, finest - 1,
+      [&](std::uint32_t l, Coord c) {
+        return LeafSpec{s.slot(0, l, c), s.slot(1, l, c), 0, 0, 0.5f};
+      },
+      true);
+  GpuScene& g = gpu_scene(context());
+  for (const test::BuiltSvo* svo : {&finest_leaves, &up_octants})
+    for (const TransferFunction* tf : {&translucent, &opaque}) {
+      const std::string which =
+          std::string(svo == &finest_leaves ? "leaf children" : "up octants") +
+          (tf == &translucent ? ", translucent" : ", opaque");
+      std::vector<std::uint32_t> want;
+      cpu_render::render_svo({svo->nodes, svo->leaves}, *s.cpu_atlas, s.geometry, camera, *tf, {},
+                             &want);
+      FrameInput in = frame_input(s, *svo, *tf, camera);
+      in.feedback = true;
+      RaycasterOptions o;
+      o.width = camera.width;
+      o.height = camera.height;
+      Raycaster raycaster(context(), *g.from_cpu, o);
+      const vulkan_render::Ticket ticket = raycaster.render(in);
+      const std::vector<std::uint32_t> got = raycaster.feedback(ticket);
+      ASSERT_EQ(got.size(), want.size()) << which;
+      std::size_t sampled = 0, unsampled = 0, differ = 0;
+      for (std::size_t i = 0; i < want.size(); ++i) {
+        (want[i] != 0 ? sampled : unsampled) += std::size_t{1};
+        differ += got[i] != want[i] ? std::size_t{1} : std::size_t{0};
+      }
+      std::printf("  %s: %zu regions sampled, %zu not, %zu entries differ\n", which.c_str(),
+                  sampled, unsampled, differ);
+      EXPECT_GT(sampled, 8u) << which;
+      // Both LOD differences occur (f = 1 reads B one level up: 2; f = 0: 1; an up octant: 2).
+      EXPECT_NE(std::count(want.begin(), want.end(), 2u), 0) << which;
+      if (svo == &finest_leaves) {
+        EXPECT_NE(std::count(want.begin(), want.end(), 1u), 0) << which;
+      }
+      // Float and double place a ray's first sample in a region differently only at grazing
+      // edges.
+      EXPECT_LE(differ, sampled / 50 + 1) << which;
+      // A second frame clears the table first: the same values again.
+      const vulkan_render::Ticket again = raycaster.render(in);
+      EXPECT_EQ(raycaster.feedback(again), got) << which;
+    }
+  // A frame rendered without feedback has no table.
+  FrameInput in = frame_input(s, finest_leaves, opaque, camera);
+  RaycasterOptions o;
+  o.width = camera.width;
+  o.height = camera.height;
+  Raycaster raycaster(context(), *g.from_cpu, o);
+  EXPECT_THROW(raycaster.feedback(raycaster.render(in)), std::invalid_argument);
+}
+
 // --- Level-of-detail blending: corner weights mix in the parent's drawing ----------------------
 
 TEST_F(VulkanRender, LodBlendingMatchesTheCpuReferenceRenderer) {
@@ -581,6 +654,32 @@ TEST_F(VulkanRender, TransferFunctionCullingKeepsTheImage) {
   in.leaf_histograms = all_low;
   const RgbaImage none = render_gpu(context(), atlas, in);
   EXPECT_EQ(drawn_fraction(none), 0.0);
+  // The culled leaves count as reached in the feedback table, as in the CPU ray caster.
+  for (const std::vector<std::uint64_t>* h : {&leaf_histograms, &all_low}) {
+    in.leaf_histograms = *h;
+    in.feedback = true;
+    RaycasterOptions o;
+    o.width = camera.width;
+    o.height = camera.height;
+    Raycaster raycaster(context(), atlas, o);
+    const std::vector<std::uint32_t> got = raycaster.feedback(raycaster.render(in));
+    std::vector<vr_uint> words;
+    for (const std::uint64_t w : *h) {
+      words.push_back(static_cast<vr_uint>(w));
+      words.push_back(static_cast<vr_uint>(w >> 32));
+    }
+    cpu_render::SvoView view{svo.nodes, svo.leaves, words, {s.data_lo, s.data_hi}};
+    std::vector<std::uint32_t> want;
+    cpu_render::render_svo(view, *s.cpu_atlas, s.geometry, camera, tf, {}, &want);
+    const auto reached = std::count_if(want.begin(), want.end(), [](auto v) { return v != 0; });
+    EXPECT_GT(reached, 8) << (h == &all_low ? "all culled" : "some culled");
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < want.size() && i < got.size(); ++i)
+      differ += got[i] != want[i] ? 1u : 0u;
+    EXPECT_EQ(got.size(), want.size());
+    EXPECT_LE(differ, std::size_t(reached) / 50 + 1)
+        << (h == &all_low ? "all culled" : "some culled");
+  }
 }
 
 // --- Frames in flight, bad input ----------------------------------------------------------
@@ -728,6 +827,65 @@ TEST_F(VulkanRender, FrameLoopConvergesAndMatchesTheCpuRenderer) {
   test::TempDir dir("vulkan-render-loop");
   test::write_blobs_container(dir.path(), {70, 50, 40}, 6);
   expect_frame_loop_matches_cpu(context(), format::Container(dir / "test.vreel"), 2.25);
+}
+
+TEST_F(VulkanRender, FrameLoopFeedbackLeavesOccludedNodesUnloaded) {
+  // Ray-guided feedback from the GPU's table: with a transfer function opaque everywhere the
+  // rays end in the first region they enter, the 4 × 4 × 4 finest nodes behind the three faces
+  // the camera sees are hidden and never loaded, and the picture is the one drawn without
+  // feedback. Pipelined: the table of a frame arrives frames later. One request at a time, so
+  // that feedback comes before the nodes behind are requested.
+  test::TempDir dir("vulkan-render-feedback");
+  test::write_blobs_container(dir.path(), {136, 136, 136}, 2);
+  const format::Container container(dir / "test.vreel");
+  const format::Manifest& m = container.manifest();
+  const float lo = static_cast<float>(m.value_min), hi = static_cast<float>(m.value_max);
+  const TransferFunction opaque({{lo, 0.2f, 0.4f, 1.0f, 1.0f}, {hi, 1.0f, 0.5f, 0.2f, 1.0f}}, lo,
+                                hi);
+  const auto camera = player::OrbitCamera::framing({136, 136, 136}, 256, 192);
+  struct Run {
+    std::uint64_t bytes = 0;
+    std::uint32_t hidden = 0, occupied = 0;
+    RgbaImage image;
+  };
+  const auto run = [&](bool feedback) {
+    loop::FrameLoopOptions o;
+    o.width = 256;
+    o.height = 192;
+    o.pipelined = true;
+    o.atlas_bytes = std::uint64_t{125} * 93312;
+    o.scheduler.ray_feedback = feedback;
+    o.scheduler.loader.max_in_flight = 1;
+    vulkan_render::VulkanFrameLoop l(context(), container, o);
+    loop::FrameReport r;
+    int quiet = 0;  // frames in a row with nothing requested, in flight or uploaded
+    for (int i = 0; i < 2000 && quiet < 8; ++i) {
+      r = l.frame(camera, 0.5, opaque, true);
+      const bool still = r.stats.requests_in_flight == 0 && r.stats.arrivals_waiting == 0 &&
+                         r.stats.uploads == 0 && r.stats.requests_sent == 0;
+      quiet = still ? quiet + 1 : 0;
+    }
+    EXPECT_EQ(quiet, 8) << "feedback " << feedback << ": did not settle";
+    Run out{r.stats.bytes_loaded, r.stats.hidden_nodes, r.stats.atlas_occupied,
+            l.read_back(r.ticket)};
+    l.finish();
+    return out;
+  };
+  const Run with = run(true), without = run(false);
+  const psnr::ImageComparison c = compare(with.image, without.image);
+  std::printf(
+      "  feedback: %u nodes hidden, %u keyframe nodes and %llu bytes loaded (without: %u, %llu); "
+      "PSNR %.1f dB\n",
+      with.hidden, with.occupied, static_cast<unsigned long long>(with.bytes), without.occupied,
+      static_cast<unsigned long long>(without.bytes), c.psnr);
+  // 27 finest nodes lie behind the faces; some are loaded before their parent is refined and
+  // the rays can tell them apart (kept then: the atlas has room).
+  EXPECT_GE(with.hidden, 20u);
+  EXPECT_EQ(without.hidden, 0u);
+  EXPECT_LE(with.occupied + 15, without.occupied);
+  EXPECT_LT(double(with.bytes), 0.95 * double(without.bytes));
+  EXPECT_GT(drawn_fraction(without.image), 0.1);
+  EXPECT_GE(c.psnr, 40.0);
 }
 
 TEST_F(VulkanRender, AViewWaitedForDrawsCompleteOnItsFirstFrame) {

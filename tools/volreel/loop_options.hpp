@@ -11,7 +11,7 @@
 namespace volreel::cli {
 
 /// --atlas-mb, --bandwidth, --latency, --sse-target, --upload-budget, --step,
-/// --max-step-doublings, --no-culling, --decode, --lod-fade, --spatial-blend.
+/// --max-step-doublings, --no-culling, --decode, --lod-fade, --spatial-blend, --ray-feedback.
 inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
   cmd.add_option("--atlas-mb", loop.atlas_mb, "Brick atlas memory, MiB (93 312 bytes per slot)")
       ->capture_default_str();
@@ -46,6 +46,10 @@ inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
   cmd.add_option("--spatial-blend", loop.spatial_blend,
                  "A node's corners next to a coarser neighbour take its parent's drawing "
                  "(true/false)")
+      ->capture_default_str();
+  cmd.add_option("--ray-feedback", loop.ray_feedback,
+                 "Leave out of the streaming the nodes no ray reached in a recent frame (behind "
+                 "opaque material, outside the image), from the ray caster's feedback (true/false)")
       ->capture_default_str();
 }
 

@@ -73,6 +73,9 @@ stream::FrameUpdate CpuFrameLoop::update_and_decode(const player::OrbitCamera& c
 FrameReport CpuFrameLoop::stream(const player::OrbitCamera& camera, double playhead) {
   const auto start = Clock::now();
   FrameReport report;
+  // A step draws nothing: no ray tells what this view reaches, and a table from an earlier view
+  // must not hide what this one needs (a wait for a complete view would stop short).
+  scheduler_->forget_feedback();
   update_and_decode(camera, playhead, report);
   // Nothing reads the atlas between frames here: the slots marked for the next frame may be
   // reused by the next step already.

@@ -20,6 +20,7 @@ constexpr std::uint32_t local_size = 8;  // raycast.comp's workgroup is 8 × 8
 constexpr std::uint32_t flag_histograms = 1;
 constexpr std::uint32_t flag_fetch_filter = 2;
 constexpr std::uint32_t flag_block_skip = 4;
+constexpr std::uint32_t flag_feedback = 8;
 constexpr std::uint32_t blocks_per_slot = 216;  // 6³ blocks of 6³ voxels
 // RenderOptions::max_step_doublings at most (as cpu_render checks): 2^16 fine steps, and k stays
 // an exact integer in the shader's floats.
@@ -71,6 +72,9 @@ std::string size_text(int w, int h) {
 struct Raycaster::Entry {
   vulkan::Buffer params, nodes, leaves, histograms, transfer, readback;
   vulkan::Buffer visible_prefix, ranges_params, changed_slots;
+  vulkan::Buffer feedback;           ///< the feedback table (svo_layout.h), host-readable
+  std::size_t feedback_entries = 0;  ///< its entries this frame
+  bool has_feedback = false;         ///< the frame writes it (FrameInput::feedback)
   VkDescriptorSet ranges_set = VK_NULL_HANDLE;
   std::uint32_t changed = 0;  ///< slots whose block ranges this frame recomputes
   vulkan::Fence fence;
@@ -112,6 +116,7 @@ Raycaster::Raycaster(const vulkan::Context& context, const vulkan::Atlas& atlas,
       {6, VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1, compute, nullptr},
       {7, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, compute, nullptr},
       {8, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, compute, nullptr},
+      {9, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, compute, nullptr},
   };
   set_layout_ = vulkan::DescriptorSetLayout(context, bindings);
   if (options.output == OutputFormat::rgba8_unorm)
@@ -132,7 +137,7 @@ Raycaster::Raycaster(const vulkan::Context& context, const vulkan::Atlas& atlas,
   ranges_pipeline_ = vulkan::ComputePipeline(context, ranges_shader_, range_layouts, 0);
   const std::uint32_t ring = options.frames_in_flight;
   const VkDescriptorPoolSize sizes[] = {
-      {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 10 * ring},
+      {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 11 * ring},
       {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2 * ring},
       {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, ring},
   };
@@ -306,7 +311,8 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
   p.size_levels[1] = static_cast<std::uint32_t>(camera.height);
   p.size_levels[2] = input.geometry.levels;
   p.size_levels[3] = (histograms ? flag_histograms : 0) | (fetch_filter_ ? flag_fetch_filter : 0) |
-                     (input.skip_invisible_blocks ? flag_block_skip : 0);
+                     (input.skip_invisible_blocks ? flag_block_skip : 0) |
+                     (input.feedback ? flag_feedback : 0);
   p.grid_mask[0] = atlas_.grid().x;
   p.grid_mask[1] = atlas_.grid().y;
   const std::uint64_t visible =
@@ -353,6 +359,12 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
   vulkan::write_storage_image(device, entry.set, 6, output_.view());
   vulkan::write_storage_buffer(device, entry.set, 7, block_ranges_.handle());
   vulkan::write_storage_buffer(device, entry.set, 8, entry.visible_prefix.handle());
+  // The feedback table (bound always: the shader declares it), cleared by the frame's commands.
+  entry.has_feedback = input.feedback;
+  entry.feedback_entries = input.feedback ? VR_SVO_FEEDBACK_ENTRIES * leaf_count : 0;
+  ensure(context_, entry.feedback, entry.feedback_entries * 4,
+         storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, VK_MEMORY_PROPERTY_HOST_CACHED_BIT);
+  vulkan::write_storage_buffer(device, entry.set, 9, entry.feedback.handle());
   vulkan::write_storage_buffer(device, entry.ranges_set, 0, entry.ranges_params.handle());
   vulkan::write_storage_buffer(device, entry.ranges_set, 1, entry.changed_slots.handle());
   vulkan::write_storage_buffer(device, entry.ranges_set, 2, block_ranges_.handle());
@@ -366,6 +378,9 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
 }
 
 void Raycaster::record_commands(VkCommandBuffer cb, Entry& entry, bool readback) {
+  // 0. The feedback table starts at 0 (made visible to the shader by the barrier below).
+  if (entry.feedback_entries > 0)
+    vkCmdFillBuffer(cb, entry.feedback.handle(), 0, VkDeviceSize{4} * entry.feedback_entries, 0);
   // 1. After every earlier compute and transfer command on the queue: the atlas decoder's slot
   //    writes, the previous frame's copy or blit of the output image.
   vulkan::memory_barrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
@@ -395,9 +410,12 @@ void Raycaster::record_commands(VkCommandBuffer cb, Entry& entry, bool readback)
   if (timed)
     vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, timestamps_, 2 * entry.index + 1);
   entry.timed = timed;
-  // 4. The output's writes visible to copies and blits.
+  // 4. The output's writes visible to copies and blits; the feedback table's to the host.
   vulkan::memory_barrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
                          VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
+  if (entry.feedback_entries > 0)
+    vulkan::memory_barrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+                           VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
   // 5. Optionally a copy to the entry's host buffer.
   if (readback) {
     const VkDeviceSize bytes = VkDeviceSize{texel_bytes(entry.format)} *
@@ -501,6 +519,24 @@ cpu_render::RgbaImage Raycaster::read_back(Ticket ticket) const {
     for (std::size_t i = 0; i < values; ++i) image.rgba[i] = vulkan::half_to_float(halves[i]);
   }
   return image;
+}
+
+std::vector<std::uint32_t> Raycaster::feedback(Ticket ticket) const {
+  const Entry& entry = entry_of(ticket, "feedback");
+  if (!entry.has_feedback)
+    throw std::invalid_argument("Raycaster::feedback: frame " + std::to_string(ticket) +
+                                " was rendered without FrameInput::feedback");
+  entry.fence.wait();
+  entry.feedback.invalidate();
+  std::vector<std::uint32_t> table(entry.feedback_entries);
+  std::memcpy(table.data(), entry.feedback.mapped(), table.size() * sizeof(std::uint32_t));
+  return table;
+}
+
+bool Raycaster::has_feedback(Ticket ticket) const {
+  if (ticket == 0) return false;
+  const Entry& entry = *ring_[(ticket - 1) % ring_.size()];
+  return entry.ticket == ticket && entry.fenced && entry.has_feedback;
 }
 
 std::optional<double> Raycaster::gpu_milliseconds(Ticket ticket) const {

@@ -97,6 +97,9 @@ VulkanFrameLoop::VulkanFrameLoop(std::unique_ptr<vulkan::Context>&& owned,
   ro.frames_in_flight = options.gpu.frames_in_flight;
   raycaster_ = std::make_unique<Raycaster>(context, *atlas_, ro);
   options_.scheduler.atlas_slots = atlas_->slot_count();
+  // Feedback arrives when its frame completes, up to frames_in_flight frames after it was built.
+  options_.scheduler.feedback_frames =
+      std::max(options_.scheduler.feedback_frames, ro.frames_in_flight + 1);
   scheduler_ = std::make_unique<stream::StreamScheduler>(container, options_.scheduler);
   slot_histograms_.assign(atlas_->slot_count(), 0);
 }
@@ -112,6 +115,19 @@ VulkanFrameLoop::~VulkanFrameLoop() {
 void VulkanFrameLoop::retire_completed() {
   while (retired_ < raycaster_->last_ticket() && raycaster_->poll(retired_ + 1)) ++retired_;
   if (retired_ > 0) scheduler_->retire(retired_);
+  // Ray-guided feedback (Thiele et al. §3): the newest completed frame's table guides the next
+  // selection, for the SVO the scheduler built for that frame (it keeps the last few).
+  const Ticket last = raycaster_->last_ticket(), ring = options_.gpu.frames_in_flight;
+  for (Ticket t = last; t > fed_back_ && t + ring > last; --t)
+    if (raycaster_->has_feedback(t) && raycaster_->poll(t)) {
+      take_feedback(t);
+      break;
+    }
+}
+
+void VulkanFrameLoop::take_feedback(Ticket ticket) {
+  scheduler_->feedback(raycaster_->feedback(ticket), ticket);
+  fed_back_ = ticket;
 }
 
 void VulkanFrameLoop::finish() {
@@ -193,6 +209,10 @@ stream::FrameUpdate VulkanFrameLoop::update_and_decode(const player::OrbitCamera
 loop::FrameReport VulkanFrameLoop::stream(const player::OrbitCamera& camera, double playhead) {
   const auto start = Clock::now();
   loop::FrameReport report;
+  // A step draws nothing: no ray tells what this view reaches, and a table from an earlier view
+  // must not hide what this one needs (a wait for a complete view would stop short).
+  fed_back_ = raycaster_->last_ticket();
+  scheduler_->forget_feedback();
   update_and_decode(camera, playhead, report);
   report.timings.frame_ms = ms_since(start);
   return report;
@@ -225,6 +245,13 @@ loop::FrameReport VulkanFrameLoop::frame(const player::OrbitCamera& camera, doub
                        changed_slots_.end());
   input.changed_slots = changed_slots_;
   input.skip_invisible_blocks = options_.transfer_culling;
+  input.feedback = options_.scheduler.ray_feedback;
+  // The frame whose ring entry this one reuses: render() waits for it, so its table costs no
+  // wait (with the GPU frames behind, no frame is complete at retire_completed()).
+  const std::uint32_t ring = options_.gpu.frames_in_flight;
+  if (gpu_frame > ring && gpu_frame - ring > fed_back_ &&
+      raycaster_->has_feedback(gpu_frame - ring))
+    take_feedback(gpu_frame - ring);
   const auto t = Clock::now();
   report.ticket = raycaster_->render(input, readback);
   changed_slots_.clear();

@@ -46,9 +46,10 @@
 // VR_SVO_FEEDBACK_ENTRIES 32-bit entries per leaf record, one per region the leaf draws — entry
 // 8·leaf for a VR_SVO_CHILD_LEAF child (the child's spatial node), entry 8·leaf + i for octant i
 // drawn from a node's own leaf as VR_SVO_CHILD_UP (the child of octant i, or the node itself at
-// the finest level and for a root drawn as a leaf). An entry is 0 when no ray sampled the region,
-// else 1 + the largest LOD difference of its samples: the levels from the region's node up to
-// the brick read (the finer of A and B while both are read).
+// the finest level and for a root drawn as a leaf). An entry is 0 when no ray reached the region
+// (a leaf culled by its histogram counts as reached), else 1 + the largest LOD difference of its
+// samples: the levels from the region's node up to the brick read (the finer of A and B while both
+// are read).
 //
 // Leaf histograms (a third array, optional), VR_SVO_HISTOGRAM_WORDS words per leaf record: the OR
 // of the 64-bin value histograms (format's Node::histogram, bins over the sequence's value range)

@@ -124,9 +124,11 @@ void validate_svo(const SvoView& svo, std::uint32_t slot_count, const VolumeGeom
 ///
 /// Ray-guided feedback (Thiele, Matthes, Froehlich, §3.1): with `feedback`, it is set to the
 /// feedback table of svo_layout.h (VR_SVO_FEEDBACK_ENTRIES entries per leaf record, one per region
-/// the leaf draws): 0 where no ray took a sample in the region (occluded behind opaque material,
-/// culled by the transfer function, outside the image), else 1 + the largest LOD difference of
-/// those samples: how many levels above the region's node the brick read lies.
+/// the leaf draws): 0 where no ray reached the region (occluded behind opaque material, outside
+/// the image), else 1 + the largest LOD difference of its samples: how many levels above the
+/// region's node the brick read lies. A leaf culled by its histogram counts as reached: hidden,
+/// its region would be drawn from an ancestor's data, whose wider histogram may show, and the
+/// node requested again, frame after frame.
 RgbaImage render_svo(const SvoView& svo, const CpuAtlas& atlas, const VolumeGeometry& geometry,
                      const player::OrbitCamera& camera, const TransferFunction& transfer,
                      const RenderOptions& options = {},

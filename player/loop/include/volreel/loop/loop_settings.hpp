@@ -26,6 +26,8 @@ struct LoopSettings {
   /// Level-of-detail blending (stream::LodBlendSettings): the fade's seconds, spatial blending.
   double lod_fade = stream::LodBlendSettings{}.fade_s;
   bool spatial_blend = stream::LodBlendSettings{}.spatial;
+  /// Ray-guided feedback (stream::SchedulerSettings::ray_feedback).
+  bool ray_feedback = stream::SchedulerSettings{}.ray_feedback;
 };
 
 /// "512x512" -> {512, 512} (1..16384 each). Throws std::invalid_argument naming `option`.
@@ -39,8 +41,8 @@ FrameLoopOptions::Decode parse_decode(const std::string& text,
 double parse_latency(const std::string& text, const std::string& option = "--latency");
 
 /// Applies the settings to `options` (size, atlas, loader, SSE target, upload budget, step,
-/// culling, level-of-detail blending). Throws std::invalid_argument naming the option on a bad
-/// value.
+/// culling, level-of-detail blending, ray-guided feedback). Throws std::invalid_argument naming the
+/// option on a bad value.
 void apply(const LoopSettings& settings, FrameLoopOptions& options);
 
 }  // namespace volreel::loop

@@ -68,6 +68,10 @@ struct SchedulerSettings {
   std::size_t max_messages = 64;                    ///< messages kept for the UI (newest)
   /// Use the renderer's feedback (feedback()) to leave hidden nodes out of the selected set.
   bool ray_feedback = true;
+  /// Feedback guides the selection while the frame it was drawn for is one of the last this many
+  /// GPU frames (update()'s gpu_frame_number): a GPU's table arrives when its frame completes,
+  /// frames in flight later. At least 1.
+  std::uint32_t feedback_frames = 4;
   /// Level-of-detail blending in the SVO (svo_builder.hpp; the fade on the loader's clock).
   LodBlendSettings lod_blend;
 };
@@ -135,15 +139,24 @@ class StreamScheduler {
   void report_error(std::string message);
   /// Ray-guided feedback for the SVO of the last update(): the feedback table of svo_layout.h
   /// (per region a leaf draws, 0 where no ray sampled it, else 1 + the largest LOD difference
-  /// sampled; cpu_render::render_svo writes it).
+  /// sampled; cpu_render::render_svo and the Vulkan ray caster write it).
   /// Priorities are distributed over that SVO (Algorithm 1: a region's is its entry − 1,
   /// or −∞ when no ray sampled it; a node record's the largest of its children's + 1; a node
-  /// below a region the region's − 1 a level). At the next update a visited node whose priority
+  /// below a region the region's − 1 a level). At the next updates a visited node whose priority
   /// is −∞ is hidden, except the root: its keyframe nodes are not requested and rank below every
   /// other's (kept while resident and the atlas has room). Regions with nothing drawn (holes) or
-  /// outside the view are unknown and never hide anything. Throws std::invalid_argument when the
-  /// table's size is not VR_SVO_FEEDBACK_ENTRIES per leaf record of the SVO.
+  /// outside the view are unknown and never hide anything. The newest feedback counts, while its
+  /// frame is one of the last SchedulerSettings::feedback_frames. Throws std::invalid_argument
+  /// when no SVO was built yet or the table's size is not VR_SVO_FEEDBACK_ENTRIES per leaf record
+  /// of the SVO.
   void feedback(std::span<const std::uint32_t> leaves);
+  /// The same for the SVO of the last update() told `gpu_frame_number` (a frame that completed
+  /// late). Returns false, and changes nothing, when that frame is no longer one of the last
+  /// feedback_frames or is older than the feedback already given.
+  bool feedback(std::span<const std::uint32_t> leaves, std::uint64_t gpu_frame_number);
+  /// Drops the feedback given: until the next, nothing is hidden (for updates that draw nothing,
+  /// such as a wait for a complete view, where no ray tells what the view reaches).
+  void forget_feedback() { feedback_stamp_ = 0; }
   /// Whether the last update hid the node (feedback: no ray reached it).
   bool hidden(std::uint32_t node) const { return node < hidden_.size() && hidden_[node] != 0; }
 
@@ -209,9 +222,9 @@ class StreamScheduler {
   std::size_t error_count_ = 0;
   std::vector<std::string> frame_errors_;
 
-  // Ray-guided feedback. The last SVO's regions (the spatial node each octant drawn stands for,
-  // and its leaf record) and node records (spatial node, parent record), by SVO stamp; Algorithm
-  // 1's priorities per spatial node for the SVO whose feedback came, by the same stamp.
+  // Ray-guided feedback. The last feedback_frames SVOs' regions (the spatial node each octant
+  // drawn stands for, and its leaf record) and node records (spatial node, parent record), by GPU
+  // frame; Algorithm 1's priorities per spatial node from the newest feedback, by its stamp.
   static constexpr std::int32_t priority_hidden = -(1 << 30);  ///< −∞: no ray reached it
   /// Subtracted from a hidden node's priorities: below every other's (they are O(sse_weight)).
   static constexpr double hidden_demotion = 1e6;
@@ -220,20 +233,28 @@ class StreamScheduler {
   struct SvoRegion {
     std::uint32_t record = 0, node = 0, entry = no_entry;  ///< entry: in the feedback table
   };
-  std::vector<SvoRegion> svo_regions_;
-  std::vector<std::uint32_t> svo_record_nodes_, svo_record_parents_;
-  std::size_t svo_leaf_count_ = 0;
-  std::uint32_t svo_stamp_ = 0, feedback_stamp_ = 0;
+  struct KeptSvo {
+    std::uint64_t gpu_frame = 0;
+    std::vector<SvoRegion> regions;
+    std::vector<std::uint32_t> record_nodes, record_parents;
+    std::size_t leaf_count = 0;
+  };
+  std::deque<KeptSvo> kept_svos_;               ///< oldest first
+  std::uint32_t priority_stamp_ = 0;            ///< counts feedback() calls
+  std::uint32_t feedback_stamp_ = 0;            ///< the newest feedback's, 0: none (or forgotten)
+  std::uint64_t feedback_frame_ = 0;            ///< the GPU frame it was drawn for
   std::vector<std::uint32_t> priority_stamps_;  ///< per spatial node
   std::vector<std::int32_t> ray_priority_;      ///< per spatial node
   std::vector<std::uint8_t> hidden_;            ///< per spatial node, this frame
   std::vector<std::uint32_t> hidden_list_;      ///< the nodes hidden_ marks
   std::vector<std::int32_t> record_priority_;   ///< scratch: per node record
 
-  /// The ray priority of a visited node (priority_unknown without feedback for the last SVO).
+  /// Whether feedback guides the selection: given, and its frame still one of the kept.
+  bool feedback_current() const;
+  /// The ray priority of a visited node (priority_unknown without current feedback).
   std::int32_t ray_priority(std::uint32_t node) const;
-  /// Keeps the regions of an SVO just built for feedback().
-  void keep_svo_regions(const SvoArrays& svo);
+  /// Keeps the regions of an SVO just built for feedback(), for its GPU frame.
+  void keep_svo_regions(const SvoArrays& svo, std::uint64_t gpu_frame_number);
 
   /// The selected set (Cesium patent [0060]–[0063]): the atlas's worth of keyframe nodes of the
   /// highest priority among the visible nodes' held ones, into selection_.

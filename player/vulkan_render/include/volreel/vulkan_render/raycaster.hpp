@@ -78,6 +78,9 @@ struct FrameInput {
   /// Skip samples whose atlas blocks hold only values the transfer function hides (the image is
   /// unchanged; the texel fetches are saved).
   bool skip_invisible_blocks = false;
+  /// Write the ray-guided feedback table (svo_layout.h: VR_SVO_FEEDBACK_ENTRIES per leaf record),
+  /// as cpu_render::render_svo does, for Raycaster::feedback().
+  bool feedback = false;
 };
 
 /// Identifies a submitted frame; 0 is "nothing" (always complete). Increases by one per frame.
@@ -116,6 +119,11 @@ class Raycaster {
   /// The image of frame `ticket`, rendered with readback = true and still in the ring (one of the
   /// last frames_in_flight frames); waits for it. Throws std::invalid_argument otherwise.
   cpu_render::RgbaImage read_back(Ticket ticket) const;
+  /// The feedback table of frame `ticket` (render() with FrameInput::feedback, still in the
+  /// ring); waits for it. Throws std::invalid_argument otherwise.
+  std::vector<std::uint32_t> feedback(Ticket ticket) const;
+  /// Whether frame `ticket` was rendered with FrameInput::feedback and is still in the ring.
+  bool has_feedback(Ticket ticket) const;
   /// GPU time of the dispatch of a completed frame `ticket` (render()), milliseconds, when the
   /// queue supports timestamps; waits for it.
   std::optional<double> gpu_milliseconds(Ticket ticket) const;

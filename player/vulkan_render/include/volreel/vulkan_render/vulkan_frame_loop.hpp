@@ -75,7 +75,10 @@ class VulkanFrameLoop final : public loop::FrameLoop {
  private:
   VulkanFrameLoop(std::unique_ptr<vulkan::Context>&& owned, const vulkan::Context& context,
                   const format::Container& container, const loop::FrameLoopOptions& options);
+  /// Retires the completed frames; hands the newest one's feedback table to the scheduler.
   void retire_completed();
+  /// Hands frame `ticket`'s feedback table to the scheduler (waits for the frame).
+  void take_feedback(Ticket ticket);
   /// Steps 1–3 of a frame: retire, the scheduler's update, the decode of the uploads.
   stream::FrameUpdate update_and_decode(const player::OrbitCamera& camera, double playhead,
                                         loop::FrameReport& report);
@@ -97,6 +100,7 @@ class VulkanFrameLoop final : public loop::FrameLoop {
   std::vector<std::uint32_t> changed_slots_;  ///< decoded since the last rendered frame
   stream::FrameUpdate last_update_;
   Ticket retired_ = 0;
+  Ticket fed_back_ = 0;  ///< the newest frame whose feedback table went to the scheduler
 };
 
 /// Histogram words of each leaf record: the OR of the histograms of the slots of A and B, and of
