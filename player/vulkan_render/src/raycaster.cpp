@@ -528,8 +528,9 @@ std::vector<std::uint32_t> Raycaster::feedback(Ticket ticket) const {
                                 " was rendered without FrameInput::feedback");
   entry.fence.wait();
   entry.feedback.invalidate();
-  std::vector<std::uint32_t> table(entry.feedback_entries);
-  std::memcpy(table.data(), entry.feedback.mapped(), table.size() * sizeof(std::uint32_t));
+  std::vector<std::uint32_t> table(entry.feedback_entries);  // empty for an SVO without leaves
+  if (!table.empty())
+    std::memcpy(table.data(), entry.feedback.mapped(), table.size() * sizeof(std::uint32_t));
   return table;
 }
 
