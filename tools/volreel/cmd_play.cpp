@@ -46,6 +46,9 @@ void run_play(PlayCommandOptions& o) {
   p.bandwidth_bytes_per_s = loop::parse_bandwidth(o.bandwidth);
   p.latency_s = loop::parse_latency(o.latency);
   p.decode = loop::parse_decode(o.decode);
+  if (!(p.lod_blend.fade_s >= 0) || p.lod_blend.fade_s > 60)
+    throw InputError("--lod-fade: expected seconds in [0, 60], found '" +
+                     std::to_string(p.lod_blend.fade_s) + "'");
   p.renderer = o.renderer == "cpu"      ? app::RendererKind::cpu
                : o.renderer == "vulkan" ? app::RendererKind::vulkan
                                         : app::RendererKind::automatic;
@@ -141,6 +144,19 @@ void add_play_command(CLI::App& app) {
                   "Where bricks are decoded: auto (on the CPU with a CPU Vulkan implementation "
                   "such as lavapipe, in the compute shader on a GPU), gpu or cpu")
       ->check(CLI::IsMember({"auto", "gpu", "cpu"}))
+      ->capture_default_str();
+  cmd->add_option("--lod-fade", o->player.lod_blend.fade_s,
+                  "A node whose own bricks arrive while an ancestor draws it fades in from the "
+                  "parent's drawing over this many seconds (0: at once)")
+      ->capture_default_str();
+  cmd->add_option("--spatial-blend", o->player.lod_blend.spatial,
+                  "A node's corners next to a coarser neighbour take its parent's drawing "
+                  "(true/false)")
+      ->capture_default_str();
+  cmd->add_option(
+         "--ray-feedback", o->player.ray_feedback,
+         "Leave out of the streaming the nodes no ray reached in a recent frame (behind "
+         "opaque material, outside the image), from the ray caster's feedback (true/false)")
       ->capture_default_str();
   cmd->add_option("--script", o->script_file, "Replay the timed actions of this file");
   cmd->add_option("--script-inline", o->script_inline,

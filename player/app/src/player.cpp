@@ -93,6 +93,8 @@ Player::Player(const PlayerOptions& options)
   setup.scheduler.loader.latency_s = options.latency_s;
   setup.scheduler.loader.max_in_flight = options.max_requests;
   setup.scheduler.upload_budget_bytes = options.upload_bytes;
+  setup.scheduler.lod_blend = options.lod_blend;
+  setup.scheduler.ray_feedback = options.ray_feedback;
   setup.decode = options.decode;
   setup.width = render_size(swapchain_->extent()).width;
   setup.height = render_size(swapchain_->extent()).height;

@@ -23,6 +23,7 @@
 
 #include "volreel/format/source.hpp"
 #include "volreel/loop/frame_loop.hpp"
+#include "volreel/stream/scheduler.hpp"
 
 namespace volreel::app {
 
@@ -58,6 +59,10 @@ struct PlayerOptions {
   double frame_ms = 100;
   /// Where the Vulkan renderer decodes bricks (loop::FrameLoopOptions::Decode).
   loop::FrameLoopOptions::Decode decode = loop::FrameLoopOptions::Decode::automatic;
+  /// Level-of-detail blending (stream::LodBlendSettings: the fade's seconds, spatial blending).
+  stream::LodBlendSettings lod_blend;
+  /// Ray-guided feedback (stream::SchedulerSettings::ray_feedback).
+  bool ray_feedback = stream::SchedulerSettings{}.ray_feedback;
   std::string script;            ///< script text (script.hpp), empty for none
   std::uint64_t max_frames = 0;  ///< quit after this many frames (0: never)
   std::optional<std::filesystem::path> screenshot_on_exit;  ///< PNG of the last frame
