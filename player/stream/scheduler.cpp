@@ -298,7 +298,7 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
                   &stored_times_, hidden_, blends ? &blend_ : nullptr, loader_.now_seconds());
     out.stats.blended_leaves = svo_stats.blended_leaves;
     for (const std::uint32_t slot : svo_stats.used_slots) atlas_.mark_used(slot, gpu_frame_number);
-    keep_svo_regions(svo, gpu_frame_number);
+    if (settings_.ray_feedback) keep_svo_regions(svo, gpu_frame_number);
     out.stats.hidden_nodes = static_cast<std::uint32_t>(hidden_list_.size());
     out.stats.hidden_targets = svo_stats.hidden_targets;
     out.svo_nodes = std::move(svo.nodes);
@@ -385,6 +385,7 @@ void StreamScheduler::keep_svo_regions(const SvoArrays& svo, std::uint64_t gpu_f
 }
 
 void StreamScheduler::feedback(std::span<const std::uint32_t> leaves) {
+  if (!settings_.ray_feedback) return;  // ignored
   if (kept_svos_.empty())
     throw std::invalid_argument("ray feedback: no SVO was built yet (call update() first)");
   feedback(leaves, kept_svos_.back().gpu_frame);
@@ -394,7 +395,9 @@ bool StreamScheduler::feedback(std::span<const std::uint32_t> leaves,
                                std::uint64_t gpu_frame_number) {
   const auto kept = std::find_if(kept_svos_.begin(), kept_svos_.end(),
                                  [&](const KeptSvo& k) { return k.gpu_frame == gpu_frame_number; });
-  if (kept == kept_svos_.end() || (feedback_stamp_ != 0 && gpu_frame_number < feedback_frame_))
+  if (!settings_.ray_feedback) return false;  // ignored (no SVO regions are kept)
+  if (kept == kept_svos_.end() || (feedback_stamp_ != 0 && gpu_frame_number < feedback_frame_) ||
+      gpu_frame_number < forgotten_frame_)
     return false;
   const KeptSvo& svo = *kept;
   if (leaves.size() != VR_SVO_FEEDBACK_ENTRIES * svo.leaf_count)
@@ -450,6 +453,11 @@ bool StreamScheduler::feedback(std::span<const std::uint32_t> leaves,
     if (svo.record_nodes[r] != no_node) set(svo.record_nodes[r], record_priority_[r]);
   }
   return true;
+}
+
+void StreamScheduler::forget_feedback() {
+  feedback_stamp_ = 0;
+  if (!kept_svos_.empty()) forgotten_frame_ = kept_svos_.back().gpu_frame;
 }
 
 bool StreamScheduler::feedback_current() const {

@@ -230,11 +230,19 @@ TEST(StreamScheduler, NodesNoRayReachedAreNotRequestedAndComeBackWhenReached) {
   u = s.update(cam, playhead, frame);
   s.retire(frame++);
   EXPECT_EQ(u.stats.hidden_nodes, 1u);
-  // Forgotten (a stream step that draws nothing): nothing is hidden until the next feedback.
+  // Forgotten (a stream step that draws nothing): nothing is hidden until the next feedback,
+  // and a table of a frame drawn before is refused; the step's own frame number is not.
+  const std::uint64_t before = frame - 1;
+  s.update(cam, playhead, frame);
   s.forget_feedback();
+  EXPECT_FALSE(s.feedback(reached_but(drawn_update, 0), before));
+  u = s.update(cam, playhead, frame);
+  EXPECT_EQ(u.stats.hidden_nodes, 0u);
+  EXPECT_TRUE(s.feedback(reached_but(u, 0), frame));
+  s.retire(frame++);
   u = s.update(cam, playhead, frame);
   s.retire(frame++);
-  EXPECT_EQ(u.stats.hidden_nodes, 0u);
+  EXPECT_EQ(u.stats.hidden_nodes, 1u);
   // Switched off, feedback is ignored.
   SchedulerSettings off_settings = settings;
   off_settings.ray_feedback = false;

@@ -388,6 +388,7 @@ TEST_F(VulkanRender, FeedbackTableMatchesTheCpuRenderers) {
       RaycasterOptions o;
       o.width = camera.width;
       o.height = camera.height;
+      o.frames_in_flight = 1;  // the second frame reuses the first one's table
       Raycaster raycaster(context(), *g.from_cpu, o);
       const vulkan_render::Ticket ticket = raycaster.render(in);
       const std::vector<std::uint32_t> got = raycaster.feedback(ticket);

@@ -97,9 +97,10 @@ VulkanFrameLoop::VulkanFrameLoop(std::unique_ptr<vulkan::Context>&& owned,
   ro.frames_in_flight = options.gpu.frames_in_flight;
   raycaster_ = std::make_unique<Raycaster>(context, *atlas_, ro);
   options_.scheduler.atlas_slots = atlas_->slot_count();
-  // Feedback arrives when its frame completes, up to frames_in_flight frames after it was built.
+  // Feedback arrives when its frame completes, up to frames_in_flight frames after it was built
+  // (one frame more of slack: a frame without a new table keeps the last one's hiding).
   options_.scheduler.feedback_frames =
-      std::max(options_.scheduler.feedback_frames, ro.frames_in_flight + 1);
+      std::max(options_.scheduler.feedback_frames, ro.frames_in_flight + 2);
   scheduler_ = std::make_unique<stream::StreamScheduler>(container, options_.scheduler);
   slot_histograms_.assign(atlas_->slot_count(), 0);
 }

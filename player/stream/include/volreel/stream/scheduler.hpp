@@ -156,7 +156,8 @@ class StreamScheduler {
   bool feedback(std::span<const std::uint32_t> leaves, std::uint64_t gpu_frame_number);
   /// Drops the feedback given: until the next, nothing is hidden (for updates that draw nothing,
   /// such as a wait for a complete view, where no ray tells what the view reaches).
-  void forget_feedback() { feedback_stamp_ = 0; }
+  /// Tables of frames before the last update's are refused after it.
+  void forget_feedback();
   /// Whether the last update hid the node (feedback: no ray reached it).
   bool hidden(std::uint32_t node) const { return node < hidden_.size() && hidden_[node] != 0; }
 
@@ -239,10 +240,11 @@ class StreamScheduler {
     std::vector<std::uint32_t> record_nodes, record_parents;
     std::size_t leaf_count = 0;
   };
-  std::deque<KeptSvo> kept_svos_;               ///< oldest first
-  std::uint32_t priority_stamp_ = 0;            ///< counts feedback() calls
-  std::uint32_t feedback_stamp_ = 0;            ///< the newest feedback's, 0: none (or forgotten)
-  std::uint64_t feedback_frame_ = 0;            ///< the GPU frame it was drawn for
+  std::deque<KeptSvo> kept_svos_;      ///< oldest first
+  std::uint32_t priority_stamp_ = 0;   ///< counts feedback() calls
+  std::uint32_t feedback_stamp_ = 0;   ///< the newest feedback's, 0: none (or forgotten)
+  std::uint64_t feedback_frame_ = 0;   ///< the GPU frame it was drawn for
+  std::uint64_t forgotten_frame_ = 0;  ///< forget_feedback(): tables of earlier frames refused
   std::vector<std::uint32_t> priority_stamps_;  ///< per spatial node
   std::vector<std::int32_t> ray_priority_;      ///< per spatial node
   std::vector<std::uint8_t> hidden_;            ///< per spatial node, this frame
