@@ -72,7 +72,8 @@ std::string size_text(int w, int h) {
 struct Raycaster::Entry {
   vulkan::Buffer params, nodes, leaves, histograms, transfer, readback;
   vulkan::Buffer visible_prefix, ranges_params, changed_slots;
-  vulkan::Buffer feedback;           ///< the feedback table (svo_layout.h), host-readable
+  vulkan::Buffer feedback_table;     ///< the feedback table (svo_layout.h) the shader writes
+  vulkan::Buffer feedback;           ///< its copy for the host
   std::size_t feedback_entries = 0;  ///< its entries this frame
   bool has_feedback = false;         ///< the frame writes it (FrameInput::feedback)
   VkDescriptorSet ranges_set = VK_NULL_HANDLE;
@@ -359,12 +360,21 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
   vulkan::write_storage_image(device, entry.set, 6, output_.view());
   vulkan::write_storage_buffer(device, entry.set, 7, block_ranges_.handle());
   vulkan::write_storage_buffer(device, entry.set, 8, entry.visible_prefix.handle());
-  // The feedback table (bound always: the shader declares it), cleared by the frame's commands.
+  // The feedback table (bound always: the shader declares it), cleared by the frame's commands,
+  // in device memory where the shader's atomics are cheap (not across the bus to host memory on a
+  // discrete GPU), and copied to a host-cached buffer after the dispatch.
   entry.has_feedback = input.feedback;
   entry.feedback_entries = input.feedback ? VR_SVO_FEEDBACK_ENTRIES * leaf_count : 0;
-  ensure(context_, entry.feedback, entry.feedback_entries * 4,
-         storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, VK_MEMORY_PROPERTY_HOST_CACHED_BIT);
-  vulkan::write_storage_buffer(device, entry.set, 9, entry.feedback.handle());
+  const VkDeviceSize table_bytes =
+      std::max<VkDeviceSize>(VkDeviceSize{4} * entry.feedback_entries, 16);
+  if (entry.feedback_table.handle() == VK_NULL_HANDLE || entry.feedback_table.size() < table_bytes)
+    entry.feedback_table = vulkan::Buffer(
+        context_, std::max(table_bytes, 2 * entry.feedback_table.size()),
+        storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT, 0,
+        VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+  ensure(context_, entry.feedback, table_bytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+         VK_MEMORY_PROPERTY_HOST_CACHED_BIT);
+  vulkan::write_storage_buffer(device, entry.set, 9, entry.feedback_table.handle());
   vulkan::write_storage_buffer(device, entry.ranges_set, 0, entry.ranges_params.handle());
   vulkan::write_storage_buffer(device, entry.ranges_set, 1, entry.changed_slots.handle());
   vulkan::write_storage_buffer(device, entry.ranges_set, 2, block_ranges_.handle());
@@ -380,7 +390,8 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
 void Raycaster::record_commands(VkCommandBuffer cb, Entry& entry, bool readback) {
   // 0. The feedback table starts at 0 (made visible to the shader by the barrier below).
   if (entry.feedback_entries > 0)
-    vkCmdFillBuffer(cb, entry.feedback.handle(), 0, VkDeviceSize{4} * entry.feedback_entries, 0);
+    vkCmdFillBuffer(cb, entry.feedback_table.handle(), 0, VkDeviceSize{4} * entry.feedback_entries,
+                    0);
   // 1. After every earlier compute and transfer command on the queue: the atlas decoder's slot
   //    writes, the previous frame's copy or blit of the output image.
   vulkan::memory_barrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
@@ -410,12 +421,16 @@ void Raycaster::record_commands(VkCommandBuffer cb, Entry& entry, bool readback)
   if (timed)
     vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, timestamps_, 2 * entry.index + 1);
   entry.timed = timed;
-  // 4. The output's writes visible to copies and blits; the feedback table's to the host.
+  // 4. The output's and the feedback table's writes visible to copies and blits; the table's copy
+  //    to the host.
   vulkan::memory_barrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
                          VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
-  if (entry.feedback_entries > 0)
-    vulkan::memory_barrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+  if (entry.feedback_entries > 0) {
+    const VkBufferCopy region{0, 0, VkDeviceSize{4} * entry.feedback_entries};
+    vkCmdCopyBuffer(cb, entry.feedback_table.handle(), entry.feedback.handle(), 1, &region);
+    vulkan::memory_barrier(cb, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
                            VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
+  }
   // 5. Optionally a copy to the entry's host buffer.
   if (readback) {
     const VkDeviceSize bytes = VkDeviceSize{texel_bytes(entry.format)} *
