@@ -343,7 +343,6 @@ void StreamScheduler::keep_svo_regions(const SvoArrays& svo, std::uint64_t gpu_f
       kept_svos_.pop_front();
       kept_svos_.push_back(std::move(oldest));
     }
-    while (kept_svos_.size() > keep) kept_svos_.pop_front();
   }
   KeptSvo& k = kept_svos_.back();
   k.gpu_frame = gpu_frame_number;
