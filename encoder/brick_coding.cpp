@@ -135,12 +135,16 @@ double quantize_block(const float* y, float mean_error, const std::int32_t* a, c
   return e;
 }
 
+/// Mean bits at fixed rate, where no ε sets a step: a step of 1/4095 of the means' span.
+constexpr std::uint32_t fixed_rate_mean_bits = 12;
+
 /// The mean bits of a brick whose block means span [lo, hi]: `forced` when ≥ 0, else the fewest
-/// bits b (0..12) whose quantization step (hi − lo)/(2^b − 1) is at most `step` (b = 0: the one
-/// level is the midpoint, so a span up to `step` suffices), and 12 when step ≤ 0.
+/// bits b (0..VR_MEAN_BITS) whose quantization step (hi − lo)/(2^b − 1) is at most `step` (b = 0:
+/// the one level is the midpoint, so a span up to `step` suffices), and VR_MEAN_BITS when none
+/// is; fixed_rate_mean_bits when step ≤ 0.
 std::uint32_t choose_mean_bits(float lo, float hi, double step, int forced) {
   if (forced >= 0) return static_cast<std::uint32_t>(forced);
-  if (!(step > 0)) return VR_MEAN_BITS;
+  if (!(step > 0)) return fixed_rate_mean_bits;
   const double span = static_cast<double>(hi) - static_cast<double>(lo);
   for (std::uint32_t b = 0; b < VR_MEAN_BITS; ++b)
     if (span <= step * static_cast<double>(b == 0 ? 1u : (1u << b) - 1u)) return b;

@@ -1,6 +1,8 @@
 // coding_settings.cpp: the names of the variable-rate rules and codecs, and the mean bits' text.
 #include "volreel/encoder/coding_settings.hpp"
 
+#include "volreel/format/brick_decode.h"
+
 #include <cstdlib>
 
 namespace volreel::encoder {
@@ -41,7 +43,7 @@ int bits_from_text(const std::string& text, const char* option, long lo, long hi
 }  // namespace
 
 int mean_bits_from_text(const std::string& text) {
-  return bits_from_text(text, "--mean-bits", 0, 12);
+  return bits_from_text(text, "--mean-bits", 0, VR_MEAN_BITS);
 }
 
 int coef_bits_from_text(const std::string& text) {

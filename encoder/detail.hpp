@@ -38,7 +38,7 @@ struct QuantizeOptions {
   int coef_bits = -1;  ///< ≥ 1: every brick's step is its largest coefficient / 2^coef_bits
   std::uint32_t fixed_coef_bits = 8;  ///< signed bits of the largest value where there is no step
   /// The largest step of a brick's quantized block means: each brick takes the fewest bits
-  /// (0..12) whose step over its means' range is at most this. 0: always 12 bits.
+  /// (0..15) whose step over its means' range is at most this. 0: always 12 bits.
   double mean_step = 0;
   int mean_bits = -1;  ///< ≥ 0: every brick takes exactly this many mean bits (overrides mean_step)
 };

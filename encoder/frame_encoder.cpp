@@ -502,7 +502,7 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
     if (!(settings_.max_error >= 0 && std::isfinite(settings_.max_error)))
       throw InputError("--max-error must be positive and finite");
     if (settings_.mean_bits < -1 || settings_.mean_bits > static_cast<int>(VR_MEAN_BITS))
-      throw InputError("--mean-bits must be auto or 0..12");
+      throw InputError("--mean-bits must be auto or 0..15");
     if (!(settings_.mean_step_factor > 0 && std::isfinite(settings_.mean_step_factor)))
       throw InputError("the mean step factor must be positive and finite");
     if (settings_.fixed_sparsity == 0 && settings_.rule == VariableRateRule::lagrangian &&

@@ -25,10 +25,10 @@ inline std::vector<float> random_atoms(SplitMix64& rng, std::uint32_t count) {
   return atoms;
 }
 
-/// A ksvd payload. `style` picks the pattern: 0 random widths (mean bits 0..12, sparsity bits
+/// A ksvd payload. `style` picks the pattern: 0 random widths (mean bits 0..15, sparsity bits
 /// 0..6, magnitude bits 1..16, atom bits from K up to 16), sparsities, codes and means; 1 every
 /// block at sparsity 63; 2 every block at sparsity 0; 3 extreme fields (atoms 0 and K−1,
-/// magnitudes 1 and 2^16, 12-bit means 0 and 4095, sparsities up to 255 in 8-bit fields,
+/// magnitudes 1 and 2^16, 15-bit means 0 and 32767, sparsities up to 255 in 8-bit fields,
 /// escaped gaps and values); 4 like 0 with negative scales. Values of both signs, most small
 /// (the entropy coder's common case), some at the largest magnitude (escapes).
 inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t atom_count,

@@ -254,8 +254,8 @@ void add_encode_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--mean-bits", o->mean_bits,
                   "Bits of each brick's quantized block means: auto (variable rate: per brick the "
-                  "fewest bits, 0..12,\n"
-                  "whose step is at most eps/2; fixed rate: 12) or 0..12 for every brick")
+                  "fewest bits, 0..15,\n"
+                  "whose step is at most eps/2; fixed rate: 12) or 0..15 for every brick")
       ->capture_default_str();
   cmd->add_option("--coef-bits", o->coef_bits,
                   "Magnitude bits of each brick's quantized coefficients: auto (variable rate: "

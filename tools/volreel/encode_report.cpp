@@ -73,8 +73,8 @@ void print_breakdown(const encoder::EncodeSummary& s) {
   for (std::size_t k = 0; k < s.mean_bits_histogram.size(); ++k)
     bricks += s.mean_bits_histogram[k], bits += k * s.mean_bits_histogram[k];
   const double brick_count = static_cast<double>(std::max<std::size_t>(bricks, 1));
-  std::printf("\nmean bits per brick: mean %.2f; bricks with 0..12 bits (%%):",
-              static_cast<double>(bits) / brick_count);
+  std::printf("\nmean bits per brick: mean %.2f; bricks with 0..%zu bits (%%):",
+              static_cast<double>(bits) / brick_count, s.mean_bits_histogram.size() - 1);
   for (std::size_t count : s.mean_bits_histogram)
     std::printf(" %.1f", 100.0 * static_cast<double>(count) / brick_count);
   std::printf("\n");
@@ -118,7 +118,7 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
     else
       std::fprintf(stderr,
                    "warning: %zu blocks miss the pointwise bound %.4g even with 16-bit "
-                   "coefficients (12-bit block means are too coarse for it); volreel compare "
+                   "coefficients (15-bit block means are too coarse for it); volreel compare "
                    "prints the largest error\n",
                    s.blocks_over_bound, c.max_error);
   }

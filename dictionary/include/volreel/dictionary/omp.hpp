@@ -84,10 +84,12 @@ inline constexpr double default_encoding_psnr = 55.0;
 /// Sparse codes of n blocks, with max_atoms slots per block (slots past count(i) are unused).
 struct SparseCodes {
   int max_atoms = 0;
-  std::vector<std::uint8_t> count;     ///< atoms used by block i
-  std::vector<std::int32_t> atom;      ///< n × max_atoms atom indices, in the order OMP chose them
-  std::vector<float> coefficient;      ///< n × max_atoms coefficients
-  std::vector<float> residual_energy;  ///< ‖y − Dγ‖₂² of block i (from OMP's update formula)
+  std::vector<std::uint8_t> count;  ///< atoms used by block i
+  std::vector<std::int32_t> atom;   ///< n × max_atoms atom indices, in the order OMP chose them
+  std::vector<float> coefficient;   ///< n × max_atoms coefficients
+  /// ‖y − Dγ‖₂² of block i: computed from y and the code where the pursuit stopped at the
+  /// tolerance, else its running estimate (BatchOmp::encode)
+  std::vector<float> residual_energy;
 
   void resize(std::size_t blocks, int slots);
   std::size_t size() const { return count.size(); }
@@ -111,7 +113,9 @@ class BatchOmp {
   /// Codes every column of `blocks` (m × n, zero-mean). codes is resized to n. gain_weights: empty,
   /// or n values ≥ 0, the importance of each block's error in the rate-distortion stop: block i
   /// stops before an atom whose gain × gain_weights[i] is below min_atom_gain (0: no atoms, unless
-  /// the max_error bound asks for them). Throws std::invalid_argument on a size mismatch.
+  /// the max_error bound asks for them). A block whose pursuit stops at the tolerance is checked
+  /// against its computed residual and continued while it misses it (docs/design.md, "Pursuit").
+  /// Throws std::invalid_argument on a size mismatch.
   void encode(const Eigen::Ref<const Eigen::MatrixXf>& blocks, SparseCodes& codes,
               const std::vector<float>& gain_weights = {}) const;
 

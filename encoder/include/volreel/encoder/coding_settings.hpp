@@ -37,7 +37,7 @@ const char* codec_name(format::Codec codec);
 /// The inverse; throws InputError naming --codec and the value on another name.
 format::Codec codec_from_name(const std::string& name);
 
-/// CodingSettings::mean_bits from its command-line text: "auto" (-1) or a whole number 0..12;
+/// CodingSettings::mean_bits from its command-line text: "auto" (-1) or a whole number 0..15;
 /// throws InputError naming --mean-bits and the text otherwise.
 int mean_bits_from_text(const std::string& text);
 /// CodingSettings::coef_bits from its command-line text: "auto" (-1) or a whole number 1..16;
@@ -84,9 +84,9 @@ struct CodingSettings {
   /// see dictionary::AtomSelection.
   dictionary::AtomSelection selection = dictionary::AtomSelection::error;
   /// ksvd: the bits b of each brick's quantized block means (format/SPEC.md, the layout word). -1:
-  /// variable rate gives each brick the fewest bits (0..12) whose step over the span of its block
+  /// variable rate gives each brick the fewest bits (0..15) whose step over the span of its block
   /// means is at most mean_step_factor·ε_l (ε_l: the brick's level's tolerance, see
-  /// level_tolerance_factor), fixed rate (no ε) 12 bits; 0..12: every brick exactly b bits.
+  /// level_tolerance_factor), fixed rate (no ε) 12 bits; 0..15: every brick exactly b bits.
   int mean_bits = -1;
   /// The mean step as a fraction of ε. A mean off by e adds 216·e² to its block's squared error,
   /// so halving the step gains 13.5·step² for one more bit per block; the Lagrangian rule buys

@@ -15,6 +15,7 @@
 #include "volreel/dictionary/omp.hpp"
 #include "volreel/encoder/coding_settings.hpp"
 #include "volreel/encoder/pyramid.hpp"
+#include "volreel/format/brick_decode.h"
 #include "volreel/format/frame_file.hpp"
 
 namespace volreel::encoder {
@@ -62,7 +63,8 @@ struct FrameStats {
   double unquantized_squared_error = 0, quantized_squared_error = 0;
   ByteBreakdown breakdown;
   std::array<std::size_t, 256> sparsity_histogram{};  ///< coded blocks (ksvd) by atom count
-  std::array<std::size_t, 13> mean_bits_histogram{};  ///< coded bricks (ksvd) by mean bits
+  std::array<std::size_t, VR_MEAN_BITS + 1>
+      mean_bits_histogram{};                          ///< coded bricks (ksvd) by mean bits
   std::array<std::size_t, 17> coef_bits_histogram{};  ///< coded bricks (ksvd) by magnitude bits
   std::uint64_t code_bits = 0;  ///< ksvd: bits of the code streams (padding excluded)
   /// Blocks that missed the pointwise bound (CodingSettings::max_error) even with 16-bit

@@ -19,6 +19,7 @@
 #include "volreel/encoder/frame_encoder.hpp"
 #include "volreel/encoder/keyframes.hpp"
 #include "volreel/encoder/ranks.hpp"
+#include "volreel/format/brick_decode.h"
 
 namespace volreel::encoder {
 
@@ -94,7 +95,7 @@ struct EncodeSummary {
   double unquantized_squared_error = 0, quantized_squared_error = 0;  ///< FrameStats', summed
   ByteBreakdown breakdown;                                            ///< of the frames encoded
   std::array<std::size_t, 256> sparsity_histogram{};                  ///< FrameStats', summed
-  std::array<std::size_t, 13> mean_bits_histogram{};                  ///< FrameStats', summed
+  std::array<std::size_t, VR_MEAN_BITS + 1> mean_bits_histogram{};    ///< FrameStats', summed
   std::array<std::size_t, 17> coef_bits_histogram{};                  ///< FrameStats', summed
   std::uint64_t code_bits = 0;                                        ///< FrameStats', summed
   std::size_t blocks_over_bound = 0;                                  ///< FrameStats', summed

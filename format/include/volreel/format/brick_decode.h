@@ -65,7 +65,7 @@ VR_INLINE float vr_as_float(vr_uint bits) {
 #define vr_as_float(bits) uintBitsToFloat(bits)
 #endif
 
-/* Constants of format version 5 (SPEC.md). */
+/* Constants of format version 7 (SPEC.md). */
 #define VR_BRICK_SIZE 36u        /* stored voxels per axis: interior + 2·apron */
 #define VR_BRICK_INTERIOR 34u    /* interior voxels per axis */
 #define VR_BLOCK_SIZE 6u         /* M */
@@ -73,7 +73,7 @@ VR_INLINE float vr_as_float(vr_uint bits) {
 #define VR_BLOCKS_PER_AXIS 6u    /* blocks per brick axis */
 #define VR_BLOCKS_PER_BRICK 216u /* 6³ blocks per brick, x fastest */
 #define VR_HEADER_WORDS 5u       /* three f32 dequantization values, layout and band words */
-#define VR_MEAN_BITS 12u         /* the most bits of a quantized mean */
+#define VR_MEAN_BITS 15u         /* the most bits of a quantized mean */
 #define VR_MAX_SPARSITY_BITS 8u  /* the widest sparsity field: at most 255 atoms a block */
 #define VR_MAX_COEF_BITS 16u     /* the most magnitude bits: |q| ≤ 2^16 */
 #define VR_MAX_ATOM_BITS 16u     /* the widest atom index */
@@ -95,7 +95,7 @@ VR_INLINE vr_uint vr_read_bits(VR_PAYLOAD_PARAM vr_uint first_word, vr_uint bit,
 }
 
 /* Word 3, the layout word (a reader checks every field's range):
- *   bits 0..3    mean bits b         (0..12)  bits of each block's quantized mean
+ *   bits 0..3    mean bits b         (0..15)  bits of each block's quantized mean
  *   bits 4..7    sparsity bits t     (0..8)   width of each block's sparsity field
  *   bits 8..12   magnitude bits c    (1..16)  every quantized coefficient has |q| ≤ 2^c; an
  *                                             escaped value is |q| − 1 in c bits
@@ -134,7 +134,7 @@ VR_INLINE vr_uint vr_make_layout(vr_uint mean_bits, vr_uint sparsity_bits, vr_ui
 VR_INLINE vr_uint vr_band_word(VR_PAYLOAD_PARAM_ONLY) {
   return VR_LOAD_WORD(4u);
 }
-/* Width of a block entry, t + b (0..20). */
+/* Width of a block entry, t + b (0..23). */
 VR_INLINE vr_uint vr_layout_entry_bits(vr_uint layout_word) {
   return vr_layout_sparsity_bits(layout_word) + vr_layout_mean_bits(layout_word);
 }

@@ -22,7 +22,7 @@ struct AtomTable {
 struct KsvdPayloadLayout {
   std::uint32_t word = 0;           ///< the layout word (word 3)
   std::uint32_t band_word = 0;      ///< the magnitudes' Rice parameters (word 4)
-  std::uint32_t mean_bits = 0;      ///< b, 0..12
+  std::uint32_t mean_bits = 0;      ///< b, 0..15
   std::uint32_t sparsity_bits = 0;  ///< t, 0..8
   std::uint32_t coef_bits = 0;      ///< c, 1..16: every |q| ≤ 2^c
   std::uint32_t atom_bits = 0;      ///< a, 1..16
@@ -50,7 +50,7 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::
                                      std::uint64_t at);
 
 /// The parts of a ksvd brick payload before packing: the three dequantization values (mean_bias,
-/// mean_scale, coef_scale), the field widths (mean bits b 0..12, sparsity bits t 0..8, magnitude
+/// mean_scale, coef_scale), the field widths (mean bits b 0..15, sparsity bits t 0..8, magnitude
 /// bits c 1..16, atom bits a 1..16), the entropy coder's two parameters, per block its sparsity
 /// (< 2^t) and quantized mean (< 2^b), and the codes of all blocks in block order, each block's
 /// in increasing atom order (atom index < 2^a, quantized value q ≠ 0 with |q| ≤ 2^c).

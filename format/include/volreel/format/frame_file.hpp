@@ -20,7 +20,7 @@ static_assert(std::endian::native == std::endian::little, "volreel's files are l
 
 inline constexpr std::array<char, 8> frame_magic = {'V', 'R', 'E', 'E', 'L', 'F', 'R', 'M'};
 /// Version of the frame file layout, independent of the program version.
-inline constexpr std::uint32_t frame_format_version = 6;
+inline constexpr std::uint32_t frame_format_version = 7;
 
 inline constexpr std::uint32_t brick_size = 36;      ///< stored voxels per brick axis
 inline constexpr std::uint32_t brick_interior = 34;  ///< interior voxels per brick axis
