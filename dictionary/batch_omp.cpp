@@ -348,9 +348,9 @@ constexpr int max_continuations = 4;
 /// 80 dB whatever ε asked. So when a pursuit stops because its estimate met the target, the
 /// residual is computed from y and the code (in double), and while it misses the target a new
 /// pursuit codes it (α⁰ = Dᵀr), with the same rules and the atoms left; its atoms join the code,
-/// and the coefficients of an atom taken twice add up. The quantizer refits the coefficients
-/// (least squares on the support) later. Returns the number of atoms; `*residual` is the computed
-/// ‖r‖² when the last pass stopped at the target.
+/// and the coefficients of an atom taken twice add up (the quantizer refits blocks of up to
+/// max_refit_atoms atoms by least squares on the support; larger ones keep these sums). Returns the
+/// number of atoms; `*residual` is the computed ‖r‖² when the last pass stopped at the target.
 template <class Pursuit>
 int refine_on_residual(const float* y, const Eigen::MatrixXf& atoms, const StopRule& rule,
                        int count, Pursuit&& pursue, ResidualWorkspace& rw, std::int32_t* atom_out,

@@ -80,8 +80,11 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
 /// which would read as a constant brick). Throws std::runtime_error if zfp fails.
 std::vector<std::byte> zfp_payload(const float* brick, double accuracy);
 
-/// `count` frames of the first `frames`, evenly spaced (the middle one if count is 1), read into
-/// memory: the samples that size estimates encode.
+/// The indices of `count` frames of the first `frames`, evenly spaced (the middle one if count is
+/// 1), in increasing order.
+std::vector<std::size_t> evenly_spaced_indices(std::size_t frames, std::size_t count);
+
+/// Those frames read into memory: the samples that size estimates encode.
 std::vector<Volume> evenly_spaced_frames(const datasets::SeriesReader& series, std::size_t frames,
                                          std::size_t count);
 

@@ -22,12 +22,19 @@ double manifest_estimate(std::size_t frames) {
 
 }  // namespace
 
+std::vector<std::size_t> detail::evenly_spaced_indices(std::size_t frames, std::size_t count) {
+  std::vector<std::size_t> indices;
+  const std::size_t n = std::min(count, frames);
+  for (std::size_t i = 0; i < n; ++i)
+    indices.push_back(n == 1 ? frames / 2 : i * (frames - 1) / (n - 1));
+  return indices;
+}
+
 std::vector<Volume> detail::evenly_spaced_frames(const datasets::SeriesReader& series,
                                                  std::size_t frames, std::size_t count) {
   std::vector<Volume> samples;
-  const std::size_t n = std::min(count, frames);
-  for (std::size_t i = 0; i < n; ++i)
-    samples.push_back(series.read_frame(n == 1 ? frames / 2 : i * (frames - 1) / (n - 1)));
+  for (std::size_t i : evenly_spaced_indices(frames, count))
+    samples.push_back(series.read_frame(i));
   return samples;
 }
 
@@ -46,40 +53,58 @@ RateSearch search_tolerance(const datasets::SeriesReader& series,
                      " is below what the dictionary and manifest alone take (" +
                      std::to_string(floor_bps) +
                      " bps): use a smaller dictionary (volreel train --atoms) or more frames");
-  // 1. Sample frames, evenly spaced, in memory.
-  const std::vector<Volume> samples = detail::evenly_spaced_frames(series, frames, sample_frames);
+  // 1. Sample frames, evenly spaced; a trial reads and encodes them one at a time.
+  std::vector<std::size_t> sample = detail::evenly_spaced_indices(frames, sample_frames);
   const double range = tolerance_range(settings.value_min, settings.value_max);
   settings.fixed_sparsity = 0;
+  RateSearch r;
   const auto estimate = [&](double eps) {
     settings.tolerance = eps;
     const FrameEncoder encoder(&dictionary, settings);
     double bytes = 0;
-    for (std::size_t i = 0; i < samples.size(); ++i)
-      bytes += static_cast<double>(encoder.encode(i, samples[i]).size());
+    for (std::size_t i : sample)
+      bytes += static_cast<double>(encoder.encode(i, series.read_frame(i)).size());
+    ++r.iterations;
     return 8 *
-           (bytes / static_cast<double>(samples.size()) * static_cast<double>(frames) +
+           (bytes / static_cast<double>(sample.size()) * static_cast<double>(frames) +
             fixed_bytes) /
            voxels;
   };
   // 2. Bracket in log ε (bps falls as ε grows), then bisect geometrically.
-  RateSearch r;
-  double lo = range * 1e-4, hi = range * 1e-2;
-  double bps_lo = estimate(lo), bps_hi = estimate(hi);
-  r.iterations = 2;
-  while (bps_lo < target_bps && lo > range * 1e-9) lo /= 4, bps_lo = estimate(lo), ++r.iterations;
-  while (bps_hi > target_bps && hi < range) hi *= 4, bps_hi = estimate(hi), ++r.iterations;
-  r.tolerance = std::abs(bps_lo - target_bps) < std::abs(bps_hi - target_bps) ? lo : hi;
-  r.estimated_bps = r.tolerance == lo ? bps_lo : bps_hi;
-  for (int i = 0; i < 30 && std::abs(r.estimated_bps - target_bps) > relative * target_bps; ++i) {
-    const double mid = std::sqrt(lo * hi);
-    const double bps = estimate(mid);
-    ++r.iterations;
-    r.tolerance = mid;
+  const auto search = [&](double lo, double hi) {
+    double bps_lo = estimate(lo), bps_hi = estimate(hi);
+    while (bps_lo < target_bps && lo > range * 1e-9) lo /= 4, bps_lo = estimate(lo);
+    while (bps_hi > target_bps && hi < range) hi *= 4, bps_hi = estimate(hi);
+    r.tolerance = std::abs(bps_lo - target_bps) < std::abs(bps_hi - target_bps) ? lo : hi;
+    r.estimated_bps = r.tolerance == lo ? bps_lo : bps_hi;
+    for (int i = 0; i < 30 && std::abs(r.estimated_bps - target_bps) > relative * target_bps; ++i) {
+      const double mid = std::sqrt(lo * hi);
+      const double bps = estimate(mid);
+      r.tolerance = mid;
+      r.estimated_bps = bps;
+      (bps > target_bps ? lo : hi) = mid;
+      progress.report(i + 1, 30,
+                      "eps " + std::to_string(mid) + " -> " + std::to_string(bps) + " bps");
+    }
+  };
+  search(range * 1e-4, range * 1e-2);
+  // 3. The ε found, checked on as many frames again, evenly spaced among the others: a sequence
+  //    whose frames differ in cost (a flow going from smooth to turbulent and back) can mislead
+  //    the first sample by 20 % and more. Where the estimate over both misses the target, the
+  //    search runs again on both, near the ε found; at most rate_check_rounds times.
+  for (int round = 0; round < rate_check_rounds && sample.size() < frames; ++round) {
+    std::vector<std::size_t> rest;
+    for (std::size_t i = 0; i < frames; ++i)
+      if (!std::binary_search(sample.begin(), sample.end(), i)) rest.push_back(i);
+    for (std::size_t k : detail::evenly_spaced_indices(rest.size(), sample_frames))
+      sample.push_back(rest[k]);
+    std::sort(sample.begin(), sample.end());
+    const double bps = estimate(r.tolerance);
     r.estimated_bps = bps;
-    (bps > target_bps ? lo : hi) = mid;
-    progress.report(i + 1, 30,
-                    "eps " + std::to_string(mid) + " -> " + std::to_string(bps) + " bps");
+    if (std::abs(bps - target_bps) <= relative * target_bps) break;
+    search(r.tolerance / 2, r.tolerance * 2);
   }
+  r.sample_frames = sample.size();
   return r;
 }
 

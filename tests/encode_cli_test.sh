@@ -88,7 +88,7 @@ if "$volreel" bench index --help > /dev/null 2>&1; then
 fi
 
 # The pointwise bound: every value of the finest level within E (compare's max error), and a
-# container of format version 3 refused with the message to encode again.
+# container of an older format version refused with the message to encode again.
 "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/m.vreel" --max-error 2e-3 \
   > "$work/max.txt" 2>&1 || fail "encode --max-error: $(cat "$work/max.txt")"
 grep -q "pointwise bound: every coded block within" "$work/max.txt" || fail "--max-error report: $(cat "$work/max.txt")"

@@ -95,6 +95,56 @@ TEST_F(SmallSeries, ABitsPerVoxelTargetIsMetByTheRateSearch) {
   }
 }
 
+// A sequence whose frames differ in cost: frames 0, 2 and 5 (the three evenly spaced samples of
+// six) are a smooth field, frames 1, 3 and 4 white noise. The first sample misjudges the sequence
+// by far; the check on the other frames finds it and searches again on all six, so that the
+// estimate is the container's.
+TEST(Tolerance, TheRateSearchChecksItsEpsilonOnOtherFrames) {
+  test::TempDir dir("rate_check");
+  datasets::AnalyticParams smooth, rough;
+  smooth.field = datasets::AnalyticField::blobs;
+  rough.field = datasets::AnalyticField::noise;
+  smooth.dims = rough.dims = {36, 34, 30};
+  smooth.frames = rough.frames = 6;
+  {
+    datasets::RawSeriesWriter w(dir / "series", smooth.dims, "mixed");
+    std::vector<float> frame(smooth.dims.voxels());
+    for (std::size_t t = 0; t < 6; ++t) {
+      const bool noisy = t == 1 || t == 3 || t == 4;
+      datasets::analytic_frame(noisy ? rough : smooth, t, frame);
+      if (noisy)  // into the smooth frames' range, so that ε means the same in both
+        for (float& v : frame) v = 0.5f + 0.1f * v;
+      w.write_frame(t, static_cast<double>(t), frame);
+    }
+    w.finish();
+  }
+  const auto series = datasets::open_series(dir / "series");
+  encoder::CodingSettings coding;
+  std::tie(coding.value_min, coding.value_max) = encoder::value_range(*series, 0);
+  const auto d = test::random_dictionary(64, 5);
+  const std::uint64_t dictionary_bytes = format::dictionary_file_size(64, 216, false);
+  const double target = 3;
+  const auto r =
+      encoder::search_tolerance(*series, d, dictionary_bytes, coding, target, 6, 3, 0.03);
+  EXPECT_EQ(r.sample_frames, 6u);
+  EXPECT_NEAR(r.estimated_bps, target, 0.03 * target);
+  // The estimate is what the six frames cost at that ε, with the dictionary and about a
+  // manifest's bytes (search_tolerance's estimate, 900 + 70 per frame).
+  coding.tolerance = r.tolerance;
+  const encoder::FrameEncoder encoder(&d, coding);
+  double bytes = 0, sampled = 0;
+  for (std::size_t t = 0; t < 6; ++t) {
+    const auto size = static_cast<double>(encoder.encode(t, series->read_frame(t)).size());
+    bytes += size;
+    if (t == 0 || t == 2 || t == 5) sampled += 2 * size;
+  }
+  const double voxels = 6.0 * static_cast<double>(series->info().dims.voxels());
+  const double fixed = static_cast<double>(dictionary_bytes) + 900 + 70 * 6;
+  EXPECT_LT(std::abs(8 * (bytes + fixed) / voxels - target), 0.05 * target);
+  // The first sample alone would have been far off at that ε.
+  EXPECT_GT(std::abs(sampled - bytes), 0.3 * bytes);
+}
+
 TEST(Tolerance, ADictionaryIsTrainedAtTheToleranceOrPsnrAskedElseTheEncodingDefault) {
   encoder::ToleranceRequest request;
   EXPECT_DOUBLE_EQ(encoder::tolerance_to_train_at(request, 2.0),

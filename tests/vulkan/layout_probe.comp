@@ -39,8 +39,8 @@ void main() {
     }
   }
   // Layout words of every width and parameter.
-  const uint other = vr_make_layout(i % 13u, (i / 13u) % 9u, 1u + (i / 117u) % 16u,
-                                    1u + (i / 1872u) % 16u, (i / 3u) % 4u, i % 4096u);
+  const uint other = vr_make_layout(i % 16u, (i / 16u) % 9u, 1u + (i / 144u) % 16u,
+                                    1u + (i / 2304u) % 16u, (i / 3u) % 4u, i % 4096u);
   const uint entry = vr_block_entry(layout_word, i % VR_BLOCKS_PER_BRICK);
   uint rice_bit = (i * 7u) % 900u;
   const uint rice = vr_read_rice(0u, rice_bit, i % 16u, 1u + i % 16u);

@@ -95,8 +95,8 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
   for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
     for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) {
       const std::uint32_t i = b * 216 + v;
-      const vr_uint other = vr_make_layout(i % 13, (i / 13) % 9, 1 + (i / 117) % 16,
-                                           1 + (i / 1872) % 16, (i / 3) % 4, i % 4096);
+      const vr_uint other = vr_make_layout(i % 16, (i / 16) % 9, 1 + (i / 144) % 16,
+                                           1 + (i / 2304) % 16, (i / 3) % 4, i % 4096);
       const vr_uint entry = vr_block_entry(p, layout_word, i % VR_BLOCKS_PER_BRICK);
       vr_uint rice_bit = (i * 7) % 900;
       const vr_uint rice = vr_read_rice(p, 0, rice_bit, i % 16, 1 + i % 16);

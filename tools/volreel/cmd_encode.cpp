@@ -163,11 +163,12 @@ void run_encode(const EncodeOptions& o) {
   };
   events.tolerance_chosen = [&](const encoder::ToleranceChoice& eps,
                                 const encoder::CodingSettings& c, std::uint32_t atoms) {
-    print_tolerance_choice(eps, c, o.bps, std::min(o.rate_sample_frames, frames),
-                           encoder::tolerance_range(c.value_min, c.value_max), atoms);
+    print_tolerance_choice(eps, c, o.bps, encoder::tolerance_range(c.value_min, c.value_max),
+                           atoms);
   };
   const encoder::EncodeSummary s = encoder::encode(*series, o.out, r, events);
-  print_encode_summary(s, s.coding, o.out, r.tolerance.psnr.value_or(0));
+  print_encode_summary(s, s.coding, o.out, r.tolerance.psnr.value_or(0),
+                       r.tolerance.bps.value_or(0));
   const std::uint64_t rss = peak_resident_bytes();
   const std::vector<std::uint64_t> each =
       ranks ? ranks->gather({&rss, 1}) : std::vector<std::uint64_t>{rss};
@@ -298,7 +299,9 @@ void add_encode_command(CLI::App& app) {
                   "of bricks at a time,\n"
                   "with keyframe gap 1 and a dictionary given; smaller frames lower the default "
                   "keyframe gap to fit");
-  cmd->add_option("--rate-sample-frames", o->rate_sample_frames, "--bps: frames encoded per trial")
+  cmd->add_option("--rate-sample-frames", o->rate_sample_frames,
+                  "--bps: frames encoded per trial, evenly spaced; the eps found is checked on as "
+                  "many others\n(twice at most) and searched again where they disagree")
       ->capture_default_str();
   cmd->add_flag("--resume", o->resume,
                 "Continue an interrupted encode: keep frames already written and valid");

@@ -4,6 +4,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <string>
 #include <utility>
@@ -83,8 +84,7 @@ void print_breakdown(const encoder::EncodeSummary& s) {
 }  // namespace
 
 void print_tolerance_choice(const encoder::ToleranceChoice& e, const encoder::CodingSettings& c,
-                            double target_bps, std::size_t sample_frames, double range,
-                            std::uint32_t atoms) {
+                            double target_bps, double range, std::uint32_t atoms) {
   using Source = encoder::ToleranceSource;
   if (e.source == Source::fixed_rate)
     std::printf("fixed rate: %d atoms per block\n", c.fixed_sparsity);
@@ -93,7 +93,7 @@ void print_tolerance_choice(const encoder::ToleranceChoice& e, const encoder::Co
         "rate control: eps %.4g gives an estimated %.4f bps (target %.4f) after %d trial encodes "
         "of %zu frames\n",
         e.rate_search.tolerance, e.rate_search.estimated_bps, target_bps, e.rate_search.iterations,
-        sample_frames);
+        e.rate_search.sample_frames);
   if (e.source == Source::dictionary_training)
     std::printf("tolerance from the dictionary's training: ");
   if (c.fixed_sparsity == 0 && c.rule == encoder::VariableRateRule::tolerance)
@@ -111,7 +111,7 @@ void print_tolerance_choice(const encoder::ToleranceChoice& e, const encoder::Co
 }
 
 void print_encode_summary(const encoder::EncodeSummary& s, const encoder::CodingSettings& c,
-                          const std::string& out, double psnr_target) {
+                          const std::string& out, double psnr_target, double bps_target) {
   if (c.max_error > 0) {
     if (s.blocks_over_bound == 0)
       std::printf("pointwise bound: every coded block within %.4g of the original\n", c.max_error);
@@ -150,6 +150,16 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
       s.team_size > 1
           ? (", each frame coded by " + std::to_string(s.team_size) + " processes together").c_str()
           : "");
+  if (bps_target > 0 && std::abs(s.bps - bps_target) > bps_tolerance * bps_target) {
+    const bool under = s.bps < bps_target;
+    std::fflush(stdout);
+    std::fprintf(stderr,
+                 "warning: target %.4f bps missed: the container is %.4f bps (%+.1f %%) at eps "
+                 "%.4g; the rate search's sample frames cost %s than the sequence's average: "
+                 "encode again with a larger --rate-sample-frames, or with a %s --tolerance\n",
+                 bps_target, s.bps, 100.0 * (s.bps / bps_target - 1), c.tolerance,
+                 under ? "more" : "less", under ? "smaller" : "larger");
+  }
   const std::size_t node_steps = s.bricks_stored + s.nodes_interpolated;
   if (s.nodes_interpolated > 0)
     std::printf(

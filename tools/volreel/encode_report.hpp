@@ -14,14 +14,18 @@ namespace volreel::cli {
 /// sample_frames: the --bps search's target and frames per trial; range: max − min of the
 /// values; atoms: K of the dictionary.
 void print_tolerance_choice(const encoder::ToleranceChoice& choice,
-                            const encoder::CodingSettings& coding, double target_bps,
-                            std::size_t sample_frames, double range, std::uint32_t atoms);
+                            const encoder::CodingSettings& coding, double target_bps, double range,
+                            std::uint32_t atoms);
 
 /// The encode's times, quantization loss, byte breakdown, histograms and totals (written to
 /// `out`).
-/// psnr_target: the --psnr of the encode (0: none), reported as met or missed.
+/// psnr_target: the --psnr of the encode (0: none), reported as met or missed; bps_target: the
+/// --bps (0: none), a warning when the container lands more than bps_tolerance from it.
 void print_encode_summary(const encoder::EncodeSummary& summary,
                           const encoder::CodingSettings& coding, const std::string& out,
-                          double psnr_target = 0);
+                          double psnr_target = 0, double bps_target = 0);
+
+/// How far from --bps a container may land before the encode warns: 5 %.
+inline constexpr double bps_tolerance = 0.05;
 
 }  // namespace volreel::cli

@@ -88,7 +88,8 @@ struct SparseCodes {
   std::vector<std::int32_t> atom;   ///< n × max_atoms atom indices, in the order OMP chose them
   std::vector<float> coefficient;   ///< n × max_atoms coefficients
   /// ‖y − Dγ‖₂² of block i: computed from y and the code where the pursuit stopped at the
-  /// tolerance, else its running estimate (BatchOmp::encode)
+  /// tolerance, else (another stop, or the last continuation's) the pursuit's running estimate
+  /// (BatchOmp::encode)
   std::vector<float> residual_energy;
 
   void resize(std::size_t blocks, int slots);

@@ -16,12 +16,15 @@
 namespace volreel::encoder {
 
 /// Rate control for --bps: ε such that the container's bps, estimated from `sample_frames` evenly
-/// spaced frames (encoded in memory) plus the dictionary, is within `relative` of target_bps.
-/// Returns ε and the estimated bps.
+/// spaced frames (encoded in memory, one at a time) plus the dictionary, is within `relative` of
+/// target_bps; then checked on as many other frames, and searched again on all of them where the
+/// estimate misses (at most rate_check_rounds times). Returns ε and the estimated bps.
 struct RateSearch {
   double tolerance = 0, estimated_bps = 0;
-  int iterations = 0;
+  int iterations = 0;             ///< trial encodes of the sample
+  std::size_t sample_frames = 0;  ///< frames in the final estimate
 };
+inline constexpr int rate_check_rounds = 2;
 RateSearch search_tolerance(const datasets::SeriesReader& series,
                             const dictionary::Dictionary& dictionary,
                             std::uint64_t dictionary_bytes, CodingSettings settings,
