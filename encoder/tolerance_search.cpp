@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "detail.hpp"
@@ -58,12 +60,17 @@ RateSearch search_tolerance(const datasets::SeriesReader& series,
   const double range = tolerance_range(settings.value_min, settings.value_max);
   settings.fixed_sparsity = 0;
   RateSearch r;
+  // Each (ε, frame)'s bytes once encoded: the check (step 3) encodes only the frames it adds.
+  std::map<std::pair<double, std::size_t>, double> sized;
   const auto estimate = [&](double eps) {
     settings.tolerance = eps;
     const FrameEncoder encoder(&dictionary, settings);
     double bytes = 0;
-    for (std::size_t i : sample)
-      bytes += static_cast<double>(encoder.encode(i, series.read_frame(i)).size());
+    for (std::size_t i : sample) {
+      auto [at, added] = sized.try_emplace({eps, i}, 0.0);
+      if (added) at->second = static_cast<double>(encoder.encode(i, series.read_frame(i)).size());
+      bytes += at->second;
+    }
     ++r.iterations;
     return 8 *
            (bytes / static_cast<double>(sample.size()) * static_cast<double>(frames) +

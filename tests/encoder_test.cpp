@@ -1163,24 +1163,37 @@ TEST(DctAtoms, AreGeneratedByTheReaderNotStored) {
   EXPECT_THROW(format::serialize_dictionary_file(bad), format::FormatError);
 }
 
+/// One frame of `field` coded at each nominal PSNR in turn: the finest level's delivered PSNR
+/// and the frame's bytes.
+std::vector<std::pair<double, std::size_t>> delivered_at_nominal_psnr(
+    datasets::AnalyticField field, const dictionary::Dictionary& d,
+    std::initializer_list<double> nominal) {
+  const Volume v = analytic_volume(field, {40, 36, 34}, 2);
+  const auto [mn, mx] = std::minmax_element(v.data.begin(), v.data.end());
+  const double range = static_cast<double>(*mx) - static_cast<double>(*mn);
+  std::vector<std::pair<double, std::size_t>> out;
+  for (double psnr : nominal) {
+    const auto bytes =
+        encoder::FrameEncoder(&d, ksvd_settings(dictionary::tolerance_for_psnr(psnr, range), v))
+            .encode(0, v);
+    out.emplace_back(finest_level_error(bytes, d, v).first, bytes.size());
+  }
+  return out;
+}
+
 // The quality ceiling of fixed-width codes, 15 atoms and a dictionary that does not span the
 // blocks is gone: with the DCT part and a coefficient step that follows ε, the PSNR keeps rising
 // as ε falls, past 65 dB, on white noise, which no dictionary was trained on.
 TEST(Encoder, QualityKeepsRisingWithoutACeiling) {
-  const Volume v = analytic_volume(datasets::AnalyticField::noise, {40, 36, 34}, 2);
-  const auto d = with_dct(random_dictionary(64, 21));
-  const auto [mn, mx] = std::minmax_element(v.data.begin(), v.data.end());
-  const double range = static_cast<double>(*mx) - static_cast<double>(*mn);
   double previous = 0;
   std::size_t previous_bytes = 0;
-  for (double psnr : {40.0, 50.0, 60.0, 70.0, 80.0}) {
-    auto s = ksvd_settings(dictionary::tolerance_for_psnr(psnr, range), v);
-    const auto bytes = encoder::FrameEncoder(&d, s).encode(0, v);
-    const double got = finest_level_error(bytes, d, v).first;
-    EXPECT_GT(got, previous + 4) << "nominal " << psnr << " dB";
-    EXPECT_GT(bytes.size(), previous_bytes);
+  for (const auto& [got, bytes] : delivered_at_nominal_psnr(datasets::AnalyticField::noise,
+                                                            with_dct(random_dictionary(64, 21)),
+                                                            {40.0, 50.0, 60.0, 70.0, 80.0})) {
+    EXPECT_GT(got, previous + 4) << "after " << previous << " dB";
+    EXPECT_GT(bytes, previous_bytes);
     previous = got;
-    previous_bytes = bytes.size();
+    previous_bytes = bytes;
   }
   EXPECT_GT(previous, 65.0);  // white noise needs nearly every atom: no ceiling below that
 }
@@ -1188,15 +1201,11 @@ TEST(Encoder, QualityKeepsRisingWithoutACeiling) {
 // A smooth field keeps rising too, past where format 6's 12-bit block means (about 84 dB on it) and
 // the pursuit's float estimate of the residual (about 80 dB on smooth blocks) used to stop it.
 TEST(Encoder, SmoothFieldKeepsRisingPastEightyDecibels) {
-  const Volume v = analytic_volume(datasets::AnalyticField::blobs, {40, 36, 34}, 2);
-  const auto d = with_dct(random_dictionary(64, 22));
-  const auto [mn, mx] = std::minmax_element(v.data.begin(), v.data.end());
-  const double range = static_cast<double>(*mx) - static_cast<double>(*mn);
   double previous = 0;
-  for (double psnr : {70.0, 80.0, 90.0, 100.0}) {
-    auto s = ksvd_settings(dictionary::tolerance_for_psnr(psnr, range), v);
-    const double got = finest_level_error(encoder::FrameEncoder(&d, s).encode(0, v), d, v).first;
-    EXPECT_GT(got, previous + 5) << "nominal " << psnr << " dB";
+  for (const auto& [got, bytes] :
+       delivered_at_nominal_psnr(datasets::AnalyticField::blobs,
+                                 with_dct(random_dictionary(64, 22)), {70.0, 80.0, 90.0, 100.0})) {
+    EXPECT_GT(got, previous + 5) << "after " << previous << " dB";
     previous = got;
   }
   EXPECT_GT(previous, 88.0);
