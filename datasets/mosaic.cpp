@@ -58,7 +58,7 @@ std::vector<MosaicBrick> pool_of(const format::Container& c, std::size_t count) 
     return ca != cb ? cb : a.bytes < b.bytes;
   });
   std::vector<MosaicBrick> pool;
-  std::vector<float> decoded(format::brick_voxels);
+  std::vector<float> decoded(c.manifest().shape().voxels());
   for (const Ref& r : refs) {
     if (pool.size() == count) break;
     const format::FrameView& view = files[r.file].view();
@@ -68,8 +68,8 @@ std::vector<MosaicBrick> pool_of(const format::Container& c, std::size_t count) 
         }))
       continue;
     const format::FrameHeader& h = view.header();
-    format::decode_payload(bytes, view.codec(), h.codec_parameter, c.atoms(), decoded, view.name(),
-                           view.brick_offset(r.brick));
+    format::decode_payload(bytes, view.codec(), h.codec_parameter, c.atoms(), view.shape(), decoded,
+                           view.name(), view.brick_offset(r.brick));
     MosaicBrick brick;
     brick.payload.assign(bytes.begin(), bytes.end());
     for (float v : decoded)
@@ -111,8 +111,8 @@ struct Tree {
   std::vector<std::uint32_t> first_child, child_count;  ///< 0, 0 for a leaf
 };
 
-Tree build_tree(const std::array<std::uint32_t, 3>& dims) {
-  const auto geometry = format::level_geometry(dims);
+Tree build_tree(const std::array<std::uint32_t, 3>& dims, format::BrickShape shape) {
+  const auto geometry = format::level_geometry(dims, shape);
   std::uint64_t nodes = 0;
   for (const auto& g : geometry) nodes += std::uint64_t{g.grid[0]} * g.grid[1] * g.grid[2];
   // The node table's child links hold 30 bits.
@@ -240,7 +240,7 @@ MosaicReport write_mosaic(const MosaicParams& params, const Progress& progress) 
   const format::Container source = open_source(params.source);
   const format::Manifest& from = source.manifest();
   const std::vector<MosaicBrick> pool = pool_of(source, params.pool_bricks);
-  const Tree tree = build_tree(params.dims);
+  const Tree tree = build_tree(params.dims, from.shape());
 
   // The manifest: the source's coding at the mosaic's size and length.
   format::Manifest m;
@@ -252,6 +252,7 @@ MosaicReport write_mosaic(const MosaicParams& params, const Progress& progress) 
              "), for benchmarks";
   for (std::size_t t = 0; t < params.frames; ++t) m.timestamps.push_back(static_cast<double>(t));
   m.block_size = from.block_size;
+  m.brick_size = from.brick_size;
   m.levels = static_cast<std::uint32_t>(tree.levels.size());
   m.codec = from.codec;
   m.tolerance = from.tolerance;
@@ -290,6 +291,7 @@ MosaicReport write_mosaic(const MosaicParams& params, const Progress& progress) 
   format::FrameHeader header{};
   header.codec = static_cast<std::uint32_t>(m.codec);
   for (std::size_t a = 0; a < 3; ++a) header.dims[a] = m.dims[a];
+  header.brick_size = m.brick_size;
   header.block_size = m.block_size;
   header.atom_count = m.dictionary ? m.dictionary->atom_count : 0;
   header.value_min = static_cast<float>(m.value_min);

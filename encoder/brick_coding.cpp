@@ -15,9 +15,6 @@
 
 namespace volreel::encoder::detail {
 
-using format::brick_interior;
-using format::brick_size;
-
 namespace {
 
 /// Mid-tread quantizer of the block means over [lo, hi] with `levels`+1 steps:
@@ -189,12 +186,12 @@ std::vector<std::byte> constant_payload(float v) {
   return p;
 }
 
-void brick_to_blocks(const float* brick, float* columns, float* means) {
-  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+void brick_to_blocks(format::BrickShape shape, const float* brick, float* columns, float* means) {
+  for (std::uint32_t b = 0; b < shape.blocks(); ++b) {
     float* col = columns + std::size_t{b} * VR_BLOCK_LENGTH;
     double sum = 0;
     for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) {
-      col[v] = brick[vr_brick_voxel(b, v)];
+      col[v] = brick[vr_brick_voxel(shape.blocks_per_axis(), b, v)];
       sum += static_cast<double>(col[v]);
     }
     const auto mean = static_cast<float>(sum / VR_BLOCK_LENGTH);
@@ -203,30 +200,32 @@ void brick_to_blocks(const float* brick, float* columns, float* means) {
   }
 }
 
-void owned_block_shares(std::uint32_t x, std::uint32_t y, std::uint32_t z,
+void owned_block_shares(format::BrickShape shape, std::uint32_t x, std::uint32_t y, std::uint32_t z,
                         const std::array<std::uint32_t, 3>& dims, float* shares) {
   const std::uint32_t position[3] = {x, y, z};
-  float owned[3][VR_BLOCKS_PER_AXIS];  // owned voxels of block column c on axis a
+  const std::uint32_t n = shape.blocks_per_axis();
+  const std::int64_t interior = shape.interior();
+  float owned[3][VR_MAX_BLOCKS_PER_AXIS];  // owned voxels of block column c on axis a
   for (std::size_t a = 0; a < 3; ++a) {
-    // Stored index i holds level voxel 34·p − 1 + i: owned for 1 ≤ i ≤ 34 and 34·p − 1 + i < dim.
-    const std::int64_t end = std::min<std::int64_t>(
-        brick_interior + 1, std::int64_t{dims[a]} - std::int64_t{brick_interior} * position[a] + 1);
-    for (std::uint32_t c = 0; c < VR_BLOCKS_PER_AXIS; ++c) {
+    // Stored index i holds level voxel I·p − 1 + i (I the interior): owned for 1 ≤ i ≤ I and
+    // I·p − 1 + i < dim.
+    const std::int64_t end =
+        std::min<std::int64_t>(interior + 1, std::int64_t{dims[a]} - interior * position[a] + 1);
+    for (std::uint32_t c = 0; c < n; ++c) {
       const std::int64_t lo = std::max<std::int64_t>(1, c * VR_BLOCK_SIZE),
                          hi = std::min<std::int64_t>(end, (c + 1) * VR_BLOCK_SIZE);
       owned[a][c] = static_cast<float>(std::max<std::int64_t>(0, hi - lo)) / VR_BLOCK_SIZE;
     }
   }
-  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
-    shares[b] = owned[0][b % VR_BLOCKS_PER_AXIS] *
-                owned[1][(b / VR_BLOCKS_PER_AXIS) % VR_BLOCKS_PER_AXIS] *
-                owned[2][b / (VR_BLOCKS_PER_AXIS * VR_BLOCKS_PER_AXIS)];
+  for (std::uint32_t b = 0; b < shape.blocks(); ++b)
+    shares[b] = owned[0][b % n] * owned[1][(b / n) % n] * owned[2][b / (n * n)];
 }
 
-void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
-                         const std::array<std::uint32_t, 3>& dims, float* weights) {
-  owned_block_shares(x, y, z, dims, weights);
-  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+void owned_block_weights(format::BrickShape shape, std::uint32_t x, std::uint32_t y,
+                         std::uint32_t z, const std::array<std::uint32_t, 3>& dims,
+                         float* weights) {
+  owned_block_shares(shape, x, y, z, dims, weights);
+  for (std::uint32_t b = 0; b < shape.blocks(); ++b)
     weights[b] = weights[b] > 0 ? std::max(weights[b], 1.0f / VR_BLOCK_LENGTH) : 0.0f;
 }
 
@@ -240,17 +239,18 @@ void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
 /// only): if a block still misses the bound, code the brick again with half the step, down to
 /// the finest step 16 magnitude bits allow. Coefficients that round to 0 are left out, and each
 /// block's codes are packed in increasing atom order (the entropy coder's gaps).
-std::vector<std::byte> quantize_brick(const float* columns, const float* means,
-                                      const dictionary::SparseCodes& codes, std::size_t first_block,
-                                      const Eigen::MatrixXf& atoms, const QuantizeOptions& options,
-                                      BrickQuantization* result) {
+std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* columns,
+                                      const float* means, const dictionary::SparseCodes& codes,
+                                      std::size_t first_block, const Eigen::MatrixXf& atoms,
+                                      const QuantizeOptions& options, BrickQuantization* result) {
+  const std::uint32_t blocks = shape.blocks();
   float mean_lo = means[0], mean_hi = means[0];
-  for (std::uint32_t b = 1; b < VR_BLOCKS_PER_BRICK; ++b) {
+  for (std::uint32_t b = 1; b < blocks; ++b) {
     mean_lo = std::min(mean_lo, means[b]);
     mean_hi = std::max(mean_hi, means[b]);
   }
   double largest = 0;
-  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+  for (std::uint32_t b = 0; b < blocks; ++b) {
     const std::size_t i = first_block + b;
     for (int k = 0; k < codes.count[i]; ++k)
       largest = std::max(largest, std::abs(static_cast<double>(codes.coefficients_of(i)[k])));
@@ -260,6 +260,8 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
   const double finest_step = largest / std::ldexp(1.0, VR_MAX_COEF_BITS);
 
   format::KsvdPayloadParts parts;
+  parts.sparsity.assign(blocks, 0);
+  parts.mean.assign(blocks, 0);
   parts.band_split = options.band_split;
   parts.mean_bits = choose_mean_bits(mean_lo, mean_hi, options.mean_step, options.mean_bits);
   parts.atom_bits =
@@ -284,7 +286,7 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
     std::size_t missed = 0;
     std::uint32_t most_atoms = 0;
     std::int64_t largest_q = 1;
-    for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    for (std::uint32_t b = 0; b < blocks; ++b) {
       const std::size_t i = first_block + b;
       int s = codes.count[i];
       std::copy_n(codes.atoms_of(i), s, a.data());
@@ -368,13 +370,14 @@ std::vector<std::byte> quantize_brick(const float* columns, const float* means,
   }
 }
 
-std::vector<std::byte> zfp_payload(const float* brick, double accuracy) {
-  format::ZfpStream zfp(format::ZfpMode::accuracy(accuracy), brick_size, brick_size, brick_size);
+std::vector<std::byte> zfp_payload(format::BrickShape shape, const float* brick, double accuracy) {
+  format::ZfpStream zfp(format::ZfpMode::accuracy(accuracy), shape.size, shape.size, shape.size);
   std::vector<std::byte> buffer(zfp.maximum_size());
   const std::size_t size = zfp.compress(brick, buffer.data(), buffer.size());
   if (size == 0) throw std::runtime_error("zfp_compress failed");
   buffer.resize((size + 3) / 4 * 4);
-  // A zfp stream of 4 bytes would read as a constant brick; never happens for 36³ (≥ 729 blocks).
+  // A zfp stream of 4 bytes would read as a constant brick; never happens for 12³ and up
+  // (≥ 27 blocks).
   if (buffer.size() == 4) buffer.resize(8);
   return buffer;
 }

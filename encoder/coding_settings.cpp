@@ -1,4 +1,5 @@
-// coding_settings.cpp: the names of the variable-rate rules and codecs, and the mean bits' text.
+// coding_settings.cpp: the names of the variable-rate rules and codecs, and the mean bits',
+// coefficient bits' and brick size's text.
 #include "volreel/encoder/coding_settings.hpp"
 
 #include "volreel/format/brick_decode.h"
@@ -48,6 +49,18 @@ int mean_bits_from_text(const std::string& text) {
 
 int coef_bits_from_text(const std::string& text) {
   return bits_from_text(text, "--coef-bits", 1, 16);
+}
+
+std::uint32_t brick_size_from_text(const std::string& text) {
+  const int size =
+      bits_from_text(text, "--brick-size", format::min_brick_size, format::max_brick_size);
+  if (size < 0) return 0;
+  if (!format::valid_brick_size(static_cast<std::uint64_t>(size)))
+    throw InputError(
+        "--brick-size must be auto or a multiple of 6 in 12..66 (stored voxels per "
+        "brick axis, the interior 2 fewer), not '" +
+        text + "'");
+  return static_cast<std::uint32_t>(size);
 }
 
 }  // namespace volreel::encoder

@@ -14,6 +14,7 @@
 #include "volreel/datasets/series.hpp"
 #include "volreel/datasets/volume.hpp"
 #include "volreel/dictionary/omp.hpp"
+#include "volreel/format/frame_file.hpp"
 
 namespace volreel::encoder::detail {
 
@@ -46,39 +47,40 @@ struct QuantizeOptions {
 /// A constant brick's payload: its one value (4 bytes).
 std::vector<std::byte> constant_payload(float v);
 
-/// Copies the 216 blocks of a 36³ brick into 216 columns of `columns` (m × 216, zero-mean) and
-/// their means into `means`.
-void brick_to_blocks(const float* brick, float* columns, float* means);
+/// Copies the n³ blocks of a brick of `shape` into n³ columns of `columns` (m × n³, zero-mean)
+/// and their means into `means`.
+void brick_to_blocks(format::BrickShape shape, const float* brick, float* columns, float* means);
 
-/// Share of each of the 216 blocks of brick (x, y, z) of a level of size `dims` that the decoder
-/// reads: voxels of the brick's interior (stored index 1..34 on each axis) inside the level.
-void owned_block_shares(std::uint32_t x, std::uint32_t y, std::uint32_t z,
+/// Share of each of the n³ blocks of brick (x, y, z) of `shape` of a level of size `dims` that
+/// the decoder reads: voxels of the brick's interior (stored index 1..size − 2 on each axis)
+/// inside the level.
+void owned_block_shares(format::BrickShape shape, std::uint32_t x, std::uint32_t y, std::uint32_t z,
                         const std::array<std::uint32_t, 3>& dims, float* shares);
 
 /// The shares as weights of the Lagrangian rule: at least 1/216 (one voxel) for a block that
 /// holds any of the level's own voxels, so that as ε → 0 every such block is still coded up to
 /// Smax; 0 for a block of padding alone (past the volume's edge, never drawn): its mean only.
-void owned_block_weights(std::uint32_t x, std::uint32_t y, std::uint32_t z,
-                         const std::array<std::uint32_t, 3>& dims, float* weights);
+void owned_block_weights(format::BrickShape shape, std::uint32_t x, std::uint32_t y,
+                         std::uint32_t z, const std::array<std::uint32_t, 3>& dims, float* weights);
 
 /// What quantize_brick adds up over the bricks it codes.
 struct BrickQuantization {
-  double squared_error = 0;  ///< of the quantized blocks (all 216 of each brick)
+  double squared_error = 0;  ///< of the quantized blocks (all n³ of each brick)
   std::size_t codes = 0;
   std::size_t blocks_over_bound = 0;  ///< blocks that missed max_abs_error even at 16 bits
 };
 
-/// Quantizes one brick's sparse codes (blocks first_block .. first_block + 215 of `codes`) into
+/// Quantizes one brick's sparse codes (blocks first_block .. first_block + n³ − 1 of `codes`) into
 /// its ksvd payload (brick_decode.h's layout); see brick_coding.cpp for the steps. Adds to
 /// *result.
-std::vector<std::byte> quantize_brick(const float* columns, const float* means,
-                                      const dictionary::SparseCodes& codes, std::size_t first_block,
-                                      const Eigen::MatrixXf& atoms, const QuantizeOptions& options,
-                                      BrickQuantization* result);
+std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* columns,
+                                      const float* means, const dictionary::SparseCodes& codes,
+                                      std::size_t first_block, const Eigen::MatrixXf& atoms,
+                                      const QuantizeOptions& options, BrickQuantization* result);
 
-/// A 36³ brick as a zfp fixed-accuracy stream, padded to a multiple of 4 bytes (never 4 bytes,
-/// which would read as a constant brick). Throws std::runtime_error if zfp fails.
-std::vector<std::byte> zfp_payload(const float* brick, double accuracy);
+/// A brick of `shape` as a zfp fixed-accuracy stream, padded to a multiple of 4 bytes (never 4
+/// bytes, which would read as a constant brick). Throws std::runtime_error if zfp fails.
+std::vector<std::byte> zfp_payload(format::BrickShape shape, const float* brick, double accuracy);
 
 /// The indices of `count` frames of the first `frames`, evenly spaced (the middle one if count is
 /// 1), in increasing order.

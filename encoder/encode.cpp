@@ -11,6 +11,7 @@
 
 #include "volreel/dictionary/coreset.hpp"
 #include "volreel/dictionary/training.hpp"
+#include "volreel/format/container.hpp"
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/file_io.hpp"
 #include "volreel/format/frame_file.hpp"
@@ -75,14 +76,15 @@ std::string mebibytes(double bytes) {
 
 /// What the encoder holds per frame of a stretch with keyframe gaps: the frame and the original
 /// voxels of every brick of its octree.
-double stretch_bytes_per_frame(const Dims& dims) {
+double stretch_bytes_per_frame(const Dims& dims, format::BrickShape shape) {
   std::uint64_t bricks = 0;
-  for (const auto& g : format::level_geometry({static_cast<std::uint32_t>(dims.x),
-                                               static_cast<std::uint32_t>(dims.y),
-                                               static_cast<std::uint32_t>(dims.z)}))
+  for (const auto& g : format::level_geometry(
+           {static_cast<std::uint32_t>(dims.x), static_cast<std::uint32_t>(dims.y),
+            static_cast<std::uint32_t>(dims.z)},
+           shape))
     bricks += std::uint64_t{g.grid[0]} * g.grid[1] * g.grid[2];
   return 4.0 * (static_cast<double>(dims.voxels()) +
-                static_cast<double>(bricks) * static_cast<double>(format::brick_voxels));
+                static_cast<double>(bricks) * static_cast<double>(shape.voxels()));
 }
 
 /// The training settings of an encode given no dictionary (volreel train's defaults).
@@ -152,12 +154,12 @@ double whole_frame_bytes(const Dims& dims) {
   return 2.0 * 4.0 * static_cast<double>(dims.voxels());
 }
 
-std::uint32_t default_keyframe_gap(const Dims& dims, bool size_target, std::uint64_t memory,
-                                   bool* lowered) {
+std::uint32_t default_keyframe_gap(const Dims& dims, format::BrickShape shape, bool size_target,
+                                   std::uint64_t memory, bool* lowered) {
   if (lowered) *lowered = false;
   if (size_target) return 1;
   if (memory == 0) memory = default_encode_memory();
-  const double per_frame = stretch_bytes_per_frame(dims);
+  const double per_frame = stretch_bytes_per_frame(dims, shape);
   std::uint32_t gap = default_max_keyframe_gap;
   while (gap > 1 && memory > 0 && (gap + 1) * per_frame > static_cast<double>(memory)) --gap;
   if (lowered) *lowered = gap < default_max_keyframe_gap;
@@ -173,6 +175,32 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   const std::size_t frames =
       request.max_frames ? std::min(request.max_frames, info.frames) : info.frames;
   const Ranks& ranks = request.ranks ? *request.ranks : single_process();
+  // The brick size: given, the container's own (resume), or chosen for the volume.
+  bool chosen_brick_size = false;
+  if (request.coding.brick_size == 0 && request.resume && fs::exists(out / "manifest.json"))
+    request.coding.brick_size = format::Container(out, true).manifest().brick_size;
+  if (request.coding.brick_size == 0) {
+    chosen_brick_size = true;
+    request.coding.brick_size =
+        format::choose_brick_shape({static_cast<std::uint32_t>(info.dims.x),
+                                    static_cast<std::uint32_t>(info.dims.y),
+                                    static_cast<std::uint32_t>(info.dims.z)})
+            .size;
+  }
+  const format::BrickShape shape{request.coding.brick_size};
+  if (!format::valid_brick_size(shape.size))
+    throw InputError("--brick-size must be auto or a multiple of 6 in 12..66, not " +
+                     std::to_string(shape.size));
+  say("bricks of " + std::to_string(shape.size) + "^3 voxels (" + std::to_string(shape.interior()) +
+      "^3 interior + apron)" +
+      (chosen_brick_size
+           ? printed(", chosen for this volume (its blocks that hold voxels of "
+                     "the volume store %.3g values per voxel, all levels)",
+                     format::coded_block_share({static_cast<std::uint32_t>(info.dims.x),
+                                                static_cast<std::uint32_t>(info.dims.y),
+                                                static_cast<std::uint32_t>(info.dims.z)},
+                                               shape))
+           : std::string()));
   EncodeJob job;
   job.ranks = &ranks;
   job.resume = request.resume;
@@ -203,8 +231,9 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
                        ", and training a dictionary reads frames whole: give one (--dictionary "
                        "FILE from volreel train on a smaller series, or --dictionary dct), or "
                        "give more --memory");
-    // A row of bricks' planes (36, and as many again while the next row reads) on every level.
-    const double window = 4.0 * static_cast<double>(info.dims.plane()) * 72 * 4 / 3;
+    // A row of bricks' planes (S, and as many again while the next row reads) on every level.
+    const double window =
+        4.0 * static_cast<double>(info.dims.plane()) * 2 * static_cast<double>(shape.size) * 4 / 3;
     if (window > static_cast<double>(memory))
       throw InputError(frame_size + ", and coding them piecewise holds about " + mebibytes(window) +
                        " of planes: give at least that --memory");
@@ -215,12 +244,13 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   } else {
     bool lowered = false;
     job.max_keyframe_gap =
-        default_keyframe_gap(info.dims, request.tolerance.bps.has_value(), memory, &lowered);
+        default_keyframe_gap(info.dims, shape, request.tolerance.bps.has_value(), memory, &lowered);
     if (lowered)
       say("keyframe gap " + std::to_string(job.max_keyframe_gap) + " (not " +
           std::to_string(default_max_keyframe_gap) +
           "): " + std::to_string(job.max_keyframe_gap + 1) +
-          printed(" frames of %.0f MB each fit in ", stretch_bytes_per_frame(info.dims) / 1e6) +
+          printed(" frames of %.0f MB each fit in ",
+                  stretch_bytes_per_frame(info.dims, shape) / 1e6) +
           memory_text);
   }
   auto& c = job.coding;

@@ -22,8 +22,6 @@ namespace volreel::encoder {
 using detail::Clock;
 using detail::QuantizeOptions;
 using detail::seconds_since;
-using format::brick_interior;
-using format::brick_voxels;
 
 namespace {
 
@@ -33,8 +31,10 @@ constexpr int max_sparsity = static_cast<int>(VR_BLOCK_LENGTH);
 /// Coefficient bits of fixed rate, which has no ε to set a step from (--coef-bits overrides).
 constexpr std::uint32_t fixed_rate_coef_bits = 8;
 
-constexpr std::size_t chunk_bricks =
-    32;  ///< bricks coded per batch-OMP call (memory: 32·36³ floats ×2)
+/// Bricks coded per batch-OMP call: about 32 bricks of 36³ (memory: 1.5 M floats ×2).
+std::size_t chunk_bricks(format::BrickShape shape) {
+  return std::max<std::size_t>(1, 32 * format::BrickShape{}.voxels() / shape.voxels());
+}
 
 using Cell = CodedBrick;
 
@@ -49,6 +49,7 @@ struct OctreeCells {
 /// quantization and the Lagrangian rule's block weights.
 struct BrickCoding {
   const CodingSettings& settings;
+  format::BrickShape shape;
   const dictionary::BatchOmp* omp = nullptr;  ///< ksvd
   const Eigen::MatrixXf* atoms = nullptr;     ///< ksvd
   QuantizeOptions quantize;
@@ -71,19 +72,23 @@ struct BrickCoding {
 
 /// Batch-OMP's inputs and outputs for one chunk, reused from chunk to chunk.
 struct ChunkWorkspace {
-  std::vector<float> bricks = std::vector<float>(chunk_bricks * brick_voxels);
+  explicit ChunkWorkspace(format::BrickShape shape)
+      : bricks(chunk_bricks(shape) * shape.voxels()) {}
+  std::vector<float> bricks;
   Eigen::MatrixXf columns;
   std::vector<float> means, weights;
   dictionary::SparseCodes codes;
 };
 
 /// Adds a stored brick's payload to the byte breakdown and sparsity histogram of a frame.
-void add_to_breakdown(const Cell& c, const std::array<std::uint32_t, 3>& level_dims, bool coarse,
-                      bool ksvd, FrameStats& st) {
+void add_to_breakdown(format::BrickShape shape, const Cell& c,
+                      const std::array<std::uint32_t, 3>& level_dims, bool coarse, bool ksvd,
+                      FrameStats& st) {
   ByteBreakdown& b = st.breakdown;
   const std::size_t size = c.payload.size();
-  float shares[VR_BLOCKS_PER_BRICK];  // of each block, the voxels that are the level's own
-  detail::owned_block_shares(c.x, c.y, c.z, level_dims, shares);
+  const std::uint32_t blocks = shape.blocks();
+  std::vector<float> shares(blocks);  // of each block, the voxels that are the level's own
+  detail::owned_block_shares(shape, c.x, c.y, c.z, level_dims, shares.data());
   if (c.constant) {
     b.constant_bricks += size;
   } else if (!ksvd) {
@@ -94,30 +99,31 @@ void add_to_breakdown(const Cell& c, const std::array<std::uint32_t, 3>& level_d
     std::memcpy(words.data(), c.payload.data(), size / 4 * 4);
     const vr_uint layout = vr_layout_word(words.data());
     b.brick_headers += 4 * VR_HEADER_WORDS;
-    b.block_entries += 4 * vr_entry_words(layout);
+    b.block_entries += 4 * vr_entry_words(layout, blocks);
+    const vr_uint first = vr_code_first_word(layout, blocks);
     ++st.mean_bits_histogram[vr_layout_mean_bits(layout)];
     ++st.coef_bits_histogram[vr_layout_coef_bits(layout)];
     const vr_uint band_word = vr_band_word(words.data());
     vr_uint bit = 0;
-    for (std::uint32_t k = 0; k < VR_BLOCKS_PER_BRICK; ++k) {
+    for (std::uint32_t k = 0; k < blocks; ++k) {
       const vr_uint sparsity = vr_entry_sparsity(layout, vr_block_entry(words.data(), layout, k));
       const vr_uint start = bit;
       vr_uint next_atom = 0, atom = 0;
       for (vr_uint j = 0; j < sparsity; ++j)
-        vr_read_code(words.data(), layout, band_word, sparsity, bit, next_atom, atom);
+        vr_read_code(words.data(), first, layout, band_word, sparsity, bit, next_atom, atom);
       ++st.sparsity_histogram[sparsity];
       if (!coarse) b.finest_owned_codes += (bit - start) / 8.0 * static_cast<double>(shares[k]);
     }
     st.code_bits += bit;
     b.codes += bit / 8;
-    b.alignment += size - 4 * vr_code_first_word(layout) - bit / 8;
+    b.alignment += size - 4 * first - bit / 8;
   }
   if (coarse) b.coarse_levels += size;
   // The blocks' owned shares average to the brick's interior voxels inside the level: the rest of
-  // the 36³ are apron or padding.
+  // the stored voxels are apron or padding.
   double owned = 0;
   for (float share : shares) owned += static_cast<double>(share);
-  b.aprons_and_padding += static_cast<double>(size) * (1 - owned / VR_BLOCKS_PER_BRICK);
+  b.aprons_and_padding += static_cast<double>(size) * (1 - owned / blocks);
 }
 
 /// Step 1: every cell of every level, breadth-first, Morton order inside a level.
@@ -150,6 +156,7 @@ OctreeCells octree_cells(const std::vector<format::LevelGeometry>& geometry) {
 void extract_chunk(const PyramidWindow& window, std::span<Cell> chunk, float* bricks, float lo,
                    float hi, const BrickCoding& coding) {
   const bool ksvd = coding.ksvd();
+  const std::size_t brick_voxels = coding.shape.voxels();
 #pragma omp parallel for schedule(dynamic, 1)
   for (std::ptrdiff_t j = 0; j < static_cast<std::ptrdiff_t>(chunk.size()); ++j) {
     Cell& c = chunk[static_cast<std::size_t>(j)];
@@ -157,7 +164,7 @@ void extract_chunk(const PyramidWindow& window, std::span<Cell> chunk, float* br
     window.extract_brick(c.level, c.x, c.y, c.z, {brick, brick_voxels});
     float mn = brick[0], mx = brick[0];
     std::uint64_t hist = 0;
-    for (std::uint32_t v = 0; v < brick_voxels; ++v) {
+    for (std::size_t v = 0; v < brick_voxels; ++v) {
       mn = std::min(mn, brick[v]);
       mx = std::max(mx, brick[v]);
       hist |= std::uint64_t{1} << format::histogram_bin(brick[v], lo, hi);
@@ -168,7 +175,7 @@ void extract_chunk(const PyramidWindow& window, std::span<Cell> chunk, float* br
     if (c.constant)
       c.payload = detail::constant_payload(mn);
     else if (!ksvd)
-      c.payload = detail::zfp_payload(brick, coding.settings.zfp_accuracy);
+      c.payload = detail::zfp_payload(coding.shape, brick, coding.settings.zfp_accuracy);
   }
 }
 
@@ -178,25 +185,26 @@ void extract_chunk(const PyramidWindow& window, std::span<Cell> chunk, float* br
 void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::span<Cell> chunk,
                      const std::vector<std::size_t>& coded, const BrickCoding& coding,
                      ChunkWorkspace& work, Clock::time_point part, FrameStats& st) {
-  const auto blocks = static_cast<Eigen::Index>(coded.size() * VR_BLOCKS_PER_BRICK);
+  const std::size_t brick_blocks = coding.shape.blocks(), brick_voxels = coding.shape.voxels();
+  const auto blocks = static_cast<Eigen::Index>(coded.size() * brick_blocks);
   work.columns.resize(VR_BLOCK_LENGTH, blocks);
   work.means.resize(static_cast<std::size_t>(blocks));
   work.weights.resize(coding.weighted ? static_cast<std::size_t>(blocks) : 0);
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(coded.size()); ++k) {
     const auto kk = static_cast<std::size_t>(k);
-    detail::brick_to_blocks(work.bricks.data() + coded[kk] * brick_voxels,
-                            work.columns.data() + kk * VR_BLOCKS_PER_BRICK * VR_BLOCK_LENGTH,
-                            work.means.data() + kk * VR_BLOCKS_PER_BRICK);
+    detail::brick_to_blocks(coding.shape, work.bricks.data() + coded[kk] * brick_voxels,
+                            work.columns.data() + kk * brick_blocks * VR_BLOCK_LENGTH,
+                            work.means.data() + kk * brick_blocks);
     if (coding.weighted) {
       const Cell& c = chunk[coded[kk]];
-      float* w = work.weights.data() + kk * VR_BLOCKS_PER_BRICK;
+      float* w = work.weights.data() + kk * brick_blocks;
       if (coding.settings.weight_owned_voxels)
-        detail::owned_block_weights(c.x, c.y, c.z, geometry[c.level].dims, w);
+        detail::owned_block_weights(coding.shape, c.x, c.y, c.z, geometry[c.level].dims, w);
       else
-        std::fill(w, w + VR_BLOCKS_PER_BRICK, 1.0f);
+        std::fill(w, w + brick_blocks, 1.0f);
       const double scale = coding.level_scale(c.level);
-      for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+      for (std::size_t b = 0; b < brick_blocks; ++b)
         w[b] = static_cast<float>(static_cast<double>(w[b]) / (scale * scale));
     }
   }
@@ -216,10 +224,10 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
     brick_qo.mean_step *= coding.level_scale(cell.level);
     brick_qo.coef_step *= coding.level_scale(cell.level);
     detail::BrickQuantization result;
-    cell.payload =
-        detail::quantize_brick(work.columns.data() + kk * VR_BLOCKS_PER_BRICK * VR_BLOCK_LENGTH,
-                               work.means.data() + kk * VR_BLOCKS_PER_BRICK, work.codes,
-                               kk * VR_BLOCKS_PER_BRICK, *coding.atoms, brick_qo, &result);
+    cell.payload = detail::quantize_brick(coding.shape,
+                                          work.columns.data() + kk * brick_blocks * VR_BLOCK_LENGTH,
+                                          work.means.data() + kk * brick_blocks, work.codes,
+                                          kk * brick_blocks, *coding.atoms, brick_qo, &result);
     cell.codes = result.codes;
     code_count += result.codes;
     quantized_error += result.squared_error;
@@ -241,6 +249,7 @@ void code_chunk(const PyramidWindow& window, std::span<Cell> chunk, float lo, fl
                 const std::function<float*(std::size_t j)>& originals) {
   const auto part = Clock::now();
   extract_chunk(window, chunk, work.bricks.data(), lo, hi, coding);
+  const std::size_t brick_voxels = coding.shape.voxels();
   if (originals)
     for (std::size_t j = 0; j < chunk.size(); ++j)
       std::copy_n(work.bricks.data() + j * brick_voxels, brick_voxels, originals(j));
@@ -260,15 +269,17 @@ void measure_chunk(std::span<Cell> chunk, const float* bricks,
                    const std::array<std::uint32_t, 3>& dims, const BrickCoding& coding,
                    FrameStats& st) {
   double worst = 0;
+  const format::BrickShape shape = coding.shape;
+  const std::uint32_t brick_interior = shape.interior(), brick_size = shape.size;
 #pragma omp parallel for schedule(dynamic, 1) reduction(max : worst)
   for (std::ptrdiff_t j = 0; j < static_cast<std::ptrdiff_t>(chunk.size()); ++j) {
     Cell& c = chunk[static_cast<std::size_t>(j)];
     double squared = 0;
-    std::vector<float> decoded(brick_voxels);
+    std::vector<float> decoded(shape.voxels());
     format::decode_payload(c.payload, coding.settings.codec, coding.settings.zfp_accuracy,
-                           coding.decode_atoms, decoded, "<frame being coded>", 0);
-    const float* original = bricks + static_cast<std::size_t>(j) * brick_voxels;
-    // Brick voxel a ∈ [1, 35) is level voxel 34·x + a − 1 on each axis.
+                           coding.decode_atoms, shape, decoded, "<frame being coded>", 0);
+    const float* original = bricks + static_cast<std::size_t>(j) * shape.voxels();
+    // Brick voxel a ∈ [1, I + 1) is level voxel I·x + a − 1 on each axis (I the interior).
     const std::uint32_t cell[3] = {c.x, c.y, c.z};
     std::uint32_t end[3];
     for (int a = 0; a < 3; ++a)
@@ -277,8 +288,7 @@ void measure_chunk(std::span<Cell> chunk, const float* bricks,
     for (std::uint32_t k = 0; k < end[2]; ++k)
       for (std::uint32_t jj = 0; jj < end[1]; ++jj)
         for (std::uint32_t i = 0; i < end[0]; ++i) {
-          const std::size_t v =
-              ((std::size_t{k} + 1) * format::brick_size + jj + 1) * format::brick_size + i + 1;
+          const std::size_t v = ((std::size_t{k} + 1) * brick_size + jj + 1) * brick_size + i + 1;
           const double e = static_cast<double>(decoded[v]) - static_cast<double>(original[v]);
           squared += e * e;
           worst = std::max(worst, std::abs(e));
@@ -304,6 +314,8 @@ void code_bricks(PyramidWindow& window, std::vector<Cell>& cells,
   const std::function<void(double)>& progress = options.progress;
   const std::vector<format::LevelGeometry>& geometry = window.geometry();
   const std::size_t levels = geometry.size(), finest = levels - 1;
+  const std::size_t brick_voxels = coding.shape.voxels(), brick_interior = coding.shape.interior();
+  const std::size_t chunk_size = chunk_bricks(coding.shape);
   // A buffer of the right size is reused as it is (every value is overwritten below).
   if (originals && originals->size() != cells.size() * brick_voxels)
     originals->resize(cells.size() * brick_voxels);
@@ -313,11 +325,11 @@ void code_bricks(PyramidWindow& window, std::vector<Cell>& cells,
     for (std::size_t i = level_begin[l]; i < level_begin[l + 1]; ++i)
       if (i % options.members == options.member) rows[l][cells[i].z].push_back(i);
   }
-  // The planes row z of a level needs: its bricks' 36 planes, 34z − 1 .. 34z + 34, clamped.
+  // The planes row z of a level needs: its bricks' S planes, Iz − 1 .. Iz + I, clamped.
   const auto row_end = [&](std::size_t l, std::size_t z) {
     return std::min<std::size_t>(brick_interior * (z + 1) + 1, window.planes(l));
   };
-  ChunkWorkspace work;
+  ChunkWorkspace work(coding.shape);
   std::vector<Cell> chunk;
   std::vector<std::size_t> next(levels, 0);  // per level, the next row to code
   for (;;) {
@@ -329,8 +341,8 @@ void code_bricks(PyramidWindow& window, std::vector<Cell>& cells,
     for (std::size_t l = 0; l < levels; ++l) {
       for (; next[l] < rows[l].size() && window.end(l) >= row_end(l, next[l]); ++next[l]) {
         const std::vector<std::size_t>& row = rows[l][next[l]];
-        for (std::size_t begin = 0; begin < row.size(); begin += chunk_bricks) {
-          const std::size_t n = std::min(chunk_bricks, row.size() - begin);
+        for (std::size_t begin = 0; begin < row.size(); begin += chunk_size) {
+          const std::size_t n = std::min(chunk_size, row.size() - begin);
           chunk.clear();
           for (std::size_t j = 0; j < n; ++j) chunk.push_back(std::move(cells[row[begin + j]]));
           std::function<float*(std::size_t)> place;
@@ -345,7 +357,7 @@ void code_bricks(PyramidWindow& window, std::vector<Cell>& cells,
         }
       }
       more = more || next[l] < rows[l].size();
-      // Row z's bricks start at plane 34z − 1.
+      // Row z's bricks start at plane Iz − 1.
       window.release(l, next[l] < rows[l].size()
                             ? std::max<std::size_t>(brick_interior * next[l], 1) - 1
                             : window.planes(l));
@@ -396,7 +408,7 @@ void link_tree(CodedFrame& coded) {
 /// Step 4: keep the nodes not under an empty node; number them breadth-first; link first
 /// children. Moves the kept cells' payloads into `out` and counts their bytes in `st`.
 void build_node_table(const CodedFrame& coded, std::span<const char> keep_brick, bool ksvd,
-                      format::FrameContents& out, FrameStats& st) {
+                      format::BrickShape shape, format::FrameContents& out, FrameStats& st) {
   const std::vector<Cell>& cells = coded.bricks;
   const std::vector<std::size_t>& level_begin = coded.level_begin;
   const std::vector<std::vector<std::size_t>>& children = coded.children;
@@ -416,7 +428,7 @@ void build_node_table(const CodedFrame& coded, std::span<const char> keep_brick,
       node.brick = format::no_brick;
       if (keep_brick.empty() || keep_brick[i] || cells[i].subtree_constant) {
         node.brick = static_cast<std::uint32_t>(out.payloads.size());
-        add_to_breakdown(cells[i], coded.geometry[l].dims, l + 1 < levels, ksvd, st);
+        add_to_breakdown(shape, cells[i], coded.geometry[l].dims, l + 1 < levels, ksvd, st);
         out.payloads.push_back(cells[i].payload);
         ++st.bricks;
         if (cells[i].constant) ++st.constant_bricks;
@@ -470,6 +482,9 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
     : dictionary_(dictionary), settings_(settings) {
   if (settings_.codec == format::Codec::ksvd) {
     if (!dictionary_) throw InputError("the ksvd codec needs a dictionary");
+    if (!format::valid_brick_size(settings_.brick_size))
+      throw InputError("the brick size must be a multiple of 6 in 12..66, not " +
+                       std::to_string(settings_.brick_size));
     if (dictionary_->block_size != 6 || dictionary_->block_length() != 216)
       throw InputError("the dictionary has blocks of " + std::to_string(dictionary_->block_size) +
                        "^3; volreel's bricks need 6^3");
@@ -526,6 +541,9 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
     omp_ = std::make_shared<dictionary::BatchOmp>(dictionary_->atoms, o);
   } else if (!(settings_.zfp_accuracy > 0 && std::isfinite(settings_.zfp_accuracy))) {
     throw InputError("--zfp-accuracy must be positive");
+  } else if (!format::valid_brick_size(settings_.brick_size)) {
+    throw InputError("the brick size must be a multiple of 6 in 12..66, not " +
+                     std::to_string(settings_.brick_size));
   }
 }
 
@@ -565,18 +583,21 @@ QuantizeOptions FrameEncoder::quantize_options() const {
 }
 
 std::vector<std::byte> FrameEncoder::encode_brick(std::span<const float> brick) const {
-  if (brick.size() != brick_voxels) throw InputError("encode_brick needs 36^3 values");
+  const format::BrickShape shape = this->shape();
+  if (brick.size() != shape.voxels())
+    throw InputError("encode_brick needs " + std::to_string(shape.voxels()) + " values (" +
+                     std::to_string(shape.size) + "^3), not " + std::to_string(brick.size()));
   const auto [mn, mx] = std::minmax_element(brick.begin(), brick.end());
   if (*mn == *mx) return detail::constant_payload(*mn);
   if (settings_.codec == format::Codec::zfp)
-    return detail::zfp_payload(brick.data(), settings_.zfp_accuracy);
-  Eigen::MatrixXf columns(VR_BLOCK_LENGTH, VR_BLOCKS_PER_BRICK);
-  std::vector<float> means(VR_BLOCKS_PER_BRICK);
-  detail::brick_to_blocks(brick.data(), columns.data(), means.data());
+    return detail::zfp_payload(shape, brick.data(), settings_.zfp_accuracy);
+  Eigen::MatrixXf columns(VR_BLOCK_LENGTH, shape.blocks());
+  std::vector<float> means(shape.blocks());
+  detail::brick_to_blocks(shape, brick.data(), columns.data(), means.data());
   dictionary::SparseCodes codes;
   omp_->encode(columns, codes);
   detail::BrickQuantization result;
-  return detail::quantize_brick(columns.data(), means.data(), codes, 0, dictionary_->atoms,
+  return detail::quantize_brick(shape, columns.data(), means.data(), codes, 0, dictionary_->atoms,
                                 quantize_options(), &result);
 }
 
@@ -604,10 +625,11 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
                                const PlaneCoding& options) const {
   const bool keep_originals = options.keep_originals;
   const auto start = Clock::now();
-  PyramidWindow window(format::level_geometry({static_cast<std::uint32_t>(dims.x),
-                                               static_cast<std::uint32_t>(dims.y),
-                                               static_cast<std::uint32_t>(dims.z)}),
-                       read);
+  PyramidWindow window(format::level_geometry(
+                           {static_cast<std::uint32_t>(dims.x), static_cast<std::uint32_t>(dims.y),
+                            static_cast<std::uint32_t>(dims.z)},
+                           shape()),
+                       read, shape());
   std::vector<float> originals = std::move(coded.originals);
   coded = CodedFrame{};
   if (keep_originals) coded.originals = std::move(originals);  // its storage, reused
@@ -620,9 +642,13 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
   OctreeCells octree = octree_cells(geometry);  // 1.
 
   BrickCoding coding{settings_,  // 2.
-                     omp_.get(),         ksvd ? &dictionary_->atoms : nullptr,
-                     quantize_options(), atom_gain_threshold(),
-                     geometry.size(),    false};
+                     shape(),
+                     omp_.get(),
+                     ksvd ? &dictionary_->atoms : nullptr,
+                     quantize_options(),
+                     atom_gain_threshold(),
+                     geometry.size(),
+                     false};
   coding.weighted = ksvd && coding.atom_gain_threshold > 0 &&
                     (settings_.weight_owned_voxels || settings_.level_tolerance_factor != 1);
   if (options.measure_finest && ksvd)
@@ -660,6 +686,7 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
   h.dims[0] = static_cast<std::uint32_t>(dims.x);
   h.dims[1] = static_cast<std::uint32_t>(dims.y);
   h.dims[2] = static_cast<std::uint32_t>(dims.z);
+  h.brick_size = settings_.brick_size;
   h.block_size = ksvd ? 6 : 0;
   h.atom_count = ksvd ? static_cast<std::uint32_t>(dictionary_->atom_count()) : 0;
   h.value_min = lo;
@@ -679,7 +706,7 @@ std::vector<std::byte> FrameEncoder::write(const CodedFrame& coded, std::span<co
   FrameStats st = coded.stats;
   format::FrameContents out;  // 4.
   out.header = coded.header;
-  build_node_table(coded, keep, settings_.codec == format::Codec::ksvd, out, st);
+  build_node_table(coded, keep, settings_.codec == format::Codec::ksvd, shape(), out, st);
   std::vector<std::byte> bytes = format::serialize_frame(out);
   st.bytes = bytes.size();
   st.breakdown.frame_tables = st.bytes - st.breakdown.total();  // what is not a brick payload

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <exception>
 #include <stdexcept>
+#include <vector>
 
 #include "volreel/format/brick_decode.h"
 
@@ -13,30 +14,25 @@ namespace volreel::encoder {
 
 namespace {
 
-using format::brick_voxels;
-
-constexpr std::uint32_t blocks = VR_BLOCKS_PER_BRICK;
-constexpr std::uint32_t side = format::brick_size;
-
 /// Squared errors of a brick against its original, per 6³ block and in all.
 struct BrickError {
-  std::array<double, blocks> block{};
+  std::vector<double> block;
   double total = 0;
 };
 
-/// Adds the squared differences o − (f0·a + f1·b) of one row of 36 voxels to its six blocks'
-/// sums; returns the row's largest |difference|.
-double add_row(const float* o, const float* a, const float* b, double f0, double f1,
-               double* block_sums) {
-  double d2[side];
+/// Adds the squared differences o − (f0·a + f1·b) of one row of a brick of `shape` (S voxels)
+/// to its n blocks' sums; returns the row's largest |difference|.
+double add_row(format::BrickShape shape, const float* o, const float* a, const float* b, double f0,
+               double f1, double* block_sums) {
+  double d2[format::max_brick_size];
   double largest = 0;
-  for (std::uint32_t x = 0; x < side; ++x) {
+  for (std::uint32_t x = 0; x < shape.size; ++x) {
     const double d = static_cast<double>(o[x]) -
                      (f0 * static_cast<double>(a[x]) + f1 * static_cast<double>(b[x]));
     d2[x] = d * d;
     largest = std::max(largest, std::abs(d));
   }
-  for (std::uint32_t bx = 0; bx < VR_BLOCKS_PER_AXIS; ++bx) {
+  for (std::uint32_t bx = 0; bx < shape.blocks_per_axis(); ++bx) {
     double sum = 0;
     for (std::uint32_t x = 0; x < VR_BLOCK_SIZE; ++x) sum += d2[bx * VR_BLOCK_SIZE + x];
     block_sums[bx] += sum;
@@ -45,14 +41,15 @@ double add_row(const float* o, const float* a, const float* b, double f0, double
 }
 
 /// The coded brick's error against the original (a stored state's, for the rule).
-BrickError coded_error(const float* o, const float* c) {
+BrickError coded_error(format::BrickShape shape, const float* o, const float* c) {
+  const std::uint32_t side = shape.size, n = shape.blocks_per_axis();
   BrickError e;
+  e.block.assign(shape.blocks(), 0.0);
   for (std::uint32_t z = 0; z < side; ++z)
     for (std::uint32_t y = 0; y < side; ++y) {
       const std::size_t row = (std::size_t{z} * side + y) * side;
-      add_row(o + row, c + row, c + row, 1.0, 0.0,
-              &e.block[((z / VR_BLOCK_SIZE) * VR_BLOCKS_PER_AXIS + y / VR_BLOCK_SIZE) *
-                       VR_BLOCKS_PER_AXIS]);
+      add_row(shape, o + row, c + row, c + row, 1.0, 0.0,
+              &e.block[((z / VR_BLOCK_SIZE) * n + y / VR_BLOCK_SIZE) * n]);
     }
   for (double v : e.block) e.total += v;
   return e;
@@ -61,34 +58,34 @@ BrickError coded_error(const float* o, const float* c) {
 /// Whether the interpolation (1 − f)·a + f·b stands in for the brick at a step: original o, the
 /// error `coded` that storing it would give, under the rule's bounds. In double: the
 /// interpolation itself (a decoder's float arithmetic adds a rounding of the value, none where
-/// a = b).
-bool interpolation_holds(const float* o, const BrickError& coded, const float* a, const float* b,
-                         float f, double eps, double max_abs, bool energy,
-                         const KeyframeRule& rule) {
+/// a = b). `e`: scratch of one value per block.
+bool interpolation_holds(format::BrickShape shape, const float* o, const BrickError& coded,
+                         const float* a, const float* b, float f, double eps, double max_abs,
+                         bool energy, const KeyframeRule& rule, std::vector<double>& e) {
   if (rule.within_coded_error) eps = 0;
+  const std::uint32_t side = shape.size, n = shape.blocks_per_axis();
   const double f1 = static_cast<double>(f), f0 = 1.0 - f1;
   const double block_tolerance = VR_BLOCK_LENGTH * eps * eps;
-  std::array<double, blocks> e{};
+  e.assign(shape.blocks(), 0.0);
   double total = 0;
-  for (std::uint32_t bz = 0; bz < VR_BLOCKS_PER_AXIS; ++bz) {
+  for (std::uint32_t bz = 0; bz < n; ++bz) {
     for (std::uint32_t z = bz * VR_BLOCK_SIZE; z < (bz + 1) * VR_BLOCK_SIZE; ++z)
       for (std::uint32_t y = 0; y < side; ++y) {
         const std::size_t row = (std::size_t{z} * side + y) * side;
         const double largest =
-            add_row(o + row, a + row, b + row, f0, f1,
-                    &e[(bz * VR_BLOCKS_PER_AXIS + y / VR_BLOCK_SIZE) * VR_BLOCKS_PER_AXIS]);
+            add_row(shape, o + row, a + row, b + row, f0, f1, &e[(bz * n + y / VR_BLOCK_SIZE) * n]);
         if (max_abs > 0 && largest > max_abs) return false;
       }
     if (!energy) continue;
     // The slab of blocks bz is complete.
-    for (std::uint32_t k = bz * 36; k < (bz + 1) * 36; ++k) {
+    for (std::uint32_t k = bz * n * n; k < (bz + 1) * n * n; ++k) {
       if (e[k] > rule.block_factor * std::max(block_tolerance, coded.block[k])) return false;
       total += e[k];
     }
   }
   return !energy ||
          total <= rule.brick_factor *
-                      std::max(static_cast<double>(brick_voxels) * eps * eps, coded.total);
+                      std::max(static_cast<double>(shape.voxels()) * eps * eps, coded.total);
 }
 
 }  // namespace
@@ -100,8 +97,11 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
   std::vector<std::vector<char>> keep(n);
   if (n == 0) return keep;
   const std::size_t cells = frames[0]->bricks.size();
+  const format::BrickShape shape{frames[0]->header.brick_size};
+  const std::size_t brick_voxels = shape.voxels();
   for (std::size_t f = 0; f < n; ++f) {
-    if (frames[f]->bricks.size() != cells || frames[f]->originals.size() != cells * brick_voxels)
+    if (frames[f]->bricks.size() != cells || frames[f]->header.brick_size != shape.size ||
+        frames[f]->originals.size() != cells * brick_voxels)
       throw std::invalid_argument(
           "choose_keyframes: frames of one geometry, coded with their originals");
     keep[f].assign(cells, 1);
@@ -126,6 +126,7 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
   {
     std::vector<float> states(n * brick_voxels);
     std::vector<BrickError> coded(n);
+    std::vector<double> scratch;
 #pragma omp for schedule(dynamic, 1)
     for (std::ptrdiff_t ci = 0; ci < static_cast<std::ptrdiff_t>(cells); ++ci) {
       const auto i = static_cast<std::size_t>(ci);
@@ -139,11 +140,11 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
           if (covered[f][i])
             std::fill(out.begin(), out.end(), cover_value[f][i]);
           else
-            format::decode_payload(b.payload, codec, frames[f]->header.codec_parameter, atoms, out,
-                                   "<encoder>", 0);
+            format::decode_payload(b.payload, codec, frames[f]->header.codec_parameter, atoms,
+                                   shape, out, "<encoder>", 0);
           forced[f] = f == 0 || f + 1 == n || covered[f][i] || b.subtree_constant;
           if (!forced[f])
-            coded[f] = coded_error(frames[f]->originals.data() + i * brick_voxels, state(f));
+            coded[f] = coded_error(shape, frames[f]->originals.data() + i * brick_voxels, state(f));
         }
         const std::uint32_t level = frames[0]->bricks[i].level;
         std::size_t k = 0;
@@ -155,9 +156,10 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
               const float f =
                   static_cast<float>(static_cast<double>(t - k) / static_cast<double>(u - k));
               const CodedFrame& ft = *frames[t];
-              holds = interpolation_holds(ft.originals.data() + i * brick_voxels, coded[t],
+              holds = interpolation_holds(shape, ft.originals.data() + i * brick_voxels, coded[t],
                                           state(k), state(u), f, ft.level_tolerance[level],
-                                          ft.max_abs_error, codec == format::Codec::ksvd, rule);
+                                          ft.max_abs_error, codec == format::Codec::ksvd, rule,
+                                          scratch);
             }
             if (!holds) break;
             best = u;

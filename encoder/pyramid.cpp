@@ -8,9 +8,6 @@
 
 namespace volreel::encoder {
 
-using format::brick_interior;
-using format::brick_size;
-
 namespace {
 
 std::size_t clamp_index(std::int64_t i, std::uint32_t n) {
@@ -46,11 +43,13 @@ void downsample_planes(const std::array<std::uint32_t, 3>& fine_dims,
   }
 }
 
-Pyramid build_pyramid(const Volume& frame) {
+Pyramid build_pyramid(const Volume& frame, format::BrickShape shape) {
   Pyramid p;
-  p.geometry = format::level_geometry({static_cast<std::uint32_t>(frame.dims.x),
-                                       static_cast<std::uint32_t>(frame.dims.y),
-                                       static_cast<std::uint32_t>(frame.dims.z)});
+  p.shape = shape;
+  p.geometry = format::level_geometry(
+      {static_cast<std::uint32_t>(frame.dims.x), static_cast<std::uint32_t>(frame.dims.y),
+       static_cast<std::uint32_t>(frame.dims.z)},
+      shape);
   const std::size_t levels = p.geometry.size();
   p.levels.resize(levels);
   p.levels[levels - 1] = frame.data;
@@ -72,12 +71,17 @@ namespace {
 
 /// extract_brick's voxels from the planes `plane(z)` returns of a level of size `dims`.
 template <class Plane>
-void extract_from_planes(const std::array<std::uint32_t, 3>& dims, std::uint32_t x, std::uint32_t y,
-                         std::uint32_t z, const Plane& plane, std::span<float> out) {
-  const std::int64_t x0 = std::int64_t{x} * brick_interior - 1,
-                     y0 = std::int64_t{y} * brick_interior - 1,
-                     z0 = std::int64_t{z} * brick_interior - 1;
-  std::size_t xs[brick_size];
+void extract_from_planes(format::BrickShape shape, const std::array<std::uint32_t, 3>& dims,
+                         std::uint32_t x, std::uint32_t y, std::uint32_t z, const Plane& plane,
+                         std::span<float> out) {
+  if (out.size() != shape.voxels())
+    throw std::logic_error("extract_brick: an output of " + std::to_string(out.size()) +
+                           " values for a brick of " + std::to_string(shape.voxels()));
+  const std::int64_t interior = shape.interior();
+  const std::uint32_t brick_size = shape.size;
+  const std::int64_t x0 = std::int64_t{x} * interior - 1, y0 = std::int64_t{y} * interior - 1,
+                     z0 = std::int64_t{z} * interior - 1;
+  std::size_t xs[format::max_brick_size];
   for (std::uint32_t a = 0; a < brick_size; ++a) xs[a] = clamp_index(x0 + a, dims[0]);
   for (std::uint32_t c = 0; c < brick_size; ++c) {
     const float* level_plane = plane(clamp_index(z0 + c, dims[2]));
@@ -98,11 +102,15 @@ void extract_brick(const Pyramid& pyramid, std::size_t level, std::uint32_t x, s
   const std::vector<float>& v = pyramid.levels[level];
   const std::size_t plane = std::size_t{dims[0]} * dims[1];
   extract_from_planes(
-      dims, x, y, z, [&](std::size_t zz) { return v.data() + zz * plane; }, out);
+      pyramid.shape, dims, x, y, z, [&](std::size_t zz) { return v.data() + zz * plane; }, out);
 }
 
-PyramidWindow::PyramidWindow(std::vector<format::LevelGeometry> geometry, ReadPlanes read)
-    : geometry_(std::move(geometry)), read_(std::move(read)), levels_(geometry_.size()) {}
+PyramidWindow::PyramidWindow(std::vector<format::LevelGeometry> geometry, ReadPlanes read,
+                             format::BrickShape shape)
+    : geometry_(std::move(geometry)),
+      shape_(shape),
+      read_(std::move(read)),
+      levels_(geometry_.size()) {}
 
 const float* PyramidWindow::plane(std::size_t level, std::size_t z) const {
   const Level& v = levels_[level];
@@ -166,7 +174,8 @@ void PyramidWindow::release(std::size_t level, std::size_t begin) {
 void PyramidWindow::extract_brick(std::size_t level, std::uint32_t x, std::uint32_t y,
                                   std::uint32_t z, std::span<float> out) const {
   extract_from_planes(
-      geometry_[level].dims, x, y, z, [&](std::size_t zz) { return plane(level, zz); }, out);
+      shape_, geometry_[level].dims, x, y, z, [&](std::size_t zz) { return plane(level, zz); },
+      out);
 }
 
 }  // namespace volreel::encoder

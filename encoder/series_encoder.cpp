@@ -78,6 +78,7 @@ std::string settings_difference(const format::Manifest& old, const format::Manif
   const auto text = [](const auto& v) { return nlohmann::json(v); };
   const auto codec = [](format::Codec c) { return nlohmann::json(codec_name(c)); };
   differ("dims", text(old.dims), text(now.dims));
+  differ("brick size", text(old.brick_size), text(now.brick_size));
   differ("codec", codec(old.codec), codec(now.codec));
   differ("tolerance", text(old.tolerance), text(now.tolerance));
   differ("fixed sparsity", text(old.fixed_sparsity), text(now.fixed_sparsity));
@@ -124,7 +125,8 @@ format::Manifest new_manifest(const datasets::SeriesInfo& info, std::size_t fram
                           static_cast<std::ptrdiff_t>(std::min(frames, info.timestamps.size())));
   while (m.timestamps.size() < frames)
     m.timestamps.push_back(static_cast<double>(m.timestamps.size()));
-  m.levels = static_cast<std::uint32_t>(format::level_geometry(m.dims).size());
+  m.brick_size = coding.brick_size;
+  m.levels = static_cast<std::uint32_t>(format::level_geometry(m.dims, m.shape()).size());
   m.codec = coding.codec;
   m.block_size = coding.codec == format::Codec::ksvd ? 6 : 0;
   m.tolerance =
@@ -196,7 +198,8 @@ bool prepare_container(const fs::path& out, const EncodeJob& job, format::Manife
         throw InputError("'" + out.string() + "' was encoded with other settings: " + d +
                          "; cannot --resume it: give the same options (pursuit: --pursuit, "
                          "level_tolerance_factor: --level-factor, mean_bits: --mean-bits, "
-                         "rate_rule: --rate-rule) or --overwrite to start again");
+                         "rate_rule: --rate-rule, brick size: --brick-size) or --overwrite to "
+                         "start again");
       m.frames = old.manifest().frames;
       resuming = true;
     } else if (!job.overwrite) {

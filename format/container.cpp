@@ -189,11 +189,14 @@ Manifest manifest_from_json(const std::string& text, const fs::path& name) {
       fail("timestamps", "increasing numbers", t);
     m.timestamps.push_back(t.get<double>());
   }
-  m.brick_size = static_cast<std::uint32_t>(uint_field("brick_size", brick_size, brick_size));
+  m.brick_size =
+      static_cast<std::uint32_t>(uint_field("brick_size", min_brick_size, max_brick_size));
+  if (!valid_brick_size(m.brick_size))
+    fail("brick_size", "a multiple of 6 in 12..66", get("brick_size"));
   m.brick_apron = static_cast<std::uint32_t>(uint_field("brick_apron", brick_apron, brick_apron));
   m.levels = static_cast<std::uint32_t>(uint_field("levels", 1, max_levels));
-  if (m.levels != level_geometry(m.dims).size())
-    fail("levels", std::to_string(level_geometry(m.dims).size()) + " for these dims",
+  if (m.levels != level_geometry(m.dims, m.shape()).size())
+    fail("levels", std::to_string(level_geometry(m.dims, m.shape()).size()) + " for these dims",
          get("levels"));
   const std::string codec = string_field("codec");
   if (codec == "ksvd")
@@ -454,6 +457,10 @@ void Container::check_frame(std::size_t t, const FrameView& view) const {
         path, offsetof(FrameHeader, fixed_sparsity),
         "fixed sparsity " + std::to_string(manifest_.fixed_sparsity) + " (manifest.json)",
         std::to_string(h.fixed_sparsity));
+  if (h.brick_size != manifest_.brick_size)
+    throw FormatError(path, offsetof(FrameHeader, brick_size),
+                      "brick size " + std::to_string(manifest_.brick_size) + " (manifest.json)",
+                      std::to_string(h.brick_size));
   if (h.block_size != manifest_.block_size)
     throw FormatError(path, offsetof(FrameHeader, block_size),
                       "block size " + std::to_string(manifest_.block_size) + " (manifest.json)",
@@ -522,7 +529,7 @@ void decode_and_check_histograms(const FrameView& view, const AtomTable& atoms) 
                              std::min(64.0, std::ceil(error / (range / histogram_bins)) + 1))
                        : 0u;
   const std::uint32_t finest = view.level(view.level_count() - 1).first_node;
-  std::vector<float> brick(brick_voxels);
+  std::vector<float> brick(view.shape().voxels());
   // Every brick decoded once (what validate_payloads does); the finest level's non-constant
   // bricks also against their histograms (constant ones are checked by the reader). A node
   // without a brick at this step has the histogram of the frame's data, which its interpolated

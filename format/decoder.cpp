@@ -40,9 +40,10 @@ struct ParsedCode {
 /// check_ksvd_payload on `payload` (word_count words followed by payload_padding_words zero
 /// words), appending the codes to *codes when it is not null.
 KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_count,
-                                     std::size_t bytes, std::uint32_t atom_count,
+                                     std::size_t bytes, std::uint32_t atom_count, BrickShape shape,
                                      const std::filesystem::path& name, std::uint64_t at,
                                      std::vector<ParsedCode>* codes) {
+  const vr_uint blocks = shape.blocks();
   const auto fail = [&](std::uint64_t offset, const std::string& expected,
                         const std::string& found) {
     throw FormatError(name, at + offset, "brick payload " + expected, found);
@@ -86,7 +87,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
              std::to_string(max_decoded_magnitude) + " in magnitude",
          "values that reach " + std::to_string(bound));
   // 2. The entries.
-  const vr_uint first = vr_code_first_word(layout.word);
+  const vr_uint first = vr_code_first_word(layout.word, blocks);
   if (bytes < 4 * std::uint64_t{first})
     fail(0,
          "of at least " + str(4 * std::uint64_t{first}) + " bytes for " +
@@ -97,7 +98,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
   const std::uint64_t stream_bits = (std::uint64_t{word_count} - first) * 32;
   const vr_uint largest = 1u << layout.coef_bits;
   vr_uint bit = 0;
-  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+  for (vr_uint b = 0; b < blocks; ++b) {
     const vr_uint s = vr_entry_sparsity(layout.word, vr_block_entry(payload, layout.word, b));
     layout.codes += s;
     vr_uint next_atom = 0, atom = 0;
@@ -106,7 +107,8 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
       if (bit >= stream_bits)
         fail(code_at, "codes inside the payload (block " + str(b) + ", code " + str(k) + ")",
              "the payload's end");
-      const int q = vr_read_code(payload, layout.word, layout.band_word, s, bit, next_atom, atom);
+      const int q =
+          vr_read_code(payload, first, layout.word, layout.band_word, s, bit, next_atom, atom);
       if (atom >= atom_count)
         fail(code_at,
              "atom index < " + str(atom_count) + " (block " + str(b) + ", code " + str(k) + ")",
@@ -130,8 +132,8 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
   return layout;
 }
 
-void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::span<float> out,
-                 const std::filesystem::path& name, std::uint64_t at) {
+void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, BrickShape shape,
+                 std::span<float> out, const std::filesystem::path& name, std::uint64_t at) {
   // Payloads are 4-byte aligned inside the file and the map is page-aligned, but copy to be safe
   // for in-memory views of arbitrary alignment; zero words after it, which a Rice code's
   // look-ahead at the stream's end (and a damaged stream's overrun) read (brick_decode.h).
@@ -141,8 +143,8 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
   // 1. Structure, dequantization values, atom indices and magnitudes; the codes, read once.
   thread_local std::vector<ParsedCode> codes;
   codes.clear();
-  const KsvdPayloadLayout layout =
-      parse_ksvd_payload(payload, bytes.size() / 4, bytes.size(), atoms.count, name, at, &codes);
+  const KsvdPayloadLayout layout = parse_ksvd_payload(payload, bytes.size() / 4, bytes.size(),
+                                                      atoms.count, shape, name, at, &codes);
   if (atoms.values.size() < std::size_t{atoms.count} * VR_BLOCK_LENGTH)
     throw FormatError(
         name, "dictionary holds fewer than the " + str(atoms.count) + " atoms the frame needs");
@@ -151,8 +153,9 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
   const float* atom_values = atoms.values.data();
   const float mean_bias = vr_as_float(payload[0]), mean_scale = vr_as_float(payload[1]);
   const float coef_scale = vr_as_float(payload[2]);
+  const vr_uint n = shape.blocks_per_axis(), size = shape.size;
   std::size_t code = 0;
-  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+  for (vr_uint b = 0; b < shape.blocks(); ++b) {
     const vr_uint entry = vr_block_entry(payload, layout.word, b);
     const vr_uint s = vr_entry_sparsity(layout.word, entry);
     const float mean =
@@ -163,12 +166,11 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, std::
       add_scaled(block, atom_values + std::size_t{codes[code].atom} * VR_BLOCK_LENGTH,
                  coef_scale * static_cast<float>(codes[code].q));
     // Scatter the block into the brick, row by row.
-    const vr_uint bx = b % 6, by = (b / 6) % 6, bz = b / 36;
+    const vr_uint bx = b % n, by = (b / n) % n, bz = b / (n * n);
     for (vr_uint z = 0; z < 6; ++z)
       for (vr_uint y = 0; y < 6; ++y)
-        std::memcpy(
-            out.data() + ((bz * 6 + z) * VR_BRICK_SIZE + by * 6 + y) * VR_BRICK_SIZE + bx * 6,
-            block + (z * 6 + y) * 6, 6 * sizeof(float));
+        std::memcpy(out.data() + ((bz * 6 + z) * size + by * 6 + y) * size + bx * 6,
+                    block + (z * 6 + y) * 6, 6 * sizeof(float));
   }
 }
 
@@ -219,7 +221,7 @@ std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, vr_uint
                           BitWriter* out) {
   std::uint64_t bits = 0;
   std::size_t k = 0;
-  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+  for (std::size_t b = 0; b < parts.sparsity.size(); ++b) {
     const vr_uint s = parts.sparsity[b], gap_rice = s > 0 ? vr_gap_rice(layout, s) : 0;
     vr_uint next_atom = 0;
     for (vr_uint j = 0; j < s; ++j, ++k) {
@@ -258,8 +260,16 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
                                 str(parts.coef_bits) + ", atom " + str(parts.atom_bits) +
                                 " bits, gap shift " + std::to_string(parts.gap_shift) +
                                 " or a band's Rice parameter over 15");
+  const std::size_t blocks = parts.sparsity.size();
+  bool brick_blocks = false;  // n³ for a brick size 6n
+  for (std::uint32_t size = min_brick_size; size <= max_brick_size; size += brick_block_size)
+    brick_blocks = brick_blocks || BrickShape{size}.blocks() == blocks;
+  if (blocks != parts.mean.size() || !brick_blocks)
+    throw std::invalid_argument(str(parts.sparsity.size()) + " sparsities and " +
+                                str(parts.mean.size()) +
+                                " means: not one each per block of a brick (n³, n = 2..11)");
   std::uint64_t codes = 0;
-  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+  for (std::size_t b = 0; b < blocks; ++b) {
     if ((std::uint64_t{parts.sparsity[b]} >> parts.sparsity_bits) != 0 ||
         (std::uint64_t{parts.mean[b]} >> parts.mean_bits) != 0)
       throw std::invalid_argument("block " + str(b) + ": sparsity " + str(parts.sparsity[b]) +
@@ -270,7 +280,7 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
     throw std::invalid_argument(str(parts.atoms.size()) + " atoms and " + str(parts.values.size()) +
                                 " values for sparsities summing to " + str(codes));
   std::size_t k = 0;
-  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+  for (std::size_t b = 0; b < blocks; ++b)
     for (vr_uint j = 0; j < parts.sparsity[b]; ++j, ++k) {
       const std::int64_t magnitude = std::abs(std::int64_t{parts.values[k]});
       if ((std::uint64_t{parts.atoms[k]} >> parts.atom_bits) != 0 || magnitude == 0 ||
@@ -314,7 +324,7 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
   const vr_uint layout = layout_of(gap_shift);
 
   BitWriter entries, stream;
-  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+  for (std::size_t b = 0; b < blocks; ++b)
     entries.put(vr_layout_entry_bits(layout),
                 parts.sparsity[b] | (parts.mean[b] << parts.sparsity_bits));
   write_codes(parts, layout, band_word, &stream);
@@ -333,14 +343,17 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
 }
 
 KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint32_t atom_count,
-                                     const std::filesystem::path& name, std::uint64_t at) {
+                                     BrickShape shape, const std::filesystem::path& name,
+                                     std::uint64_t at) {
   std::vector<vr_uint> words(bytes.size() / 4 + payload_padding_words, 0u);
   if (bytes.size() >= 4) std::memcpy(words.data(), bytes.data(), bytes.size() / 4 * 4);
   const vr_uint* payload = words.data();
   std::vector<ParsedCode> codes;  // read once, by the check
-  const KsvdPayloadLayout layout =
-      parse_ksvd_payload(payload, bytes.size() / 4, bytes.size(), atom_count, name, at, &codes);
+  const KsvdPayloadLayout layout = parse_ksvd_payload(payload, bytes.size() / 4, bytes.size(),
+                                                      atom_count, shape, name, at, &codes);
   KsvdPayloadParts parts;
+  parts.sparsity.resize(shape.blocks());
+  parts.mean.resize(shape.blocks());
   std::memcpy(parts.dequantization, payload, 12);
   parts.mean_bits = layout.mean_bits;
   parts.sparsity_bits = layout.sparsity_bits;
@@ -350,7 +363,7 @@ KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint
     parts.band_rice[band] = static_cast<int>((layout.band_word >> (4 * band)) & 0xF);
   parts.gap_shift = static_cast<int>(vr_layout_gap_shift(layout.word));
   parts.band_split = vr_layout_band_split(layout.word);
-  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+  for (vr_uint b = 0; b < shape.blocks(); ++b) {
     const vr_uint entry = vr_block_entry(payload, layout.word, b);
     parts.sparsity[b] = vr_entry_sparsity(layout.word, entry);
     parts.mean[b] = vr_entry_mean(layout.word, entry);
@@ -363,25 +376,27 @@ KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint
 }
 
 KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> bytes, std::uint32_t atom_count,
-                                     const std::filesystem::path& name, std::uint64_t at) {
+                                     BrickShape shape, const std::filesystem::path& name,
+                                     std::uint64_t at) {
   std::vector<vr_uint> words(bytes.size() / 4);
   if (!words.empty()) std::memcpy(words.data(), bytes.data(), 4 * words.size());
-  return check_ksvd_payload(words, bytes.size(), atom_count, name, at);
+  return check_ksvd_payload(words, bytes.size(), atom_count, shape, name, at);
 }
 
 KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::size_t bytes,
-                                     std::uint32_t atom_count, const std::filesystem::path& name,
-                                     std::uint64_t at) {
+                                     std::uint32_t atom_count, BrickShape shape,
+                                     const std::filesystem::path& name, std::uint64_t at) {
   std::vector<vr_uint> padded(words.size() + payload_padding_words, 0u);
   std::copy(words.begin(), words.end(), padded.begin());
-  return parse_ksvd_payload(padded.data(), words.size(), bytes, atom_count, name, at, nullptr);
+  return parse_ksvd_payload(padded.data(), words.size(), bytes, atom_count, shape, name, at,
+                            nullptr);
 }
 
 namespace {
 
-void decode_zfp(std::span<const std::byte> bytes, double accuracy, std::span<float> out,
-                const std::filesystem::path& name, std::uint64_t at) {
-  ZfpStream zfp(ZfpMode::accuracy(accuracy), brick_size, brick_size, brick_size);
+void decode_zfp(std::span<const std::byte> bytes, double accuracy, BrickShape shape,
+                std::span<float> out, const std::filesystem::path& name, std::uint64_t at) {
+  ZfpStream zfp(ZfpMode::accuracy(accuracy), shape.size, shape.size, shape.size);
   // zfp reads without bounds checks: give it a zero-padded copy as long as the longest stream.
   std::vector<std::byte> padded(std::max<std::size_t>(zfp.maximum_size(), bytes.size()) + 64);
   if (!bytes.empty()) std::memcpy(padded.data(), bytes.data(), bytes.size());
@@ -397,10 +412,12 @@ void decode_zfp(std::span<const std::byte> bytes, double accuracy, std::span<flo
 }  // namespace
 
 void decode_payload(std::span<const std::byte> bytes, Codec codec, double zfp_accuracy,
-                    const AtomTable& atoms, std::span<float> out, const std::filesystem::path& name,
-                    std::uint64_t offset) {
-  if (out.size() != brick_voxels)
-    throw FormatError(name, "decode_payload needs an output of 36^3 values");
+                    const AtomTable& atoms, BrickShape shape, std::span<float> out,
+                    const std::filesystem::path& name, std::uint64_t offset) {
+  if (!valid_brick_size(shape.size) || out.size() != shape.voxels())
+    throw FormatError(name, "decode_payload needs a brick size in 12..66, a multiple of 6 (not " +
+                                str(shape.size) + "), and an output of its cube of values (not " +
+                                str(out.size()) + ")");
   // A 4-byte payload is a constant brick (either codec).
   if (bytes.size() == 4) {
     float v;
@@ -411,9 +428,9 @@ void decode_payload(std::span<const std::byte> bytes, Codec codec, double zfp_ac
     return;
   }
   if (codec == Codec::ksvd)
-    decode_ksvd(bytes, atoms, out, name, offset);
+    decode_ksvd(bytes, atoms, shape, out, name, offset);
   else
-    decode_zfp(bytes, zfp_accuracy, out, name, offset);
+    decode_zfp(bytes, zfp_accuracy, shape, out, name, offset);
 }
 
 void decode_brick(const FrameView& frame, std::uint32_t brick, const AtomTable& atoms,
@@ -422,15 +439,16 @@ void decode_brick(const FrameView& frame, std::uint32_t brick, const AtomTable& 
     throw FormatError(frame.name(),
                       "no brick " + str(brick) + " (frame has " + str(frame.brick_count()) + ")");
   decode_payload(frame.checked_brick_bytes(brick), frame.codec(), frame.header().codec_parameter,
-                 atoms, out, frame.name(), frame.brick_offset(brick));
+                 atoms, frame.shape(), out, frame.name(), frame.brick_offset(brick));
 }
 
 void place_in_level(const NodePosition& p, std::uint32_t level, std::array<std::uint32_t, 3> dims,
-                    std::span<const float> brick, std::span<float> out) {
+                    BrickShape shape, std::span<const float> brick, std::span<float> out) {
+  const std::size_t brick_size = shape.size;
   const std::size_t nx = dims[0], ny = dims[1], nz = dims[2];
   const std::size_t scale = std::size_t{1}
                             << (level - p.level);  // a node voxel covers scale³ voxels of `level`
-  const std::size_t span_voxels = brick_interior * scale;
+  const std::size_t span_voxels = shape.interior() * scale;
   const std::size_t x0 = p.x * span_voxels, y0 = p.y * span_voxels, z0 = p.z * span_voxels;
   const std::size_t x1 = std::min(nx, x0 + span_voxels), y1 = std::min(ny, y0 + span_voxels),
                     z1 = std::min(nz, z0 + span_voxels);
@@ -478,7 +496,7 @@ void decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& 
   const auto n = static_cast<std::ptrdiff_t>(work.size());
 #pragma omp parallel
   {
-    std::vector<float> brick(brick_voxels);
+    std::vector<float> brick(frame.shape().voxels());
 #pragma omp for schedule(dynamic, 4)
     for (std::ptrdiff_t w = 0; w < n; ++w) {
       const std::uint32_t i = work[static_cast<std::size_t>(w)];
@@ -490,7 +508,7 @@ void decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& 
         continue;
       }
       place_in_level(frame.position(i), level, {target.dims[0], target.dims[1], target.dims[2]},
-                     brick, out);
+                     frame.shape(), brick, out);
     }
   }
   if (error) std::rethrow_exception(error);
@@ -509,7 +527,7 @@ LevelVolume decode_level(const FrameView& frame, std::uint32_t level, const Atom
 }
 
 void validate_payloads(const FrameView& frame, const AtomTable& atoms) {
-  std::vector<float> brick(brick_voxels);
+  std::vector<float> brick(frame.shape().voxels());
   for (std::uint32_t b = 0; b < frame.brick_count(); ++b) decode_brick(frame, b, atoms, brick);
 }
 

@@ -22,19 +22,49 @@ namespace volreel::format {
 
 namespace fs = std::filesystem;
 
-std::vector<LevelGeometry> level_geometry(std::array<std::uint32_t, 3> dims) {
+std::vector<LevelGeometry> level_geometry(std::array<std::uint32_t, 3> dims, BrickShape shape) {
+  const std::uint32_t interior = shape.interior();
   std::vector<LevelGeometry> levels;
   LevelGeometry g;
   g.dims = dims;
   for (;;) {
-    for (std::size_t a = 0; a < 3; ++a)
-      g.grid[a] = (g.dims[a] + brick_interior - 1) / brick_interior;
+    for (std::size_t a = 0; a < 3; ++a) g.grid[a] = (g.dims[a] + interior - 1) / interior;
     levels.push_back(g);
     if (g.grid[0] <= 1 && g.grid[1] <= 1 && g.grid[2] <= 1) break;
     for (std::size_t a = 0; a < 3; ++a) g.dims[a] = (g.dims[a] + 1) / 2;
   }
   std::reverse(levels.begin(), levels.end());
   return levels;
+}
+
+double coded_block_share(std::array<std::uint32_t, 3> dims, BrickShape shape) {
+  const std::int64_t interior = shape.interior(), side = brick_block_size;
+  double blocks = 0;
+  for (const LevelGeometry& g : level_geometry(dims, shape)) {
+    double product = 1;
+    for (std::size_t a = 0; a < 3; ++a) {
+      // Brick x stores level voxels x·interior − 1 + [0, size); block j of it starts at
+      // x·interior − 1 + 6j.
+      std::uint64_t count = 0;
+      for (std::int64_t x = 0; x < g.grid[a]; ++x)
+        for (std::int64_t j = 0; j < shape.blocks_per_axis(); ++j) {
+          const std::int64_t first = x * interior - 1 + side * j;
+          if (first < std::int64_t{g.dims[a]} && first + side > 0) ++count;
+        }
+      product *= static_cast<double>(count);
+    }
+    blocks += product;
+  }
+  return blocks * static_cast<double>(side * side * side) /
+         (static_cast<double>(dims[0]) * dims[1] * dims[2]);
+}
+
+BrickShape choose_brick_shape(std::array<std::uint32_t, 3> dims) {
+  double least = coded_block_share(dims, {max_brick_size});
+  for (std::uint32_t size = min_brick_size; size < max_brick_size; size += brick_block_size)
+    least = std::min(least, coded_block_share(dims, {size}));
+  for (std::uint32_t size = min_brick_size;; size += brick_block_size)
+    if (size == max_brick_size || coded_block_share(dims, {size}) <= least * 1.01) return {size};
 }
 
 std::uint64_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
@@ -75,7 +105,9 @@ std::vector<std::byte> serialize_frame(const FrameContents& frame) {
   std::memcpy(h.magic, frame_magic.data(), 8);
   h.format_version = frame_format_version;
   h.header_bytes = sizeof(FrameHeader);
-  h.brick_size = brick_size;
+  if (!valid_brick_size(h.brick_size))
+    throw FormatError("<memory>", "frame header's brick size " + str(h.brick_size) +
+                                      " is not a multiple of 6 in 12..66");
   h.brick_apron = brick_apron;
   h.level_count = static_cast<std::uint32_t>(frame.levels.size());
   h.node_count = static_cast<std::uint32_t>(frame.nodes.size());
@@ -94,7 +126,7 @@ std::vector<std::byte> serialize_frame(const FrameContents& frame) {
     payload_bytes += p.size();
   }
   h.payload_bytes = payload_bytes;
-  const auto geometry = level_geometry({h.dims[0], h.dims[1], h.dims[2]});
+  const auto geometry = level_geometry({h.dims[0], h.dims[1], h.dims[2]}, {h.brick_size});
   if (geometry.size() != frame.levels.size())
     throw FormatError("<memory>", "frame has " + str(frame.levels.size()) +
                                       " levels, its dims need " + str(geometry.size()));
@@ -166,8 +198,9 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name, std::uint6
     if (h.dims[a] == 0 || h.dims[a] > (1u << 24))
       fail(offsetof(FrameHeader, dims) + 4u * static_cast<unsigned>(a), "dimension in 1..16777216",
            str(h.dims[a]));
-  if (h.brick_size != brick_size)
-    fail(offsetof(FrameHeader, brick_size), "brick size 36", str(h.brick_size));
+  if (!valid_brick_size(h.brick_size))
+    fail(offsetof(FrameHeader, brick_size), "brick size a multiple of 6 in 12..66",
+         str(h.brick_size));
   if (h.brick_apron != brick_apron)
     fail(offsetof(FrameHeader, brick_apron), "apron 1", str(h.brick_apron));
   const bool ksvd = h.codec == static_cast<std::uint32_t>(Codec::ksvd);
@@ -181,7 +214,7 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name, std::uint6
   if (!std::isfinite(h.value_min) || !std::isfinite(h.value_max) || h.value_min > h.value_max)
     fail(offsetof(FrameHeader, value_min), "a finite value range min <= max",
          "[" + std::to_string(h.value_min) + ", " + std::to_string(h.value_max) + "]");
-  const auto geometry = level_geometry({h.dims[0], h.dims[1], h.dims[2]});
+  const auto geometry = level_geometry({h.dims[0], h.dims[1], h.dims[2]}, {h.brick_size});
   if (h.level_count != geometry.size())
     fail(offsetof(FrameHeader, level_count), str(geometry.size()) + " levels for these dims",
          str(h.level_count));

@@ -154,7 +154,7 @@ void TimeStepDecoder::decode(std::size_t t, std::uint32_t level, std::span<float
   const auto n = static_cast<std::ptrdiff_t>(work.size());
 #pragma omp parallel
   {
-    std::vector<float> a(brick_voxels), b(brick_voxels);
+    std::vector<float> a(f.shape().voxels()), b(f.shape().voxels());
 #pragma omp for schedule(dynamic, 4)
     for (std::ptrdiff_t w = 0; w < n; ++w) {
       const auto k = static_cast<std::size_t>(w);
@@ -171,7 +171,7 @@ void TimeStepDecoder::decode(std::size_t t, std::uint32_t level, std::span<float
         if (!error) error = std::current_exception();
         continue;
       }
-      place_in_level(f.position(work[k]), level, dims, a, out);
+      place_in_level(f.position(work[k]), level, dims, f.shape(), a, out);
     }
   }
   if (error) std::rethrow_exception(error);

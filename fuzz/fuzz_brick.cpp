@@ -1,6 +1,6 @@
 // fuzz_brick.cpp: one brick payload through the CPU reference decoder (check_ksvd_payload, then the
-// decode) against the DCT basis, and as a zfp stream. Every outcome is a FormatError or finite
-// values.
+// decode) against the DCT basis, and as a zfp stream, as a brick of 36³ and of 12³ (the payload's
+// entries depend on the brick size). Every outcome is a FormatError or finite values.
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -21,13 +21,15 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (size > (std::size_t{1} << 20)) return 0;
   std::vector<std::byte> bytes(size);
   if (size > 0) std::memcpy(bytes.data(), data, size);
-  std::vector<float> out(brick_voxels);
-  for (const Codec codec : {Codec::ksvd, Codec::zfp}) {
-    try {
-      decode_payload(bytes, codec, 1e-3, atoms, out, "fuzz.vrf", 0);
-      for (float v : out)
-        if (!std::isfinite(v)) std::abort();  // a payload that passed must decode to finite values
-    } catch (const FormatError&) {
+  for (const BrickShape shape : {BrickShape{36}, BrickShape{12}}) {
+    std::vector<float> out(shape.voxels());
+    for (const Codec codec : {Codec::ksvd, Codec::zfp}) {
+      try {
+        decode_payload(bytes, codec, 1e-3, atoms, shape, out, "fuzz.vrf", 0);
+        for (float v : out)
+          if (!std::isfinite(v)) std::abort();  // a payload that passed decodes to finite values
+      } catch (const FormatError&) {
+      }
     }
   }
   return 0;

@@ -31,11 +31,11 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
   try {
     const FrameView view(bytes, "fuzz.vrf");
-    std::vector<float> brick(brick_voxels);
+    std::vector<float> brick(view.shape().voxels());
     for (std::uint32_t b = 0; b < view.brick_count(); ++b) {
       try {  // unchecked bytes first (past the brick CRC), then the checked path
         decode_payload(view.brick_bytes(b), view.codec(), view.header().codec_parameter, atoms,
-                       brick, view.name(), view.brick_offset(b));
+                       view.shape(), brick, view.name(), view.brick_offset(b));
       } catch (const FormatError&) {
       }
     }

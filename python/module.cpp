@@ -96,7 +96,7 @@ class PyContainer {
 
   /// The size (x, y, z) of level l.
   std::array<std::uint32_t, 3> level_dims(std::uint32_t l) const {
-    const auto geometry = format::level_geometry(manifest().dims);
+    const auto geometry = format::level_geometry(manifest().dims, manifest().shape());
     if (l >= geometry.size()) throw py::index_error("level " + std::to_string(l));
     return geometry[l].dims;
   }
@@ -266,7 +266,8 @@ py::dict encode(const py::object& frames, const fs::path& out, std::optional<dou
                 std::optional<double> max_error, const std::string& dictionary,
                 const std::string& codec, std::optional<double> zfp_accuracy, int atoms,
                 std::optional<std::uint32_t> max_keyframe_gap, bool overwrite, bool resume,
-                const std::optional<std::vector<double>>& times, const std::string& variable) {
+                const std::optional<std::vector<double>>& times, const std::string& variable,
+                const std::string& brick_size) {
   if (int(psnr.has_value()) + int(bps.has_value()) + int(tolerance.has_value()) +
           int(max_error.has_value()) >
       1)
@@ -274,6 +275,7 @@ py::dict encode(const py::object& frames, const fs::path& out, std::optional<dou
   SeriesInput in = series_input(frames, out, times, variable);
   encoder::EncodeRequest r;
   r.coding.codec = encoder::codec_from_name(codec);
+  r.coding.brick_size = encoder::brick_size_from_text(brick_size);
   if (tolerance) r.tolerance.tolerance = *tolerance;
   if (psnr) r.tolerance.psnr = *psnr;
   if (bps) r.tolerance.bps = *bps;
@@ -440,8 +442,9 @@ PYBIND11_MODULE(_volreel, m) {
         py::arg("dictionary") = "", py::arg("codec") = "ksvd", py::arg("zfp_accuracy") = py::none(),
         py::arg("atoms") = 0, py::arg("max_keyframe_gap") = py::none(),
         py::arg("overwrite") = false, py::arg("resume") = false, py::arg("times") = py::none(),
-        py::arg("variable") = "",
-        "Encodes frames into the container `out` as `volreel encode` does");
+        py::arg("variable") = "", py::arg("brick_size") = "auto",
+        "Encodes frames into the container `out` as `volreel encode` does (brick_size: \"auto\" "
+        "or stored voxels per brick axis, a multiple of 6 in 12..66, as --brick-size)");
   m.def("train", &train, py::arg("frames"), py::arg("out"), py::kw_only(), py::arg("atoms") = 256,
         py::arg("psnr") = py::none(), py::arg("tolerance") = py::none(),
         py::arg("times") = py::none(),

@@ -17,8 +17,8 @@ expect_error() {
 "$volreel" gen analytic --field blobs --dims 40x36x30 --frames 3 --out "$work/s" 2>/dev/null
 "$volreel" train "$work/s" --out "$work/dict.bin" --atoms 64 --coreset 200k --levels 2 --iterations 2 --psnr 45 > /dev/null 2>&1
 
-# Variable rate: info, verify, compare (with bps), decode at both levels.
-"$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/a.vreel" > "$work/enc.txt" 2>/dev/null
+# Variable rate: info, verify, compare (with bps), decode at both levels (bricks of 36^3: 2 levels).
+"$volreel" encode "$work/s" --dictionary "$work/dict.bin" --brick-size 36 --out "$work/a.vreel" > "$work/enc.txt" 2>/dev/null
 grep -q "quantization:.*dB lost" "$work/enc.txt" || fail "encode does not report the quantization loss"
 grep -q "MVoxel/s" "$work/enc.txt" || fail "encode does not report its speed"
 grep -q "ksvd" <<< "$("$volreel" info "$work/a.vreel")" || fail "info lacks the codec"
@@ -34,6 +34,27 @@ echo "$out" | json '1 if d["bps"] > 0 and d["sequence"]["psnr"] > 35 else exit(1
 expect_error "levels 0..1" "$volreel" decode "$work/a.vreel" --frame 0 --level 5 --out "$work/x.f32"
 expect_error "the container has frames 0..2" "$volreel" decode "$work/a.vreel" --frame 3 --out "$work/x.f32"
 expect_error "already holds a container" "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/a.vreel"
+
+# The brick size: chosen per volume by default (42^3 holds 40x36x30 in one brick), or given.
+"$volreel" encode "$work/s" --dictionary dct --out "$work/auto.vreel" > "$work/auto.txt" 2>/dev/null
+grep -q "bricks of 42^3 voxels (40^3 interior + apron), chosen for this volume" "$work/auto.txt" ||
+  fail "encode does not report the brick size it chose: $(cat "$work/auto.txt")"
+[ "$("$volreel" info "$work/auto.vreel" --json | json 'd["brick_size"]')" = 42 ] || fail "info --json brick_size"
+[ "$("$volreel" info "$work/auto.vreel" --json | json 'd["levels"]')" = 1 ] || fail "one brick, one level"
+grep -q "bricks of 42^3 (40 interior + 1 apron)" <<< "$("$volreel" info "$work/auto.vreel")" || fail "info lacks the brick size"
+grep -q OK <<< "$("$volreel" verify "$work/auto.vreel" 2>/dev/null)" || fail "verify with bricks of 42^3"
+"$volreel" encode "$work/s" --dictionary dct --brick-size 12 --out "$work/b12.vreel" > /dev/null 2>&1
+[ "$("$volreel" info "$work/b12.vreel" --json | json 'd["levels"]')" = 3 ] || fail "bricks of 12^3: 3 levels"
+for c in auto b12; do
+  out=$("$volreel" compare "$work/s" "$work/$c.vreel" --json --no-ssim 2>/dev/null)
+  echo "$out" | json '1 if d["sequence"]["psnr"] > 45 else exit(1)' > /dev/null || fail "compare $c: $out"
+done
+"$volreel" decode "$work/b12.vreel" --frame 1 --level 0 --out "$work/b12l0.f32" > /dev/null
+[ "$(stat -c %s "$work/b12l0.f32")" = $((10 * 9 * 8 * 4)) ] || fail "bricks of 12^3: decode at level 0"
+expect_error "brick-size must be auto or a multiple of 6 in 12..66" \
+  "$volreel" encode "$work/s" --dictionary dct --brick-size 40 --out "$work/x.vreel"
+expect_error "brick-size must be auto or a whole number 12..66" \
+  "$volreel" encode "$work/s" --dictionary dct --brick-size 72 --out "$work/x.vreel"
 
 # Damage: a flipped byte in a frame, a truncated frame, a broken manifest.
 cp -r "$work/a.vreel" "$work/b.vreel"
@@ -57,9 +78,13 @@ grep -q "fixed rate S = 2" <<< "$("$volreel" info "$work/fixed.vreel")" || fail 
 "$volreel" verify "$work/z.vreel" > /dev/null 2>&1 || fail "verify zfp"
 out=$("$volreel" compare "$work/s" "$work/z.vreel" --json --no-ssim 2>/dev/null)
 echo "$out" | json '1 if d["sequence"]["max_abs_error"] <= 1e-3 else exit(1)' > /dev/null || fail "zfp max error above its accuracy"
-"$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/r.vreel" --bps 8 --rate-sample-frames 3 > /dev/null 2>&1
+"$volreel" encode "$work/s" --dictionary dct --out "$work/r.vreel" --bps 2 --rate-sample-frames 3 > /dev/null 2>&1
 bps=$("$volreel" info "$work/r.vreel" --json | json 'd["bps"]')
-/usr/bin/python3 -c "import sys; b=$bps; sys.exit(0 if abs(b-8)/8 <= 0.05 else 1)" || fail "--bps 8 gave $bps bps"
+/usr/bin/python3 -c "import sys; b=$bps; sys.exit(0 if abs(b-2)/2 <= 0.05 else 1)" || fail "--bps 2 gave $bps bps"
+# A size the codec cannot reach (more bits than float precision needs) is reported as such.
+"$volreel" encode "$work/s" --dictionary dct --out "$work/r40.vreel" --bps 40 > /dev/null 2> "$work/r40.txt"
+grep -q "target 40.0000 bps missed.*no tolerance makes it larger" "$work/r40.txt" ||
+  fail "--bps 40: $(cat "$work/r40.txt")"
 
 # gen mosaic: a larger valid container repeating a.vreel's bricks; never over an existing one.
 "$volreel" gen mosaic --from "$work/a.vreel" --size 70x50x40 --frames 6 --max-keyframe-gap 2 --out "$work/mosaic.vreel" \
@@ -116,7 +141,7 @@ grep -q "target PSNR 60.00 dB met by every frame" "$work/pp.txt" || fail "piecew
 expect_error "needs --max-keyframe-gap 1" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1M --max-keyframe-gap 4 --out "$work/x.vreel"
 expect_error "training a dictionary reads frames whole" "$volreel" encode "$work/tall" --memory 1M --out "$work/x.vreel"
 expect_error "bps codes sample frames whole" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1M --bps 1 --out "$work/x.vreel"
-expect_error "holds about 0.527 MiB of planes: give at least that --memory" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 100k --out "$work/x.vreel"
+expect_error "holds about 0.967 MiB of planes: give at least that --memory" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 100k --out "$work/x.vreel"
 expect_error "expected a size such as 2G" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory lots --out "$work/x.vreel"
 [ ! -e "$work/x.vreel" ] || fail "a refused encode left a container behind"
 

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <map>
 
 #include <nlohmann/json.hpp>
 
@@ -33,9 +34,14 @@
 namespace volreel {
 namespace {
 
-using format::brick_size;
-using format::brick_voxels;
 using test::random_dictionary;
+
+// Most tests use bricks of the default size, 36³: 216 blocks of 6³.
+constexpr format::BrickShape shape36{};
+constexpr std::uint32_t brick_size = shape36.size;
+constexpr std::size_t brick_voxels = shape36.voxels();
+constexpr std::uint32_t blocks_per_axis = shape36.blocks_per_axis();
+constexpr std::uint32_t blocks_per_brick = shape36.blocks();
 
 Volume analytic_volume(datasets::AnalyticField field, Dims dims, std::size_t t = 0) {
   datasets::AnalyticParams p;
@@ -175,7 +181,7 @@ TEST(Encoder, RoundTripOfABrickBuiltFromAtoms) {
     const float mean = static_cast<float>(b) * 0.01f - 1.0f;
     const float coefficient = 1.0f + static_cast<float>(b % 64) / 64.0f;
     for (std::uint32_t v = 0; v < 216; ++v)
-      brick[vr_brick_voxel(b, v)] = mean + coefficient * d.atoms(v, chosen[b]);
+      brick[vr_brick_voxel(blocks_per_axis, b, v)] = mean + coefficient * d.atoms(v, chosen[b]);
   }
   encoder::CodingSettings s;
   s.tolerance = 1.0 / 64;
@@ -186,7 +192,8 @@ TEST(Encoder, RoundTripOfABrickBuiltFromAtoms) {
   const encoder::FrameEncoder enc(&d, s);
   const auto payload = enc.encode_brick(brick);
   // One code per block, naming the atom the block was built from, with its coefficient.
-  const format::KsvdPayloadParts parts = format::unpack_ksvd_payload(payload, 64, "<memory>", 0);
+  const format::KsvdPayloadParts parts =
+      format::unpack_ksvd_payload(payload, 64, shape36, "<memory>", 0);
   ASSERT_EQ(parts.atoms.size(), 216u);
   for (vr_uint b = 0; b < 216; ++b) {
     ASSERT_EQ(parts.sparsity[b], 1u) << "block " << b;
@@ -199,7 +206,8 @@ TEST(Encoder, RoundTripOfABrickBuiltFromAtoms) {
   std::vector<vr_uint> words(payload.size() / 4 + 1, 0u);
   std::memcpy(words.data(), payload.data(), payload.size());
   std::vector<float> out(brick_voxels);
-  format::decode_payload(payload, format::Codec::ksvd, 0, atom_table(d), out, "<memory>", 0);
+  format::decode_payload(payload, format::Codec::ksvd, 0, atom_table(d), shape36, out, "<memory>",
+                         0);
   double max_error = 0;
   for (std::size_t i = 0; i < brick_voxels; ++i)
     max_error = std::max(max_error, std::abs(static_cast<double>(out[i] - brick[i])));
@@ -208,8 +216,8 @@ TEST(Encoder, RoundTripOfABrickBuiltFromAtoms) {
   // The shared per-value decode of brick_decode.h agrees with the brick decoder.
   for (vr_uint b = 0; b < 216; b += 17) {
     for (vr_uint v = 0; v < 216; v += 5)
-      ASSERT_FLOAT_EQ(vr_decode_value(words.data(), d.atoms.data(), b, v),
-                      out[vr_brick_voxel(b, v)]);
+      ASSERT_FLOAT_EQ(vr_decode_value(words.data(), d.atoms.data(), blocks_per_brick, b, v),
+                      out[vr_brick_voxel(blocks_per_axis, b, v)]);
   }
 }
 
@@ -321,8 +329,8 @@ std::vector<vr_uint> block_sparsities(const format::FrameView& f, std::uint32_t 
   std::vector<vr_uint> words(payload.size() / 4);
   std::memcpy(words.data(), payload.data(), payload.size());
   const vr_uint lw = vr_layout_word(words.data());
-  std::vector<vr_uint> atoms(VR_BLOCKS_PER_BRICK);
-  for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
+  std::vector<vr_uint> atoms(blocks_per_brick);
+  for (vr_uint b = 0; b < blocks_per_brick; ++b)
     atoms[b] = vr_entry_sparsity(lw, vr_block_entry(words.data(), lw, b));
   return atoms;
 }
@@ -341,9 +349,9 @@ TEST(Encoder, PaddingBlocksGetNoAtomsUnderTheLagrangianRule) {  // (at this ε: 
     std::size_t padding_codes = 0, other_codes = 0;
     for (std::uint32_t i = f.level(f.level_count() - 1).first_node; i < f.node_count(); ++i) {
       const std::vector<vr_uint> atoms = block_sparsities(f, i);
-      ASSERT_EQ(atoms.size(), VR_BLOCKS_PER_BRICK);
-      for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b)
-        (f.position(i).x == 1 && b % VR_BLOCKS_PER_AXIS >= 2 ? padding_codes : other_codes) +=
+      ASSERT_EQ(atoms.size(), blocks_per_brick);
+      for (vr_uint b = 0; b < blocks_per_brick; ++b)
+        (f.position(i).x == 1 && b % blocks_per_axis >= 2 ? padding_codes : other_codes) +=
             atoms[b];
     }
     EXPECT_GT(other_codes, 0u);
@@ -367,7 +375,7 @@ TEST(Encoder, FinestOwnedCodesCountEachBlockByItsOwnVoxels) {
   double expected = 0, finest_codes = 0;
   for (std::uint32_t i = f.level(f.level_count() - 1).first_node; i < f.node_count(); ++i) {
     const std::vector<vr_uint> sparsities = block_sparsities(f, i);
-    ASSERT_EQ(sparsities.size(), VR_BLOCKS_PER_BRICK);
+    ASSERT_EQ(sparsities.size(), blocks_per_brick);
     // The code bits of each block, read as the decoders read them.
     const auto payload = f.brick_bytes(i);
     std::vector<vr_uint> words(payload.size() / 4 + 1, 0u);
@@ -375,12 +383,13 @@ TEST(Encoder, FinestOwnedCodesCountEachBlockByItsOwnVoxels) {
     const vr_uint lw = vr_layout_word(words.data());
     const vr_uint band_word = vr_band_word(words.data());
     vr_uint bit = 0;
+    const vr_uint first = vr_code_first_word(lw, blocks_per_brick);
     const std::uint32_t pos[3] = {f.position(i).x, f.position(i).y, f.position(i).z};
-    for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    for (vr_uint b = 0; b < blocks_per_brick; ++b) {
       const vr_uint atoms = sparsities[b], start = bit;
       vr_uint next_atom = 0, atom = 0;
       for (vr_uint k = 0; k < atoms; ++k)
-        vr_read_code(words.data(), lw, band_word, atoms, bit, next_atom, atom);
+        vr_read_code(words.data(), first, lw, band_word, atoms, bit, next_atom, atom);
       const double code_bytes = (bit - start) / 8.0;
       const std::uint32_t block[3] = {b % 6, (b / 6) % 6, b / 36};
       double owned = 1;  // voxel by voxel: stored index 1..34 and inside the volume
@@ -422,10 +431,10 @@ MeanCheck check_means(const std::vector<std::byte>& bytes, const encoder::Pyrami
     out.bits.push_back(bits);
     const auto p = f.position(i);
     encoder::extract_brick(pyramid, p.level, p.x, p.y, p.z, brick);
-    for (vr_uint b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    for (vr_uint b = 0; b < blocks_per_brick; ++b) {
       double exact = 0;
       for (vr_uint v = 0; v < VR_BLOCK_LENGTH; ++v)
-        exact += static_cast<double>(brick[vr_brick_voxel(b, v)]);
+        exact += static_cast<double>(brick[vr_brick_voxel(blocks_per_axis, b, v)]);
       exact /= VR_BLOCK_LENGTH;
       const vr_uint q = vr_entry_mean(lw, vr_block_entry(words.data(), lw, b));
       const double decoded = static_cast<double>(vr_as_float(words[0])) +
@@ -568,7 +577,7 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
       parts.gap_shift = static_cast<int>(bits % 4);
     }
     std::vector<std::uint32_t> order(atom_count);
-    for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+    for (std::uint32_t b = 0; b < blocks_per_brick; ++b) {
       parts.sparsity[b] =
           static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << parts.sparsity_bits));
       parts.mean[b] = static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << bits));
@@ -593,7 +602,7 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
       }
     }
     const auto payload = format::pack_ksvd_payload(parts);
-    const auto layout = format::check_ksvd_payload(payload, atom_count, "p", 0);
+    const auto layout = format::check_ksvd_payload(payload, atom_count, shape36, "p", 0);
     ASSERT_EQ(layout.mean_bits, bits);
     ASSERT_EQ(layout.sparsity_bits, parts.sparsity_bits);
     ASSERT_EQ(layout.coef_bits, parts.coef_bits);
@@ -601,7 +610,8 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
     ASSERT_EQ(layout.codes, parts.atoms.size());
     const std::uint64_t entry_words = (216u * (bits + parts.sparsity_bits) + 31) / 32;
     ASSERT_EQ(payload.size(), 4 * (VR_HEADER_WORDS + entry_words + (layout.code_bits + 31) / 32));
-    const format::KsvdPayloadParts back = format::unpack_ksvd_payload(payload, atom_count, "p", 0);
+    const format::KsvdPayloadParts back =
+        format::unpack_ksvd_payload(payload, atom_count, shape36, "p", 0);
     ASSERT_EQ(back.sparsity, parts.sparsity) << bits << " bits";
     ASSERT_EQ(back.mean, parts.mean) << bits << " bits";
     ASSERT_EQ(back.atoms, parts.atoms) << bits << " bits";
@@ -619,22 +629,25 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
                         (good & ~(0x1Fu << 13)) | (17u << 13), good & ~(0x1Fu << 13)}) {
       auto broken = payload;
       std::memcpy(broken.data() + 12, &bad, 4);
-      EXPECT_THROW(format::check_ksvd_payload(broken, atom_count, "p", 0), format::FormatError)
+      EXPECT_THROW(format::check_ksvd_payload(broken, atom_count, shape36, "p", 0),
+                   format::FormatError)
           << bad;
     }
     auto longer = payload;
     longer.resize(payload.size() + 4);
-    EXPECT_THROW(format::check_ksvd_payload(longer, atom_count, "p", 0), format::FormatError);
+    EXPECT_THROW(format::check_ksvd_payload(longer, atom_count, shape36, "p", 0),
+                 format::FormatError);
     if (layout.code_bits % 32 != 0) {
       auto padded = payload;
       padded.back() = std::byte{0x80};
-      EXPECT_THROW(format::check_ksvd_payload(padded, atom_count, "p", 0), format::FormatError);
+      EXPECT_THROW(format::check_ksvd_payload(padded, atom_count, shape36, "p", 0),
+                   format::FormatError);
     }
     const std::vector<std::byte> short_payload(payload.begin(), payload.end() - 4);
     if (layout.codes > 1) {
-      EXPECT_THROW(format::check_ksvd_payload(short_payload, atom_count, "p", 0),
+      EXPECT_THROW(format::check_ksvd_payload(short_payload, atom_count, shape36, "p", 0),
                    format::FormatError);
-      EXPECT_THROW(format::check_ksvd_payload(payload, 1, "p", 0), format::FormatError);
+      EXPECT_THROW(format::check_ksvd_payload(payload, 1, shape36, "p", 0), format::FormatError);
     }
   }
 }
@@ -1211,6 +1224,80 @@ TEST(Encoder, SmoothFieldKeepsRisingPastEightyDecibels) {
   EXPECT_GT(previous, 88.0);
 }
 
+// Every brick size: the frame header and the levels follow the size, every brick decodes, and the
+// tolerance rule's error bound holds; the same ε costs fewer bytes in bricks of 66³ than of 36³
+// on a 64³ volume (one brick instead of 2³ and a coarse level).
+TEST(Encoder, EveryBrickSizeMeetsItsTolerance) {
+  const auto d = with_dct(random_dictionary(32, 9));
+  const Volume v = analytic_volume(datasets::AnalyticField::blobs, {64, 64, 64});
+  const auto [mn, mx] = std::minmax_element(v.data.begin(), v.data.end());
+  const double eps = 2e-3 * static_cast<double>(*mx - *mn);
+  std::map<std::uint32_t, std::size_t> bytes_of;
+  for (const std::uint32_t size : {12u, 24u, 36u, 54u, 66u}) {
+    SCOPED_TRACE("bricks of " + std::to_string(size) + "^3");
+    auto s = ksvd_settings(eps, v);
+    s.rule = encoder::VariableRateRule::tolerance;
+    s.max_atoms = 216;
+    s.brick_size = size;
+    const encoder::FrameEncoder enc(&d, s);
+    encoder::FrameStats st;
+    const auto bytes = enc.encode(0, v, &st);
+    bytes_of[size] = bytes.size();
+    const format::FrameView f(bytes, "sized.vrf");
+    EXPECT_EQ(f.header().brick_size, size);
+    EXPECT_EQ(f.shape(), format::BrickShape{size});
+    EXPECT_EQ(f.level_count(), format::level_geometry({64, 64, 64}, {size}).size());
+    format::validate_payloads(f, atom_table(d));
+    const auto decoded = format::decode_level(f, f.level_count() - 1, atom_table(d));
+    double se = 0;
+    for (std::size_t i = 0; i < v.data.size(); ++i)
+      se += std::pow(static_cast<double>(decoded.data[i] - v.data[i]), 2);
+    EXPECT_LE(std::sqrt(se / static_cast<double>(v.data.size())), 1.3 * eps);
+    EXPECT_EQ(st.blocks, st.bricks > st.constant_bricks
+                             ? (st.bricks - st.constant_bricks) * format::BrickShape{size}.blocks()
+                             : 0u);
+    // Every level decodes, the root too.
+    const auto root = format::decode_level(f, 0, atom_table(d));
+    EXPECT_EQ(root.data.size(),
+              std::size_t{f.level(0).dims[0]} * f.level(0).dims[1] * f.level(0).dims[2]);
+  }
+  EXPECT_LT(static_cast<double>(bytes_of[66]), 0.9 * static_cast<double>(bytes_of[36]));
+  // A brick size that is not a multiple of 6 in 12..66 is refused.
+  for (const std::uint32_t bad : {0u, 6u, 40u, 72u}) {
+    auto s = ksvd_settings(eps, v);
+    s.brick_size = bad;
+    EXPECT_THROW(encoder::FrameEncoder(&d, s), InputError) << bad;
+  }
+}
+
+TEST(Tiling, CodedBlocksPerVoxelAndTheChosenSize) {
+  // 64³ in bricks of 36³: 12 blocks a side at the finest level, 6 at the 32³ root.
+  EXPECT_NEAR(format::coded_block_share({64, 64, 64}, {36}), (1728.0 + 216.0) * 216 / 262144,
+              1e-12);
+  // In one brick of 66³: 11 blocks a side.
+  EXPECT_NEAR(format::coded_block_share({64, 64, 64}, {66}), 1331.0 * 216 / 262144, 1e-12);
+  EXPECT_EQ(format::choose_brick_shape({64, 64, 64}).size, 66u);
+  EXPECT_EQ(format::choose_brick_shape({128, 128, 128}).size, 66u);
+  EXPECT_EQ(format::choose_brick_shape({96, 64, 40}).size, 66u);
+  // 34³ fits one brick of 36³ and every larger size alike: the smallest of the tie.
+  EXPECT_EQ(format::choose_brick_shape({34, 34, 34}).size, 36u);
+  // A tiny volume takes the smallest bricks.
+  EXPECT_EQ(format::choose_brick_shape({8, 8, 8}).size, 12u);
+  for (const std::array<std::uint32_t, 3> dims :
+       {std::array<std::uint32_t, 3>{100, 100, 100}, {720, 360, 40}, {1, 1, 300}}) {
+    const format::BrickShape chosen = format::choose_brick_shape(dims);
+    EXPECT_TRUE(format::valid_brick_size(chosen.size));
+    for (std::uint32_t size = format::min_brick_size; size <= format::max_brick_size; size += 6)
+      EXPECT_LE(format::coded_block_share(dims, chosen),
+                1.01 * format::coded_block_share(dims, {size}) + 1e-12)
+          << size;
+  }
+  EXPECT_FALSE(format::valid_brick_size(40));
+  EXPECT_FALSE(format::valid_brick_size(6));
+  EXPECT_FALSE(format::valid_brick_size(72));
+  EXPECT_TRUE(format::valid_brick_size(12));
+}
+
 // --max-error: every decoded value of the finest level within E, for several E and both a smooth
 // and a rough field. (Below about 1.5e-5 of a brick's span of block means, 15-bit means are too
 // coarse for the bound: such blocks are counted in blocks_over_bound and reported.)
@@ -1299,7 +1386,7 @@ TEST(Encoder, FixedRateBeyondFifteenAtomsReadsBack) {
   const format::FrameView f(bytes, "fixed.vrf");
   EXPECT_EQ(f.header().fixed_sparsity, 40u);
   const std::vector<vr_uint> atoms = block_sparsities(f, f.node_count() - 1);
-  ASSERT_EQ(atoms.size(), VR_BLOCKS_PER_BRICK);
+  ASSERT_EQ(atoms.size(), blocks_per_brick);
   EXPECT_EQ(*std::max_element(atoms.begin(), atoms.end()), 40u);
   EXPECT_GT(finest_level_error(bytes, d, v).first, 30.0);
   s.fixed_sparsity = 217;

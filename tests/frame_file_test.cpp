@@ -75,15 +75,21 @@ TEST(FrameLayout, OffsetsAndGeometry) {
   EXPECT_EQ(format::morton3(0, 1, 0), 2u);
   EXPECT_EQ(format::morton3(0, 0, 1), 4u);
   EXPECT_EQ(format::morton3(3, 3, 3), 63u);
-  const auto g = format::level_geometry({128, 128, 128});
+  const auto g = format::level_geometry({128, 128, 128}, {});
   ASSERT_EQ(g.size(), 3u);  // 4³ -> 2³ -> 1 bricks
   EXPECT_EQ(g[2].grid[0], 4u);
   EXPECT_EQ(g[1].dims[0], 64u);
   EXPECT_EQ(g[0].dims[0], 32u);
-  const auto odd = format::level_geometry({35, 34, 1});
+  const auto odd = format::level_geometry({35, 34, 1}, {});
   ASSERT_EQ(odd.size(), 2u);
   EXPECT_EQ(odd[0].dims[0], 18u);
   EXPECT_EQ(odd[0].dims[2], 1u);
+  // Bricks of 66³ (interior 64): 128³ is 2³ bricks under one root.
+  const auto big = format::level_geometry({128, 128, 128}, {66});
+  ASSERT_EQ(big.size(), 2u);
+  EXPECT_EQ(big[1].grid[0], 2u);
+  EXPECT_EQ(big[0].dims[0], 64u);
+  EXPECT_EQ(big[0].grid[0], 1u);
   // Little-endian on disk: the magic's bytes and the version's first byte.
   const auto d = small_dictionary();
   const auto bytes = small_frame(format::Codec::ksvd, d);
@@ -160,7 +166,7 @@ TEST(DamagedFrame, BrickChecksumsCatchPayloadDamage) {
     EXPECT_NE(m.find("offset " + std::to_string(good.brick_offset(brick))), std::string::npos) << m;
     EXPECT_NE(m.find("payload corrupt"), std::string::npos) << m;
   }
-  std::vector<float> out(format::brick_voxels);
+  std::vector<float> out(view.shape().voxels());
   EXPECT_THROW(format::decode_brick(view, brick, table(d), out), format::FormatError);
   for (std::uint32_t b = 0; b < view.brick_count(); ++b)  // the others still decode
     if (b != brick) {
@@ -170,10 +176,22 @@ TEST(DamagedFrame, BrickChecksumsCatchPayloadDamage) {
 
 TEST(DamagedFrame, EmptyPayloadsAreErrors) {
   const auto d = small_dictionary();
-  std::vector<float> out(format::brick_voxels);
+  std::vector<float> out(format::BrickShape{}.voxels());
   for (const format::Codec codec : {format::Codec::ksvd, format::Codec::zfp})
-    EXPECT_THROW(format::decode_payload({}, codec, 1e-3, table(d), out, "x", 0),
+    EXPECT_THROW(format::decode_payload({}, codec, 1e-3, table(d), {}, out, "x", 0),
                  format::FormatError);
+  // A brick size that is not one, or an output of another size, is refused.
+  std::vector<std::byte> constant(4);
+  const float one = 1.0f;
+  std::memcpy(constant.data(), &one, 4);
+  EXPECT_NO_THROW(
+      format::decode_payload(constant, format::Codec::ksvd, 0, table(d), {}, out, "x", 0));
+  EXPECT_THROW(
+      format::decode_payload(constant, format::Codec::ksvd, 0, table(d), {40}, out, "x", 0),
+      format::FormatError);
+  EXPECT_THROW(
+      format::decode_payload(constant, format::Codec::ksvd, 0, table(d), {42}, out, "x", 0),
+      format::FormatError);
 }
 
 TEST(DamagedFrame, PayloadErrorsNameTheBrick) {

@@ -62,7 +62,10 @@ void check_geometry(const VolumeGeometry& g) {
   if (g.levels < 1 || g.levels > format::max_levels)
     throw std::invalid_argument("render: expected 1 to " + std::to_string(format::max_levels) +
                                 " octree levels, found " + std::to_string(g.levels));
-  const std::uint64_t root = std::uint64_t{format::brick_interior} << (g.levels - 1);
+  if (!format::valid_brick_size(g.shape.size))
+    throw std::invalid_argument("render: bricks of " + std::to_string(g.shape.size) +
+                                "^3 (a brick size is a multiple of 6 in 12..66)");
+  const std::uint64_t root = std::uint64_t{g.shape.interior()} << (g.levels - 1);
   for (int a = 0; a < 3; ++a)
     if (g.dims[static_cast<std::size_t>(a)] == 0 || g.dims[static_cast<std::size_t>(a)] > root)
       throw std::invalid_argument("render: dims[" + std::to_string(a) +
@@ -209,7 +212,7 @@ class SvoSampler {
  public:
   SvoSampler(const SvoView& svo, const CpuAtlas& atlas, const VolumeGeometry& geometry,
              const TransferFunction& transfer)
-      : svo_(svo), atlas_(atlas), levels_(geometry.levels) {
+      : svo_(svo), atlas_(atlas), levels_(geometry.levels), interior_(geometry.shape.interior()) {
     // Transfer-function culling: a leaf whose histogram hull maps only to zero opacity is not
     // drawn (opacity correction keeps zero at zero, so the uncorrected function decides).
     if (!svo.histograms.empty()) {
@@ -239,7 +242,7 @@ class SvoSampler {
     bool up = false;
     vr_uint up_octant = 0;
     for (;;) {
-      const std::uint32_t half = (format::brick_interior / 2) << (levels_ - 1 - level);
+      const std::uint32_t half = (interior_ / 2) << (levels_ - 1 - level);
       const std::uint32_t child[3] = {q[0] / half, q[1] / half, q[2] / half};
       const vr_uint octant =
           (child[0] - 2 * c[0]) | ((child[1] - 2 * c[1]) << 1) | ((child[2] - 2 * c[2]) << 2);
@@ -282,15 +285,17 @@ class SvoSampler {
       return culled;
     }
     // 2. Local coordinates u ∈ [0, 1)³ of p in the spatial node (level, c).
-    const double size = double(format::brick_interior << (levels_ - 1 - level));
+    const double size = double(interior_ << (levels_ - 1 - level));
     float u[3];
     for (int a = 0; a < 3; ++a) u[a] = static_cast<float>((p[a] - double(c[a]) * size) / size);
     // 3. Both keyframes at their slot coordinates, each mapped into its brick by its LOD
     //    difference (svo_layout.h), then interpolated with the leaf's factor.
+    const auto interior = static_cast<float>(interior_);
     const auto keyframe = [&](vr_uint slot, vr_uint up_levels) {
-      return atlas_.sample(slot, vr_svo_slot_coord(vr_svo_ancestor_local(c[0], u[0], up_levels)),
-                           vr_svo_slot_coord(vr_svo_ancestor_local(c[1], u[1], up_levels)),
-                           vr_svo_slot_coord(vr_svo_ancestor_local(c[2], u[2], up_levels)));
+      return atlas_.sample(
+          slot, vr_svo_slot_coord(vr_svo_ancestor_local(c[0], u[0], up_levels), interior),
+          vr_svo_slot_coord(vr_svo_ancestor_local(c[1], u[1], up_levels), interior),
+          vr_svo_slot_coord(vr_svo_ancestor_local(c[2], u[2], up_levels), interior));
     };
     // A keyframe pair at slots s0, s1 (LOD differences d0, d1) mixed by factor x; a keyframe
     // whose weight is 0 is not read.
@@ -314,7 +319,7 @@ class SvoSampler {
     // 4. The step's doublings from the leaf's level (svo_layout.h; the cap is the caller's) and
     //    the region's box.
     // (region_level ≤ levels_: the octants of a one-level volume's root are half a brick.)
-    const double region_size = double((format::brick_interior / 2) << (levels_ - region_level));
+    const double region_size = double((interior_ / 2) << (levels_ - region_level));
     return {true,
             value,
             vr_svo_step_doublings(levels_, level, record[2], f, max_doublings_allowed),
@@ -329,6 +334,7 @@ class SvoSampler {
   const SvoView& svo_;
   const CpuAtlas& atlas_;
   std::uint32_t levels_;
+  std::uint32_t interior_;                  ///< interior voxels per brick axis
   std::vector<std::uint8_t> leaf_visible_;  ///< per leaf record; empty: no culling
 };
 
@@ -362,8 +368,8 @@ class DenseSampler {
 
 }  // namespace
 
-VolumeGeometry VolumeGeometry::of(std::array<std::uint32_t, 3> dims) {
-  return {dims, static_cast<std::uint32_t>(format::level_geometry(dims).size())};
+VolumeGeometry VolumeGeometry::of(std::array<std::uint32_t, 3> dims, format::BrickShape shape) {
+  return {dims, static_cast<std::uint32_t>(format::level_geometry(dims, shape).size()), shape};
 }
 
 void validate_svo(const SvoView& svo, std::uint32_t slot_count, const VolumeGeometry& geometry) {
@@ -462,6 +468,10 @@ RgbaImage render_svo(const SvoView& svo, const CpuAtlas& atlas, const VolumeGeom
                      const player::OrbitCamera& camera, const TransferFunction& transfer,
                      const RenderOptions& options, std::vector<std::uint32_t>* feedback) {
   validate_svo(svo, atlas.slot_count(), geometry);
+  if (atlas.shape() != geometry.shape)
+    throw std::invalid_argument("render_svo: an atlas of " + std::to_string(atlas.shape().size) +
+                                "^3 slots for bricks of " + std::to_string(geometry.shape.size) +
+                                "^3");
   if (feedback)
     feedback->assign(VR_SVO_FEEDBACK_ENTRIES * (svo.leaves.size() / VR_SVO_LEAF_WORDS), 0);
   return cast_rays(geometry, camera, transfer, options, SvoSampler(svo, atlas, geometry, transfer),
@@ -472,7 +482,7 @@ RgbaImage render_reference(const DenseLevel& a, const DenseLevel& b, float facto
                            const VolumeGeometry& geometry, const player::OrbitCamera& camera,
                            const TransferFunction& transfer, const RenderOptions& options) {
   check_geometry(geometry);
-  const auto geometries = format::level_geometry(geometry.dims);
+  const auto geometries = format::level_geometry(geometry.dims, geometry.shape);
   if (geometries.size() != geometry.levels)
     throw std::invalid_argument("render_reference: dims give " + std::to_string(geometries.size()) +
                                 " levels, geometry says " + std::to_string(geometry.levels));

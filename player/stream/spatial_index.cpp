@@ -89,10 +89,12 @@ std::uint32_t HeldTimes::at_or_after(std::uint32_t t) const {
 
 namespace {
 
-std::shared_ptr<const IndexGeometry> make_geometry(std::array<std::uint32_t, 3> dims) {
+std::shared_ptr<const IndexGeometry> make_geometry(std::array<std::uint32_t, 3> dims,
+                                                   format::BrickShape shape) {
   auto g = std::make_shared<IndexGeometry>();
+  g->shape = shape;
   g->dims = dims;
-  g->levels = format::level_geometry(dims);
+  g->levels = format::level_geometry(dims, shape);
   const auto levels = static_cast<std::uint32_t>(g->levels.size());
   for (std::uint32_t l = 0; l < levels; ++l) {
     g->first.push_back(static_cast<std::uint32_t>(g->ids.size()));
@@ -109,7 +111,7 @@ std::shared_ptr<const IndexGeometry> make_geometry(std::array<std::uint32_t, 3> 
           keys.push_back({format::morton3(x, y, z), NodeKey{l, x, y, z}});
     std::sort(keys.begin(), keys.end(),
               [](const auto& a, const auto& b) { return a.first < b.first; });
-    const std::uint64_t span = std::uint64_t{format::brick_interior} << (levels - 1 - l);
+    const std::uint64_t span = std::uint64_t{shape.interior()} << (levels - 1 - l);
     for (const auto& [morton, key] : keys) {
       SpatialNode n;
       n.key = key;
@@ -136,6 +138,10 @@ HeldFrame read_frame(const IndexGeometry& g, std::uint32_t t, const format::Fram
     if (h.dims[a] != g.dims[static_cast<std::size_t>(a)])
       throw format::FormatError(file, offsetof(format::FrameHeader, dims), "dims of the series",
                                 "another size");
+  if (h.brick_size != g.shape.size)
+    throw format::FormatError(file, offsetof(format::FrameHeader, brick_size),
+                              "brick size " + str(g.shape.size) + " of the series",
+                              str(h.brick_size));
   if (frame.level_count() != g.levels.size())
     throw format::FormatError(file, offsetof(format::FrameHeader, level_count),
                               str(g.levels.size()) + " levels", str(frame.level_count()));
@@ -283,8 +289,9 @@ struct SpatialIndex::Reader {
 
 // ---- SpatialIndexBuilder ------------------------------------------------------------------------
 
-SpatialIndexBuilder::SpatialIndexBuilder(std::array<std::uint32_t, 3> dims, std::size_t frame_count)
-    : geometry_(make_geometry(dims)), files_(frame_count), frames_(frame_count) {}
+SpatialIndexBuilder::SpatialIndexBuilder(std::array<std::uint32_t, 3> dims, std::size_t frame_count,
+                                         format::BrickShape shape)
+    : geometry_(make_geometry(dims, shape)), files_(frame_count), frames_(frame_count) {}
 
 void SpatialIndexBuilder::add_frame(std::uint32_t t, const format::FrameView& frame,
                                     std::filesystem::path file) {
@@ -352,6 +359,10 @@ SpatialIndex& SpatialIndex::operator=(const SpatialIndex& other) {
 
 std::array<std::uint32_t, 3> SpatialIndex::dims() const {
   return geometry_ ? geometry_->dims : std::array<std::uint32_t, 3>{};
+}
+
+format::BrickShape SpatialIndex::shape() const {
+  return geometry_ ? geometry_->shape : format::BrickShape{};
 }
 
 std::uint32_t SpatialIndex::level_count() const {
@@ -628,7 +639,7 @@ SpatialIndex build_spatial_index(const format::Container& container,
   const auto& m = container.manifest();
   const std::size_t frames = container.frame_count();
   SpatialIndex index;
-  index.geometry_ = make_geometry(m.dims);
+  index.geometry_ = make_geometry(m.dims, m.shape());
   index.files_.resize(frames);
   for (std::size_t t = 0; t < frames; ++t)
     if (m.frames[t]) index.files_[t] = container.source().name(m.frames[t]->file);

@@ -57,7 +57,7 @@ class VolreelReader(VTKPythonAlgorithmBase):
     @smproperty.intvector(name="Level", default_values=-1)
     @smdomain.intrange(min=-1, max=20)
     def SetLevel(self, level):
-        """Level of detail: -1 full resolution, 0 the root brick (one 34^3 brick)."""
+        """Level of detail: -1 full resolution, 0 the root (a single brick)."""
         if level != self._level:
             self._level = level
             self.Modified()

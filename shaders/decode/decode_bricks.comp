@@ -6,7 +6,8 @@
 // Bindings: 0 the batch (uint words: 4 words of record per brick {payload word offset, slot,
 // kind, payload words}, then the payloads), 1 the dictionary (atom-major; 216 floats = 54 vec4
 // per atom), 2 the atlas. Kinds: 0 ksvd (format/include/volreel/format/brick_decode.h),
-// 1 constant (one float), 2 raw (36³ floats decoded on the CPU, e.g. zfp).
+// 1 constant (one float), 2 raw (S³ floats decoded on the CPU, e.g. zfp). Specialization
+// constant 0: the blocks per brick axis n (S = 6n, the container's brick size).
 // VR_ATLAS_QUALIFIER (r16 or r16f) is set by the build, and VR_ATLAS_UNORM for r16: one SPIR-V
 // module per atlas format.
 #version 450
@@ -19,6 +20,7 @@
 #define VR_INVOCATIONS 54u         /* 216 values of a block / 4 */
 
 layout(local_size_x = 54) in;
+layout(constant_id = 0) const uint VR_BLOCKS_PER_AXIS = 6u;
 
 layout(std430, set = 0, binding = 0) readonly buffer Batch { uint batch_words[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Atoms { vec4 atom_quads[]; };
@@ -63,7 +65,7 @@ void main() {
   const ivec3 origin = ivec3(vr_atlas_cell_x(slot, params.grid_x),
                              vr_atlas_cell_y(slot, params.grid_x, params.grid_y),
                              vr_atlas_cell_z(slot, params.grid_x, params.grid_y)) *
-                       int(VR_ATLAS_SLOT_SIZE);
+                       int(VR_BRICK_SIZE);
   const uint voxels = VR_BRICK_SIZE * VR_BRICK_SIZE * VR_BRICK_SIZE;
 
   // Constant and raw bricks: no codes (kind is the same for the whole workgroup).
@@ -87,6 +89,7 @@ void main() {
   const float mean_scale = vr_as_float(vr_load_word(1u));
   const float coef_scale = vr_as_float(vr_load_word(2u));
   const uint band_word = vr_band_word();
+  const uint first = vr_code_first_word(layout_word, VR_BLOCKS_PER_BRICK);
   uint bit = 0u;
   for (uint b = 0u; b < VR_BLOCKS_PER_BRICK; ++b) {
     const uint entry = vr_block_entry(layout_word, b);
@@ -94,9 +97,10 @@ void main() {
     vec4 value = vec4(mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry)));
     uint next_atom = 0u, atom = 0u;
     for (uint k = 0u; k < s; ++k) {
-      const int q = vr_read_code(layout_word, band_word, s, bit, next_atom, atom);
+      const int q = vr_read_code(first, layout_word, band_word, s, bit, next_atom, atom);
       value += coef_scale * float(q) * atom_quads[atom * (VR_BLOCK_LENGTH / 4u) + t];
     }
-    for (uint i = 0u; i < 4u; ++i) store_voxel(origin, vr_brick_voxel(b, 4u * t + i), value[i]);
+    for (uint i = 0u; i < 4u; ++i)
+      store_voxel(origin, vr_brick_voxel(VR_BLOCKS_PER_AXIS, b, 4u * t + i), value[i]);
   }
 }

@@ -12,10 +12,12 @@
 //    lays it out);
 //  - a row is stored as one uvec4: three pairs of 16-bit texels (packUnorm2x16 / packHalf2x16, the
 //    rounding of a store into the R16 image) and an unused word, into binding 2, a storage buffer
-//    holding, per brick of the dispatch, 6 columns (block x) of 36×36 rows of 8 texels; the host
-//    copies each column into its slot with vkCmdCopyBufferToImage (bufferRowLength 8).
+//    holding, per brick of the dispatch, n columns (block x) of S×S rows of 8 texels (S = 6n the
+//    brick size); the host copies each column into its slot with vkCmdCopyBufferToImage
+//    (bufferRowLength 8).
 // Bindings: 0 the batch (4-word records {payload word offset, slot, kind, payload words}, then the
 // payloads), 1 the dictionary, 2 the decoded bricks. Kinds as in decode_bricks.comp.
+// Specialization constant 0: the blocks per brick axis n.
 // VR_ATLAS_UNORM for R16_UNORM (else R16_SFLOAT).
 #version 450
 #extension GL_GOOGLE_include_directive : require
@@ -29,10 +31,11 @@
 #define VR_ROW_ROUNDS 5u         /* rows per invocation: ceil(36 / 8) */
 #define VR_ATOM_TEXELS_PER_ROW 2u /* an atom row of 6 values padded to 8: two RGBA32F texels */
 #define VR_ATOM_TEXELS 72u       /* texels of an atom */
-#define VR_COLUMN_ROWS 1296u     /* rows (uvec4) of one column (6 voxels wide) of a brick */
-#define VR_BRICK_ROWS 7776u      /* uvec4 of a decoded brick: 6 columns */
+#define VR_COLUMN_ROWS (VR_BRICK_SIZE * VR_BRICK_SIZE) /* rows (uvec4) of a column 6 voxels wide */
+#define VR_BRICK_ROWS (VR_BLOCKS_PER_AXIS * VR_COLUMN_ROWS) /* uvec4 of a decoded brick: n columns */
 
 layout(local_size_x = 8) in;
+layout(constant_id = 0) const uint VR_BLOCKS_PER_AXIS = 6u;
 
 layout(std430, set = 0, binding = 0) readonly buffer Batch { uint batch_words[]; };
 layout(set = 0, binding = 1) uniform samplerBuffer atom_texels;
@@ -82,7 +85,7 @@ void main() {
     return;
   }
   if (kind == VR_KIND_RAW) {
-    // Row i of the decoded brick: column i / 1296, (y, z) = (i % 36, i % 1296 / 36).
+    // Row i of the decoded brick: column i / S², (y, z) = (i % S, i % S² / S).
     for (uint i = lane; i < VR_BRICK_ROWS; i += VR_LANES) {
       const uint first = (i % VR_COLUMN_ROWS) * VR_BRICK_SIZE + i / VR_COLUMN_ROWS * VR_BLOCK_SIZE;
       uvec4 row = uvec4(0u);
@@ -113,6 +116,7 @@ void main() {
   const float coef_scale = vr_as_float(vr_load_word(2u));
   const uint layout_word = vr_layout_word();
   const uint band_word = vr_band_word();
+  const uint first = vr_code_first_word(layout_word, VR_BLOCKS_PER_BRICK);
   uint bit = 0u;
   uint b = 0u;
   for (uint bz = 0u; bz < VR_BLOCKS_PER_AXIS; ++bz)
@@ -126,7 +130,8 @@ void main() {
         uint next_atom = 0u, atom_index = 0u;
         for (uint k = 0u; k < s; ++k) {
           const float coefficient =
-              coef_scale * float(vr_read_code(layout_word, band_word, s, bit, next_atom, atom_index));
+              coef_scale *
+              float(vr_read_code(first, layout_word, band_word, s, bit, next_atom, atom_index));
           const int atom = int(atom_index * VR_ATOM_TEXELS);
 #define VR_ACCUMULATE(r)                                                         \
   low##r += coefficient * texelFetch(atom_texels, atom + int(texel##r));         \
@@ -134,7 +139,7 @@ void main() {
           VR_ACCUMULATE(0) VR_ACCUMULATE(1) VR_ACCUMULATE(2) VR_ACCUMULATE(3) VR_ACCUMULATE(4)
         }
         // Row (y, z) of block (bx, by, bz) in column bx of the brick: uvec4 index
-        // (6bz + z)·36 + 6by + y.
+        // (6bz + z)·S + 6by + y.
         const uint origin = out_base + bx * VR_COLUMN_ROWS +
                             bz * VR_BLOCK_SIZE * VR_BRICK_SIZE + by * VR_BLOCK_SIZE;
 #define VR_STORE(r)                                                            \

@@ -26,7 +26,8 @@
 // corrected for the step), 5 the atlas (sampler3D, linear, clamp to edge, normalized coordinates),
 // 6 the output image, 7 block value ranges and 8 the prefix count of visible transfer-function
 // entries (both ignored unless VR_FLAG_BLOCK_SKIP). VR_OUTPUT_QUALIFIER (rgba8 or rgba16f) is set
-// by the build.
+// by the build. Specialization constant 0: the blocks per brick axis n (bricks and atlas slots of
+// S = 6n voxels a side, interior S − 2).
 #version 450
 #extension GL_GOOGLE_include_directive : require
 
@@ -38,10 +39,11 @@
 #define VR_FLAG_FETCH_FILTER 2u
 #define VR_FLAG_BLOCK_SKIP 4u
 #define VR_FLAG_FEEDBACK 8u
-#define VR_BLOCKS_PER_AXIS 6u
-#define VR_BRICK_INTERIOR 34u
 
 layout(local_size_x = 8, local_size_y = 8) in;
+layout(constant_id = 0) const uint VR_BLOCKS_PER_AXIS = 6u;
+#define VR_BRICK_SIZE (VR_BLOCKS_PER_AXIS * 6u)
+#define VR_BRICK_INTERIOR (VR_BRICK_SIZE - 2u)
 
 layout(std430, set = 0, binding = 0) readonly buffer Params {
   vec4 eye_step;          // eye (world = finest voxels), step
@@ -96,9 +98,10 @@ uvec2 hull(uvec2 h) {
 // Stored voxel coordinate (texel units) in a slot of node-local u for LOD difference d (patent
 // [0050]; svo_layout.h, for any d).
 vec3 slot_texel(uint d, uvec3 c, vec3 u) {
-  return vec3(vr_svo_slot_coord(vr_svo_ancestor_local(c.x, u.x, d)),
-              vr_svo_slot_coord(vr_svo_ancestor_local(c.y, u.y, d)),
-              vr_svo_slot_coord(vr_svo_ancestor_local(c.z, u.z, d)));
+  const float interior = float(VR_BRICK_INTERIOR);
+  return vec3(vr_svo_slot_coord(vr_svo_ancestor_local(c.x, u.x, d), interior),
+              vr_svo_slot_coord(vr_svo_ancestor_local(c.y, u.y, d), interior),
+              vr_svo_slot_coord(vr_svo_ancestor_local(c.z, u.z, d), interior));
 }
 
 // The origin of `slot` in the atlas, texels.
@@ -106,7 +109,7 @@ ivec3 slot_origin(uint slot) {
   return ivec3(vr_atlas_cell_x(slot, params.grid_mask.x),
                vr_atlas_cell_y(slot, params.grid_mask.x, params.grid_mask.y),
                vr_atlas_cell_z(slot, params.grid_mask.x, params.grid_mask.y)) *
-         int(VR_ATLAS_SLOT_SIZE);
+         int(VR_BRICK_SIZE);
 }
 
 // The value range (normalized texel units) of the 6³ block of `slot` (its origin `origin`) that a
@@ -115,7 +118,7 @@ ivec3 slot_origin(uint slot) {
 // covers filter hardware's own rounding.
 vec2 block_range(uint slot, ivec3 origin, vec3 at) {
   ivec3 i = ivec3(floor(at - 0.5)) - origin;
-  uvec3 b = min(uvec3(clamp(i, ivec3(0), ivec3(int(VR_ATLAS_SLOT_SIZE) - 1))) / 6u,
+  uvec3 b = min(uvec3(clamp(i, ivec3(0), ivec3(int(VR_BRICK_SIZE) - 1))) / 6u,
                 uvec3(VR_BLOCKS_PER_AXIS - 1u));
   uint block = b.x + VR_BLOCKS_PER_AXIS * (b.y + VR_BLOCKS_PER_AXIS * b.z);
   return block_ranges[slot * VR_BLOCKS_PER_AXIS * VR_BLOCKS_PER_AXIS * VR_BLOCKS_PER_AXIS + block];

@@ -56,27 +56,31 @@ TEST(CpuRenderLodMapping, AncestorLocalHandComputed) {
   EXPECT_FLOAT_EQ(vr_svo_ancestor_local(13, 0.25f, 3), 0.65625f);  // (5 + 0.25)/8
   EXPECT_FLOAT_EQ(vr_svo_ancestor_local(8, 0.0f, 3), 0.0f);        // (0 + 0)/8
   // Stored voxel coordinates: the apron is skipped.
-  EXPECT_FLOAT_EQ(vr_svo_slot_coord(0.0f), 1.0f);
-  EXPECT_FLOAT_EQ(vr_svo_slot_coord(0.5f), 18.0f);
+  EXPECT_FLOAT_EQ(vr_svo_slot_coord(0.0f, 34.0f), 1.0f);
+  EXPECT_FLOAT_EQ(vr_svo_slot_coord(0.5f, 34.0f), 18.0f);
+  EXPECT_FLOAT_EQ(vr_svo_slot_coord(0.5f, 64.0f), 33.0f);
   // A case that a one-level mapping (fract((c + u)/2) applied for any d, or c mod 2 instead of
   // c mod 2^d) gets wrong: node 6 at d = 2 lies in the third quarter of its ancestor.
   EXPECT_FLOAT_EQ(vr_svo_ancestor_local(6, 0.5f, 2), 0.625f);  // (2 + 0.5)/4
 }
 
 TEST(CpuRenderLodMapping, FinestVoxelCentresLandOnTheirAncestorVoxels) {
-  // The centre of finest voxel g = 34c + i (world g + 0.5) lies at level-(L−1−d) voxel
-  // coordinate (g + 0.5)/2^d − 0.5; in the ancestor brick c >> d, whose stored voxel 1 is level
-  // voxel 34·(c >> d), that is stored voxel (g + 0.5)/2^d − 0.5 − 34·(c >> d) + 1. The SVO
-  // mapping must give the same texel coordinate (slot_coord − 0.5) for every d.
-  for (vr_uint d = 0; d <= 3; ++d)
-    for (vr_uint c = 0; c < 16; ++c)
-      for (vr_uint i = 0; i < 34; ++i) {
-        const double g = 34.0 * c + i;
-        const double expected = (g + 0.5) / double(1u << d) - 0.5 - 34.0 * double(c >> d) + 1.0;
-        const float u = (float(i) + 0.5f) / 34.0f;
-        const double got = double(vr_svo_slot_coord(vr_svo_ancestor_local(c, u, d))) - 0.5;
-        ASSERT_NEAR(got, expected, 1e-4) << "d " << d << " c " << c << " i " << i;
-      }
+  // The centre of finest voxel g = Ic + i (world g + 0.5; I the interior) lies at level-(L−1−d)
+  // voxel coordinate (g + 0.5)/2^d − 0.5; in the ancestor brick c >> d, whose stored voxel 1 is
+  // level voxel I·(c >> d), that is stored voxel (g + 0.5)/2^d − 0.5 − I·(c >> d) + 1. The SVO
+  // mapping must give the same texel coordinate (slot_coord − 0.5) for every d and brick size.
+  for (const vr_uint interior : {34u, 64u, 10u})
+    for (vr_uint d = 0; d <= 3; ++d)
+      for (vr_uint c = 0; c < 16; ++c)
+        for (vr_uint i = 0; i < interior; ++i) {
+          const double I = interior, g = I * c + i;
+          const double expected = (g + 0.5) / double(1u << d) - 0.5 - I * double(c >> d) + 1.0;
+          const float u = (float(i) + 0.5f) / float(interior);
+          const double got =
+              double(vr_svo_slot_coord(vr_svo_ancestor_local(c, u, d), float(interior))) - 0.5;
+          ASSERT_NEAR(got, expected, 1e-4)
+              << "interior " << interior << " d " << d << " c " << c << " i " << i;
+        }
 }
 
 // --- Scenes: two frames of an analytic field, their exact pyramids and an atlas ----------------
@@ -111,7 +115,7 @@ struct Scene {
   /// Every brick of every level of both frames, exactly (no coding).
   CpuAtlas exact_atlas() const {
     CpuAtlas atlas(2 * bricks_per_frame);
-    std::vector<float> brick(format::brick_voxels);
+    std::vector<float> brick(atlas.slot_values());
     for (std::size_t t = 0; t < 2; ++t)
       for_each_brick([&](std::uint32_t l, Coord c) {
         encoder::extract_brick(pyramids[t], l, c[0], c[1], c[2], brick);
@@ -128,7 +132,7 @@ std::shared_ptr<const Scene> make_scene(Dims dims, datasets::AnalyticField field
                                           static_cast<std::uint32_t>(dims.y),
                                           static_cast<std::uint32_t>(dims.z)};
   s->geometry = VolumeGeometry::of(d);
-  s->levels = format::level_geometry(d);
+  s->levels = format::level_geometry(d, {});
   datasets::AnalyticParams p;
   p.field = field;
   p.dims = dims;
@@ -822,13 +826,13 @@ TEST(CpuRenderStep, DoublingsFromTheLeafLevelHandComputed) {
 struct ConstantScene {
   std::array<std::uint32_t, 3> dims{200, 120, 90};
   VolumeGeometry geometry = VolumeGeometry::of(dims);
-  std::vector<format::LevelGeometry> levels = format::level_geometry(dims);
+  std::vector<format::LevelGeometry> levels = format::level_geometry(dims, {});
   CpuAtlas atlas;
   explicit ConstantScene(const std::vector<float>& values)
       : atlas(static_cast<std::uint32_t>(values.size())) {
     for (std::size_t i = 0; i < values.size(); ++i)
       atlas.store(static_cast<std::uint32_t>(i),
-                  std::vector<float>(format::brick_voxels, values[i]));
+                  std::vector<float>(atlas.slot_values(), values[i]));
   }
   player::OrbitCamera camera() const {
     auto c = player::OrbitCamera::framing(glm::dvec3(dims[0], dims[1], dims[2]), 48, 32);
@@ -1051,7 +1055,7 @@ TEST(CpuRender, WritesAPng) {
 
 TEST(CpuRenderAtlas, StoresAndSamples) {
   CpuAtlas atlas(3);
-  std::vector<float> brick(CpuAtlas::slot_values);
+  std::vector<float> brick(atlas.slot_values());
   for (std::size_t i = 0; i < brick.size(); ++i) brick[i] = float(i % 36);  // value = x
   atlas.store(2, brick);
   EXPECT_FLOAT_EQ(atlas.sample(2, 10.5f, 3.5f, 7.5f), 10.0f);  // texel centre

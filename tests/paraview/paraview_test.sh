@@ -10,7 +10,8 @@ here=$(cd "$(dirname "$0")" && pwd)
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 "$volreel" gen analytic --field blobs --dims 40x36x24 --frames 6 --out "$work/s" > /dev/null 2>&1
-"$volreel" encode "$work/s" --out "$work/c.vreel" --psnr 45 --atoms 64 > /dev/null 2>&1
+# Bricks of 36^3: two levels, so that the reader's coarse level is smaller.
+"$volreel" encode "$work/s" --out "$work/c.vreel" --psnr 45 --atoms 64 --brick-size 36 > /dev/null 2>&1
 "$volreel" decode "$work/c.vreel" --frame 3 --out "$work/t3.f32" > /dev/null
 mkdir -p "$shots"
 # A 24-bit screen for OpenGL. Under a loaded machine pvpython has once failed to connect to a

@@ -48,7 +48,8 @@ def series(tmp_path_factory):
 def container(series, tmp_path_factory):
     path, _, _ = series
     out = tmp_path_factory.mktemp("container") / "c.vreel"
-    run("encode", path, "--out", out, "--psnr", "45", "--atoms", "64")
+    # Bricks of 36^3: two levels on this small volume (the chosen size would make it one brick).
+    run("encode", path, "--out", out, "--psnr", "45", "--atoms", "64", "--brick-size", "36")
     return out
 
 

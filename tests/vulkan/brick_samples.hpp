@@ -30,11 +30,14 @@ inline std::vector<float> random_atoms(SplitMix64& rng, std::uint32_t count) {
 /// block at sparsity 63; 2 every block at sparsity 0; 3 extreme fields (atoms 0 and K−1,
 /// magnitudes 1 and 2^16, 15-bit means 0 and 32767, sparsities up to 255 in 8-bit fields,
 /// escaped gaps and values); 4 like 0 with negative scales. Values of both signs, most small
-/// (the entropy coder's common case), some at the largest magnitude (escapes).
+/// (the entropy coder's common case), some at the largest magnitude (escapes). One entry per
+/// block of a brick of `shape`.
 inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t atom_count,
-                                                  int style) {
+                                                  int style, format::BrickShape shape = {}) {
   const auto sign = [&] { return rng.below(2) ? 1.0f : -1.0f; };
   format::KsvdPayloadParts parts;
+  parts.sparsity.assign(shape.blocks(), 0);
+  parts.mean.assign(shape.blocks(), 0);
   parts.dequantization[0] = static_cast<float>(rng.uniform(-2, 2));
   parts.dequantization[1] = sign() * static_cast<float>(rng.uniform(1e-4, 1e-3));
   parts.dequantization[2] = sign() * static_cast<float>(rng.uniform(0.005, 0.03));
@@ -58,7 +61,7 @@ inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t
   const std::uint32_t most = std::min((1u << parts.sparsity_bits) - 1u, atom_count);
   const std::int64_t largest = std::int64_t{1} << parts.coef_bits;
   std::vector<std::uint32_t> order(atom_count);
-  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+  for (std::uint32_t b = 0; b < shape.blocks(); ++b) {
     std::uint32_t s = static_cast<std::uint32_t>(rng.below(std::uint64_t{std::min(most, 40u)} + 1));
     std::uint32_t mean = static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << parts.mean_bits));
     if (style == 1) s = std::min(63u, atom_count);

@@ -1,13 +1,14 @@
 // layout_probe.comp: evaluates the shared-layout functions of brick_decode.h and atlas_layout.h
 // in GLSL for test inputs, so that vulkan_test can compare them with the C++ results. One
-// workgroup per block b, one invocation per value v; index i = 216·b + v. Output sections of
-// 46656 words each (see layout_test.cpp). The payload buffer ends with a zero word (the look-ahead
-// of the last Rice code).
+// workgroup per block b of a brick of n³ blocks (n: specialization constant 0), one invocation per
+// value v; index i = 216·b + v. Output sections of 216·n³ words each (see layout_test.cpp). The
+// payload buffer ends with a zero word (the look-ahead of the last Rice code).
 #version 450
 #extension GL_GOOGLE_include_directive : require
 #define VR_GLSL 1
 
 layout(local_size_x = 216) in;
+layout(constant_id = 0) const uint VR_BLOCKS_PER_AXIS = 6u;
 layout(std430, set = 0, binding = 0) readonly buffer Payload { uint payload_words[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Atoms { float atom_values[]; };
 layout(std430, set = 0, binding = 2) writeonly buffer Results { uint results[]; };
@@ -18,7 +19,7 @@ float vr_load_atom(uint index) { return atom_values[index]; }
 #include "volreel/format/brick_decode.h"
 #include "volreel/player/atlas_layout.h"
 
-const uint N = 46656u;
+const uint N = VR_BLOCKS_PER_BRICK * 216u;
 
 void main() {
   const uint b = gl_WorkGroupID.x, v = gl_LocalInvocationIndex, i = b * 216u + v;
@@ -29,12 +30,13 @@ void main() {
   // Code v of block b (atom in the low 16 bits, q in the high 16), read as the decoders do.
   uint code = 0xFFFFFFFFu;
   const uint band_word = vr_band_word();
+  const uint first = vr_code_first_word(layout_word, VR_BLOCKS_PER_BRICK);
   uint bit = 0u;
   for (uint c = 0u; c <= b; ++c) {
     const uint s = vr_entry_sparsity(layout_word, vr_block_entry(layout_word, c));
     uint next_atom = 0u, atom = 0u;
     for (uint k = 0u; k < s; ++k) {
-      const int q = vr_read_code(layout_word, band_word, s, bit, next_atom, atom);
+      const int q = vr_read_code(first, layout_word, band_word, s, bit, next_atom, atom);
       if (c == b && k == v) code = atom | (uint(q) << 16u);
     }
   }
@@ -44,15 +46,16 @@ void main() {
   const uint entry = vr_block_entry(layout_word, i % VR_BLOCKS_PER_BRICK);
   uint rice_bit = (i * 7u) % 900u;
   const uint rice = vr_read_rice(0u, rice_bit, i % 16u, 1u + i % 16u);
-  results[0u * N + i] = vr_brick_voxel(b, v);
-  results[1u * N + i] = floatBitsToUint(vr_decode_value(b, v));
+  results[0u * N + i] = vr_brick_voxel(VR_BLOCKS_PER_AXIS, b, v);
+  results[1u * N + i] = floatBitsToUint(vr_decode_value(VR_BLOCKS_PER_BRICK, b, v));
   results[2u * N + i] = vr_read_bits(0u, (i * 13u) % 1024u, i % 33u);
   results[3u * N + i] = vr_entry_sparsity(layout_word, entry) |
                         (vr_entry_mean(layout_word, entry) << 8u);
   results[4u * N + i] = code;
   results[5u * N + i] = vr_layout_entry_bits(other) | (vr_gap_rice(other, 1u + i % 255u) << 5u) |
                         (vr_band_rice(other, i * 2654435761u, i % 300u) << 10u) |
-                        (vr_entry_words(other) << 15u) | (vr_code_first_word(other) << 23u);
+                        (vr_entry_words(other, VR_BLOCKS_PER_BRICK) << 15u) |
+                        (vr_code_first_word(other, VR_BLOCKS_PER_BRICK) << 23u);
   results[6u * N + i] = vr_atlas_cell_x(i, 7u) | (vr_atlas_cell_y(i, 7u, 5u) << 8u) |
                         (vr_atlas_cell_z(i, 7u, 5u) << 16u);
   results[7u * N + i] = vr_atlas_cell_x(i, 56u) | (vr_atlas_cell_y(i, 56u, 56u) << 8u) |
@@ -62,8 +65,8 @@ void main() {
     const uint constants[16] = uint[16](
         VR_BRICK_SIZE, VR_BRICK_INTERIOR, VR_BLOCK_SIZE, VR_BLOCK_LENGTH, VR_BLOCKS_PER_AXIS,
         VR_BLOCKS_PER_BRICK, VR_HEADER_WORDS, VR_MEAN_BITS, VR_MAX_SPARSITY_BITS, VR_MAX_COEF_BITS,
-        VR_MAX_ATOM_BITS, VR_ATLAS_SLOT_SIZE, VR_ATLAS_NO_SLOT, layout_word, codes,
-        vr_code_first_word(layout_word));
+        VR_MAX_ATOM_BITS, VR_MAX_BLOCKS_PER_AXIS, VR_ATLAS_NO_SLOT, layout_word, codes,
+        vr_code_first_word(layout_word, VR_BLOCKS_PER_BRICK));
     for (uint k = 0u; k < 16u; ++k) results[8u * N + k] = constants[k];
   }
 }

@@ -16,21 +16,26 @@
 namespace volreel::vulkan {
 namespace {
 
-constexpr std::uint32_t N = 46656;  // 216 blocks × 216 values
 constexpr std::uint32_t sections = 10;
 
-class LayoutTest : public test::VulkanTest {};
+class LayoutTest : public test::VulkanTest, public ::testing::WithParamInterface<std::uint32_t> {};
 
-TEST_F(LayoutTest, GlslAndCppAgree) {
+// Bricks of 36³ (216 blocks) and of 18³ (27 blocks, the specialization constant at work).
+INSTANTIATE_TEST_SUITE_P(BrickSizes, LayoutTest, ::testing::Values(36u, 18u));
+
+TEST_P(LayoutTest, GlslAndCppAgree) {
   Context& ctx = context();
+  const format::BrickShape shape{GetParam()};
+  const std::uint32_t blocks = shape.blocks(), n = shape.blocks_per_axis();
+  const std::uint32_t N = blocks * VR_BLOCK_LENGTH;  // values of a brick: one section
   SplitMix64 rng(5);
   const std::uint32_t atom_count = 1024;
   const std::vector<float> atoms = test::random_atoms(rng, atom_count);
-  const std::vector<std::byte> bytes = test::random_ksvd_payload(rng, atom_count, 0);
+  const std::vector<std::byte> bytes = test::random_ksvd_payload(rng, atom_count, 0, shape);
   std::vector<vr_uint> payload(bytes.size() / 4 + 1, 0u);  // + the look-ahead word
   std::memcpy(payload.data(), bytes.data(), bytes.size());
   const format::KsvdPayloadParts parts =
-      format::unpack_ksvd_payload(bytes, atom_count, "<memory>", 0);
+      format::unpack_ksvd_payload(bytes, atom_count, shape, "<memory>", 0);
 
   // 1. Run the probe.
   const auto host = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
@@ -45,7 +50,7 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
   DescriptorSetLayout set_layout(ctx, bindings);
   ShaderModule shader(ctx, volreel_layout_probe_spv);
   const VkDescriptorSetLayout layouts[] = {set_layout.handle()};
-  ComputePipeline pipeline(ctx, shader, layouts);
+  ComputePipeline pipeline(ctx, shader, layouts, 0, {&n, 1});
   const VkDescriptorPoolSize sizes[] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3}};
   DescriptorPool pool(ctx, sizes, 1);
   VkDescriptorSet set = pool.allocate(set_layout.handle());
@@ -56,7 +61,7 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
     vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.handle());
     vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.layout(), 0, 1, &set,
                             0, nullptr);
-    vkCmdDispatch(commands, VR_BLOCKS_PER_BRICK, 1, 1);
+    vkCmdDispatch(commands, blocks, 1, 1);
     memory_barrier(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
                    VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
   });
@@ -67,41 +72,41 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
   const float* a = atoms.data();
   const vr_uint layout_word = vr_layout_word(p);
   std::uint32_t codes = 0;
-  for (std::uint32_t c = 0; c < VR_BLOCKS_PER_BRICK; ++c)
+  for (std::uint32_t c = 0; c < blocks; ++c)
     codes += vr_entry_sparsity(layout_word, vr_block_entry(p, layout_word, c));
   ASSERT_GT(codes, 0u);
   ASSERT_GE(payload.size(), 34u) << "the probe reads bits 0..1055";
-  const std::uint32_t constants[16] = {VR_BRICK_SIZE,
-                                       VR_BRICK_INTERIOR,
+  const std::uint32_t constants[16] = {shape.size,
+                                       shape.interior(),
                                        VR_BLOCK_SIZE,
                                        VR_BLOCK_LENGTH,
-                                       VR_BLOCKS_PER_AXIS,
-                                       VR_BLOCKS_PER_BRICK,
+                                       n,
+                                       blocks,
                                        VR_HEADER_WORDS,
                                        VR_MEAN_BITS,
                                        VR_MAX_SPARSITY_BITS,
                                        VR_MAX_COEF_BITS,
                                        VR_MAX_ATOM_BITS,
-                                       VR_ATLAS_SLOT_SIZE,
+                                       VR_MAX_BLOCKS_PER_AXIS,
                                        VR_ATLAS_NO_SLOT,
                                        layout_word,
                                        codes,
-                                       vr_code_first_word(layout_word)};
+                                       vr_code_first_word(layout_word, blocks)};
   for (std::uint32_t k = 0; k < 16; ++k)
     EXPECT_EQ(gpu[8 * N + k], constants[k]) << "constant " << k;
   std::uint32_t mismatches = 0;
   float worst = 0;
   std::size_t first_code = 0;  // of block b in parts
-  for (std::uint32_t b = 0; b < VR_BLOCKS_PER_BRICK; ++b) {
+  for (std::uint32_t b = 0; b < blocks; ++b) {
     for (std::uint32_t v = 0; v < VR_BLOCK_LENGTH; ++v) {
       const std::uint32_t i = b * 216 + v;
       const vr_uint other = vr_make_layout(i % 16, (i / 16) % 9, 1 + (i / 144) % 16,
                                            1 + (i / 2304) % 16, (i / 3) % 4, i % 4096);
-      const vr_uint entry = vr_block_entry(p, layout_word, i % VR_BLOCKS_PER_BRICK);
+      const vr_uint entry = vr_block_entry(p, layout_word, i % blocks);
       vr_uint rice_bit = (i * 7) % 900;
       const vr_uint rice = vr_read_rice(p, 0, rice_bit, i % 16, 1 + i % 16);
       const std::uint32_t expected[10] = {
-          vr_brick_voxel(b, v),
+          vr_brick_voxel(n, b, v),
           0,  // the decoded value, compared below
           vr_read_bits(p, 0, (i * 13) % 1024, i % 33),
           vr_entry_sparsity(layout_word, entry) | (vr_entry_mean(layout_word, entry) << 8),
@@ -110,7 +115,7 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
                                 : 0xFFFFFFFFu,
           vr_layout_entry_bits(other) | (vr_gap_rice(other, 1 + i % 255) << 5) |
               (vr_band_rice(other, i * 2654435761u, i % 300) << 10) |
-              (vr_entry_words(other) << 15) | (vr_code_first_word(other) << 23),
+              (vr_entry_words(other, blocks) << 15) | (vr_code_first_word(other, blocks) << 23),
           vr_atlas_cell_x(i, 7) | (vr_atlas_cell_y(i, 7, 5) << 8) |
               (vr_atlas_cell_z(i, 7, 5) << 16),
           vr_atlas_cell_x(i, 56) | (vr_atlas_cell_y(i, 56, 56) << 8) |
@@ -122,7 +127,7 @@ TEST_F(LayoutTest, GlslAndCppAgree) {
           ADD_FAILURE() << "section " << s << " index " << i << ": GLSL " << gpu[s * N + i]
                         << ", C++ " << expected[s];
       // The decoded value: the same arithmetic; the device may fuse multiply-adds.
-      const float cpu = vr_decode_value(p, a, b, v);
+      const float cpu = vr_decode_value(p, a, blocks, b, v);
       const float glsl = std::bit_cast<float>(gpu[N + i]);
       worst = std::max(worst, std::fabs(cpu - glsl) / std::max(1.0f, std::fabs(cpu)));
     }

@@ -99,13 +99,14 @@ struct Scene {
   }
 };
 
-/// 240 × 40 × 30 (grids 8×2×1 → 4×1×1 → 2×1×1 → 1: four levels, 23 bricks per frame).
-const Scene& scene() {
-  static const std::unique_ptr<Scene> made = [] {
+/// 240 × 40 × 30 in bricks of `shape` (36³: grids 8×2×1 → 4×1×1 → 2×1×1 → 1, four levels, 23
+/// bricks per frame).
+std::unique_ptr<Scene> make_scene(format::BrickShape shape) {
+  {
     auto s = std::make_unique<Scene>();
     s->dims = {240, 40, 30};
-    s->geometry = VolumeGeometry::of(s->dims);
-    s->levels = format::level_geometry(s->dims);
+    s->geometry = VolumeGeometry::of(s->dims, shape);
+    s->levels = format::level_geometry(s->dims, shape);
     for (const auto& l : s->levels) {
       s->level_first.push_back(s->bricks_per_frame);
       s->bricks_per_frame += l.grid[0] * l.grid[1] * l.grid[2];
@@ -127,6 +128,7 @@ const Scene& scene() {
     }
     s->dictionary = random_dictionary(256, 7);
     encoder::CodingSettings coding;
+    coding.brick_size = shape.size;
     coding.tolerance = 0.01 * double(s->data_hi - s->data_lo);
     coding.value_min = s->data_lo;
     coding.value_max = s->data_hi;
@@ -135,7 +137,7 @@ const Scene& scene() {
       s->bytes[t] = frame_encoder.encode(t, frames[t]);
       s->views[t] = format::FrameView(s->bytes[t], "frame" + std::to_string(t));
     }
-    s->cpu_atlas = std::make_unique<CpuAtlas>(s->slot_count());
+    s->cpu_atlas = std::make_unique<CpuAtlas>(s->slot_count(), shape);
     std::size_t bricks = 0;
     s->for_each_brick([&](std::size_t t, std::uint32_t l, Coord c, std::span<const std::byte> b) {
       s->cpu_atlas->decode_into(s->slot(t, l, c), b, format::Codec::ksvd, 0, s->atoms());
@@ -150,7 +152,11 @@ const Scene& scene() {
         s->hi = std::max(s->hi, v);
       }
     return s;
-  }();
+  }
+}
+
+const Scene& scene() {
+  static const std::unique_ptr<Scene> made = make_scene({});
   return *made;
 }
 
@@ -181,7 +187,7 @@ psnr::ImageComparison compare(const RgbaImage& a, const RgbaImage& b) {
 
 /// Copies the CPU atlas's slots into the GPU atlas (16-bit unorm over the atlas's range).
 void upload_cpu_atlas(vulkan::Context& context, const vulkan::Atlas& atlas, const CpuAtlas& cpu) {
-  const std::size_t voxels = CpuAtlas::slot_values;
+  const std::size_t voxels = cpu.slot_values();
   const vulkan::Buffer staging(
       context, cpu.slot_count() * voxels * 2, VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
       VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT);
@@ -198,7 +204,7 @@ void upload_cpu_atlas(vulkan::Context& context, const vulkan::Atlas& atlas, cons
     r.bufferOffset = s * voxels * 2;
     r.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
     r.imageOffset = atlas.slot_origin(s);
-    r.imageExtent = {VR_ATLAS_SLOT_SIZE, VR_ATLAS_SLOT_SIZE, VR_ATLAS_SLOT_SIZE};
+    r.imageExtent = {atlas.slot_size(), atlas.slot_size(), atlas.slot_size()};
     regions.push_back(r);
   }
   context.submit_and_wait([&](VkCommandBuffer cb) {
@@ -224,7 +230,10 @@ vulkan::AtlasOptions atlas_options(const Scene& s) {
   const float margin = 0.01f * (s.hi - s.lo);
   o.value_min = s.lo - margin;
   o.value_max = s.hi + margin;
-  o.memory_budget_bytes = std::uint64_t{64} * 93312;  // a 4×4×4 grid, more than the scene needs
+  o.slot_size = s.geometry.shape.size;
+  // A 4×4×4 grid of slots, more than the scene of 36³ bricks needs; at least the scene's slots.
+  o.memory_budget_bytes =
+      std::uint64_t{std::max(64u, s.slot_count())} * 2 * s.geometry.shape.voxels();
   return o;
 }
 
@@ -336,6 +345,52 @@ TEST_P(FullyLoaded, MatchesTheCpuReferenceRenderer) {
                 filter == vulkan_render::AtlasFilter::fetch ? 3e-3 : 1e-2)
           << which;
     }
+}
+
+// Bricks of 24³ (five levels) and 66³ (three): the ray caster's specialization constant and the
+// decoder's, against the CPU reference renderer on atlases decoded on the CPU and on the GPU.
+TEST_F(VulkanRender, OtherBrickSizesMatchTheCpuReferenceRenderer) {
+  for (const std::uint32_t size : {24u, 66u}) {
+    SCOPED_TRACE("bricks of " + std::to_string(size) + "^3");
+    const std::unique_ptr<Scene> made = make_scene({size});
+    const Scene& s = *made;
+    ASSERT_EQ(s.geometry.levels, size == 24 ? 5u : 3u);
+    const std::uint32_t finest = s.geometry.levels - 1, d = 1;
+    const auto svo = build_uniform_svo(s.levels, finest, [&](std::uint32_t l, Coord c) {
+      return LeafSpec{s.slot(0, l, c), s.slot(1, l - d, {c[0] >> d, c[1] >> d, c[2] >> d}), 0, d,
+                      0.5f};
+    });
+    const TransferFunction tf = test_transfer(s);
+    const auto camera = test_camera();
+    const RgbaImage want =
+        cpu_render::render_svo({svo.nodes, svo.leaves}, *s.cpu_atlas, s.geometry, camera, tf);
+    ASSERT_GT(drawn_fraction(want), 0.15);
+    vulkan::Atlas from_cpu(context(), atlas_options(s)), from_gpu(context(), atlas_options(s));
+    ASSERT_GE(from_cpu.slot_count(), s.slot_count());
+    upload_cpu_atlas(context(), from_cpu, *s.cpu_atlas);
+    {
+      vulkan::AtlasDecoder decoder(context(), from_gpu);
+      decoder.set_dictionary(s.atoms());
+      std::vector<vulkan::BrickUpload> batch;
+      s.for_each_brick([&](std::size_t t, std::uint32_t l, Coord c, std::span<const std::byte> b) {
+        batch.push_back({b, format::Codec::ksvd, 0, s.slot(t, l, c)});
+      });
+      decoder.wait(decoder.submit(batch));
+    }
+    const FrameInput in = frame_input(s, svo, tf, camera);
+    for (const vulkan::Atlas* atlas : {&from_cpu, &from_gpu}) {
+      const RgbaImage got = render_gpu(context(), *atlas, in, OutputFormat::rgba16_sfloat,
+                                       vulkan_render::AtlasFilter::fetch);
+      const psnr::ImageComparison c = compare(got, want);
+      std::printf("  bricks of %u^3, %s atlas: PSNR %.1f dB, max |diff| %.4f\n", size,
+                  atlas == &from_cpu ? "CPU-decoded" : "GPU-decoded", c.psnr,
+                  cpu_render::max_abs_difference(got, want));
+      EXPECT_GE(c.psnr, min_psnr);
+      EXPECT_LE(cpu_render::max_abs_difference(got, want), 3e-3);
+    }
+    // An atlas of another slot size is refused.
+    EXPECT_THROW(render_gpu(context(), *gpu_scene(context()).from_cpu, in), std::invalid_argument);
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(LodDifferenceAndFactor, FullyLoaded,

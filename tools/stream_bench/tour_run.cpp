@@ -26,7 +26,7 @@ GroundTruth::GroundTruth(const format::Container& container,
                          std::unique_ptr<datasets::SeriesReader> series)
     : container_(container), series_(std::move(series)), steps_(container) {
   const format::Manifest& m = container.manifest();
-  geometry_ = cpu_render::VolumeGeometry::of(m.dims);
+  geometry_ = cpu_render::VolumeGeometry::of(m.dims, m.shape());
   if (series_) {
     const auto& info = series_->info();
     if (info.dims.x != m.dims[0] || info.dims.y != m.dims[1] || info.dims.z != m.dims[2])
@@ -162,7 +162,8 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy, const Progr
   double simulated_time = 0;
   if (s.simulated_fps > 0)
     options.scheduler.loader.clock = [&simulated_time] { return simulated_time; };
-  options.atlas_bytes = std::uint64_t{s.settings.atlas_slots} * loop::CpuFrameLoop::gpu_slot_bytes;
+  options.atlas_bytes = std::uint64_t{s.settings.atlas_slots} *
+                        loop::CpuFrameLoop::gpu_slot_bytes(s.container->manifest().shape());
   options.width = s.width;
   options.height = s.height;
   options.render = s.render;

@@ -37,6 +37,7 @@ struct RdCommandOptions {
   std::string pursuit = dictionary::pursuit_name(encoder::CodingSettings{}.selection);
   double level_factor = encoder::CodingSettings{}.level_tolerance_factor;
   double coef_step = encoder::CodingSettings{}.coef_step_factor;
+  std::string brick_size = "auto";
   std::vector<double> zfp_bricks;  ///< zfp inside the container, accuracy / range (default none)
   /// Also variable rate through a container with sparse keyframes, one curve per gap.
   std::vector<std::uint32_t> keyframe_gaps;
@@ -65,6 +66,7 @@ std::vector<psnr::RdPoint> keyframe_points(const datasets::SeriesReader& series,
         request.coding.selection = dictionary::pursuit_from_name(o.pursuit);
         request.coding.level_tolerance_factor = o.level_factor;
         request.coding.coef_step_factor = o.coef_step;
+        request.coding.brick_size = encoder::brick_size_from_text(o.brick_size);
         request.tolerance.tolerance = relative * range;
         request.dictionary = o.dictionary;
         request.half_atoms = o.atom_storage == "f16";
@@ -104,6 +106,16 @@ void run_rd(const RdCommandOptions& o) {
     bar.finish();
   }
   std::printf("value range [%.6g, %.6g]\n", range.first, range.second);
+  std::uint32_t brick_size = encoder::brick_size_from_text(o.brick_size);
+  const std::array<std::uint32_t, 3> dims{static_cast<std::uint32_t>(info.dims.x),
+                                          static_cast<std::uint32_t>(info.dims.y),
+                                          static_cast<std::uint32_t>(info.dims.z)};
+  if (brick_size == 0) brick_size = format::choose_brick_shape(dims).size;
+  std::printf(
+      "volreel bricks: %u^3 voxels (%s; blocks holding voxels of the volume store %.3g "
+      "values per voxel, all levels)\n",
+      brick_size, o.brick_size == "auto" ? "chosen for this volume" : "--brick-size",
+      format::coded_block_share(dims, {brick_size}));
   auto codecs = psnr::make_zfp_sweep(range.second - range.first);
   if (!o.dictionary.empty()) {
     // The dictionary as volreel encode stores it in the container (binary16 atoms by default).
@@ -120,6 +132,7 @@ void run_rd(const RdCommandOptions& o) {
     sweep.selection = dictionary::pursuit_from_name(o.pursuit);
     sweep.level_tolerance_factor = o.level_factor;
     sweep.coef_step_factor = o.coef_step;
+    sweep.brick_size = brick_size;
     std::printf(
         "volreel pursuit %s; variable rate (Lagrangian rule) codes level d above the finest to "
         "eps*%g^d\n",
@@ -127,10 +140,12 @@ void run_rd(const RdCommandOptions& o) {
     for (auto& c : make_volreel_sweep(dict, bytes, range.first, range.second, sweep))
       codecs.push_back(std::move(c));
   }
-  if (!o.zfp_bricks.empty())
-    for (auto& c : make_volreel_sweep(nullptr, 0, range.first, range.second,
-                                      {{}, {}, false, {}, o.zfp_bricks}))
+  if (!o.zfp_bricks.empty()) {
+    VolreelSweep sweep{{}, {}, false, {}, o.zfp_bricks};
+    sweep.brick_size = brick_size;
+    for (auto& c : make_volreel_sweep(nullptr, 0, range.first, range.second, sweep))
       codecs.push_back(std::move(c));
+  }
   if (o.dictionary.empty())
     std::printf("no --dictionary: volreel's sparse codecs are skipped (zfp only)\n");
   std::vector<psnr::RdPoint> points;
@@ -247,6 +262,10 @@ void add_bench_command(CLI::App& app) {
                    ? std::string()
                    : "expected bits per voxel > 0, e.g. 0.3, found '" + text + "'";
       })
+      ->capture_default_str();
+  rd->add_option("--brick-size", o->brick_size,
+                 "Stored voxels per brick axis of volreel's rows, as volreel encode --brick-size "
+                 "(auto: chosen for the volume)")
       ->capture_default_str();
   rd->add_option("--zfp-bricks", o->zfp_bricks,
                  "Also zfp per brick inside the container, accuracy as fractions of the range");

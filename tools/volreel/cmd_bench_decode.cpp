@@ -73,7 +73,8 @@ void run_bench_decode(const BenchDecodeOptions& o) {
     }
   if (bricks.empty()) throw InputError(o.container + " has no bricks in its first frames");
   const format::AtomTable atoms = container.atoms();
-  const double brick_mvoxel = format::brick_voxels * 1e-6;
+  const std::size_t brick_voxels = m.shape().voxels();
+  const double brick_mvoxel = static_cast<double>(brick_voxels) * 1e-6;
   const double total_mvoxel = static_cast<double>(bricks.size()) * brick_mvoxel;
 
   vulkan::ContextOptions context_options;
@@ -90,13 +91,13 @@ void run_bench_decode(const BenchDecodeOptions& o) {
       static_cast<double>(compressed) / static_cast<double>(bricks.size()));
 
   // 2. Reference values: every brick decoded on the CPU.
-  std::vector<float> reference(bricks.size() * format::brick_voxels);
+  std::vector<float> reference(bricks.size() * brick_voxels);
 #pragma omp parallel for schedule(dynamic, 4)
   for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(bricks.size()); ++i) {
     const BrickRef& r = bricks[static_cast<std::size_t>(i)];
-    format::decode_brick(*r.frame, r.brick, atoms,
-                         {reference.data() + static_cast<std::size_t>(i) * format::brick_voxels,
-                          format::brick_voxels});
+    format::decode_brick(
+        *r.frame, r.brick, atoms,
+        {reference.data() + static_cast<std::size_t>(i) * brick_voxels, brick_voxels});
   }
   float lo = static_cast<float>(m.value_min), hi = static_cast<float>(m.value_max);
   for (float v : reference) {
@@ -108,6 +109,7 @@ void run_bench_decode(const BenchDecodeOptions& o) {
   const auto make_atlas_options = [&](vulkan::AtlasFormat format) {
     vulkan::AtlasOptions ao;
     ao.format = format;
+    ao.slot_size = m.brick_size;
     ao.memory_budget_bytes = static_cast<std::uint64_t>(o.atlas_mib * 1048576.0);
     ao.value_min = lo - margin;
     ao.value_max = hi + margin;
@@ -149,8 +151,8 @@ void run_bench_decode(const BenchDecodeOptions& o) {
       decoder.submit(batch);
       const std::vector<float> gpu = decoder.read_slots(slots);
       for (std::size_t i = 0; i < gpu.size(); ++i) {
-        const double e = static_cast<double>(gpu[i]) -
-                         static_cast<double>(reference[first * format::brick_voxels + i]);
+        const double e =
+            static_cast<double>(gpu[i]) - static_cast<double>(reference[first * brick_voxels + i]);
         max_error = std::max(max_error, std::fabs(e));
         squared += e * e;
       }
@@ -175,7 +177,7 @@ void run_bench_decode(const BenchDecodeOptions& o) {
       atlas.grid().z, static_cast<double>(decoder.options().upload_budget_bytes) / 1048576.0,
       decoder.options().ring_size, vulkan::kernel_name(decoder.kernel()));
   const int threads = omp_get_max_threads();
-  std::vector<float> scratch(format::brick_voxels);
+  std::vector<float> scratch(brick_voxels);
   const double cpu1 = time_passes(o.min_seconds, [&] {
     for (const BrickRef& r : bricks) format::decode_brick(*r.frame, r.brick, atoms, scratch);
   });
@@ -191,7 +193,7 @@ void run_bench_decode(const BenchDecodeOptions& o) {
         requested, 1, std::min<std::size_t>(bricks.size(), atlas.slot_count()));
     // CPU, all threads, a batch at a time (the threads meet at the end of each batch).
     std::vector<std::vector<float>> outputs(static_cast<std::size_t>(threads),
-                                            std::vector<float>(format::brick_voxels));
+                                            std::vector<float>(brick_voxels));
     const double cpu = time_passes(o.min_seconds, [&] {
       for (std::size_t first = 0; first < bricks.size(); first += batch) {
         const auto end = static_cast<std::ptrdiff_t>(std::min(bricks.size(), first + batch));
@@ -235,7 +237,8 @@ void run_bench_decode(const BenchDecodeOptions& o) {
     std::printf("\n");
   }
   std::printf(
-      "\nMVoxel/s counts the stored 36^3 voxels of each brick (apron included). upload MB/s: bytes "
+      "\nMVoxel/s counts the stored voxels of each brick (its S^3, apron included). upload MB/s: "
+      "bytes "
       "written to\n"
       "the staging buffers (records + payloads) per second of the whole upload + decode.\n");
   for (const vulkan::ValidationMessage& message : context.validation_messages())

@@ -84,8 +84,9 @@ void run_bench_index(const BenchIndexOptions& o) {
   stream::SchedulerSettings settings;
   // The player's atlas: as many slots as its 16-bit GPU atlas of --atlas-mb.
   settings.atlas_slots = static_cast<std::uint32_t>(std::clamp<std::uint64_t>(
-      static_cast<std::uint64_t>(o.atlas_mb * 1024 * 1024) / loop::CpuFrameLoop::gpu_slot_bytes, 1,
-      1u << 20));
+      static_cast<std::uint64_t>(o.atlas_mb * 1024 * 1024) /
+          loop::CpuFrameLoop::gpu_slot_bytes(container.manifest().shape()),
+      1, 1u << 20));
   stream::StreamScheduler scheduler(container, settings, index_options);
   const double open_s = seconds_since(open_start);
   const stream::SpatialIndex& index = scheduler.index();

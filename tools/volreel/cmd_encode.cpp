@@ -33,7 +33,7 @@ struct EncodeOptions {
   std::string series, dictionary, out,
       codec = "ksvd", rate_rule = "lagrangian",
       pursuit = dictionary::pursuit_name(encoder::CodingSettings{}.selection), mean_bits = "auto",
-      coef_bits = "auto", atom_storage = "f16";
+      coef_bits = "auto", atom_storage = "f16", brick_size = "auto";
   ReaderOptions reader;
   double tolerance = 0, psnr = 0, bps = 0, zfp_accuracy = 0, max_error = 0,
          level_factor = encoder::CodingSettings{}.level_tolerance_factor,
@@ -65,6 +65,7 @@ encoder::CodingSettings coding_settings(const EncodeOptions& o) {
   c.mean_bits = encoder::mean_bits_from_text(o.mean_bits);
   c.coef_bits = encoder::coef_bits_from_text(o.coef_bits);
   c.coef_step_factor = o.coef_step_factor;
+  c.brick_size = encoder::brick_size_from_text(o.brick_size);
   if (o.max_error_opt->count() > 0) {
     // The pointwise bound: the tolerance rule at ε = E/2 (an RMS error never above the largest),
     // then atoms and a finer coefficient step until every value holds (quantize_brick's steps 4
@@ -184,7 +185,8 @@ void add_encode_command(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "encode",
       "Encode a series into a NAME.vreel container (MTV-Player 3.2): per frame an octree of bricks "
-      "(34^3 + 1-voxel apron,\ncoarser levels averaging 2x2x2), each brick's 6^3 blocks "
+      "(B^3 stored voxels:\n(B-2)^3 interior + 1-voxel apron, coarser levels averaging 2x2x2), "
+      "each brick's 6^3 blocks "
       "sparse-coded against the dictionary (variable rate: each block\nkeeps the atoms that lower "
       "its squared error by at least 0.25*216*eps^2, the rate-distortion optimal\nallocation; or, "
       "--rate-rule tolerance, atoms until its RMS error <= eps; fixed rate: S atoms) and\n"
@@ -273,6 +275,11 @@ void add_encode_command(CLI::App& app) {
                   "bytes; the frames are coded\n"
                   "against the rounded atoms) or f32 (a dictionary stored in f16 stays f16)")
       ->check(CLI::IsMember({"f16", "f32"}))
+      ->capture_default_str();
+  cmd->add_option("--brick-size", o->brick_size,
+                  "B, stored voxels per brick axis: a multiple of 6 in 12..66, or auto: the size "
+                  "whose bricks, over\nall levels, hold the fewest 6^3 blocks with voxels of the "
+                  "volume (66, interior 64, for power-of-two sizes;\nthe smaller of near ties)")
       ->capture_default_str();
   cmd->add_option("--codec", o->codec, "ksvd (sparse coding) or zfp (fixed accuracy per brick)")
       ->capture_default_str();

@@ -153,12 +153,20 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
   if (bps_target > 0 && std::abs(s.bps - bps_target) > bps_tolerance * bps_target) {
     const bool under = s.bps < bps_target;
     std::fflush(stdout);
-    std::fprintf(stderr,
-                 "warning: target %.4f bps missed: the container is %.4f bps (%+.1f %%) at eps "
-                 "%.4g; the rate search's sample frames cost %s than the sequence's average: "
-                 "encode again with a larger --rate-sample-frames, or with a %s --tolerance\n",
-                 bps_target, s.bps, 100.0 * (s.bps / bps_target - 1), c.tolerance,
-                 under ? "more" : "less", under ? "smaller" : "larger");
+    // The search's smallest eps codes every value to about float precision: no eps spends more.
+    if (under && c.tolerance <= 1e-7 * (c.value_max - c.value_min))
+      std::fprintf(stderr,
+                   "warning: target %.4f bps missed: the container is %.4f bps (%+.1f %%) at eps "
+                   "%.4g, where every value is coded to about float precision; no tolerance makes "
+                   "it larger: ask for fewer bps\n",
+                   bps_target, s.bps, 100.0 * (s.bps / bps_target - 1), c.tolerance);
+    else
+      std::fprintf(stderr,
+                   "warning: target %.4f bps missed: the container is %.4f bps (%+.1f %%) at eps "
+                   "%.4g; the rate search's sample frames cost %s than the sequence's average: "
+                   "encode again with a larger --rate-sample-frames, or with a %s --tolerance\n",
+                   bps_target, s.bps, 100.0 * (s.bps / bps_target - 1), c.tolerance,
+                   under ? "more" : "less", under ? "smaller" : "larger");
   }
   const std::size_t node_steps = s.bricks_stored + s.nodes_interpolated;
   if (s.nodes_interpolated > 0)

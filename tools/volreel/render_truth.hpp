@@ -30,7 +30,7 @@ class GroundTruth {
     if (info.frames < m.frames.size())
       throw InputError("--compare " + path + ": the series has " + std::to_string(info.frames) +
                        " frames, the container " + std::to_string(m.frames.size()));
-    geometry_ = cpu_render::VolumeGeometry::of(m.dims);
+    geometry_ = cpu_render::VolumeGeometry::of(m.dims, m.shape());
   }
 
   /// The reference image at `playhead`: the finest level of both neighbouring frames, blended.

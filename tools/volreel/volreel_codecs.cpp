@@ -72,6 +72,7 @@ std::vector<std::unique_ptr<psnr::FrameCodec>> make_volreel_sweep(
   base.selection = sweep.selection;
   base.level_tolerance_factor = sweep.level_tolerance_factor;
   base.coef_step_factor = sweep.coef_step_factor;
+  base.brick_size = sweep.brick_size;
   for (double relative : sweep.relative_tolerances) {
     for (double factor : sweep.lagrangian_factors) {
       auto s = base;

@@ -24,6 +24,8 @@ struct VolreelSweep {
   double level_tolerance_factor = encoder::CodingSettings{}.level_tolerance_factor;
   /// Variable rate: the coefficient step as a multiple of ε (as volreel encode --coef-step).
   double coef_step_factor = encoder::CodingSettings{}.coef_step_factor;
+  /// Stored voxels per brick axis of every row (volreel encode --brick-size; never 0 here).
+  std::uint32_t brick_size = format::default_brick_size;
 };
 
 /// Codecs that encode each frame into an in-memory frame file and decode it with the CPU decoder.

@@ -21,8 +21,9 @@ namespace {
 loop::FrameLoopOptions cpu_options(const RendererSetup& setup) {
   loop::FrameLoopOptions o;
   o.scheduler = setup.scheduler;
-  o.atlas_bytes = std::min<std::uint64_t>(setup.atlas_bytes / 2,
-                                          (1u << 16) * loop::CpuFrameLoop::gpu_slot_bytes);
+  o.atlas_bytes = std::min<std::uint64_t>(
+      setup.atlas_bytes / 2,
+      (1u << 16) * loop::CpuFrameLoop::gpu_slot_bytes(setup.container->manifest().shape()));
   o.width = static_cast<int>(setup.width);
   o.height = static_cast<int>(setup.height);
   return o;

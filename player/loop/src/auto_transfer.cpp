@@ -32,13 +32,14 @@ std::vector<float> finest_brick_values(const format::Container& container, std::
   }
   const std::size_t take = std::min(std::max<std::size_t>(max_bricks, 1), bricks.size());
   const format::AtomTable atoms = container.atoms();
-  std::vector<float> values(take * format::brick_voxels);
+  const std::size_t brick_voxels = view.shape().voxels();
+  std::vector<float> values(take * brick_voxels);
   for (std::size_t k = 0; k < take; ++k) {
     const std::uint32_t b = bricks[k * bricks.size() / take];
     format::decode_payload(container.read_brick(view, b), view.codec(),
-                           view.header().codec_parameter, atoms,
-                           {values.data() + k * format::brick_voxels, format::brick_voxels},
-                           view.name(), view.brick_offset(b));
+                           view.header().codec_parameter, atoms, view.shape(),
+                           {values.data() + k * brick_voxels, brick_voxels}, view.name(),
+                           view.brick_offset(b));
   }
   return values;
 }

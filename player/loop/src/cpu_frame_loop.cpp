@@ -20,15 +20,16 @@ double ms_since(Clock::time_point start) {
 
 }  // namespace
 
-std::uint32_t CpuFrameLoop::slots_for(const FrameLoopOptions& options) {
+std::uint32_t CpuFrameLoop::slots_for(const FrameLoopOptions& options, format::BrickShape shape) {
   return static_cast<std::uint32_t>(
-      std::clamp<std::uint64_t>(options.atlas_bytes / gpu_slot_bytes, 1, 1u << 20));
+      std::clamp<std::uint64_t>(options.atlas_bytes / gpu_slot_bytes(shape), 1, 1u << 20));
 }
 
 CpuFrameLoop::CpuFrameLoop(const format::Container& container, const FrameLoopOptions& options)
     : container_(container), options_(options) {
-  geometry_ = cpu_render::VolumeGeometry::of(container.manifest().dims);
-  atlas_ = std::make_unique<cpu_render::CpuAtlas>(slots_for(options));
+  const format::Manifest& m = container.manifest();
+  geometry_ = cpu_render::VolumeGeometry::of(m.dims, m.shape());
+  atlas_ = std::make_unique<cpu_render::CpuAtlas>(slots_for(options, m.shape()), m.shape());
   options_.scheduler.atlas_slots = atlas_->slot_count();
   scheduler_ = std::make_unique<stream::StreamScheduler>(container, options_.scheduler);
 }
@@ -36,8 +37,9 @@ CpuFrameLoop::CpuFrameLoop(const format::Container& container, const FrameLoopOp
 CpuFrameLoop::CpuFrameLoop(const format::Container& container, stream::SpatialIndex index,
                            const FrameLoopOptions& options)
     : container_(container), options_(options) {
-  geometry_ = cpu_render::VolumeGeometry::of(container.manifest().dims);
-  atlas_ = std::make_unique<cpu_render::CpuAtlas>(slots_for(options));
+  const format::Manifest& m = container.manifest();
+  geometry_ = cpu_render::VolumeGeometry::of(m.dims, m.shape());
+  atlas_ = std::make_unique<cpu_render::CpuAtlas>(slots_for(options, m.shape()), m.shape());
   options_.scheduler.atlas_slots = atlas_->slot_count();
   scheduler_ = std::make_unique<stream::StreamScheduler>(std::move(index), options_.scheduler);
 }

@@ -11,19 +11,14 @@
 
 namespace volreel::vulkan {
 
-namespace {
-
-constexpr std::uint64_t slot_voxels =
-    std::uint64_t{VR_ATLAS_SLOT_SIZE} * VR_ATLAS_SLOT_SIZE * VR_ATLAS_SLOT_SIZE;
-
-}  // namespace
-
 const char* atlas_format_name(AtlasFormat format) {
   return format == AtlasFormat::r16_unorm ? "R16_UNORM" : "R16_SFLOAT";
 }
 
-AtlasGrid choose_atlas_grid(std::uint64_t max_slots, std::uint32_t max_image_dimension_3d) {
-  const std::uint32_t cap = std::max<std::uint32_t>(1, max_image_dimension_3d / VR_ATLAS_SLOT_SIZE);
+AtlasGrid choose_atlas_grid(std::uint64_t max_slots, std::uint32_t max_image_dimension_3d,
+                            std::uint32_t slot_size) {
+  const std::uint32_t cap =
+      std::max<std::uint32_t>(1, max_image_dimension_3d / std::max<std::uint32_t>(1, slot_size));
   const std::uint64_t n = std::clamp<std::uint64_t>(max_slots, 1, std::uint64_t{cap} * cap * cap);
   // 1. Every grid x ≥ y ≥ z within the caps and n slots; the most slots any of them holds.
   struct Candidate {
@@ -103,19 +98,26 @@ Atlas::Atlas(const Context& context, const AtlasOptions& options) : options_(opt
   if (options.format == AtlasFormat::r16_unorm && !(options.value_max > options.value_min))
     throw Error("Atlas: R16_UNORM needs value_max > value_min", VK_ERROR_INITIALIZATION_FAILED);
   // 2. Grid from the memory budget, the slot cap and the largest 3D image.
-  std::uint64_t slots = options.memory_budget_bytes / (2 * slot_voxels);
+  const std::uint32_t n = options.slot_size;
+  if (n == 0 || n % 6 != 0 || n > 66)
+    throw Error("Atlas: slots of " + std::to_string(n) +
+                    "^3 voxels (a brick size: 12..66, a "
+                    "multiple of 6)",
+                VK_ERROR_INITIALIZATION_FAILED);
+  const std::uint64_t slot_bytes = 2 * std::uint64_t{n} * n * n;
+  std::uint64_t slots = options.memory_budget_bytes / slot_bytes;
   if (options.max_slots) slots = std::min<std::uint64_t>(slots, options.max_slots);
   if (slots == 0)
     throw Error("Atlas: a memory budget of " + std::to_string(options.memory_budget_bytes) +
-                    " bytes holds no 36^3 slot (93312 bytes)",
+                    " bytes holds no " + std::to_string(n) + "^3 slot (" +
+                    std::to_string(slot_bytes) + " bytes)",
                 VK_ERROR_OUT_OF_DEVICE_MEMORY);
-  grid_ = choose_atlas_grid(slots, context.limits().maxImageDimension3D);
+  grid_ = choose_atlas_grid(slots, context.limits().maxImageDimension3D, n);
   // 3. The image, cleared to zero and left in GENERAL for storage writes, sampling and copies.
   ImageDesc desc;
   desc.type = VK_IMAGE_TYPE_3D;
   desc.format = vk_format;
-  desc.extent = {grid_.x * VR_ATLAS_SLOT_SIZE, grid_.y * VR_ATLAS_SLOT_SIZE,
-                 grid_.z * VR_ATLAS_SLOT_SIZE};
+  desc.extent = {grid_.x * n, grid_.y * n, grid_.z * n};
   desc.usage = VK_IMAGE_USAGE_STORAGE_BIT | VK_IMAGE_USAGE_SAMPLED_BIT |
                VK_IMAGE_USAGE_TRANSFER_SRC_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT;
   image_ = Image(context, desc);
@@ -134,9 +136,10 @@ Atlas::Atlas(const Context& context, const AtlasOptions& options) : options_(opt
 }
 
 VkOffset3D Atlas::slot_origin(std::uint32_t slot) const {
-  return {static_cast<std::int32_t>(vr_atlas_cell_x(slot, grid_.x) * VR_ATLAS_SLOT_SIZE),
-          static_cast<std::int32_t>(vr_atlas_cell_y(slot, grid_.x, grid_.y) * VR_ATLAS_SLOT_SIZE),
-          static_cast<std::int32_t>(vr_atlas_cell_z(slot, grid_.x, grid_.y) * VR_ATLAS_SLOT_SIZE)};
+  const std::uint32_t n = options_.slot_size;
+  return {static_cast<std::int32_t>(vr_atlas_cell_x(slot, grid_.x) * n),
+          static_cast<std::int32_t>(vr_atlas_cell_y(slot, grid_.x, grid_.y) * n),
+          static_cast<std::int32_t>(vr_atlas_cell_z(slot, grid_.x, grid_.y) * n)};
 }
 
 float Atlas::texel_to_value(std::uint16_t texel) const {

@@ -26,18 +26,26 @@ namespace {
 // Record kinds, as in decode_bricks.comp.
 constexpr std::uint32_t kind_ksvd = 0, kind_constant = 1, kind_raw = 2;
 constexpr std::uint64_t record_bytes = 16;  // {payload word offset, slot, kind, payload words}
-constexpr std::uint64_t raw_bytes = std::uint64_t{format::brick_voxels} * 4;
-constexpr std::uint64_t texel_bytes = std::uint64_t{format::brick_voxels} * 2;  // host kernel
+/// A raw brick's float32 values, and (host kernel) its 16-bit texels, for bricks of `shape`.
+std::uint64_t raw_bytes(format::BrickShape shape) {
+  return std::uint64_t{shape.voxels()} * 4;
+}
+std::uint64_t texel_bytes(format::BrickShape shape) {
+  return std::uint64_t{shape.voxels()} * 2;
+}
 constexpr std::uint32_t max_bricks_per_dispatch = 65535;  // maxComputeWorkGroupCount[0] minimum
 /// The most atoms the buffer_copy kernel's texel buffer holds: a learned dictionary of up to 1024
 /// atoms with its 215 DCT atoms, rounded up.
 constexpr std::uint32_t max_copy_atoms = 2048;
-// decode_bricks_rows.comp: a decoded brick is 6 columns (one per block x), each 36×36 rows of 8
-// texels (6 voxels and 2 unused), copied into the slot with bufferRowLength 8.
+// decode_bricks_rows.comp: a decoded brick of S³ voxels is n = S/6 columns (one per block x),
+// each S×S rows of 8 texels (6 voxels and 2 unused), copied into the slot with bufferRowLength 8.
 constexpr std::uint32_t column_row_texels = 8;
-constexpr std::uint64_t decoded_column_bytes =
-    std::uint64_t{column_row_texels} * VR_BRICK_SIZE * VR_BRICK_SIZE * 2;
-constexpr std::uint64_t decoded_brick_bytes = decoded_column_bytes * VR_BLOCKS_PER_AXIS;
+std::uint64_t decoded_column_bytes(format::BrickShape shape) {
+  return std::uint64_t{column_row_texels} * shape.size * shape.size * 2;
+}
+std::uint64_t decoded_brick_bytes(format::BrickShape shape) {
+  return decoded_column_bytes(shape) * shape.blocks_per_axis();
+}
 // ... and an atom is 36 rows of 6 values padded to 8 floats (two RGBA32F texels per row).
 constexpr std::uint32_t atom_row_floats = 8;
 constexpr std::uint64_t copy_atom_floats =
@@ -56,9 +64,17 @@ struct PushConstants {
 };
 static_assert(sizeof(PushConstants) == 16);
 
+/// lavapipe (llvmpipe) ends any shader loop after 65535 iterations (gallivm's guard against
+/// endless loops), and both decode kernels walk a brick's blocks and codes in one loop nest of
+/// one workgroup: on a CPU device, a ksvd brick whose blocks and codes pass this many is decoded
+/// on the CPU and uploaded as values (a brick of 36³ never does: 216·(1 + 255) < 60000).
+constexpr std::uint64_t cpu_device_loop_limit = 60000;
+
 /// The checks of the CPU reference decoder (format::check_ksvd_payload) on a payload that is not
 /// read there: header finite, mean bits, length against the sparsities, atom indices < K.
-void validate_upload(const BrickUpload& brick, std::size_t index, std::uint32_t atom_count) {
+/// Returns a ksvd payload's code count (0 for the other kinds).
+std::uint64_t validate_upload(const BrickUpload& brick, std::size_t index, std::uint32_t atom_count,
+                              format::BrickShape shape) {
   const std::string name = "brick upload " + std::to_string(index);
   const auto fail = [&](std::uint64_t offset, const std::string& expected,
                         const std::string& found) {
@@ -73,13 +89,13 @@ void validate_upload(const BrickUpload& brick, std::size_t index, std::uint32_t 
   const std::uint32_t kind = kind_of(brick);
   if (kind == kind_constant) {
     if (!std::isfinite(vr_as_float(word(0)))) fail(0, "a finite constant", "NaN or infinity");
-    return;
+    return 0;
   }
-  if (kind == kind_raw) return;  // decoded (and checked) by format::decode_payload
+  if (kind == kind_raw) return 0;  // decoded (and checked) by format::decode_payload
   if (atom_count == 0)
     throw std::invalid_argument(name +
                                 ": a ksvd brick but no dictionary (AtlasDecoder::set_dictionary)");
-  format::check_ksvd_payload(bytes, atom_count, name, 0);
+  return format::check_ksvd_payload(bytes, atom_count, shape, name, 0).codes;
 }
 
 }  // namespace
@@ -107,13 +123,15 @@ struct AtlasDecoder::RingEntry {
   const Buffer& shader_buffer() const { return device.handle() ? device : staging; }
 };
 
-std::uint64_t AtlasDecoder::upload_bytes(const BrickUpload& brick, DecoderOptions::Kernel kernel) {
-  if (kernel == DecoderOptions::Kernel::host) return texel_bytes;
+std::uint64_t AtlasDecoder::upload_bytes(const BrickUpload& brick, DecoderOptions::Kernel kernel,
+                                         format::BrickShape shape, bool decoded_on_cpu) {
+  if (kernel == DecoderOptions::Kernel::host) return texel_bytes(shape);
+  if (decoded_on_cpu) return record_bytes + raw_bytes(shape);
   switch (kind_of(brick)) {
     case kind_constant:
       return record_bytes + 4;
     case kind_raw:
-      return record_bytes + raw_bytes;
+      return record_bytes + raw_bytes(shape);
     default:  // and a zero word after a ksvd payload: the look-ahead of its last Rice code
       return record_bytes + (brick.payload.size() + 3) / 4 * 4 +
              (kind_of(brick) == kind_ksvd ? 4 : 0);
@@ -122,7 +140,8 @@ std::uint64_t AtlasDecoder::upload_bytes(const BrickUpload& brick, DecoderOption
 
 AtlasDecoder::AtlasDecoder(const Context& context, const Atlas& atlas,
                            const DecoderOptions& options)
-    : context_(context), atlas_(atlas), options_(options) {
+    : context_(context), atlas_(atlas), shape_{atlas.slot_size()}, options_(options) {
+  cpu_device_ = context.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
   // 1. Budget: whole words, room for a zfp brick, within the largest storage buffer binding.
   options_.upload_budget_bytes = options_.upload_budget_bytes / 4 * 4;
   if (options_.upload_budget_bytes < (std::uint64_t{1} << 20) || options_.ring_size == 0)
@@ -165,7 +184,9 @@ AtlasDecoder::AtlasDecoder(const Context& context, const Atlas& atlas,
     shader_ = unorm ? ShaderModule(context, volreel_decode_bricks_r16_spv)
                     : ShaderModule(context, volreel_decode_bricks_r16f_spv);
   const VkDescriptorSetLayout set_layout = set_layout_.handle();
-  pipeline_ = ComputePipeline(context, shader_, {&set_layout, 1}, sizeof(PushConstants));
+  const std::uint32_t blocks_per_axis = shape_.blocks_per_axis();
+  pipeline_ = ComputePipeline(context, shader_, {&set_layout, 1}, sizeof(PushConstants),
+                              {&blocks_per_axis, 1});
   const VkDescriptorPoolSize sizes[] = {
       {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 2 * options_.ring_size},
       {copy ? VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
@@ -175,12 +196,13 @@ AtlasDecoder::AtlasDecoder(const Context& context, const Atlas& atlas,
   if (copy) {
     options_.bricks_per_copy = std::clamp<std::uint32_t>(
         options_.bricks_per_copy, 1,
-        static_cast<std::uint32_t>(
-            std::min<std::uint64_t>(max_bricks_per_dispatch,
-                                    context.limits().maxStorageBufferRange / decoded_brick_bytes)));
-    decoded_ = Buffer(context, std::uint64_t{options_.bricks_per_copy} * decoded_brick_bytes,
-                      VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
-                      VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+        static_cast<std::uint32_t>(std::min<std::uint64_t>(
+            max_bricks_per_dispatch,
+            context.limits().maxStorageBufferRange / decoded_brick_bytes(shape_))));
+    decoded_ =
+        Buffer(context, std::uint64_t{options_.bricks_per_copy} * decoded_brick_bytes(shape_),
+               VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
+               VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
   }
   command_pool_ = CommandPool(context);
   // 3. A placeholder dictionary (one atom) until set_dictionary: every binding stays valid.
@@ -271,9 +293,10 @@ void AtlasDecoder::set_dictionary(const format::AtomTable& atoms) {
                                 " atoms; the decoder holds at most " +
                                 std::to_string(copy ? max_copy_atoms : 1u << VR_MAX_ATOM_BITS));
   wait_all();
+  // The host kernel decodes every brick on the CPU; the others some, on CPU devices (submit).
+  host_atoms_.assign(atoms.values.begin(),
+                     atoms.values.begin() + static_cast<std::ptrdiff_t>(values));
   if (kernel_ == DecoderOptions::Kernel::host) {
-    host_atoms_.assign(atoms.values.begin(),
-                       atoms.values.begin() + static_cast<std::ptrdiff_t>(values));
     atom_count_ = atoms.count;
     return;
   }
@@ -317,8 +340,14 @@ Ticket AtlasDecoder::submit(std::span<const BrickUpload> batch) {
       throw std::invalid_argument("brick upload " + std::to_string(i) + ": slot " +
                                   std::to_string(batch[i].slot) + " named twice in one batch");
     slot_mark_[batch[i].slot] = submit_calls_;
-    validate_upload(batch[i], i, atom_count_);
+    const std::uint64_t codes = validate_upload(batch[i], i, atom_count_, shape_);
+    decode_on_cpu_.resize(batch.size());
+    decode_on_cpu_[i] = cpu_device_ && codes + shape_.blocks() > cpu_device_loop_limit;
   }
+  decode_on_cpu_.resize(batch.size());
+  const auto bytes_of = [&](std::size_t i) {
+    return upload_bytes(batch[i], kernel_, shape_, decode_on_cpu_[i] != 0);
+  };
   const std::uint64_t budget = options_.upload_budget_bytes;
   std::size_t next = 0;
   while (next < batch.size()) {
@@ -330,13 +359,12 @@ Ticket AtlasDecoder::submit(std::span<const BrickUpload> batch) {
     std::size_t end = next;
     std::uint64_t bytes = 0;
     while (end < batch.size() && end - next < max_bricks_per_dispatch &&
-           bytes + upload_bytes(batch[end], kernel_) <= budget)
-      bytes += upload_bytes(batch[end++], kernel_);
+           bytes + bytes_of(end) <= budget)
+      bytes += bytes_of(end++);
     if (end == next)
-      throw std::invalid_argument("brick upload " + std::to_string(next) + " needs " +
-                                  std::to_string(upload_bytes(batch[next], kernel_)) +
-                                  " bytes, more than the upload budget of " +
-                                  std::to_string(budget));
+      throw std::invalid_argument(
+          "brick upload " + std::to_string(next) + " needs " + std::to_string(bytes_of(next)) +
+          " bytes, more than the upload budget of " + std::to_string(budget));
     const auto count = static_cast<std::uint32_t>(end - next);
     if (kernel_ == DecoderOptions::Kernel::host) {
       const std::span<const BrickUpload> chunk = batch.subspan(next, count);
@@ -355,18 +383,21 @@ Ticket AtlasDecoder::submit(std::span<const BrickUpload> batch) {
     std::uint32_t cursor = 4 * count;  // word offset of the next payload
     for (std::uint32_t i = 0; i < count; ++i) {
       const BrickUpload& brick = batch[next + i];
-      const std::uint32_t kind = kind_of(brick);
+      const bool on_cpu = decode_on_cpu_[next + i] != 0;
+      const std::uint32_t kind = on_cpu ? kind_raw : kind_of(brick);
       std::uint32_t payload_words = 0;
       if (kind == kind_raw) {
-        // zfp: decoded on the CPU by the reference decoder, uploaded as float32.
+        // zfp, and ksvd bricks past a CPU device's loop limit: decoded on the CPU by the
+        // reference decoder, uploaded as float32.
         const auto start = std::chrono::steady_clock::now();
-        zfp_scratch_.resize(format::brick_voxels);
-        format::decode_payload(brick.payload, format::Codec::zfp, brick.zfp_accuracy, {},
-                               zfp_scratch_, "brick upload " + std::to_string(next + i), 0);
+        zfp_scratch_.resize(shape_.voxels());
+        format::decode_payload(brick.payload, brick.codec, brick.zfp_accuracy,
+                               {host_atoms_, atom_count_}, shape_, zfp_scratch_,
+                               "brick upload " + std::to_string(next + i), 0);
         stats_.cpu_zfp_seconds +=
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-        payload_words = format::brick_voxels;
-        std::memcpy(words + cursor, zfp_scratch_.data(), raw_bytes);
+        payload_words = static_cast<std::uint32_t>(shape_.voxels());
+        std::memcpy(words + cursor, zfp_scratch_.data(), raw_bytes(shape_));
       } else {
         payload_words = static_cast<std::uint32_t>(brick.payload.size() / 4);  // validated above
         std::memcpy(words + cursor, brick.payload.data(), 4 * std::size_t{payload_words});
@@ -456,19 +487,21 @@ void AtlasDecoder::record_decode(VkCommandBuffer commands, const std::uint32_t* 
     vkCmdDispatch(commands, n, 1, 1);
     memory_barrier(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
                    VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
-    regions.resize(std::size_t{n} * VR_BLOCKS_PER_AXIS);
+    const std::uint32_t columns = shape_.blocks_per_axis(), size = shape_.size;
+    regions.resize(std::size_t{n} * columns);
     for (std::uint32_t i = 0; i < n; ++i) {
       const VkOffset3D origin = atlas_.slot_origin(records[4 * (first + i) + 1]);
-      for (std::uint32_t c = 0; c < VR_BLOCKS_PER_AXIS; ++c) {
-        VkBufferImageCopy& r = regions[std::size_t{i} * VR_BLOCKS_PER_AXIS + c];
+      for (std::uint32_t c = 0; c < columns; ++c) {
+        VkBufferImageCopy& r = regions[std::size_t{i} * columns + c];
         r = {};
-        r.bufferOffset = std::uint64_t{i} * decoded_brick_bytes + c * decoded_column_bytes;
+        r.bufferOffset =
+            std::uint64_t{i} * decoded_brick_bytes(shape_) + c * decoded_column_bytes(shape_);
         r.bufferRowLength = column_row_texels;
-        r.bufferImageHeight = VR_BRICK_SIZE;
+        r.bufferImageHeight = size;
         r.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
         r.imageOffset = {origin.x + static_cast<std::int32_t>(c * VR_BLOCK_SIZE), origin.y,
                          origin.z};
-        r.imageExtent = {VR_BLOCK_SIZE, VR_BRICK_SIZE, VR_BRICK_SIZE};
+        r.imageExtent = {VR_BLOCK_SIZE, size, size};
       }
     }
     copy_into_atlas(commands, decoded_.handle(), regions);
@@ -503,13 +536,13 @@ void AtlasDecoder::decode_on_host(std::span<const BrickUpload> bricks, std::size
   std::size_t error_index = bricks.size();
 #pragma omp parallel
   {
-    std::vector<float> values(format::brick_voxels);
+    std::vector<float> values(shape_.voxels());
 #pragma omp for schedule(dynamic, 1)
     for (std::ptrdiff_t i = 0; i < n; ++i) {
       const BrickUpload& brick = bricks[static_cast<std::size_t>(i)];
       try {
         format::decode_payload(
-            brick.payload, brick.codec, brick.zfp_accuracy, atoms, values,
+            brick.payload, brick.codec, brick.zfp_accuracy, atoms, shape_, values,
             "brick upload " + std::to_string(first + static_cast<std::size_t>(i)), 0);
       } catch (...) {
 #pragma omp critical(volreel_host_decode_error)
@@ -519,7 +552,7 @@ void AtlasDecoder::decode_on_host(std::span<const BrickUpload> bricks, std::size
         }
         continue;
       }
-      atlas_.values_to_texels(values, texels + static_cast<std::size_t>(i) * format::brick_voxels);
+      atlas_.values_to_texels(values, texels + static_cast<std::size_t>(i) * shape_.voxels());
     }
   }
   stats_.cpu_decode_seconds +=
@@ -529,16 +562,16 @@ void AtlasDecoder::decode_on_host(std::span<const BrickUpload> bricks, std::size
 
 void AtlasDecoder::record_host_copies(VkCommandBuffer commands, VkBuffer texels,
                                       std::span<const BrickUpload> bricks) {
-  // Each brick's texels (36³, x fastest) into its slot.
+  // Each brick's texels (S³, x fastest) into its slot.
   std::vector<VkBufferImageCopy>& regions = copy_regions_;
   regions.resize(bricks.size());
   for (std::size_t i = 0; i < bricks.size(); ++i) {
     VkBufferImageCopy& r = regions[i];
     r = {};
-    r.bufferOffset = i * texel_bytes;
+    r.bufferOffset = i * texel_bytes(shape_);
     r.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
     r.imageOffset = atlas_.slot_origin(bricks[i].slot);
-    r.imageExtent = {VR_ATLAS_SLOT_SIZE, VR_ATLAS_SLOT_SIZE, VR_ATLAS_SLOT_SIZE};
+    r.imageExtent = {shape_.size, shape_.size, shape_.size};
   }
   copy_into_atlas(commands, texels, regions);
 }
@@ -556,7 +589,7 @@ void AtlasDecoder::wait(Ticket ticket) const {
 
 std::vector<float> AtlasDecoder::read_slots(std::span<const std::uint32_t> slots) const {
   wait_all();
-  constexpr std::uint64_t slot_texels = format::brick_voxels;
+  const std::uint64_t slot_texels = shape_.voxels();
   constexpr std::size_t chunk = 64;  // slots per readback
   std::vector<float> values(slots.size() * slot_texels);
   if (slots.empty()) return values;
@@ -576,7 +609,7 @@ std::vector<float> AtlasDecoder::read_slots(std::span<const std::uint32_t> slots
       r.bufferOffset = i * slot_texels * 2;
       r.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
       r.imageOffset = atlas_.slot_origin(slot);
-      r.imageExtent = {VR_ATLAS_SLOT_SIZE, VR_ATLAS_SLOT_SIZE, VR_ATLAS_SLOT_SIZE};
+      r.imageExtent = {shape_.size, shape_.size, shape_.size};
     }
     context_.submit_and_wait([&](VkCommandBuffer commands) {
       // The atlas leaves GENERAL only for the copy (the layout copies are fastest in).

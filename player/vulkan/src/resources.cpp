@@ -124,7 +124,8 @@ DescriptorSetLayout::DescriptorSetLayout(const Context& context,
 
 ComputePipeline::ComputePipeline(const Context& context, const ShaderModule& shader,
                                  std::span<const VkDescriptorSetLayout> set_layouts,
-                                 std::uint32_t push_constant_bytes) {
+                                 std::uint32_t push_constant_bytes,
+                                 std::span<const std::uint32_t> specialization) {
   const VkDevice device = context.device();
   VkPushConstantRange range{VK_SHADER_STAGE_COMPUTE_BIT, 0, push_constant_bytes};
   VkPipelineLayoutCreateInfo layout_info{VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO};
@@ -140,6 +141,12 @@ ComputePipeline::ComputePipeline(const Context& context, const ShaderModule& sha
   info.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
   info.stage.module = shader.handle();
   info.stage.pName = "main";
+  std::vector<VkSpecializationMapEntry> entries;
+  for (std::uint32_t i = 0; i < specialization.size(); ++i)
+    entries.push_back({i, 4 * i, sizeof(std::uint32_t)});
+  const VkSpecializationInfo constants{static_cast<std::uint32_t>(entries.size()), entries.data(),
+                                       specialization.size_bytes(), specialization.data()};
+  if (!specialization.empty()) info.stage.pSpecializationInfo = &constants;
   info.layout = layout;
   VkPipeline pipeline = VK_NULL_HANDLE;
   check(vkCreateComputePipelines(device, VK_NULL_HANDLE, 1, &info, nullptr, &pipeline),

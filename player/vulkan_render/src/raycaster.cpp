@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "volreel/format/frame_file.hpp"
 #include "volreel/player/svo_layout.h"
 #include "volreel_block_ranges_spv.h"
 #include "volreel_raycast_rgba16f_spv.h"
@@ -21,7 +22,6 @@ constexpr std::uint32_t flag_histograms = 1;
 constexpr std::uint32_t flag_fetch_filter = 2;
 constexpr std::uint32_t flag_block_skip = 4;
 constexpr std::uint32_t flag_feedback = 8;
-constexpr std::uint32_t blocks_per_slot = 216;  // 6³ blocks of 6³ voxels
 // RenderOptions::max_step_doublings at most (as cpu_render checks): 2^16 fine steps, and k stays
 // an exact integer in the shader's floats.
 constexpr std::uint32_t max_step_doublings = 16;
@@ -125,7 +125,9 @@ Raycaster::Raycaster(const vulkan::Context& context, const vulkan::Atlas& atlas,
   else
     shader_ = vulkan::ShaderModule(context, volreel_raycast_rgba16f_spv);
   const VkDescriptorSetLayout layouts[] = {set_layout_.handle()};
-  pipeline_ = vulkan::ComputePipeline(context, shader_, layouts, 0);
+  // Specialization constant 0 of both shaders: blocks per brick axis (slots of 6n voxels a side).
+  const std::uint32_t blocks_per_axis = atlas.slot_size() / format::brick_block_size;
+  pipeline_ = vulkan::ComputePipeline(context, shader_, layouts, 0, {&blocks_per_axis, 1});
   const VkDescriptorSetLayoutBinding range_bindings[] = {
       {0, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, compute, nullptr},
       {1, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, compute, nullptr},
@@ -135,7 +137,8 @@ Raycaster::Raycaster(const vulkan::Context& context, const vulkan::Atlas& atlas,
   ranges_layout_ = vulkan::DescriptorSetLayout(context, range_bindings);
   ranges_shader_ = vulkan::ShaderModule(context, volreel_block_ranges_spv);
   const VkDescriptorSetLayout range_layouts[] = {ranges_layout_.handle()};
-  ranges_pipeline_ = vulkan::ComputePipeline(context, ranges_shader_, range_layouts, 0);
+  ranges_pipeline_ =
+      vulkan::ComputePipeline(context, ranges_shader_, range_layouts, 0, {&blocks_per_axis, 1});
   const std::uint32_t ring = options.frames_in_flight;
   const VkDescriptorPoolSize sizes[] = {
       {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 11 * ring},
@@ -144,6 +147,8 @@ Raycaster::Raycaster(const vulkan::Context& context, const vulkan::Atlas& atlas,
   };
   descriptor_pool_ = vulkan::DescriptorPool(context, sizes, 2 * ring);
   // Block ranges start as "anything" until a slot's ranges are computed.
+  const VkDeviceSize blocks_per_slot =
+      VkDeviceSize{blocks_per_axis} * blocks_per_axis * blocks_per_axis;  // 6³ voxels each
   const VkDeviceSize range_bytes = VkDeviceSize{atlas.slot_count()} * blocks_per_slot * 8;
   block_ranges_ =
       vulkan::Buffer(context, range_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT,
@@ -253,6 +258,10 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
                                 std::to_string(o.max_step_doublings));
   cpu_render::validate_svo({input.svo_nodes, input.svo_leaves}, atlas_.slot_count(),
                            input.geometry);
+  if (input.geometry.shape.size != atlas_.slot_size())
+    throw std::invalid_argument("Raycaster: bricks of " +
+                                std::to_string(input.geometry.shape.size) + "^3 in an atlas of " +
+                                std::to_string(atlas_.slot_size()) + "^3 slots");
   const std::size_t leaf_count = input.svo_leaves.size() / VR_SVO_LEAF_WORDS;
   const bool histograms = !input.leaf_histograms.empty();
   if (histograms && input.leaf_histograms.size() != leaf_count)

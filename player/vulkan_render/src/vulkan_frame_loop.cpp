@@ -63,10 +63,11 @@ VulkanFrameLoop::VulkanFrameLoop(std::unique_ptr<vulkan::Context>&& owned,
       container_(container),
       options_(options) {
   const format::Manifest& m = container.manifest();
-  geometry_ = cpu_render::VolumeGeometry::of(m.dims);
+  geometry_ = cpu_render::VolumeGeometry::of(m.dims, m.shape());
   // 1. The atlas over the sequence's value range with a margin (decoded values overshoot it).
   vulkan::AtlasOptions ao;
   ao.format = vulkan::AtlasFormat::r16_unorm;
+  ao.slot_size = m.brick_size;
   ao.memory_budget_bytes = options.atlas_bytes;
   const double range = m.value_max - m.value_min;
   const double margin = 0.01 * (range > 0 ? range : 1.0);

@@ -43,6 +43,10 @@ int mean_bits_from_text(const std::string& text);
 /// CodingSettings::coef_bits from its command-line text: "auto" (-1) or a whole number 1..16;
 /// throws InputError naming --coef-bits and the text otherwise.
 int coef_bits_from_text(const std::string& text);
+/// CodingSettings::brick_size from its command-line text: "auto" (0: chosen per volume,
+/// format::choose_brick_shape) or a multiple of 6 in 12..66; throws InputError naming
+/// --brick-size and the text otherwise.
+std::uint32_t brick_size_from_text(const std::string& text);
 
 /// How bricks are coded.
 struct CodingSettings {
@@ -50,6 +54,9 @@ struct CodingSettings {
   /// The container the frames belong to (format::container_identifier), written into every
   /// frame header; 0 for frames of no container (trials of the rate search, benchmarks).
   std::uint64_t container_id = 0;
+  /// Stored voxels per brick axis (format::BrickShape::size: a multiple of 6 in 12..66); the
+  /// encoder's callers choose it per volume (format::choose_brick_shape).
+  std::uint32_t brick_size = format::default_brick_size;
   double tolerance = 0;  ///< ksvd variable rate: ε (data units), see VariableRateRule
   VariableRateRule rule = VariableRateRule::lagrangian;
   /// Lagrangian rule: the minimum gain of an atom, as a fraction of m·ε² (> 0). Only its ratio

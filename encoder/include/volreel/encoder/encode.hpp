@@ -22,7 +22,8 @@
 namespace volreel::encoder {
 
 struct EncodeRequest {
-  /// How bricks are coded; encode() sets the value range, ε and zfp's accuracy.
+  /// How bricks are coded; encode() sets the value range, ε and zfp's accuracy, and the brick
+  /// size when it is 0 (format::choose_brick_shape).
   CodingSettings coding;
   /// What ε is asked to be (ksvd): tolerance, PSNR (also every frame's target,
   /// EncodeJob::psnr_target) or a size.
@@ -69,11 +70,11 @@ struct EncodeEvents {
       tolerance_chosen;
 };
 
-/// The keyframe gap an encode of frames of `dims` uses when none is asked for (see
-/// EncodeRequest::max_keyframe_gap) with `memory` bytes (0: half the machine's); `lowered` says
-/// whether memory lowered it.
-std::uint32_t default_keyframe_gap(const Dims& dims, bool size_target, std::uint64_t memory = 0,
-                                   bool* lowered = nullptr);
+/// The keyframe gap an encode of frames of `dims` in bricks of `shape` uses when none is asked
+/// for (see EncodeRequest::max_keyframe_gap) with `memory` bytes (0: half the machine's);
+/// `lowered` says whether memory lowered it.
+std::uint32_t default_keyframe_gap(const Dims& dims, format::BrickShape shape, bool size_target,
+                                   std::uint64_t memory = 0, bool* lowered = nullptr);
 /// What coding a frame of `dims` whole holds: the frame, and its finest level decoded to measure
 /// it (float32 each). Frames larger than EncodeRequest::memory are coded piecewise.
 double whole_frame_bytes(const Dims& dims);

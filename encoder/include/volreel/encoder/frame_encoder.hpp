@@ -100,7 +100,8 @@ struct CodedFrame {
   std::vector<std::size_t> level_begin;
   std::vector<std::vector<std::size_t>> children;  ///< per brick, its children's indices
   std::vector<std::size_t> parent;                 ///< per brick, its parent's (root: itself)
-  /// The stored voxels (36³ each) of every brick of the frame, when code() was asked to keep them.
+  /// The stored voxels (S³ each, S the brick size) of every brick of the frame, when code() was
+  /// asked to keep them.
   std::vector<float> originals;
   /// The error rule the bricks were coded to, per level: ε_l (ksvd variable rate; 0 otherwise),
   /// the pointwise bound (--max-error or the zfp accuracy; 0 for none).
@@ -167,6 +168,8 @@ class FrameEncoder {
   /// or a zfp stream (the same coding encode() applies to every brick).
   std::vector<std::byte> encode_brick(std::span<const float> brick) const;
   const CodingSettings& settings() const { return settings_; }
+  /// The brick tiling of the frames it codes (CodingSettings::brick_size).
+  format::BrickShape shape() const { return {settings_.brick_size}; }
   /// The Lagrangian rule's minimum atom gain, lagrangian_factor·m·ε² (data units²); 0 for the
   /// other rules and codecs.
   double atom_gain_threshold() const;

@@ -18,14 +18,17 @@ namespace volreel::encoder {
 
 /// The levels of a frame's brick hierarchy as dense volumes: [0] the root level … [L−1] the frame.
 struct Pyramid {
+  format::BrickShape shape;
   std::vector<format::LevelGeometry> geometry;
   std::vector<std::vector<float>> levels;
 };
 /// Level l−1 voxel (i,j,k) = mean of level-l voxels (2i+a, 2j+b, 2k+c), a,b,c ∈ {0,1}, indices
 /// clamped to the level (edge replication where a size is odd).
-Pyramid build_pyramid(const Volume& frame);
-/// Stored voxels of brick (x, y, z) of level l into out (36³, x fastest): level voxel
-/// (34x − 1 + a, 34y − 1 + b, 34z − 1 + c) for a, b, c in [0, 36), clamped to the level.
+/// The levels are those of bricks of `shape` (format::level_geometry).
+Pyramid build_pyramid(const Volume& frame, format::BrickShape shape = {});
+/// Stored voxels of brick (x, y, z) of level l into out (S³ for bricks of S = pyramid.shape.size
+/// voxels a side, interior I = S − 2; x fastest): level voxel (Ix − 1 + a, Iy − 1 + b,
+/// Iz − 1 + c) for a, b, c in [0, S), clamped to the level.
 void extract_brick(const Pyramid& pyramid, std::size_t level, std::uint32_t x, std::uint32_t y,
                    std::uint32_t z, std::span<float> out);
 
@@ -41,12 +44,15 @@ void downsample_planes(const std::array<std::uint32_t, 3>& fine_dims,
 /// than memory is worked through in pieces: the finest level's planes come from a reader (a
 /// series' read_slab), each coarser level's are averaged from the finer planes as soon as these
 /// are there. The window of level l is planes [begin(l), end(l)); a brick of level l may be
-/// extracted while its 36 planes (clamped to the level) are in it.
+/// extracted while its S planes (clamped to the level) are in it.
 class PyramidWindow {
  public:
   /// read(z_begin, z_end, out): the finest level's planes [z_begin, z_end) into out.
   using ReadPlanes = std::function<void(std::size_t z_begin, std::size_t z_end, std::span<float>)>;
-  PyramidWindow(std::vector<format::LevelGeometry> geometry, ReadPlanes read);
+  /// `geometry`: format::level_geometry of the frame's dims and `shape`.
+  PyramidWindow(std::vector<format::LevelGeometry> geometry, ReadPlanes read,
+                format::BrickShape shape = {});
+  format::BrickShape shape() const { return shape_; }
 
   const std::vector<format::LevelGeometry>& geometry() const { return geometry_; }
   std::size_t planes(std::size_t level) const { return geometry_[level].dims[2]; }
@@ -74,6 +80,7 @@ class PyramidWindow {
   void append_planes(std::size_t level, std::size_t end);
 
   std::vector<format::LevelGeometry> geometry_;
+  format::BrickShape shape_;
   ReadPlanes read_;
   std::vector<Level> levels_;
   std::size_t bytes_ = 0, peak_bytes_ = 0;

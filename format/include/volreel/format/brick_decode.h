@@ -10,7 +10,8 @@
 //                         (vr_layout_*)
 //   word 4                the band word: the magnitudes' Rice parameter of each of 8 atom
 //                         bands, 4 bits each (vr_band_rice)
-//   entry[216]            per block, t + b bits each, one bit stream from bit 0 of word 5
+//   entry[n³]             per block (n³ of them: n = brick size / 6), t + b bits each, one
+//                         bit stream from bit 0 of word 5
 //                         (low bit first): sparsity s in the low t bits, quantized mean q above;
 //                         zero bits up to the next word
 //   codes                 one bit stream from the next word, block after block, each block's
@@ -65,22 +66,27 @@ VR_INLINE float vr_as_float(vr_uint bits) {
 #define vr_as_float(bits) uintBitsToFloat(bits)
 #endif
 
-/* Constants of format version 7 (SPEC.md). */
-#define VR_BRICK_SIZE 36u        /* stored voxels per axis: interior + 2·apron */
-#define VR_BRICK_INTERIOR 34u    /* interior voxels per axis */
-#define VR_BLOCK_SIZE 6u         /* M */
-#define VR_BLOCK_LENGTH 216u     /* m = M³ values per block */
-#define VR_BLOCKS_PER_AXIS 6u    /* blocks per brick axis */
-#define VR_BLOCKS_PER_BRICK 216u /* 6³ blocks per brick, x fastest */
-#define VR_HEADER_WORDS 5u       /* three f32 dequantization values, layout and band words */
-#define VR_MEAN_BITS 15u         /* the most bits of a quantized mean */
-#define VR_MAX_SPARSITY_BITS 8u  /* the widest sparsity field: at most 255 atoms a block */
-#define VR_MAX_COEF_BITS 16u     /* the most magnitude bits: |q| ≤ 2^16 */
-#define VR_MAX_ATOM_BITS 16u     /* the widest atom index */
-#define VR_MAX_GAP_SHIFT 3u      /* the largest reduction of the gaps' Rice parameter */
-#define VR_MAX_BAND_SPLIT 4095u  /* the largest split between band 0 and the others */
-#define VR_ESCAPE_ZEROS 16u      /* a Rice code whose unary part reaches 16 zeros is an escape */
-#define VR_ATOM_BANDS 8u         /* atom bands of the magnitudes' Rice parameters */
+/* Constants of format version 7 (SPEC.md). A brick of a container is n·6 voxels a side (n
+ * blocks, 2 ≤ n ≤ 11: the manifest's brick_size), its blocks x fastest; the functions below take
+ * the number of blocks of a brick, n³. A GLSL includer declares n as a specialization constant,
+ * `layout(constant_id = ...) const uint VR_BLOCKS_PER_AXIS`, before including this file. */
+#define VR_BLOCK_SIZE 6u           /* M */
+#define VR_BLOCK_LENGTH 216u       /* m = M³ values per block */
+#define VR_MAX_BLOCKS_PER_AXIS 11u /* the largest brick: 66³ voxels */
+#ifdef VR_GLSL
+#define VR_BRICK_SIZE (VR_BLOCKS_PER_AXIS * VR_BLOCK_SIZE) /* stored voxels per axis */
+#define VR_BRICK_INTERIOR (VR_BRICK_SIZE - 2u)             /* interior voxels per axis */
+#define VR_BLOCKS_PER_BRICK (VR_BLOCKS_PER_AXIS * VR_BLOCKS_PER_AXIS * VR_BLOCKS_PER_AXIS)
+#endif
+#define VR_HEADER_WORDS 5u      /* three f32 dequantization values, layout and band words */
+#define VR_MEAN_BITS 15u        /* the most bits of a quantized mean */
+#define VR_MAX_SPARSITY_BITS 8u /* the widest sparsity field: at most 255 atoms a block */
+#define VR_MAX_COEF_BITS 16u    /* the most magnitude bits: |q| ≤ 2^16 */
+#define VR_MAX_ATOM_BITS 16u    /* the widest atom index */
+#define VR_MAX_GAP_SHIFT 3u     /* the largest reduction of the gaps' Rice parameter */
+#define VR_MAX_BAND_SPLIT 4095u /* the largest split between band 0 and the others */
+#define VR_ESCAPE_ZEROS 16u     /* a Rice code whose unary part reaches 16 zeros is an escape */
+#define VR_ATOM_BANDS 8u        /* atom bands of the magnitudes' Rice parameters */
 
 /* Bits [bit, bit + width) of the bit stream that starts at bit 0 of word `first_word` (bit i of
  * the stream is bit i mod 32 of word first_word + i/32), width 0..32. A field spans at most two
@@ -139,7 +145,7 @@ VR_INLINE vr_uint vr_layout_entry_bits(vr_uint layout_word) {
   return vr_layout_sparsity_bits(layout_word) + vr_layout_mean_bits(layout_word);
 }
 
-/* Block entry `block` (0..215): sparsity in the low t bits, quantized mean above. */
+/* Block entry `block` (0..n³ − 1): sparsity in the low t bits, quantized mean above. */
 VR_INLINE vr_uint vr_block_entry(VR_PAYLOAD_PARAM vr_uint layout_word, vr_uint block) {
   vr_uint entry_bits = vr_layout_entry_bits(layout_word);
   return vr_read_bits(VR_PAYLOAD_ARG VR_HEADER_WORDS, block * entry_bits, entry_bits);
@@ -151,13 +157,13 @@ VR_INLINE vr_uint vr_entry_mean(vr_uint layout_word, vr_uint entry) {
   return entry >> vr_layout_sparsity_bits(layout_word);
 }
 
-/* Words of the 216 entries, zero bits to the next word included, and the word where the codes
- * begin. */
-VR_INLINE vr_uint vr_entry_words(vr_uint layout_word) {
-  return (VR_BLOCKS_PER_BRICK * vr_layout_entry_bits(layout_word) + 31u) / 32u;
+/* Words of the entries of a brick of `blocks` blocks, zero bits to the next word included, and
+ * the word where the codes begin. */
+VR_INLINE vr_uint vr_entry_words(vr_uint layout_word, vr_uint blocks) {
+  return (blocks * vr_layout_entry_bits(layout_word) + 31u) / 32u;
 }
-VR_INLINE vr_uint vr_code_first_word(vr_uint layout_word) {
-  return VR_HEADER_WORDS + vr_entry_words(layout_word);
+VR_INLINE vr_uint vr_code_first_word(vr_uint layout_word, vr_uint blocks) {
+  return VR_HEADER_WORDS + vr_entry_words(layout_word, blocks);
 }
 
 /* The codes: one bit stream from word vr_code_first_word, the blocks' codes in block order, each
@@ -219,13 +225,13 @@ VR_INLINE vr_uint vr_band_rice(vr_uint layout_word, vr_uint band_word, vr_uint a
   return (band_word >> (4u * vr_atom_band(layout_word, atom))) & 0xFu;
 }
 
-/* Reads the next code of a block of s codes, starting at bit `bit` of the code stream (the
- * stream runs on over the whole brick); before a block's first code next_atom = 0. Sets atom;
- * returns the signed quantized coefficient q (coefficient = coef_scale·q). */
-VR_INLINE int vr_read_code(VR_PAYLOAD_PARAM vr_uint layout_word, vr_uint band_word, vr_uint s,
-                           VR_INOUT(vr_uint, bit), VR_INOUT(vr_uint, next_atom),
+/* Reads the next code of a block of s codes, starting at bit `bit` of the code stream that
+ * begins at word `first` (vr_code_first_word; the stream runs on over the whole brick); before a
+ * block's first code next_atom = 0. Sets atom; returns the signed quantized coefficient q
+ * (coefficient = coef_scale·q). */
+VR_INLINE int vr_read_code(VR_PAYLOAD_PARAM vr_uint first, vr_uint layout_word, vr_uint band_word,
+                           vr_uint s, VR_INOUT(vr_uint, bit), VR_INOUT(vr_uint, next_atom),
                            VR_INOUT(vr_uint, atom)) {
-  vr_uint first = vr_code_first_word(layout_word);
   atom = next_atom + vr_read_rice(VR_PAYLOAD_ARG first, bit, vr_gap_rice(layout_word, s),
                                   vr_layout_atom_bits(layout_word));
   next_atom = atom + 1u;
@@ -238,18 +244,21 @@ VR_INLINE int vr_read_code(VR_PAYLOAD_PARAM vr_uint layout_word, vr_uint band_wo
   return negative != 0u ? -q : q;
 }
 
-/* Decodes value v (0..215, x fastest inside the block) of block `block`: walks the codes of
- * blocks 0..block (a reference; the decoders walk the blocks in order once). Steps:
+/* Decodes value v (0..215, x fastest inside the block) of block `block` of a brick of `blocks`
+ * blocks: walks the codes of blocks 0..block (a reference; the decoders walk the blocks in order
+ * once). Steps:
  *  1. read the layout word and, block by block, the entry: sparsity s, quantized mean q;
  *  2. value = mean_bias + mean_scale·q;
  *  3. for each of the block's s codes (vr_read_code): atom a, quantized coefficient q;
  *     value += coef_scale·q · atoms[a·216 + v]. */
-VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint block, vr_uint v) {
+VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint blocks, vr_uint block,
+                                vr_uint v) {
   float mean_bias = vr_as_float(VR_LOAD_WORD(0u));
   float mean_scale = vr_as_float(VR_LOAD_WORD(1u));
   float coef_scale = vr_as_float(VR_LOAD_WORD(2u));
   vr_uint layout_word = vr_layout_word(VR_PAYLOAD_ARG_ONLY);
   vr_uint band_word = vr_band_word(VR_PAYLOAD_ARG_ONLY);
+  vr_uint first = vr_code_first_word(layout_word, blocks);
   vr_uint bit = 0u;
   float value = 0.0f;
   for (vr_uint b = 0u; b <= block; ++b) {
@@ -258,22 +267,22 @@ VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint block, v
     value = mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry));
     vr_uint next_atom = 0u, atom = 0u;
     for (vr_uint k = 0u; k < s; ++k) {
-      int q = vr_read_code(VR_PAYLOAD_ARG layout_word, band_word, s, bit, next_atom, atom);
+      int q = vr_read_code(VR_PAYLOAD_ARG first, layout_word, band_word, s, bit, next_atom, atom);
       if (b == block) value += coef_scale * float(q) * VR_LOAD_ATOM(atom * VR_BLOCK_LENGTH + v);
     }
   }
   return value;
 }
 
-/* Position of value v of block b inside the 36³ brick (x fastest): returns the linear voxel
- * index z·36² + y·36 + x. */
-VR_INLINE vr_uint vr_brick_voxel(vr_uint block, vr_uint v) {
-  vr_uint bx = block % VR_BLOCKS_PER_AXIS, by = (block / VR_BLOCKS_PER_AXIS) % VR_BLOCKS_PER_AXIS,
-          bz = block / (VR_BLOCKS_PER_AXIS * VR_BLOCKS_PER_AXIS);
+/* Position of value v of block b inside a brick of n blocks a side (n·6 voxels, x fastest):
+ * returns the linear voxel index (z·6n + y)·6n + x. */
+VR_INLINE vr_uint vr_brick_voxel(vr_uint blocks_per_axis, vr_uint block, vr_uint v) {
+  vr_uint n = blocks_per_axis, size = n * VR_BLOCK_SIZE;
+  vr_uint bx = block % n, by = (block / n) % n, bz = block / (n * n);
   vr_uint x = bx * VR_BLOCK_SIZE + v % VR_BLOCK_SIZE,
           y = by * VR_BLOCK_SIZE + (v / VR_BLOCK_SIZE) % VR_BLOCK_SIZE,
           z = bz * VR_BLOCK_SIZE + v / (VR_BLOCK_SIZE * VR_BLOCK_SIZE);
-  return (z * VR_BRICK_SIZE + y) * VR_BRICK_SIZE + x;
+  return (z * size + y) * size + x;
 }
 
 #endif /* VOLREEL_FORMAT_BRICK_DECODE_H */

@@ -45,7 +45,9 @@ struct Manifest {
   std::array<double, 3> spacing{1, 1, 1};
   std::string variable, source;
   std::vector<double> timestamps;  ///< one per frame
-  std::uint32_t brick_size = format::brick_size, brick_apron = format::brick_apron, block_size = 6;
+  /// Stored voxels per brick axis (BrickShape::size: 12..66, a multiple of 6).
+  std::uint32_t brick_size = default_brick_size, brick_apron = format::brick_apron, block_size = 6;
+  BrickShape shape() const { return {brick_size}; }
   std::uint32_t levels = 0;  ///< octree depth (levels, root included)
   Codec codec = Codec::ksvd;
   double tolerance = 0;              ///< ksvd ε (0 with fixed sparsity)

@@ -1,4 +1,5 @@
-// decoder.hpp: the CPU reference decoder — a brick of a frame file to 36³ float32 values, and a
+// decoder.hpp: the CPU reference decoder — a brick of a frame file to S³ float32 values (S the
+// container's brick size), and a
 // frame at any level of its octree to a dense volume. This is the oracle the GPU decoder is
 // tested against; the per-value arithmetic is brick_decode.h, shared with GLSL.
 #pragma once
@@ -40,19 +41,22 @@ constexpr double max_atom_magnitude = 1.01;
 /// max_decoded_magnitude, the layout word (every width in range), and the
 /// code stream read to its end: in each block atom indices increasing and < atom_count, every
 /// magnitude ≤ 2^c, the stream inside the payload, the payload exactly the words of the header,
-/// entries and codes, and the padding after the last code zero. Throws FormatError naming `name`
-/// and the offset `at` + the bad field's offset in the payload.
+/// entries (one per block of a brick of `shape`) and codes, and the padding after the last code
+/// zero. Throws FormatError naming `name` and the offset `at` + the bad field's offset in the
+/// payload.
 KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> payload, std::uint32_t atom_count,
-                                     const std::filesystem::path& name, std::uint64_t at);
+                                     BrickShape shape, const std::filesystem::path& name,
+                                     std::uint64_t at);
 /// The same on a payload already copied into 32-bit words (`bytes` long; bytes/4 words).
 KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::size_t bytes,
-                                     std::uint32_t atom_count, const std::filesystem::path& name,
-                                     std::uint64_t at);
+                                     std::uint32_t atom_count, BrickShape shape,
+                                     const std::filesystem::path& name, std::uint64_t at);
 
 /// The parts of a ksvd brick payload before packing: the three dequantization values (mean_bias,
 /// mean_scale, coef_scale), the field widths (mean bits b 0..15, sparsity bits t 0..8, magnitude
-/// bits c 1..16, atom bits a 1..16), the entropy coder's two parameters, per block its sparsity
-/// (< 2^t) and quantized mean (< 2^b), and the codes of all blocks in block order, each block's
+/// bits c 1..16, atom bits a 1..16), the entropy coder's two parameters, per block of the brick
+/// (n³ blocks for bricks of 6n voxels a side) its sparsity (< 2^t) and quantized mean (< 2^b),
+/// and the codes of all blocks in block order, each block's
 /// in increasing atom order (atom index < 2^a, quantized value q ≠ 0 with |q| ≤ 2^c).
 struct KsvdPayloadParts {
   float dequantization[3] = {0, 0, 0};
@@ -66,8 +70,8 @@ struct KsvdPayloadParts {
   int gap_shift = -1;  ///< the gaps' Rice shift 0..3; -1: the one giving the fewest bits
   /// Atoms below this form band 0 (0..4095): the learned atoms before the DCT basis.
   std::uint32_t band_split = 0;
-  std::array<std::uint32_t, 216> sparsity{};
-  std::array<std::uint32_t, 216> mean{};
+  std::vector<std::uint32_t> sparsity = std::vector<std::uint32_t>(BrickShape{}.blocks());
+  std::vector<std::uint32_t> mean = std::vector<std::uint32_t>(BrickShape{}.blocks());
   std::vector<std::uint32_t> atoms;  ///< one per code
   std::vector<std::int32_t> values;  ///< one per code
 };
@@ -77,25 +81,27 @@ std::uint32_t bits_for_count(std::uint64_t count);
 
 /// Packs the parts into a payload of brick_decode.h's layout, choosing the entropy coder's
 /// parameters where the parts leave them at −1. Throws std::invalid_argument when a width is out
-/// of range, a field does not fit its bits, a block's atoms do not increase, a value is 0 or
-/// the codes do not number Σ sparsity.
+/// of range, a field does not fit its bits, a block's atoms do not increase, a value is 0, the
+/// codes do not number Σ sparsity or the blocks are not those of a brick.
 std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts);
 
 /// The parts of a ksvd payload (the inverse of pack_ksvd_payload, with the entropy coder's
 /// parameters as stored), after check_ksvd_payload.
 KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> payload, std::uint32_t atom_count,
-                                     const std::filesystem::path& name, std::uint64_t at);
+                                     BrickShape shape, const std::filesystem::path& name,
+                                     std::uint64_t at);
 
 /// Decodes one brick payload (a 4-byte constant, a ksvd payload or a zfp stream of codec `codec`
-/// with accuracy `zfp_accuracy`) into out (36³ values). `name` and `offset` (the payload's file
-/// offset) are used in errors. Throws FormatError on a bad payload.
+/// with accuracy `zfp_accuracy`) of a brick of `shape` into out (shape.voxels() values, x
+/// fastest). `name` and `offset` (the payload's file offset) are used in errors. Throws
+/// FormatError on a bad payload.
 void decode_payload(std::span<const std::byte> payload, Codec codec, double zfp_accuracy,
-                    const AtomTable& atoms, std::span<float> out, const std::filesystem::path& name,
-                    std::uint64_t offset);
+                    const AtomTable& atoms, BrickShape shape, std::span<float> out,
+                    const std::filesystem::path& name, std::uint64_t offset);
 
-/// Decodes brick b into out (36³ values, x fastest). Validates the payload first (length against
-/// its block sparsities, atom indices < K, finite dequantization values) and throws FormatError
-/// naming the frame file and the payload's offset. zfp frames ignore `atoms`.
+/// Decodes brick b into out (frame.shape().voxels() values, x fastest). Validates the payload first
+/// (length against its block sparsities, atom indices < K, finite dequantization values) and throws
+/// FormatError naming the frame file and the payload's offset. zfp frames ignore `atoms`.
 void decode_brick(const FrameView& frame, std::uint32_t brick, const AtomTable& atoms,
                   std::span<float> out);
 
@@ -119,7 +125,7 @@ void decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& 
 /// size): its interior when the node is of that level, else its first value over the region it
 /// covers (an empty node above the level).
 void place_in_level(const NodePosition& p, std::uint32_t level, std::array<std::uint32_t, 3> dims,
-                    std::span<const float> brick, std::span<float> out);
+                    BrickShape shape, std::span<const float> brick, std::span<float> out);
 /// The nodes whose bricks make level `level` of a frame: the level's nodes and the empty nodes
 /// above it. Throws FormatError when the frame has no such level.
 std::vector<std::uint32_t> level_work(const FrameView& frame, std::uint32_t level);

@@ -22,10 +22,28 @@ inline constexpr std::array<char, 8> frame_magic = {'V', 'R', 'E', 'E', 'L', 'F'
 /// Version of the frame file layout, independent of the program version.
 inline constexpr std::uint32_t frame_format_version = 7;
 
-inline constexpr std::uint32_t brick_size = 36;      ///< stored voxels per brick axis
-inline constexpr std::uint32_t brick_interior = 34;  ///< interior voxels per brick axis
-inline constexpr std::uint32_t brick_apron = 1;      ///< voxels copied from each neighbour
-inline constexpr std::uint32_t brick_voxels = brick_size * brick_size * brick_size;
+inline constexpr std::uint32_t brick_apron = 1;       ///< voxels copied from each neighbour
+inline constexpr std::uint32_t brick_block_size = 6;  ///< voxels per block axis (VR_BLOCK_SIZE)
+/// Stored voxels per brick axis that a container may have: multiples of 6 in 12..66.
+inline constexpr std::uint32_t min_brick_size = 12, max_brick_size = 66;
+inline constexpr std::uint32_t default_brick_size = 36;
+
+/// A container's brick tiling: bricks of size³ stored voxels, the (size − 2)³ interior and a
+/// 1-voxel apron copied from the neighbours, cut into (size / 6)³ blocks of 6³.
+struct BrickShape {
+  std::uint32_t size = default_brick_size;  ///< stored voxels per axis
+  constexpr std::uint32_t interior() const { return size - 2 * brick_apron; }
+  constexpr std::uint32_t blocks_per_axis() const { return size / brick_block_size; }
+  constexpr std::uint32_t blocks() const {
+    return blocks_per_axis() * blocks_per_axis() * blocks_per_axis();
+  }
+  constexpr std::size_t voxels() const { return std::size_t{size} * size * size; }
+  constexpr bool operator==(const BrickShape&) const = default;
+};
+/// Whether `size` is a brick size a container may have (a multiple of 6 in 12..66).
+constexpr bool valid_brick_size(std::uint64_t size) {
+  return size >= min_brick_size && size <= max_brick_size && size % brick_block_size == 0;
+}
 inline constexpr std::uint32_t max_levels = 16;
 /// Node::brick of a node that has no brick at this time step (not one of its keyframes).
 inline constexpr std::uint32_t no_brick = 0xFFFFFFFFu;
@@ -46,7 +64,7 @@ struct FrameHeader {
   std::uint32_t codec;                 //  16  Codec
   std::uint32_t frame_index;           //  20  time step t
   std::uint32_t dims[3];               //  24  volume size x, y, z at the finest level
-  std::uint32_t brick_size;            //  36  36
+  std::uint32_t brick_size;            //  36  BrickShape::size: 12..66, a multiple of 6
   std::uint32_t brick_apron;           //  40  1
   std::uint32_t block_size;            //  44  6 (ksvd) or 0 (zfp)
   std::uint32_t level_count;           //  48  levels L; level 0 is the root, L−1 the finest
@@ -84,7 +102,7 @@ struct LevelEntry {
   std::uint32_t first_node;  //   0  index of the level's first node
   std::uint32_t node_count;  //   4
   std::uint32_t dims[3];     //   8  size of the level's volume in voxels (finest = frame)
-  std::uint32_t grid[3];     //  20  bricks per axis = ceil(dims / 34)
+  std::uint32_t grid[3];     //  20  bricks per axis = ceil(dims / interior)
 };
 static_assert(sizeof(LevelEntry) == 32);
 static_assert(offsetof(LevelEntry, grid) == 20);
@@ -102,13 +120,22 @@ struct Node {
 static_assert(sizeof(Node) == 16);
 static_assert(offsetof(Node, histogram) == 8);
 
-/// Level geometry of a frame of `dims` (finest level last): dims_{l} = ceil(dims_{l+1} / 2),
-/// grid = ceil(dims / 34), as many levels as it takes until the grid is 1×1×1.
+/// Level geometry of a frame of `dims` in bricks of `shape` (finest level last):
+/// dims_{l} = ceil(dims_{l+1} / 2), grid = ceil(dims / interior), as many levels as it takes
+/// until the grid is 1×1×1.
 struct LevelGeometry {
   std::array<std::uint32_t, 3> dims{};
   std::array<std::uint32_t, 3> grid{};
 };
-std::vector<LevelGeometry> level_geometry(std::array<std::uint32_t, 3> dims);
+std::vector<LevelGeometry> level_geometry(std::array<std::uint32_t, 3> dims, BrickShape shape);
+
+/// Per voxel of a volume of `dims`, the values of the 6³ blocks that hold at least one voxel of
+/// their level, over all levels of bricks of `shape`: what the tiling costs (blocks wholly
+/// outside a level's volume cost a few bits).
+double coded_block_share(std::array<std::uint32_t, 3> dims, BrickShape shape);
+/// The brick shape whose coded_block_share is the least for `dims` (the smaller size on a tie
+/// within 1 %: finer units to stream).
+BrickShape choose_brick_shape(std::array<std::uint32_t, 3> dims);
 
 /// Morton code of brick coordinates (x in the lowest bit of each triple), up to 21 bits per axis.
 std::uint64_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z);
@@ -118,8 +145,9 @@ std::uint32_t histogram_bin(float v, float lo, float hi);
 
 /// A frame to be written: what the encoder produces.
 struct FrameContents {
-  FrameHeader header{};            ///< codec, frame index, dims, atom count, value range,
-                                   ///< codec parameter, fixed sparsity; the rest is filled in
+  FrameHeader header{};            ///< codec, frame index, dims, brick size, atom count, value
+                                   ///< range, codec parameter, fixed sparsity; the rest is
+                                   ///< filled in
   std::vector<LevelEntry> levels;  ///< first_node and node_count per level (dims/grid filled in)
   std::vector<Node> nodes;
   std::vector<std::vector<std::byte>> payloads;  ///< one per brick; each a multiple of 4 bytes
@@ -160,6 +188,8 @@ class FrameView {
   /// Whether the payloads are held (a whole file), not only the index.
   bool has_payloads() const { return bytes_.size() == file_size_; }
 
+  /// The brick tiling (the header's brick size, checked).
+  BrickShape shape() const { return {header_.brick_size}; }
   std::uint32_t level_count() const { return header_.level_count; }
   const LevelEntry& level(std::uint32_t l) const { return levels_[l]; }
   std::uint32_t node_count() const { return header_.node_count; }

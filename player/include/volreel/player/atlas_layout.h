@@ -2,10 +2,11 @@
 // so that the same text compiles as C++ (the stream scheduler, the CPU renderer, the Vulkan host
 // code) and as GLSL (the decode and render shaders), like format/brick_decode.h.
 //
-// The atlas holds a fixed number of slots of 36³ voxels (a brick with its 1-voxel apron). On the
-// GPU it is one 3D image of grid_x·36 × grid_y·36 × grid_z·36 voxels; slot s occupies the cell
-// (s mod grid_x, (s / grid_x) mod grid_y, s / (grid_x·grid_y)) of that grid. A CPU copy of the
-// atlas stores slot s as 36³ contiguous values (x fastest) at s·36³.
+// The atlas holds a fixed number of slots of S³ voxels, S the container's brick size (a brick with
+// its 1-voxel apron; 36 or up to 66). On the GPU it is one 3D image of grid_x·S × grid_y·S ×
+// grid_z·S voxels; slot s occupies the cell (s mod grid_x, (s / grid_x) mod grid_y,
+// s / (grid_x·grid_y)) of that grid. A CPU copy of the atlas stores slot s as S³ contiguous values
+// (x fastest) at s·S³.
 #ifndef VOLREEL_PLAYER_ATLAS_LAYOUT_H
 #define VOLREEL_PLAYER_ATLAS_LAYOUT_H
 
@@ -18,10 +19,9 @@ typedef std::uint32_t vr_uint;
 #define VR_INLINE
 #endif
 
-#define VR_ATLAS_SLOT_SIZE 36u /* voxels per slot axis: a whole stored brick */
 #define VR_ATLAS_NO_SLOT 0xFFFFFFFFu
 
-/* Grid cell of slot s along x, y and z; multiply by VR_ATLAS_SLOT_SIZE for the first voxel. */
+/* Grid cell of slot s along x, y and z; multiply by the slot size S for the first voxel. */
 VR_INLINE vr_uint vr_atlas_cell_x(vr_uint slot, vr_uint grid_x) {
   return slot % grid_x;
 }

@@ -4,10 +4,11 @@
 // shader).
 //
 // Geometry. The spatial octree is the frames' brick octree (format/SPEC.md): L levels, level 0 the
-// root, level L−1 the finest. A node at level l and brick coordinates c = (x, y, z) covers finest
-// voxels [c·34·2^(L−1−l), (c+1)·34·2^(L−1−l)) on each axis; its children at level l+1 are
+// root, level L−1 the finest. With bricks of I interior voxels a side (the container's brick
+// size − 2: 34 for 36³ bricks), a node at level l and brick coordinates c = (x, y, z) covers
+// finest voxels [c·I·2^(L−1−l), (c+1)·I·2^(L−1−l)) on each axis; its children at level l+1 are
 // 2c + (i & 1, (i >> 1) & 1, (i >> 2) & 1) for octant i = 0..7. The root covers
-// [0, 34·2^(L−1))³, which may extend past the volume's dims: samples outside the dims are empty.
+// [0, I·2^(L−1))³, which may extend past the volume's dims: samples outside the dims are empty.
 //
 // Two arrays of 32-bit words:
 //
@@ -61,8 +62,8 @@
 // Sampling a point with local coordinates u ∈ [0,1)³ inside a spatial node at brick coordinates c
 // from a keyframe with LOD difference d: the brick's own local coordinates are
 //   u' = ((c mod 2^d) + u) / 2^d                                           (vr_svo_ancestor_local)
-// and its stored voxel coordinate (texel units, texel centres at +0.5) inside the 36³ slot is
-//   1 + 34·u'                                                                  (vr_svo_slot_coord)
+// and its stored voxel coordinate (texel units, texel centres at +0.5) inside the (I + 2)³ slot is
+//   1 + I·u'                                                                   (vr_svo_slot_coord)
 // — the 1 skips the apron, which makes trilinear filtering seamless across bricks.
 #ifndef VOLREEL_PLAYER_SVO_LAYOUT_H
 #define VOLREEL_PLAYER_SVO_LAYOUT_H
@@ -143,9 +144,10 @@ VR_INLINE float vr_svo_ancestor_local(vr_uint c, float u, vr_uint d) {
   vr_uint span = 1u << d;
   return (float(c & (span - 1u)) + u) / float(span);
 }
-/* One axis of the stored voxel coordinate inside a slot (texel units) of brick-local u'. */
-VR_INLINE float vr_svo_slot_coord(float u_brick) {
-  return 1.0f + 34.0f * u_brick;
+/* One axis of the stored voxel coordinate inside a slot (texel units) of brick-local u', for
+   bricks of `interior` interior voxels a side. */
+VR_INLINE float vr_svo_slot_coord(float u_brick, float interior) {
+  return 1.0f + interior * u_brick;
 }
 
 /* Ray step from the leaf's level (docs/design.md, "Streaming", step 7): how many times the base

@@ -1,6 +1,7 @@
 // cpu_atlas.hpp: the CPU copy of the brick atlas (atlas_layout.h): slot s holds one stored brick
-// of 36³ float values (x fastest) at s·36³, filled from decoded bricks or straight from a brick
-// payload with the CPU reference decoder. The CPU reference renderer samples it.
+// of S³ float values (x fastest, S the bricks' size) at s·S³, filled from decoded bricks or
+// straight from a brick payload with the CPU reference decoder. The CPU reference renderer
+// samples it.
 #pragma once
 
 #include <cstddef>
@@ -17,15 +18,15 @@ namespace volreel::cpu_render {
 
 class CpuAtlas {
  public:
-  static constexpr std::size_t slot_values =
-      std::size_t{VR_ATLAS_SLOT_SIZE} * VR_ATLAS_SLOT_SIZE * VR_ATLAS_SLOT_SIZE;
-
-  /// slot_count slots, every value 0.
-  explicit CpuAtlas(std::uint32_t slot_count);
+  /// slot_count slots for bricks of `shape`, every value 0.
+  explicit CpuAtlas(std::uint32_t slot_count, format::BrickShape shape = {});
 
   std::uint32_t slot_count() const { return slot_count_; }
+  format::BrickShape shape() const { return shape_; }
+  /// Values of a slot: shape().voxels().
+  std::size_t slot_values() const { return slot_values_; }
 
-  /// Copies a decoded brick (36³ values, x fastest) into slot `slot`. Throws std::out_of_range on
+  /// Copies a decoded brick (S³ values, x fastest) into slot `slot`. Throws std::out_of_range on
   /// a bad slot and std::invalid_argument on a brick of the wrong size.
   void store(std::uint32_t slot, std::span<const float> brick);
   /// Decodes a brick payload (format::decode_payload: constant, ksvd with `atoms`, or zfp with
@@ -35,7 +36,7 @@ class CpuAtlas {
                    double zfp_accuracy, const format::AtomTable& atoms,
                    const std::filesystem::path& name = "brick", std::uint64_t offset = 0);
 
-  /// The 36³ values of a slot.
+  /// The S³ values of a slot.
   std::span<const float> slot(std::uint32_t slot) const;
   std::span<float> slot(std::uint32_t slot);
 
@@ -46,6 +47,8 @@ class CpuAtlas {
 
  private:
   std::uint32_t slot_count_ = 0;
+  format::BrickShape shape_;
+  std::size_t slot_values_ = 0;
   struct Free {
     void operator()(float* p) const;
   };

@@ -62,8 +62,9 @@ namespace volreel::cpu_render {
 struct VolumeGeometry {
   std::array<std::uint32_t, 3> dims{};
   std::uint32_t levels = 1;
-  /// From the finest dims (levels by format::level_geometry).
-  static VolumeGeometry of(std::array<std::uint32_t, 3> dims);
+  format::BrickShape shape;  ///< the bricks' (the container's brick size)
+  /// From the finest dims and the bricks' shape (levels by format::level_geometry).
+  static VolumeGeometry of(std::array<std::uint32_t, 3> dims, format::BrickShape shape = {});
 };
 
 /// The word arrays of an array-encoded SVO (svo_layout.h): node records (10 words each, record

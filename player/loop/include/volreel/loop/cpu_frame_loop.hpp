@@ -15,9 +15,11 @@ namespace volreel::loop {
 
 class CpuFrameLoop final : public FrameLoop {
  public:
-  /// Bytes of one slot of a 16-bit GPU atlas: options.atlas_bytes / this is the slot count.
-  static constexpr std::uint64_t gpu_slot_bytes =
-      std::uint64_t{cpu_render::CpuAtlas::slot_values} * 2;
+  /// Bytes of one slot of a 16-bit GPU atlas for bricks of `shape`: options.atlas_bytes / this is
+  /// the slot count.
+  static std::uint64_t gpu_slot_bytes(format::BrickShape shape) {
+    return std::uint64_t{shape.voxels()} * 2;
+  }
 
   /// Indexes the container; the atlas gets as many slots as a 16-bit GPU atlas of
   /// options.atlas_bytes would (gpu_slot_bytes each, 1 to 2^20; it stores float32, twice that).
@@ -53,7 +55,7 @@ class CpuFrameLoop final : public FrameLoop {
   const stream::FrameUpdate& last_update() const { return last_update_; }
 
  private:
-  static std::uint32_t slots_for(const FrameLoopOptions& options);
+  static std::uint32_t slots_for(const FrameLoopOptions& options, format::BrickShape shape);
   /// Steps 1–2 of a frame: the scheduler's update and the decode of the uploads.
   stream::FrameUpdate update_and_decode(const player::OrbitCamera& camera, double playhead,
                                         FrameReport& report);

@@ -21,7 +21,8 @@
 // only while its frame is held.
 //
 // Geometry (player/include/volreel/player/svo_layout.h): with L levels, a node of level l at brick
-// coordinates c covers finest voxels [c·34·2^(L−1−l), (c+1)·34·2^(L−1−l)) per axis; bounds() clips
+// coordinates c covers finest voxels [c·I·2^(L−1−l), (c+1)·I·2^(L−1−l)) per axis, I the bricks'
+// interior (the container's brick size − 2, 34 for 36³ bricks); bounds() clips
 // that box to the volume. Children of c are 2c + (i & 1, (i >> 1) & 1, (i >> 2) & 1), octant i.
 //
 // A node of type `empty` in frame t (format::NodeType::empty) is a constant subtree: frame t has
@@ -176,6 +177,7 @@ struct IndexOptions {
 
 /// The frame geometry's nodes (all absent), shared by an index and its copies.
 struct IndexGeometry {
+  format::BrickShape shape;
   std::array<std::uint32_t, 3> dims{};
   std::vector<format::LevelGeometry> levels;
   std::vector<SpatialNode> nodes;
@@ -202,10 +204,11 @@ class SpatialIndex;
 /// Builds a SpatialIndex one frame at a time (frames in any order); every frame is held.
 class SpatialIndexBuilder {
  public:
-  /// dims: the volume's finest size; frame_count: time steps of the series.
-  SpatialIndexBuilder(std::array<std::uint32_t, 3> dims, std::size_t frame_count);
+  /// dims: the volume's finest size; frame_count: time steps of the series; shape: the bricks'.
+  SpatialIndexBuilder(std::array<std::uint32_t, 3> dims, std::size_t frame_count,
+                      format::BrickShape shape = {});
   /// Adds frame t's nodes and bricks; `file` is where a loader reads the bytes. Throws
-  /// format::FormatError if the frame's dims or levels disagree with the index.
+  /// format::FormatError if the frame's dims, brick size or levels disagree with the index.
   void add_frame(std::uint32_t t, const format::FrameView& frame, std::filesystem::path file);
   SpatialIndex build() &&;
 
@@ -226,6 +229,8 @@ class SpatialIndex {
   SpatialIndex& operator=(SpatialIndex&&) noexcept;
 
   std::array<std::uint32_t, 3> dims() const;
+  /// The bricks' tiling (the container's brick size).
+  format::BrickShape shape() const;
   std::uint32_t level_count() const;
   std::size_t frame_count() const { return files_.size(); }
   /// Finest voxels per axis of one voxel of level l: 2^(L−1−l).

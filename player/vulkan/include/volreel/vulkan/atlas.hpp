@@ -1,5 +1,6 @@
 // atlas.hpp: the brick atlas on the GPU — one 3D image of 16-bit voxels holding a fixed number of
-// 36³ slots (a brick with its apron), laid out as player/atlas_layout.h says. The decoder writes
+// S³ slots (a brick with its apron, S the container's brick size), laid out as
+// player/atlas_layout.h says. The decoder writes
 // slots as a storage image; the renderer samples it with a linear sampler. The image stays in
 // VK_IMAGE_LAYOUT_GENERAL (AtlasDecoder's buffer-copy kernel and read_slots leave it only for the
 // span of their copies).
@@ -26,7 +27,9 @@ const char* atlas_format_name(AtlasFormat format);
 
 struct AtlasOptions {
   AtlasFormat format = AtlasFormat::r16_unorm;
-  /// Bytes the atlas image may take (2 bytes per voxel, 93 312 bytes per slot).
+  /// Voxels per slot axis: the container's brick size (format::BrickShape::size).
+  std::uint32_t slot_size = 36;
+  /// Bytes the atlas image may take (2 bytes per voxel: 93 312 bytes per 36³ slot).
   std::uint64_t memory_budget_bytes = std::uint64_t{256} << 20;
   /// At most this many slots (0: as many as the budget and the device allow).
   std::uint32_t max_slots = 0;
@@ -41,10 +44,11 @@ struct AtlasGrid {
   std::uint32_t slots() const { return x * y * z; }
 };
 
-/// The grid for at most `max_slots` slots with no axis longer than `max_image_dimension_3d`
-/// voxels: as close to a cube as possible, the largest slot count not above max_slots that such
-/// a grid holds (at least 1 slot). Pure arithmetic, for tests.
-AtlasGrid choose_atlas_grid(std::uint64_t max_slots, std::uint32_t max_image_dimension_3d);
+/// The grid for at most `max_slots` slots of `slot_size`³ voxels with no axis longer than
+/// `max_image_dimension_3d` voxels: as close to a cube as possible, the largest slot count not
+/// above max_slots that such a grid holds (at least 1 slot). Pure arithmetic, for tests.
+AtlasGrid choose_atlas_grid(std::uint64_t max_slots, std::uint32_t max_image_dimension_3d,
+                            std::uint32_t slot_size = 36);
 
 /// The 16-bit texel value that `value` becomes in the atlas (the GPU's conversion up to the last
 /// unit), and back; for tests and error measurements on the CPU.
@@ -64,6 +68,8 @@ class Atlas {
   AtlasFormat format() const { return options_.format; }
   const AtlasGrid& grid() const { return grid_; }
   std::uint32_t slot_count() const { return grid_.slots(); }
+  /// Voxels per slot axis (AtlasOptions::slot_size).
+  std::uint32_t slot_size() const { return options_.slot_size; }
   float value_min() const { return options_.value_min; }
   float value_max() const { return options_.value_max; }
   /// First voxel of slot s in the image.

@@ -8,10 +8,10 @@
 //
 // Kinds: ksvd payloads are decoded on the GPU; 4-byte payloads (constant bricks) are filled
 // without reading codes; zfp payloads are decoded on the CPU (format::decode_payload) and uploaded
-// as 36³ float32 values. The host kernel instead decodes every brick on the CPU (the reference
-// decoder, OpenMP over the bricks), converts it to the atlas's 16-bit texels and copies it into
-// its slot: no compute pass at all, for CPU implementations, where the CPU decoder is several
-// times faster than either shader.
+// as S³ float32 values (S the brick size, AtlasOptions::slot_size). The host kernel instead decodes
+// every brick on the CPU (the reference decoder, OpenMP over the bricks), converts it to the
+// atlas's 16-bit texels and copies it into its slot: no compute pass at all, for CPU
+// implementations, where the CPU decoder is several times faster than either shader.
 //
 // Staging: a ring of host-visible buffers, each of `upload_budget_bytes` (the most a frame
 // uploads). A batch larger than one buffer is split over several ring entries. A ring entry is
@@ -45,7 +45,7 @@ struct BrickUpload {
 
 struct DecoderOptions {
   /// Bytes of one staging buffer = the most one submission uploads (≥ 1 MiB: a zfp brick
-  /// uploads 36³ float32 = 186 624 bytes).
+  /// uploads S³ float32: 186 624 bytes for 36³).
   std::uint64_t upload_budget_bytes = std::uint64_t{8} << 20;
   /// Staging buffers in the ring (≥ 1): submissions that may be in flight at once.
   std::uint32_t ring_size = 3;
@@ -57,12 +57,12 @@ struct DecoderOptions {
   ///    (shaders/decode/decode_bricks_rows.comp): for CPU implementations (lavapipe), where
   ///    storage-image stores, shared memory and barriers are slow;
   ///  - host: every brick decoded on the CPU by format::decode_payload, converted to 16-bit texels
-  ///    (Atlas::value_to_texel) and copied into its slot with vkCmdCopyBufferToImage (36³ · 2
+  ///    (Atlas::value_to_texel) and copied into its slot with vkCmdCopyBufferToImage (S³ · 2
   ///    bytes of staging per brick);
   ///  - automatic: host on a VK_PHYSICAL_DEVICE_TYPE_CPU device, image_store otherwise.
   enum class Kernel { automatic, image_store, buffer_copy, host };
   Kernel kernel = Kernel::automatic;
-  /// buffer_copy: bricks decoded per dispatch (the decoded-brick buffer holds this many 36³
+  /// buffer_copy: bricks decoded per dispatch (the decoded-brick buffer holds this many S³
   /// bricks of 16-bit texels, rows padded from 6 to 8 texels: 124 416 bytes each).
   std::uint32_t bricks_per_copy = 256;
 };
@@ -101,21 +101,24 @@ class AtlasDecoder {
   void wait_all() const { wait(last_ticket_); }
   Ticket last_ticket() const { return last_ticket_; }
 
-  /// Reads slots back from the atlas as values (36³ each, x fastest, concatenated in the order
+  /// Reads slots back from the atlas as values (S³ each, x fastest, concatenated in the order
   /// given); waits for every submission first. For tests and benchmarks.
   std::vector<float> read_slots(std::span<const std::uint32_t> slots) const;
   std::vector<float> read_slot(std::uint32_t slot) const { return read_slots({&slot, 1}); }
 
-  /// Bytes that uploading `brick` takes in a staging buffer with `kernel` (its record included).
+  /// Bytes that uploading `brick` (of `shape`) takes in a staging buffer with `kernel` (its record
+  /// included); `decoded_on_cpu`: a ksvd brick uploaded as values (see submit).
   static std::uint64_t upload_bytes(
-      const BrickUpload& brick,
-      DecoderOptions::Kernel kernel = DecoderOptions::Kernel::image_store);
+      const BrickUpload& brick, DecoderOptions::Kernel kernel = DecoderOptions::Kernel::image_store,
+      format::BrickShape shape = {}, bool decoded_on_cpu = false);
 
   struct Stats {
     std::uint64_t bricks = 0, submissions = 0;
     std::uint64_t uploaded_bytes = 0;  ///< staging bytes written (records, payloads, zfp floats)
-    double cpu_zfp_seconds = 0;        ///< CPU time decoding zfp bricks in submit
-    double cpu_decode_seconds = 0;     ///< host kernel: wall time decoding bricks in submit
+    /// CPU time decoding zfp bricks in submit (and, on a CPU device, ksvd bricks of more codes
+    /// than its shader loops run)
+    double cpu_zfp_seconds = 0;
+    double cpu_decode_seconds = 0;  ///< host kernel: wall time decoding bricks in submit
   };
   const Stats& stats() const { return stats_; }
   const DecoderOptions& options() const { return options_; }
@@ -135,13 +138,14 @@ class AtlasDecoder {
   /// Barriers around a copy of `regions` of `source` into the atlas.
   void copy_into_atlas(VkCommandBuffer commands, VkBuffer source,
                        const std::vector<VkBufferImageCopy>& regions) const;
-  /// host: decodes `bricks` into `texels` (36³ per brick) on the CPU; throws FormatError naming
+  /// host: decodes `bricks` into `texels` (S³ per brick) on the CPU; throws FormatError naming
   /// "brick upload first + i" for a bad payload.
   void decode_on_host(std::span<const BrickUpload> bricks, std::size_t first,
                       std::uint16_t* texels);
 
   const Context& context_;
   const Atlas& atlas_;
+  format::BrickShape shape_;  ///< the atlas's slots: the bricks' shape
   DecoderOptions options_;
   DecoderOptions::Kernel kernel_ = DecoderOptions::Kernel::image_store;
   Buffer decoded_;  ///< buffer_copy: the decoded bricks of one dispatch, before the copy
@@ -154,12 +158,17 @@ class AtlasDecoder {
   /// buffer_copy: atoms_ as a uniform texel buffer of RGBA32F (4 values of an atom a texel).
   detail::DeviceHandle<VkBufferView, vkDestroyBufferView> atoms_view_;
   std::uint32_t atom_count_ = 0;
-  std::vector<float> host_atoms_;  ///< host: the dictionary's values, for the CPU decoder
+  std::vector<float> host_atoms_;  ///< the dictionary's values, for the CPU decoder
   std::vector<RingEntry> ring_;
   std::size_t next_entry_ = 0;
   Ticket last_ticket_ = 0;
   Stats stats_;
   std::vector<float> zfp_scratch_;
+  /// CPU devices (lavapipe) end a shader loop after 65535 iterations: per brick of the batch
+  /// being submitted, whether its codes are too many for the kernels' loops there, so that it is
+  /// decoded on the CPU and uploaded as values.
+  bool cpu_device_ = false;
+  std::vector<char> decode_on_cpu_;
   std::vector<VkBufferImageCopy> copy_regions_;
   std::vector<std::uint64_t> slot_mark_;  ///< per slot, the last submit() call that named it
   std::uint64_t submit_calls_ = 0;

@@ -140,10 +140,12 @@ class DescriptorSetLayout {
 class ComputePipeline {
  public:
   ComputePipeline() = default;
-  /// Entry point "main"; `push_constant_bytes` (0: none) visible to the compute stage.
+  /// Entry point "main"; `push_constant_bytes` (0: none) visible to the compute stage;
+  /// `specialization[i]` the value of the shader's 32-bit specialization constant i.
   ComputePipeline(const Context& context, const ShaderModule& shader,
                   std::span<const VkDescriptorSetLayout> set_layouts,
-                  std::uint32_t push_constant_bytes = 0);
+                  std::uint32_t push_constant_bytes = 0,
+                  std::span<const std::uint32_t> specialization = {});
   VkPipeline handle() const { return pipeline_.get(); }
   VkPipelineLayout layout() const { return layout_.get(); }
 
