@@ -13,7 +13,9 @@ namespace volreel::cli {
 /// --atlas-mb, --bandwidth, --latency, --sse-target, --upload-budget, --step,
 /// --max-step-doublings, --no-culling, --decode, --lod-fade, --spatial-blend, --ray-feedback.
 inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
-  cmd.add_option("--atlas-mb", loop.atlas_mb, "Brick atlas memory, MiB (93 312 bytes per slot)")
+  cmd.add_option("--atlas-mb", loop.atlas_mb,
+                 "Brick atlas memory, MiB (2 bytes a voxel: 93 312 bytes per slot of 36^3, 574 992 "
+                 "of 66^3)")
       ->capture_default_str();
   cmd.add_option("--bandwidth", loop.bandwidth,
                  "Simulated read bandwidth, e.g. 20MB/s (0: unlimited)")

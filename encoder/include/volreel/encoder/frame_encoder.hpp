@@ -164,8 +164,8 @@ class FrameEncoder {
   /// coding's statistics with the bytes written.
   std::vector<std::byte> write(const CodedFrame& coded, std::span<const char> keep = {},
                                FrameStats* stats = nullptr) const;
-  /// One stored brick (36³ values, x fastest) -> its payload: a 4-byte constant, a ksvd payload
-  /// or a zfp stream (the same coding encode() applies to every brick).
+  /// One stored brick (S³ values of shape(), x fastest) -> its payload: a 4-byte constant, a ksvd
+  /// payload or a zfp stream (the same coding encode() applies to every brick).
   std::vector<std::byte> encode_brick(std::span<const float> brick) const;
   const CodingSettings& settings() const { return settings_; }
   /// The brick tiling of the frames it codes (CodingSettings::brick_size).

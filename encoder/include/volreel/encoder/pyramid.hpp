@@ -1,6 +1,6 @@
 // pyramid.hpp: the brick hierarchy of one frame (MTV-Player §3.2): levels averaging 2×2×2 voxels
 // (Cesium patent [0031]) from the frame up to one root brick, and the stored voxels of a brick
-// (34³ interior with a 1-voxel apron).
+// (its interior with a 1-voxel apron, format::BrickShape).
 #pragma once
 
 #include <array>

@@ -71,7 +71,8 @@ class TimeStepDecoder {
   void forget_frames_far_from(std::size_t t);
 };
 
-/// Decodes one stored state into out (36³ values): the brick, or the constant everywhere.
+/// Decodes one stored state into out (S³ values, the frame's brick size): the brick, or the
+/// constant everywhere.
 void decode_state(const FrameView& frame, const StoredState& state, const AtomTable& atoms,
                   std::span<float> out);
 

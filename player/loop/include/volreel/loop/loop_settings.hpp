@@ -13,7 +13,7 @@ namespace volreel::loop {
 
 struct LoopSettings {
   std::string size;              ///< "WxH" (empty: keep the options' size)
-  double atlas_mb = 256;         ///< atlas memory, MiB (16-bit voxels: 93 312 bytes per slot)
+  double atlas_mb = 256;         ///< atlas memory, MiB (16-bit voxels: S³·2 bytes per slot)
   std::string bandwidth = "0";   ///< "20MB/s", "500kB/s", "1GB/s", a number (MB/s); 0: unlimited
   std::string latency = "0";     ///< "50ms", "0.2s", a number (ms)
   double sse_target = 1.0;       ///< pixels per voxel at which a node is detailed enough
