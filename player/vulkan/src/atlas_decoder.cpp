@@ -197,8 +197,10 @@ AtlasDecoder::AtlasDecoder(const Context& context, const Atlas& atlas,
     options_.bricks_per_copy = std::clamp<std::uint32_t>(
         options_.bricks_per_copy, 1,
         static_cast<std::uint32_t>(std::min<std::uint64_t>(
-            max_bricks_per_dispatch,
-            context.limits().maxStorageBufferRange / decoded_brick_bytes(shape_))));
+            {max_bricks_per_dispatch,
+             context.limits().maxStorageBufferRange / decoded_brick_bytes(shape_),
+             std::max<std::uint64_t>(1,
+                                     (std::uint64_t{32} << 20) / decoded_brick_bytes(shape_))})));
     decoded_ =
         Buffer(context, std::uint64_t{options_.bricks_per_copy} * decoded_brick_bytes(shape_),
                VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT,

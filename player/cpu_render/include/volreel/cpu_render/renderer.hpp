@@ -58,7 +58,8 @@
 namespace volreel::cpu_render {
 
 /// The spatial octree's geometry: the finest level's dims and the level count L (format's
-/// level_geometry(dims).size()). The root covers [0, 34·2^(L−1))³ finest voxels.
+/// level_geometry(dims, shape).size()). The root covers [0, I·2^(L−1))³ finest voxels, I the
+/// bricks' interior.
 struct VolumeGeometry {
   std::array<std::uint32_t, 3> dims{};
   std::uint32_t levels = 1;

@@ -63,7 +63,8 @@ struct DecoderOptions {
   enum class Kernel { automatic, image_store, buffer_copy, host };
   Kernel kernel = Kernel::automatic;
   /// buffer_copy: bricks decoded per dispatch (the decoded-brick buffer holds this many S³
-  /// bricks of 16-bit texels, rows padded from 6 to 8 texels: 124 416 bytes each).
+  /// bricks of 16-bit texels, rows padded from 6 to 8 texels: 124 416 bytes each for 36³), at
+  /// most as many as fit 32 MiB (42 bricks of 66³).
   std::uint32_t bricks_per_copy = 256;
 };
 
