@@ -176,16 +176,15 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
       request.max_frames ? std::min(request.max_frames, info.frames) : info.frames;
   const Ranks& ranks = request.ranks ? *request.ranks : single_process();
   // The brick size: given, the container's own (resume), or chosen for the volume.
+  const std::array<std::uint32_t, 3> dims{static_cast<std::uint32_t>(info.dims.x),
+                                          static_cast<std::uint32_t>(info.dims.y),
+                                          static_cast<std::uint32_t>(info.dims.z)};
   bool chosen_brick_size = false;
   if (request.coding.brick_size == 0 && request.resume && fs::exists(out / "manifest.json"))
     request.coding.brick_size = format::Container(out, true).manifest().brick_size;
   if (request.coding.brick_size == 0) {
     chosen_brick_size = true;
-    request.coding.brick_size =
-        format::choose_brick_shape({static_cast<std::uint32_t>(info.dims.x),
-                                    static_cast<std::uint32_t>(info.dims.y),
-                                    static_cast<std::uint32_t>(info.dims.z)})
-            .size;
+    request.coding.brick_size = format::choose_brick_shape(dims).size;
   }
   const format::BrickShape shape{request.coding.brick_size};
   if (!format::valid_brick_size(shape.size))
@@ -193,14 +192,10 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
                      std::to_string(shape.size));
   say("bricks of " + std::to_string(shape.size) + "^3 voxels (" + std::to_string(shape.interior()) +
       "^3 interior + apron)" +
-      (chosen_brick_size
-           ? printed(", chosen for this volume (its blocks that hold voxels of "
-                     "the volume store %.3g values per voxel, all levels)",
-                     format::coded_block_share({static_cast<std::uint32_t>(info.dims.x),
-                                                static_cast<std::uint32_t>(info.dims.y),
-                                                static_cast<std::uint32_t>(info.dims.z)},
-                                               shape))
-           : std::string()));
+      (chosen_brick_size ? printed(", chosen for this volume (its blocks that hold voxels of "
+                                   "the volume store %.3g values per voxel, all levels)",
+                                   format::coded_block_share(dims, shape))
+                         : std::string()));
   EncodeJob job;
   job.ranks = &ranks;
   job.resume = request.resume;

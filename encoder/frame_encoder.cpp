@@ -87,7 +87,9 @@ void add_to_breakdown(format::BrickShape shape, const Cell& c,
   ByteBreakdown& b = st.breakdown;
   const std::size_t size = c.payload.size();
   const std::uint32_t blocks = shape.blocks();
-  std::vector<float> shares(blocks);  // of each block, the voxels that are the level's own
+  // Of each block, the voxels that are the level's own.
+  std::array<float, VR_MAX_BLOCKS_PER_AXIS * VR_MAX_BLOCKS_PER_AXIS * VR_MAX_BLOCKS_PER_AXIS>
+      shares{};
   detail::owned_block_shares(shape, c.x, c.y, c.z, level_dims, shares.data());
   if (c.constant) {
     b.constant_bricks += size;
@@ -122,7 +124,7 @@ void add_to_breakdown(format::BrickShape shape, const Cell& c,
   // The blocks' owned shares average to the brick's interior voxels inside the level: the rest of
   // the stored voxels are apron or padding.
   double owned = 0;
-  for (float share : shares) owned += static_cast<double>(share);
+  for (std::uint32_t k = 0; k < blocks; ++k) owned += static_cast<double>(shares[k]);
   b.aprons_and_padding += static_cast<double>(size) * (1 - owned / blocks);
 }
 

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstring>
 #include <string>
+#include <utility>
 
 #include "volreel/format/bytes.hpp"
 #include "volreel/format/crc32c.hpp"
@@ -60,11 +61,14 @@ double coded_block_share(std::array<std::uint32_t, 3> dims, BrickShape shape) {
 }
 
 BrickShape choose_brick_shape(std::array<std::uint32_t, 3> dims) {
-  double least = coded_block_share(dims, {max_brick_size});
-  for (std::uint32_t size = min_brick_size; size < max_brick_size; size += brick_block_size)
-    least = std::min(least, coded_block_share(dims, {size}));
-  for (std::uint32_t size = min_brick_size;; size += brick_block_size)
-    if (size == max_brick_size || coded_block_share(dims, {size}) <= least * 1.01) return {size};
+  std::vector<std::pair<std::uint32_t, double>> shares;  // every size, smallest first
+  for (std::uint32_t size = min_brick_size; size <= max_brick_size; size += brick_block_size)
+    shares.emplace_back(size, coded_block_share(dims, {size}));
+  double least = shares.front().second;
+  for (const auto& [size, share] : shares) least = std::min(least, share);
+  for (const auto& [size, share] : shares)
+    if (share <= least * 1.01) return {size};
+  return {max_brick_size};  // not reached: the least is one of them
 }
 
 std::uint64_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z) {

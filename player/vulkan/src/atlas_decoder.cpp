@@ -332,6 +332,7 @@ void AtlasDecoder::set_dictionary(const format::AtomTable& atoms) {
 Ticket AtlasDecoder::submit(std::span<const BrickUpload> batch) {
   // 1. Check everything before anything is uploaded.
   slot_mark_.resize(atlas_.slot_count(), 0);
+  decode_on_cpu_.resize(batch.size());
   ++submit_calls_;
   for (std::size_t i = 0; i < batch.size(); ++i) {
     if (batch[i].slot >= atlas_.slot_count())
@@ -343,10 +344,8 @@ Ticket AtlasDecoder::submit(std::span<const BrickUpload> batch) {
                                   std::to_string(batch[i].slot) + " named twice in one batch");
     slot_mark_[batch[i].slot] = submit_calls_;
     const std::uint64_t codes = validate_upload(batch[i], i, atom_count_, shape_);
-    decode_on_cpu_.resize(batch.size());
     decode_on_cpu_[i] = cpu_device_ && codes + shape_.blocks() > cpu_device_loop_limit;
   }
-  decode_on_cpu_.resize(batch.size());
   const auto bytes_of = [&](std::size_t i) {
     return upload_bytes(batch[i], kernel_, shape_, decode_on_cpu_[i] != 0);
   };
