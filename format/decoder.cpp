@@ -20,22 +20,105 @@ std::string str(std::uint64_t v) {
   return std::to_string(v);
 }
 
-/// block[v] += c·atom[v] for the 216 values of a block (kept out of line so that the compiler
-/// vectorizes it instead of interchanging it with the loop over codes).
-[[gnu::noinline]] void add_scaled(float* __restrict block, const float* __restrict atom, float c) {
-#pragma omp simd
-  for (vr_uint v = 0; v < VR_BLOCK_LENGTH; ++v) block[v] += c * atom[v];
-}
+/// x86-64 builds carry an AVX2 version of the decoder's inner loop besides the baseline (SSE2)
+/// one, chosen when the program loads. AVX2 without FMA: both versions multiply, then add, and
+/// decode to the same bits on every machine.
+#if defined(__x86_64__) && defined(__ELF__)
+#define VOLREEL_SIMD_CLONES gnu::target_clones("avx2", "default"),
+#else
+#define VOLREEL_SIMD_CLONES
+#endif
+
+/// One code as read: its atom and signed quantized coefficient.
+struct ParsedCode;
+
+/// block[v] = mean + Σ coef_scale·q_k·atom_k[v] over a block's codes, a third of the block at a
+/// time so that the sums stay in registers while the codes' atoms stream past.
+[[VOLREEL_SIMD_CLONES gnu::noinline]] void decode_block(float* __restrict block, float mean,
+                                                        const ParsedCode* __restrict codes,
+                                                        vr_uint count,
+                                                        const float* __restrict atoms,
+                                                        float coef_scale);
 
 /// Zero words after a payload's copy: the look-ahead of a Rice code and the overrun of a damaged
 /// stream's last code (at most 81 bits past the stream's end) read zeros.
 constexpr std::size_t payload_padding_words = 4;
+
+/// The code stream of a payload read in 64-bit windows: the codes of brick_decode.h's
+/// vr_read_code (which the GPU decoders run, and which the tests hold this reader to), with one
+/// unaligned load for a gap and one for a magnitude and its sign instead of up to five word reads
+/// with a branch each. The window at a bit holds at least 33 bits of the stream, and a Rice code
+/// with its sign takes at most 33 (16 zeros and 16 escaped bits and the sign, or at most 15 zeros,
+/// the one and 15 low bits and the sign). It reads up to two words past the bit it starts at:
+/// the payload's zero padding words take them.
+class CodeStream {
+ public:
+  CodeStream(const vr_uint* payload, vr_uint first_word) : words_(payload + first_word) {}
+  std::uint64_t bit() const { return bit_; }
+
+  /// The next code of a block whose gaps have Rice parameter `gap_rice` (vr_gap_rice), after the
+  /// block's codes up to next_atom − 1; as vr_read_code.
+  int read(vr_uint layout_word, vr_uint band_word, vr_uint gap_rice, vr_uint atom_bits,
+           vr_uint coef_bits, vr_uint& next_atom, vr_uint& atom) {
+    atom = next_atom + rice(window(), gap_rice, atom_bits);
+    next_atom = atom + 1;
+    const std::uint64_t w = window();
+    const vr_uint magnitude = rice(w, vr_band_rice(layout_word, band_word, atom), coef_bits);
+    const vr_uint negative = static_cast<vr_uint>(w >> (bit_ - start_)) & 1u;
+    bit_ += 1;
+    const int q = static_cast<int>(magnitude + 1);
+    return negative ? -q : q;
+  }
+
+ private:
+  /// The stream from bit_ on, at least 33 bits; start_ remembers where it starts.
+  std::uint64_t window() {
+    std::uint64_t w;
+    std::memcpy(&w, words_ + bit_ / 32, sizeof w);
+    start_ = bit_;
+    return w >> (bit_ % 32);
+  }
+  /// The Rice code at bit_ inside window w (vr_read_rice), advancing bit_ past it.
+  vr_uint rice(std::uint64_t w, vr_uint k, vr_uint escape_bits) {
+    w >>= bit_ - start_;
+    const vr_uint zeros = vr_lowest_bit(static_cast<vr_uint>(w) | (1u << VR_ESCAPE_ZEROS));
+    if (zeros == VR_ESCAPE_ZEROS) {
+      bit_ += VR_ESCAPE_ZEROS + escape_bits;
+      return static_cast<vr_uint>(w >> VR_ESCAPE_ZEROS) & ((1u << escape_bits) - 1u);
+    }
+    bit_ += zeros + 1 + k;
+    return (zeros << k) | (static_cast<vr_uint>(w >> (zeros + 1)) & ((1u << k) - 1u));
+  }
+
+  const vr_uint* words_;
+  std::uint64_t bit_ = 0, start_ = 0;
+};
 
 /// One code as read: its atom and signed quantized coefficient.
 struct ParsedCode {
   vr_uint atom;
   int q;
 };
+
+void decode_block(float* __restrict block, float mean, const ParsedCode* __restrict codes,
+                  vr_uint count, const float* __restrict atoms, float coef_scale) {
+  typedef float Lanes [[gnu::vector_size(32)]];  // 8 floats: one AVX2 register or two SSE ones
+  constexpr vr_uint lanes = 8, part = 9;         // 27 = 3 parts of 9 vectors: 216 values
+  for (vr_uint p = 0; p < VR_BLOCK_LENGTH / lanes; p += part) {
+    Lanes sum[part];
+    for (vr_uint i = 0; i < part; ++i) sum[i] = Lanes{} + mean;
+    for (vr_uint k = 0; k < count; ++k) {
+      const Lanes c = Lanes{} + coef_scale * static_cast<float>(codes[k].q);
+      const float* atom = atoms + std::size_t{codes[k].atom} * VR_BLOCK_LENGTH + p * lanes;
+      for (vr_uint i = 0; i < part; ++i) {
+        Lanes a;
+        std::memcpy(&a, atom + i * lanes, sizeof a);
+        sum[i] += c * a;
+      }
+    }
+    std::memcpy(block + p * lanes, sum, sizeof sum);
+  }
+}
 
 /// check_ksvd_payload on `payload` (word_count words followed by payload_padding_words zero
 /// words), appending the codes to *codes when it is not null.
@@ -97,18 +180,19 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
   //    look-ahead of a Rice code and a damaged stream's overrun: a code reads at most 81 bits).
   const std::uint64_t stream_bits = (std::uint64_t{word_count} - first) * 32;
   const vr_uint largest = 1u << layout.coef_bits;
-  vr_uint bit = 0;
+  CodeStream stream(payload, first);
   for (vr_uint b = 0; b < blocks; ++b) {
     const vr_uint s = vr_entry_sparsity(layout.word, vr_block_entry(payload, layout.word, b));
     layout.codes += s;
+    const vr_uint gap_rice = s > 0 ? vr_gap_rice(layout.word, s) : 0;
     vr_uint next_atom = 0, atom = 0;
     for (vr_uint k = 0; k < s; ++k) {
-      const std::uint64_t code_at = 4 * std::uint64_t{first} + bit / 8;
-      if (bit >= stream_bits)
+      const std::uint64_t code_at = 4 * std::uint64_t{first} + stream.bit() / 8;
+      if (stream.bit() >= stream_bits)
         fail(code_at, "codes inside the payload (block " + str(b) + ", code " + str(k) + ")",
              "the payload's end");
-      const int q =
-          vr_read_code(payload, first, layout.word, layout.band_word, s, bit, next_atom, atom);
+      const int q = stream.read(layout.word, layout.band_word, gap_rice, layout.atom_bits,
+                                layout.coef_bits, next_atom, atom);
       if (atom >= atom_count)
         fail(code_at,
              "atom index < " + str(atom_count) + " (block " + str(b) + ", code " + str(k) + ")",
@@ -122,6 +206,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
       if (codes) codes->push_back({atom, q});
     }
   }
+  const std::uint64_t bit = stream.bit();
   layout.code_bits = bit;
   const std::uint64_t need = 4 * (std::uint64_t{first} + (std::uint64_t{bit} + 31) / 32);
   if (bytes != need)
@@ -161,10 +246,8 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, Brick
     const float mean =
         mean_bias + mean_scale * static_cast<float>(vr_entry_mean(layout.word, entry));
     alignas(64) float block[VR_BLOCK_LENGTH];
-    for (vr_uint v = 0; v < VR_BLOCK_LENGTH; ++v) block[v] = mean;
-    for (vr_uint k = 0; k < s; ++k, ++code)
-      add_scaled(block, atom_values + std::size_t{codes[code].atom} * VR_BLOCK_LENGTH,
-                 coef_scale * static_cast<float>(codes[code].q));
+    decode_block(block, mean, codes.data() + code, s, atom_values, coef_scale);
+    code += s;
     // Scatter the block into the brick, row by row.
     const vr_uint bx = b % n, by = (b / n) % n, bz = b / (n * n);
     for (vr_uint z = 0; z < 6; ++z)

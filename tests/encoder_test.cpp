@@ -616,6 +616,23 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
     ASSERT_EQ(back.mean, parts.mean) << bits << " bits";
     ASSERT_EQ(back.atoms, parts.atoms) << bits << " bits";
     ASSERT_EQ(back.values, parts.values) << bits << " bits";
+    // The shared text the GPU decoders run (vr_read_code) reads the same codes as the CPU
+    // decoder's reader, to the same end of the stream.
+    std::vector<vr_uint> words(payload.size() / 4 + 1, 0u);
+    std::memcpy(words.data(), payload.data(), payload.size());
+    const vr_uint first = vr_code_first_word(layout.word, blocks_per_brick);
+    vr_uint bit = 0;
+    std::size_t code = 0;
+    for (vr_uint b = 0; b < blocks_per_brick; ++b) {
+      vr_uint next_atom = 0, atom = 0;
+      for (vr_uint k = 0; k < parts.sparsity[b]; ++k, ++code) {
+        const int q = vr_read_code(words.data(), first, layout.word, layout.band_word,
+                                   parts.sparsity[b], bit, next_atom, atom);
+        ASSERT_EQ(atom, parts.atoms[code]) << bits << " bits, block " << b;
+        ASSERT_EQ(q, parts.values[code]) << bits << " bits, block " << b;
+      }
+    }
+    ASSERT_EQ(bit, layout.code_bits) << bits << " bits";
     if (parts.gap_shift >= 0) {
       ASSERT_EQ(back.band_rice, parts.band_rice);
       ASSERT_EQ(back.gap_shift, parts.gap_shift);
