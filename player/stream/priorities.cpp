@@ -148,19 +148,30 @@ double node_sse(const SpatialIndex& index, std::uint32_t node, const player::Orb
 }
 
 void ViewTraversal::run(const SpatialIndex& index, const player::OrbitCamera& camera,
-                        double sse_target) {
-  visits_.clear();
+                        double sse_target, bool restricted) {
   if (stamp_.size() != index.node_count()) {
     stamp_.assign(index.node_count(), 0);
     where_.assign(index.node_count(), 0);
+    forced_.assign(index.node_count(), 0);
+    forced_list_.clear();
     generation_ = 0;
   }
+  for (const std::uint32_t id : forced_list_) forced_[id] = 0;
+  forced_list_.clear();
+  const Frustum frustum(camera);
+  walk(index, frustum, camera, sse_target);
+  // Each pass forces at least one more node, and a node is forced once: this ends.
+  while (restricted && force_splits(index)) walk(index, frustum, camera, sse_target);
+}
+
+void ViewTraversal::walk(const SpatialIndex& index, const Frustum& frustum,
+                         const player::OrbitCamera& camera, double sse_target) {
+  visits_.clear();
   if (++generation_ == 0) {  // wrapped: clear the stamps
     std::fill(stamp_.begin(), stamp_.end(), 0u);
     generation_ = 1;
   }
   if (index.node_count() == 0 || !index.node(0).present()) return;
-  const Frustum frustum(camera);
   // Depth-first preorder with an explicit stack (children pushed in reverse octant order).
   std::vector<std::uint32_t> stack{0};
   while (!stack.empty()) {
@@ -171,7 +182,9 @@ void ViewTraversal::run(const SpatialIndex& index, const player::OrbitCamera& ca
     Visit v;
     v.node = id;
     v.sse = node_sse(index, id, camera);
-    v.refine = n.has_children && v.sse > sse_target;
+    const bool detailed = v.sse <= sse_target;
+    v.refine = n.has_children && (!detailed || forced_[id] != 0);
+    v.forced = v.refine && detailed;
     stamp_[id] = generation_;
     where_[id] = static_cast<std::uint32_t>(visits_.size());
     visits_.push_back(v);
@@ -180,6 +193,48 @@ void ViewTraversal::run(const SpatialIndex& index, const player::OrbitCamera& ca
         if (n.children[static_cast<std::size_t>(i)] != no_node)
           stack.push_back(n.children[static_cast<std::size_t>(i)]);
   }
+}
+
+bool ViewTraversal::force_splits(const SpatialIndex& index) {
+  const std::size_t before = forced_list_.size();
+  for (const Visit& v : visits_) {
+    if (v.refine) continue;
+    const NodeKey& k = index.node(v.node).key;
+    if (k.level < 2) continue;  // every neighbour is at level 0 or finer
+    // The 26 cells around N at level d lie in N's parent and in 7 cells of level d − 1 around it:
+    // per axis the parent's coordinate, or the one on N's side (below for an even coordinate).
+    const std::uint32_t c[3] = {k.x, k.y, k.z};
+    std::int64_t side[3];
+    for (int a = 0; a < 3; ++a) side[a] = std::int64_t{c[a] / 2} + (c[a] % 2 == 0 ? -1 : 1);
+    for (int octant = 1; octant < 8; ++octant) {
+      std::int64_t cell[3];
+      bool inside = true;
+      for (int a = 0; a < 3; ++a) {
+        cell[a] = (octant >> a) & 1 ? side[a] : std::int64_t{c[a] / 2};
+        inside = inside && cell[a] >= 0 && cell[a] < (std::int64_t{1} << (k.level - 1));
+      }
+      if (!inside) continue;
+      // That cell must be drawn at level d − 1 or finer: find the deepest visited node at or
+      // above it; a target node above it is too coarse.
+      NodeKey up{k.level - 1, static_cast<std::uint32_t>(cell[0]),
+                 static_cast<std::uint32_t>(cell[1]), static_cast<std::uint32_t>(cell[2])};
+      for (;;) {
+        const std::uint32_t id = index.find(up);
+        if (id != no_node && visited(id)) {
+          const Visit& above = visit(id);
+          if (up.level < k.level - 1 && !above.refine && index.node(id).has_children &&
+              forced_[id] == 0) {
+            forced_[id] = 1;
+            forced_list_.push_back(id);
+          }
+          break;
+        }
+        if (up.level == 0) break;
+        up = {up.level - 1, up.x / 2, up.y / 2, up.z / 2};
+      }
+    }
+  }
+  return forced_list_.size() > before;
 }
 
 }  // namespace volreel::stream

@@ -60,7 +60,7 @@ void StreamScheduler::end_request(KeyframeId id) {
 void StreamScheduler::select(const player::OrbitCamera& camera, double playhead) {
   heap_.clear();
   selection_.clear();
-  view_.run(index_, camera, settings_.priority.sse_target);
+  view_.run(index_, camera, settings_.priority.sse_target, settings_.priority.restricted);
   // Ray-guided feedback: visited nodes no ray reached in the last frame drawn (not the root).
   for (const std::uint32_t n : hidden_list_) hidden_[n] = 0;
   hidden_list_.clear();
@@ -301,6 +301,7 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     if (settings_.ray_feedback) keep_svo_regions(svo, gpu_frame_number);
     out.stats.hidden_nodes = static_cast<std::uint32_t>(hidden_list_.size());
     out.stats.hidden_targets = svo_stats.hidden_targets;
+    out.stats.forced_nodes = static_cast<std::uint32_t>(view_.forced_count());
     out.svo_nodes = std::move(svo.nodes);
     out.svo_leaves = std::move(svo.leaves);
     out.stats.target_nodes = svo_stats.target_nodes;

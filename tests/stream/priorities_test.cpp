@@ -107,6 +107,91 @@ TEST(StreamPriorities, TraversalRefinesWhileTheSseExceedsTheTarget) {
   EXPECT_TRUE(view.visits().empty());
 }
 
+/// Pairs of the view's target nodes (visited, not refined) that touch by a face, an edge or a
+/// corner and differ by more than one level.
+std::size_t restriction_violations(const SpatialIndex& index, const ViewTraversal& view) {
+  std::vector<std::uint32_t> targets;
+  for (const auto& v : view.visits())
+    if (!v.refine) targets.push_back(v.node);
+  std::size_t violations = 0;
+  for (std::size_t i = 0; i < targets.size(); ++i)
+    for (std::size_t j = i + 1; j < targets.size(); ++j) {
+      const SpatialNode &a = index.node(targets[i]), &b = index.node(targets[j]);
+      bool touch = true;
+      for (std::size_t k = 0; k < 3; ++k) touch = touch && a.lo[k] <= b.hi[k] && b.lo[k] <= a.hi[k];
+      const std::uint32_t la = a.key.level, lb = b.key.level;
+      if (touch && (la > lb + 1 || lb > la + 1)) ++violations;
+    }
+  return violations;
+}
+
+TEST(StreamPriorities, RestrictedTargetNodesDifferByAtMostOneLevelWhereTheyTouch) {
+  // Bricks of 12³ (interiors of 10) over 80³: 4 levels, 8³ finest nodes.
+  const Dims dims{80, 80, 80};
+  Volume v(dims);
+  datasets::AnalyticParams p;
+  p.dims = dims;
+  datasets::analytic_frame(p, 0, v.data);
+  encoder::CodingSettings coding = test::zfp_coding();
+  coding.brick_size = 12;
+  const auto bytes = encoder::FrameEncoder(nullptr, coding).encode(0, v);
+  const format::FrameView frame(bytes, "memory.vrf");
+  SpatialIndexBuilder builder({80, 80, 80}, 1, format::BrickShape{12});
+  builder.add_frame(0, frame, "memory.vrf");
+  const SpatialIndex index = std::move(builder).build();
+  ASSERT_EQ(index.level_count(), 4u);
+  // The eye just outside a face: the near nodes project 5 times larger than the far ones.
+  player::OrbitCamera cam = player::OrbitCamera::framing({80, 80, 80}, 512, 512);
+  cam.distance = 45;
+  cam.azimuth = 0.3;
+  cam.elevation = 0.2;
+  cam.fov_y = glm::radians(100.0);
+  ViewTraversal view;
+  double target = 0;
+  for (const double t : {64.0, 32.0, 24.0, 16.0, 12.0, 8.0, 6.0, 4.0, 3.0, 2.0, 1.0}) {
+    view.run(index, cam, t);
+    if (restriction_violations(index, view) > 0) {
+      target = t;
+      break;
+    }
+  }
+  ASSERT_GT(target, 0) << "no view with target nodes two levels apart";
+  std::vector<std::uint8_t> refined(index.node_count(), 0);
+  for (const auto& visit : view.visits()) refined[visit.node] = visit.refine;
+  const std::size_t free_visits = view.visits().size();
+  EXPECT_EQ(view.forced_count(), 0u);
+
+  view.run(index, cam, target, true);
+  EXPECT_EQ(restriction_violations(index, view), 0u) << "SSE target " << target;
+  EXPECT_GT(view.forced_count(), 0u);
+  EXPECT_GT(view.visits().size(), free_visits);
+  // Restriction only adds refinement, and marks what it added.
+  std::size_t forced = 0;
+  for (const auto& visit : view.visits()) {
+    if (refined[visit.node]) {
+      EXPECT_TRUE(visit.refine) << "node " << visit.node;
+    }
+    EXPECT_EQ(visit.forced, visit.refine && !refined[visit.node]) << "node " << visit.node;
+    forced += visit.forced;
+  }
+  EXPECT_EQ(forced, view.forced_count());
+  // The walk stays a depth-first preorder: a node's parent comes before it.
+  std::vector<std::uint8_t> seen(index.node_count(), 0);
+  for (const auto& visit : view.visits()) {
+    const std::uint32_t parent = index.node(visit.node).parent;
+    if (parent != no_node) {
+      EXPECT_TRUE(seen[parent]) << "node " << visit.node;
+    }
+    seen[visit.node] = 1;
+  }
+  // Far away nothing needs forcing; the next run forgets the forced nodes.
+  player::OrbitCamera far_cam = cam;
+  far_cam.distance *= 100;
+  view.run(index, far_cam, target, true);
+  EXPECT_EQ(view.forced_count(), 0u);
+  EXPECT_EQ(view.visits().size(), 1u);
+}
+
 /// A node's held time steps (all that matters to the due window), held range [begin, 10).
 struct Times {
   Times(std::initializer_list<std::uint32_t> times, std::uint32_t begin_at = 0) : begin(begin_at) {

@@ -207,6 +207,11 @@ void add_bench_stream_command(CLI::App& bench) {
                   "parent's drawing over this many seconds instead of replacing it at once (0: at "
                   "once)")
       ->capture_default_str();
+  cmd->add_option("--restricted", o->s.restricted,
+                  "Both policies: a restricted working set, the view's target nodes that touch "
+                  "differing by at\n"
+                  "most one level (a coarser neighbour is refined too) (true/false)")
+      ->capture_default_str();
   cmd->add_option("--spatial-blend", o->s.spatial_blend,
                   "Both policies: a node's corners next to a coarser neighbour take its parent's "
                   "drawing, so\n"

@@ -153,6 +153,10 @@ void add_play_command(CLI::App& app) {
                   "A node's corners next to a coarser neighbour take its parent's drawing "
                   "(true/false)")
       ->capture_default_str();
+  cmd->add_option("--restricted", o->player.restricted,
+                  "Restricted working set: the view's target nodes that touch differ by at most "
+                  "one level; a coarser neighbour is refined too (true/false)")
+      ->capture_default_str();
   cmd->add_option(
          "--ray-feedback", o->player.ray_feedback,
          "Leave out of the streaming the nodes no ray reached in a recent frame (behind "

@@ -95,6 +95,7 @@ Player::Player(const PlayerOptions& options)
   setup.scheduler.upload_budget_bytes = options.upload_bytes;
   setup.scheduler.lod_blend = options.lod_blend;
   setup.scheduler.ray_feedback = options.ray_feedback;
+  setup.scheduler.priority.restricted = options.restricted;
   setup.decode = options.decode;
   setup.width = render_size(swapchain_->extent()).width;
   setup.height = render_size(swapchain_->extent()).height;

@@ -115,6 +115,7 @@ void apply(const LoopSettings& s, FrameLoopOptions& o) {
     bad("--lod-fade", "seconds in [0, 60]", std::to_string(s.lod_fade));
   o.scheduler.lod_blend.fade_s = s.lod_fade;
   o.scheduler.lod_blend.spatial = s.spatial_blend;
+  o.scheduler.priority.restricted = s.restricted;
   o.scheduler.ray_feedback = s.ray_feedback;
 }
 

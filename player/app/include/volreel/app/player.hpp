@@ -61,6 +61,8 @@ struct PlayerOptions {
   loop::FrameLoopOptions::Decode decode = loop::FrameLoopOptions::Decode::automatic;
   /// Level-of-detail blending (stream::LodBlendSettings: the fade's seconds, spatial blending).
   stream::LodBlendSettings lod_blend;
+  /// A restricted working set (stream::PrioritySettings::restricted).
+  bool restricted = stream::PrioritySettings{}.restricted;
   /// Ray-guided feedback (stream::SchedulerSettings::ray_feedback).
   bool ray_feedback = stream::SchedulerSettings{}.ray_feedback;
   std::string script;            ///< script text (script.hpp), empty for none

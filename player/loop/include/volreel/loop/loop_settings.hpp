@@ -26,6 +26,8 @@ struct LoopSettings {
   /// Level-of-detail blending (stream::LodBlendSettings): the fade's seconds, spatial blending.
   double lod_fade = stream::LodBlendSettings{}.fade_s;
   bool spatial_blend = stream::LodBlendSettings{}.spatial;
+  /// A restricted working set (stream::PrioritySettings::restricted).
+  bool restricted = stream::PrioritySettings{}.restricted;
   /// Ray-guided feedback (stream::SchedulerSettings::ray_feedback).
   bool ray_feedback = stream::SchedulerSettings{}.ray_feedback;
 };

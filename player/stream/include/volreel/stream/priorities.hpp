@@ -79,6 +79,9 @@ struct PrioritySettings {
   double lookahead_s = 1.0;
   /// Patent policy: the SSE behind ssePriority (see above).
   SseScope sse_scope = SseScope::level;
+  /// A restricted working set (Thiele, Matthes, Froehlich §4.1; ViewTraversal): the view's target
+  /// nodes that touch differ by at most one level.
+  bool restricted = true;
 };
 
 /// [0044]: the ruler-like table for `keyframes` time steps. 9 keyframes give exactly
@@ -140,16 +143,32 @@ double node_sse(const SpatialIndex& index, std::uint32_t node, const player::Orb
 /// One frame's walk of the spatial octree: from the root, every node in the frustum is visited,
 /// and its children too while its SSE exceeds the target. Results are per node (frame-stamped, so
 /// nothing is cleared between frames).
+///
+/// Restricted (Thiele, Matthes, Froehlich §4.1): the target nodes — visited and not refined —
+/// that touch (by a face, an edge or a corner) differ by at most one level, so that a boundary
+/// between levels of detail is one level step, which blending can hide. Where a target node N at
+/// level d touches a region whose target node is coarser than d − 1, that coarser node is refined
+/// too ("forced split"), and the walk runs again, until no target node has such a neighbour. The
+/// paper's split condition ("split N only once its neighbours are fine enough") in the order of a
+/// walk: N keeps its refinement, and its coarse neighbours follow. A node that has no children
+/// (its region constant in every held frame: exact at its level) and regions outside the frustum
+/// (never drawn) impose nothing and are never refined.
 class ViewTraversal {
  public:
   struct Visit {
     std::uint32_t node = no_node;
     double sse = 0;
-    bool refine = false;  ///< SSE > target and the node has children: its children are visited
+    /// The node has children and its SSE exceeds the target (or the restriction forces it): its
+    /// children are visited.
+    bool refine = false;
+    bool forced = false;  ///< refined for the restriction alone (its SSE meets the target)
   };
 
   /// Walks the index for the camera; visits are in depth-first preorder.
-  void run(const SpatialIndex& index, const player::OrbitCamera& camera, double sse_target);
+  void run(const SpatialIndex& index, const player::OrbitCamera& camera, double sse_target,
+           bool restricted = false);
+  /// Refined by the restriction alone, this frame.
+  std::size_t forced_count() const { return forced_list_.size(); }
 
   std::span<const Visit> visits() const { return visits_; }
   bool visited(std::uint32_t node) const {
@@ -159,9 +178,18 @@ class ViewTraversal {
   const Visit& visit(std::uint32_t node) const { return visits_[where_[node]]; }
 
  private:
+  /// One walk from the root, refining where the SSE exceeds the target or forced_ is set.
+  void walk(const SpatialIndex& index, const Frustum& frustum, const player::OrbitCamera& camera,
+            double sse_target);
+  /// Marks in forced_ the target nodes coarser than a touching target node's level − 1; returns
+  /// whether it marked any.
+  bool force_splits(const SpatialIndex& index);
+
   std::vector<Visit> visits_;
   std::vector<std::uint32_t> stamp_, where_;
   std::uint32_t generation_ = 0;
+  std::vector<std::uint8_t> forced_;        ///< per node: refined for the restriction
+  std::vector<std::uint32_t> forced_list_;  ///< the nodes forced_ marks
 };
 
 }  // namespace volreel::stream

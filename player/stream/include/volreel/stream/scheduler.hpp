@@ -92,6 +92,8 @@ struct StreamStats {
   /// Visited nodes hidden by the ray feedback (none of their keyframe nodes selected), and of
   /// the target nodes those hidden (not in target_nodes).
   std::uint32_t hidden_nodes = 0, hidden_targets = 0;
+  /// Visited nodes refined for the restricted working set alone (PrioritySettings::restricted).
+  std::uint32_t forced_nodes = 0;
   double fraction_at_target = 0;  ///< at_target_nodes / target_nodes (1 when none; 0 while
                                   ///< the index does not hold the frames around the playhead)
   bool index_ready = true;        ///< the index holds the frames around the playhead

@@ -121,6 +121,7 @@ struct BenchStreamSettings {
   bool ray_feedback = stream::SchedulerSettings{}.ray_feedback;
   double lod_fade = stream::LodBlendSettings{}.fade_s;  ///< stream::LodBlendSettings
   bool spatial_blend = stream::LodBlendSettings{}.spatial;
+  bool restricted = stream::PrioritySettings{}.restricted;
   double step = 1.0;
   double upload_budget_mb = 64;
   std::uint64_t seed = 1;
