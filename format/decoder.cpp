@@ -20,10 +20,12 @@ std::string str(std::uint64_t v) {
   return std::to_string(v);
 }
 
-/// x86-64 builds carry an AVX2 version of the decoder's inner loop besides the baseline (SSE2)
-/// one, chosen when the program loads. AVX2 without FMA: both versions multiply, then add, and
-/// decode to the same bits on every machine.
-#if defined(__x86_64__) && defined(__ELF__)
+/// x86-64 builds with GCC carry an AVX2 version of the decoder's inner loop besides the baseline
+/// (SSE2) one, chosen when the program loads. AVX2 without FMA: both versions multiply, then add,
+/// so a build for baseline x86-64 (the default) decodes to the same bits on every machine. (Clang
+/// does not take target_clones on a function declared before its definition; its builds, the
+/// fuzzers', keep the baseline version.)
+#if defined(__x86_64__) && defined(__ELF__) && !defined(__clang__)
 #define VOLREEL_SIMD_CLONES gnu::target_clones("avx2", "default"),
 #else
 #define VOLREEL_SIMD_CLONES
@@ -106,9 +108,9 @@ void decode_block(float* __restrict block, float mean, const ParsedCode* __restr
   constexpr vr_uint lanes = 8, part = 9;         // 27 = 3 parts of 9 vectors: 216 values
   for (vr_uint p = 0; p < VR_BLOCK_LENGTH / lanes; p += part) {
     Lanes sum[part];
-    for (vr_uint i = 0; i < part; ++i) sum[i] = Lanes{} + mean;
+    for (vr_uint i = 0; i < part; ++i) sum[i] = mean - Lanes{};  // x − (+0) keeps a −0
     for (vr_uint k = 0; k < count; ++k) {
-      const Lanes c = Lanes{} + coef_scale * static_cast<float>(codes[k].q);
+      const Lanes c = coef_scale * static_cast<float>(codes[k].q) - Lanes{};
       const float* atom = atoms + std::size_t{codes[k].atom} * VR_BLOCK_LENGTH + p * lanes;
       for (vr_uint i = 0; i < part; ++i) {
         Lanes a;

@@ -114,7 +114,8 @@ std::uint32_t current_target_nodes(const stream::StreamScheduler& scheduler,
                                    stream::ResidentKeyframes& resident) {
   const stream::SpatialIndex& index = scheduler.index();
   if (index.node_count() == 0 || index.frame_count() == 0) return 0;
-  view.run(index, camera, scheduler.settings().priority.sse_target);
+  view.run(index, camera, scheduler.settings().priority.sse_target,
+           scheduler.settings().priority.restricted);
   std::vector<stream::ResidentKeyframe> entries;
   for (const std::uint32_t slot : scheduler.atlas().occupied_slots()) {
     const auto key = scheduler.atlas().key(slot);
