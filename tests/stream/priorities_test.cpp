@@ -127,18 +127,7 @@ std::size_t restriction_violations(const SpatialIndex& index, const ViewTraversa
 
 TEST(StreamPriorities, RestrictedTargetNodesDifferByAtMostOneLevelWhereTheyTouch) {
   // Bricks of 12³ (interiors of 10) over 80³: 4 levels, 8³ finest nodes.
-  const Dims dims{80, 80, 80};
-  Volume v(dims);
-  datasets::AnalyticParams p;
-  p.dims = dims;
-  datasets::analytic_frame(p, 0, v.data);
-  encoder::CodingSettings coding = test::zfp_coding();
-  coding.brick_size = 12;
-  const auto bytes = encoder::FrameEncoder(nullptr, coding).encode(0, v);
-  const format::FrameView frame(bytes, "memory.vrf");
-  SpatialIndexBuilder builder({80, 80, 80}, 1, format::BrickShape{12});
-  builder.add_frame(0, frame, "memory.vrf");
-  const SpatialIndex index = std::move(builder).build();
+  const SpatialIndex index = test::make_index({80, 80, 80}, 1, 12);
   ASSERT_EQ(index.level_count(), 4u);
   // The eye just outside a face: the near nodes project 5 times larger than the far ones.
   player::OrbitCamera cam = player::OrbitCamera::framing({80, 80, 80}, 512, 512);

@@ -51,18 +51,21 @@ inline std::filesystem::path make_container(
 
 /// An index of `frames` time steps that all share one frame encoded in memory (no files: for
 /// tests of priorities and selection that do no I/O).
-inline stream::SpatialIndex make_index(Dims dims, std::size_t frames) {
+inline stream::SpatialIndex make_index(Dims dims, std::size_t frames,
+                                       std::uint32_t brick_size = format::default_brick_size) {
   datasets::AnalyticParams p;
   p.dims = dims;
   p.frames = 4;
   Volume v(dims);
   datasets::analytic_frame(p, 0, v.data);
-  const auto bytes = encoder::FrameEncoder(nullptr, zfp_coding()).encode(0, v);
+  encoder::CodingSettings coding = zfp_coding();
+  coding.brick_size = brick_size;
+  const auto bytes = encoder::FrameEncoder(nullptr, coding).encode(0, v);
   const format::FrameView view(bytes, "memory.vrf");
   const std::array<std::uint32_t, 3> d{static_cast<std::uint32_t>(dims.x),
                                        static_cast<std::uint32_t>(dims.y),
                                        static_cast<std::uint32_t>(dims.z)};
-  stream::SpatialIndexBuilder b(d, frames);
+  stream::SpatialIndexBuilder b(d, frames, format::BrickShape{brick_size});
   for (std::uint32_t t = 0; t < frames; ++t) b.add_frame(t, view, "memory.vrf");
   return std::move(b).build();
 }
