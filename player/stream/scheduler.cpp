@@ -292,11 +292,12 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     resident_.assign(index_, resident);
     SvoStats svo_stats;
     blend_.settings = settings_.lod_blend;
-    const bool blends = settings_.lod_blend.fade_s > 0 || settings_.lod_blend.spatial;
-    SvoArrays svo =
-        build_svo(index_, view_, resident_, playhead, settings_.selection, &svo_stats,
-                  &stored_times_, hidden_, blends ? &blend_ : nullptr, loader_.now_seconds());
+    // The blending state also holds the restricted drawing's scratch (build_svo uses it alone
+    // when nothing blends).
+    SvoArrays svo = build_svo(index_, view_, resident_, playhead, settings_.selection, &svo_stats,
+                              &stored_times_, hidden_, &blend_, loader_.now_seconds());
     out.stats.blended_leaves = svo_stats.blended_leaves;
+    out.stats.restricted_nodes = svo_stats.restricted_nodes;
     for (const std::uint32_t slot : svo_stats.used_slots) atlas_.mark_used(slot, gpu_frame_number);
     if (settings_.ray_feedback) keep_svo_regions(svo, gpu_frame_number);
     out.stats.hidden_nodes = static_cast<std::uint32_t>(hidden_list_.size());

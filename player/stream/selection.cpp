@@ -92,7 +92,8 @@ double stored_state_time(const SpatialIndex& index, std::uint32_t node, Side sid
 
 KeyframePick pick_side(const SpatialIndex& index, std::uint32_t node, double p,
                        const ResidentKeyframes& resident, Side side,
-                       const SelectionSettings& settings, StoredTimes& stored) {
+                       const SelectionSettings& settings, StoredTimes& stored,
+                       std::uint32_t min_up) {
   KeyframePick best;
   best.score = std::numeric_limits<double>::infinity();
   // The nearest time step on this side, and the step at which this node's state is stored
@@ -109,6 +110,8 @@ KeyframePick pick_side(const SpatialIndex& index, std::uint32_t node, double p,
     KeyframePick c = nearest_on_side(index, resident.of_node(n), p, side, settings);
     if (!c.valid()) continue;
     const KeyframeNode& k = index.keyframe(c.keyframe);
+    // A node drawn coarser for the restriction skips the finer levels, except exact constants.
+    if (up < min_up && !k.subtree_constant) continue;
     // 2. Ancestor handicap, except for a constant subtree, which is exact for its descendants.
     c.exact = up == 0 || k.subtree_constant;
     const double t = static_cast<double>(k.t);
@@ -155,15 +158,18 @@ double StoredTimes::nearest(std::uint32_t node, bool after, bool constant_only) 
 
 KeyframePair select_keyframe_pair(const SpatialIndex& index, std::uint32_t node, double playhead,
                                   const ResidentKeyframes& resident,
-                                  const SelectionSettings& settings, StoredTimes* stored) {
+                                  const SelectionSettings& settings, StoredTimes* stored,
+                                  std::uint32_t min_lod_difference) {
   StoredTimes alone;
   if (!stored) {
     alone.start(index, playhead, false);
     stored = &alone;
   }
   KeyframePair pair;
-  pair.a = pick_side(index, node, playhead, resident, Side::before, settings, *stored);
-  pair.b = pick_side(index, node, playhead, resident, Side::after, settings, *stored);
+  pair.a = pick_side(index, node, playhead, resident, Side::before, settings, *stored,
+                     min_lod_difference);
+  pair.b = pick_side(index, node, playhead, resident, Side::after, settings, *stored,
+                     min_lod_difference);
   if (pair.valid() && pair.a.t != pair.b.t) {
     const double f = (playhead - static_cast<double>(pair.a.t)) /
                      (static_cast<double>(pair.b.t) - static_cast<double>(pair.a.t));

@@ -21,7 +21,8 @@ class Builder {
  public:
   Builder(const SpatialIndex& index, const ViewTraversal& view, const ResidentKeyframes& resident,
           double playhead, const SelectionSettings& settings, SvoStats& stats, StoredTimes& stored,
-          std::span<const std::uint8_t> hidden, LodBlendState* blend, double now)
+          std::span<const std::uint8_t> hidden, LodBlendState* blend, double now,
+          DrawnRegions* drawn)
       : index_(index),
         view_(view),
         resident_(resident),
@@ -31,7 +32,8 @@ class Builder {
         stored_(stored),
         hidden_(hidden),
         blend_(blend),
-        now_(now) {
+        now_(now),
+        drawn_(drawn) {
     stored_.start(index_, playhead_);
     if (blend_) {
       blend_->reset(index_.node_count());
@@ -84,6 +86,7 @@ class Builder {
   std::span<const std::uint8_t> hidden_;
   LodBlendState* blend_;
   double now_;
+  DrawnRegions* drawn_;  ///< restricted drawing: caps applied and regions recorded (null: off)
   SvoArrays out_;
   std::vector<std::uint32_t> used_;
   /// Leaf records of nodes drawn from their own leaf, for the corner weights.
@@ -98,6 +101,43 @@ class Builder {
     const std::uint32_t d = vr_svo_coarser_lod(
         vr_svo_lod_pack(pair.a.lod_difference, pair.b.lod_difference), pair.factor);
     return level >= d ? level - d : 0;
+  }
+
+  /// The restricted drawing's data level of `pair` drawing a node at `level`: an own brick the
+  /// node's level, an ancestor's that ancestor's; exact constants impose nothing (exact_level).
+  static std::uint32_t restricted_level(std::uint32_t level, const KeyframePair& pair) {
+    std::uint32_t d = DrawnRegions::exact_level;
+    const auto take = [&](const KeyframePick& k) {
+      if (!(k.exact && k.lod_difference > 0)) d = std::min(d, level - k.lod_difference);
+    };
+    if (pair.factor != 1.0f) take(pair.a);
+    if (pair.factor != 0.0f) take(pair.b);
+    return d;
+  }
+
+  /// The node's keyframe pair, chosen again from coarser data when the restriction caps it.
+  KeyframePair choose_pair(std::uint32_t id) {
+    const KeyframePair pair =
+        select_keyframe_pair(index_, id, playhead_, resident_, settings_, &stored_);
+    if (!drawn_ || drawn_->cap_pass[id] < drawn_->caps_from) return pair;
+    const std::uint32_t level = index_.node(id).key.level, cap = drawn_->cap[id];
+    const std::uint32_t drawn = restricted_level(level, pair);
+    if (drawn == DrawnRegions::exact_level || drawn <= cap) return pair;
+    ++stats_.restricted_nodes;
+    return select_keyframe_pair(index_, id, playhead_, resident_, settings_, &stored_, level - cap);
+  }
+
+  /// Records for the restriction the region of `node` drawn by `owner`'s pair (or refined).
+  void record(std::uint32_t node, std::uint32_t owner, const KeyframePair* pair) {
+    DrawnRegions& d = *drawn_;
+    d.stamp[node] = d.pass;
+    d.owner[node] = owner;
+    d.refined[node] = pair == nullptr;
+    d.level[node] = static_cast<std::uint8_t>(
+        pair ? std::min<std::uint32_t>(restricted_level(index_.node(owner).key.level, *pair),
+                                       DrawnRegions::exact_level)
+             : 0);
+    d.nodes.push_back(node);
   }
 
   /// Marks `node` as a region drawn at data level `level` with temporal weight t.
@@ -148,6 +188,7 @@ class Builder {
                       std::uint32_t last_visit) {
     if (!pair.valid()) return {VR_SVO_CHILD_EMPTY, 0};
     if (pair.drawn_by_ancestor()) return {VR_SVO_CHILD_UP, 0};
+    if (drawn_) record(id, id, &pair);
     if (!blend_) return {VR_SVO_CHILD_LEAF, append_leaf(pair)};
     LodBlendState& b = *blend_;
     const vr_uint leaf = append_leaf(pair, parent);
@@ -180,8 +221,7 @@ class Builder {
 
   ChildResult visit(std::uint32_t id, vr_uint parent_record, const KeyframePair* parent) {
     const ViewTraversal::Visit& v = view_.visit(id);
-    const KeyframePair pair =
-        select_keyframe_pair(index_, id, playhead_, resident_, settings_, &stored_);
+    const KeyframePair pair = choose_pair(id);
     // The build that visited the node before this one (blending).
     const std::uint32_t last_visit =
         blend_ ? std::exchange(blend_->visited_build[id], blend_->build) : 0;
@@ -196,6 +236,10 @@ class Builder {
         ++stats_.holes;
       else if (pair.drawn_by_ancestor())
         ++stats_.ancestor_drawn;
+      if (blend_ && blend_->settings.fade_s > 0) {
+        const ChildResult out = fade_out(id, parent_record, pair);
+        if (out.kind == VR_SVO_CHILD_NODE) return out;
+      }
       return as_leaf(id, pair, parent, last_visit);
     }
     // 2. A node record for the refined node; children first, then this node's own leaf.
@@ -228,12 +272,80 @@ class Builder {
           vr_svo_child_word(children[i].kind, children[i].index);
     }
     if (any_up) out_.nodes[record * VR_SVO_NODE_WORDS + 9] = append_leaf(pair);
+    if (drawn_) {
+      this->record(id, id, nullptr);
+      for (vr_uint i = 0; i < 8; ++i)
+        if (children[i].kind == VR_SVO_CHILD_UP) this->record(n.children[i], id, &pair);
+    }
     if (blend_) {
       blend_->region_build[id] = blend_->build;
       blend_->region_refined[id] = 1;
       for (vr_uint i = 0; i < 8; ++i)
         if (children[i].kind == VR_SVO_CHILD_UP) mark_region(n.children[i], id, pair);
     }
+    return {VR_SVO_CHILD_NODE, record};
+  }
+
+  /// Fade-out on collapse: a target node that its children drew in the last build (or that is
+  /// still fading out) keeps a node record whose children with bricks of their own are drawn from
+  /// them, blended towards this node's drawing with weight 1 − (now − out_since) / fade_s; the
+  /// others are drawn "up" by its own leaf. Returns an empty result (and appends nothing) when
+  /// the node is not fading out or no child has bricks of its own.
+  ChildResult fade_out(std::uint32_t id, vr_uint parent_record, const KeyframePair& pair) {
+    LodBlendState& b = *blend_;
+    const std::uint32_t last = b.build - 1;
+    const SpatialNode& n = index_.node(id);
+    if (!pair.valid() || !n.has_children || last == 0) return {};
+    if (b.out_build[id] != last) {
+      // Not fading in the last build: a collapse if its children drew it then.
+      if (!(b.region_build[id] == last && b.region_refined[id])) return {};
+      b.out_since[id] = now_;
+    }
+    const double t = (now_ - b.out_since[id]) / b.settings.fade_s;
+    if (!(t < 1.0)) return {};
+    const auto w = static_cast<vr_uint>(std::lround(std::clamp(1.0 - t, 0.0, 1.0) * 255.0));
+    if (w == 0) return {};
+    // The children's own pairs (plain selection: they are not in the view's cut).
+    KeyframePair pairs[8];
+    bool any = false;
+    for (vr_uint i = 0; i < 8; ++i) {
+      if (n.children[i] == no_node) continue;
+      pairs[i] =
+          select_keyframe_pair(index_, n.children[i], playhead_, resident_, settings_, &stored_);
+      any |= pairs[i].valid() && !pairs[i].drawn_by_ancestor();
+    }
+    if (!any) return {};
+    b.out_build[id] = b.build;
+    const vr_uint record = append_node(parent_record, id);
+    const std::uint32_t level = n.key.level;
+    bool any_up = false;
+    for (vr_uint i = 0; i < 8; ++i) {
+      const std::uint32_t c = n.children[i];
+      vr_uint kind = VR_SVO_CHILD_EMPTY, index = 0;
+      if (c != no_node && pairs[i].valid() && !pairs[i].drawn_by_ancestor()) {
+        kind = VR_SVO_CHILD_LEAF;
+        index = append_leaf(pairs[i], &pair);
+        vr_uint* leaf = &out_.leaves[std::size_t{index} * VR_SVO_LEAF_WORDS];
+        leaf[7] = leaf[8] = w * 0x01010101u;
+        if (w != 255) {
+          const float g = std::bit_cast<float>(leaf[6]);
+          if (g != 1.0f) used_.push_back(leaf[4]);
+          if (g != 0.0f) used_.push_back(leaf[5]);
+          ++stats_.blended_leaves;
+        }
+        // Drawn from its own bricks: if it comes back into the cut it goes on without a fade-in.
+        b.own_build[c] = b.build;
+        mark(c, data_level(level + 1, pairs[i]), 1.0f);
+      } else if (c != no_node) {
+        kind = VR_SVO_CHILD_UP;
+        any_up = true;
+        mark_region(c, id, pair);
+      }
+      out_.nodes[record * VR_SVO_NODE_WORDS + 1 + i] = vr_svo_child_word(kind, index);
+    }
+    if (any_up) out_.nodes[record * VR_SVO_NODE_WORDS + 9] = append_leaf(pair);
+    b.region_build[id] = b.build;
+    b.region_refined[id] = 1;
     return {VR_SVO_CHILD_NODE, record};
   }
 
@@ -310,6 +422,46 @@ class Builder {
   }
 };
 
+/// Lowers the cap of each region's owner whose region touches one drawn two or more levels
+/// coarser; returns whether it lowered any. A region's 26 neighbouring cells of its node's level
+/// lead, walking up, to the coarser or equal regions that touch it; finer ones check it from their
+/// side.
+bool lower_caps(const SpatialIndex& index, DrawnRegions& d) {
+  bool lowered = false;
+  for (const std::uint32_t node : d.nodes) {
+    const std::uint32_t mine = d.level[node];
+    if (d.refined[node] || mine == DrawnRegions::exact_level || mine < 2) continue;
+    const NodeKey& k = index.node(node).key;
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          if (dx == 0 && dy == 0 && dz == 0) continue;
+          const std::int64_t x = std::int64_t{k.x} + dx, y = std::int64_t{k.y} + dy,
+                             z = std::int64_t{k.z} + dz;
+          if (x < 0 || y < 0 || z < 0) continue;
+          const std::uint32_t cell =
+              index.find({k.level, static_cast<std::uint32_t>(x), static_cast<std::uint32_t>(y),
+                          static_cast<std::uint32_t>(z)});
+          for (std::uint32_t n = cell; n != no_node; n = index.node(n).parent) {
+            if (d.stamp[n] != d.pass) continue;
+            // A refined cell holds finer regions; a refined ancestor, an empty octant.
+            const std::uint32_t other = d.level[n];
+            if (!d.refined[n] && other != DrawnRegions::exact_level && other + 1 < mine) {
+              const std::uint32_t owner = d.owner[node];
+              const auto cap = static_cast<std::uint8_t>(other + 1);
+              if (d.cap_pass[owner] < d.caps_from || cap < d.cap[owner]) {
+                d.cap[owner] = cap;
+                d.cap_pass[owner] = d.pass;
+                lowered = true;
+              }
+            }
+            break;
+          }
+        }
+  }
+  return lowered;
+}
+
 }  // namespace
 
 SvoArrays build_svo(const SpatialIndex& index, const ViewTraversal& view,
@@ -318,11 +470,62 @@ SvoArrays build_svo(const SpatialIndex& index, const ViewTraversal& view,
                     std::span<const std::uint8_t> hidden, LodBlendState* blend, double now) {
   SvoStats local;
   SvoStats& s = stats ? *stats : local;
-  s = SvoStats{};
   StoredTimes fresh;
-  return Builder(index, view, resident, playhead, settings, s, stored ? *stored : fresh, hidden,
-                 blend, now)
-      .run();
+  StoredTimes& st = stored ? *stored : fresh;
+  const bool blending = blend && (blend->settings.fade_s > 0 || blend->settings.spatial);
+  LodBlendState* const b = blending ? blend : nullptr;
+  s = SvoStats{};
+  if (!settings.restricted)
+    return Builder(index, view, resident, playhead, settings, s, st, hidden, b, now, nullptr).run();
+  // Restricted drawing: build (without touching the blending's state), lower the caps of the
+  // regions that touch one two or more levels coarser, and build again until none does. Caps only
+  // go down, so this ends; then the last build stands, or one more with the blending.
+  DrawnRegions own;
+  DrawnRegions& d = blend ? blend->drawn : own;
+  d.reset(index.node_count());
+  d.start_build();
+  for (std::uint32_t extra = 0;; ++extra) {
+    d.start_pass();
+    s = SvoStats{};
+    SvoArrays out =
+        Builder(index, view, resident, playhead, settings, s, st, hidden, nullptr, now, &d).run();
+    if (lower_caps(index, d)) continue;
+    if (blending) {
+      d.start_pass();
+      s = SvoStats{};
+      out = Builder(index, view, resident, playhead, settings, s, st, hidden, b, now, &d).run();
+      ++extra;
+    }
+    s.restriction_builds = extra;
+    return out;
+  }
+}
+
+void DrawnRegions::reset(std::size_t node_count) {
+  if (stamp.size() == node_count) return;
+  pass = caps_from = 0;
+  stamp.assign(node_count, 0);
+  owner.assign(node_count, 0);
+  level.assign(node_count, 0);
+  refined.assign(node_count, 0);
+  cap_pass.assign(node_count, 0);
+  cap.assign(node_count, 0);
+  nodes.clear();
+}
+
+void DrawnRegions::start_build() {
+  caps_from = pass + 1;
+}
+
+void DrawnRegions::start_pass() {
+  nodes.clear();
+  if (++pass == 0) {  // wrapped: clear the stamps (caps of this build are lost: more passes)
+    const std::size_t n = stamp.size();
+    reset(0);
+    reset(n);
+    pass = 1;
+  }
+  if (caps_from == 0) caps_from = 1;
 }
 
 void LodBlendState::reset(std::size_t nodes) {
@@ -331,6 +534,8 @@ void LodBlendState::reset(std::size_t nodes) {
   visited_build.assign(nodes, 0);
   own_build.assign(nodes, 0);
   since.assign(nodes, 0);
+  out_build.assign(nodes, 0);
+  out_since.assign(nodes, 0);
   region_build.assign(nodes, 0);
   region_level.assign(nodes, 0);
   region_refined.assign(nodes, 0);

@@ -85,11 +85,13 @@ loaded = int(rows[-1]["bytes_loaded"])
 assert 0 < loaded, "nothing loaded"
 assert all(float(r["psnr_db"]) > 0 for r in rows)
 assert all(0 <= int(r["blended_leaves"]) <= int(r["svo_leaves"]) for r in rows)
+assert all(0 <= int(r["restricted_nodes"]) for r in rows)
 PY
 /usr/bin/python3 - "$work/slow/summary.json" <<'PY' || fail "blending settings not in summary.json"
 import json, sys
 d = json.load(open(sys.argv[1]))
 assert d["spatial_blend"] is True and d["lod_fade_s"] == 0.5, d
+assert d["restricted"] is True and d["restricted_drawing"] is True, d
 PY
 "$volreel" bench stream "$work/a.vreel" --series "$work/s-moved" --bandwidth 0 --duration 1 --size 32x32 --policy nearest \
   --out "$work/n" > "$work/n.txt" 2>/dev/null || fail "bench stream --series"

@@ -301,7 +301,47 @@ TEST_F(StreamSelection, LodBlendingFadesNewDetailInAndBlendsTowardsCoarserNeighb
     EXPECT_EQ(leaf_of(svo, o)[8], VR_SVO_BLEND_NONE) << o;
   }
   EXPECT_EQ(stats.blended_leaves, 0u);
-  // 7. A node first seen with its bricks resident (not visited in the last build) is drawn at
+  // 7. The camera moves away and the root alone is the cut (a collapse): the octants fade out
+  //    towards the root's drawing, each leaf's coarse pair the root's, then the root draws alone.
+  ViewTraversal far_view;
+  player::OrbitCamera far_cam = cam;
+  far_cam.distance *= 100;
+  far_view.run(index, far_cam, 1.0);
+  ASSERT_FALSE(far_view.visit(0).refine);
+  const auto build_far = [&](double now) {
+    SvoArrays far =
+        build_svo(index, far_view, everything, 5.25, {}, &stats, nullptr, {}, &blend, now);
+    EXPECT_TRUE(validate_svo(far.nodes, far.leaves, 18, index.level_count()).empty());
+    return far;
+  };
+  svo = build_far(5.0);
+  ASSERT_EQ(svo.nodes.size(), VR_SVO_NODE_WORDS);
+  EXPECT_EQ(stats.target_nodes, 1u);
+  for (std::uint32_t o = 0; o < 8; ++o) {
+    EXPECT_EQ(corners(leaf_of(svo, o)),
+              (std::array<std::uint32_t, 8>{255, 255, 255, 255, 255, 255, 255, 255}))
+        << o;
+    EXPECT_EQ(leaf_of(svo, o)[4], 0u);  // coarse pair: the root's
+  }
+  svo = build_far(5.5);
+  for (std::uint32_t o = 0; o < 8; ++o)
+    EXPECT_EQ(corners(leaf_of(svo, o)),
+              (std::array<std::uint32_t, 8>{128, 128, 128, 128, 128, 128, 128, 128}))
+        << o;
+  EXPECT_EQ(stats.blended_leaves, 8u);
+  EXPECT_EQ(stats.used_slots.size(), 18u);  // the octants' slots are kept while they fade
+  svo = build_far(6.0);
+  EXPECT_EQ(svo.leaves.size(), VR_SVO_LEAF_WORDS);  // faded out: the root's leaf alone
+  for (std::uint32_t o = 0; o < 8; ++o)
+    EXPECT_EQ(vr_svo_child_kind(svo.nodes[1 + o]), VR_SVO_CHILD_UP) << o;
+  EXPECT_EQ(stats.used_slots, (std::vector<std::uint32_t>{0, 1}));
+  // Without a fade, a collapse is at once.
+  LodBlendState instant;
+  instant.settings.spatial = true;
+  build_svo(index, view, everything, 5.25, {}, &stats, nullptr, {}, &instant, 0.0);
+  svo = build_svo(index, far_view, everything, 5.25, {}, &stats, nullptr, {}, &instant, 0.1);
+  EXPECT_EQ(svo.leaves.size(), VR_SVO_LEAF_WORDS);
+  // 8. A node first seen with its bricks resident (not visited in the last build) is drawn at
   //    once; without spatial blending its corners next to coarser octants are not lowered.
   LodBlendState fresh;
   fresh.settings.fade_s = 1.0;
@@ -309,7 +349,7 @@ TEST_F(StreamSelection, LodBlendingFadesNewDetailInAndBlendsTowardsCoarserNeighb
   svo = build_svo(index, view, with_c0, 5.25, {}, &stats, nullptr, {}, &fresh, 10.0);
   EXPECT_EQ(leaf_of(svo, 0)[7], VR_SVO_BLEND_NONE);
   EXPECT_EQ(leaf_of(svo, 0)[8], VR_SVO_BLEND_NONE);
-  // 8. At start-up (nothing drawn in the last build, a hole) new bricks are drawn at once: there
+  // 9. At start-up (nothing drawn in the last build, a hole) new bricks are drawn at once: there
   //    is no drawing to fade from.
   LodBlendState start;
   start.settings.fade_s = 1.0;
@@ -321,6 +361,126 @@ TEST_F(StreamSelection, LodBlendingFadesNewDetailInAndBlendsTowardsCoarserNeighb
   svo = build_svo(index, view, with_c0, 5.25, {}, &stats);
   EXPECT_EQ(leaf_of(svo, 0)[7], VR_SVO_BLEND_NONE);
   EXPECT_EQ(leaf_of(svo, 0)[4], VR_ATLAS_NO_SLOT);
+}
+
+/// The regions an SVO draws: per spatial node whose cell a leaf or an "up" octant covers, the data
+/// level it is drawn at (the node's level minus the coarser LOD difference its keyframes read).
+std::vector<std::pair<std::uint32_t, std::uint32_t>> drawn_regions(const SpatialIndex& index,
+                                                                   const SvoArrays& svo) {
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> regions;
+  const auto data_level = [&](std::uint32_t level, std::uint32_t leaf) {
+    const std::uint32_t* w = &svo.leaves[std::size_t{leaf} * VR_SVO_LEAF_WORDS];
+    return level - vr_svo_coarser_lod(w[2], std::bit_cast<float>(w[3]));
+  };
+  const std::size_t records = svo.nodes.size() / VR_SVO_NODE_WORDS;
+  for (std::size_t r = 0; r < records; ++r) {
+    const std::uint32_t* w = &svo.nodes[r * VR_SVO_NODE_WORDS];
+    const SpatialNode& n = index.node(svo.node_ids[r]);
+    for (std::uint32_t i = 0; i < 8; ++i) {
+      const std::uint32_t kind = vr_svo_child_kind(w[1 + i]);
+      const std::uint32_t cell = n.has_children ? n.children[i] : svo.node_ids[r];
+      if (kind == VR_SVO_CHILD_LEAF)
+        regions.emplace_back(cell, data_level(n.key.level + 1, vr_svo_child_index(w[1 + i])));
+      else if (kind == VR_SVO_CHILD_UP)
+        regions.emplace_back(cell, data_level(n.key.level, w[9]));
+    }
+  }
+  return regions;
+}
+
+/// Pairs of drawn regions that touch (by a face, an edge or a corner) with data levels more than
+/// one apart.
+std::size_t drawn_violations(const SpatialIndex& index, const SvoArrays& svo) {
+  const auto regions = drawn_regions(index, svo);
+  std::size_t violations = 0;
+  for (std::size_t i = 0; i < regions.size(); ++i)
+    for (std::size_t j = i + 1; j < regions.size(); ++j) {
+      const SpatialNode &a = index.node(regions[i].first), &b = index.node(regions[j].first);
+      bool touch = true;
+      for (std::size_t k = 0; k < 3; ++k) touch = touch && a.lo[k] <= b.hi[k] && b.lo[k] <= a.hi[k];
+      const std::uint32_t la = regions[i].second, lb = regions[j].second;
+      if (touch && (la > lb + 1 || lb > la + 1)) ++violations;
+    }
+  return violations;
+}
+
+TEST(StreamSvoRestricted, TouchingRegionsAreDrawnAtMostOneLevelApart) {
+  // 80³ in bricks of 12³: 4 levels; every visible node refined to the finest.
+  const SpatialIndex index = test::make_index({80, 80, 80}, 2, 12);
+  ASSERT_EQ(index.level_count(), 4u);
+  ViewTraversal view;
+  view.run(index, test::close_camera({80, 80, 80}), 0.5);
+  // A finest node X at the volume's corner, and its ancestors A2 (level 2) and A1 (level 1): each
+  // touches only its own siblings, inside its parent's cell.
+  const std::uint32_t x = index.find({3, 0, 0, 0});
+  ASSERT_NE(x, no_node);
+  ASSERT_TRUE(view.visited(x));
+  ASSERT_FALSE(view.visit(x).refine);
+  const std::uint32_t a2 = index.node(x).parent, a1 = index.node(a2).parent;
+  for (const std::uint32_t n : {x, a2, a1, 0u})
+    ASSERT_FALSE(index.keyframe(index.find_keyframe(n, 0)).subtree_constant);
+  const SelectionSettings restricted;  // the default
+  EXPECT_TRUE(restricted.restricted);
+  SelectionSettings free;
+  free.restricted = false;
+  const auto build = [&](const ResidentKeyframes& r, const SelectionSettings& s, SvoStats& st) {
+    SvoArrays svo = build_svo(index, view, r, 0.0, s, &st);
+    EXPECT_TRUE(validate_svo(svo.nodes, svo.leaves, 8, index.level_count()).empty());
+    return svo;
+  };
+  const auto max_level = [&](const SvoArrays& svo) {
+    std::uint32_t m = 0;
+    for (const auto& region : drawn_regions(index, svo)) m = std::max(m, region.second);
+    return m;
+  };
+  SvoStats free_stats, stats;
+
+  // 1. Every ancestor resident: X at level 3 beside its siblings drawn by A2 (2), A2's siblings
+  //    by A1 (1), A1's by the root (0). Nothing to restrict: the same SVO either way.
+  const auto chain = resident(index, {{0, 0}, {a1, 0}, {a2, 0}, {x, 0}});
+  const SvoArrays free_chain = build(chain, free, free_stats);
+  EXPECT_EQ(drawn_violations(index, free_chain), 0u);
+  const SvoArrays chain_r = build(chain, restricted, stats);
+  EXPECT_EQ(chain_r.nodes, free_chain.nodes);
+  EXPECT_EQ(chain_r.leaves, free_chain.leaves);
+  EXPECT_EQ(stats.restricted_nodes, 0u);
+  EXPECT_EQ(stats.restriction_builds, 0u);
+  EXPECT_EQ(max_level(chain_r), 3u);
+
+  // 2. A2 missing: X (3) touches its siblings, drawn by A1's data (1). X is drawn from A1 too.
+  const auto no_a2 = resident(index, {{0, 0}, {a1, 0}, {x, 0}});
+  const SvoArrays free_no_a2 = build(no_a2, free, free_stats);
+  EXPECT_GT(drawn_violations(index, free_no_a2), 0u);
+  EXPECT_EQ(max_level(free_no_a2), 3u);
+  const SvoArrays no_a2_r = build(no_a2, restricted, stats);
+  EXPECT_EQ(drawn_violations(index, no_a2_r), 0u);
+  EXPECT_EQ(max_level(no_a2_r), 1u);  // A1's detail kept
+  EXPECT_EQ(stats.restricted_nodes, 1u);
+  EXPECT_EQ(stats.restriction_builds, 1u);
+
+  // 3. A1 missing: A2's regions (2) touch the root's (0), and then X (3) touches the root's: both
+  //    drawn from the root, in two rounds.
+  const auto no_a1 = resident(index, {{0, 0}, {a2, 0}, {x, 0}});
+  const SvoArrays free_no_a1 = build(no_a1, free, free_stats);
+  EXPECT_GT(drawn_violations(index, free_no_a1), 0u);
+  const SvoArrays no_a1_r = build(no_a1, restricted, stats);
+  EXPECT_EQ(drawn_violations(index, no_a1_r), 0u);
+  EXPECT_EQ(max_level(no_a1_r), 0u);
+  EXPECT_EQ(stats.restricted_nodes, 2u);
+  EXPECT_EQ(stats.restriction_builds, 2u);
+  EXPECT_EQ(stats.target_nodes, free_stats.target_nodes);
+
+  // 4. With the blending's state: the same drawing, and the state's scratch reused.
+  LodBlendState blend;
+  blend.settings.fade_s = 1.0;
+  SvoStats blend_stats;
+  const SvoArrays blended =
+      build_svo(index, view, no_a1, 0.0, restricted, &blend_stats, nullptr, {}, &blend, 0.0);
+  EXPECT_TRUE(validate_svo(blended.nodes, blended.leaves, 8, index.level_count()).empty());
+  EXPECT_EQ(drawn_violations(index, blended), 0u);
+  EXPECT_EQ(blend_stats.restricted_nodes, 2u);
+  EXPECT_EQ(blend_stats.restriction_builds, 3u);  // two rounds, then the build that blends
+  EXPECT_EQ(blend.drawn.stamp.size(), index.node_count());
 }
 
 TEST(StreamSvo, ValidationFindsBrokenTrees) {

@@ -315,6 +315,7 @@ SchedulerSetup scheduler_setup(const BenchStreamSettings& o, double bandwidth, d
   ss.ray_feedback = o.ray_feedback;
   ss.lod_blend.spatial = o.spatial_blend;
   ss.priority.restricted = o.restricted;
+  ss.selection.restricted = o.restricted_drawing;
   ss.lod_blend.fade_s = o.lod_fade;
   ss.upload_budget_bytes = static_cast<std::uint64_t>(o.upload_budget_mb * 1e6);
   ss.loader.bandwidth_bytes_per_s = bandwidth;
@@ -481,6 +482,7 @@ nlohmann::json bench_summary_json(const BenchStreamSettings& o, const std::strin
       {"lod_fade_s", o.lod_fade},
       {"spatial_blend", o.spatial_blend},
       {"restricted", o.restricted},
+      {"restricted_drawing", o.restricted_drawing},
       {"size", {setup.width, setup.height}},
       {"ground_truth", original_truth ? "original series" : "container finest level"}};
   if (tours.size() == 1) {

@@ -24,7 +24,8 @@ void write_csv(const std::filesystem::path& path, const RunResult& r,
          "at_target_nodes,current_nodes,target_nodes,holes,root_resident,bytes_loaded,"
          "bytes_uploaded_total,uploads,bytes_uploaded,requests_sent,requests_in_flight,"
          "arrivals_discarded,atlas_occupied,selected,svo_nodes,svo_leaves,hidden_nodes,"
-         "hidden_targets,forced_nodes,blended_leaves,update_ms,decode_ms,render_ms,measure_ms,"
+         "hidden_targets,forced_nodes,restricted_nodes,blended_leaves,update_ms,decode_ms,render_"
+         "ms,measure_ms,"
          "frame_ms\n";
   std::size_t next_seek = 0;
   for (std::size_t i = 0; i < r.frames.size(); ++i) {
@@ -39,7 +40,7 @@ void write_csv(const std::filesystem::path& path, const RunResult& r,
     std::snprintf(
         row, sizeof row,
         "%zu,%.4f,%.4f,%d,%.4f,%.5f,%.4f,%.4f,%.5f,%.5f,%u,%u,%u,%u,%d,%llu,%llu,%zu,%llu,%zu,%zu,%"
-        "zu,%u,%u,%u,%u,%u,%u,%u,%u,%.3f,%.3f,"
+        "zu,%u,%u,%u,%u,%u,%u,%u,%u,%u,%.3f,%.3f,"
         "%.3f,%.3f,%.3f\n",
         i, f.time, f.playhead, seek ? 1 : 0, f.psnr, f.ssim, f.popping, f.seam,
         s.fraction_at_target, f.fraction_current, s.at_target_nodes, f.current_nodes,
@@ -48,8 +49,8 @@ void write_csv(const std::filesystem::path& path, const RunResult& r,
         static_cast<unsigned long long>(f.bytes_uploaded), s.uploads,
         static_cast<unsigned long long>(s.bytes_uploaded), s.requests_sent, s.requests_in_flight,
         s.arrivals_discarded, s.atlas_occupied, s.selected, s.svo_nodes, s.svo_leaves,
-        s.hidden_nodes, s.hidden_targets, s.forced_nodes, s.blended_leaves, f.update_ms,
-        f.decode_ms, f.render_ms, f.measure_ms, f.frame_ms);
+        s.hidden_nodes, s.hidden_targets, s.forced_nodes, s.restricted_nodes, s.blended_leaves,
+        f.update_ms, f.decode_ms, f.render_ms, f.measure_ms, f.frame_ms);
     csv << row;
   }
   csv.close();

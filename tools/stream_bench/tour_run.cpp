@@ -107,7 +107,10 @@ bool has_exact_data(const stream::SpatialIndex& index, std::uint32_t node, std::
 /// side. StreamStats::fraction_at_target counts
 /// spatial detail only — a node drawn from its own bricks of keyframes far from the playhead
 /// counts there (a stale frame after a seek), not here. Recomputed from the scheduler's atlas
-/// with the same view traversal and selection as its update().
+/// with the same view traversal and selection as its update(), before the restricted drawing
+/// (SelectionSettings::restricted): a node it draws coarser still counts here. It only draws a
+/// node coarser while a touching region's finer bricks are missing, so once the view's bricks
+/// are all loaded both agree.
 std::uint32_t current_target_nodes(const stream::StreamScheduler& scheduler,
                                    const player::OrbitCamera& camera, double playhead,
                                    stream::ViewTraversal& view,

@@ -212,6 +212,11 @@ void add_bench_stream_command(CLI::App& bench) {
                   "differing by at\n"
                   "most one level (a coarser neighbour is refined too) (true/false)")
       ->capture_default_str();
+  cmd->add_option("--restricted-drawing", o->s.restricted_drawing,
+                  "Both policies: regions drawn from data more than one level finer than a "
+                  "region they touch\n"
+                  "are drawn coarser, while bricks stream in (true/false)")
+      ->capture_default_str();
   cmd->add_option("--spatial-blend", o->s.spatial_blend,
                   "Both policies: a node's corners next to a coarser neighbour take its parent's "
                   "drawing, so\n"

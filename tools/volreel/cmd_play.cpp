@@ -158,6 +158,11 @@ void add_play_command(CLI::App& app) {
                   "one level; a coarser neighbour is refined too (true/false)")
       ->capture_default_str();
   cmd->add_option(
+         "--restricted-drawing", o->player.restricted_drawing,
+         "Restricted drawing: while bricks stream in, a region drawn from data more than one "
+         "level finer than a region it touches is drawn coarser (true/false)")
+      ->capture_default_str();
+  cmd->add_option(
          "--ray-feedback", o->player.ray_feedback,
          "Leave out of the streaming the nodes no ray reached in a recent frame (behind "
          "opaque material, outside the image), from the ray caster's feedback (true/false)")

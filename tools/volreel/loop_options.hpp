@@ -12,7 +12,7 @@ namespace volreel::cli {
 
 /// --atlas-mb, --bandwidth, --latency, --sse-target, --upload-budget, --step,
 /// --max-step-doublings, --no-culling, --decode, --lod-fade, --spatial-blend, --restricted,
-/// --ray-feedback.
+/// --restricted-drawing, --ray-feedback.
 inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
   cmd.add_option("--atlas-mb", loop.atlas_mb,
                  "Brick atlas memory, MiB (2 bytes a voxel: 93 312 bytes per slot of 36^3, 574 992 "
@@ -53,6 +53,11 @@ inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
   cmd.add_option("--restricted", loop.restricted,
                  "Restricted working set: the view's target nodes that touch differ by at most "
                  "one level; a coarser neighbour is refined too (true/false)")
+      ->capture_default_str();
+  cmd.add_option(
+         "--restricted-drawing", loop.restricted_drawing,
+         "Restricted drawing: while bricks stream in, a region drawn from data more than one "
+         "level finer than a region it touches is drawn coarser (true/false)")
       ->capture_default_str();
   cmd.add_option("--ray-feedback", loop.ray_feedback,
                  "Leave out of the streaming the nodes no ray reached in a recent frame (behind "

@@ -96,6 +96,7 @@ Player::Player(const PlayerOptions& options)
   setup.scheduler.lod_blend = options.lod_blend;
   setup.scheduler.ray_feedback = options.ray_feedback;
   setup.scheduler.priority.restricted = options.restricted;
+  setup.scheduler.selection.restricted = options.restricted_drawing;
   setup.decode = options.decode;
   setup.width = render_size(swapchain_->extent()).width;
   setup.height = render_size(swapchain_->extent()).height;

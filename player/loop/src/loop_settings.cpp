@@ -116,6 +116,7 @@ void apply(const LoopSettings& s, FrameLoopOptions& o) {
   o.scheduler.lod_blend.fade_s = s.lod_fade;
   o.scheduler.lod_blend.spatial = s.spatial_blend;
   o.scheduler.priority.restricted = s.restricted;
+  o.scheduler.selection.restricted = s.restricted_drawing;
   o.scheduler.ray_feedback = s.ray_feedback;
 }
 

@@ -63,6 +63,8 @@ struct PlayerOptions {
   stream::LodBlendSettings lod_blend;
   /// A restricted working set (stream::PrioritySettings::restricted).
   bool restricted = stream::PrioritySettings{}.restricted;
+  /// Restricted drawing (stream::SelectionSettings::restricted).
+  bool restricted_drawing = stream::SelectionSettings{}.restricted;
   /// Ray-guided feedback (stream::SchedulerSettings::ray_feedback).
   bool ray_feedback = stream::SchedulerSettings{}.ray_feedback;
   std::string script;            ///< script text (script.hpp), empty for none

@@ -28,6 +28,8 @@ struct LoopSettings {
   bool spatial_blend = stream::LodBlendSettings{}.spatial;
   /// A restricted working set (stream::PrioritySettings::restricted).
   bool restricted = stream::PrioritySettings{}.restricted;
+  /// Restricted drawing (stream::SelectionSettings::restricted).
+  bool restricted_drawing = stream::SelectionSettings{}.restricted;
   /// Ray-guided feedback (stream::SchedulerSettings::ray_feedback).
   bool ray_feedback = stream::SchedulerSettings{}.ray_feedback;
 };

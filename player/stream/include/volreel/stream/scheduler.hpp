@@ -94,6 +94,8 @@ struct StreamStats {
   std::uint32_t hidden_nodes = 0, hidden_targets = 0;
   /// Visited nodes refined for the restricted working set alone (PrioritySettings::restricted).
   std::uint32_t forced_nodes = 0;
+  /// Nodes drawn coarser for the restricted drawing (SelectionSettings::restricted).
+  std::uint32_t restricted_nodes = 0;
   double fraction_at_target = 0;  ///< at_target_nodes / target_nodes (1 when none; 0 while
                                   ///< the index does not hold the frames around the playhead)
   bool index_ready = true;        ///< the index holds the frames around the playhead

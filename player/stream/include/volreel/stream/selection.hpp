@@ -39,6 +39,12 @@ namespace volreel::stream {
 struct SelectionSettings {
   double ancestor_handicap = 4.0;      ///< score × exp(ancestor_handicap · levels up)
   double missing_side_factor = 200.0;  ///< score × this when a node has nothing on one side
+  /// Restricted drawing (svo_builder.hpp, build_svo): regions of the SVO that touch are drawn
+  /// from data at most one level apart, a finer one drawn coarser where needed. On by default:
+  /// it completes the restricted working set that spatial blending assumes, and on the
+  /// benchmark tours it changed mean image PSNR by at most 0.01 dB (docs/benchmarks.md,
+  /// "Restricted working set").
+  bool restricted = true;
 };
 
 /// A keyframe node in the atlas.
@@ -103,10 +109,13 @@ class StoredTimes {
 
 /// Two keyframe nodes for spatial node `node` at playhead p (keyframe units), from `resident`.
 /// `stored`: a StoredTimes started for this index and playhead, shared by the calls of one pass
-/// (null: looked up for this call alone).
+/// (null: looked up for this call alone). `min_lod_difference`: candidates from fewer levels above
+/// the node are passed over, except constant subtrees (exact data); the restricted drawing of
+/// svo_builder.hpp draws a node coarser this way.
 KeyframePair select_keyframe_pair(const SpatialIndex& index, std::uint32_t node, double playhead,
                                   const ResidentKeyframes& resident,
                                   const SelectionSettings& settings = {},
-                                  StoredTimes* stored = nullptr);
+                                  StoredTimes* stored = nullptr,
+                                  std::uint32_t min_lod_difference = 0);
 
 }  // namespace volreel::stream

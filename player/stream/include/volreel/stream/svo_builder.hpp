@@ -45,9 +45,13 @@ struct SvoStats {
   /// not in target_nodes.
   std::uint32_t hidden_targets = 0;
   std::uint32_t node_records = 0, leaf_records = 0;
-  std::uint32_t ancestor_drawn = 0;       ///< target nodes drawn by an ancestor
-  std::uint32_t holes = 0;                ///< target nodes with nothing resident at all
-  std::uint32_t blended_leaves = 0;       ///< leaf records whose weights blend (not all 255)
+  std::uint32_t ancestor_drawn = 0;  ///< target nodes drawn by an ancestor
+  std::uint32_t holes = 0;           ///< target nodes with nothing resident at all
+  std::uint32_t blended_leaves = 0;  ///< leaf records whose weights blend (not all 255)
+  /// Restricted drawing: nodes whose own keyframe pair was chosen coarser so that the regions
+  /// they draw touch none drawn two or more levels coarser.
+  std::uint32_t restricted_nodes = 0;
+  std::uint32_t restriction_builds = 0;   ///< extra builds the restriction took
   std::vector<std::uint32_t> used_slots;  ///< atlas slots the leaves reference (unique)
 };
 
@@ -65,14 +69,36 @@ struct LodBlendSettings {
   bool spatial = false;
 };
 
+/// Scratch of the restricted drawing (SelectionSettings::restricted), per spatial node: the
+/// regions one build draws and the data level each node's own drawing is held to.
+struct DrawnRegions {
+  std::uint32_t pass = 0;               ///< passes so far (stamps below: 0 never)
+  std::uint32_t caps_from = 0;          ///< first pass of the current build (caps older are void)
+  std::vector<std::uint32_t> stamp;     ///< pass that drew the node's region (or refined it)
+  std::vector<std::uint32_t> owner;     ///< the node whose keyframe pair draws the region
+  std::vector<std::uint8_t> level;      ///< its data level (exact_level: exact constants)
+  std::vector<std::uint8_t> refined;    ///< a node record, drawn by its children
+  std::vector<std::uint32_t> cap_pass;  ///< pass that set the node's cap
+  std::vector<std::uint8_t> cap;        ///< the finest data level the node's own pair may draw at
+  std::vector<std::uint32_t> nodes;     ///< the regions the current pass recorded
+  static constexpr std::uint8_t exact_level = 255;
+  /// Sizes the per-node arrays for an index of `node_count` nodes (clears them when it changes).
+  void reset(std::size_t node_count);
+  void start_build();  ///< caps set before now are void
+  void start_pass();   ///< regions recorded before now are void
+};
+
 /// What level-of-detail blending keeps from one build to the next, per spatial node, and the
 /// scratch of one build. Pass the same object to every build_svo of one view.
 struct LodBlendState {
   LodBlendSettings settings;
-  std::uint32_t build = 0;                   ///< builds so far (stamps below: 0 never)
+  DrawnRegions drawn;       ///< the restricted drawing's scratch (used also when nothing blends)
+  std::uint32_t build = 0;  ///< builds so far (stamps below: 0 never)
   std::vector<std::uint32_t> visited_build;  ///< last build the view visited the node in
   std::vector<std::uint32_t> own_build;      ///< last build it was drawn from a leaf of its own
   std::vector<double> since;                 ///< when it was first drawn from its own leaf
+  std::vector<std::uint32_t> out_build;      ///< last build it faded out (a collapse)
+  std::vector<double> out_since;             ///< when its collapse began
   // One build's regions, per spatial node: drawn (own leaf or an ancestor's as "up") at data
   // level `region_level` with temporal weight `region_t`, or a node record (refined).
   std::vector<std::uint32_t> region_build;
@@ -86,7 +112,15 @@ struct LodBlendState {
 /// Builds the SVO for the nodes visited by `view` at playhead p from the resident keyframe nodes.
 /// `hidden` (per spatial node, nonzero: no ray reached it; empty: none is) only moves target
 /// nodes from SvoStats::target_nodes to hidden_targets; they are drawn alike.
-/// `blend` (null: no blending, every leaf's weights VR_SVO_BLEND_NONE): level-of-detail blending
+/// Restricted drawing (settings.restricted, Thiele, Matthes, Froehlich §4.1 applied to what is
+/// drawn): where two regions of the SVO touch (by a face, an edge or a corner), their data levels
+/// differ by at most one. While bricks stream in, a node drawn from its own bricks can touch one
+/// drawn from a grandparent's; the finer one is then drawn coarser, its pair chosen again from at
+/// least the level above the coarse neighbour's + 1 (select_keyframe_pair's min_lod_difference),
+/// and the build repeats until no region needs it (SvoStats::restricted_nodes). A region's data
+/// level here counts exact constants as exact: they neither take nor impose a limit.
+/// `blend` (null: no blending, every leaf's weights VR_SVO_BLEND_NONE; with `blend` and neither
+/// fade_s nor spatial set, only its scratch is used): level-of-detail blending
 /// at time `now` (seconds on the caller's clock). A node drawn from a leaf record of its own (a
 /// VR_SVO_CHILD_LEAF child) gets its parent's keyframe pair as its coarse pair (LOD differences
 /// + 1) and corner weights: the least of its temporal weight min(1, (now − since) / fade_s) and

@@ -122,6 +122,7 @@ struct BenchStreamSettings {
   double lod_fade = stream::LodBlendSettings{}.fade_s;  ///< stream::LodBlendSettings
   bool spatial_blend = stream::LodBlendSettings{}.spatial;
   bool restricted = stream::PrioritySettings{}.restricted;
+  bool restricted_drawing = stream::SelectionSettings{}.restricted;
   double step = 1.0;
   double upload_budget_mb = 64;
   std::uint64_t seed = 1;
