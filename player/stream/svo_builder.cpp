@@ -514,18 +514,20 @@ void DrawnRegions::reset(std::size_t node_count) {
 }
 
 void DrawnRegions::start_build() {
-  caps_from = pass + 1;
+  caps_from = pass + 1;  // 0 at the wrap, which the next start_pass handles
 }
 
 void DrawnRegions::start_pass() {
   nodes.clear();
-  if (++pass == 0) {  // wrapped: clear the stamps (caps of this build are lost: more passes)
+  if (++pass == 0) {
+    // Wrapped: clear the stamps. Caps set so far in this build are lost (more passes), and those
+    // set from now on count: caps_from must not stay above the new stamps, or no cap would hold
+    // and the build would never end.
     const std::size_t n = stamp.size();
     reset(0);
     reset(n);
-    pass = 1;
+    pass = caps_from = 1;
   }
-  if (caps_from == 0) caps_from = 1;
 }
 
 void LodBlendState::reset(std::size_t nodes) {
