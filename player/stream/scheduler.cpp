@@ -289,6 +289,21 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     resident.reserve(selection_.size());
     for (std::size_t i = 0; i < selection_.size(); ++i)
       if (slot_of_[i] != no_slot) resident.push_back({selection_[i].keyframe, slot_of_[i]});
+    // A fade-out on collapse draws the children of a node they drew in the last build (or that
+    // was fading out then) from their own bricks while it lasts. They are no longer selected, but
+    // their slots keep them until overwritten (over-writeable), and the build marks the slots it
+    // draws from as used, so that no upload overwrites them while a GPU frame samples them.
+    if (settings_.lod_blend.fade_s > 0 && blend_.build > 0)
+      for (const std::uint32_t slot : atlas_.overwriteable_slots()) {
+        const auto key = atlas_.key(slot);
+        const KeyframeId id = key ? index_.find_keyframe(*key) : no_keyframe;
+        if (id == no_keyframe) continue;
+        const std::uint32_t parent = index_.node(SpatialIndex::node_of(id)).parent;
+        if (parent == no_node || parent >= blend_.region_build.size()) continue;
+        if ((blend_.region_build[parent] == blend_.build && blend_.region_refined[parent]) ||
+            blend_.out_build[parent] == blend_.build)
+          resident.push_back({id, slot});
+      }
     resident_.assign(index_, resident);
     SvoStats svo_stats;
     blend_.settings = settings_.lod_blend;

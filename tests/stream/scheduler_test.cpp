@@ -617,6 +617,79 @@ TEST(StreamScheduler, SlotsSampledByUnretiredGpuFramesAreNotOverwritten) {
   (void)unretired;
 }
 
+// A collapse fades out in the scheduler too: when the camera moves away and the root alone is the
+// cut, its children are no longer selected and their slots become over-writeable, but they still
+// hold the children's bricks. For fade_s the children are drawn from them, their weights falling
+// from 255, and their slots are marked used (no upload may overwrite a slot a GPU frame samples);
+// then the root is drawn alone.
+TEST(StreamScheduler, ACollapseFadesOutFromBricksTheAtlasStillHolds) {
+  test::TempDir dir("stream-scheduler-fade-out");
+  const auto path = test::make_container(dir.path(), dims, 4);
+  const format::Container c(path);
+  double now = 0;
+  SchedulerSettings settings;
+  settings.atlas_slots = 64;
+  settings.lod_blend.fade_s = 1.0;
+  settings.loader.clock = [&] { return now; };
+  StreamScheduler s(c, settings);
+  const auto close = test::close_camera(dims);
+  auto far = close;
+  far.distance *= 100;  // the root alone is visited
+  std::uint64_t frame = 0;
+  const double playhead = 1.5;
+  // 1. Close: everything arrives and fades in; the root refines into its 8 children.
+  FrameUpdate u;
+  for (int i = 0; i < 400; ++i, now += 0.05) {
+    u = s.update(close, playhead, frame);
+    s.retire(frame++);
+    if (u.stats.fraction_at_target == 1.0 && u.stats.atlas_occupied == 36 &&
+        u.stats.blended_leaves == 0 && now > 2)
+      break;
+  }
+  ASSERT_EQ(u.stats.atlas_occupied, 36u);
+  ASSERT_EQ(u.stats.target_nodes, 8u);
+  ASSERT_EQ(u.svo_leaves.size(), 8 * VR_SVO_LEAF_WORDS);
+  // 2. Far: the children fade out from their own bricks, then the root's leaf is drawn alone.
+  std::vector<std::uint32_t> weights;
+  for (int i = 0; i < 30; ++i, now += 0.1, s.retire(frame++)) {
+    u = s.update(far, playhead, frame);
+    EXPECT_TRUE(u.uploads.empty());
+    EXPECT_EQ(u.stats.target_nodes, 1u);
+    EXPECT_EQ(u.stats.atlas_occupied, 4u);  // the root's 4 keyframe nodes alone are selected
+    if (u.svo_leaves.size() == VR_SVO_LEAF_WORDS) break;    // faded out
+    ASSERT_EQ(u.svo_leaves.size(), 8 * VR_SVO_LEAF_WORDS);  // the 8 children (none drawn "up")
+    std::set<std::uint32_t> w;
+    for (std::uint32_t o = 0; o < 8; ++o) {
+      const std::uint32_t word = u.svo_nodes[1 + o];
+      ASSERT_EQ(vr_svo_child_kind(word), VR_SVO_CHILD_LEAF);
+      const std::uint32_t* leaf = &u.svo_leaves[vr_svo_child_index(word) * VR_SVO_LEAF_WORDS];
+      // Keyframes 1 and 2 of the child, in over-writeable slots that the frame marks used.
+      const NodeKey& child = s.index().node(s.index().node(0).children[o]).key;
+      EXPECT_EQ(s.atlas().key(leaf[0]), (KeyframeKey{child.level, child.x, child.y, child.z, 1}));
+      EXPECT_EQ(s.atlas().state(leaf[0]), AtlasSlots::State::overwriteable);
+      EXPECT_FALSE(s.atlas().retired(leaf[0]));  // this frame samples it and is not done yet
+      w.insert(leaf[7] & 0xffu);
+    }
+    ASSERT_EQ(w.size(), 1u) << "every child fades alike";
+    weights.push_back(*w.begin());
+  }
+  EXPECT_EQ(u.svo_leaves.size(), VR_SVO_LEAF_WORDS);
+  ASSERT_GE(weights.size(), 9u);  // 1 s at 10 frames a second
+  EXPECT_EQ(weights.front(), 255u);
+  for (std::size_t i = 1; i < weights.size(); ++i) EXPECT_LT(weights[i], weights[i - 1]) << i;
+  // Without a fade the collapse is at once.
+  settings.lod_blend.fade_s = 0;
+  StreamScheduler instant(c, settings);
+  for (int i = 0; i < 400; ++i, now += 0.05) {
+    u = instant.update(close, playhead, frame);
+    instant.retire(frame++);
+    if (u.stats.fraction_at_target == 1.0 && u.stats.atlas_occupied == 36) break;
+  }
+  ASSERT_EQ(u.svo_leaves.size(), 8 * VR_SVO_LEAF_WORDS);
+  u = instant.update(far, playhead, frame++);
+  EXPECT_EQ(u.svo_leaves.size(), VR_SVO_LEAF_WORDS);
+}
+
 TEST(StreamScheduler, AStaleArrivalIsDiscardedAndTheAtlasLeftUntouched) {
   test::TempDir dir("stream-scheduler-stale");
   const auto path = test::make_container(dir.path(), dims, 4);
