@@ -293,7 +293,7 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     // was fading out then) from their own bricks while it lasts. They are no longer selected, but
     // their slots keep them until overwritten (over-writeable), and the build marks the slots it
     // draws from as used, so that no upload overwrites them while a GPU frame samples them.
-    if (settings_.lod_blend.fade_s > 0 && blend_.build > 0)
+    if (settings_.lod_blend.fade_out_s > 0 && blend_.build > 0)
       for (const std::uint32_t slot : atlas_.overwriteable_slots()) {
         const auto key = atlas_.key(slot);
         const KeyframeId id = key ? index_.find_keyframe(*key) : no_keyframe;

@@ -236,7 +236,7 @@ class Builder {
         ++stats_.holes;
       else if (pair.drawn_by_ancestor())
         ++stats_.ancestor_drawn;
-      if (blend_ && blend_->settings.fade_s > 0) {
+      if (blend_ && blend_->settings.fade_out_s > 0) {
         const ChildResult out = fade_out(id, parent_record, pair);
         if (out.kind == VR_SVO_CHILD_NODE) return out;
       }
@@ -288,7 +288,7 @@ class Builder {
 
   /// Fade-out on collapse: a target node that its children drew in the last build (or that is
   /// still fading out) keeps a node record whose children with bricks of their own are drawn from
-  /// them, blended towards this node's drawing with weight 1 − (now − out_since) / fade_s; the
+  /// them, blended towards this node's drawing with weight 1 − (now − out_since) / fade_out_s; the
   /// others are drawn "up" by its own leaf. Returns an empty result (and appends nothing) when
   /// the node is not fading out or no child has bricks of its own.
   ChildResult fade_out(std::uint32_t id, vr_uint parent_record, const KeyframePair& pair) {
@@ -301,18 +301,25 @@ class Builder {
       if (!(b.region_build[id] == last && b.region_refined[id])) return {};
       b.out_since[id] = now_;
     }
-    const double t = (now_ - b.out_since[id]) / b.settings.fade_s;
+    const double t = (now_ - b.out_since[id]) / b.settings.fade_out_s;
     if (!(t < 1.0)) return {};
     const auto w = static_cast<vr_uint>(std::lround(std::clamp(1.0 - t, 0.0, 1.0) * 255.0));
     if (w == 0) return {};
-    // The children's own pairs (plain selection: they are not in the view's cut).
+    // The children's own pairs (plain selection: they are not in the view's cut), only where both
+    // are the child's own bricks at the times the playhead needs: the resident set may still
+    // hold a child's bricks of other times (after a seek, or as the playhead moves on), which
+    // are further from the truth than the node's own drawing.
     KeyframePair pairs[8];
+    bool own[8] = {};
     bool any = false;
     for (vr_uint i = 0; i < 8; ++i) {
-      if (n.children[i] == no_node) continue;
-      pairs[i] =
-          select_keyframe_pair(index_, n.children[i], playhead_, resident_, settings_, &stored_);
-      any |= pairs[i].valid() && !pairs[i].drawn_by_ancestor();
+      const std::uint32_t c = n.children[i];
+      if (c == no_node) continue;
+      pairs[i] = select_keyframe_pair(index_, c, playhead_, resident_, settings_, &stored_);
+      own[i] = pairs[i].at_full_detail() &&
+               static_cast<double>(pairs[i].a.t) == stored_.nearest(c, false, false) &&
+               static_cast<double>(pairs[i].b.t) == stored_.nearest(c, true, false);
+      any |= own[i];
     }
     if (!any) return {};
     b.out_build[id] = b.build;
@@ -322,7 +329,7 @@ class Builder {
     for (vr_uint i = 0; i < 8; ++i) {
       const std::uint32_t c = n.children[i];
       vr_uint kind = VR_SVO_CHILD_EMPTY, index = 0;
-      if (c != no_node && pairs[i].valid() && !pairs[i].drawn_by_ancestor()) {
+      if (c != no_node && own[i]) {
         kind = VR_SVO_CHILD_LEAF;
         index = append_leaf(pairs[i], &pair);
         vr_uint* leaf = &out_.leaves[std::size_t{index} * VR_SVO_LEAF_WORDS];
@@ -472,7 +479,8 @@ SvoArrays build_svo(const SpatialIndex& index, const ViewTraversal& view,
   SvoStats& s = stats ? *stats : local;
   StoredTimes fresh;
   StoredTimes& st = stored ? *stored : fresh;
-  const bool blending = blend && (blend->settings.fade_s > 0 || blend->settings.spatial);
+  const bool blending = blend && (blend->settings.fade_s > 0 || blend->settings.fade_out_s > 0 ||
+                                  blend->settings.spatial);
   LodBlendState* const b = blending ? blend : nullptr;
   s = SvoStats{};
   if (!settings.restricted)

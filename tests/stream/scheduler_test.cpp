@@ -629,7 +629,7 @@ TEST(StreamScheduler, ACollapseFadesOutFromBricksTheAtlasStillHolds) {
   double now = 0;
   SchedulerSettings settings;
   settings.atlas_slots = 64;
-  settings.lod_blend.fade_s = 1.0;
+  settings.lod_blend.fade_out_s = 1.0;  // the fade-out alone: arrivals replace at once
   settings.loader.clock = [&] { return now; };
   StreamScheduler s(c, settings);
   const auto close = test::close_camera(dims);
@@ -637,7 +637,7 @@ TEST(StreamScheduler, ACollapseFadesOutFromBricksTheAtlasStillHolds) {
   far.distance *= 100;  // the root alone is visited
   std::uint64_t frame = 0;
   const double playhead = 1.5;
-  // 1. Close: everything arrives and fades in; the root refines into its 8 children.
+  // 1. Close: everything arrives; the root refines into its 8 children.
   FrameUpdate u;
   for (int i = 0; i < 400; ++i, now += 0.05) {
     u = s.update(close, playhead, frame);
@@ -678,7 +678,7 @@ TEST(StreamScheduler, ACollapseFadesOutFromBricksTheAtlasStillHolds) {
   EXPECT_EQ(weights.front(), 255u);
   for (std::size_t i = 1; i < weights.size(); ++i) EXPECT_LT(weights[i], weights[i - 1]) << i;
   // Without a fade the collapse is at once.
-  settings.lod_blend.fade_s = 0;
+  settings.lod_blend.fade_out_s = 0;
   StreamScheduler instant(c, settings);
   for (int i = 0; i < 400; ++i, now += 0.05) {
     u = instant.update(close, playhead, frame);

@@ -222,6 +222,7 @@ TEST_F(StreamSelection, LodBlendingFadesNewDetailInAndBlendsTowardsCoarserNeighb
   };
   LodBlendState blend;
   blend.settings.fade_s = 1.0;
+  blend.settings.fade_out_s = 1.0;
   blend.settings.spatial = true;
   SvoStats stats;
   // Slots are numbered in the order the resident list was written: at most 18 (root + 8 × 2).
@@ -335,6 +336,30 @@ TEST_F(StreamSelection, LodBlendingFadesNewDetailInAndBlendsTowardsCoarserNeighb
   for (std::uint32_t o = 0; o < 8; ++o)
     EXPECT_EQ(vr_svo_child_kind(svo.nodes[1 + o]), VR_SVO_CHILD_UP) << o;
   EXPECT_EQ(stats.used_slots, (std::vector<std::uint32_t>{0, 1}));
+  // A collapse where the octants' resident bricks are of other times than the playhead needs
+  // (keyframes 5 and 6 at playhead 7.5, after a seek): they are further from the truth than the
+  // root's own drawing at 7 and 8, so nothing fades out.
+  LodBlendState stale;
+  stale.settings.fade_out_s = 1.0;
+  std::vector<ResidentKeyframe> old_octants = {{index.find_keyframe(0, 7), 0},
+                                               {index.find_keyframe(0, 8), 1}};
+  for (std::uint32_t i = 2; i < entries.size(); ++i) old_octants.push_back(entries[i]);
+  ResidentKeyframes seeked;
+  seeked.assign(index, old_octants);
+  build_svo(index, view, everything, 5.25, {}, &stats, nullptr, {}, &stale, 20.0);
+  svo = build_svo(index, far_view, seeked, 7.5, {}, &stats, nullptr, {}, &stale, 20.1);
+  EXPECT_EQ(svo.leaves.size(), VR_SVO_LEAF_WORDS);
+  EXPECT_EQ(stats.target_nodes, 1u);
+  // The same collapse with the octants' bricks at 7 and 8 fades out.
+  std::vector<ResidentKeyframe> current = {old_octants[0], old_octants[1]};
+  for (const std::uint32_t c : index.node(0).children)
+    for (const std::uint32_t t : {7u, 8u})
+      current.push_back({index.find_keyframe(c, t), static_cast<std::uint32_t>(current.size())});
+  ResidentKeyframes at_7;
+  at_7.assign(index, current);
+  build_svo(index, view, at_7, 7.5, {}, &stats, nullptr, {}, &stale, 30.0);
+  svo = build_svo(index, far_view, at_7, 7.5, {}, &stats, nullptr, {}, &stale, 30.1);
+  EXPECT_EQ(svo.leaves.size(), 8 * VR_SVO_LEAF_WORDS);
   // Without a fade, a collapse is at once.
   LodBlendState instant;
   instant.settings.spatial = true;

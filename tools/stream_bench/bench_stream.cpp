@@ -248,6 +248,8 @@ void BenchStreamSettings::check() const {
     bad("--speculative-link", "seconds in [0, 60]", std::to_string(o.speculative_link));
   if (!(o.lod_fade >= 0) || o.lod_fade > 60)
     bad("--lod-fade", "seconds in [0, 60]", std::to_string(o.lod_fade));
+  if (!(o.lod_fade_out >= 0) || o.lod_fade_out > 60)
+    bad("--lod-fade-out", "seconds in [0, 60]", std::to_string(o.lod_fade_out));
   if (!(o.lookahead >= 0) || o.lookahead > 60)
     bad("--lookahead", "seconds in [0, 60]", std::to_string(o.lookahead));
   if (!(o.step > 0) || !std::isfinite(o.step))
@@ -317,6 +319,7 @@ SchedulerSetup scheduler_setup(const BenchStreamSettings& o, double bandwidth, d
   ss.priority.restricted = o.restricted;
   ss.selection.restricted = o.restricted_drawing;
   ss.lod_blend.fade_s = o.lod_fade;
+  ss.lod_blend.fade_out_s = o.lod_fade_out;
   ss.upload_budget_bytes = static_cast<std::uint64_t>(o.upload_budget_mb * 1e6);
   ss.loader.bandwidth_bytes_per_s = bandwidth;
   ss.loader.latency_s = latency;
@@ -480,6 +483,7 @@ nlohmann::json bench_summary_json(const BenchStreamSettings& o, const std::strin
       {"ancestor_handicap", o.ancestor_handicap},
       {"ray_feedback", o.ray_feedback},
       {"lod_fade_s", o.lod_fade},
+      {"lod_fade_out_s", o.lod_fade_out},
       {"spatial_blend", o.spatial_blend},
       {"restricted", o.restricted},
       {"restricted_drawing", o.restricted_drawing},

@@ -207,6 +207,12 @@ void add_bench_stream_command(CLI::App& bench) {
                   "parent's drawing over this many seconds instead of replacing it at once (0: at "
                   "once)")
       ->capture_default_str();
+  cmd->add_option("--lod-fade-out", o->s.lod_fade_out,
+                  "Both policies: a node whose children drew it in the last frame and that is now "
+                  "drawn by itself\n"
+                  "keeps drawing them, fading to its own drawing over this many seconds (0: at "
+                  "once)")
+      ->capture_default_str();
   cmd->add_option("--restricted", o->s.restricted,
                   "Both policies: a restricted working set, the view's target nodes that touch "
                   "differing by at\n"

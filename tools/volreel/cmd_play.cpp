@@ -46,6 +46,9 @@ void run_play(PlayCommandOptions& o) {
   p.bandwidth_bytes_per_s = loop::parse_bandwidth(o.bandwidth);
   p.latency_s = loop::parse_latency(o.latency);
   p.decode = loop::parse_decode(o.decode);
+  if (!(p.lod_blend.fade_out_s >= 0) || p.lod_blend.fade_out_s > 60)
+    throw InputError("--lod-fade-out: expected seconds in [0, 60], found '" +
+                     std::to_string(p.lod_blend.fade_out_s) + "'");
   if (!(p.lod_blend.fade_s >= 0) || p.lod_blend.fade_s > 60)
     throw InputError("--lod-fade: expected seconds in [0, 60], found '" +
                      std::to_string(p.lod_blend.fade_s) + "'");
@@ -148,6 +151,11 @@ void add_play_command(CLI::App& app) {
   cmd->add_option("--lod-fade", o->player.lod_blend.fade_s,
                   "A node whose own bricks arrive while an ancestor draws it fades in from the "
                   "parent's drawing over this many seconds (0: at once)")
+      ->capture_default_str();
+  cmd->add_option("--lod-fade-out", o->player.lod_blend.fade_out_s,
+                  "A node whose children drew it in the last frame and that is now drawn by "
+                  "itself keeps drawing them, fading to its own drawing over this many seconds "
+                  "(0: at once)")
       ->capture_default_str();
   cmd->add_option("--spatial-blend", o->player.lod_blend.spatial,
                   "A node's corners next to a coarser neighbour take its parent's drawing "

@@ -11,7 +11,8 @@
 namespace volreel::cli {
 
 /// --atlas-mb, --bandwidth, --latency, --sse-target, --upload-budget, --step,
-/// --max-step-doublings, --no-culling, --decode, --lod-fade, --spatial-blend, --restricted,
+/// --max-step-doublings, --no-culling, --decode, --lod-fade, --lod-fade-out, --spatial-blend,
+/// --restricted,
 /// --restricted-drawing, --ray-feedback.
 inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
   cmd.add_option("--atlas-mb", loop.atlas_mb,
@@ -45,6 +46,11 @@ inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
   cmd.add_option("--lod-fade", loop.lod_fade,
                  "A node whose own bricks arrive while an ancestor draws it fades in from the "
                  "parent's drawing over this many seconds (0: at once)")
+      ->capture_default_str();
+  cmd.add_option("--lod-fade-out", loop.lod_fade_out,
+                 "A node whose children drew it in the last frame and that is now drawn by itself "
+                 "keeps drawing them, fading to its own drawing over this many seconds (0: at "
+                 "once)")
       ->capture_default_str();
   cmd.add_option("--spatial-blend", loop.spatial_blend,
                  "A node's corners next to a coarser neighbour take its parent's drawing "

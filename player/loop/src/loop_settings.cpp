@@ -114,6 +114,9 @@ void apply(const LoopSettings& s, FrameLoopOptions& o) {
   if (!(s.lod_fade >= 0) || s.lod_fade > 60)
     bad("--lod-fade", "seconds in [0, 60]", std::to_string(s.lod_fade));
   o.scheduler.lod_blend.fade_s = s.lod_fade;
+  if (!(s.lod_fade_out >= 0) || s.lod_fade_out > 60)
+    bad("--lod-fade-out", "seconds in [0, 60]", std::to_string(s.lod_fade_out));
+  o.scheduler.lod_blend.fade_out_s = s.lod_fade_out;
   o.scheduler.lod_blend.spatial = s.spatial_blend;
   o.scheduler.priority.restricted = s.restricted;
   o.scheduler.selection.restricted = s.restricted_drawing;

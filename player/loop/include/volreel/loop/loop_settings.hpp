@@ -23,8 +23,10 @@ struct LoopSettings {
   std::uint32_t max_step_doublings = 3;
   bool no_culling = false;      ///< no transfer-function culling
   std::string decode = "auto";  ///< "auto", "gpu" or "cpu" (FrameLoopOptions::Decode)
-  /// Level-of-detail blending (stream::LodBlendSettings): the fade's seconds, spatial blending.
+  /// Level-of-detail blending (stream::LodBlendSettings): the fades' seconds (in, out), spatial
+  /// blending.
   double lod_fade = stream::LodBlendSettings{}.fade_s;
+  double lod_fade_out = stream::LodBlendSettings{}.fade_out_s;
   bool spatial_blend = stream::LodBlendSettings{}.spatial;
   /// A restricted working set (stream::PrioritySettings::restricted).
   bool restricted = stream::PrioritySettings{}.restricted;

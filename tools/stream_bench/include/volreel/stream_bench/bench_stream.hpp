@@ -120,6 +120,7 @@ struct BenchStreamSettings {
   double ancestor_handicap = stream::SelectionSettings{}.ancestor_handicap;
   bool ray_feedback = stream::SchedulerSettings{}.ray_feedback;
   double lod_fade = stream::LodBlendSettings{}.fade_s;  ///< stream::LodBlendSettings
+  double lod_fade_out = stream::LodBlendSettings{}.fade_out_s;
   bool spatial_blend = stream::LodBlendSettings{}.spatial;
   bool restricted = stream::PrioritySettings{}.restricted;
   bool restricted_drawing = stream::SelectionSettings{}.restricted;
