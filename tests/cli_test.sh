@@ -59,6 +59,7 @@ expect_error "WIDTHxHEIGHT" "$volreel" play "$work/none.vreel" --size big
 expect_error "bandwidth: expected a rate" "$volreel" play "$work/none.vreel" --bandwidth 5xb
 expect_error "latency: expected a duration" "$volreel" play "$work/none.vreel" --latency 3parsecs
 expect_error "lod-fade: expected seconds" "$volreel" play "$work/none.vreel" --lod-fade -1
+expect_error "lod-fade-out: expected seconds" "$volreel" play "$work/none.vreel" --lod-fade-out -1
 
 # Rate-distortion benchmark on a small series: table, CSV and plot.
 "$volreel" bench rd "$work/a" --out "$work/rd" --ssim-frames 1 > "$work/rd.txt" 2>/dev/null

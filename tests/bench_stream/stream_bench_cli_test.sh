@@ -75,7 +75,7 @@ PY
 # 2. A slow link and one policy: less loaded, still sane; the container's own decode as truth.
 mv "$work/s" "$work/s-moved"
 "$volreel" bench stream "$work/a.vreel" --bandwidth 20kB/s --latency 20ms --duration 2 --size 32x32 --policy patent \
-  --spatial-blend true --lod-fade 0.5 --out "$work/slow" > "$work/slow.txt" 2>/dev/null || fail "bench stream (slow)"
+  --spatial-blend true --lod-fade 0.5 --lod-fade-out 0.25 --out "$work/slow" > "$work/slow.txt" 2>/dev/null || fail "bench stream (slow)"
 grep -q "the container's own finest-level decode" "$work/slow.txt" || fail "no notice of the fallback ground truth"
 grep -q "due window first" "$work/slow.txt" || fail "no due-window line: $(cat "$work/slow.txt")"
 /usr/bin/python3 - "$work/slow/stream_patent.csv" <<'PY' || fail "slow link numbers"
@@ -90,7 +90,7 @@ PY
 /usr/bin/python3 - "$work/slow/summary.json" <<'PY' || fail "blending settings not in summary.json"
 import json, sys
 d = json.load(open(sys.argv[1]))
-assert d["spatial_blend"] is True and d["lod_fade_s"] == 0.5, d
+assert d["spatial_blend"] is True and d["lod_fade_s"] == 0.5 and d["lod_fade_out_s"] == 0.25, d
 assert d["restricted"] is True and d["restricted_drawing"] is True, d
 PY
 "$volreel" bench stream "$work/a.vreel" --series "$work/s-moved" --bandwidth 0 --duration 1 --size 32x32 --policy nearest \
@@ -157,6 +157,7 @@ expect_error "seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --lo
 expect_error "seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --speculative-link 100
 expect_error "an exponent in \[0, 64\]" "$volreel" bench stream "$work/a.vreel" --ancestor-handicap -2
 expect_error "seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --lod-fade -0.5
+expect_error "lod-fade-out.*seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --lod-fade-out 61
 "$volreel" bench stream --help > "$work/help.txt" && grep -q -e "--bandwidth" "$work/help.txt" || fail "--help lacks --bandwidth"
-for o in --due-window --lookahead --speculative-link --ancestor-handicap --sse-priority --seeds --lod-fade --spatial-blend; do grep -q -e "$o" "$work/help.txt" || fail "--help lacks $o"; done
+for o in --due-window --lookahead --speculative-link --ancestor-handicap --sse-priority --seeds --lod-fade --lod-fade-out --spatial-blend; do grep -q -e "$o" "$work/help.txt" || fail "--help lacks $o"; done
 echo "stream bench CLI: OK"
