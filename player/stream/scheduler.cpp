@@ -290,16 +290,21 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     for (std::size_t i = 0; i < selection_.size(); ++i)
       if (slot_of_[i] != no_slot) resident.push_back({selection_[i].keyframe, slot_of_[i]});
     // A fade-out on collapse draws the children of a node they drew in the last build (or that
-    // was fading out then) from their own bricks while it lasts. They are no longer selected, but
-    // their slots keep them until overwritten (over-writeable), and the build marks the slots it
-    // draws from as used, so that no upload overwrites them while a GPU frame samples them.
+    // was fading out then), and that the view now targets, from their own bricks while it lasts.
+    // They are no longer selected, but their slots keep them until overwritten (over-writeable),
+    // and the build marks the slots it draws from as used, so that no upload overwrites them while
+    // a GPU frame samples them.
     if (settings_.lod_blend.fade_out_s > 0 && blend_.build > 0)
       for (const std::uint32_t slot : atlas_.overwriteable_slots()) {
         const auto key = atlas_.key(slot);
         const KeyframeId id = key ? index_.find_keyframe(*key) : no_keyframe;
         if (id == no_keyframe) continue;
+        // Only below a node this view targets (not refines): the builder visits none of its
+        // children, so nothing but the fade draws from these bricks.
         const std::uint32_t parent = index_.node(SpatialIndex::node_of(id)).parent;
-        if (parent == no_node || parent >= blend_.region_build.size()) continue;
+        if (parent == no_node || parent >= blend_.region_build.size() || !view_.visited(parent) ||
+            view_.visit(parent).refine)
+          continue;
         if ((blend_.region_build[parent] == blend_.build && blend_.region_refined[parent]) ||
             blend_.out_build[parent] == blend_.build)
           resident.push_back({id, slot});

@@ -362,6 +362,7 @@ TEST_F(StreamSelection, LodBlendingFadesNewDetailInAndBlendsTowardsCoarserNeighb
   EXPECT_EQ(svo.leaves.size(), 8 * VR_SVO_LEAF_WORDS);
   // Without a fade, a collapse is at once.
   LodBlendState instant;
+  instant.settings.fade_out_s = 0;
   instant.settings.spatial = true;
   build_svo(index, view, everything, 5.25, {}, &stats, nullptr, {}, &instant, 0.0);
   svo = build_svo(index, far_view, everything, 5.25, {}, &stats, nullptr, {}, &instant, 0.1);

@@ -63,9 +63,11 @@ struct LodBlendSettings {
   /// stream` (docs/design.md, "Level-of-detail blending").
   double fade_s = 0.0;
   /// Fade-out on collapse: a node whose children drew it in the last build and that is now drawn
-  /// by itself keeps drawing the children's bricks, fading towards its own drawing over this many
-  /// seconds (docs/design.md, "Level-of-detail blending"). 0: at once.
-  double fade_out_s = 0.0;
+  /// by itself keeps drawing the children's bricks (their own, at the playhead's times), fading
+  /// towards its own drawing over this many seconds (docs/design.md, "Level-of-detail
+  /// blending"). 0: at once. On by default: on `volreel bench stream`'s tours it removed the jump
+  /// of a collapse and never lowered image PSNR (the finer data is shown longer).
+  double fade_out_s = 0.3;
   /// Spatial blending: a region's corners next to a region drawn coarser take the parent's
   /// drawing, so that the value goes over smoothly towards the coarser neighbour. Off by default:
   /// without a restricted working set it lowered image PSNR and did not lower the seam metric in
