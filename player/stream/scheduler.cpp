@@ -294,19 +294,27 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     // They are no longer selected, but their slots keep them until overwritten (over-writeable),
     // and the build marks the slots it draws from as used, so that no upload overwrites them while
     // a GPU frame samples them.
-    if (settings_.lod_blend.fade_out_s > 0 && blend_.build > 0)
+    // A node collapses where this view targets it and the last build drew it refined (or it was
+    // fading out then). Only below such a node (the builder visits none of its children, so
+    // nothing but the fade draws from these bricks), and only in frames that have one: the scan
+    // of the over-writeable slots is skipped otherwise.
+    const auto collapses = [&](std::uint32_t node) {
+      return node < blend_.region_build.size() &&
+             ((blend_.region_build[node] == blend_.build && blend_.region_refined[node]) ||
+              blend_.out_build[node] == blend_.build);
+    };
+    const bool any_collapse =
+        settings_.lod_blend.fade_out_s > 0 && blend_.build > 0 &&
+        std::any_of(view_.visits().begin(), view_.visits().end(),
+                    [&](const ViewTraversal::Visit& v) { return !v.refine && collapses(v.node); });
+    if (any_collapse)
       for (const std::uint32_t slot : atlas_.overwriteable_slots()) {
         const auto key = atlas_.key(slot);
         const KeyframeId id = key ? index_.find_keyframe(*key) : no_keyframe;
         if (id == no_keyframe) continue;
-        // Only below a node this view targets (not refines): the builder visits none of its
-        // children, so nothing but the fade draws from these bricks.
         const std::uint32_t parent = index_.node(SpatialIndex::node_of(id)).parent;
-        if (parent == no_node || parent >= blend_.region_build.size() || !view_.visited(parent) ||
-            view_.visit(parent).refine)
-          continue;
-        if ((blend_.region_build[parent] == blend_.build && blend_.region_refined[parent]) ||
-            blend_.out_build[parent] == blend_.build)
+        if (parent != no_node && view_.visited(parent) && !view_.visit(parent).refine &&
+            collapses(parent))
           resident.push_back({id, slot});
       }
     resident_.assign(index_, resident);
