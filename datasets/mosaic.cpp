@@ -8,10 +8,12 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <exception>
 #include <optional>
 #include <span>
 
+#include "volreel/format/brick_decode.h"
 #include "volreel/format/container.hpp"
 #include "volreel/format/decoder.hpp"
 #include "volreel/format/dictionary_file.hpp"
@@ -63,6 +65,14 @@ std::vector<MosaicBrick> pool_of(const format::Container& c, std::size_t count) 
     if (pool.size() == count) break;
     const format::FrameView& view = files[r.file].view();
     const std::span<const std::byte> bytes = view.checked_brick_bytes(r.brick);
+    // A ksvd brick codes only the blocks its position needs (its box word): the pool takes the
+    // ones that code every block, which stand in for a brick anywhere.
+    if (view.codec() == format::Codec::ksvd && bytes.size() >= 4 * VR_HEADER_WORDS) {
+      const vr_uint n = view.shape().blocks_per_axis();
+      vr_uint box;
+      std::memcpy(&box, bytes.data() + 4 * 5, 4);
+      if (box != vr_make_box(n, n, n)) continue;
+    }
     if (std::any_of(pool.begin(), pool.end(), [&](const MosaicBrick& p) {
           return std::equal(p.payload.begin(), p.payload.end(), bytes.begin(), bytes.end());
         }))
@@ -78,7 +88,8 @@ std::vector<MosaicBrick> pool_of(const format::Container& c, std::size_t count) 
   }
   if (pool.empty())
     throw InputError("mosaic source '" + c.directory().string() +
-                     "' has no brick in its first frames to repeat");
+                     "' has no brick in its first frames to repeat (a constant one, or one that "
+                     "codes all its blocks: a volume larger than one brick a side has some)");
   return pool;
 }
 

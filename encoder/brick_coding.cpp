@@ -243,14 +243,20 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
                                       const float* means, const dictionary::SparseCodes& codes,
                                       std::size_t first_block, const Eigen::MatrixXf& atoms,
                                       const QuantizeOptions& options, BrickQuantization* result) {
-  const std::uint32_t blocks = shape.blocks();
-  float mean_lo = means[0], mean_hi = means[0];
-  for (std::uint32_t b = 1; b < blocks; ++b) {
-    mean_lo = std::min(mean_lo, means[b]);
-    mean_hi = std::max(mean_hi, means[b]);
-  }
+  const std::uint32_t blocks = shape.blocks(), per_axis = shape.blocks_per_axis();
+  vr_uint box = 0;
+  for (vr_uint a = 0; a < 3; ++a)
+    box |= (options.box[a] == 0 ? per_axis : std::min(options.box[a], per_axis)) << (4 * a);
+  const auto coded = [&](std::uint32_t b) { return vr_block_in_box(box, per_axis, b); };
+  float mean_lo = means[0], mean_hi = means[0];  // block 0 is always coded
+  for (std::uint32_t b = 1; b < blocks; ++b)
+    if (coded(b)) {
+      mean_lo = std::min(mean_lo, means[b]);
+      mean_hi = std::max(mean_hi, means[b]);
+    }
   double largest = 0;
   for (std::uint32_t b = 0; b < blocks; ++b) {
+    if (!coded(b)) continue;
     const std::size_t i = first_block + b;
     for (int k = 0; k < codes.count[i]; ++k)
       largest = std::max(largest, std::abs(static_cast<double>(codes.coefficients_of(i)[k])));
@@ -263,6 +269,7 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
   parts.sparsity.assign(blocks, 0);
   parts.mean.assign(blocks, 0);
   parts.band_split = options.band_split;
+  for (vr_uint a = 0; a < 3; ++a) parts.box[a] = vr_box_blocks(box, a);
   parts.mean_bits = choose_mean_bits(mean_lo, mean_hi, options.mean_step, options.mean_bits);
   parts.atom_bits =
       std::max<std::uint32_t>(1, format::bits_for_count(static_cast<std::uint64_t>(atoms.cols())));
@@ -287,6 +294,7 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
     std::uint32_t most_atoms = 0;
     std::int64_t largest_q = 1;
     for (std::uint32_t b = 0; b < blocks; ++b) {
+      if (!coded(b)) continue;  // sparsity and mean 0: no entry in the payload
       const std::size_t i = first_block + b;
       int s = codes.count[i];
       std::copy_n(codes.atoms_of(i), s, a.data());

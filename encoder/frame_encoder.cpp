@@ -99,16 +99,19 @@ void add_to_breakdown(format::BrickShape shape, const Cell& c,
     // One zero word more: a Rice code's look-ahead (brick_decode.h).
     std::vector<vr_uint> words(std::max<std::size_t>(size / 4, VR_HEADER_WORDS) + 1, 0u);
     std::memcpy(words.data(), c.payload.data(), size / 4 * 4);
-    const vr_uint layout = vr_layout_word(words.data());
+    const vr_uint layout = vr_layout_word(words.data()), box = vr_box_word(words.data());
     b.brick_headers += 4 * VR_HEADER_WORDS;
-    b.block_entries += 4 * vr_entry_words(layout, blocks);
-    const vr_uint first = vr_code_first_word(layout, blocks);
+    b.block_entries += 4 * vr_entry_words(layout, vr_box_entries(box));
+    const vr_uint first = vr_code_first_word(layout, vr_box_entries(box));
     ++st.mean_bits_histogram[vr_layout_mean_bits(layout)];
     ++st.coef_bits_histogram[vr_layout_coef_bits(layout)];
     const vr_uint band_word = vr_band_word(words.data());
     vr_uint bit = 0;
-    for (std::uint32_t k = 0; k < blocks; ++k) {
-      const vr_uint sparsity = vr_entry_sparsity(layout, vr_block_entry(words.data(), layout, k));
+    for (std::uint32_t k = 0, e = 0; k < blocks; ++k) {
+      const vr_uint sparsity =
+          vr_block_in_box(box, shape.blocks_per_axis(), k)
+              ? vr_entry_sparsity(layout, vr_block_entry(words.data(), layout, e++))
+              : 0u;
       const vr_uint start = bit;
       vr_uint next_atom = 0, atom = 0;
       for (vr_uint j = 0; j < sparsity; ++j)
@@ -122,10 +125,15 @@ void add_to_breakdown(format::BrickShape shape, const Cell& c,
   }
   if (coarse) b.coarse_levels += size;
   // The blocks' owned shares average to the brick's interior voxels inside the level: the rest of
-  // the stored voxels are apron or padding.
+  // the stored voxels are apron or padding. A ksvd payload stores its box of coded blocks only.
   double owned = 0;
   for (std::uint32_t k = 0; k < blocks; ++k) owned += static_cast<double>(shares[k]);
-  b.aprons_and_padding += static_cast<double>(size) * (1 - owned / blocks);
+  double stored_blocks = blocks;
+  if (ksvd && !c.constant) {
+    const auto box = format::coded_box(shape, {c.x, c.y, c.z}, level_dims);
+    stored_blocks = static_cast<double>(box[0]) * box[1] * box[2];
+  }
+  b.aprons_and_padding += static_cast<double>(size) * (1 - owned / stored_blocks);
 }
 
 /// Step 1: every cell of every level, breadth-first, Morton order inside a level.
@@ -181,6 +189,13 @@ void extract_chunk(const PyramidWindow& window, std::span<Cell> chunk, float* br
   }
 }
 
+/// A cell's box word of coded blocks (format::coded_box).
+vr_uint brick_box(format::BrickShape shape, const Cell& c,
+                  const std::vector<format::LevelGeometry>& geometry) {
+  const auto box = format::coded_box(shape, {c.x, c.y, c.z}, geometry[c.level].dims);
+  return vr_make_box(box[0], box[1], box[2]);
+}
+
 /// Step 2b (ksvd): the blocks of the chunk's non-constant bricks (`coded`, indices into the chunk)
 /// and their weights, batch-OMP on all of them at once, then each brick quantized into its
 /// payload. `part` is when the chunk's extraction began (its time counts as brick extraction).
@@ -206,8 +221,11 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
       else
         std::fill(w, w + brick_blocks, 1.0f);
       const double scale = coding.level_scale(c.level);
-      for (std::size_t b = 0; b < brick_blocks; ++b)
-        w[b] = static_cast<float>(static_cast<double>(w[b]) / (scale * scale));
+      const vr_uint box = brick_box(coding.shape, c, geometry);
+      for (std::size_t b = 0; b < brick_blocks; ++b)  // blocks outside the box: not coded
+        w[b] = vr_block_in_box(box, coding.shape.blocks_per_axis(), static_cast<vr_uint>(b))
+                   ? static_cast<float>(static_cast<double>(w[b]) / (scale * scale))
+                   : 0.0f;
     }
   }
   st.seconds_bricks += seconds_since(part);
@@ -225,6 +243,8 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
     QuantizeOptions brick_qo = qo;  // the means' and coefficients' steps follow the level's ε
     brick_qo.mean_step *= coding.level_scale(cell.level);
     brick_qo.coef_step *= coding.level_scale(cell.level);
+    brick_qo.box =
+        format::coded_box(coding.shape, {cell.x, cell.y, cell.z}, geometry[cell.level].dims);
     detail::BrickQuantization result;
     cell.payload = detail::quantize_brick(coding.shape,
                                           work.columns.data() + kk * brick_blocks * VR_BLOCK_LENGTH,
@@ -239,8 +259,13 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
   st.blocks_over_bound += over_bound;
   st.quantized_squared_error += quantized_error;
   st.seconds_quantize += seconds_since(part);
-  for (std::size_t i = 0; i < work.codes.size(); ++i)
-    st.unquantized_squared_error += static_cast<double>(work.codes.residual_energy[i]);
+  for (std::size_t k = 0; k < coded.size(); ++k) {  // the coded blocks, as quantize_brick's
+    const vr_uint box = brick_box(coding.shape, chunk[coded[k]], geometry);
+    for (std::size_t b = 0; b < brick_blocks; ++b)
+      if (vr_block_in_box(box, coding.shape.blocks_per_axis(), static_cast<vr_uint>(b)))
+        st.unquantized_squared_error +=
+            static_cast<double>(work.codes.residual_energy[k * brick_blocks + b]);
+  }
   st.blocks += static_cast<std::size_t>(blocks);
 }
 

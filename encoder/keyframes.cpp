@@ -20,19 +20,23 @@ struct BrickError {
   double total = 0;
 };
 
-/// Adds the squared differences o − (f0·a + f1·b) of one row of a brick of `shape` (S voxels)
-/// to its n blocks' sums; returns the row's largest |difference|.
-double add_row(format::BrickShape shape, const float* o, const float* a, const float* b, double f0,
+/// The blocks a brick's errors are taken over: its box of coded blocks (format::coded_box), the
+/// ones a renderer reads; blocks past it are padding.
+using Box = std::array<std::uint32_t, 3>;
+
+/// Adds the squared differences o − (f0·a + f1·b) of the first `blocks` blocks' voxels of one row
+/// of a brick (6·blocks voxels) to their sums; returns the row's largest |difference|.
+double add_row(std::uint32_t blocks, const float* o, const float* a, const float* b, double f0,
                double f1, double* block_sums) {
   double d2[format::max_brick_size];
   double largest = 0;
-  for (std::uint32_t x = 0; x < shape.size; ++x) {
+  for (std::uint32_t x = 0; x < blocks * VR_BLOCK_SIZE; ++x) {
     const double d = static_cast<double>(o[x]) -
                      (f0 * static_cast<double>(a[x]) + f1 * static_cast<double>(b[x]));
     d2[x] = d * d;
     largest = std::max(largest, std::abs(d));
   }
-  for (std::uint32_t bx = 0; bx < shape.blocks_per_axis(); ++bx) {
+  for (std::uint32_t bx = 0; bx < blocks; ++bx) {
     double sum = 0;
     for (std::uint32_t x = 0; x < VR_BLOCK_SIZE; ++x) sum += d2[bx * VR_BLOCK_SIZE + x];
     block_sums[bx] += sum;
@@ -40,15 +44,15 @@ double add_row(format::BrickShape shape, const float* o, const float* a, const f
   return largest;
 }
 
-/// The coded brick's error against the original (a stored state's, for the rule).
-BrickError coded_error(format::BrickShape shape, const float* o, const float* c) {
+/// The coded brick's error against the original over its box (a stored state's, for the rule).
+BrickError coded_error(format::BrickShape shape, const Box& box, const float* o, const float* c) {
   const std::uint32_t side = shape.size, n = shape.blocks_per_axis();
   BrickError e;
   e.block.assign(shape.blocks(), 0.0);
-  for (std::uint32_t z = 0; z < side; ++z)
-    for (std::uint32_t y = 0; y < side; ++y) {
+  for (std::uint32_t z = 0; z < box[2] * VR_BLOCK_SIZE; ++z)
+    for (std::uint32_t y = 0; y < box[1] * VR_BLOCK_SIZE; ++y) {
       const std::size_t row = (std::size_t{z} * side + y) * side;
-      add_row(shape, o + row, c + row, c + row, 1.0, 0.0,
+      add_row(box[0], o + row, c + row, c + row, 1.0, 0.0,
               &e.block[((z / VR_BLOCK_SIZE) * n + y / VR_BLOCK_SIZE) * n]);
     }
   for (double v : e.block) e.total += v;
@@ -58,22 +62,23 @@ BrickError coded_error(format::BrickShape shape, const float* o, const float* c)
 /// Whether the interpolation (1 − f)·a + f·b stands in for the brick at a step: original o, the
 /// error `coded` that storing it would give, under the rule's bounds. In double: the
 /// interpolation itself (a decoder's float arithmetic adds a rounding of the value, none where
-/// a = b). `e`: scratch of one value per block.
-bool interpolation_holds(format::BrickShape shape, const float* o, const BrickError& coded,
-                         const float* a, const float* b, float f, double eps, double max_abs,
-                         bool energy, const KeyframeRule& rule, std::vector<double>& e) {
+/// a = b). Over the brick's box; `e`: scratch of one value per block.
+bool interpolation_holds(format::BrickShape shape, const Box& box, const float* o,
+                         const BrickError& coded, const float* a, const float* b, float f,
+                         double eps, double max_abs, bool energy, const KeyframeRule& rule,
+                         std::vector<double>& e) {
   if (rule.within_coded_error) eps = 0;
   const std::uint32_t side = shape.size, n = shape.blocks_per_axis();
   const double f1 = static_cast<double>(f), f0 = 1.0 - f1;
   const double block_tolerance = VR_BLOCK_LENGTH * eps * eps;
   e.assign(shape.blocks(), 0.0);
   double total = 0;
-  for (std::uint32_t bz = 0; bz < n; ++bz) {
+  for (std::uint32_t bz = 0; bz < box[2]; ++bz) {
     for (std::uint32_t z = bz * VR_BLOCK_SIZE; z < (bz + 1) * VR_BLOCK_SIZE; ++z)
-      for (std::uint32_t y = 0; y < side; ++y) {
+      for (std::uint32_t y = 0; y < box[1] * VR_BLOCK_SIZE; ++y) {
         const std::size_t row = (std::size_t{z} * side + y) * side;
-        const double largest =
-            add_row(shape, o + row, a + row, b + row, f0, f1, &e[(bz * n + y / VR_BLOCK_SIZE) * n]);
+        const double largest = add_row(box[0], o + row, a + row, b + row, f0, f1,
+                                       &e[(bz * n + y / VR_BLOCK_SIZE) * n]);
         if (max_abs > 0 && largest > max_abs) return false;
       }
     if (!energy) continue;
@@ -134,6 +139,9 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
         // Each step's stored state of this node, as a decoder would have it.
         const auto state = [&](std::size_t f) { return states.data() + f * brick_voxels; };
         std::vector<char> forced(n, 0);
+        const CodedBrick& cell = frames[0]->bricks[i];
+        const Box box = format::coded_box(shape, {cell.x, cell.y, cell.z},
+                                          frames[0]->geometry[cell.level].dims);
         for (std::size_t f = 0; f < n; ++f) {
           const CodedBrick& b = frames[f]->bricks[i];
           const std::span<float> out(state(f), brick_voxels);
@@ -144,7 +152,8 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
                                    shape, out, "<encoder>", 0);
           forced[f] = f == 0 || f + 1 == n || covered[f][i] || b.subtree_constant;
           if (!forced[f])
-            coded[f] = coded_error(shape, frames[f]->originals.data() + i * brick_voxels, state(f));
+            coded[f] =
+                coded_error(shape, box, frames[f]->originals.data() + i * brick_voxels, state(f));
         }
         const std::uint32_t level = frames[0]->bricks[i].level;
         std::size_t k = 0;
@@ -156,10 +165,10 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
               const float f =
                   static_cast<float>(static_cast<double>(t - k) / static_cast<double>(u - k));
               const CodedFrame& ft = *frames[t];
-              holds = interpolation_holds(shape, ft.originals.data() + i * brick_voxels, coded[t],
-                                          state(k), state(u), f, ft.level_tolerance[level],
-                                          ft.max_abs_error, codec == format::Codec::ksvd, rule,
-                                          scratch);
+              holds = interpolation_holds(shape, box, ft.originals.data() + i * brick_voxels,
+                                          coded[t], state(k), state(u), f,
+                                          ft.level_tolerance[level], ft.max_abs_error,
+                                          codec == format::Codec::ksvd, rule, scratch);
             }
             if (!holds) break;
             best = u;

@@ -9,6 +9,7 @@
 #include <limits>
 #include <string>
 
+#include "volreel/format/brick_decode.h"
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/error.hpp"
@@ -534,13 +535,42 @@ void decode_and_check_histograms(const FrameView& view, const AtomTable& atoms) 
   // bricks also against their histograms (constant ones are checked by the reader). A node
   // without a brick at this step has the histogram of the frame's data, which its interpolated
   // values need not match.
+  const std::uint32_t side = view.shape().size;
   for (std::uint32_t i = 0; i < view.node_count(); ++i) {
     const Node n = view.node(i);
     if (n.brick == no_brick) continue;
     decode_brick(view, n.brick, atoms, brick);
-    if (!check || i < finest || view.brick_bytes(n.brick).size() == 4) continue;
+    // A ksvd brick codes the blocks its position in the level needs (the box word); the voxels
+    // past them decode to a placeholder no renderer reads, left out of the histogram check.
+    const NodePosition p = view.position(i);
+    const LevelEntry& level = view.level(p.level);
+    const auto box =
+        coded_box(view.shape(), {p.x, p.y, p.z}, {level.dims[0], level.dims[1], level.dims[2]});
+    std::uint32_t end[3] = {side, side, side};
+    const auto payload = view.brick_bytes(n.brick);
+    if (view.codec() == Codec::ksvd && payload.size() != 4) {
+      std::uint32_t word;
+      std::memcpy(&word, payload.data() + 4 * 5, 4);  // the decode above checked the size
+      for (std::size_t a = 0; a < 3; ++a) {
+        const vr_uint coded = vr_box_blocks(word, static_cast<vr_uint>(a));
+        if (coded < box[a])
+          throw FormatError(view.name(), view.brick_offset(n.brick) + 4 * 5,
+                            "node " + std::to_string(i) + " box word with at least " +
+                                std::to_string(box[0]) + " x " + std::to_string(box[1]) + " x " +
+                                std::to_string(box[2]) + " coded blocks (its position's)",
+                            std::to_string(vr_box_blocks(word, 0)) + " x " +
+                                std::to_string(vr_box_blocks(word, 1)) + " x " +
+                                std::to_string(vr_box_blocks(word, 2)));
+        end[a] = coded * VR_BLOCK_SIZE;
+      }
+    }
+    if (!check || i < finest || payload.size() == 4) continue;
     std::uint64_t decoded = 0;
-    for (float v : brick) decoded |= std::uint64_t{1} << histogram_bin(v, h.value_min, h.value_max);
+    for (std::uint32_t z = 0; z < end[2]; ++z)
+      for (std::uint32_t y = 0; y < end[1]; ++y)
+        for (std::uint32_t x = 0; x < end[0]; ++x)
+          decoded |= std::uint64_t{1} << histogram_bin(
+                         brick[(std::size_t{z} * side + y) * side + x], h.value_min, h.value_max);
     const std::uint64_t at = h.node_table_offset + sizeof(Node) * std::uint64_t{i} + 8;
     if ((decoded & ~dilate_bins(n.histogram, k)) != 0)
       throw FormatError(view.name(), at,

@@ -143,6 +143,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
   KsvdPayloadLayout layout;
   layout.word = payload[3];
   layout.band_word = payload[4];
+  layout.box_word = payload[5];
   layout.mean_bits = vr_layout_mean_bits(layout.word);
   layout.sparsity_bits = vr_layout_sparsity_bits(layout.word);
   layout.coef_bits = vr_layout_coef_bits(layout.word);
@@ -171,20 +172,28 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
          "dequantization values whose decoded values stay below " +
              std::to_string(max_decoded_magnitude) + " in magnitude",
          "values that reach " + std::to_string(bound));
-  // 2. The entries.
-  const vr_uint first = vr_code_first_word(layout.word, blocks);
+  // 2. The box of coded blocks and their entries.
+  const vr_uint n = shape.blocks_per_axis(), box = layout.box_word;
+  if ((box >> 12) != 0 || vr_box_blocks(box, 0) < 1 || vr_box_blocks(box, 0) > n ||
+      vr_box_blocks(box, 1) < 1 || vr_box_blocks(box, 1) > n || vr_box_blocks(box, 2) < 1 ||
+      vr_box_blocks(box, 2) > n)
+    fail(20, "box word of 1.." + str(n) + " coded blocks on each axis and zero bits 12..31",
+         str(vr_box_blocks(box, 0)) + " x " + str(vr_box_blocks(box, 1)) + " x " +
+             str(vr_box_blocks(box, 2)) + " blocks" + ((box >> 12) != 0 ? ", nonzero bits" : ""));
+  const vr_uint first = vr_code_first_word(layout.word, vr_box_entries(box));
   if (bytes < 4 * std::uint64_t{first})
     fail(0,
-         "of at least " + str(4 * std::uint64_t{first}) + " bytes for " +
-             str(vr_layout_entry_bits(layout.word)) + "-bit block entries",
+         "of at least " + str(4 * std::uint64_t{first}) + " bytes for " + str(vr_box_entries(box)) +
+             " " + str(vr_layout_entry_bits(layout.word)) + "-bit block entries",
          str(bytes) + " bytes");
   // 3. The code stream, read as the decoders read it (the zero words after the payload take the
   //    look-ahead of a Rice code and a damaged stream's overrun: a code reads at most 81 bits).
   const std::uint64_t stream_bits = (std::uint64_t{word_count} - first) * 32;
   const vr_uint largest = 1u << layout.coef_bits;
   CodeStream stream(payload, first);
-  for (vr_uint b = 0; b < blocks; ++b) {
-    const vr_uint s = vr_entry_sparsity(layout.word, vr_block_entry(payload, layout.word, b));
+  for (vr_uint b = 0, e = 0; b < blocks; ++b) {
+    if (!vr_block_in_box(box, n, b)) continue;
+    const vr_uint s = vr_entry_sparsity(layout.word, vr_block_entry(payload, layout.word, e++));
     layout.codes += s;
     const vr_uint gap_rice = s > 0 ? vr_gap_rice(layout.word, s) : 0;
     vr_uint next_atom = 0, atom = 0;
@@ -242,14 +251,20 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, Brick
   const float coef_scale = vr_as_float(payload[2]);
   const vr_uint n = shape.blocks_per_axis(), size = shape.size;
   std::size_t code = 0;
-  for (vr_uint b = 0; b < shape.blocks(); ++b) {
-    const vr_uint entry = vr_block_entry(payload, layout.word, b);
-    const vr_uint s = vr_entry_sparsity(layout.word, entry);
-    const float mean =
-        mean_bias + mean_scale * static_cast<float>(vr_entry_mean(layout.word, entry));
-    alignas(64) float block[VR_BLOCK_LENGTH];
-    decode_block(block, mean, codes.data() + code, s, atom_values, coef_scale);
-    code += s;
+  alignas(64) float outside[VR_BLOCK_LENGTH];  // a block outside the box: mean_bias everywhere
+  std::fill_n(outside, VR_BLOCK_LENGTH, mean_bias);
+  for (vr_uint b = 0, e = 0; b < shape.blocks(); ++b) {
+    alignas(64) float coded[VR_BLOCK_LENGTH];
+    const float* block = outside;
+    if (vr_block_in_box(layout.box_word, n, b)) {
+      const vr_uint entry = vr_block_entry(payload, layout.word, e++);
+      const vr_uint s = vr_entry_sparsity(layout.word, entry);
+      const float mean =
+          mean_bias + mean_scale * static_cast<float>(vr_entry_mean(layout.word, entry));
+      decode_block(coded, mean, codes.data() + code, s, atom_values, coef_scale);
+      code += s;
+      block = coded;
+    }
     // Scatter the block into the brick, row by row.
     const vr_uint bx = b % n, by = (b / n) % n, bz = b / (n * n);
     for (vr_uint z = 0; z < 6; ++z)
@@ -353,8 +368,21 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
     throw std::invalid_argument(str(parts.sparsity.size()) + " sparsities and " +
                                 str(parts.mean.size()) +
                                 " means: not one each per block of a brick (n³, n = 2..11)");
+  const auto n = static_cast<vr_uint>(std::lround(std::cbrt(static_cast<double>(blocks))));
+  vr_uint box_n[3];
+  for (std::size_t a = 0; a < 3; ++a) {
+    if (parts.box[a] > n)
+      throw std::invalid_argument("box of " + str(parts.box[0]) + " x " + str(parts.box[1]) +
+                                  " x " + str(parts.box[2]) + " blocks in a brick of " + str(n) +
+                                  " a side");
+    box_n[a] = parts.box[a] == 0 ? n : parts.box[a];
+  }
+  const vr_uint box = vr_make_box(box_n[0], box_n[1], box_n[2]);
   std::uint64_t codes = 0;
   for (std::size_t b = 0; b < blocks; ++b) {
+    if (!vr_block_in_box(box, n, static_cast<vr_uint>(b)) && parts.sparsity[b] != 0)
+      throw std::invalid_argument("block " + str(b) + " outside the box of coded blocks has " +
+                                  str(parts.sparsity[b]) + " atoms");
     if ((std::uint64_t{parts.sparsity[b]} >> parts.sparsity_bits) != 0 ||
         (std::uint64_t{parts.mean[b]} >> parts.mean_bits) != 0)
       throw std::invalid_argument("block " + str(b) + ": sparsity " + str(parts.sparsity[b]) +
@@ -410,14 +438,16 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
 
   BitWriter entries, stream;
   for (std::size_t b = 0; b < blocks; ++b)
-    entries.put(vr_layout_entry_bits(layout),
-                parts.sparsity[b] | (parts.mean[b] << parts.sparsity_bits));
+    if (vr_block_in_box(box, n, static_cast<vr_uint>(b)))
+      entries.put(vr_layout_entry_bits(layout),
+                  parts.sparsity[b] | (parts.mean[b] << parts.sparsity_bits));
   write_codes(parts, layout, band_word, &stream);
   const std::vector<vr_uint> entry_words = entries.words(), code_words = stream.words();
   std::vector<std::byte> payload(4 * (VR_HEADER_WORDS + entry_words.size() + code_words.size()));
   std::memcpy(payload.data(), parts.dequantization, 12);
   std::memcpy(payload.data() + 12, &layout, 4);
   std::memcpy(payload.data() + 16, &band_word, 4);
+  std::memcpy(payload.data() + 20, &box, 4);
   std::size_t at = 4 * VR_HEADER_WORDS;
   for (const std::vector<vr_uint>* part : {&entry_words, &code_words})
     for (const vr_uint w : *part) {
@@ -448,8 +478,12 @@ KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint
     parts.band_rice[band] = static_cast<int>((layout.band_word >> (4 * band)) & 0xF);
   parts.gap_shift = static_cast<int>(vr_layout_gap_shift(layout.word));
   parts.band_split = vr_layout_band_split(layout.word);
-  for (vr_uint b = 0; b < shape.blocks(); ++b) {
-    const vr_uint entry = vr_block_entry(payload, layout.word, b);
+  const vr_uint n = shape.blocks_per_axis();
+  for (std::size_t a = 0; a < 3; ++a)
+    parts.box[a] = vr_box_blocks(layout.box_word, static_cast<vr_uint>(a));
+  for (vr_uint b = 0, e = 0; b < shape.blocks(); ++b) {
+    if (!vr_block_in_box(layout.box_word, n, b)) continue;  // sparsity and mean 0
+    const vr_uint entry = vr_block_entry(payload, layout.word, e++);
     parts.sparsity[b] = vr_entry_sparsity(layout.word, entry);
     parts.mean[b] = vr_entry_mean(layout.word, entry);
   }

@@ -60,6 +60,19 @@ double coded_block_share(std::array<std::uint32_t, 3> dims, BrickShape shape) {
          (static_cast<double>(dims[0]) * dims[1] * dims[2]);
 }
 
+std::array<std::uint32_t, 3> coded_box(BrickShape shape, std::array<std::uint32_t, 3> position,
+                                       std::array<std::uint32_t, 3> dims) {
+  const std::int64_t interior = shape.interior(), side = brick_block_size,
+                     n = shape.blocks_per_axis();
+  std::array<std::uint32_t, 3> box{};
+  for (std::size_t a = 0; a < 3; ++a) {
+    // Block j starts at level voxel I·p − 1 + 6j; it is coded while that is at most dims.
+    const std::int64_t room = std::int64_t{dims[a]} + 1 - interior * std::int64_t{position[a]};
+    box[a] = static_cast<std::uint32_t>(std::clamp<std::int64_t>(room / side + 1, 1, n));
+  }
+  return box;
+}
+
 BrickShape choose_brick_shape(std::array<std::uint32_t, 3> dims) {
   std::vector<std::pair<std::uint32_t, double>> shares;  // every size, smallest first
   for (std::uint32_t size = min_brick_size; size <= max_brick_size; size += brick_block_size)

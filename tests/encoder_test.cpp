@@ -216,7 +216,7 @@ TEST(Encoder, RoundTripOfABrickBuiltFromAtoms) {
   // The shared per-value decode of brick_decode.h agrees with the brick decoder.
   for (vr_uint b = 0; b < 216; b += 17) {
     for (vr_uint v = 0; v < 216; v += 5)
-      ASSERT_FLOAT_EQ(vr_decode_value(words.data(), d.atoms.data(), blocks_per_brick, b, v),
+      ASSERT_FLOAT_EQ(vr_decode_value(words.data(), d.atoms.data(), blocks_per_axis, b, v),
                       out[vr_brick_voxel(blocks_per_axis, b, v)]);
   }
 }
@@ -322,6 +322,16 @@ TEST(Encoder, LagrangianRuleBeatsTheToleranceRuleAtEqualSize) {
   }
 }
 
+/// The entry of each of the 216 blocks of a ksvd payload's words (0 for a block outside the box
+/// of coded blocks: no atoms).
+std::vector<vr_uint> block_entries(const vr_uint* words) {
+  const vr_uint lw = vr_layout_word(words), box = vr_box_word(words);
+  std::vector<vr_uint> entries(blocks_per_brick, 0u);
+  for (vr_uint b = 0, e = 0; b < blocks_per_brick; ++b)
+    if (vr_block_in_box(box, blocks_per_axis, b)) entries[b] = vr_block_entry(words, lw, e++);
+  return entries;
+}
+
 /// Atoms of each of the 216 blocks of coded brick `node` (empty for a constant brick).
 std::vector<vr_uint> block_sparsities(const format::FrameView& f, std::uint32_t node) {
   const auto payload = f.brick_bytes(node);
@@ -329,15 +339,29 @@ std::vector<vr_uint> block_sparsities(const format::FrameView& f, std::uint32_t 
   std::vector<vr_uint> words(payload.size() / 4);
   std::memcpy(words.data(), payload.data(), payload.size());
   const vr_uint lw = vr_layout_word(words.data());
-  std::vector<vr_uint> atoms(blocks_per_brick);
-  for (vr_uint b = 0; b < blocks_per_brick; ++b)
-    atoms[b] = vr_entry_sparsity(lw, vr_block_entry(words.data(), lw, b));
+  std::vector<vr_uint> atoms = block_entries(words.data());
+  for (vr_uint& a : atoms) a = vr_entry_sparsity(lw, a);
   return atoms;
 }
 
-TEST(Encoder, PaddingBlocksGetNoAtomsUnderTheLagrangianRule) {  // (at this ε: they weigh 1/216)
+TEST(Encoder, BoxOfCodedBlocksEndsJustPastTheVolume) {
+  // Block j of brick p starts at level voxel 34·p − 1 + 6j (bricks of 36³); it is coded while
+  // that is at most the level's size (the voxel just past the end is read by a linear filter).
+  EXPECT_EQ(format::coded_box(shape36, {0, 0, 0}, {64, 64, 64}),
+            (std::array<std::uint32_t, 3>{6, 6, 6}));
+  EXPECT_EQ(format::coded_box(shape36, {1, 0, 0}, {40, 34, 11}),
+            (std::array<std::uint32_t, 3>{2, 6, 3}));  // z: block 2 starts at 11, past the end
+  EXPECT_EQ(format::coded_box(shape36, {0, 0, 0}, {10, 1, 34}),
+            (std::array<std::uint32_t, 3>{2, 1, 6}));
+  EXPECT_EQ(format::coded_box(format::BrickShape{66}, {1, 0, 0}, {96, 64, 40}),
+            (std::array<std::uint32_t, 3>{6, 11, 7}));
+}
+
+TEST(Encoder, PaddingBlocksOutsideTheBoxAreNotStored) {
   // 40 voxels in x: the second brick column holds interior voxels 34..39 (stored indices 1..6)
-  // and padding, so its blocks with x index ≥ 2 (stored 12..35) are padding only.
+  // and the voxel past the end (stored 7), so its blocks with x index ≥ 2 (stored 12..35) are
+  // padding only: outside the box, with no entry and no codes under either rule, decoding to
+  // mean_bias.
   const Volume v = analytic_volume(datasets::AnalyticField::noise, {40, 34, 34});
   const auto d = random_dictionary(64, 13);
   for (const auto rule :
@@ -346,19 +370,28 @@ TEST(Encoder, PaddingBlocksGetNoAtomsUnderTheLagrangianRule) {  // (at this ε: 
     s.rule = rule;
     const auto bytes = encoder::FrameEncoder(&d, s).encode(0, v);
     const format::FrameView f(bytes, "padding.vrf");
-    std::size_t padding_codes = 0, other_codes = 0;
+    std::size_t other_codes = 0, column_bricks = 0;
     for (std::uint32_t i = f.level(f.level_count() - 1).first_node; i < f.node_count(); ++i) {
-      const std::vector<vr_uint> atoms = block_sparsities(f, i);
-      ASSERT_EQ(atoms.size(), blocks_per_brick);
-      for (vr_uint b = 0; b < blocks_per_brick; ++b)
-        (f.position(i).x == 1 && b % blocks_per_axis >= 2 ? padding_codes : other_codes) +=
-            atoms[b];
+      const auto payload = f.brick_bytes(i);
+      ASSERT_GT(payload.size(), 4u);
+      std::vector<vr_uint> words(std::max<std::size_t>(payload.size() / 4, VR_HEADER_WORDS), 0u);
+      std::memcpy(words.data(), payload.data(), payload.size());
+      const vr_uint box = vr_box_word(words.data());
+      EXPECT_EQ(box, f.position(i).x == 1 ? vr_make_box(2, 6, 6) : vr_make_box(6, 6, 6));
+      for (const vr_uint atoms : block_sparsities(f, i)) other_codes += atoms;
+      if (f.position(i).x != 1) continue;
+      ++column_bricks;
+      std::vector<float> out(brick_voxels);
+      format::decode_payload(payload, format::Codec::ksvd, 0, atom_table(d), shape36, out,
+                             "padding.vrf", 0);
+      for (vr_uint b = 0; b < blocks_per_brick; ++b) {
+        if (b % blocks_per_axis < 2) continue;
+        for (vr_uint k = 0; k < VR_BLOCK_LENGTH; k += 7)
+          ASSERT_EQ(out[vr_brick_voxel(blocks_per_axis, b, k)], vr_as_float(words[0]));
+      }
     }
+    EXPECT_EQ(column_bricks, 1u);
     EXPECT_GT(other_codes, 0u);
-    if (rule == encoder::VariableRateRule::lagrangian)
-      EXPECT_EQ(padding_codes, 0u);
-    else
-      EXPECT_GT(padding_codes, 0u);  // the ε rule codes them like any block
   }
 }
 
@@ -383,7 +416,7 @@ TEST(Encoder, FinestOwnedCodesCountEachBlockByItsOwnVoxels) {
     const vr_uint lw = vr_layout_word(words.data());
     const vr_uint band_word = vr_band_word(words.data());
     vr_uint bit = 0;
-    const vr_uint first = vr_code_first_word(lw, blocks_per_brick);
+    const vr_uint first = vr_code_first_word(lw, vr_box_entries(vr_box_word(words.data())));
     const std::uint32_t pos[3] = {f.position(i).x, f.position(i).y, f.position(i).z};
     for (vr_uint b = 0; b < blocks_per_brick; ++b) {
       const vr_uint atoms = sparsities[b], start = bit;
@@ -431,12 +464,14 @@ MeanCheck check_means(const std::vector<std::byte>& bytes, const encoder::Pyrami
     out.bits.push_back(bits);
     const auto p = f.position(i);
     encoder::extract_brick(pyramid, p.level, p.x, p.y, p.z, brick);
+    const std::vector<vr_uint> entries = block_entries(words.data());
     for (vr_uint b = 0; b < blocks_per_brick; ++b) {
+      if (!vr_block_in_box(vr_box_word(words.data()), blocks_per_axis, b)) continue;  // no mean
       double exact = 0;
       for (vr_uint v = 0; v < VR_BLOCK_LENGTH; ++v)
         exact += static_cast<double>(brick[vr_brick_voxel(blocks_per_axis, b, v)]);
       exact /= VR_BLOCK_LENGTH;
-      const vr_uint q = vr_entry_mean(lw, vr_block_entry(words.data(), lw, b));
+      const vr_uint q = vr_entry_mean(lw, entries[b]);
       const double decoded = static_cast<double>(vr_as_float(words[0])) +
                              static_cast<double>(vr_as_float(words[1])) * q;
       out.worst_error = std::max(out.worst_error, std::abs(decoded - exact));
@@ -898,8 +933,8 @@ TEST(Encoder, FixedSparsityUsesAtMostSAtoms) {
 /// coding changes on purpose, print the new values with VOLREEL_PRINT_CHECKSUMS=1 and update them
 /// (KSVD_* and ZFP_* in tests/CMakeLists.txt: the ε rule and zfp; LAGRANGIAN_* below: the default
 /// variable rate).
-constexpr std::size_t LAGRANGIAN_BYTES = 2180;
-constexpr std::uint32_t LAGRANGIAN_CRC = 0xd30e081bu;
+constexpr std::size_t LAGRANGIAN_BYTES = 1660;
+constexpr std::uint32_t LAGRANGIAN_CRC = 0xf821735eu;
 
 TEST(Encoder, RegressionChecksums) {
   const Volume v = analytic_volume(datasets::AnalyticField::blobs, {40, 36, 34}, 1);
@@ -941,18 +976,21 @@ TEST(Encoder, RegressionChecksums) {
 
 /// Histograms that disagree with the bricks are found by verify even with every checksum
 /// recomputed: all bins set, or the bins of the values left out.
+/// One frame of a ramp along x (90 voxels) with a small step pattern across it, at `path`.
+void write_ramp(const std::filesystem::path& path, const Dims& dims) {
+  datasets::RawSeriesWriter w(path, dims, "ramp");
+  std::vector<float> v(dims.voxels());
+  for (std::size_t i = 0; i < v.size(); ++i)
+    v[i] = static_cast<float>(i % 90) / 89.0f + 0.01f * static_cast<float>(i / 90 % 7);
+  w.write_frame(0, 0, v);
+  w.finish();
+}
+
 TEST(Container, VerifyChecksHistogramsAgainstTheDecodedBricks) {
   test::TempDir dir("container-histograms");
   // A ramp along x over three bricks: each leaf holds about a third of the value range.
   const Dims dims{90, 20, 20};
-  {
-    datasets::RawSeriesWriter w(dir / "ramp", dims, "ramp");
-    std::vector<float> v(dims.voxels());
-    for (std::size_t i = 0; i < v.size(); ++i)
-      v[i] = static_cast<float>(i % 90) / 89.0f + 0.01f * static_cast<float>(i / 90 % 7);
-    w.write_frame(0, 0, v);
-    w.finish();
-  }
+  write_ramp(dir / "ramp", dims);
   const auto series = datasets::open_series(dir / "ramp");
   format::write_dictionary_file(dir / "dct.bin", format::dct_dictionary(6, "test"));
   encoder::EncodeJob job;
@@ -996,6 +1034,69 @@ TEST(Container, VerifyChecksHistogramsAgainstTheDecodedBricks) {
   EXPECT_NE(all.find("bins no value comes near"), std::string::npos) << all;
   const std::string none = edited("one.vreel", std::uint64_t{1} << 63, ~std::uint64_t{0});
   EXPECT_NE(none.find("leaves some of them out"), std::string::npos) << none;
+}
+
+TEST(Container, VerifyRefusesABrickCodingFewerBlocksThanItsPositionNeeds) {
+  test::TempDir dir("container-box");
+  // 90 × 20 × 20 in bricks of 36³: each brick codes 4 blocks in y and z (the volume and the voxel
+  // past its end), the first brick 6 in x.
+  const Dims dims{90, 20, 20};
+  write_ramp(dir / "ramp", dims);
+  format::write_dictionary_file(dir / "dct.bin", format::dct_dictionary(6, "test"));
+  encoder::EncodeJob job;
+  job.coding.tolerance = 1e-4;
+  job.coding.brick_size = 36;
+  job.dictionary_file = dir / "dct.bin";
+  const auto out = dir / "box.vreel";
+  encoder::encode_series(*datasets::open_series(dir / "ramp"), out, job);
+  ASSERT_TRUE(format::verify_container(out).empty());
+  // The first finest brick written again with one x layer of blocks fewer: a valid payload, but
+  // its position needs that layer.
+  std::vector<std::byte> bytes;
+  {
+    const format::FrameFile f(out / "frames/000000.vrf");
+    const format::FrameView& view = f.view();
+    format::FrameContents contents;
+    contents.header = view.header();
+    for (std::uint32_t l = 0; l < view.level_count(); ++l) contents.levels.push_back(view.level(l));
+    for (std::uint32_t i = 0; i < view.node_count(); ++i) contents.nodes.push_back(view.node(i));
+    for (std::uint32_t b = 0; b < view.brick_count(); ++b) {
+      const auto payload = view.brick_bytes(b);
+      contents.payloads.emplace_back(payload.begin(), payload.end());
+    }
+    const std::uint32_t leaf = view.level(view.level_count() - 1).first_node;
+    ASSERT_EQ(view.position(leaf).x, 0u);
+    const std::uint32_t brick = view.node(leaf).brick;
+    format::KsvdPayloadParts parts = format::unpack_ksvd_payload(
+        view.brick_bytes(brick), view.header().atom_count, shape36, "box", 0);
+    ASSERT_EQ(parts.box, (std::array<std::uint32_t, 3>{6, 4, 4}));
+    parts.box[0] = 5;
+    std::vector<std::uint32_t> atoms;
+    std::vector<std::int32_t> values;
+    for (std::uint32_t b = 0, k = 0; b < blocks_per_brick; ++b) {
+      const bool keep = b % blocks_per_axis < 5;
+      for (std::uint32_t j = 0; j < parts.sparsity[b]; ++j, ++k)
+        if (keep) atoms.push_back(parts.atoms[k]), values.push_back(parts.values[k]);
+      if (!keep) parts.sparsity[b] = parts.mean[b] = 0;
+    }
+    parts.atoms = atoms;
+    parts.values = values;
+    contents.payloads[brick] = format::pack_ksvd_payload(parts);
+    bytes = format::serialize_frame(contents);
+  }
+  std::ofstream(out / "frames/000000.vrf", std::ios::binary)
+      .write(reinterpret_cast<const char*>(bytes.data()),
+             static_cast<std::streamsize>(bytes.size()));
+  auto manifest = format::manifest_to_json(format::Container(out).manifest());
+  manifest["frames"][0]["crc32c"] = format::manifest_crc(bytes);
+  manifest["frames"][0]["bytes"] = bytes.size();
+  std::ofstream(out / "manifest.json") << format::manifest_text(manifest);
+  const auto problems = format::verify_container(out);
+  ASSERT_EQ(problems.size(), 1u) << problems.front();
+  EXPECT_NE(problems.front().find("box word with at least 6 x 4 x 4 coded blocks"),
+            std::string::npos)
+      << problems.front();
+  EXPECT_NE(problems.front().find("found 5 x 4 x 4"), std::string::npos) << problems.front();
 }
 
 TEST(Container, EncodeResumeVerifyAndDecode) {

@@ -89,10 +89,14 @@ void main() {
   const float mean_scale = vr_as_float(vr_load_word(1u));
   const float coef_scale = vr_as_float(vr_load_word(2u));
   const uint band_word = vr_band_word();
-  const uint first = vr_code_first_word(layout_word, VR_BLOCKS_PER_BRICK);
-  uint bit = 0u;
+  const uint box_word = vr_box_word();
+  const uint first = vr_code_first_word(layout_word, vr_box_entries(box_word));
+  uint bit = 0u, e = 0u;
   for (uint b = 0u; b < VR_BLOCKS_PER_BRICK; ++b) {
-    const uint entry = vr_block_entry(layout_word, b);
+    // A block outside the box of coded blocks: mean_bias, no entry, no codes.
+    const bool in_box = vr_block_in_box(box_word, VR_BLOCKS_PER_AXIS, b);
+    const uint entry = in_box ? vr_block_entry(layout_word, e) : 0u;
+    e += in_box ? 1u : 0u;
     const uint s = vr_entry_sparsity(layout_word, entry);
     vec4 value = vec4(mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry)));
     uint next_atom = 0u, atom = 0u;

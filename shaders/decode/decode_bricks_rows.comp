@@ -116,13 +116,19 @@ void main() {
   const float coef_scale = vr_as_float(vr_load_word(2u));
   const uint layout_word = vr_layout_word();
   const uint band_word = vr_band_word();
-  const uint first = vr_code_first_word(layout_word, VR_BLOCKS_PER_BRICK);
+  const uint box_word = vr_box_word();
+  const uint first = vr_code_first_word(layout_word, vr_box_entries(box_word));
+  const uint box_x = vr_box_blocks(box_word, 0u), box_y = vr_box_blocks(box_word, 1u),
+             box_z = vr_box_blocks(box_word, 2u);
   uint bit = 0u;
-  uint b = 0u;
+  uint e = 0u;
   for (uint bz = 0u; bz < VR_BLOCKS_PER_AXIS; ++bz)
     for (uint by = 0u; by < VR_BLOCKS_PER_AXIS; ++by)
-      for (uint bx = 0u; bx < VR_BLOCKS_PER_AXIS; ++bx, ++b) {
-        const uint entry = vr_block_entry(layout_word, b);
+      for (uint bx = 0u; bx < VR_BLOCKS_PER_AXIS; ++bx) {
+        // A block outside the box of coded blocks: mean_bias, no entry, no codes.
+        const bool in_box = bx < box_x && by < box_y && bz < box_z;
+        const uint entry = in_box ? vr_block_entry(layout_word, e) : 0u;
+        e += in_box ? 1u : 0u;
         const uint s = vr_entry_sparsity(layout_word, entry);
         const float mean = mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry));
         low0 = low1 = low2 = low3 = low4 = vec4(mean);

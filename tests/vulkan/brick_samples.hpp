@@ -30,8 +30,9 @@ inline std::vector<float> random_atoms(SplitMix64& rng, std::uint32_t count) {
 /// block at sparsity 63; 2 every block at sparsity 0; 3 extreme fields (atoms 0 and K−1,
 /// magnitudes 1 and 2^16, 15-bit means 0 and 32767, sparsities up to 255 in 8-bit fields,
 /// escaped gaps and values); 4 like 0 with negative scales. Values of both signs, most small
-/// (the entropy coder's common case), some at the largest magnitude (escapes). One entry per
-/// block of a brick of `shape`.
+/// (the entropy coder's common case), some at the largest magnitude (escapes). Styles 0 and 4:
+/// half of the payloads code a random box of blocks (1..n on each axis; brick_decode.h,
+/// vr_box_word), the others every block; style 3 codes all but the last layer of blocks in z.
 inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t atom_count,
                                                   int style, format::BrickShape shape = {}) {
   const auto sign = [&] { return rng.below(2) ? 1.0f : -1.0f; };
@@ -60,8 +61,16 @@ inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t
   parts.band_split = static_cast<std::uint32_t>(rng.below(atom_count + 1));
   const std::uint32_t most = std::min((1u << parts.sparsity_bits) - 1u, atom_count);
   const std::int64_t largest = std::int64_t{1} << parts.coef_bits;
+  const std::uint32_t n = shape.blocks_per_axis();
+  if ((style == 0 || style == 4) && rng.below(2) == 1)
+    for (std::uint32_t& a : parts.box) a = 1 + static_cast<std::uint32_t>(rng.below(n));
+  if (style == 3) parts.box = {n, n, n - 1};
+  const vr_uint box =
+      vr_make_box(parts.box[0] == 0 ? n : parts.box[0], parts.box[1] == 0 ? n : parts.box[1],
+                  parts.box[2] == 0 ? n : parts.box[2]);
   std::vector<std::uint32_t> order(atom_count);
   for (std::uint32_t b = 0; b < shape.blocks(); ++b) {
+    if (!vr_block_in_box(box, n, b)) continue;  // no entry, no codes
     std::uint32_t s = static_cast<std::uint32_t>(rng.below(std::uint64_t{std::min(most, 40u)} + 1));
     std::uint32_t mean = static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << parts.mean_bits));
     if (style == 1) s = std::min(63u, atom_count);

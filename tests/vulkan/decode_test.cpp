@@ -288,9 +288,11 @@ TEST_P(DecodeTest, EveryBrickSizeMatchesTheCpuReferenceDecoder) {
       for (std::uint32_t slot : written) expected.push_back(in_slot[slot]);
       EXPECT_EQ(compare(atlas, decoder.read_slots(written), expected).bad, 0u);
     }
-    // A brick of another size is refused before anything is submitted.
-    const format::BrickShape other{size == 36 ? 42u : 36u};
-    const Payload wrong = test::random_ksvd_payload(rng, atom_count, 1, other);
+    // A brick whose box of coded blocks is wider than this size's bricks (a larger size's, or a
+    // damaged box word) is refused before anything is submitted.
+    Payload wrong = test::random_ksvd_payload(rng, atom_count, 1, shape);
+    const vr_uint too_wide = vr_make_box(shape.blocks_per_axis() + 1, 1, 1);
+    std::memcpy(wrong.data() + 4 * 5, &too_wide, 4);
     const BrickUpload bad{wrong, format::Codec::ksvd, 0, 0};
     const Ticket last = decoder.last_ticket();
     EXPECT_THROW(decoder.submit({&bad, 1}), format::FormatError);

@@ -24,16 +24,19 @@ const uint N = VR_BLOCKS_PER_BRICK * 216u;
 void main() {
   const uint b = gl_WorkGroupID.x, v = gl_LocalInvocationIndex, i = b * 216u + v;
   const uint layout_word = vr_layout_word();
+  const uint box_word = vr_box_word();
+  const uint entries = vr_box_entries(box_word);
   uint codes = 0u;
-  for (uint c = 0u; c < VR_BLOCKS_PER_BRICK; ++c)
-    codes += vr_entry_sparsity(layout_word, vr_block_entry(layout_word, c));
+  for (uint e = 0u; e < entries; ++e)
+    codes += vr_entry_sparsity(layout_word, vr_block_entry(layout_word, e));
   // Code v of block b (atom in the low 16 bits, q in the high 16), read as the decoders do.
   uint code = 0xFFFFFFFFu;
   const uint band_word = vr_band_word();
-  const uint first = vr_code_first_word(layout_word, VR_BLOCKS_PER_BRICK);
-  uint bit = 0u;
+  const uint first = vr_code_first_word(layout_word, entries);
+  uint bit = 0u, e = 0u;
   for (uint c = 0u; c <= b; ++c) {
-    const uint s = vr_entry_sparsity(layout_word, vr_block_entry(layout_word, c));
+    if (!vr_block_in_box(box_word, VR_BLOCKS_PER_AXIS, c)) continue;
+    const uint s = vr_entry_sparsity(layout_word, vr_block_entry(layout_word, e++));
     uint next_atom = 0u, atom = 0u;
     for (uint k = 0u; k < s; ++k) {
       const int q = vr_read_code(first, layout_word, band_word, s, bit, next_atom, atom);
@@ -43,11 +46,11 @@ void main() {
   // Layout words of every width and parameter.
   const uint other = vr_make_layout(i % 16u, (i / 16u) % 9u, 1u + (i / 144u) % 16u,
                                     1u + (i / 2304u) % 16u, (i / 3u) % 4u, i % 4096u);
-  const uint entry = vr_block_entry(layout_word, i % VR_BLOCKS_PER_BRICK);
+  const uint entry = vr_block_entry(layout_word, i % entries);
   uint rice_bit = (i * 7u) % 900u;
   const uint rice = vr_read_rice(0u, rice_bit, i % 16u, 1u + i % 16u);
   results[0u * N + i] = vr_brick_voxel(VR_BLOCKS_PER_AXIS, b, v);
-  results[1u * N + i] = floatBitsToUint(vr_decode_value(VR_BLOCKS_PER_BRICK, b, v));
+  results[1u * N + i] = floatBitsToUint(vr_decode_value(VR_BLOCKS_PER_AXIS, b, v));
   results[2u * N + i] = vr_read_bits(0u, (i * 13u) % 1024u, i % 33u);
   results[3u * N + i] = vr_entry_sparsity(layout_word, entry) |
                         (vr_entry_mean(layout_word, entry) << 8u);
@@ -65,8 +68,8 @@ void main() {
     const uint constants[16] = uint[16](
         VR_BRICK_SIZE, VR_BRICK_INTERIOR, VR_BLOCK_SIZE, VR_BLOCK_LENGTH, VR_BLOCKS_PER_AXIS,
         VR_BLOCKS_PER_BRICK, VR_HEADER_WORDS, VR_MEAN_BITS, VR_MAX_SPARSITY_BITS, VR_MAX_COEF_BITS,
-        VR_MAX_ATOM_BITS, VR_MAX_BLOCKS_PER_AXIS, VR_ATLAS_NO_SLOT, layout_word, codes,
-        vr_code_first_word(layout_word, VR_BLOCKS_PER_BRICK));
+        VR_MAX_ATOM_BITS, box_word, VR_ATLAS_NO_SLOT, layout_word, codes,
+        vr_code_first_word(layout_word, entries));
     for (uint k = 0u; k < 16u; ++k) results[8u * N + k] = constants[k];
   }
 }

@@ -31,7 +31,16 @@ TEST_P(LayoutTest, GlslAndCppAgree) {
   SplitMix64 rng(5);
   const std::uint32_t atom_count = 1024;
   const std::vector<float> atoms = test::random_atoms(rng, atom_count);
-  const std::vector<std::byte> bytes = test::random_ksvd_payload(rng, atom_count, 0, shape);
+  // A payload that codes a box of blocks, not all of them (about every other one does).
+  const auto coded_blocks = [](const std::vector<std::byte>& payload) {
+    vr_uint box_word;
+    std::memcpy(&box_word, payload.data() + 4 * 5, 4);
+    return vr_box_entries(box_word);
+  };
+  std::vector<std::byte> bytes;
+  do {
+    bytes = test::random_ksvd_payload(rng, atom_count, 0, shape);
+  } while (coded_blocks(bytes) == blocks);
   std::vector<vr_uint> payload(bytes.size() / 4 + 1, 0u);  // + the look-ahead word
   std::memcpy(payload.data(), bytes.data(), bytes.size());
   const format::KsvdPayloadParts parts =
@@ -70,10 +79,12 @@ TEST_P(LayoutTest, GlslAndCppAgree) {
   // 2. The same functions in C++.
   const vr_uint* p = payload.data();
   const float* a = atoms.data();
-  const vr_uint layout_word = vr_layout_word(p);
+  const vr_uint layout_word = vr_layout_word(p), box_word = vr_box_word(p);
+  const vr_uint entries = vr_box_entries(box_word);
+  ASSERT_LT(entries, blocks) << "the probe's payload codes a box of blocks, not all";
   std::uint32_t codes = 0;
-  for (std::uint32_t c = 0; c < blocks; ++c)
-    codes += vr_entry_sparsity(layout_word, vr_block_entry(p, layout_word, c));
+  for (std::uint32_t e = 0; e < entries; ++e)
+    codes += vr_entry_sparsity(layout_word, vr_block_entry(p, layout_word, e));
   ASSERT_GT(codes, 0u);
   ASSERT_GE(payload.size(), 34u) << "the probe reads bits 0..1055";
   const std::uint32_t constants[16] = {shape.size,
@@ -87,11 +98,11 @@ TEST_P(LayoutTest, GlslAndCppAgree) {
                                        VR_MAX_SPARSITY_BITS,
                                        VR_MAX_COEF_BITS,
                                        VR_MAX_ATOM_BITS,
-                                       VR_MAX_BLOCKS_PER_AXIS,
+                                       box_word,
                                        VR_ATLAS_NO_SLOT,
                                        layout_word,
                                        codes,
-                                       vr_code_first_word(layout_word, blocks)};
+                                       vr_code_first_word(layout_word, entries)};
   for (std::uint32_t k = 0; k < 16; ++k)
     EXPECT_EQ(gpu[8 * N + k], constants[k]) << "constant " << k;
   std::uint32_t mismatches = 0;
@@ -102,7 +113,7 @@ TEST_P(LayoutTest, GlslAndCppAgree) {
       const std::uint32_t i = b * 216 + v;
       const vr_uint other = vr_make_layout(i % 16, (i / 16) % 9, 1 + (i / 144) % 16,
                                            1 + (i / 2304) % 16, (i / 3) % 4, i % 4096);
-      const vr_uint entry = vr_block_entry(p, layout_word, i % blocks);
+      const vr_uint entry = vr_block_entry(p, layout_word, i % entries);
       vr_uint rice_bit = (i * 7) % 900;
       const vr_uint rice = vr_read_rice(p, 0, rice_bit, i % 16, 1 + i % 16);
       const std::uint32_t expected[10] = {
@@ -127,7 +138,7 @@ TEST_P(LayoutTest, GlslAndCppAgree) {
           ADD_FAILURE() << "section " << s << " index " << i << ": GLSL " << gpu[s * N + i]
                         << ", C++ " << expected[s];
       // The decoded value: the same arithmetic; the device may fuse multiply-adds.
-      const float cpu = vr_decode_value(p, a, blocks, b, v);
+      const float cpu = vr_decode_value(p, a, n, b, v);
       const float glsl = std::bit_cast<float>(gpu[N + i]);
       worst = std::max(worst, std::fabs(cpu - glsl) / std::max(1.0f, std::fabs(cpu)));
     }

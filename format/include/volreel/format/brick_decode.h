@@ -66,7 +66,7 @@ VR_INLINE float vr_as_float(vr_uint bits) {
 #define vr_as_float(bits) uintBitsToFloat(bits)
 #endif
 
-/* Constants of format version 7 (SPEC.md). A brick of a container is n·6 voxels a side (n
+/* Constants of format version 8 (SPEC.md). A brick of a container is n·6 voxels a side (n
  * blocks, 2 ≤ n ≤ 11: the manifest's brick_size), its blocks x fastest; the functions below take
  * the number of blocks of a brick, n³. A GLSL includer declares n as a specialization constant,
  * `layout(constant_id = ...) const uint VR_BLOCKS_PER_AXIS`, before including this file. */
@@ -78,7 +78,7 @@ VR_INLINE float vr_as_float(vr_uint bits) {
 #define VR_BRICK_INTERIOR (VR_BRICK_SIZE - 2u)             /* interior voxels per axis */
 #define VR_BLOCKS_PER_BRICK (VR_BLOCKS_PER_AXIS * VR_BLOCKS_PER_AXIS * VR_BLOCKS_PER_AXIS)
 #endif
-#define VR_HEADER_WORDS 5u      /* three f32 dequantization values, layout and band words */
+#define VR_HEADER_WORDS 6u      /* three f32 dequantization values, layout, band and box words */
 #define VR_MEAN_BITS 15u        /* the most bits of a quantized mean */
 #define VR_MAX_SPARSITY_BITS 8u /* the widest sparsity field: at most 255 atoms a block */
 #define VR_MAX_COEF_BITS 16u    /* the most magnitude bits: |q| ≤ 2^16 */
@@ -140,15 +140,40 @@ VR_INLINE vr_uint vr_make_layout(vr_uint mean_bits, vr_uint sparsity_bits, vr_ui
 VR_INLINE vr_uint vr_band_word(VR_PAYLOAD_PARAM_ONLY) {
   return VR_LOAD_WORD(4u);
 }
+/* Word 5, the box word: the coded blocks of the brick are those with bx < nx, by < ny and
+ * bz < nz (each 1..n), the blocks that hold a voxel of the brick's level or the voxel just past
+ * its end; bits 0..3 nx, 4..7 ny, 8..11 nz, 12..31 zero. Only coded blocks have an entry (in
+ * block order) and codes; every value of a block outside the box is mean_bias. */
+VR_INLINE vr_uint vr_box_word(VR_PAYLOAD_PARAM_ONLY) {
+  return VR_LOAD_WORD(5u);
+}
+VR_INLINE vr_uint vr_box_blocks(vr_uint box_word, vr_uint axis) {
+  return (box_word >> (4u * axis)) & 0xFu;
+}
+/* Number of coded blocks, nx·ny·nz: the entries of the brick. */
+VR_INLINE vr_uint vr_box_entries(vr_uint box_word) {
+  return vr_box_blocks(box_word, 0u) * vr_box_blocks(box_word, 1u) * vr_box_blocks(box_word, 2u);
+}
+VR_INLINE vr_uint vr_make_box(vr_uint nx, vr_uint ny, vr_uint nz) {
+  return nx | (ny << 4u) | (nz << 8u);
+}
+/* Whether block b of a brick of n blocks a side is coded. */
+VR_INLINE bool vr_block_in_box(vr_uint box_word, vr_uint blocks_per_axis, vr_uint block) {
+  vr_uint n = blocks_per_axis;
+  return block % n < vr_box_blocks(box_word, 0u) && (block / n) % n < vr_box_blocks(box_word, 1u) &&
+         block / (n * n) < vr_box_blocks(box_word, 2u);
+}
+
 /* Width of a block entry, t + b (0..23). */
 VR_INLINE vr_uint vr_layout_entry_bits(vr_uint layout_word) {
   return vr_layout_sparsity_bits(layout_word) + vr_layout_mean_bits(layout_word);
 }
 
-/* Block entry `block` (0..n³ − 1): sparsity in the low t bits, quantized mean above. */
-VR_INLINE vr_uint vr_block_entry(VR_PAYLOAD_PARAM vr_uint layout_word, vr_uint block) {
+/* Entry e (0..nx·ny·nz − 1: the coded blocks in block order): sparsity in the low t bits,
+ * quantized mean above. */
+VR_INLINE vr_uint vr_block_entry(VR_PAYLOAD_PARAM vr_uint layout_word, vr_uint e) {
   vr_uint entry_bits = vr_layout_entry_bits(layout_word);
-  return vr_read_bits(VR_PAYLOAD_ARG VR_HEADER_WORDS, block * entry_bits, entry_bits);
+  return vr_read_bits(VR_PAYLOAD_ARG VR_HEADER_WORDS, e * entry_bits, entry_bits);
 }
 VR_INLINE vr_uint vr_entry_sparsity(vr_uint layout_word, vr_uint entry) {
   return entry & ((1u << vr_layout_sparsity_bits(layout_word)) - 1u);
@@ -157,17 +182,17 @@ VR_INLINE vr_uint vr_entry_mean(vr_uint layout_word, vr_uint entry) {
   return entry >> vr_layout_sparsity_bits(layout_word);
 }
 
-/* Words of the entries of a brick of `blocks` blocks, zero bits to the next word included, and
- * the word where the codes begin. */
-VR_INLINE vr_uint vr_entry_words(vr_uint layout_word, vr_uint blocks) {
-  return (blocks * vr_layout_entry_bits(layout_word) + 31u) / 32u;
+/* Words of `entries` entries (vr_box_entries), zero bits to the next word included, and the
+ * word where the codes begin. */
+VR_INLINE vr_uint vr_entry_words(vr_uint layout_word, vr_uint entries) {
+  return (entries * vr_layout_entry_bits(layout_word) + 31u) / 32u;
 }
-VR_INLINE vr_uint vr_code_first_word(vr_uint layout_word, vr_uint blocks) {
-  return VR_HEADER_WORDS + vr_entry_words(layout_word, blocks);
+VR_INLINE vr_uint vr_code_first_word(vr_uint layout_word, vr_uint entries) {
+  return VR_HEADER_WORDS + vr_entry_words(layout_word, entries);
 }
 
-/* The codes: one bit stream from word vr_code_first_word, the blocks' codes in block order, each
- * block's in increasing atom order. A code is the gap to its atom (atom − previous atom of the
+/* The codes: one bit stream from word vr_code_first_word, the coded blocks' codes in block order,
+ * each block's in increasing atom order. A code is the gap to its atom (atom − previous atom of the
  * block − 1; the first code of a block: its atom), then the value's magnitude |q| − 1 (q ≠ 0),
  * both as Rice codes (the gap's parameter from the block's sparsity, the magnitude's from the
  * atom's band), then the sign of q (1: negative). A Rice code of x with parameter k is
@@ -244,25 +269,32 @@ VR_INLINE int vr_read_code(VR_PAYLOAD_PARAM vr_uint first, vr_uint layout_word, 
   return negative != 0u ? -q : q;
 }
 
-/* Decodes value v (0..215, x fastest inside the block) of block `block` of a brick of `blocks`
- * blocks: walks the codes of blocks 0..block (a reference; the decoders walk the blocks in order
+/* Decodes value v (0..215, x fastest inside the block) of block `block` of a brick of n blocks a
+ * side: walks the codes of blocks 0..block (a reference; the decoders walk the blocks in order
  * once). Steps:
- *  1. read the layout word and, block by block, the entry: sparsity s, quantized mean q;
- *  2. value = mean_bias + mean_scale·q;
+ *  1. read the layout and box words and, coded block by coded block (vr_block_in_box), the
+ *     entry: sparsity s, quantized mean q;
+ *  2. value = mean_bias + mean_scale·q (a block outside the box: mean_bias, no codes);
  *  3. for each of the block's s codes (vr_read_code): atom a, quantized coefficient q;
  *     value += coef_scale·q · atoms[a·216 + v]. */
-VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint blocks, vr_uint block,
-                                vr_uint v) {
+VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint blocks_per_axis,
+                                vr_uint block, vr_uint v) {
   float mean_bias = vr_as_float(VR_LOAD_WORD(0u));
   float mean_scale = vr_as_float(VR_LOAD_WORD(1u));
   float coef_scale = vr_as_float(VR_LOAD_WORD(2u));
   vr_uint layout_word = vr_layout_word(VR_PAYLOAD_ARG_ONLY);
   vr_uint band_word = vr_band_word(VR_PAYLOAD_ARG_ONLY);
-  vr_uint first = vr_code_first_word(layout_word, blocks);
-  vr_uint bit = 0u;
+  vr_uint box_word = vr_box_word(VR_PAYLOAD_ARG_ONLY);
+  vr_uint first = vr_code_first_word(layout_word, vr_box_entries(box_word));
+  vr_uint bit = 0u, e = 0u;
   float value = 0.0f;
   for (vr_uint b = 0u; b <= block; ++b) {
-    vr_uint entry = vr_block_entry(VR_PAYLOAD_ARG layout_word, b);
+    if (!vr_block_in_box(box_word, blocks_per_axis, b)) {
+      value = mean_bias;
+      continue;
+    }
+    vr_uint entry = vr_block_entry(VR_PAYLOAD_ARG layout_word, e);
+    e += 1u;
     vr_uint s = vr_entry_sparsity(layout_word, entry);
     value = mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry));
     vr_uint next_atom = 0u, atom = 0u;

@@ -23,6 +23,7 @@ struct AtomTable {
 struct KsvdPayloadLayout {
   std::uint32_t word = 0;           ///< the layout word (word 3)
   std::uint32_t band_word = 0;      ///< the magnitudes' Rice parameters (word 4)
+  std::uint32_t box_word = 0;       ///< the coded blocks (word 5, vr_box_word)
   std::uint32_t mean_bits = 0;      ///< b, 0..15
   std::uint32_t sparsity_bits = 0;  ///< t, 0..8
   std::uint32_t coef_bits = 0;      ///< c, 1..16: every |q| ≤ 2^c
@@ -39,9 +40,10 @@ constexpr double max_atom_magnitude = 1.01;
 /// Checks a ksvd payload before anything decodes it (the CPU decoder here, or the GPU): the header
 /// and entries present, finite dequantization values that bound every decoded value by
 /// max_decoded_magnitude, the layout word (every width in range), and the
-/// code stream read to its end: in each block atom indices increasing and < atom_count, every
-/// magnitude ≤ 2^c, the stream inside the payload, the payload exactly the words of the header,
-/// entries (one per block of a brick of `shape`) and codes, and the padding after the last code
+/// box word (1..n coded blocks on each axis of a brick of `shape`), the code stream read to its
+/// end: in each block atom indices increasing and < atom_count, every magnitude ≤ 2^c, the
+/// stream inside the payload, the payload exactly the words of the header, entries (one per coded
+/// block) and codes, and the padding after the last code
 /// zero. Throws FormatError naming `name` and the offset `at` + the bad field's offset in the
 /// payload.
 KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> payload, std::uint32_t atom_count,
@@ -56,8 +58,10 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::
 /// mean_scale, coef_scale), the field widths (mean bits b 0..15, sparsity bits t 0..8, magnitude
 /// bits c 1..16, atom bits a 1..16), the entropy coder's two parameters, per block of the brick
 /// (n³ blocks for bricks of 6n voxels a side) its sparsity (< 2^t) and quantized mean (< 2^b),
-/// and the codes of all blocks in block order, each block's
-/// in increasing atom order (atom index < 2^a, quantized value q ≠ 0 with |q| ≤ 2^c).
+/// the coded blocks' box (brick_decode.h, vr_box_word: blocks outside it have sparsity 0 and are
+/// stored without an entry, decoding to mean_bias) and the codes of all blocks in block order,
+/// each block's in increasing atom order (atom index < 2^a, quantized value q ≠ 0 with
+/// |q| ≤ 2^c).
 struct KsvdPayloadParts {
   float dequantization[3] = {0, 0, 0};
   std::uint32_t mean_bits = 12;
@@ -72,6 +76,8 @@ struct KsvdPayloadParts {
   std::uint32_t band_split = 0;
   std::vector<std::uint32_t> sparsity = std::vector<std::uint32_t>(BrickShape{}.blocks());
   std::vector<std::uint32_t> mean = std::vector<std::uint32_t>(BrickShape{}.blocks());
+  /// Coded blocks on each axis, 1..n; 0 on an axis: all n.
+  std::array<std::uint32_t, 3> box{0, 0, 0};
   std::vector<std::uint32_t> atoms;  ///< one per code
   std::vector<std::int32_t> values;  ///< one per code
 };

@@ -20,7 +20,7 @@ static_assert(std::endian::native == std::endian::little, "volreel's files are l
 
 inline constexpr std::array<char, 8> frame_magic = {'V', 'R', 'E', 'E', 'L', 'F', 'R', 'M'};
 /// Version of the frame file layout, independent of the program version.
-inline constexpr std::uint32_t frame_format_version = 7;
+inline constexpr std::uint32_t frame_format_version = 8;
 
 inline constexpr std::uint32_t brick_apron = 1;       ///< voxels copied from each neighbour
 inline constexpr std::uint32_t brick_block_size = 6;  ///< voxels per block axis (VR_BLOCK_SIZE)
@@ -131,8 +131,13 @@ std::vector<LevelGeometry> level_geometry(std::array<std::uint32_t, 3> dims, Bri
 
 /// Per voxel of a volume of `dims`, the values of the 6³ blocks that hold at least one voxel of
 /// their level, over all levels of bricks of `shape`: what the tiling costs (blocks wholly
-/// outside a level's volume cost a few bits).
+/// outside a level's volume are not stored: coded_box).
 double coded_block_share(std::array<std::uint32_t, 3> dims, BrickShape shape);
+/// The coded blocks of brick `position` of a level of size `dims` (a ksvd payload's box word,
+/// brick_decode.h): on each axis the blocks that hold a voxel of the level or the voxel just past
+/// its end, which a renderer's linear filter reads at the volume's far face (1..n each).
+std::array<std::uint32_t, 3> coded_box(BrickShape shape, std::array<std::uint32_t, 3> position,
+                                       std::array<std::uint32_t, 3> dims);
 /// The brick shape whose coded_block_share is the least for `dims` (the smaller size on a tie
 /// within 1 %: finer units to stream).
 BrickShape choose_brick_shape(std::array<std::uint32_t, 3> dims);
