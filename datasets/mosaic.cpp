@@ -8,7 +8,6 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
-#include <cstring>
 #include <exception>
 #include <optional>
 #include <span>
@@ -67,12 +66,10 @@ std::vector<MosaicBrick> pool_of(const format::Container& c, std::size_t count) 
     const std::span<const std::byte> bytes = view.checked_brick_bytes(r.brick);
     // A ksvd brick codes only the blocks its position needs (its box word): the pool takes the
     // ones that code every block, which stand in for a brick anywhere.
-    if (view.codec() == format::Codec::ksvd && bytes.size() >= 4 * VR_HEADER_WORDS) {
-      const vr_uint n = view.shape().blocks_per_axis();
-      vr_uint box;
-      std::memcpy(&box, bytes.data() + 4 * 5, 4);
-      if (box != vr_make_box(n, n, n)) continue;
-    }
+    const vr_uint n = view.shape().blocks_per_axis();
+    if (view.codec() == format::Codec::ksvd && bytes.size() != 4 &&
+        format::ksvd_box_word(bytes) != vr_make_box(n, n, n))
+      continue;
     if (std::any_of(pool.begin(), pool.end(), [&](const MosaicBrick& p) {
           return std::equal(p.payload.begin(), p.payload.end(), bytes.begin(), bytes.end());
         }))

@@ -244,9 +244,7 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
                                       std::size_t first_block, const Eigen::MatrixXf& atoms,
                                       const QuantizeOptions& options, BrickQuantization* result) {
   const std::uint32_t blocks = shape.blocks(), per_axis = shape.blocks_per_axis();
-  vr_uint box = 0;
-  for (vr_uint a = 0; a < 3; ++a)
-    box |= (options.box[a] == 0 ? per_axis : std::min(options.box[a], per_axis)) << (4 * a);
+  const vr_uint box = options.box != 0 ? options.box : vr_make_box(per_axis, per_axis, per_axis);
   const auto coded = [&](std::uint32_t b) { return vr_block_in_box(box, per_axis, b); };
   float mean_lo = means[0], mean_hi = means[0];  // block 0 is always coded
   for (std::uint32_t b = 1; b < blocks; ++b)

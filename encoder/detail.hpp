@@ -42,9 +42,9 @@ struct QuantizeOptions {
   /// (0..15) whose step over its means' range is at most this. 0: always 12 bits.
   double mean_step = 0;
   int mean_bits = -1;  ///< ≥ 0: every brick takes exactly this many mean bits (overrides mean_step)
-  /// The brick's coded blocks on each axis (format::coded_box; 0: all): the blocks outside are
-  /// not coded and decode to the payload's mean_bias.
-  std::array<std::uint32_t, 3> box{0, 0, 0};
+  /// The brick's box word of coded blocks (brick_decode.h, vr_box_word; 0: every block): the
+  /// blocks outside are not coded and decode to the payload's mean_bias.
+  std::uint32_t box = 0;
 };
 
 /// A constant brick's payload: its one value (4 bytes).

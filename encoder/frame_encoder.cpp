@@ -91,6 +91,7 @@ void add_to_breakdown(format::BrickShape shape, const Cell& c,
   std::array<float, VR_MAX_BLOCKS_PER_AXIS * VR_MAX_BLOCKS_PER_AXIS * VR_MAX_BLOCKS_PER_AXIS>
       shares{};
   detail::owned_block_shares(shape, c.x, c.y, c.z, level_dims, shares.data());
+  double stored_blocks = blocks;  // a ksvd payload: its box of coded blocks only
   if (c.constant) {
     b.constant_bricks += size;
   } else if (!ksvd) {
@@ -100,6 +101,7 @@ void add_to_breakdown(format::BrickShape shape, const Cell& c,
     std::vector<vr_uint> words(std::max<std::size_t>(size / 4, VR_HEADER_WORDS) + 1, 0u);
     std::memcpy(words.data(), c.payload.data(), size / 4 * 4);
     const vr_uint layout = vr_layout_word(words.data()), box = vr_box_word(words.data());
+    stored_blocks = vr_box_entries(box);
     b.brick_headers += 4 * VR_HEADER_WORDS;
     b.block_entries += 4 * vr_entry_words(layout, vr_box_entries(box));
     const vr_uint first = vr_code_first_word(layout, vr_box_entries(box));
@@ -128,11 +130,6 @@ void add_to_breakdown(format::BrickShape shape, const Cell& c,
   // the stored voxels are apron or padding. A ksvd payload stores its box of coded blocks only.
   double owned = 0;
   for (std::uint32_t k = 0; k < blocks; ++k) owned += static_cast<double>(shares[k]);
-  double stored_blocks = blocks;
-  if (ksvd && !c.constant) {
-    const auto box = format::coded_box(shape, {c.x, c.y, c.z}, level_dims);
-    stored_blocks = static_cast<double>(box[0]) * box[1] * box[2];
-  }
   b.aprons_and_padding += static_cast<double>(size) * (1 - owned / stored_blocks);
 }
 
@@ -189,13 +186,6 @@ void extract_chunk(const PyramidWindow& window, std::span<Cell> chunk, float* br
   }
 }
 
-/// A cell's box word of coded blocks (format::coded_box).
-vr_uint brick_box(format::BrickShape shape, const Cell& c,
-                  const std::vector<format::LevelGeometry>& geometry) {
-  const auto box = format::coded_box(shape, {c.x, c.y, c.z}, geometry[c.level].dims);
-  return vr_make_box(box[0], box[1], box[2]);
-}
-
 /// Step 2b (ksvd): the blocks of the chunk's non-constant bricks (`coded`, indices into the chunk)
 /// and their weights, batch-OMP on all of them at once, then each brick quantized into its
 /// payload. `part` is when the chunk's extraction began (its time counts as brick extraction).
@@ -207,6 +197,14 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
   work.columns.resize(VR_BLOCK_LENGTH, blocks);
   work.means.resize(static_cast<std::size_t>(blocks));
   work.weights.resize(coding.weighted ? static_cast<std::size_t>(blocks) : 0);
+  // Each brick's box word of coded blocks (format::coded_box): the blocks past it are not coded.
+  const vr_uint per_axis = coding.shape.blocks_per_axis();
+  std::vector<vr_uint> boxes(coded.size());
+  for (std::size_t k = 0; k < coded.size(); ++k) {
+    const Cell& c = chunk[coded[k]];
+    const auto box = format::coded_box(coding.shape, {c.x, c.y, c.z}, geometry[c.level].dims);
+    boxes[k] = vr_make_box(box[0], box[1], box[2]);
+  }
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(coded.size()); ++k) {
     const auto kk = static_cast<std::size_t>(k);
@@ -221,9 +219,8 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
       else
         std::fill(w, w + brick_blocks, 1.0f);
       const double scale = coding.level_scale(c.level);
-      const vr_uint box = brick_box(coding.shape, c, geometry);
       for (std::size_t b = 0; b < brick_blocks; ++b)  // blocks outside the box: not coded
-        w[b] = vr_block_in_box(box, coding.shape.blocks_per_axis(), static_cast<vr_uint>(b))
+        w[b] = vr_block_in_box(boxes[kk], per_axis, static_cast<vr_uint>(b))
                    ? static_cast<float>(static_cast<double>(w[b]) / (scale * scale))
                    : 0.0f;
     }
@@ -243,8 +240,7 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
     QuantizeOptions brick_qo = qo;  // the means' and coefficients' steps follow the level's ε
     brick_qo.mean_step *= coding.level_scale(cell.level);
     brick_qo.coef_step *= coding.level_scale(cell.level);
-    brick_qo.box =
-        format::coded_box(coding.shape, {cell.x, cell.y, cell.z}, geometry[cell.level].dims);
+    brick_qo.box = boxes[kk];
     detail::BrickQuantization result;
     cell.payload = detail::quantize_brick(coding.shape,
                                           work.columns.data() + kk * brick_blocks * VR_BLOCK_LENGTH,
@@ -259,13 +255,11 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
   st.blocks_over_bound += over_bound;
   st.quantized_squared_error += quantized_error;
   st.seconds_quantize += seconds_since(part);
-  for (std::size_t k = 0; k < coded.size(); ++k) {  // the coded blocks, as quantize_brick's
-    const vr_uint box = brick_box(coding.shape, chunk[coded[k]], geometry);
+  for (std::size_t k = 0; k < coded.size(); ++k)  // the coded blocks, as quantize_brick's
     for (std::size_t b = 0; b < brick_blocks; ++b)
-      if (vr_block_in_box(box, coding.shape.blocks_per_axis(), static_cast<vr_uint>(b)))
+      if (vr_block_in_box(boxes[k], per_axis, static_cast<vr_uint>(b)))
         st.unquantized_squared_error +=
             static_cast<double>(work.codes.residual_energy[k * brick_blocks + b]);
-  }
   st.blocks += static_cast<std::size_t>(blocks);
 }
 

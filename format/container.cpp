@@ -542,15 +542,14 @@ void decode_and_check_histograms(const FrameView& view, const AtomTable& atoms) 
     decode_brick(view, n.brick, atoms, brick);
     // A ksvd brick codes the blocks its position in the level needs (the box word); the voxels
     // past them decode to a placeholder no renderer reads, left out of the histogram check.
-    const NodePosition p = view.position(i);
-    const LevelEntry& level = view.level(p.level);
-    const auto box =
-        coded_box(view.shape(), {p.x, p.y, p.z}, {level.dims[0], level.dims[1], level.dims[2]});
     std::uint32_t end[3] = {side, side, side};
     const auto payload = view.brick_bytes(n.brick);
     if (view.codec() == Codec::ksvd && payload.size() != 4) {
-      std::uint32_t word;
-      std::memcpy(&word, payload.data() + 4 * 5, 4);  // the decode above checked the size
+      const NodePosition p = view.position(i);
+      const LevelEntry& level = view.level(p.level);
+      const auto box =
+          coded_box(view.shape(), {p.x, p.y, p.z}, {level.dims[0], level.dims[1], level.dims[2]});
+      const std::uint32_t word = ksvd_box_word(payload);  // checked by the decode above
       for (std::size_t a = 0; a < 3; ++a) {
         const vr_uint coded = vr_box_blocks(word, static_cast<vr_uint>(a));
         if (coded < box[a])

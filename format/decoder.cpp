@@ -494,6 +494,13 @@ KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint
   return parts;
 }
 
+std::uint32_t ksvd_box_word(std::span<const std::byte> payload) {
+  if (payload.size() < 4 * VR_HEADER_WORDS) return 0;
+  std::uint32_t word;
+  std::memcpy(&word, payload.data() + 4 * 5, 4);
+  return word;
+}
+
 KsvdPayloadLayout check_ksvd_payload(std::span<const std::byte> bytes, std::uint32_t atom_count,
                                      BrickShape shape, const std::filesystem::path& name,
                                      std::uint64_t at) {

@@ -33,9 +33,7 @@ TEST_P(LayoutTest, GlslAndCppAgree) {
   const std::vector<float> atoms = test::random_atoms(rng, atom_count);
   // A payload that codes a box of blocks, not all of them (about every other one does).
   const auto coded_blocks = [](const std::vector<std::byte>& payload) {
-    vr_uint box_word;
-    std::memcpy(&box_word, payload.data() + 4 * 5, 4);
-    return vr_box_entries(box_word);
+    return vr_box_entries(format::ksvd_box_word(payload));
   };
   std::vector<std::byte> bytes;
   do {

@@ -54,6 +54,10 @@ KsvdPayloadLayout check_ksvd_payload(std::span<const std::uint32_t> words, std::
                                      std::uint32_t atom_count, BrickShape shape,
                                      const std::filesystem::path& name, std::uint64_t at);
 
+/// The box word of a ksvd payload (brick_decode.h, vr_box_word: its coded blocks) of at least the
+/// header's bytes, unchecked (check_ksvd_payload checks it); 0 for a shorter payload.
+std::uint32_t ksvd_box_word(std::span<const std::byte> payload);
+
 /// The parts of a ksvd brick payload before packing: the three dequantization values (mean_bias,
 /// mean_scale, coef_scale), the field widths (mean bits b 0..15, sparsity bits t 0..8, magnitude
 /// bits c 1..16, atom bits a 1..16), the entropy coder's two parameters, per block of the brick
