@@ -1,6 +1,7 @@
 // brick_coding.cpp: one brick's payload — a constant, the ksvd payload (block means to b bits,
-// sparse codes quantized to 6 bits with a least-squares refit, optionally extending the pursuit
-// after quantization), or a zfp stream — and the blocks' owned shares that weigh their atoms.
+// sparse codes quantized at a uniform step with a least-squares refit, optionally extending the
+// pursuit after quantization), or a zfp stream — and the blocks' owned shares that weigh their
+// atoms.
 #include <algorithm>
 #include <cmath>
 #include <cstring>

@@ -179,10 +179,10 @@ std::vector<std::byte> serialize_dictionary_file(const DictionaryFile& d) {
 DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes,
                                      const std::filesystem::path& name) {
   // 1. The header must be there before any field is looked at.
-  const std::uint64_t minimum = dictionary_file_size(1, 1);
   if (bytes.size() < sizeof(DictionaryFileHeader))
     throw FormatError(name, bytes.size(),
-                      "a dictionary file of at least " + std::to_string(minimum) + " bytes",
+                      "a dictionary file of at least " +
+                          std::to_string(sizeof(DictionaryFileHeader)) + " bytes (its header)",
                       "end of file (truncated: " + std::to_string(bytes.size()) + " bytes)");
   DictionaryFileHeader h;
   std::memcpy(&h, bytes.data(), sizeof h);
@@ -223,6 +223,12 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes,
   if ((h.flags & ~(dictionary_flag_flat | dictionary_flag_half | dictionary_flag_dct)) != 0)
     throw FormatError(name, offsetof(DictionaryFileHeader, flags),
                       "flags with only bits 0, 1 and 2 defined", hex32(h.flags));
+  // With the DCT basis the codes index K + M³ − 1 atoms, at most dictionary_max_atoms.
+  if (dct_only_allowed && h.atom_count + (m - 1) > dictionary_max_atoms)
+    throw FormatError(name, offsetof(DictionaryFileHeader, atom_count),
+                      "atom count in 0.." + std::to_string(dictionary_max_atoms - (m - 1)) + " (" +
+                          std::to_string(m - 1) + " DCT atoms follow them)",
+                      std::to_string(h.atom_count));
   const bool half = (h.flags & dictionary_flag_half) != 0;
   const std::size_t value_bytes = half ? 2 : sizeof(float);
 

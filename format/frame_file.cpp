@@ -226,6 +226,10 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name, std::uint6
   if (ksvd && (h.atom_count == 0 || h.atom_count > dictionary_max_atoms))
     fail(offsetof(FrameHeader, atom_count), "atom count in 1.." + str(dictionary_max_atoms),
          str(h.atom_count));
+  if (!ksvd && h.block_size != 0)
+    fail(offsetof(FrameHeader, block_size), "block size 0 (zfp)", str(h.block_size));
+  if (!ksvd && h.atom_count != 0)
+    fail(offsetof(FrameHeader, atom_count), "atom count 0 (zfp)", str(h.atom_count));
   if (h.fixed_sparsity > 216)  // at most one atom per value of a 6³ block
     fail(offsetof(FrameHeader, fixed_sparsity), "fixed sparsity 0..216", str(h.fixed_sparsity));
   if (!std::isfinite(h.value_min) || !std::isfinite(h.value_max) || h.value_min > h.value_max)

@@ -81,4 +81,15 @@ psnr_of() { awk -v f="$1" 'index($0, f) == 1 { print $(NF - 6); exit }' "$work/r
 [ ! -e "$work/rdk/keyframes.vreel" ] || fail "bench rd left its keyframe container behind"
 expect_error "--keyframe-gaps needs --dictionary" "$volreel" bench rd "$work/a" --keyframe-gaps 2
 
+# Where a ksvd container's bits go: one row per level and one for all; gap, magnitude and sign
+# bits add up to the bits per code; a zfp container is refused with the reason.
+"$volreel" encode "$work/a" --dictionary dct --brick-size 12 --out "$work/k.vreel" > /dev/null 2>&1
+"$volreel" bench codes "$work/k.vreel" > "$work/codes.txt" 2>/dev/null
+levels=$("$volreel" info "$work/k.vreel" --json 2>/dev/null | json 'd["levels"]')
+[ "$(grep -c '^[0-9]' "$work/codes.txt")" = "$levels" ] || fail "bench codes: expected $levels level rows: $(cat "$work/codes.txt")"
+awk '$1 == "all" { t = $8; s = $9 + $10 + $11; if (t < 1 || s < t - 0.015 || s > t + 0.015) exit 1; ok = 1 }
+     END { exit !ok }' "$work/codes.txt" || fail "bench codes: gap + magnitude + sign != bits per code: $(cat "$work/codes.txt")"
+"$volreel" encode "$work/a" --codec zfp --out "$work/z.vreel" > /dev/null 2>&1
+expect_error "reads ksvd containers" "$volreel" bench codes "$work/z.vreel"
+
 echo "cli_end_to_end: all checks passed"

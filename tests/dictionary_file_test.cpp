@@ -229,6 +229,19 @@ TEST(DictionaryFile, BadFieldsNameTheirOffset) {
   std::memcpy(bad.data() + 16, &huge, 4);
   EXPECT_EQ(expect_error(bad, "atom count"), 16u);
 
+  // With the DCT basis appended the codes index K + M³ − 1 atoms: a K that pushes them past
+  // 65536 is refused at the count, not after the file is read.
+  bad = good;
+  std::uint32_t flags = 0, block = 0;
+  std::memcpy(&flags, bad.data() + 80, 4);
+  std::memcpy(&block, bad.data() + 20, 4);
+  flags |= dictionary_flag_dct;
+  std::memcpy(bad.data() + 80, &flags, 4);
+  const std::uint32_t too_many = dictionary_max_atoms - (block * block * block - 1) + 1;
+  std::memcpy(bad.data() + 16, &too_many, 4);
+  fix_crc(bad);
+  EXPECT_EQ(expect_error(bad, "DCT atoms follow"), 16u);
+
   bad = good;
   bad.push_back(std::byte{0});
   expect_error(bad, "extra bytes");

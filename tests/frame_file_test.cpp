@@ -194,6 +194,26 @@ TEST(DamagedFrame, EmptyPayloadsAreErrors) {
       format::FormatError);
 }
 
+TEST(DamagedFrame, AZfpHeaderNamesNoAtomsOrBlocks) {
+  const auto d = small_dictionary();
+  const std::vector<std::byte> good = small_frame(format::Codec::zfp, d);
+  EXPECT_EQ(read_everything(good, d, true), "");
+  const auto expect_refused = [&](std::size_t offset, std::uint32_t value,
+                                  const std::string& what) {
+    std::vector<std::byte> bad = good;
+    std::memcpy(bad.data() + offset, &value, 4);
+    try {
+      const format::FrameView f(bad, "frames/000000.vrf");
+      ADD_FAILURE() << "a zfp frame header with " << what << " " << value << " was accepted";
+    } catch (const format::FormatError& e) {
+      EXPECT_EQ(e.offset(), offset) << e.what();
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    }
+  };
+  expect_refused(offsetof(format::FrameHeader, atom_count), 215, "atom count 0 (zfp)");
+  expect_refused(offsetof(format::FrameHeader, block_size), 6, "block size 0 (zfp)");
+}
+
 TEST(DamagedFrame, PayloadErrorsNameTheBrick) {
   const auto d = small_dictionary();
   auto bytes = small_frame(format::Codec::ksvd, d);

@@ -205,7 +205,10 @@ void add_bench_command(CLI::App& app) {
         "SERIES", o->series,
         "Raw series directory, HDF5 file, raw file or quoted pattern of raw files (see below)")
       ->required();
-  rd->add_option("--out", o->out, "Directory for rd.csv and rd.png")->capture_default_str();
+  rd->add_option(
+        "--out", o->out,
+        "Directory for rd.csv, rd_equal_bps.csv and rd.png (and, while it runs, keyframes.vreel)")
+      ->capture_default_str();
   rd->add_option("--max-frames", o->rd.max_frames, "Use only the first N frames (0: all)")
       ->capture_default_str();
   rd->add_option("--ssim-frames", o->rd.ssim_frames,
@@ -280,6 +283,7 @@ void add_bench_command(CLI::App& app) {
   o->reader.add_to(*rd);
   rd->callback([o] { run_rd(*o); });
   add_bench_train_command(*bench);
+  add_bench_codes_command(*bench);
 #ifdef VOLREEL_HAVE_VULKAN
   add_bench_decode_command(*bench);
 #endif

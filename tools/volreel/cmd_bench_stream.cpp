@@ -143,7 +143,7 @@ void add_bench_stream_command(CLI::App& bench) {
       ->capture_default_str();
   cmd->add_option("--atlas-slots", o->s.atlas_slots,
                   "Brick slots of the atlas (= heap capacity); the default is what 256 MiB of a "
-                  "16-bit GPU atlas holds")
+                  "16-bit GPU atlas holds\nin bricks of 36^3 (in bricks of 66^3 it holds 466)")
       ->capture_default_str();
   cmd->add_option("--max-in-flight", o->s.max_in_flight,
                   "Requests in flight at most (default: what the link delivers in latency + 0.5 s, "
@@ -155,7 +155,8 @@ void add_bench_stream_command(CLI::App& bench) {
       "--transfer", o->s.transfer,
       "Transfer function: auto (quantiles of the data), tour (the tour's), a preset (grayscale, "
       "cool-warm,\n"
-      "fire, turbulence) or a JSON file; default: auto without --tour, the tour's with one");
+      "fire, turbulence, transparent) or a JSON file; default: auto without --tour, the tour's "
+      "with one");
   cmd->add_option("--sse-target", o->s.sse_target, "Screen-space error target, pixels per voxel")
       ->capture_default_str();
   cmd->add_option("--sse-weight", o->s.sse_weight,

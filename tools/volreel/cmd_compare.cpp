@@ -205,14 +205,16 @@ void compare_series(const CompareOptions& o) {
 
 void add_compare_command(CLI::App& app) {
   auto o = std::make_shared<CompareOptions>();
-  CLI::App* cmd =
-      app.add_subcommand("compare",
-                         "Error metrics between an original A and a reconstruction B: two series "
-                         "(raw series directories, HDF5 or raw\n"
-                         "files) or two PNG images. Volumes: PSNR (MTV: 10*log10(range^2/MSE)) and "
-                         "zfp's PSNR, RMSE, max error, 3D SSIM,\n"
-                         "per frame and over the sequence. Images: PSNR (range 255) and SSIM per "
-                         "colour channel, averaged.");
+  CLI::App* cmd = app.add_subcommand(
+      "compare",
+      "Error metrics between an original A and a reconstruction B: two series "
+      "(raw series directories, raw files\n"
+      "or patterns, HDF5 or NetCDF; B may also be a NAME.vreel container, "
+      "decoded at full resolution, its bps\n"
+      "printed) or two PNG images. Volumes: PSNR (MTV: 10*log10(range^2/MSE)) and "
+      "zfp's PSNR, RMSE, max error, 3D SSIM,\n"
+      "per frame and over the sequence. Images: PSNR (range 255) and SSIM per "
+      "colour channel, averaged.");
   cmd->add_option("A", o->a, "The original")->required();
   cmd->add_option("B", o->b, "The reconstruction")->required();
   o->reader.add_to(*cmd);

@@ -199,10 +199,12 @@ void add_encode_command(CLI::App& app) {
          "Raw series directory, HDF5 file, raw file or quoted pattern of raw files (see below)")
       ->required();
   cmd->add_option("--out", o->out, "The container directory to write, e.g. turb.vreel")->required();
-  cmd->add_option("--dictionary", o->dictionary,
-                  "Dictionary from volreel train, or 'dct' for the DCT basis alone (no learned "
-                  "atoms: nothing to\ntrain or store; for series too small to pay for a "
-                  "dictionary). Default: train one with volreel train's defaults");
+  cmd->add_option(
+      "--dictionary", o->dictionary,
+      "Dictionary from volreel train, or 'dct' for the DCT basis alone (no learned "
+      "atoms: nothing to\ntrain or store; for series too small to pay for a "
+      "dictionary). Default: train one, at the tolerance below (without one: that of\n55 dB PSNR), "
+      "with volreel train's other defaults");
   cmd->add_option("--atoms", o->atoms,
                   "Without --dictionary: K of the dictionary trained here (default 0: try 1024, "
                   "512, 256, 128 and the DCT\nbasis alone, and keep the one that gives the "
@@ -276,10 +278,11 @@ void add_encode_command(CLI::App& app) {
                   "against the rounded atoms) or f32 (a dictionary stored in f16 stays f16)")
       ->check(CLI::IsMember({"f16", "f32"}))
       ->capture_default_str();
-  cmd->add_option("--brick-size", o->brick_size,
-                  "B, stored voxels per brick axis: a multiple of 6 in 12..66, or auto: the size "
-                  "whose bricks, over\nall levels, hold the fewest 6^3 blocks with voxels of the "
-                  "volume (66, interior 64, for power-of-two sizes;\nthe smaller of near ties)")
+  cmd->add_option(
+         "--brick-size", o->brick_size,
+         "B, stored voxels per brick axis: a multiple of 6 in 12..66, or auto: the size "
+         "whose bricks, over\nall levels, hold the fewest 6^3 blocks with voxels of the "
+         "volume (66, interior 64, for power-of-two sizes\nfrom 64 up; the smaller of near ties)")
       ->capture_default_str();
   cmd->add_option("--codec", o->codec, "ksvd (sparse coding) or zfp (fixed accuracy per brick)")
       ->capture_default_str();

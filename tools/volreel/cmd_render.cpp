@@ -293,7 +293,8 @@ void add_render_command(CLI::App& app) {
   cmd->add_option(
       "--transfer", o->transfer,
       "Transfer function for every frame: auto (from the data's quantiles), a preset (grayscale, "
-      "cool-warm, fire, turbulence) or a JSON file; default: the tour's, or auto without --tour");
+      "cool-warm, fire, turbulence, transparent) or a JSON file; default: the tour's, or auto "
+      "without --tour");
   cmd->add_option("--video", o->video,
                   "Also encode the frames into this video with ffmpeg (H.264)");
   add_renderer_options(*cmd, o->renderer, o->cpu);

@@ -27,6 +27,8 @@ void add_decode_command(CLI::App& app);
 void add_bench_train_command(CLI::App& bench);
 /// `bench decode` (cmd_bench_decode.cpp; needs the player's Vulkan decoder).
 void add_bench_decode_command(CLI::App& bench);
+/// `bench codes` (cmd_bench_codes.cpp): where a ksvd container's code bits go.
+void add_bench_codes_command(CLI::App& bench);
 /// `bench stream` (cmd_bench_stream.cpp; the stream scheduler and the CPU renderer).
 void add_bench_stream_command(CLI::App& bench);
 /// `bench index` (cmd_bench_index.cpp; the stream scheduler at scale, no renderer).

@@ -107,9 +107,9 @@ struct CodingSettings {
   int coef_bits = -1;
   /// The coefficient step as a multiple of ε (see coef_bits). A coefficient off by e adds e² to
   /// its block's squared error (atoms have unit norm), against the m·ε² scale of the block's
-  /// coding error. Chosen on the rate-distortion suite (scripts/rd-suite; docs/benchmarks.md):
-  /// 4 gains PSNR at equal bps on every member over 1 and 2 and keeps the quantization loss under
-  /// 0.3 dB; 8 gains a little more at equal bps but loses more to quantization; 16 and 32 lose.
+  /// coding error. Chosen on the rate-distortion suite (scripts/rd-suite; docs/benchmarks.md,
+  /// "Coefficient step"): with Rice-coded magnitudes 11 leads at equal bps where 4 and 8 lead less
+  /// (a coarser step loses more to quantization, measured against the unquantized codes).
   double coef_step_factor = 11.0;
   /// > 0: the pointwise bound E (data units): every decoded value of a coded block within E of
   /// the original, checked after quantization; blocks take atoms (and bricks a finer coefficient

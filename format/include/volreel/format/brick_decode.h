@@ -10,8 +10,9 @@
 //                         (vr_layout_*)
 //   word 4                the band word: the magnitudes' Rice parameter of each of 8 atom
 //                         bands, 4 bits each (vr_band_rice)
-//   entry[n³]             per block (n³ of them: n = brick size / 6), t + b bits each, one
-//                         bit stream from bit 0 of word 5
+//   word 5                the box word: the coded blocks nx·ny·nz of the brick's n³
+//                         (n = brick size / 6; vr_box_*)
+//   entry[nx·ny·nz]       per coded block, t + b bits each, one bit stream from bit 0 of word 6
 //                         (low bit first): sparsity s in the low t bits, quantized mean q above;
 //                         zero bits up to the next word
 //   codes                 one bit stream from the next word, block after block, each block's

@@ -78,7 +78,7 @@ struct DictionaryFileHeader {
   std::uint32_t coreset_levels;   //  64
   std::uint32_t iterations;       //  68
   std::uint64_t seed;             //  72
-  std::uint32_t flags;            //  80  bit 0: flat training; other bits 0
+  std::uint32_t flags;            //  80  bit 0 flat training, 1 binary16 atoms, 2 DCT basis
   std::uint32_t training_frames;  //  84
   double rms_error;               //  88
   double mean_sparsity;           //  96

@@ -60,7 +60,7 @@ enum class NodeType : std::uint32_t { inner = 0, leaf = 1, empty = 2 };
 struct FrameHeader {
   char magic[8];                       //   0  "VREELFRM"
   std::uint32_t format_version;        //   8  frame_format_version
-  std::uint32_t header_bytes;          //  12  128
+  std::uint32_t header_bytes;          //  12  144
   std::uint32_t codec;                 //  16  Codec
   std::uint32_t frame_index;           //  20  time step t
   std::uint32_t dims[3];               //  24  volume size x, y, z at the finest level

@@ -1,0 +1,97 @@
+// code_statistics.cpp: see code_statistics.hpp.
+#include "volreel/format/code_statistics.hpp"
+
+#include <cmath>
+#include <cstdlib>
+
+#include "volreel/format/brick_decode.h"
+#include "volreel/format/decoder.hpp"
+
+namespace volreel::format {
+
+void ContextCounts::add(std::uint32_t context, std::uint32_t value, std::uint64_t count) {
+  counts_[(std::uint64_t{context} << 32) | value] += count;
+  totals_[context] += count;
+}
+
+void ContextCounts::merge(const ContextCounts& other) {
+  for (const auto& [key, n] : other.counts_)
+    add(static_cast<std::uint32_t>(key >> 32), static_cast<std::uint32_t>(key), n);
+}
+
+double ContextCounts::entropy_bits() const {
+  double bits = 0;
+  for (const auto& [key, n] : counts_) {
+    const double total = static_cast<double>(totals_.at(static_cast<std::uint32_t>(key >> 32)));
+    bits -= static_cast<double>(n) * std::log2(static_cast<double>(n) / total);
+  }
+  return bits;
+}
+
+namespace {
+
+/// Bits of a Rice code of x with parameter k (format/SPEC.md, "The codes"); sets `escape`.
+std::uint64_t rice_bits(std::uint32_t x, std::uint32_t k, std::uint32_t escape_bits,
+                        bool& escape) {
+  const std::uint32_t zeros = x >> k;
+  escape = zeros >= VR_ESCAPE_ZEROS;
+  return escape ? VR_ESCAPE_ZEROS + escape_bits : zeros + 1 + k;
+}
+
+}  // namespace
+
+void CodeStatistics::add(std::span<const std::byte> payload, std::uint32_t atom_count,
+                         BrickShape shape, const std::filesystem::path& name, std::uint64_t at) {
+  const KsvdPayloadLayout layout = check_ksvd_payload(payload, atom_count, shape, name, at);
+  const KsvdPayloadParts parts = unpack_ksvd_payload(payload, atom_count, shape, name, at);
+  const vr_uint n = shape.blocks_per_axis(), entries = vr_box_entries(layout.box_word);
+  bricks += 1;
+  blocks += entries;
+  payload_bits += 8 * std::uint64_t{payload.size()};
+  header_bits += 32 * std::uint64_t{VR_HEADER_WORDS};
+  entry_bits += 32 * std::uint64_t{vr_code_first_word(layout.word, entries) - VR_HEADER_WORDS};
+  code_bits += layout.code_bits;
+  std::size_t k = 0;
+  for (vr_uint b = 0; b < shape.blocks(); ++b) {
+    if (!vr_block_in_box(layout.box_word, n, b)) continue;
+    const vr_uint s = parts.sparsity[b];
+    const vr_uint gap_rice = s > 0 ? vr_gap_rice(layout.word, s) : 0;
+    const std::uint32_t s_class = vr_highest_bit(s + 1);
+    std::uint32_t previous = ~0u;  // −1: before the block's first code
+    for (vr_uint i = 0; i < s; ++i, ++k) {
+      const std::uint32_t atom = parts.atoms[k];
+      const std::uint32_t gap = atom - previous - 1;
+      const std::uint32_t magnitude = static_cast<std::uint32_t>(std::abs(parts.values[k])) - 1;
+      bool escape = false;
+      gap_bits += rice_bits(gap, gap_rice, parts.atom_bits, escape);
+      escapes += escape;
+      magnitude_bits +=
+          rice_bits(magnitude, vr_band_rice(layout.word, layout.band_word, atom), parts.coef_bits,
+                    escape);
+      escapes += escape;
+      sign_bits += 1;
+      gaps.add((s_class << 8) | vr_highest_bit(previous + 2), gap);
+      magnitudes.add((vr_atom_band(layout.word, atom) << 8) | s_class, magnitude);
+      previous = atom;
+    }
+  }
+  codes += k;
+}
+
+void CodeStatistics::merge(const CodeStatistics& o) {
+  bricks += o.bricks;
+  blocks += o.blocks;
+  codes += o.codes;
+  payload_bits += o.payload_bits;
+  header_bits += o.header_bits;
+  entry_bits += o.entry_bits;
+  code_bits += o.code_bits;
+  gap_bits += o.gap_bits;
+  magnitude_bits += o.magnitude_bits;
+  sign_bits += o.sign_bits;
+  escapes += o.escapes;
+  gaps.merge(o.gaps);
+  magnitudes.merge(o.magnitudes);
+}
+
+}  // namespace volreel::format
