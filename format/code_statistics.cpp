@@ -31,8 +31,7 @@ double ContextCounts::entropy_bits() const {
 namespace {
 
 /// Bits of a Rice code of x with parameter k (format/SPEC.md, "The codes"); sets `escape`.
-std::uint64_t rice_bits(std::uint32_t x, std::uint32_t k, std::uint32_t escape_bits,
-                        bool& escape) {
+std::uint64_t rice_bits(std::uint32_t x, std::uint32_t k, std::uint32_t escape_bits, bool& escape) {
   const std::uint32_t zeros = x >> k;
   escape = zeros >= VR_ESCAPE_ZEROS;
   return escape ? VR_ESCAPE_ZEROS + escape_bits : zeros + 1 + k;
@@ -65,9 +64,8 @@ void CodeStatistics::add(std::span<const std::byte> payload, std::uint32_t atom_
       bool escape = false;
       gap_bits += rice_bits(gap, gap_rice, parts.atom_bits, escape);
       escapes += escape;
-      magnitude_bits +=
-          rice_bits(magnitude, vr_band_rice(layout.word, layout.band_word, atom), parts.coef_bits,
-                    escape);
+      magnitude_bits += rice_bits(magnitude, vr_band_rice(layout.word, layout.band_word, atom),
+                                  parts.coef_bits, escape);
       escapes += escape;
       sign_bits += 1;
       gaps.add((s_class << 8) | vr_highest_bit(previous + 2), gap);

@@ -39,25 +39,23 @@ std::vector<LevelGeometry> level_geometry(std::array<std::uint32_t, 3> dims, Bri
 }
 
 double coded_block_share(std::array<std::uint32_t, 3> dims, BrickShape shape) {
-  const std::int64_t interior = shape.interior(), side = brick_block_size;
   double blocks = 0;
   for (const LevelGeometry& g : level_geometry(dims, shape)) {
+    // The blocks the encoder codes (coded_box): on each axis, summed over the bricks of a row.
     double product = 1;
     for (std::size_t a = 0; a < 3; ++a) {
-      // Brick x stores level voxels x·interior − 1 + [0, size); block j of it starts at
-      // x·interior − 1 + 6j.
       std::uint64_t count = 0;
-      for (std::int64_t x = 0; x < g.grid[a]; ++x)
-        for (std::int64_t j = 0; j < shape.blocks_per_axis(); ++j) {
-          const std::int64_t first = x * interior - 1 + side * j;
-          if (first < std::int64_t{g.dims[a]} && first + side > 0) ++count;
-        }
+      for (std::uint32_t x = 0; x < g.grid[a]; ++x) {
+        std::array<std::uint32_t, 3> position{0, 0, 0};
+        position[a] = x;
+        count += coded_box(shape, position, g.dims)[a];
+      }
       product *= static_cast<double>(count);
     }
     blocks += product;
   }
-  return blocks * static_cast<double>(side * side * side) /
-         (static_cast<double>(dims[0]) * dims[1] * dims[2]);
+  const double side = brick_block_size;
+  return blocks * side * side * side / (static_cast<double>(dims[0]) * dims[1] * dims[2]);
 }
 
 std::array<std::uint32_t, 3> coded_box(BrickShape shape, std::array<std::uint32_t, 3> position,

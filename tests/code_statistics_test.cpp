@@ -28,8 +28,7 @@ TEST(ContextCounts, EntropyIsThatOfEachContextsValues) {
   for (int i = 0; i < 4; ++i) pooled.add(0, 5);
   pooled.add(0, 0);
   pooled.add(0, 1);
-  EXPECT_NEAR(pooled.entropy_bits(),
-              -4 * std::log2(4.0 / 6) - 2 * std::log2(1.0 / 6), 1e-12);
+  EXPECT_NEAR(pooled.entropy_bits(), -4 * std::log2(4.0 / 6) - 2 * std::log2(1.0 / 6), 1e-12);
 }
 
 /// A 12³ brick (8 blocks) whose codes are known: block 0 three neighbouring atoms, block 1 two far

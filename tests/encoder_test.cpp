@@ -357,6 +357,36 @@ TEST(Encoder, BoxOfCodedBlocksEndsJustPastTheVolume) {
             (std::array<std::uint32_t, 3>{6, 11, 7}));
 }
 
+TEST(Encoder, TheBrickSizeChooserCountsTheBlocksTheEncoderStores) {
+  // 20×20×140 in bricks of 30³ or 42³: the share the chooser minimizes is the blocks the frames
+  // store (every brick's box), per voxel. They are within 1 % of each other, so it takes the
+  // smaller, 30 (a chooser that left out the blocks holding only the voxel past the end counted
+  // 30 over 1 % above 42 and took 42).
+  const std::array<std::uint32_t, 3> dims{20, 20, 140};
+  const Volume v = analytic_volume(datasets::AnalyticField::noise, {20, 20, 140});
+  const auto d = random_dictionary(64, 5);
+  std::map<std::uint32_t, double> stored;
+  for (const std::uint32_t size : {30u, 42u}) {
+    auto s = ksvd_settings(1e-2, v);
+    s.brick_size = size;
+    const auto bytes = encoder::FrameEncoder(&d, s).encode(0, v);
+    const format::FrameView f(bytes, "tiling.vrf");
+    std::uint64_t blocks = 0;
+    for (std::uint32_t i = 0; i < f.node_count(); ++i) {
+      const auto payload = f.brick_bytes(f.node(i).brick);
+      ASSERT_GT(payload.size(), 4u) << "a constant brick: the noise should leave none";
+      const vr_uint box = format::ksvd_box_word(payload);
+      blocks +=
+          std::uint64_t{vr_box_blocks(box, 0)} * vr_box_blocks(box, 1) * vr_box_blocks(box, 2);
+    }
+    stored[size] = 216.0 * static_cast<double>(blocks) / static_cast<double>(v.data.size());
+    EXPECT_DOUBLE_EQ(format::coded_block_share(dims, format::BrickShape{size}), stored[size])
+        << "bricks of " << size;
+  }
+  EXPECT_LE(stored[30], 1.01 * stored[42]);
+  EXPECT_EQ(format::choose_brick_shape(dims).size, 30u);
+}
+
 TEST(Encoder, PaddingBlocksOutsideTheBoxAreNotStored) {
   // 40 voxels in x: the second brick column holds interior voxels 34..39 (stored indices 1..6)
   // and the voxel past the end (stored 7), so its blocks with x index ≥ 2 (stored 12..35) are

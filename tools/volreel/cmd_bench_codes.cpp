@@ -32,18 +32,19 @@ double per(std::uint64_t part, std::uint64_t count) {
 
 void print_row(const char* name, const format::CodeStatistics& s) {
   const double gap_bound = s.gaps.entropy_bits(), magnitude_bound = s.magnitudes.entropy_bits();
-  const double saved = static_cast<double>(s.gap_bits + s.magnitude_bits) - gap_bound -
-                       magnitude_bound;
-  std::printf("%-7s %7llu %9.1f %8.1f %8.1f %8.1f | %6.2f %6.2f %6.2f %6.2f %7.3f | %6.2f %6.2f | "
-              "%7.1f %7.1f\n",
-              name, static_cast<unsigned long long>(s.bricks), per(s.codes, s.blocks),
-              share(s.header_bits, s.payload_bits), share(s.entry_bits, s.payload_bits),
-              share(s.code_bits, s.payload_bits), per(s.code_bits, s.codes),
-              per(s.gap_bits, s.codes), per(s.magnitude_bits, s.codes), per(s.sign_bits, s.codes),
-              100.0 * per(s.escapes, s.codes), s.codes > 0 ? gap_bound / static_cast<double>(s.codes) : 0.0,
-              s.codes > 0 ? magnitude_bound / static_cast<double>(s.codes) : 0.0,
-              s.code_bits > 0 ? 100.0 * saved / static_cast<double>(s.code_bits) : 0.0,
-              s.payload_bits > 0 ? 100.0 * saved / static_cast<double>(s.payload_bits) : 0.0);
+  const double saved =
+      static_cast<double>(s.gap_bits + s.magnitude_bits) - gap_bound - magnitude_bound;
+  std::printf(
+      "%-7s %7llu %9.1f %8.1f %8.1f %8.1f | %6.2f %6.2f %6.2f %6.2f %7.3f | %6.2f %6.2f | "
+      "%7.1f %7.1f\n",
+      name, static_cast<unsigned long long>(s.bricks), per(s.codes, s.blocks),
+      share(s.header_bits, s.payload_bits), share(s.entry_bits, s.payload_bits),
+      share(s.code_bits, s.payload_bits), per(s.code_bits, s.codes), per(s.gap_bits, s.codes),
+      per(s.magnitude_bits, s.codes), per(s.sign_bits, s.codes), 100.0 * per(s.escapes, s.codes),
+      s.codes > 0 ? gap_bound / static_cast<double>(s.codes) : 0.0,
+      s.codes > 0 ? magnitude_bound / static_cast<double>(s.codes) : 0.0,
+      s.code_bits > 0 ? 100.0 * saved / static_cast<double>(s.code_bits) : 0.0,
+      s.payload_bits > 0 ? 100.0 * saved / static_cast<double>(s.payload_bits) : 0.0);
 }
 
 void run_bench_codes(const BenchCodesOptions& o) {
@@ -69,16 +70,17 @@ void run_bench_codes(const BenchCodesOptions& o) {
         continue;
       }
       levels[view.position(node).level].add(payload, container.atoms().count, view.shape(),
-                                             view.name(), 0);
+                                            view.name(), 0);
     }
     bar.update({static_cast<double>(t + 1), static_cast<double>(frames), {}});
   }
   bar.finish();
-  std::printf("input:   %s: %ux%ux%u, %zu of %zu frames, bricks of %u^3, %zu atoms; %llu constant "
-              "bricks not counted\n",
-              o.container.c_str(), m.dims[0], m.dims[1], m.dims[2], frames,
-              container.frame_count(), m.brick_size, static_cast<std::size_t>(container.atoms().count),
-              static_cast<unsigned long long>(constant_bricks));
+  std::printf(
+      "input:   %s: %ux%ux%u, %zu of %zu frames, bricks of %u^3, %zu atoms; %llu constant "
+      "bricks not counted\n",
+      o.container.c_str(), m.dims[0], m.dims[1], m.dims[2], frames, container.frame_count(),
+      m.brick_size, static_cast<std::size_t>(container.atoms().count),
+      static_cast<unsigned long long>(constant_bricks));
   std::printf(
       "                                payload share (%%) |         bits per code             "
       "   | entropy bound   | could save (%%)\n"
@@ -109,8 +111,7 @@ void add_bench_codes_command(CLI::App& bench) {
       "escapes, and the entropy bound of the gaps and magnitudes in simple contexts: the most a\n"
       "better entropy coder of the same codes could save.");
   cmd->add_option("CONTAINER", o->container, "Container directory NAME.vreel")->required();
-  cmd->add_option("--frames", o->frames, "Read the first N frames (0: all)")
-      ->capture_default_str();
+  cmd->add_option("--frames", o->frames, "Read the first N frames (0: all)")->capture_default_str();
   cmd->callback([o] { run_bench_codes(*o); });
 }
 

@@ -281,8 +281,9 @@ void add_encode_command(CLI::App& app) {
   cmd->add_option(
          "--brick-size", o->brick_size,
          "B, stored voxels per brick axis: a multiple of 6 in 12..66, or auto: the size "
-         "whose bricks, over\nall levels, hold the fewest 6^3 blocks with voxels of the "
-         "volume (66, interior 64, for power-of-two sizes\nfrom 64 up; the smaller of near ties)")
+         "whose bricks, over\nall levels, store the fewest 6^3 blocks (with voxels of the "
+         "volume or just past it; 66,\ninterior 64, for power-of-two sizes from 64 up; the "
+         "smaller of near ties)")
       ->capture_default_str();
   cmd->add_option("--codec", o->codec, "ksvd (sparse coding) or zfp (fixed accuracy per brick)")
       ->capture_default_str();

@@ -129,9 +129,9 @@ struct LevelGeometry {
 };
 std::vector<LevelGeometry> level_geometry(std::array<std::uint32_t, 3> dims, BrickShape shape);
 
-/// Per voxel of a volume of `dims`, the values of the 6³ blocks that hold at least one voxel of
-/// their level, over all levels of bricks of `shape`: what the tiling costs (blocks wholly
-/// outside a level's volume are not stored: coded_box).
+/// Per voxel of a volume of `dims`, the values of the 6³ blocks the encoder codes (coded_box:
+/// those holding a voxel of their level or the voxel just past its end), over all levels of
+/// bricks of `shape`: what the tiling costs.
 double coded_block_share(std::array<std::uint32_t, 3> dims, BrickShape shape);
 /// The coded blocks of brick `position` of a level of size `dims` (a ksvd payload's box word,
 /// brick_decode.h): on each axis the blocks that hold a voxel of the level or the voxel just past
