@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 
 #include "volreel/format/brick_decode.h"
 #include "volreel/format/decoder.hpp"
@@ -28,48 +29,41 @@ double ContextCounts::entropy_bits() const {
   return bits;
 }
 
-namespace {
-
-/// Bits of a Rice code of x with parameter k (format/SPEC.md, "The codes"); sets `escape`.
-std::uint64_t rice_bits(std::uint32_t x, std::uint32_t k, std::uint32_t escape_bits, bool& escape) {
-  const std::uint32_t zeros = x >> k;
-  escape = zeros >= VR_ESCAPE_ZEROS;
-  return escape ? VR_ESCAPE_ZEROS + escape_bits : zeros + 1 + k;
-}
-
-}  // namespace
-
 void CodeStatistics::add(std::span<const std::byte> payload, std::uint32_t atom_count,
                          BrickShape shape, const std::filesystem::path& name, std::uint64_t at) {
-  const KsvdPayloadLayout layout = check_ksvd_payload(payload, atom_count, shape, name, at);
+  // The parts, after check_ksvd_payload's checks; then the header words they came from.
   const KsvdPayloadParts parts = unpack_ksvd_payload(payload, atom_count, shape, name, at);
-  const vr_uint n = shape.blocks_per_axis(), entries = vr_box_entries(layout.box_word);
+  vr_uint words[VR_HEADER_WORDS];
+  std::memcpy(words, payload.data(), sizeof words);
+  const vr_uint layout_word = words[3], band_word = words[4], box_word = words[5];
+  const vr_uint n = shape.blocks_per_axis(), entries = vr_box_entries(box_word);
   bricks += 1;
   blocks += entries;
   payload_bits += 8 * std::uint64_t{payload.size()};
   header_bits += 32 * std::uint64_t{VR_HEADER_WORDS};
-  entry_bits += 32 * std::uint64_t{vr_code_first_word(layout.word, entries) - VR_HEADER_WORDS};
-  code_bits += layout.code_bits;
+  entry_bits += 32 * std::uint64_t{vr_code_first_word(layout_word, entries) - VR_HEADER_WORDS};
   std::size_t k = 0;
   for (vr_uint b = 0; b < shape.blocks(); ++b) {
-    if (!vr_block_in_box(layout.box_word, n, b)) continue;
+    if (!vr_block_in_box(box_word, n, b)) continue;
     const vr_uint s = parts.sparsity[b];
-    const vr_uint gap_rice = s > 0 ? vr_gap_rice(layout.word, s) : 0;
+    const vr_uint gap_rice = s > 0 ? vr_gap_rice(layout_word, s) : 0;
     const std::uint32_t s_class = vr_highest_bit(s + 1);
     std::uint32_t previous = ~0u;  // −1: before the block's first code
     for (vr_uint i = 0; i < s; ++i, ++k) {
       const std::uint32_t atom = parts.atoms[k];
       const std::uint32_t gap = atom - previous - 1;
       const std::uint32_t magnitude = static_cast<std::uint32_t>(std::abs(parts.values[k])) - 1;
-      bool escape = false;
-      gap_bits += rice_bits(gap, gap_rice, parts.atom_bits, escape);
-      escapes += escape;
-      magnitude_bits += rice_bits(magnitude, vr_band_rice(layout.word, layout.band_word, atom),
-                                  parts.coef_bits, escape);
-      escapes += escape;
+      const vr_uint magnitude_rice = vr_band_rice(layout_word, band_word, atom);
+      const std::uint64_t gap_length = rice_bits(gap, gap_rice, parts.atom_bits);
+      const std::uint64_t magnitude_length = rice_bits(magnitude, magnitude_rice, parts.coef_bits);
+      gap_bits += gap_length;
+      magnitude_bits += magnitude_length;
       sign_bits += 1;
+      code_bits += gap_length + magnitude_length + 1;  // the code stream is nothing else
+      escapes += (gap >> gap_rice) >= VR_ESCAPE_ZEROS;
+      escapes += (magnitude >> magnitude_rice) >= VR_ESCAPE_ZEROS;
       gaps.add((s_class << 8) | vr_highest_bit(previous + 2), gap);
-      magnitudes.add((vr_atom_band(layout.word, atom) << 8) | s_class, magnitude);
+      magnitudes.add((vr_atom_band(layout_word, atom) << 8) | s_class, magnitude);
       previous = atom;
     }
   }

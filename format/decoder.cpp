@@ -310,12 +310,6 @@ class BitWriter {
   std::uint64_t bits_ = 0;
 };
 
-/// Bits of a Rice code of x with parameter k.
-std::uint64_t rice_bits(vr_uint x, vr_uint k, vr_uint escape_bits) {
-  const vr_uint zeros = x >> k;
-  return zeros >= VR_ESCAPE_ZEROS ? VR_ESCAPE_ZEROS + escape_bits : zeros + 1 + k;
-}
-
 /// Writes (or, with out == nullptr, counts) the code stream of `parts` under `layout`.
 std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, vr_uint band_word,
                           BitWriter* out) {
@@ -342,6 +336,11 @@ std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, vr_uint
 }
 
 }  // namespace
+
+std::uint64_t rice_bits(std::uint32_t x, std::uint32_t k, std::uint32_t escape_bits) {
+  const std::uint32_t zeros = x >> k;
+  return zeros >= VR_ESCAPE_ZEROS ? VR_ESCAPE_ZEROS + escape_bits : zeros + 1 + k;
+}
 
 std::uint32_t bits_for_count(std::uint64_t count) {
   std::uint32_t bits = 0;

@@ -86,6 +86,10 @@ struct KsvdPayloadParts {
   std::vector<std::int32_t> values;  ///< one per code
 };
 
+/// Bits of a Rice code of x with parameter k whose escape holds `escape_bits` bits (format/SPEC.md,
+/// "The codes": an escape when x >> k reaches 16).
+std::uint64_t rice_bits(std::uint32_t x, std::uint32_t k, std::uint32_t escape_bits);
+
 /// The fewest bits that hold every value 0..count − 1 (0 for count ≤ 1).
 std::uint32_t bits_for_count(std::uint64_t count);
 
