@@ -673,9 +673,9 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
   coding.weighted = ksvd && coding.atom_gain_threshold > 0 &&
                     (settings_.weight_owned_voxels || settings_.level_tolerance_factor != 1);
   if (options.measure_finest && ksvd)
-    coding.decode_atoms = format::AtomTable{
+    coding.decode_atoms = format::atom_table(
         {dictionary_->atoms.data(), static_cast<std::size_t>(dictionary_->atoms.size())},
-        static_cast<std::uint32_t>(dictionary_->atom_count())};
+        static_cast<std::uint32_t>(dictionary_->atom_count()));
   coding.measure_finest = options.measure_finest;
   if (options.members == 0 || options.member >= options.members)
     throw std::invalid_argument("FrameEncoder::code_planes: member " +

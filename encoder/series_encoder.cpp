@@ -514,9 +514,9 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       job.psnr_target > 0 && coding.codec == format::Codec::ksvd && coding.fixed_sparsity == 0;
   const double range = coding.value_max - coding.value_min;
   const format::AtomTable atoms =
-      dict ? format::AtomTable{{dict->dictionary.atoms.data(),
-                                static_cast<std::size_t>(dict->dictionary.atoms.size())},
-                               static_cast<std::uint32_t>(dict->dictionary.atom_count())}
+      dict ? format::atom_table({dict->dictionary.atoms.data(),
+                                 static_cast<std::size_t>(dict->dictionary.atoms.size())},
+                                static_cast<std::uint32_t>(dict->dictionary.atom_count()))
            : format::AtomTable{};
 
   // 1. An existing container: resume (same settings) or refuse unless told to overwrite. Rank 0

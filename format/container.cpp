@@ -344,6 +344,7 @@ Container::Container(std::shared_ptr<const ContainerSource> source, bool allow_i
           id_text(d.container_id) + " (the dictionary of another container)");
     atoms_ = d.atoms;
     atom_count_ = d.atom_count;
+    dct_atoms_ = d.dct_atoms;
     if (!from_cache) source_->keep(manifest_.dictionary->file, 0, dict_bytes);
   }
 }

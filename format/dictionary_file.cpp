@@ -61,27 +61,38 @@ DictionaryFile container_dictionary(DictionaryFile d, bool half) {
   return with_dct_atoms(std::move(d));
 }
 
-std::vector<float> block_dct_atoms(std::uint32_t block_size) {
+std::vector<double> block_dct_phi(std::uint32_t block_size) {
   const std::uint32_t n = block_size;
-  const std::size_t m = std::size_t{n} * n * n;
-  // φ_u(x) for every frequency u and position x.
   std::vector<double> phi(std::size_t{n} * n);
   for (std::uint32_t u = 0; u < n; ++u)
     for (std::uint32_t x = 0; x < n; ++x)
       phi[u * n + x] = std::sqrt((u == 0 ? 1.0 : 2.0) / n) *
                        std::cos(std::numbers::pi * (2.0 * x + 1.0) * u / (2.0 * n));
-  std::vector<float> atoms;
-  atoms.reserve(m > 0 ? (m - 1) * m : 0);
-  for (std::uint32_t total = 1; total <= 3 * (n - 1); ++total)
+  return phi;
+}
+
+std::vector<std::array<std::uint32_t, 3>> block_dct_frequencies(std::uint32_t block_size) {
+  const std::uint32_t n = block_size;
+  std::vector<std::array<std::uint32_t, 3>> frequencies;
+  for (std::uint32_t total = 1; n > 0 && total <= 3 * (n - 1); ++total)
     for (std::uint32_t w = 0; w < n; ++w)
       for (std::uint32_t v = 0; v < n; ++v) {
         if (w + v > total || total - w - v >= n) continue;
-        const std::uint32_t u = total - w - v;
-        for (std::uint32_t z = 0; z < n; ++z)
-          for (std::uint32_t y = 0; y < n; ++y)
-            for (std::uint32_t x = 0; x < n; ++x)
-              atoms.push_back(static_cast<float>(phi[u * n + x] * phi[v * n + y] * phi[w * n + z]));
+        frequencies.push_back({total - w - v, v, w});
       }
+  return frequencies;
+}
+
+std::vector<float> block_dct_atoms(std::uint32_t block_size) {
+  const std::uint32_t n = block_size;
+  const std::vector<double> phi = block_dct_phi(n);
+  std::vector<float> atoms;
+  atoms.reserve(std::size_t{n} * n * n * (std::size_t{n} * n * n - (n > 0 ? 1 : 0)));
+  for (const auto& [u, v, w] : block_dct_frequencies(n))
+    for (std::uint32_t z = 0; z < n; ++z)
+      for (std::uint32_t y = 0; y < n; ++y)
+        for (std::uint32_t x = 0; x < n; ++x)
+          atoms.push_back(static_cast<float>(phi[u * n + x] * phi[v * n + y] * phi[w * n + z]));
   return atoms;
 }
 

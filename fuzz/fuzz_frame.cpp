@@ -17,7 +17,7 @@ using namespace volreel::format;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   static const DictionaryFile dictionary = dct_dictionary(6, "fuzz");
-  static const AtomTable atoms{dictionary.atoms, dictionary.atom_count};
+  static const AtomTable atoms = atom_table(dictionary.atoms, dictionary.atom_count);
   std::vector<std::byte> bytes(size);
   if (size > 0) std::memcpy(bytes.data(), data, size);
   if (size >= sizeof(FrameHeader)) {

@@ -38,8 +38,9 @@ class VolreelCodec : public psnr::FrameCodec {
     const format::FrameView view(std::as_bytes(stream), "<bench>");
     format::AtomTable atoms;
     if (dictionary_)
-      atoms = {{dictionary_->atoms.data(), static_cast<std::size_t>(dictionary_->atoms.size())},
-               static_cast<std::uint32_t>(dictionary_->atom_count())};
+      atoms = format::atom_table(
+          {dictionary_->atoms.data(), static_cast<std::size_t>(dictionary_->atoms.size())},
+          static_cast<std::uint32_t>(dictionary_->atom_count()));
     format::decode_level(view, view.level_count() - 1, atoms, out);
   }
   std::size_t shared_bytes() const override { return dictionary_bytes_; }

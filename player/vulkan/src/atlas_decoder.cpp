@@ -298,6 +298,7 @@ void AtlasDecoder::set_dictionary(const format::AtomTable& atoms) {
   // The host kernel decodes every brick on the CPU; the others some, on CPU devices (submit).
   host_atoms_.assign(atoms.values.begin(),
                      atoms.values.begin() + static_cast<std::ptrdiff_t>(values));
+  host_dct_basis_ = format::atom_table(host_atoms_, atoms.count).dct_basis;
   if (kernel_ == DecoderOptions::Kernel::host) {
     atom_count_ = atoms.count;
     return;
@@ -393,7 +394,7 @@ Ticket AtlasDecoder::submit(std::span<const BrickUpload> batch) {
         const auto start = std::chrono::steady_clock::now();
         zfp_scratch_.resize(shape_.voxels());
         format::decode_payload(brick.payload, brick.codec, brick.zfp_accuracy,
-                               {host_atoms_, atom_count_}, shape_, zfp_scratch_,
+                               {host_atoms_, atom_count_, host_dct_basis_}, shape_, zfp_scratch_,
                                "brick upload " + std::to_string(next + i), 0);
         stats_.cpu_zfp_seconds +=
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -531,7 +532,7 @@ void AtlasDecoder::copy_into_atlas(VkCommandBuffer commands, VkBuffer source,
 void AtlasDecoder::decode_on_host(std::span<const BrickUpload> bricks, std::size_t first,
                                   std::uint16_t* texels) {
   const auto start = std::chrono::steady_clock::now();
-  const format::AtomTable atoms{host_atoms_, atom_count_};
+  const format::AtomTable atoms{host_atoms_, atom_count_, host_dct_basis_};
   const auto n = static_cast<std::ptrdiff_t>(bricks.size());
   std::exception_ptr error;  // the first bad payload's error, raised after the loop
   std::size_t error_index = bricks.size();

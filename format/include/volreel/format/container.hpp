@@ -113,7 +113,7 @@ class Container {
   const Manifest& manifest() const { return manifest_; }
   std::size_t frame_count() const { return manifest_.frames.size(); }
   /// The dictionary's atoms (empty for zfp).
-  AtomTable atoms() const { return {atoms_, atom_count_}; }
+  AtomTable atoms() const { return {atoms_, atom_count_, dct_atoms_}; }
   /// Maps (local) or fetches (remote) frame t whole and validates its index (header, levels,
   /// nodes, offsets); checks that it matches the manifest (size, frame index, dims, codec). Throws
   /// FormatError.
@@ -134,6 +134,7 @@ class Container {
   Manifest manifest_;
   std::vector<float> atoms_;
   std::uint32_t atom_count_ = 0;
+  bool dct_atoms_ = false;  ///< the dictionary ends with the DCT basis (flag bit 2)
 
   /// The checks of open_frame on a validated view of frame t.
   void check_frame(std::size_t t, const FrameView& view) const;

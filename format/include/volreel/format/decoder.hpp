@@ -17,7 +17,17 @@ namespace volreel::format {
 struct AtomTable {
   std::span<const float> values;  ///< K·216
   std::uint32_t count = 0;        ///< K
+  /// The last 215 atoms are block_dct_atoms(6) (dictionary_file.hpp) bit for bit: the decoder
+  /// sums their codes as a separable transform instead of atom by atom (the same values up to
+  /// float rounding). Set it only for such atoms: atom_table() checks.
+  bool dct_basis = false;
 };
+
+/// The atoms of the DCT basis a ksvd block can index (M = 6: 6³ − 1).
+constexpr std::uint32_t dct_basis_atoms = 215;
+
+/// {values, count}, with dct_basis set when its last 215 atoms are block_dct_atoms(6) bit for bit.
+AtomTable atom_table(std::span<const float> values, std::uint32_t count);
 
 /// The structure of a ksvd brick payload (brick_decode.h's layout), once checked.
 struct KsvdPayloadLayout {

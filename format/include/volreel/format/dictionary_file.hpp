@@ -123,6 +123,12 @@ DictionaryFile with_half_atoms(DictionaryFile dictionary);
 /// values.
 std::vector<float> block_dct_atoms(std::uint32_t block_size);
 
+/// The frequencies (u, v, w) of block_dct_atoms(block_size)'s atoms, in their order.
+std::vector<std::array<std::uint32_t, 3>> block_dct_frequencies(std::uint32_t block_size);
+
+/// φ_u(x) of block_dct_atoms, in double: phi[u·M + x].
+std::vector<double> block_dct_phi(std::uint32_t block_size);
+
 /// A dictionary of the DCT basis alone: no learned atom, nothing stored but the header (132 bytes).
 /// What a series too small to pay for a learned dictionary is coded against.
 DictionaryFile dct_dictionary(std::uint32_t block_size, const std::string& program_version);

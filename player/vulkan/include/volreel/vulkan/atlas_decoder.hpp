@@ -160,6 +160,7 @@ class AtlasDecoder {
   detail::DeviceHandle<VkBufferView, vkDestroyBufferView> atoms_view_;
   std::uint32_t atom_count_ = 0;
   std::vector<float> host_atoms_;  ///< the dictionary's values, for the CPU decoder
+  bool host_dct_basis_ = false;    ///< they end with the DCT basis (format::AtomTable)
   std::vector<RingEntry> ring_;
   std::size_t next_entry_ = 0;
   Ticket last_ticket_ = 0;
