@@ -515,12 +515,12 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
                        " atoms; the 16-bit atom index allows 1..65536");
     // The learned atoms before the DCT basis, when the dictionary ends with it (every container
     // dictionary does): they form the payloads' band 0.
-    const std::vector<float> dct = format::block_dct_atoms(VR_BLOCK_SIZE);
-    const auto dct_count = static_cast<Eigen::Index>(dct.size() / VR_BLOCK_LENGTH);
-    const Eigen::Index first = dictionary_->atoms.cols() - dct_count;
-    if (first >= 0 &&
-        std::equal(dct.begin(), dct.end(), dictionary_->atoms.data() + first * VR_BLOCK_LENGTH))
-      band_split_ = static_cast<std::uint32_t>(std::min<Eigen::Index>(first, VR_MAX_BAND_SPLIT));
+    atoms_ = format::atom_table(
+        {dictionary_->atoms.data(), static_cast<std::size_t>(dictionary_->atoms.size())},
+        static_cast<std::uint32_t>(dictionary_->atom_count()));
+    if (atoms_.dct_basis)
+      band_split_ =
+          std::min<std::uint32_t>(atoms_.count - format::dct_basis_atoms, VR_MAX_BAND_SPLIT);
     if (settings_.max_atoms < 1 || settings_.max_atoms > max_sparsity)
       throw InputError("--max-atoms must be in 1..216 (the values of a block), not " +
                        std::to_string(settings_.max_atoms));
@@ -672,10 +672,7 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
                      false};
   coding.weighted = ksvd && coding.atom_gain_threshold > 0 &&
                     (settings_.weight_owned_voxels || settings_.level_tolerance_factor != 1);
-  if (options.measure_finest && ksvd)
-    coding.decode_atoms = format::atom_table(
-        {dictionary_->atoms.data(), static_cast<std::size_t>(dictionary_->atoms.size())},
-        static_cast<std::uint32_t>(dictionary_->atom_count()));
+  if (options.measure_finest && ksvd) coding.decode_atoms = atoms_;
   coding.measure_finest = options.measure_finest;
   if (options.members == 0 || options.member >= options.members)
     throw std::invalid_argument("FrameEncoder::code_planes: member " +

@@ -513,11 +513,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   const bool holds_psnr =
       job.psnr_target > 0 && coding.codec == format::Codec::ksvd && coding.fixed_sparsity == 0;
   const double range = coding.value_max - coding.value_min;
-  const format::AtomTable atoms =
-      dict ? format::atom_table({dict->dictionary.atoms.data(),
-                                 static_cast<std::size_t>(dict->dictionary.atoms.size())},
-                                static_cast<std::uint32_t>(dict->dictionary.atom_count()))
-           : format::AtomTable{};
+  const format::AtomTable atoms = encoder->atoms();  // the dictionary's; a later ε keeps them
 
   // 1. An existing container: resume (same settings) or refuse unless told to overwrite. Rank 0
   //    prepares the folder, its manifest and dictionary while the others wait.

@@ -36,12 +36,7 @@ class VolreelCodec : public psnr::FrameCodec {
   }
   void decompress(Dims, std::span<const std::uint8_t> stream, std::span<float> out) override {
     const format::FrameView view(std::as_bytes(stream), "<bench>");
-    format::AtomTable atoms;
-    if (dictionary_)
-      atoms = format::atom_table(
-          {dictionary_->atoms.data(), static_cast<std::size_t>(dictionary_->atoms.size())},
-          static_cast<std::uint32_t>(dictionary_->atom_count()));
-    format::decode_level(view, view.level_count() - 1, atoms, out);
+    format::decode_level(view, view.level_count() - 1, encoder_.atoms(), out);
   }
   std::size_t shared_bytes() const override { return dictionary_bytes_; }
 

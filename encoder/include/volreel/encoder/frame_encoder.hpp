@@ -16,6 +16,7 @@
 #include "volreel/encoder/coding_settings.hpp"
 #include "volreel/encoder/pyramid.hpp"
 #include "volreel/format/brick_decode.h"
+#include "volreel/format/decoder.hpp"
 #include "volreel/format/frame_file.hpp"
 
 namespace volreel::encoder {
@@ -168,6 +169,9 @@ class FrameEncoder {
   /// payload or a zfp stream (the same coding encode() applies to every brick).
   std::vector<std::byte> encode_brick(std::span<const float> brick) const;
   const CodingSettings& settings() const { return settings_; }
+  /// ksvd: the dictionary's atoms as the decoders read the payloads it writes
+  /// (format::atom_table, the DCT basis found once); empty for zfp.
+  const format::AtomTable& atoms() const { return atoms_; }
   /// The brick tiling of the frames it codes (CodingSettings::brick_size).
   format::BrickShape shape() const { return {settings_.brick_size}; }
   /// The Lagrangian rule's minimum atom gain, lagrangian_factor·m·ε² (data units²); 0 for the
@@ -181,6 +185,7 @@ class FrameEncoder {
   /// The atoms before the DCT basis when the dictionary ends with it (the payloads' band split,
   /// format/SPEC.md), else 0; at most 4095.
   std::uint32_t band_split_ = 0;
+  format::AtomTable atoms_{};
   detail::QuantizeOptions quantize_options() const;
 };
 
