@@ -889,8 +889,9 @@ TEST_F(VulkanRender, FrameLoopFeedbackLeavesOccludedNodesUnloaded) {
   // Ray-guided feedback from the GPU's table: with a transfer function opaque everywhere the
   // rays end in the first region they enter, the 4 × 4 × 4 finest nodes behind the three faces
   // the camera sees are hidden and never loaded, and the picture is the one drawn without
-  // feedback. Pipelined: the table of a frame arrives frames later. One request at a time, so
-  // that feedback comes before the nodes behind are requested.
+  // feedback. Pipelined: the table of a frame arrives frames later. One request at a time, each
+  // read on a simulated clock that advances one second a frame and taking three, so that feedback
+  // comes before the nodes behind are requested however fast the machine reads and renders.
   test::TempDir dir("vulkan-render-feedback");
   test::write_blobs_container(dir.path(), {136, 136, 136}, 2);
   const format::Container container(dir / "test.vreel");
@@ -912,10 +913,13 @@ TEST_F(VulkanRender, FrameLoopFeedbackLeavesOccludedNodesUnloaded) {
     o.atlas_bytes = std::uint64_t{125} * 93312;
     o.scheduler.ray_feedback = feedback;
     o.scheduler.loader.max_in_flight = 1;
+    double now = 0;
+    o.scheduler.loader.clock = [&now] { return now; };
+    o.scheduler.loader.latency_s = 3;
     vulkan_render::VulkanFrameLoop l(context(), container, o);
     loop::FrameReport r;
     int quiet = 0;  // frames in a row with nothing requested, in flight or uploaded
-    for (int i = 0; i < 2000 && quiet < 8; ++i) {
+    for (int i = 0; i < 2000 && quiet < 8; ++i, now += 1) {
       r = l.frame(camera, 0.5, opaque, true);
       const bool still = r.stats.requests_in_flight == 0 && r.stats.arrivals_waiting == 0 &&
                          r.stats.uploads == 0 && r.stats.requests_sent == 0;
