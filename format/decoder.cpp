@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <exception>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -198,13 +199,11 @@ void decode_block(float* __restrict block, float mean, const ParsedCode* __restr
   }
 }
 
-/// check_ksvd_payload on `payload` (word_count words followed by payload_padding_words zero
-/// words), appending the codes to *codes when it is not null.
-KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_count,
-                                     std::size_t bytes, std::uint32_t atom_count, BrickShape shape,
-                                     const std::filesystem::path& name, std::uint64_t at,
-                                     std::vector<ParsedCode>* codes) {
-  const vr_uint blocks = shape.blocks();
+/// Steps 1 and 2 of check_ksvd_payload on `payload` (word_count words): the header, the box of
+/// coded blocks and room for their entries; the layout without codes and code_bits.
+KsvdPayloadLayout parse_ksvd_header(const vr_uint* payload, std::size_t word_count,
+                                    std::size_t bytes, BrickShape shape,
+                                    const std::filesystem::path& name, std::uint64_t at) {
   const auto fail = [&](std::uint64_t offset, const std::string& expected,
                         const std::string& found) {
     throw FormatError(name, at + offset, "brick payload " + expected, found);
@@ -262,6 +261,22 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
          "of at least " + str(4 * std::uint64_t{first}) + " bytes for " + str(vr_box_entries(box)) +
              " " + str(vr_layout_entry_bits(layout.word)) + "-bit block entries",
          str(bytes) + " bytes");
+  return layout;
+}
+
+/// check_ksvd_payload on `payload` (word_count words followed by payload_padding_words zero
+/// words), appending the codes to *codes when it is not null.
+KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_count,
+                                     std::size_t bytes, std::uint32_t atom_count, BrickShape shape,
+                                     const std::filesystem::path& name, std::uint64_t at,
+                                     std::vector<ParsedCode>* codes) {
+  const auto fail = [&](std::uint64_t offset, const std::string& expected,
+                        const std::string& found) {
+    throw FormatError(name, at + offset, "brick payload " + expected, found);
+  };
+  KsvdPayloadLayout layout = parse_ksvd_header(payload, word_count, bytes, shape, name, at);
+  const vr_uint blocks = shape.blocks(), n = shape.blocks_per_axis(), box = layout.box_word;
+  const vr_uint first = vr_code_first_word(layout.word, vr_box_entries(box));
   // 3. The code stream, read as the decoders read it (the zero words after the payload take the
   //    look-ahead of a Rice code and a damaged stream's overrun: a code reads at most 81 bits).
   const std::uint64_t stream_bits = (std::uint64_t{word_count} - first) * 32;
@@ -304,25 +319,26 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
   return layout;
 }
 
-void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, BrickShape shape,
-                 std::span<float> out, const std::filesystem::path& name, std::uint64_t at) {
-  // Payloads are 4-byte aligned inside the file and the map is page-aligned, but copy to be safe
-  // for in-memory views of arbitrary alignment; zero words after it, which a Rice code's
-  // look-ahead at the stream's end (and a damaged stream's overrun) read (brick_decode.h).
-  std::vector<vr_uint> payload_words(bytes.size() / 4 + payload_padding_words, 0u);
-  if (bytes.size() >= 4) std::memcpy(payload_words.data(), bytes.data(), bytes.size() / 4 * 4);
-  const vr_uint* payload = payload_words.data();
-  // 1. Structure, dequantization values, atom indices and magnitudes; the codes, read once.
-  thread_local std::vector<ParsedCode> codes;
-  codes.clear();
-  const KsvdPayloadLayout layout = parse_ksvd_payload(payload, bytes.size() / 4, bytes.size(),
-                                                      atoms.count, shape, name, at, &codes);
+/// A payload copied into words, followed by payload_padding_words zero words. Payloads are 4-byte
+/// aligned inside the file and the map is page-aligned, but an in-memory view may have any
+/// alignment; the zero words take a Rice code's look-ahead at the stream's end and a damaged
+/// stream's overrun (brick_decode.h).
+void copy_padded(std::span<const std::byte> bytes, std::vector<vr_uint>& words) {
+  words.assign(bytes.size() / 4 + payload_padding_words, 0u);
+  if (bytes.size() >= 4) std::memcpy(words.data(), bytes.data(), bytes.size() / 4 * 4);
+}
+
+void require_atoms(const AtomTable& atoms, const std::filesystem::path& name) {
   if (atoms.values.size() < std::size_t{atoms.count} * VR_BLOCK_LENGTH)
     throw FormatError(
         name, "dictionary holds fewer than the " + str(atoms.count) + " atoms the frame needs");
-  // 2. Decode every value of every block (brick_decode.h's arithmetic, vectorized over the block:
-  //    each atom added to all 216 values at once, or the DCT basis's codes as a separable
-  //    transform).
+}
+
+/// Every value of every block of a checked payload and its codes (brick_decode.h's arithmetic,
+/// vectorized over the block: each atom added to all 216 values at once, or the DCT basis's codes
+/// as a separable transform).
+void sum_blocks(const vr_uint* payload, const KsvdPayloadLayout& layout, const ParsedCode* codes,
+                const AtomTable& atoms, BrickShape shape, std::span<float> out) {
   const float* atom_values = atoms.values.data();
   const vr_uint dct_first = atoms.dct_basis && atoms.count >= dct_basis_atoms
                                 ? atoms.count - dct_basis_atoms
@@ -341,7 +357,7 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, Brick
       const vr_uint s = vr_entry_sparsity(layout.word, entry);
       const float mean =
           mean_bias + mean_scale * static_cast<float>(vr_entry_mean(layout.word, entry));
-      decode_block(coded, mean, codes.data() + code, s, atom_values, coef_scale, dct_first);
+      decode_block(coded, mean, codes + code, s, atom_values, coef_scale, dct_first);
       code += s;
       block = coded;
     }
@@ -352,6 +368,143 @@ void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, Brick
         std::memcpy(out.data() + ((bz * 6 + z) * size + by * 6 + y) * size + bx * 6,
                     block + (z * 6 + y) * 6, 6 * sizeof(float));
   }
+}
+
+void decode_ksvd(std::span<const std::byte> bytes, const AtomTable& atoms, BrickShape shape,
+                 std::span<float> out, const std::filesystem::path& name, std::uint64_t at) {
+  thread_local std::vector<vr_uint> payload;
+  copy_padded(bytes, payload);
+  // 1. Structure, dequantization values, atom indices and magnitudes; the codes, read once.
+  thread_local std::vector<ParsedCode> codes;
+  codes.clear();
+  const KsvdPayloadLayout layout = parse_ksvd_payload(
+      payload.data(), bytes.size() / 4, bytes.size(), atoms.count, shape, name, at, &codes);
+  require_atoms(atoms, name);
+  // 2. Every value of every block.
+  sum_blocks(payload.data(), layout, codes.data(), atoms, shape, out);
+}
+
+/// A payload's code stream read a code at a time, so that two payloads' codes can be read in
+/// step (read_in_step): the same reading and checks as parse_ksvd_payload, step 3, but a check
+/// that fails returns false instead of naming what was wrong (that reader then runs again alone).
+class SteppedCodes {
+ public:
+  /// After parse_ksvd_header on `payload` (word_count words and the zero padding words).
+  SteppedCodes(const vr_uint* payload, std::size_t word_count, const KsvdPayloadLayout& layout,
+               BrickShape shape, std::uint32_t atom_count)
+      : payload_(payload),
+        layout_(layout),
+        n_(shape.blocks_per_axis()),
+        blocks_(shape.blocks()),
+        first_(vr_code_first_word(layout.word, vr_box_entries(layout.box_word))),
+        stream_bits_((std::uint64_t{word_count} - first_) * 32),
+        word_count_(word_count),
+        atom_count_(atom_count),
+        largest_(1u << layout.coef_bits),
+        stream_(payload, first_) {
+    for (vr_uint b = 0, e = 0; b < blocks_; ++b)
+      if (vr_block_in_box(layout_.box_word, n_, b))
+        layout_.codes +=
+            vr_entry_sparsity(layout_.word, vr_block_entry(payload_, layout_.word, e++));
+  }
+
+  const KsvdPayloadLayout& layout() const { return layout_; }
+  /// Codes not read yet.
+  std::uint32_t left() const { return layout_.codes - read_; }
+
+  /// Reads the next code into *out (left() > 0); false where parse_ksvd_payload would throw.
+  bool step(ParsedCode* out) {
+    while (in_block_ == 0) {  // the next coded block with codes (left() > 0: there is one)
+      const vr_uint b = block_++;
+      if (!vr_block_in_box(layout_.box_word, n_, b)) continue;
+      in_block_ = vr_entry_sparsity(layout_.word, vr_block_entry(payload_, layout_.word, entry_++));
+      gap_rice_ = in_block_ > 0 ? vr_gap_rice(layout_.word, in_block_) : 0;
+      next_atom_ = 0;
+    }
+    --in_block_;
+    ++read_;
+    if (stream_.bit() >= stream_bits_) return false;
+    vr_uint atom = 0;
+    const int q = stream_.read(layout_.word, layout_.band_word, gap_rice_, layout_.atom_bits,
+                               layout_.coef_bits, next_atom_, atom);
+    *out = {atom, q};
+    const vr_uint m = static_cast<vr_uint>(q < 0 ? -static_cast<std::int64_t>(q) : q);
+    return atom < atom_count_ && m <= largest_;
+  }
+
+  /// After every code: the payload's length and the zero bits after the last code, as
+  /// parse_ksvd_payload checks them; sets the layout's code_bits.
+  bool finish() {
+    const std::uint64_t bit = stream_.bit();
+    layout_.code_bits = bit;
+    if (word_count_ != std::uint64_t{first_} + (bit + 31) / 32) return false;
+    return bit % 32 == 0 || (payload_[word_count_ - 1] >> (bit % 32)) == 0;
+  }
+
+ private:
+  const vr_uint* payload_;
+  KsvdPayloadLayout layout_;
+  vr_uint n_, blocks_, first_;
+  std::uint64_t stream_bits_, word_count_;
+  vr_uint atom_count_, largest_;
+  CodeStream stream_;
+  vr_uint block_ = 0, entry_ = 0, in_block_ = 0, gap_rice_ = 0, next_atom_ = 0;
+  std::uint32_t read_ = 0;
+};
+
+/// Reads both payloads' codes into a and b, a code of each in turn while both have some: reading
+/// a code is a chain of dependent steps (where the gap ends gives where the magnitude starts and
+/// the atom, whose band gives the magnitude's Rice parameter), so two independent chains keep a
+/// core busy where one leaves it waiting. False where either payload is bad.
+bool read_in_step(SteppedCodes& first_reader, ParsedCode* __restrict a, SteppedCodes& second_reader,
+                  ParsedCode* __restrict b) {
+  // Copies the stores to a and b cannot alias: their state stays in registers.
+  SteppedCodes first = first_reader, second = second_reader;
+  bool good = true;
+  while (first.left() > 0 && second.left() > 0) {
+    const bool read_a = first.step(a++);
+    const bool read_b = second.step(b++);
+    if (!(read_a && read_b)) return false;
+  }
+  while (good && first.left() > 0) good = first.step(a++);
+  while (good && second.left() > 0) good = second.step(b++);
+  good = good && first.finish() && second.finish();
+  first_reader = first;
+  second_reader = second;
+  return good;
+}
+
+/// decode_ksvd on two payloads, their codes read in step; false when it decoded them one at a
+/// time instead. A bad payload is decoded again alone, first then second, so that its error names
+/// what was wrong.
+bool decode_ksvd_pair(const PayloadJob& first, const PayloadJob& second, const AtomTable& atoms,
+                      BrickShape shape) {
+  thread_local std::vector<vr_uint> words[2];
+  thread_local std::vector<ParsedCode> codes[2];
+  const PayloadJob* jobs[2] = {&first, &second};
+  const auto alone = [&] {
+    for (const PayloadJob* job : jobs)
+      decode_ksvd(job->payload, atoms, shape, job->out, job->name, job->offset);
+    return false;
+  };
+  std::optional<SteppedCodes> readers[2];
+  try {
+    for (int i = 0; i < 2; ++i) {
+      const std::span<const std::byte> bytes = jobs[i]->payload;
+      copy_padded(bytes, words[i]);
+      const KsvdPayloadLayout header = parse_ksvd_header(
+          words[i].data(), bytes.size() / 4, bytes.size(), shape, jobs[i]->name, jobs[i]->offset);
+      readers[i].emplace(words[i].data(), bytes.size() / 4, header, shape, atoms.count);
+      if (codes[i].size() < readers[i]->left()) codes[i].resize(readers[i]->left());
+    }
+  } catch (const FormatError&) {
+    return alone();  // throws the first bad payload's error
+  }
+  if (!read_in_step(*readers[0], codes[0].data(), *readers[1], codes[1].data())) return alone();
+  require_atoms(atoms, first.name);
+  for (int i = 0; i < 2; ++i)
+    sum_blocks(words[i].data(), readers[i]->layout(), codes[i].data(), atoms, shape, jobs[i]->out);
+  return true;
 }
 
 /// A little-endian bit stream growing word by word (the inverse of vr_read_bits).
@@ -648,13 +801,39 @@ void decode_payload(std::span<const std::byte> bytes, Codec codec, double zfp_ac
     decode_zfp(bytes, zfp_accuracy, shape, out, name, offset);
 }
 
-void decode_brick(const FrameView& frame, std::uint32_t brick, const AtomTable& atoms,
-                  std::span<float> out) {
+std::size_t decode_payloads(std::span<const PayloadJob> jobs, Codec codec, const AtomTable& atoms,
+                            BrickShape shape) {
+  const auto is_ksvd_stream = [&](const PayloadJob& job) {
+    return codec == Codec::ksvd && job.payload.size() != 4 && valid_brick_size(shape.size) &&
+           job.out.size() == shape.voxels();
+  };
+  std::size_t i = 0, in_step = 0;
+  while (i < jobs.size()) {
+    if (i + 1 < jobs.size() && is_ksvd_stream(jobs[i]) && is_ksvd_stream(jobs[i + 1])) {
+      if (decode_ksvd_pair(jobs[i], jobs[i + 1], atoms, shape)) in_step += 2;
+      i += 2;
+    } else {
+      const PayloadJob& job = jobs[i++];
+      decode_payload(job.payload, codec, job.zfp_accuracy, atoms, shape, job.out, job.name,
+                     job.offset);
+    }
+  }
+  return in_step;
+}
+
+PayloadJob brick_job(const FrameView& frame, std::uint32_t brick, std::span<float> out) {
   if (brick >= frame.brick_count())
     throw FormatError(frame.name(),
                       "no brick " + str(brick) + " (frame has " + str(frame.brick_count()) + ")");
-  decode_payload(frame.checked_brick_bytes(brick), frame.codec(), frame.header().codec_parameter,
-                 atoms, frame.shape(), out, frame.name(), frame.brick_offset(brick));
+  return {frame.checked_brick_bytes(brick), out, frame.name(), frame.brick_offset(brick),
+          frame.header().codec_parameter};
+}
+
+void decode_brick(const FrameView& frame, std::uint32_t brick, const AtomTable& atoms,
+                  std::span<float> out) {
+  const PayloadJob job = brick_job(frame, brick, out);
+  decode_payload(job.payload, frame.codec(), job.zfp_accuracy, atoms, frame.shape(), out, job.name,
+                 job.offset);
 }
 
 void place_in_level(const NodePosition& p, std::uint32_t level, std::array<std::uint32_t, 3> dims,
@@ -709,21 +888,31 @@ void decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& 
   // 2. Decode each brick and copy its interior (or its constant region) into the volume.
   std::exception_ptr error;
   const auto n = static_cast<std::ptrdiff_t>(work.size());
+  // Two bricks at a time (decode_payloads reads their codes in step).
+  const std::ptrdiff_t pairs = (n + 1) / 2;
 #pragma omp parallel
   {
-    std::vector<float> brick(frame.shape().voxels());
-#pragma omp for schedule(dynamic, 4)
-    for (std::ptrdiff_t w = 0; w < n; ++w) {
-      const std::uint32_t i = work[static_cast<std::size_t>(w)];
+    const std::size_t voxels = frame.shape().voxels();
+    std::vector<float> bricks(2 * voxels);
+#pragma omp for schedule(dynamic, 2)
+    for (std::ptrdiff_t p = 0; p < pairs; ++p) {
+      const std::size_t first = 2 * static_cast<std::size_t>(p);
+      const std::size_t count = std::min<std::size_t>(2, work.size() - first);
+      PayloadJob jobs[2];
       try {
-        decode_brick(frame, frame.node(i).brick, atoms, brick);
+        for (std::size_t j = 0; j < count; ++j)
+          jobs[j] = brick_job(frame, frame.node(work[first + j]).brick,
+                              {bricks.data() + j * voxels, voxels});
+        decode_payloads({jobs, count}, frame.codec(), atoms, frame.shape());
       } catch (const FormatError&) {
 #pragma omp critical(volreel_decode_error)
         if (!error) error = std::current_exception();
         continue;
       }
-      place_in_level(frame.position(i), level, {target.dims[0], target.dims[1], target.dims[2]},
-                     frame.shape(), brick, out);
+      for (std::size_t j = 0; j < count; ++j)
+        place_in_level(frame.position(work[first + j]), level,
+                       {target.dims[0], target.dims[1], target.dims[2]}, frame.shape(), jobs[j].out,
+                       out);
     }
   }
   if (error) std::rethrow_exception(error);

@@ -1,5 +1,6 @@
 // decoder_test.cpp: the CPU reference decoder's sum of a block's codes, atom by atom for learned
-// atoms and as a separable transform for the DCT basis, against the sum in double precision.
+// atoms and as a separable transform for the DCT basis, against the sum in double precision; two
+// payloads decoded with their codes read in step (decode_payloads) against one at a time.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -7,10 +8,13 @@
 #include <cstring>
 #include <numeric>
 #include <random>
+#include <string>
+#include <vector>
 
 #include "volreel/format/brick_decode.h"
 #include "volreel/format/decoder.hpp"
 #include "volreel/format/dictionary_file.hpp"
+#include "volreel/format/error.hpp"
 
 namespace volreel {
 namespace {
@@ -142,6 +146,140 @@ TEST(Decoder, AtomTableFindsTheDctBasisBitForBit) {
       format::atom_table(std::span(d.atoms).first(d.atoms.size() - 1), d.atom_count).dct_basis);
   d.atoms[d.atoms.size() - 5] = std::nextafter(d.atoms[d.atoms.size() - 5], 2.0f);
   EXPECT_FALSE(format::atom_table(d.atoms, d.atom_count).dct_basis);
+}
+
+/// A random payload of a brick of `shape` indexing `count` atoms: a random box of coded blocks,
+/// 0..max_sparsity codes a block, magnitudes up to 2^c (with escapes), the coder's parameters
+/// chosen by pack_ksvd_payload.
+std::vector<std::byte> random_payload(format::BrickShape shape, std::uint32_t count,
+                                      std::uint32_t max_sparsity, std::mt19937& rng) {
+  const auto pick = [&rng](std::uint32_t k) { return static_cast<std::uint32_t>(rng() % k); };
+  const std::uint32_t n = shape.blocks_per_axis();
+  format::KsvdPayloadParts p;
+  p.sparsity.assign(shape.blocks(), 0);
+  p.mean.assign(shape.blocks(), 0);
+  p.dequantization[0] = 1.5f;
+  p.dequantization[1] = 0.01f;
+  p.dequantization[2] = 0.003f;
+  p.mean_bits = 9;
+  p.sparsity_bits = format::bits_for_count(max_sparsity + 1);
+  p.coef_bits = 1 + pick(12);
+  p.atom_bits = format::bits_for_count(count);
+  p.band_split = pick(3) == 0 ? 0 : count / 4;
+  for (std::uint32_t a = 0; a < 3; ++a) p.box[a] = 1 + pick(n);
+  std::vector<std::uint32_t> all(count);
+  std::iota(all.begin(), all.end(), 0u);
+  const int largest = 1 << p.coef_bits;
+  for (std::uint32_t b = 0; b < shape.blocks(); ++b) {
+    if (b % n >= p.box[0] || b / n % n >= p.box[1] || b / (n * n) >= p.box[2]) continue;
+    p.sparsity[b] = pick(max_sparsity + 1);
+    p.mean[b] = pick(512);
+    std::shuffle(all.begin(), all.end(), rng);
+    std::vector<std::uint32_t> atoms(all.begin(), all.begin() + p.sparsity[b]);
+    std::sort(atoms.begin(), atoms.end());
+    for (std::uint32_t a : atoms) {
+      // Mostly small magnitudes, some at the largest (escapes where the Rice parameter is small).
+      const int m = pick(8) == 0 ? largest : 1 + static_cast<int>(pick(largest < 4 ? 2 : 4));
+      p.atoms.push_back(a);
+      p.values.push_back(pick(2) ? m : -m);
+    }
+  }
+  return format::pack_ksvd_payload(p);
+}
+
+std::string decode_error(std::span<const format::PayloadJob> jobs, const format::AtomTable& atoms,
+                         format::BrickShape shape) {
+  try {
+    format::decode_payloads(jobs, format::Codec::ksvd, atoms, shape);
+  } catch (const format::FormatError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(Decoder, PayloadsReadInStepDecodeAsOneAtATime) {
+  const format::DictionaryFile d = learned_and_dct(40, 5);
+  const format::AtomTable atoms = format::atom_table(d.atoms, d.atom_count);
+  std::mt19937 rng(11);
+  for (const format::BrickShape shape : {format::BrickShape{12}, format::BrickShape{24}}) {
+    for (int trial = 0; trial < 40; ++trial) {
+      // Five jobs: payloads of different lengths (the longer one is read on alone at the end),
+      // and a constant brick among them that is decoded alone.
+      std::vector<std::vector<std::byte>> payloads;
+      for (std::size_t j = 0; j < 5; ++j)
+        payloads.push_back(random_payload(shape, d.atom_count, j == 1 ? 3 : 60, rng));
+      const float constant = 0.25f * static_cast<float>(trial);
+      if (trial % 2) std::memcpy(payloads[2].data(), &constant, 4), payloads[2].resize(4);
+      std::vector<std::vector<float>> one(5, std::vector<float>(shape.voxels()));
+      std::vector<std::vector<float>> paired(5, std::vector<float>(shape.voxels(), -7.0f));
+      std::vector<format::PayloadJob> jobs;
+      for (std::size_t j = 0; j < 5; ++j) {
+        format::decode_payload(payloads[j], format::Codec::ksvd, 0, atoms, shape, one[j], "one", 0);
+        jobs.push_back({payloads[j], paired[j], "paired", 0});
+      }
+      // Read in step: jobs 0 and 1, then 2 and 3, or 3 and 4 after the constant.
+      EXPECT_EQ(format::decode_payloads(jobs, format::Codec::ksvd, atoms, shape), 4u);
+      for (std::size_t j = 0; j < 5; ++j)
+        ASSERT_EQ(std::memcmp(one[j].data(), paired[j].data(), one[j].size() * sizeof(float)), 0)
+            << "brick " << shape.size << ", trial " << trial << ", job " << j;
+    }
+  }
+}
+
+TEST(Decoder, APayloadReadInStepFailsAsItDoesAlone) {
+  // A damaged payload, first or second of a pair, beside a good one or another damaged one: the
+  // error is the one decode_payload gives for the first damaged payload, offset included.
+  const format::DictionaryFile d = learned_and_dct(40, 6);
+  const format::AtomTable atoms = format::atom_table(d.atoms, d.atom_count);
+  const format::BrickShape shape{18};
+  std::mt19937 rng(13);
+  int damaged = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    const std::vector<std::byte> good = random_payload(shape, d.atom_count, 40, rng);
+    // Case 4: codes of atoms up to 12 past the dictionary's (atom indices too large).
+    std::vector<std::byte> bad =
+        random_payload(shape, d.atom_count + (trial % 6 == 4 ? 12 : 0), 40, rng);
+    switch (trial % 6) {
+      case 4:
+        break;
+      case 5: {  // the layout word's magnitude bits c lowered: magnitudes past 2^c
+        std::uint32_t layout;
+        std::memcpy(&layout, bad.data() + 12, 4);
+        const std::uint32_t c = vr_layout_coef_bits(layout);
+        layout = (layout & ~(31u << 8)) | (std::max(1u, c - std::min(c, 3u)) << 8);
+        std::memcpy(bad.data() + 12, &layout, 4);
+        break;
+      }
+      case 0:  // a byte of the code stream or the entries changed
+        bad[24 + rng() % (bad.size() - 24)] ^=
+            std::byte{static_cast<unsigned char>(1 + rng() % 255)};
+        break;
+      case 1:  // truncated to a shorter whole number of words
+        bad.resize(4 * (6 + rng() % (bad.size() / 4 - 6)));
+        break;
+      case 2:  // a word more
+        bad.resize(bad.size() + 4, std::byte{0});
+        break;
+      default:  // a header field changed
+        bad[12 + rng() % 12] ^= std::byte{static_cast<unsigned char>(1 + rng() % 255)};
+    }
+    std::vector<float> out(shape.voxels()), other(shape.voxels());
+    std::string alone;
+    try {
+      format::decode_payload(bad, format::Codec::ksvd, 0, atoms, shape, out, "frame.vrf", 100);
+    } catch (const format::FormatError& e) {
+      alone = e.what();
+    }
+    if (alone.empty()) continue;  // the change left a valid payload
+    ++damaged;
+    const format::PayloadJob bad_job{bad, out, "frame.vrf", 100};
+    const format::PayloadJob good_job{good, other, "frame.vrf", 100};
+    const format::PayloadJob jobs[][2] = {
+        {bad_job, good_job}, {good_job, bad_job}, {bad_job, bad_job}};
+    for (const auto& pair : jobs)
+      EXPECT_EQ(decode_error(pair, atoms, shape), alone) << "trial " << trial;
+  }
+  EXPECT_GT(damaged, 150);
 }
 
 }  // namespace

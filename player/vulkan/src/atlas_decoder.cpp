@@ -536,25 +536,40 @@ void AtlasDecoder::decode_on_host(std::span<const BrickUpload> bricks, std::size
   const auto n = static_cast<std::ptrdiff_t>(bricks.size());
   std::exception_ptr error;  // the first bad payload's error, raised after the loop
   std::size_t error_index = bricks.size();
+  // Two bricks at a time when they share a codec (format::decode_payloads reads their codes in
+  // step).
+  const std::size_t voxels = shape_.voxels();
 #pragma omp parallel
   {
-    std::vector<float> values(shape_.voxels());
+    std::vector<float> values(2 * voxels);
 #pragma omp for schedule(dynamic, 1)
-    for (std::ptrdiff_t i = 0; i < n; ++i) {
-      const BrickUpload& brick = bricks[static_cast<std::size_t>(i)];
-      try {
-        format::decode_payload(
-            brick.payload, brick.codec, brick.zfp_accuracy, atoms, shape_, values,
-            "brick upload " + std::to_string(first + static_cast<std::size_t>(i)), 0);
-      } catch (...) {
-#pragma omp critical(volreel_host_decode_error)
-        if (static_cast<std::size_t>(i) < error_index) {
-          error_index = static_cast<std::size_t>(i);
-          error = std::current_exception();
+    for (std::ptrdiff_t p = 0; p < (n + 1) / 2; ++p) {
+      const auto i = 2 * static_cast<std::size_t>(p);
+      std::size_t count = std::min<std::size_t>(2, bricks.size() - i);
+      if (count == 2 && bricks[i].codec != bricks[i + 1].codec) count = 1;
+      for (std::size_t done = 0; done < 2 && i + done < bricks.size();) {
+        format::PayloadJob jobs[2];
+        for (std::size_t j = 0; j < count; ++j) {
+          const BrickUpload& brick = bricks[i + done + j];
+          jobs[j] = {brick.payload,
+                     {values.data() + j * voxels, voxels},
+                     "brick upload " + std::to_string(first + i + done + j),
+                     0,
+                     brick.zfp_accuracy};
         }
-        continue;
+        try {
+          format::decode_payloads({jobs, count}, bricks[i + done].codec, atoms, shape_);
+          for (std::size_t j = 0; j < count; ++j)
+            atlas_.values_to_texels(jobs[j].out, texels + (i + done + j) * voxels);
+        } catch (...) {
+#pragma omp critical(volreel_host_decode_error)
+          if (i + done < error_index) {  // decode_payloads throws the first bad one's error
+            error_index = i + done;
+            error = std::current_exception();
+          }
+        }
+        done += count;
       }
-      atlas_.values_to_texels(values, texels + static_cast<std::size_t>(i) * shape_.voxels());
     }
   }
   stats_.cpu_decode_seconds +=

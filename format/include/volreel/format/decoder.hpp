@@ -123,6 +123,26 @@ void decode_payload(std::span<const std::byte> payload, Codec codec, double zfp_
                     const AtomTable& atoms, BrickShape shape, std::span<float> out,
                     const std::filesystem::path& name, std::uint64_t offset);
 
+/// A brick payload to decode, where its values go, and what its errors name (decode_payloads).
+struct PayloadJob {
+  std::span<const std::byte> payload;
+  std::span<float> out;
+  std::filesystem::path name;
+  std::uint64_t offset = 0;  ///< the payload's file offset
+  double zfp_accuracy = 0;   ///< codec zfp: the frame's tolerance
+};
+
+/// The job of brick b of a frame (its payload checked against its CRC, as decode_brick does).
+PayloadJob brick_job(const FrameView& frame, std::uint32_t brick, std::span<float> out);
+
+/// decode_payload on each job, with the same codec, atoms and brick shape. ksvd payloads are
+/// decoded two at a time, their code streams read in step: reading a code is a chain of
+/// dependent steps, and two independent chains keep a core busier than one (the same values as
+/// decode_payload, bit for bit). Returns how many payloads had their codes read in step. Throws
+/// the FormatError of the first bad payload; the outputs of the others are then unspecified.
+std::size_t decode_payloads(std::span<const PayloadJob> jobs, Codec codec, const AtomTable& atoms,
+                            BrickShape shape);
+
 /// Decodes brick b into out (frame.shape().voxels() values, x fastest). Validates the payload first
 /// (length against its block sparsities, atom indices < K, finite dequantization values) and throws
 /// FormatError naming the frame file and the payload's offset. zfp frames ignore `atoms`.
