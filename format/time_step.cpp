@@ -5,7 +5,9 @@
 #include <cmath>
 #include <cstring>
 #include <exception>
+#include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "volreel/format/error.hpp"
@@ -149,29 +151,52 @@ void TimeStepDecoder::decode(std::size_t t, std::uint32_t level, std::span<float
     frame_a[w] = &frame(sources[w].a.t);
     frame_b[w] = &frame(sources[w].b.t);
   }
-  // 2. Decode, interpolate, place.
+  // 2. Decode, interpolate, place: two nodes at a time, their stored bricks (up to four) decoded
+  //    together (decode_payloads reads their codes two at a time in step).
   std::exception_ptr error;
-  const auto n = static_cast<std::ptrdiff_t>(work.size());
+  const std::size_t voxels = f.shape().voxels();
+  const auto pairs = static_cast<std::ptrdiff_t>((work.size() + 1) / 2);
 #pragma omp parallel
   {
-    std::vector<float> a(f.shape().voxels()), b(f.shape().voxels());
-#pragma omp for schedule(dynamic, 4)
-    for (std::ptrdiff_t w = 0; w < n; ++w) {
-      const auto k = static_cast<std::size_t>(w);
-      const NodeSource& src = sources[k];
+    std::vector<float> states(4 * voxels);  // node j's states a and b at 2j and 2j + 1
+#pragma omp for schedule(dynamic, 2)
+    for (std::ptrdiff_t p = 0; p < pairs; ++p) {
+      const std::size_t first = 2 * static_cast<std::size_t>(p);
+      const std::size_t count = std::min<std::size_t>(2, work.size() - first);
+      const auto state_values = [&](std::size_t i) {
+        return std::span<float>(states.data() + i * voxels, voxels);
+      };
+      PayloadJob jobs[4];
+      std::size_t bricks = 0;
       try {
-        decode_state(*frame_a[k], src.a, atoms_, a);
-        if (src.interpolated) {
-          decode_state(*frame_b[k], src.b, atoms_, b);
-          const float f1 = src.factor, f0 = 1.0f - f1;
-          for (std::size_t v = 0; v < a.size(); ++v) a[v] = f0 * a[v] + f1 * b[v];
+        for (std::size_t j = 0; j < count; ++j) {
+          const NodeSource& src = sources[first + j];
+          const std::pair<const FrameView*, const StoredState*> used[2] = {
+              {frame_a[first + j], &src.a}, {frame_b[first + j], &src.b}};
+          for (std::size_t i = 0; i < (src.interpolated ? 2u : 1u); ++i) {
+            const auto [frame, state] = used[i];
+            if (state->brick == no_brick)
+              std::ranges::fill(state_values(2 * j + i), state->constant);
+            else
+              jobs[bricks++] = brick_job(*frame, state->brick, state_values(2 * j + i));
+          }
         }
+        decode_payloads({jobs, bricks}, f.codec(), atoms_, f.shape());
       } catch (const FormatError&) {
 #pragma omp critical(volreel_time_step_error)
         if (!error) error = std::current_exception();
         continue;
       }
-      place_in_level(f.position(work[k]), level, dims, f.shape(), a, out);
+      for (std::size_t j = 0; j < count; ++j) {
+        const NodeSource& src = sources[first + j];
+        const std::span<float> a = state_values(2 * j);
+        if (src.interpolated) {
+          const std::span<const float> b = state_values(2 * j + 1);
+          const float f1 = src.factor, f0 = 1.0f - f1;
+          for (std::size_t v = 0; v < a.size(); ++v) a[v] = f0 * a[v] + f1 * b[v];
+        }
+        place_in_level(f.position(work[first + j]), level, dims, f.shape(), a, out);
+      }
     }
   }
   if (error) std::rethrow_exception(error);
