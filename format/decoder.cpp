@@ -829,6 +829,31 @@ PayloadJob brick_job(const FrameView& frame, std::uint32_t brick, std::span<floa
           frame.header().codec_parameter};
 }
 
+void decode_bricks(std::span<const BrickToDecode> bricks, const AtomTable& atoms) {
+  if (bricks.empty()) return;
+  const FrameView& first = *bricks[0].frame;
+  const auto describe = [](const FrameView& f) {
+    return std::string(f.codec() == Codec::ksvd ? "ksvd" : "zfp") + ", bricks of " +
+           str(f.shape().size) + "³";
+  };
+  std::vector<PayloadJob> jobs;
+  jobs.reserve(bricks.size());
+  for (const BrickToDecode& b : bricks) {
+    try {
+      if (b.frame->codec() != first.codec() || b.frame->shape().size != first.shape().size)
+        throw FormatError(b.frame->name(), 0,
+                          "frame header: the codec and brick size of " + first.name().string() +
+                              " (" + describe(first) + ")",
+                          describe(*b.frame));
+      jobs.push_back(brick_job(*b.frame, b.brick, b.out));
+    } catch (const FormatError&) {
+      decode_payloads(jobs, first.codec(), atoms, first.shape());  // an earlier brick's error first
+      throw;
+    }
+  }
+  decode_payloads(jobs, first.codec(), atoms, first.shape());
+}
+
 void decode_brick(const FrameView& frame, std::uint32_t brick, const AtomTable& atoms,
                   std::span<float> out) {
   const PayloadJob job = brick_job(frame, brick, out);
@@ -898,12 +923,11 @@ void decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& 
     for (std::ptrdiff_t p = 0; p < pairs; ++p) {
       const std::size_t first = 2 * static_cast<std::size_t>(p);
       const std::size_t count = std::min<std::size_t>(2, work.size() - first);
-      PayloadJob jobs[2];
+      BrickToDecode pair[2];
+      for (std::size_t j = 0; j < count; ++j)
+        pair[j] = {&frame, frame.node(work[first + j]).brick, {bricks.data() + j * voxels, voxels}};
       try {
-        for (std::size_t j = 0; j < count; ++j)
-          jobs[j] = brick_job(frame, frame.node(work[first + j]).brick,
-                              {bricks.data() + j * voxels, voxels});
-        decode_payloads({jobs, count}, frame.codec(), atoms, frame.shape());
+        decode_bricks({pair, count}, atoms);
       } catch (const FormatError&) {
 #pragma omp critical(volreel_decode_error)
         if (!error) error = std::current_exception();
@@ -911,7 +935,7 @@ void decode_level(const FrameView& frame, std::uint32_t level, const AtomTable& 
       }
       for (std::size_t j = 0; j < count; ++j)
         place_in_level(frame.position(work[first + j]), level,
-                       {target.dims[0], target.dims[1], target.dims[2]}, frame.shape(), jobs[j].out,
+                       {target.dims[0], target.dims[1], target.dims[2]}, frame.shape(), pair[j].out,
                        out);
     }
   }

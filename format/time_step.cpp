@@ -152,7 +152,7 @@ void TimeStepDecoder::decode(std::size_t t, std::uint32_t level, std::span<float
     frame_b[w] = &frame(sources[w].b.t);
   }
   // 2. Decode, interpolate, place: two nodes at a time, their stored bricks (up to four) decoded
-  //    together (decode_payloads reads their codes two at a time in step).
+  //    together (decode_bricks reads their codes two at a time in step).
   std::exception_ptr error;
   const std::size_t voxels = f.shape().voxels();
   const auto pairs = static_cast<std::ptrdiff_t>((work.size() + 1) / 2);
@@ -166,22 +166,22 @@ void TimeStepDecoder::decode(std::size_t t, std::uint32_t level, std::span<float
       const auto state_values = [&](std::size_t i) {
         return std::span<float>(states.data() + i * voxels, voxels);
       };
-      PayloadJob jobs[4];
-      std::size_t bricks = 0;
-      try {
-        for (std::size_t j = 0; j < count; ++j) {
-          const NodeSource& src = sources[first + j];
-          const std::pair<const FrameView*, const StoredState*> used[2] = {
-              {frame_a[first + j], &src.a}, {frame_b[first + j], &src.b}};
-          for (std::size_t i = 0; i < (src.interpolated ? 2u : 1u); ++i) {
-            const auto [frame, state] = used[i];
-            if (state->brick == no_brick)
-              std::ranges::fill(state_values(2 * j + i), state->constant);
-            else
-              jobs[bricks++] = brick_job(*frame, state->brick, state_values(2 * j + i));
-          }
+      BrickToDecode bricks[4];
+      std::size_t stored = 0;
+      for (std::size_t j = 0; j < count; ++j) {
+        const NodeSource& src = sources[first + j];
+        const std::pair<const FrameView*, const StoredState*> used[2] = {
+            {frame_a[first + j], &src.a}, {frame_b[first + j], &src.b}};
+        for (std::size_t i = 0; i < (src.interpolated ? 2u : 1u); ++i) {
+          const auto [frame, state] = used[i];
+          if (state->brick == no_brick)
+            std::ranges::fill(state_values(2 * j + i), state->constant);
+          else
+            bricks[stored++] = {frame, state->brick, state_values(2 * j + i)};
         }
-        decode_payloads({jobs, bricks}, f.codec(), atoms_, f.shape());
+      }
+      try {
+        decode_bricks({bricks, stored}, atoms_);
       } catch (const FormatError&) {
 #pragma omp critical(volreel_time_step_error)
         if (!error) error = std::current_exception();

@@ -274,12 +274,32 @@ TEST(Decoder, APayloadReadInStepFailsAsItDoesAlone) {
     ++damaged;
     const format::PayloadJob bad_job{bad, out, "frame.vrf", 100};
     const format::PayloadJob good_job{good, other, "frame.vrf", 100};
+    // Second of a damaged pair: a short header, named differently.
+    const std::vector<std::byte> header_only(good.begin(), good.begin() + 20);
+    const format::PayloadJob other_bad{header_only, other, "other.vrf", 700};
     const format::PayloadJob jobs[][2] = {
-        {bad_job, good_job}, {good_job, bad_job}, {bad_job, bad_job}};
+        {bad_job, good_job}, {good_job, bad_job}, {bad_job, other_bad}};
     for (const auto& pair : jobs)
       EXPECT_EQ(decode_error(pair, atoms, shape), alone) << "trial " << trial;
+    const format::PayloadJob reversed[2] = {other_bad, bad_job};
+    EXPECT_NE(decode_error(reversed, atoms, shape).find("other.vrf"), std::string::npos);
   }
   EXPECT_GT(damaged, 150);
+  // Valid payloads against a table that holds fewer atoms than it counts: the error of one
+  // payload alone.
+  const std::vector<std::byte> good = random_payload(shape, d.atom_count, 40, rng);
+  format::AtomTable short_table = atoms;
+  short_table.values = short_table.values.first(short_table.values.size() - VR_BLOCK_LENGTH);
+  std::vector<float> out(shape.voxels()), other(shape.voxels());
+  std::string alone;
+  try {
+    format::decode_payload(good, format::Codec::ksvd, 0, short_table, shape, out, "a.vrf", 8);
+  } catch (const format::FormatError& e) {
+    alone = e.what();
+  }
+  EXPECT_NE(alone.find("fewer than"), std::string::npos) << alone;
+  const format::PayloadJob both[2] = {{good, out, "a.vrf", 8}, {good, other, "b.vrf", 16}};
+  EXPECT_EQ(decode_error(both, short_table, shape), alone);
 }
 
 }  // namespace

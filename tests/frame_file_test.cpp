@@ -5,6 +5,7 @@
 
 #include <cstring>
 #include <string>
+#include <vector>
 
 #include "frame_edit.hpp"
 #include "volreel/datasets/analytic.hpp"
@@ -212,6 +213,61 @@ TEST(DamagedFrame, AZfpHeaderNamesNoAtomsOrBlocks) {
   };
   expect_refused(offsetof(format::FrameHeader, atom_count), 215, "atom count 0 (zfp)");
   expect_refused(offsetof(format::FrameHeader, block_size), 6, "block size 0 (zfp)");
+}
+
+TEST(DamagedFrame, BricksDecodedTogetherFailAsOneAtATime) {
+  // decode_bricks (two payloads' codes read in step) against decode_brick: the same values, and
+  // the error of the first bad brick in the order given, whether its CRC or its payload is bad.
+  const auto d = small_dictionary();
+  auto bytes = small_frame(format::Codec::ksvd, d);
+  const auto error_of = [&](const format::FrameView& f, std::vector<std::uint32_t> order) {
+    std::vector<std::vector<float>> out(order.size(), std::vector<float>(f.shape().voxels()));
+    std::vector<format::BrickToDecode> bricks;
+    for (std::size_t i = 0; i < order.size(); ++i) bricks.push_back({&f, order[i], out[i]});
+    try {
+      format::decode_bricks(bricks, table(d));
+    } catch (const format::FormatError& e) {
+      return std::string(e.what());
+    }
+    for (std::size_t i = 0; i < order.size(); ++i) {
+      std::vector<float> one(f.shape().voxels());
+      format::decode_brick(f, order[i], table(d), one);
+      EXPECT_EQ(std::memcmp(one.data(), out[i].data(), 4 * one.size()), 0) << "brick " << order[i];
+    }
+    return std::string();
+  };
+  {
+    const format::FrameView view(bytes, "x");
+    ASSERT_GE(view.brick_count(), 4u);
+    EXPECT_EQ(error_of(view, {0, 1, 2, 3}), "");
+    EXPECT_EQ(error_of(view, {3, 0, 2}), "");
+  }
+  // Brick 3's layout word with 0 atom bits (CRCs sealed again), then a byte of brick 1 changed
+  // (its CRC no longer matches).
+  const format::FrameView sealed(bytes, "x");
+  const std::uint64_t word = sealed.brick_offset(3) + 12, byte = sealed.brick_offset(1) + 30;
+  vr_uint layout_word;
+  std::memcpy(&layout_word, bytes.data() + word, 4);
+  layout_word &= ~(0x1Fu << 13);
+  std::memcpy(bytes.data() + word, &layout_word, 4);
+  test::reseal_frame(bytes);
+  bytes[byte] ^= std::byte{0x40};
+  const format::FrameView view(bytes, "x");
+  std::string one[4];
+  for (std::uint32_t b : {1u, 3u}) {
+    std::vector<float> out(view.shape().voxels());
+    try {
+      format::decode_brick(view, b, table(d), out);
+    } catch (const format::FormatError& e) {
+      one[b] = e.what();
+    }
+  }
+  EXPECT_NE(one[1].find("CRC"), std::string::npos) << one[1];
+  EXPECT_NE(one[3].find("atom bits 1..16"), std::string::npos) << one[3];
+  EXPECT_EQ(error_of(view, {0, 1, 2, 3}), one[1]);
+  EXPECT_EQ(error_of(view, {3, 2, 1, 0}), one[3]);
+  EXPECT_EQ(error_of(view, {0, 3, 1}), one[3]);
+  EXPECT_EQ(error_of(view, {2, 1}), one[1]);
 }
 
 TEST(DamagedFrame, PayloadErrorsNameTheBrick) {

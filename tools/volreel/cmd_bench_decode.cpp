@@ -229,7 +229,7 @@ void run_bench_decode(const BenchDecodeOptions& o) {
     const double cpu = time_passes(o.min_seconds, [&] {
       for (std::size_t first = 0; first < bricks.size(); first += batch) {
         const std::size_t end = std::min(bricks.size(), first + batch);
-        // Two bricks a thread at a time, except a batch of one.
+        // Two bricks a thread at a time; a batch's odd last brick alone.
         const auto pairs = static_cast<std::ptrdiff_t>((end - first + 1) / 2);
 #pragma omp parallel for schedule(dynamic, 1)
         for (std::ptrdiff_t p = 0; p < pairs; ++p) {

@@ -563,7 +563,9 @@ void AtlasDecoder::decode_on_host(std::span<const BrickUpload> bricks, std::size
             atlas_.values_to_texels(jobs[j].out, texels + (i + done + j) * voxels);
         } catch (...) {
 #pragma omp critical(volreel_host_decode_error)
-          if (i + done < error_index) {  // decode_payloads throws the first bad one's error
+          // decode_payloads throws the first bad one's error; its index may be the pair's second
+          // (pairs do not overlap, so the first error in batch order still wins).
+          if (i + done < error_index) {
             error_index = i + done;
             error = std::current_exception();
           }

@@ -143,6 +143,18 @@ PayloadJob brick_job(const FrameView& frame, std::uint32_t brick, std::span<floa
 std::size_t decode_payloads(std::span<const PayloadJob> jobs, Codec codec, const AtomTable& atoms,
                             BrickShape shape);
 
+/// A brick of a frame to decode and where its values go (decode_bricks).
+struct BrickToDecode {
+  const FrameView* frame = nullptr;
+  std::uint32_t brick = 0;
+  std::span<float> out;
+};
+
+/// decode_brick on each, through decode_payloads (ksvd bricks two at a time, their codes read in
+/// step). The frames must share the first's codec and brick size (else FormatError). Throws the
+/// error of the first bad brick in order: its index, its CRC or its payload.
+void decode_bricks(std::span<const BrickToDecode> bricks, const AtomTable& atoms);
+
 /// Decodes brick b into out (frame.shape().voxels() values, x fastest). Validates the payload first
 /// (length against its block sparsities, atom indices < K, finite dequantization values) and throws
 /// FormatError naming the frame file and the payload's offset. zfp frames ignore `atoms`.
