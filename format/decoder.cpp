@@ -61,17 +61,22 @@ constexpr std::size_t payload_padding_words = 4;
 /// the payload's zero padding words take them.
 class CodeStream {
  public:
-  CodeStream(const vr_uint* payload, vr_uint first_word) : words_(payload + first_word) {}
+  /// band_rice: band_rice_table's, for the payload's layout and band words.
+  CodeStream(const vr_uint* payload, vr_uint first_word, vr_uint atom_bits,
+             const std::uint8_t* band_rice)
+      : words_(payload + first_word), band_rice_(band_rice), atom_limit_(1u << atom_bits) {}
   std::uint64_t bit() const { return bit_; }
 
   /// The next code of a block whose gaps have Rice parameter `gap_rice` (vr_gap_rice), after the
   /// block's codes up to next_atom − 1; as vr_read_code.
-  int read(vr_uint layout_word, vr_uint band_word, vr_uint gap_rice, vr_uint atom_bits,
-           vr_uint coef_bits, vr_uint& next_atom, vr_uint& atom) {
+  int read(vr_uint gap_rice, vr_uint atom_bits, vr_uint coef_bits, vr_uint& next_atom,
+           vr_uint& atom) {
     atom = next_atom + rice(window(), gap_rice, atom_bits);
     next_atom = atom + 1;
     const std::uint64_t w = window();
-    const vr_uint magnitude = rice(w, vr_band_rice(layout_word, band_word, atom), coef_bits);
+    // An atom index past 2^a is never valid (the caller refuses it); its Rice parameter is that of
+    // 2^a, so that the table stays small.
+    const vr_uint magnitude = rice(w, band_rice_[std::min(atom, atom_limit_)], coef_bits);
     const vr_uint negative = static_cast<vr_uint>(w >> (bit_ - start_)) & 1u;
     bit_ += 1;
     const int q = static_cast<int>(magnitude + 1);
@@ -99,8 +104,21 @@ class CodeStream {
   }
 
   const vr_uint* words_;
+  const std::uint8_t* band_rice_;
+  vr_uint atom_limit_;
   std::uint64_t bit_ = 0, start_ = 0;
 };
+
+/// The magnitudes' Rice parameter (vr_band_rice) of every atom index 0..2^a of a payload, in
+/// `table`: one load a code instead of the band's logarithm.
+const std::uint8_t* band_rice_table(vr_uint layout_word, vr_uint band_word,
+                                    std::vector<std::uint8_t>& table) {
+  const vr_uint limit = 1u << vr_layout_atom_bits(layout_word);
+  table.resize(std::size_t{limit} + 1);
+  for (vr_uint atom = 0; atom <= limit; ++atom)
+    table[atom] = static_cast<std::uint8_t>(vr_band_rice(layout_word, band_word, atom));
+  return table.data();
+}
 
 /// One code as read: its atom and signed quantized coefficient.
 struct ParsedCode {
@@ -281,7 +299,9 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
   //    look-ahead of a Rice code and a damaged stream's overrun: a code reads at most 81 bits).
   const std::uint64_t stream_bits = (std::uint64_t{word_count} - first) * 32;
   const vr_uint largest = 1u << layout.coef_bits;
-  CodeStream stream(payload, first);
+  thread_local std::vector<std::uint8_t> band_rice;
+  CodeStream stream(payload, first, layout.atom_bits,
+                    band_rice_table(layout.word, layout.band_word, band_rice));
   for (vr_uint b = 0, e = 0; b < blocks; ++b) {
     if (!vr_block_in_box(box, n, b)) continue;
     const vr_uint s = vr_entry_sparsity(layout.word, vr_block_entry(payload, layout.word, e++));
@@ -293,8 +313,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
       if (stream.bit() >= stream_bits)
         fail(code_at, "codes inside the payload (block " + str(b) + ", code " + str(k) + ")",
              "the payload's end");
-      const int q = stream.read(layout.word, layout.band_word, gap_rice, layout.atom_bits,
-                                layout.coef_bits, next_atom, atom);
+      const int q = stream.read(gap_rice, layout.atom_bits, layout.coef_bits, next_atom, atom);
       if (atom >= atom_count)
         fail(code_at,
              "atom index < " + str(atom_count) + " (block " + str(b) + ", code " + str(k) + ")",
@@ -391,7 +410,7 @@ class SteppedCodes {
  public:
   /// After parse_ksvd_header on `payload` (word_count words and the zero padding words).
   SteppedCodes(const vr_uint* payload, std::size_t word_count, const KsvdPayloadLayout& layout,
-               BrickShape shape, std::uint32_t atom_count)
+               BrickShape shape, std::uint32_t atom_count, const std::uint8_t* band_rice)
       : payload_(payload),
         layout_(layout),
         n_(shape.blocks_per_axis()),
@@ -401,7 +420,7 @@ class SteppedCodes {
         word_count_(word_count),
         atom_count_(atom_count),
         largest_(1u << layout.coef_bits),
-        stream_(payload, first_) {
+        stream_(payload, first_, layout.atom_bits, band_rice) {
     for (vr_uint b = 0, e = 0; b < blocks_; ++b)
       if (vr_block_in_box(layout_.box_word, n_, b))
         layout_.codes +=
@@ -425,8 +444,7 @@ class SteppedCodes {
     ++read_;
     if (stream_.bit() >= stream_bits_) return false;
     vr_uint atom = 0;
-    const int q = stream_.read(layout_.word, layout_.band_word, gap_rice_, layout_.atom_bits,
-                               layout_.coef_bits, next_atom_, atom);
+    const int q = stream_.read(gap_rice_, layout_.atom_bits, layout_.coef_bits, next_atom_, atom);
     *out = {atom, q};
     const vr_uint m = static_cast<vr_uint>(q < 0 ? -static_cast<std::int64_t>(q) : q);
     return atom < atom_count_ && m <= largest_;
@@ -481,6 +499,7 @@ bool decode_ksvd_pair(const PayloadJob& first, const PayloadJob& second, const A
                       BrickShape shape) {
   thread_local std::vector<vr_uint> words[2];
   thread_local std::vector<ParsedCode> codes[2];
+  thread_local std::vector<std::uint8_t> band_rice[2];
   const PayloadJob* jobs[2] = {&first, &second};
   const auto alone = [&] {
     for (const PayloadJob* job : jobs)
@@ -494,7 +513,8 @@ bool decode_ksvd_pair(const PayloadJob& first, const PayloadJob& second, const A
       copy_padded(bytes, words[i]);
       const KsvdPayloadLayout header = parse_ksvd_header(
           words[i].data(), bytes.size() / 4, bytes.size(), shape, jobs[i]->name, jobs[i]->offset);
-      readers[i].emplace(words[i].data(), bytes.size() / 4, header, shape, atoms.count);
+      readers[i].emplace(words[i].data(), bytes.size() / 4, header, shape, atoms.count,
+                         band_rice_table(header.word, header.band_word, band_rice[i]));
       if (codes[i].size() < readers[i]->left()) codes[i].resize(readers[i]->left());
     }
   } catch (const FormatError&) {
