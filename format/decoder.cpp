@@ -48,65 +48,79 @@ struct ParsedCode;
                                                         const float* __restrict atoms,
                                                         float coef_scale, vr_uint dct_first);
 
-/// Zero words after a payload's copy: the look-ahead of a Rice code and the overrun of a damaged
-/// stream's last code (at most 81 bits past the stream's end) read zeros.
+/// Zero words after a payload's copy: the look-ahead of a code's windows and the overrun of a
+/// damaged stream's last code read zeros (a code that starts inside the stream reads at most 12
+/// bytes from its first bit's byte on, CodeStream).
 constexpr std::size_t payload_padding_words = 4;
 
 /// The code stream of a payload read in 64-bit windows: the codes of brick_decode.h's
 /// vr_read_code (which the GPU decoders run, and which the tests hold this reader to), with one
-/// unaligned load for a gap and one for a magnitude and its sign instead of up to five word reads
-/// with a branch each. The window at a bit holds at least 33 bits of the stream, and a Rice code
-/// with its sign takes at most 33 (16 zeros and 16 escaped bits and the sign, or at most 15 zeros,
-/// the one and 15 low bits and the sign). It reads up to two words past the bit it starts at:
-/// the payload's zero padding words take them.
+/// unaligned load for a code's gap, magnitude and sign instead of up to five word reads with a
+/// branch each. A window loaded at a byte holds at least 57 bits of the stream from the code's
+/// first bit. A gap takes at most 32 bits (16 zeros and 16 escaped bits, or at most 15 zeros, the
+/// one and 15 low bits), a magnitude with its sign at most 33: a gap longer than 24 bits (rare)
+/// loads a second window for the magnitude. A code reads at most 12 bytes past its first bit's
+/// byte: the payload's zero padding words take them.
 class CodeStream {
  public:
   /// band_rice: band_rice_table's, for the payload's layout and band words.
   CodeStream(const vr_uint* payload, vr_uint first_word, vr_uint atom_bits,
              const std::uint8_t* band_rice)
-      : words_(payload + first_word), band_rice_(band_rice), atom_limit_(1u << atom_bits) {}
+      : bytes_(reinterpret_cast<const unsigned char*>(payload + first_word)),
+        band_rice_(band_rice),
+        atom_limit_(1u << atom_bits) {}
   std::uint64_t bit() const { return bit_; }
 
   /// The next code of a block whose gaps have Rice parameter `gap_rice` (vr_gap_rice), after the
   /// block's codes up to next_atom − 1; as vr_read_code.
   int read(vr_uint gap_rice, vr_uint atom_bits, vr_uint coef_bits, vr_uint& next_atom,
            vr_uint& atom) {
-    atom = next_atom + rice(window(), gap_rice, atom_bits);
+    std::uint64_t w = window(bit_);
+    vr_uint used = 0;
+    atom = next_atom + rice(w, used, gap_rice, atom_bits);
     next_atom = atom + 1;
-    const std::uint64_t w = window();
+    if (used > 57 - 33) {  // fewer than 33 bits left in the window
+      bit_ += used;
+      w = window(bit_);
+      used = 0;
+    }
     // An atom index past 2^a is never valid (the caller refuses it); its Rice parameter is that of
     // 2^a, so that the table stays small.
-    const vr_uint magnitude = rice(w, band_rice_[std::min(atom, atom_limit_)], coef_bits);
-    const vr_uint negative = static_cast<vr_uint>(w >> (bit_ - start_)) & 1u;
-    bit_ += 1;
+    const vr_uint magnitude = rice(w, used, band_rice_[std::min(atom, atom_limit_)], coef_bits);
+    const vr_uint negative = static_cast<vr_uint>(w) & 1u;
+    bit_ += used + 1;
     const int q = static_cast<int>(magnitude + 1);
     return negative ? -q : q;
   }
 
  private:
-  /// The stream from bit_ on, at least 33 bits; start_ remembers where it starts.
-  std::uint64_t window() {
+  /// The stream from `bit` on, at least 57 bits.
+  std::uint64_t window(std::uint64_t bit) const {
     std::uint64_t w;
-    std::memcpy(&w, words_ + bit_ / 32, sizeof w);
-    start_ = bit_;
-    return w >> (bit_ % 32);
+    std::memcpy(&w, bytes_ + bit / 8, sizeof w);
+    return w >> (bit % 8);
   }
-  /// The Rice code at bit_ inside window w (vr_read_rice), advancing bit_ past it.
-  vr_uint rice(std::uint64_t w, vr_uint k, vr_uint escape_bits) {
-    w >>= bit_ - start_;
+  /// The Rice code at the start of window w (vr_read_rice): w moves past it, `used` counts its
+  /// bits.
+  static vr_uint rice(std::uint64_t& w, vr_uint& used, vr_uint k, vr_uint escape_bits) {
     const vr_uint zeros = vr_lowest_bit(static_cast<vr_uint>(w) | (1u << VR_ESCAPE_ZEROS));
+    vr_uint value, length;
     if (zeros == VR_ESCAPE_ZEROS) {
-      bit_ += VR_ESCAPE_ZEROS + escape_bits;
-      return static_cast<vr_uint>(w >> VR_ESCAPE_ZEROS) & ((1u << escape_bits) - 1u);
+      length = VR_ESCAPE_ZEROS + escape_bits;
+      value = static_cast<vr_uint>(w >> VR_ESCAPE_ZEROS) & ((1u << escape_bits) - 1u);
+    } else {
+      length = zeros + 1 + k;
+      value = (zeros << k) | (static_cast<vr_uint>(w >> (zeros + 1)) & ((1u << k) - 1u));
     }
-    bit_ += zeros + 1 + k;
-    return (zeros << k) | (static_cast<vr_uint>(w >> (zeros + 1)) & ((1u << k) - 1u));
+    w >>= length;
+    used += length;
+    return value;
   }
 
-  const vr_uint* words_;
+  const unsigned char* bytes_;
   const std::uint8_t* band_rice_;
   vr_uint atom_limit_;
-  std::uint64_t bit_ = 0, start_ = 0;
+  std::uint64_t bit_ = 0;
 };
 
 /// The magnitudes' Rice parameter (vr_band_rice) of every atom index 0..2^a of a payload, in
@@ -296,7 +310,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
   const vr_uint blocks = shape.blocks(), n = shape.blocks_per_axis(), box = layout.box_word;
   const vr_uint first = vr_code_first_word(layout.word, vr_box_entries(box));
   // 3. The code stream, read as the decoders read it (the zero words after the payload take the
-  //    look-ahead of a Rice code and a damaged stream's overrun: a code reads at most 81 bits).
+  //    look-ahead of a code's windows and a damaged stream's overrun).
   const std::uint64_t stream_bits = (std::uint64_t{word_count} - first) * 32;
   const vr_uint largest = 1u << layout.coef_bits;
   thread_local std::vector<std::uint8_t> band_rice;
@@ -431,23 +445,42 @@ class SteppedCodes {
   /// Codes not read yet.
   std::uint32_t left() const { return layout_.codes - read_; }
 
-  /// Reads the next code into *out (left() > 0); false where parse_ksvd_payload would throw.
-  bool step(ParsedCode* out) {
-    while (in_block_ == 0) {  // the next coded block with codes (left() > 0: there is one)
+  /// Codes left in the current block; after begin_block, at least one.
+  vr_uint in_block() const { return in_block_; }
+
+  /// Moves to the next coded block that has codes (left() > 0: there is one).
+  void begin_block() {
+    while (in_block_ == 0) {
       const vr_uint b = block_++;
       if (!vr_block_in_box(layout_.box_word, n_, b)) continue;
       in_block_ = vr_entry_sparsity(layout_.word, vr_block_entry(payload_, layout_.word, entry_++));
       gap_rice_ = in_block_ > 0 ? vr_gap_rice(layout_.word, in_block_) : 0;
       next_atom_ = 0;
     }
-    --in_block_;
-    ++read_;
+  }
+
+  /// Reads the current block's next code into *out, without counting it (taken counts it); false
+  /// where parse_ksvd_payload would throw.
+  bool code(ParsedCode* out) {
     if (stream_.bit() >= stream_bits_) return false;
     vr_uint atom = 0;
     const int q = stream_.read(gap_rice_, layout_.atom_bits, layout_.coef_bits, next_atom_, atom);
     *out = {atom, q};
     const vr_uint m = static_cast<vr_uint>(q < 0 ? -static_cast<std::int64_t>(q) : q);
     return atom < atom_count_ && m <= largest_;
+  }
+
+  /// Counts `count` codes of the current block as read.
+  void taken(vr_uint count) {
+    in_block_ -= count;
+    read_ += count;
+  }
+
+  /// Reads the next code into *out (left() > 0); false where parse_ksvd_payload would throw.
+  bool step(ParsedCode* out) {
+    begin_block();
+    taken(1);
+    return code(out);
   }
 
   /// After every code: the payload's length and the zero bits after the last code, as
@@ -480,9 +513,17 @@ bool read_in_step(SteppedCodes& first_reader, ParsedCode* __restrict a, SteppedC
   SteppedCodes first = first_reader, second = second_reader;
   bool good = true;
   while (first.left() > 0 && second.left() > 0) {
-    const bool read_a = first.step(a++);
-    const bool read_b = second.step(b++);
-    if (!(read_a && read_b)) return false;
+    // A block of each at a time, as far as the shorter one goes: no block bookkeeping inside.
+    first.begin_block();
+    second.begin_block();
+    const vr_uint count = std::min(first.in_block(), second.in_block());
+    for (vr_uint k = 0; k < count; ++k) {
+      const bool read_a = first.code(a++);
+      const bool read_b = second.code(b++);
+      if (!(read_a && read_b)) return false;
+    }
+    first.taken(count);
+    second.taken(count);
   }
   while (good && first.left() > 0) good = first.step(a++);
   while (good && second.left() > 0) good = second.step(b++);

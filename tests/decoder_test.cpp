@@ -187,6 +187,48 @@ std::vector<std::byte> random_payload(format::BrickShape shape, std::uint32_t co
   return format::pack_ksvd_payload(p);
 }
 
+TEST(Decoder, TheLongestCodesReadBack) {
+  // Codes of 65 bits, every gap and magnitude an escape (16 zeros, then 16 bits) and a sign: a
+  // code longer than a 64-bit window, at every bit alignment (65 bits move the next code's start
+  // by one bit of a byte). The CPU decoder's reader and the shared text (vr_read_code) read them
+  // back.
+  const format::BrickShape shape{12};
+  format::KsvdPayloadParts p;
+  p.sparsity.assign(shape.blocks(), 3);
+  p.mean.assign(shape.blocks(), 7);
+  p.dequantization[2] = 0.001f;
+  p.sparsity_bits = 2;
+  p.coef_bits = 16;
+  p.atom_bits = 16;
+  p.gap_shift = 3;  // gap Rice parameter 16 − 1 − 2 − 3 = 10: gaps from 16·2^10 on escape
+  p.band_rice.fill(0);
+  for (std::uint32_t b = 0; b < shape.blocks(); ++b)
+    for (std::uint32_t k = 0; k < 3; ++k) {
+      p.atoms.push_back(20000 * (k + 1) + b);
+      p.values.push_back((b + k) % 2 ? 65536 - static_cast<int>(b) : -40000 - static_cast<int>(k));
+    }
+  const std::vector<std::byte> payload = format::pack_ksvd_payload(p);
+  const format::KsvdPayloadParts back =
+      format::unpack_ksvd_payload(payload, 1u << 16, shape, "long", 0);
+  EXPECT_EQ(back.atoms, p.atoms);
+  EXPECT_EQ(back.values, p.values);
+  std::vector<vr_uint> words(payload.size() / 4 + 1, 0u);
+  std::memcpy(words.data(), payload.data(), payload.size());
+  const vr_uint layout = words[3], band_word = words[4];
+  const vr_uint first = vr_code_first_word(layout, shape.blocks());
+  vr_uint bit = 0;
+  std::size_t code = 0;
+  for (std::uint32_t b = 0; b < shape.blocks(); ++b) {
+    vr_uint next_atom = 0, atom = 0;
+    for (std::uint32_t k = 0; k < 3; ++k, ++code) {
+      const int q = vr_read_code(words.data(), first, layout, band_word, 3, bit, next_atom, atom);
+      EXPECT_EQ(atom, p.atoms[code]);
+      EXPECT_EQ(q, p.values[code]);
+    }
+  }
+  EXPECT_EQ(bit, 65u * p.atoms.size());
+}
+
 std::string decode_error(std::span<const format::PayloadJob> jobs, const format::AtomTable& atoms,
                          format::BrickShape shape) {
   try {
