@@ -26,11 +26,15 @@ std::string str(std::uint64_t v) {
 /// (SSE2) one, chosen when the program loads. AVX2 without FMA: both versions multiply, then add,
 /// so a build for baseline x86-64 (the default) decodes to the same bits on every machine. (Clang
 /// does not take target_clones on a function declared before its definition; its builds, the
-/// fuzzers', keep the baseline version.)
+/// fuzzers', keep the baseline version.) The in-step code reader, integer work only, also has an
+/// x86-64-v3 version: BMI2's shifts by any register, where two interleaved readers otherwise take
+/// turns with the one shift-count register.
 #if defined(__x86_64__) && defined(__ELF__) && !defined(__clang__)
 #define VOLREEL_SIMD_CLONES gnu::target_clones("avx2", "default"),
+#define VOLREEL_BMI_CLONES gnu::target_clones("arch=x86-64-v3", "default"),
 #else
 #define VOLREEL_SIMD_CLONES
+#define VOLREEL_BMI_CLONES
 #endif
 
 /// One code as read: its atom and signed quantized coefficient.
@@ -507,8 +511,10 @@ class SteppedCodes {
 /// a code is a chain of dependent steps (where the gap ends gives where the magnitude starts and
 /// the atom, whose band gives the magnitude's Rice parameter), so two independent chains keep a
 /// core busy where one leaves it waiting. False where either payload is bad.
-bool read_in_step(SteppedCodes& first_reader, ParsedCode* __restrict a, SteppedCodes& second_reader,
-                  ParsedCode* __restrict b) {
+[[VOLREEL_BMI_CLONES gnu::noinline]] bool read_in_step(SteppedCodes& first_reader,
+                                                       ParsedCode* __restrict a,
+                                                       SteppedCodes& second_reader,
+                                                       ParsedCode* __restrict b) {
   // Copies the stores to a and b cannot alias: their state stays in registers.
   SteppedCodes first = first_reader, second = second_reader;
   bool good = true;
