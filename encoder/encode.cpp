@@ -226,9 +226,10 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
                        ", and training a dictionary reads frames whole: give one (--dictionary "
                        "FILE from volreel train on a smaller series, or --dictionary dct), or "
                        "give more --memory");
-    // A row of bricks' planes (S, and as many again while the next row reads) on every level.
+    // A row of bricks' planes (S, and as many again while the next row reads) on every level, the
+    // coarser levels' with their detail (PyramidWindow::brick_detail): 1 + 2·(1/4 + 1/16 + …).
     const double window =
-        4.0 * static_cast<double>(info.dims.plane()) * 2 * static_cast<double>(shape.size) * 4 / 3;
+        4.0 * static_cast<double>(info.dims.plane()) * 2 * static_cast<double>(shape.size) * 5 / 3;
     if (window > static_cast<double>(memory))
       throw InputError(frame_size + ", and coding them piecewise holds about " + mebibytes(window) +
                        " of planes: give at least that --memory");

@@ -56,17 +56,29 @@ struct BrickCoding {
   double atom_gain_threshold = 0;
   std::size_t levels = 0;
   /// Lagrangian rule: each block's atom gains are weighed by the share of its voxels the decoder
-  /// reads and by its level's 1/F^(2d) (coded to ε·F^d, d levels above the finest).
+  /// reads and by its brick's 1/s² (coded to s·ε: brick_scale).
   bool weighted = false;
   bool measure_finest = false;       ///< PlaneCoding::measure_finest
   format::AtomTable decode_atoms{};  ///< ksvd, measure_finest: the atoms payloads decode with
 
   bool ksvd() const { return settings.codec == format::Codec::ksvd; }
-  /// F^d for a brick of `level`: the factor on its level's ε (1 unless the Lagrangian rule).
-  double level_scale(std::uint32_t level) const {
-    return atom_gain_threshold > 0
-               ? std::pow(settings.level_tolerance_factor, static_cast<double>(levels - 1 - level))
-               : 1.0;
+  /// The factor on ε for a brick of `level` whose own voxels differ from the frame by
+  /// `detail` (mean square, PyramidWindow::brick_detail): F^d, or r·δ/ε where that is larger
+  /// (CodingSettings::level_detail_ratio); 1 unless the Lagrangian rule.
+  double brick_scale(std::uint32_t level, double detail) const {
+    if (!(atom_gain_threshold > 0)) return 1.0;
+    const double scale =
+        std::pow(settings.level_tolerance_factor, static_cast<double>(levels - 1 - level));
+    const double from_detail =
+        settings.tolerance > 0
+            ? settings.level_detail_ratio * std::sqrt(std::max(detail, 0.0)) / settings.tolerance
+            : 0.0;
+    return std::max(scale, from_detail);
+  }
+  /// A coded brick's factor on ε, from the tolerance extract_chunk gave it.
+  double scale_of(const CodedBrick& c) const {
+    return atom_gain_threshold > 0 && settings.tolerance > 0 ? c.tolerance / settings.tolerance
+                                                             : 1.0;
   }
 };
 
@@ -177,6 +189,14 @@ void extract_chunk(const PyramidWindow& window, std::span<Cell> chunk, float* br
       hist |= std::uint64_t{1} << format::histogram_bin(brick[v], lo, hi);
     }
     c.histogram = hist;
+    c.tolerance = 0;
+    if (ksvd && coding.settings.fixed_sparsity == 0) {
+      const bool coarse = c.level + 1 < coding.levels;
+      c.tolerance = coding.settings.tolerance *
+                    coding.brick_scale(c.level, coarse && coding.settings.level_detail_ratio > 0
+                                                    ? window.brick_detail(c.level, c.x, c.y, c.z)
+                                                    : 0.0);
+    }
     c.constant = mn == mx;
     c.value = mn;
     if (c.constant)
@@ -218,7 +238,7 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
         detail::owned_block_weights(coding.shape, c.x, c.y, c.z, geometry[c.level].dims, w);
       else
         std::fill(w, w + brick_blocks, 1.0f);
-      const double scale = coding.level_scale(c.level);
+      const double scale = coding.scale_of(c);
       for (std::size_t b = 0; b < brick_blocks; ++b)  // blocks outside the box: not coded
         w[b] = vr_block_in_box(boxes[kk], per_axis, static_cast<vr_uint>(b))
                    ? static_cast<float>(static_cast<double>(w[b]) / (scale * scale))
@@ -238,8 +258,8 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
     const auto kk = static_cast<std::size_t>(k);
     Cell& cell = chunk[coded[kk]];
     QuantizeOptions brick_qo = qo;  // the means' and coefficients' steps follow the level's ε
-    brick_qo.mean_step *= coding.level_scale(cell.level);
-    brick_qo.coef_step *= coding.level_scale(cell.level);
+    brick_qo.mean_step *= coding.scale_of(cell);
+    brick_qo.coef_step *= coding.scale_of(cell);
     brick_qo.box = boxes[kk];
     detail::BrickQuantization result;
     cell.payload = detail::quantize_brick(coding.shape,
@@ -546,6 +566,8 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
       throw InputError("the Lagrangian factor must be positive and finite");
     if (!(settings_.level_tolerance_factor >= 1 && settings_.level_tolerance_factor <= 16))
       throw InputError("the level tolerance factor must be in [1, 16]");
+    if (!(settings_.level_detail_ratio >= 0 && settings_.level_detail_ratio <= 4))
+      throw InputError("the level detail ratio must be in [0, 4]");
     dictionary::SparseCodingOptions o;
     o.selection = settings_.selection;
     if (settings_.fixed_sparsity > 0) {
@@ -671,7 +693,8 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
                      geometry.size(),
                      false};
   coding.weighted = ksvd && coding.atom_gain_threshold > 0 &&
-                    (settings_.weight_owned_voxels || settings_.level_tolerance_factor != 1);
+                    (settings_.weight_owned_voxels || settings_.level_tolerance_factor != 1 ||
+                     settings_.level_detail_ratio > 0);
   if (options.measure_finest && ksvd) coding.decode_atoms = atoms_;
   coding.measure_finest = options.measure_finest;
   if (options.members == 0 || options.member >= options.members)
@@ -692,10 +715,6 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
     link_tree(coded);
     st.finest_squared_error = finest_squared_error(coded.bricks);
   }
-  const bool variable = ksvd && settings_.fixed_sparsity == 0;
-  for (std::size_t l = 0; l < geometry.size(); ++l)
-    coded.level_tolerance.push_back(
-        variable ? settings_.tolerance * coding.level_scale(static_cast<std::uint32_t>(l)) : 0.0);
   coded.max_abs_error = ksvd ? settings_.max_error : settings_.zfp_accuracy;
 
   format::FrameHeader& h = coded.header;
@@ -784,6 +803,7 @@ std::vector<std::byte> team_part(const CodedFrame& coded, const PlaneCoding& opt
     format::detail::append_value(out, static_cast<std::uint8_t>(b.constant));
     format::detail::append_value(out, b.value);
     format::detail::append_value(out, b.squared_error);
+    format::detail::append_value(out, b.tolerance);
     format::detail::append_value(out, std::uint64_t{b.payload.size()});
     const std::size_t at = out.size();
     out.resize(at + b.payload.size());
@@ -829,6 +849,7 @@ void join_team_parts(CodedFrame& coded, std::span<const std::vector<std::byte>> 
       b.constant = take<std::uint8_t>(in, at, member) != 0;
       b.value = take<float>(in, at, member);
       b.squared_error = take<double>(in, at, member);
+      b.tolerance = take<double>(in, at, member);
       const auto size = take<std::uint64_t>(in, at, member);
       if (size == 0 || size > in.size() - at)
         throw std::runtime_error("team member " + std::to_string(member) + " sent brick " +

@@ -155,7 +155,6 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
             coded[f] =
                 coded_error(shape, box, frames[f]->originals.data() + i * brick_voxels, state(f));
         }
-        const std::uint32_t level = frames[0]->bricks[i].level;
         std::size_t k = 0;
         while (k + 1 < n) {
           std::size_t best = k + 1;
@@ -166,9 +165,9 @@ std::vector<std::vector<char>> choose_keyframes(std::span<const CodedFrame* cons
                   static_cast<float>(static_cast<double>(t - k) / static_cast<double>(u - k));
               const CodedFrame& ft = *frames[t];
               holds = interpolation_holds(shape, box, ft.originals.data() + i * brick_voxels,
-                                          coded[t], state(k), state(u), f,
-                                          ft.level_tolerance[level], ft.max_abs_error,
-                                          codec == format::Codec::ksvd, rule, scratch);
+                                          coded[t], state(k), state(u), f, ft.bricks[i].tolerance,
+                                          ft.max_abs_error, codec == format::Codec::ksvd, rule,
+                                          scratch);
             }
             if (!holds) break;
             best = u;

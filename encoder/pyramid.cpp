@@ -19,25 +19,44 @@ std::size_t clamp_index(std::int64_t i, std::uint32_t n) {
 void downsample_planes(const std::array<std::uint32_t, 3>& fine_dims,
                        const std::array<std::uint32_t, 3>& dims,
                        const std::function<const float*(std::size_t z)>& fine_plane,
-                       std::size_t k_begin, std::size_t k_end, float* out) {
+                       std::size_t k_begin, std::size_t k_end, float* out,
+                       const std::function<const float*(std::size_t z)>& fine_detail,
+                       float* detail_out) {
   const std::size_t plane = std::size_t{dims[0]} * dims[1];
   for (std::size_t k = k_begin; k < k_end; ++k) {
-    const float* fine_z[2] = {
-        fine_plane(clamp_index(2 * static_cast<std::int64_t>(k), fine_dims[2])),
-        fine_plane(clamp_index(2 * static_cast<std::int64_t>(k) + 1, fine_dims[2]))};
+    const std::size_t fz[2] = {clamp_index(2 * static_cast<std::int64_t>(k), fine_dims[2]),
+                               clamp_index(2 * static_cast<std::int64_t>(k) + 1, fine_dims[2])};
+    const float* fine_z[2] = {fine_plane(fz[0]), fine_plane(fz[1])};
+    const float* detail_z[2] = {nullptr, nullptr};
+    if (detail_out && fine_detail)
+      detail_z[0] = fine_detail(fz[0]), detail_z[1] = fine_detail(fz[1]);
     float* coarse = out + (k - k_begin) * plane;
+    float* detail = detail_out ? detail_out + (k - k_begin) * plane : nullptr;
     const auto ny = static_cast<std::ptrdiff_t>(dims[1]);
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t jj = 0; jj < ny; ++jj) {
       const auto j = static_cast<std::uint32_t>(jj);
       for (std::uint32_t i = 0; i < dims[0]; ++i) {
+        std::size_t at[8];
         double sum = 0;
         for (std::uint32_t c = 0; c < 8; ++c) {
           const std::size_t x = clamp_index(2 * std::int64_t{i} + (c & 1), fine_dims[0]);
           const std::size_t y = clamp_index(2 * std::int64_t{j} + ((c >> 1) & 1), fine_dims[1]);
-          sum += static_cast<double>(fine_z[c >> 2][y * fine_dims[0] + x]);
+          at[c] = y * fine_dims[0] + x;
+          sum += static_cast<double>(fine_z[c >> 2][at[c]]);
         }
-        coarse[std::size_t{j} * dims[0] + i] = static_cast<float>(sum / 8);
+        const double mean = sum / 8;
+        coarse[std::size_t{j} * dims[0] + i] = static_cast<float>(mean);
+        if (!detail) continue;
+        // The frame's voxels under this one differ from it by the finer voxels' own detail plus
+        // the finer voxels' difference from their mean (each finer voxel covering as many).
+        double squares = 0;
+        for (std::uint32_t c = 0; c < 8; ++c) {
+          const double d = static_cast<double>(fine_z[c >> 2][at[c]]) - mean;
+          squares += d * d;
+          if (detail_z[0]) squares += static_cast<double>(detail_z[c >> 2][at[c]]);
+        }
+        detail[std::size_t{j} * dims[0] + i] = static_cast<float>(squares / 8);
       }
     }
   }
@@ -112,6 +131,38 @@ PyramidWindow::PyramidWindow(std::vector<format::LevelGeometry> geometry, ReadPl
       read_(std::move(read)),
       levels_(geometry_.size()) {}
 
+std::size_t PyramidWindow::stored_values(std::size_t level) const {
+  const std::size_t plane_size = std::size_t{geometry_[level].dims[0]} * geometry_[level].dims[1];
+  return level + 1 < geometry_.size() ? 2 * plane_size : plane_size;
+}
+
+const float* PyramidWindow::detail(std::size_t level, std::size_t z) const {
+  if (level + 1 == geometry_.size()) return nullptr;
+  return plane(level, z) + std::size_t{geometry_[level].dims[0]} * geometry_[level].dims[1];
+}
+
+double PyramidWindow::brick_detail(std::size_t level, std::uint32_t x, std::uint32_t y,
+                                   std::uint32_t z) const {
+  if (level + 1 == geometry_.size()) return 0;
+  const auto& dims = geometry_[level].dims;
+  const std::uint32_t interior = shape_.interior(), cell[3] = {x, y, z};
+  std::uint32_t begin[3], end[3];
+  for (int a = 0; a < 3; ++a) {
+    const std::uint32_t n = dims[static_cast<std::size_t>(a)];
+    begin[a] = std::min(interior * cell[a], n);
+    end[a] = std::min(begin[a] + interior, n);
+  }
+  double sum = 0;
+  std::size_t count = 0;
+  for (std::uint32_t k = begin[2]; k < end[2]; ++k) {
+    const float* d = detail(level, k);
+    for (std::uint32_t j = begin[1]; j < end[1]; ++j)
+      for (std::uint32_t i = begin[0]; i < end[0]; ++i, ++count)
+        sum += static_cast<double>(d[std::size_t{j} * dims[0] + i]);
+  }
+  return count > 0 ? sum / static_cast<double>(count) : 0.0;
+}
+
 const float* PyramidWindow::plane(std::size_t level, std::size_t z) const {
   const Level& v = levels_[level];
   if (z < v.begin || z >= v.end)
@@ -125,22 +176,23 @@ void PyramidWindow::append_planes(std::size_t level, std::size_t end) {
   Level& v = levels_[level];
   end = std::min(end, planes(level));
   const auto& dims = geometry_[level].dims;
-  const std::size_t plane_size = std::size_t{dims[0]} * dims[1];
+  const std::size_t plane_size = std::size_t{dims[0]} * dims[1], stored = stored_values(level);
   for (; v.end < end; ++v.end) {
     std::vector<float> p;
     if (!v.spare.empty()) {
       p = std::move(v.spare.back());
       v.spare.pop_back();
     }
-    p.resize(plane_size);
+    p.resize(stored);
     if (level + 1 == geometry_.size())
       read_(v.end, v.end + 1, p);
     else
       downsample_planes(
           geometry_[level + 1].dims, dims, [&](std::size_t z) { return plane(level + 1, z); },
-          v.end, v.end + 1, p.data());
+          v.end, v.end + 1, p.data(), [&](std::size_t z) { return detail(level + 1, z); },
+          p.data() + plane_size);
     v.planes.push_back(std::move(p));
-    bytes_ += plane_size * sizeof(float);
+    bytes_ += stored * sizeof(float);
     peak_bytes_ = std::max(peak_bytes_, bytes_);
   }
 }
@@ -161,13 +213,13 @@ void PyramidWindow::release(std::size_t level, std::size_t begin) {
   if (level > 0 && levels_[level - 1].end < planes(level - 1))
     begin = std::min(begin, 2 * levels_[level - 1].end);
   begin = std::min(begin, v.end);
-  const std::size_t plane_size = std::size_t{geometry_[level].dims[0]} * geometry_[level].dims[1];
+  const std::size_t stored = stored_values(level);
   for (; v.begin < begin; ++v.begin) {
     // A released plane's storage serves the next plane appended (the window's planes are always
     // about one brick's worth, so one spare is enough).
     if (v.spare.empty()) v.spare.push_back(std::move(v.planes.front()));
     v.planes.pop_front();
-    bytes_ -= plane_size * sizeof(float);
+    bytes_ -= stored * sizeof(float);
   }
 }
 

@@ -64,6 +64,11 @@ nlohmann::json coding_choices_of(const format::Manifest& m) {
         m.encoder.is_object() && m.encoder.contains("level_tolerance_factor")
             ? m.encoder["level_tolerance_factor"]
             : nlohmann::json(1.0);
+  // Containers written before the field existed coded levels above the finest to ε·F^d alone.
+  if (r["rate_rule"] == rate_rule_name(VariableRateRule::lagrangian))
+    r["level_detail_ratio"] = m.encoder.is_object() && m.encoder.contains("level_detail_ratio")
+                                  ? m.encoder["level_detail_ratio"]
+                                  : nlohmann::json(0.0);
   return r;
 }
 
@@ -155,6 +160,7 @@ format::Manifest new_manifest(const datasets::SeriesInfo& info, std::size_t fram
       m.encoder["lagrangian_factor"] = coding.lagrangian_factor;
       m.encoder["weight_owned_voxels"] = coding.weight_owned_voxels;
       m.encoder["level_tolerance_factor"] = coding.level_tolerance_factor;
+      m.encoder["level_detail_ratio"] = coding.level_detail_ratio;
     }
   }
   return m;
@@ -197,7 +203,8 @@ bool prepare_container(const fs::path& out, const EncodeJob& job, format::Manife
       if (const std::string d = settings_difference(old.manifest(), m); !d.empty())
         throw InputError("'" + out.string() + "' was encoded with other settings: " + d +
                          "; cannot --resume it: give the same options (pursuit: --pursuit, "
-                         "level_tolerance_factor: --level-factor, mean_bits: --mean-bits, "
+                         "level_tolerance_factor: --level-factor, level_detail_ratio: "
+                         "--level-detail, mean_bits: --mean-bits, "
                          "rate_rule: --rate-rule, brick size: --brick-size) or --overwrite to "
                          "start again");
       m.frames = old.manifest().frames;

@@ -520,6 +520,7 @@ TEST(Encoder, VariableRateTakesTheFewestMeanBitsForAStepOfHalfEpsilon) {
   for (double eps : {1e-6, 1e-4, 1e-2, 5e-2, 2e-1}) {
     auto s = ksvd_settings(eps, v);
     s.level_tolerance_factor = 1;  // every level's step at most ε/2 (see LevelFactor... below)
+    s.level_detail_ratio = 0;
     const auto bytes = encoder::FrameEncoder(&d, s).encode(0, v);
     const MeanCheck m = check_means(bytes, pyramid);
     ASSERT_FALSE(m.bits.empty());
@@ -795,6 +796,96 @@ TEST(Encoder, NodeTableIsBreadthFirstWithBottomUpHistograms) {
   const auto p = encoder::build_pyramid(v);
   const auto root = format::decode_level(f, 0, atom_table(d));
   ASSERT_EQ(root.data.size(), p.levels[0].size());
+}
+
+TEST(PyramidWindow, ABricksDetailIsWhatItsLevelLostOfTheFrame) {
+  // 80³ in bricks of 12³ (interior 10): levels of 80, 40, 20 and 10 voxels a side, no edge
+  // replication. A coarse brick's detail is the mean, over its own voxels, of the squared
+  // difference between the frame's voxels under each and its value.
+  const Volume v = analytic_volume(datasets::AnalyticField::noise, {80, 80, 80});
+  const format::BrickShape shape{12};
+  const auto p = encoder::build_pyramid(v, shape);
+  const std::size_t levels = p.geometry.size(), finest = levels - 1;
+  ASSERT_EQ(levels, 4u);
+  const std::size_t plane = v.dims.plane();
+  encoder::PyramidWindow w(
+      p.geometry,
+      [&](std::size_t z0, std::size_t, std::span<float> out) {
+        std::copy_n(v.data.data() + z0 * plane, out.size(), out.data());
+      },
+      shape);
+  w.advance(v.dims.planes());
+  for (std::size_t l = 0; l < levels; ++l) {
+    const auto& g = p.geometry[l];
+    const std::size_t f = std::size_t{1} << (finest - l);  // frame voxels a side per voxel
+    for (std::uint32_t z = 0; z < g.grid[2]; z += 3)
+      for (std::uint32_t x = 0; x < g.grid[0]; x += 2) {
+        const std::uint32_t y = g.grid[1] - 1;
+        double sum = 0;
+        std::size_t count = 0;
+        for (std::uint32_t k = 10 * z; k < std::min(10 * z + 10, g.dims[2]); ++k)
+          for (std::uint32_t j = 10 * y; j < std::min(10 * y + 10, g.dims[1]); ++j)
+            for (std::uint32_t i = 10 * x; i < std::min(10 * x + 10, g.dims[0]); ++i, ++count) {
+              const double value = p.levels[l][(std::size_t{k} * g.dims[1] + j) * g.dims[0] + i];
+              double squares = 0;
+              for (std::size_t c = 0; c < f; ++c)
+                for (std::size_t b = 0; b < f; ++b)
+                  for (std::size_t a = 0; a < f; ++a) {
+                    const double d =
+                        static_cast<double>(v.at(static_cast<std::int64_t>(i * f + a),
+                                                 static_cast<std::int64_t>(j * f + b),
+                                                 static_cast<std::int64_t>(k * f + c))) -
+                        value;
+                    squares += d * d;
+                  }
+              sum += squares / static_cast<double>(f * f * f);
+            }
+        const double expected = sum / static_cast<double>(count);
+        EXPECT_NEAR(w.brick_detail(l, x, y, z), expected, 1e-5 * expected + 1e-12)
+            << "level " << l << " brick " << x << ", " << y << ", " << z;
+        if (l < finest) {
+          EXPECT_GT(expected, 0.0);
+        }
+      }
+  }
+}
+
+TEST(Encoder, CoarseBricksAreCodedToWhatTheirDownsamplingLostAtSmallEpsilon) {
+  // A brick d levels above the finest is coded to ε·F^d, or r·δ where that is coarser (δ² its
+  // detail): at a small ε the coarse levels take fewer bytes, the finest level the same.
+  const Volume v = analytic_volume(datasets::AnalyticField::noise, {80, 80, 80});
+  const auto d = random_dictionary(64, 3);
+  auto s = ksvd_settings(1e-4, v);
+  s.brick_size = 12;
+  const auto p = encoder::build_pyramid(v, format::BrickShape{12});
+  const std::size_t finest = p.geometry.size() - 1;
+  const std::size_t plane = v.dims.plane();
+  encoder::PyramidWindow w(
+      p.geometry,
+      [&](std::size_t z0, std::size_t, std::span<float> out) {
+        std::copy_n(v.data.data() + z0 * plane, out.size(), out.data());
+      },
+      format::BrickShape{12});
+  w.advance(v.dims.planes());
+  std::size_t coarse_bytes[2] = {0, 0}, finest_bytes[2] = {0, 0};
+  for (int detail_rule = 0; detail_rule < 2; ++detail_rule) {
+    s.level_detail_ratio = detail_rule ? 0.5 : 0.0;
+    const encoder::CodedFrame coded = encoder::FrameEncoder(&d, s).code(0, v);
+    std::size_t raised = 0;
+    for (const encoder::CodedBrick& b : coded.bricks) {
+      const double floor = 1e-4 * std::pow(2.0, static_cast<double>(finest - b.level));
+      const double from_detail =
+          s.level_detail_ratio * std::sqrt(w.brick_detail(b.level, b.x, b.y, b.z));
+      EXPECT_NEAR(b.tolerance, std::max(floor, from_detail), 1e-9) << "level " << b.level;
+      raised += b.tolerance > floor * 1.001;
+      (b.level == finest ? finest_bytes : coarse_bytes)[detail_rule] += b.payload.size();
+    }
+    if (detail_rule) {
+      EXPECT_GT(raised, 0u);
+    }
+  }
+  EXPECT_EQ(finest_bytes[1], finest_bytes[0]);
+  EXPECT_LT(coarse_bytes[1], coarse_bytes[0] * 3 / 4);
 }
 
 TEST(PyramidWindow, HoldsAFewPlanesAndExtractsThePyramidsBricks) {

@@ -141,8 +141,9 @@ TEST(Tolerance, TheRateSearchChecksItsEpsilonOnOtherFrames) {
   const double voxels = 6.0 * static_cast<double>(series->info().dims.voxels());
   const double fixed = static_cast<double>(dictionary_bytes) + 900 + 70 * 6;
   EXPECT_LT(std::abs(8 * (bytes + fixed) / voxels - target), 0.05 * target);
-  // The first sample alone would have been far off at that ε.
-  EXPECT_GT(std::abs(sampled - bytes), 0.3 * bytes);
+  // The first sample alone would have been far off at that ε (several times the 3 % the search
+  // aims at).
+  EXPECT_GT(std::abs(sampled - bytes), 0.2 * bytes);
 }
 
 TEST(Tolerance, ADictionaryIsTrainedAtTheToleranceOrPsnrAskedElseTheEncodingDefault) {

@@ -36,6 +36,7 @@ struct RdCommandOptions {
   bool tolerance_rule = false;  ///< also variable rate with the ε rule
   std::string pursuit = dictionary::pursuit_name(encoder::CodingSettings{}.selection);
   double level_factor = encoder::CodingSettings{}.level_tolerance_factor;
+  double level_detail = encoder::CodingSettings{}.level_detail_ratio;
   double coef_step = encoder::CodingSettings{}.coef_step_factor;
   std::string brick_size = "auto";
   std::vector<double> zfp_bricks;  ///< zfp inside the container, accuracy / range (default none)
@@ -65,6 +66,7 @@ std::vector<psnr::RdPoint> keyframe_points(const datasets::SeriesReader& series,
         request.coding.lagrangian_factor = factor;
         request.coding.selection = dictionary::pursuit_from_name(o.pursuit);
         request.coding.level_tolerance_factor = o.level_factor;
+        request.coding.level_detail_ratio = o.level_detail;
         request.coding.coef_step_factor = o.coef_step;
         request.coding.brick_size = encoder::brick_size_from_text(o.brick_size);
         request.tolerance.tolerance = relative * range;
@@ -131,12 +133,13 @@ void run_rd(const RdCommandOptions& o) {
     VolreelSweep sweep{o.tolerances, o.lagrangian_factors, o.tolerance_rule, o.sparsities, {}};
     sweep.selection = dictionary::pursuit_from_name(o.pursuit);
     sweep.level_tolerance_factor = o.level_factor;
+    sweep.level_detail_ratio = o.level_detail;
     sweep.coef_step_factor = o.coef_step;
     sweep.brick_size = brick_size;
     std::printf(
         "volreel pursuit %s; variable rate (Lagrangian rule) codes level d above the finest to "
-        "eps*%g^d\n",
-        o.pursuit.c_str(), o.level_factor);
+        "eps*%g^d, or %g times what a brick's downsampling lost where that is coarser\n",
+        o.pursuit.c_str(), o.level_factor, o.level_detail);
     for (auto& c : make_volreel_sweep(dict, bytes, range.first, range.second, sweep))
       codecs.push_back(std::move(c));
   }
@@ -248,6 +251,12 @@ void add_bench_command(CLI::App& app) {
                  "--level-factor; the\n"
                  "finest level, which the table measures, is the same, so F changes only the bps)")
       ->check(CLI::Range(1.0, 16.0))
+      ->capture_default_str();
+  rd->add_option("--level-detail", o->level_detail,
+                 "Variable rate: also code a brick above the finest level to R times what its "
+                 "downsampling lost where\nthat is coarser than eps*F^d (as volreel encode "
+                 "--level-detail; changes only the bps, as --level-factor)")
+      ->check(CLI::Range(0.0, 4.0))
       ->capture_default_str();
   rd->add_option("--coef-step", o->coef_step,
                  "Variable rate: the largest coefficient step as a multiple of eps (as volreel "

@@ -37,6 +37,7 @@ struct EncodeOptions {
   ReaderOptions reader;
   double tolerance = 0, psnr = 0, bps = 0, zfp_accuracy = 0, max_error = 0,
          level_factor = encoder::CodingSettings{}.level_tolerance_factor,
+         level_detail = encoder::CodingSettings{}.level_detail_ratio,
          coef_step_factor = encoder::CodingSettings{}.coef_step_factor;
   int fixed_sparsity = 0, max_atoms = encoder::default_max_atoms, atoms = 0;
   std::size_t max_frames = 0, rate_sample_frames = 3;
@@ -44,8 +45,8 @@ struct EncodeOptions {
   std::uint32_t max_keyframe_gap = encoder::default_max_keyframe_gap;
   bool resume = false, overwrite = false, no_refit = false, extend = false;
   CLI::Option *tolerance_opt = nullptr, *psnr_opt = nullptr, *bps_opt = nullptr, *zfp_opt = nullptr,
-              *level_factor_opt = nullptr, *max_error_opt = nullptr, *max_atoms_opt = nullptr,
-              *rate_rule_opt = nullptr, *keyframe_gap_opt = nullptr;
+              *level_factor_opt = nullptr, *level_detail_opt = nullptr, *max_error_opt = nullptr,
+              *max_atoms_opt = nullptr, *rate_rule_opt = nullptr, *keyframe_gap_opt = nullptr;
 };
 
 /// The options' coding settings (the value range and ε not yet set).
@@ -60,8 +61,12 @@ encoder::CodingSettings coding_settings(const EncodeOptions& o) {
   if (o.level_factor_opt->count() > 0 &&
       (c.fixed_sparsity > 0 || c.rule != encoder::VariableRateRule::lagrangian))
     throw InputError("--level-factor applies to variable rate with --rate-rule lagrangian only");
+  if (o.level_detail_opt->count() > 0 &&
+      (c.fixed_sparsity > 0 || c.rule != encoder::VariableRateRule::lagrangian))
+    throw InputError("--level-detail applies to variable rate with --rate-rule lagrangian only");
   c.selection = dictionary::pursuit_from_name(o.pursuit);
   c.level_tolerance_factor = o.level_factor;
+  c.level_detail_ratio = o.level_detail;
   c.mean_bits = encoder::mean_bits_from_text(o.mean_bits);
   c.coef_bits = encoder::coef_bits_from_text(o.coef_bits);
   c.coef_step_factor = o.coef_step_factor;
@@ -250,6 +255,14 @@ void add_encode_command(CLI::App& app) {
                                         "screen, and differ from the data\nby more than eps "
                                         "already); 1 codes every level to eps");
   o->level_factor_opt->check(CLI::Range(1.0, 16.0))->capture_default_str();
+  o->level_detail_opt = cmd->add_option(
+      "--level-detail", o->level_detail,
+      "Lagrangian rule: also code a brick above the finest level to R times what its "
+      "downsampling lost\n(delta, the RMS difference between the data and the brick's voxels) "
+      "where that is coarser than\neps*F^d: at small eps coarse levels then leave their bits to "
+      "the finest, and their drawing\nstays within sqrt(1 + R^2)*delta of the data; 0: eps*F^d "
+      "alone");
+  o->level_detail_opt->check(CLI::Range(0.0, 4.0))->capture_default_str();
   cmd->add_option("--pursuit", o->pursuit,
                   "Which atom each pursuit step adds: ormp (the one that lowers the block's "
                   "squared error most: fewer atoms\nfor the same error) or omp (the one most "

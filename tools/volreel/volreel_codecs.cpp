@@ -67,6 +67,7 @@ std::vector<std::unique_ptr<psnr::FrameCodec>> make_volreel_sweep(
   base.value_max = value_max;
   base.selection = sweep.selection;
   base.level_tolerance_factor = sweep.level_tolerance_factor;
+  base.level_detail_ratio = sweep.level_detail_ratio;
   base.coef_step_factor = sweep.coef_step_factor;
   base.brick_size = sweep.brick_size;
   for (double relative : sweep.relative_tolerances) {

@@ -22,6 +22,7 @@ struct VolreelSweep {
   /// Every ksvd row: the pursuit, and (variable rate, Lagrangian rule) the level factor.
   dictionary::AtomSelection selection = encoder::CodingSettings{}.selection;
   double level_tolerance_factor = encoder::CodingSettings{}.level_tolerance_factor;
+  double level_detail_ratio = encoder::CodingSettings{}.level_detail_ratio;
   /// Variable rate: the coefficient step as a multiple of ε (as volreel encode --coef-step).
   double coef_step_factor = encoder::CodingSettings{}.coef_step_factor;
   /// Stored voxels per brick axis of every row (volreel encode --brick-size; never 0 here).

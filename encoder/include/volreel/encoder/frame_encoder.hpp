@@ -86,6 +86,9 @@ struct CodedBrick {
   bool constant = false;           ///< every stored voxel one value
   bool subtree_constant = false;   ///< the brick and every descendant that value (an empty node)
   float value = 0;                 ///< the constant (constant bricks)
+  /// The tolerance it was coded to: ε·F^d, or r·δ where that is coarser (ksvd variable rate,
+  /// CodingSettings::level_detail_ratio; 0 otherwise).
+  double tolerance = 0;
   /// PlaneCoding::measure_finest, finest bricks: the squared error over the voxels that are its
   /// own (FrameStats::finest_squared_error sums them in brick order, the same for any threads).
   double squared_error = 0;
@@ -104,9 +107,8 @@ struct CodedFrame {
   /// The stored voxels (S³ each, S the brick size) of every brick of the frame, when code() was
   /// asked to keep them.
   std::vector<float> originals;
-  /// The error rule the bricks were coded to, per level: ε_l (ksvd variable rate; 0 otherwise),
-  /// the pointwise bound (--max-error or the zfp accuracy; 0 for none).
-  std::vector<double> level_tolerance;
+  /// The pointwise bound the bricks were coded to (--max-error or the zfp accuracy; 0 for none);
+  /// each brick's tolerance is its own (CodedBrick::tolerance).
   double max_abs_error = 0;
   std::size_t window_bytes = 0;  ///< the most bytes of planes held while coding (PyramidWindow)
   format::FrameHeader header{};

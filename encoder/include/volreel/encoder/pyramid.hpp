@@ -34,11 +34,16 @@ void extract_brick(const Pyramid& pyramid, std::size_t level, std::uint32_t x, s
 
 /// Level l−1 planes [k_begin, k_end) of a level whose finer level l has dims `fine_dims`, from
 /// the finer planes (global z) that `fine_plane` returns: the averages build_pyramid computes.
-/// `out` holds the coarse planes from k_begin on.
+/// `out` holds the coarse planes from k_begin on. With `detail_out`, also each coarse voxel's
+/// detail: the mean squared difference between the frame's voxels under it and its value (the
+/// 8 finer voxels' squared differences from their mean, plus their own detail from `fine_detail`
+/// where the finer level is not the frame's).
 void downsample_planes(const std::array<std::uint32_t, 3>& fine_dims,
                        const std::array<std::uint32_t, 3>& dims,
                        const std::function<const float*(std::size_t z)>& fine_plane,
-                       std::size_t k_begin, std::size_t k_end, float* out);
+                       std::size_t k_begin, std::size_t k_end, float* out,
+                       const std::function<const float*(std::size_t z)>& fine_detail = {},
+                       float* detail_out = nullptr);
 
 /// The same levels as build_pyramid, held a window of planes at a time, so that a frame larger
 /// than memory is worked through in pieces: the finest level's planes come from a reader (a
@@ -67,6 +72,10 @@ class PyramidWindow {
   /// std::logic_error if a plane it needs is not in the window).
   void extract_brick(std::size_t level, std::uint32_t x, std::uint32_t y, std::uint32_t z,
                      std::span<float> out) const;
+  /// The mean over brick (x, y, z)'s own voxels (its interior, inside the level) of their detail
+  /// (downsample_planes): the mean squared difference between the frame and what a level above
+  /// the frame's draws in its place. 0 on the frame's level. Its planes must be in the window.
+  double brick_detail(std::size_t level, std::uint32_t x, std::uint32_t y, std::uint32_t z) const;
   /// The most bytes of planes the window held at once.
   std::size_t peak_bytes() const { return peak_bytes_; }
 
@@ -77,6 +86,10 @@ class PyramidWindow {
     std::vector<std::vector<float>> spare;  ///< a released plane's storage, reused
   };
   const float* plane(std::size_t level, std::size_t z) const;
+  /// The detail plane stored after a level's plane z (null on the frame's level).
+  const float* detail(std::size_t level, std::size_t z) const;
+  /// Floats a plane of `level` holds: its values, and its detail above the frame's level.
+  std::size_t stored_values(std::size_t level) const;
   void append_planes(std::size_t level, std::size_t end);
 
   std::vector<format::LevelGeometry> geometry_;
