@@ -3,6 +3,7 @@
 #include "volreel/encoder/pyramid.hpp"
 
 #include <algorithm>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -56,7 +57,9 @@ void downsample_planes(const std::array<std::uint32_t, 3>& fine_dims,
           squares += d * d;
           if (detail_z[0]) squares += static_cast<double>(detail_z[c >> 2][at[c]]);
         }
-        detail[std::size_t{j} * dims[0] + i] = static_cast<float>(squares / 8);
+        // Values near the float range's ends square past it: the detail saturates.
+        detail[std::size_t{j} * dims[0] + i] =
+            static_cast<float>(std::min(squares / 8, double{std::numeric_limits<float>::max()}));
       }
     }
   }

@@ -131,17 +131,17 @@ expect_error "encode the series again" "$volreel" info "$work/m.vreel"
 # container a whole-frame encode writes; --psnr holds; what piecewise coding cannot do is refused.
 "$volreel" gen analytic --field blobs --dims 40x36x120 --frames 3 --out "$work/tall" 2>/dev/null
 "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --max-keyframe-gap 1 --out "$work/whole.vreel" > /dev/null 2>&1
-"$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1M --out "$work/pieces.vreel" > "$work/pieces.txt" 2>&1 ||
-  fail "encode --memory 1M: $(cat "$work/pieces.txt")"
-grep -q "do not fit --memory (1 MiB) whole: each is coded piecewise" "$work/pieces.txt" || fail "--memory report: $(cat "$work/pieces.txt")"
+"$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1200K --out "$work/pieces.vreel" > "$work/pieces.txt" 2>&1 ||
+  fail "encode --memory 1200K: $(cat "$work/pieces.txt")"
+grep -q "do not fit --memory (1.17 MiB) whole: each is coded piecewise" "$work/pieces.txt" || fail "--memory report: $(cat "$work/pieces.txt")"
 diff -r "$work/whole.vreel" "$work/pieces.vreel" > /dev/null || fail "a piecewise encode differs from a whole-frame one"
-"$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1M --psnr 60 --out "$work/pp.vreel" > "$work/pp.txt" 2>&1
+"$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1200K --psnr 60 --out "$work/pp.vreel" > "$work/pp.txt" 2>&1
 grep -q "target PSNR 60.00 dB met by every frame" "$work/pp.txt" || fail "piecewise --psnr 60: $(cat "$work/pp.txt")"
 "$volreel" compare "$work/tall" "$work/pp.vreel" --no-ssim --min-psnr 60 > /dev/null 2>&1 || fail "piecewise --psnr 60 not delivered"
-expect_error "needs --max-keyframe-gap 1" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1M --max-keyframe-gap 4 --out "$work/x.vreel"
-expect_error "training a dictionary reads frames whole" "$volreel" encode "$work/tall" --memory 1M --out "$work/x.vreel"
-expect_error "bps codes sample frames whole" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1M --bps 1 --out "$work/x.vreel"
-expect_error "holds about 0.967 MiB of planes: give at least that --memory" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 100k --out "$work/x.vreel"
+expect_error "needs --max-keyframe-gap 1" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1200K --max-keyframe-gap 4 --out "$work/x.vreel"
+expect_error "training a dictionary reads frames whole" "$volreel" encode "$work/tall" --memory 1200K --out "$work/x.vreel"
+expect_error "bps codes sample frames whole" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1200K --bps 1 --out "$work/x.vreel"
+expect_error "holds about 1.09 MiB of planes: give at least that --memory" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 100k --out "$work/x.vreel"
 expect_error "expected a size such as 2G" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory lots --out "$work/x.vreel"
 [ ! -e "$work/x.vreel" ] || fail "a refused encode left a container behind"
 

@@ -49,25 +49,25 @@ grep -Eq "encoding .* 13/13 frames" "$work/mpi2.txt" || fail "the progress bar d
 grep -Eq "encoding .* [0-9]+/[0-9] frames" "$work/mpi2.txt" && fail "a progress bar counts a share of the frames"
 # Frames larger than --memory, coded piecewise by each rank.
 "$volreel" gen analytic --field blobs --dims 40x36x120 --frames 5 --out "$work/tall" > /dev/null 2>&1
-"$volreel" encode "$work/tall" --out "$work/tall1.vreel" --dictionary dct --memory 1M > /dev/null 2>&1
-mpi 2 "$volreel" encode "$work/tall" --out "$work/tall2.vreel" --dictionary dct --memory 1M \
+"$volreel" encode "$work/tall" --out "$work/tall1.vreel" --dictionary dct --memory 1200K > /dev/null 2>&1
+mpi 2 "$volreel" encode "$work/tall" --out "$work/tall2.vreel" --dictionary dct --memory 1200K \
   > "$work/tall2.txt" 2>&1 || fail "mpirun piecewise: $(tail -5 "$work/tall2.txt")"
-grep -q "coded piecewise" "$work/tall2.txt" || fail "-n 2 --memory 1M did not code piecewise"
+grep -q "coded piecewise" "$work/tall2.txt" || fail "-n 2 --memory 1200K did not code piecewise"
 same "$work/tall1.vreel" "$work/tall2.vreel" "piecewise under -n 2 differs"
 # Fewer keyframe stretches than ranks: a team of ranks codes each frame together, brick by brick
 # (one frame, -n 2 and -n 3; three frames, two stretches, -n 4: two teams of 2), with a PSNR
 # target whose retries the team decides on together; a team resumes what a team wrote.
 "$volreel" gen analytic --field blobs --dims 40x36x120 --frames 1 --out "$work/one" > /dev/null 2>&1
-"$volreel" encode "$work/one" --out "$work/one1.vreel" --dictionary dct --memory 1M > /dev/null 2>&1
+"$volreel" encode "$work/one" --out "$work/one1.vreel" --dictionary dct --memory 1200K > /dev/null 2>&1
 for n in 2 3; do
-  mpi "$n" "$volreel" encode "$work/one" --out "$work/one$n.vreel" --dictionary dct --memory 1M \
+  mpi "$n" "$volreel" encode "$work/one" --out "$work/one$n.vreel" --dictionary dct --memory 1200K \
     > "$work/one$n.txt" 2>&1 || fail "mpirun -n $n, one frame: $(tail -5 "$work/one$n.txt")"
   grep -q "each frame coded by $n processes together" "$work/one$n.txt" ||
     fail "-n $n did not share the frame: $(grep wrote "$work/one$n.txt")"
   same "$work/one1.vreel" "$work/one$n.vreel" "one frame shared by $n ranks differs"
 done
 "$volreel" gen analytic --field blobs --dims 40x36x120 --frames 3 --out "$work/three" > /dev/null 2>&1
-targs=(encode "$work/three" --dictionary dct --memory 1M --psnr 62)
+targs=(encode "$work/three" --dictionary dct --memory 1200K --psnr 62)
 "$volreel" "${targs[@]}" --out "$work/three1.vreel" > "$work/three1.txt" 2>&1
 grep -q "coded again" "$work/three1.txt" || fail "the shared PSNR case should code frames again"
 mpi 4 "$volreel" "${targs[@]}" --out "$work/three4.vreel" > "$work/three4.txt" 2>&1 ||
