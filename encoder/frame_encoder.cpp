@@ -193,7 +193,7 @@ void extract_chunk(const PyramidWindow& window, std::span<Cell> chunk, float* br
     if (ksvd && coding.settings.fixed_sparsity == 0) {
       const bool coarse = c.level + 1 < coding.levels;
       c.tolerance = coding.settings.tolerance *
-                    coding.brick_scale(c.level, coarse && coding.settings.level_detail_ratio > 0
+                    coding.brick_scale(c.level, coarse && coding.settings.uses_level_detail()
                                                     ? window.brick_detail(c.level, c.x, c.y, c.z)
                                                     : 0.0);
     }
@@ -672,7 +672,7 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
                            {static_cast<std::uint32_t>(dims.x), static_cast<std::uint32_t>(dims.y),
                             static_cast<std::uint32_t>(dims.z)},
                            shape()),
-                       read, shape());
+                       read, shape(), settings_.uses_level_detail());
   std::vector<float> originals = std::move(coded.originals);
   coded = CodedFrame{};
   if (keep_originals) coded.originals = std::move(originals);  // its storage, reused
@@ -694,7 +694,7 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
                      false};
   coding.weighted = ksvd && coding.atom_gain_threshold > 0 &&
                     (settings_.weight_owned_voxels || settings_.level_tolerance_factor != 1 ||
-                     settings_.level_detail_ratio > 0);
+                     settings_.uses_level_detail());
   if (options.measure_finest && ksvd) coding.decode_atoms = atoms_;
   coding.measure_finest = options.measure_finest;
   if (options.members == 0 || options.member >= options.members)

@@ -128,25 +128,26 @@ void extract_brick(const Pyramid& pyramid, std::size_t level, std::uint32_t x, s
 }
 
 PyramidWindow::PyramidWindow(std::vector<format::LevelGeometry> geometry, ReadPlanes read,
-                             format::BrickShape shape)
+                             format::BrickShape shape, bool detail)
     : geometry_(std::move(geometry)),
       shape_(shape),
+      detail_(detail),
       read_(std::move(read)),
       levels_(geometry_.size()) {}
 
 std::size_t PyramidWindow::stored_values(std::size_t level) const {
   const std::size_t plane_size = std::size_t{geometry_[level].dims[0]} * geometry_[level].dims[1];
-  return level + 1 < geometry_.size() ? 2 * plane_size : plane_size;
+  return detail_ && level + 1 < geometry_.size() ? 2 * plane_size : plane_size;
 }
 
 const float* PyramidWindow::detail(std::size_t level, std::size_t z) const {
-  if (level + 1 == geometry_.size()) return nullptr;
+  if (!detail_ || level + 1 == geometry_.size()) return nullptr;
   return plane(level, z) + std::size_t{geometry_[level].dims[0]} * geometry_[level].dims[1];
 }
 
 double PyramidWindow::brick_detail(std::size_t level, std::uint32_t x, std::uint32_t y,
                                    std::uint32_t z) const {
-  if (level + 1 == geometry_.size()) return 0;
+  if (!detail_ || level + 1 == geometry_.size()) return 0;
   const auto& dims = geometry_[level].dims;
   const std::uint32_t interior = shape_.interior(), cell[3] = {x, y, z};
   std::uint32_t begin[3], end[3];
@@ -193,7 +194,7 @@ void PyramidWindow::append_planes(std::size_t level, std::size_t end) {
       downsample_planes(
           geometry_[level + 1].dims, dims, [&](std::size_t z) { return plane(level + 1, z); },
           v.end, v.end + 1, p.data(), [&](std::size_t z) { return detail(level + 1, z); },
-          p.data() + plane_size);
+          detail_ ? p.data() + plane_size : nullptr);
     v.planes.push_back(std::move(p));
     bytes_ += stored * sizeof(float);
     peak_bytes_ = std::max(peak_bytes_, bytes_);

@@ -229,6 +229,18 @@ TEST(Decoder, TheLongestCodesReadBack) {
   EXPECT_EQ(bit, 65u * p.atoms.size());
 }
 
+/// decode_payload's error on one payload ("" when it decodes).
+std::string alone_error(std::span<const std::byte> payload, const format::AtomTable& atoms,
+                        format::BrickShape shape, std::span<float> out, const std::string& name,
+                        std::uint64_t at) {
+  try {
+    format::decode_payload(payload, format::Codec::ksvd, 0, atoms, shape, out, name, at);
+  } catch (const format::FormatError& e) {
+    return e.what();
+  }
+  return "";
+}
+
 std::string decode_error(std::span<const format::PayloadJob> jobs, const format::AtomTable& atoms,
                          format::BrickShape shape) {
   try {
@@ -306,12 +318,7 @@ TEST(Decoder, APayloadReadInStepFailsAsItDoesAlone) {
         bad[12 + rng() % 12] ^= std::byte{static_cast<unsigned char>(1 + rng() % 255)};
     }
     std::vector<float> out(shape.voxels()), other(shape.voxels());
-    std::string alone;
-    try {
-      format::decode_payload(bad, format::Codec::ksvd, 0, atoms, shape, out, "frame.vrf", 100);
-    } catch (const format::FormatError& e) {
-      alone = e.what();
-    }
+    const std::string alone = alone_error(bad, atoms, shape, out, "frame.vrf", 100);
     if (alone.empty()) continue;  // the change left a valid payload
     ++damaged;
     const format::PayloadJob bad_job{bad, out, "frame.vrf", 100};
@@ -333,12 +340,7 @@ TEST(Decoder, APayloadReadInStepFailsAsItDoesAlone) {
   format::AtomTable short_table = atoms;
   short_table.values = short_table.values.first(short_table.values.size() - VR_BLOCK_LENGTH);
   std::vector<float> out(shape.voxels()), other(shape.voxels());
-  std::string alone;
-  try {
-    format::decode_payload(good, format::Codec::ksvd, 0, short_table, shape, out, "a.vrf", 8);
-  } catch (const format::FormatError& e) {
-    alone = e.what();
-  }
+  const std::string alone = alone_error(good, short_table, shape, out, "a.vrf", 8);
   EXPECT_NE(alone.find("fewer than"), std::string::npos) << alone;
   const format::PayloadJob both[2] = {{good, out, "a.vrf", 8}, {good, other, "b.vrf", 16}};
   EXPECT_EQ(decode_error(both, short_table, shape), alone);

@@ -813,7 +813,7 @@ TEST(PyramidWindow, ABricksDetailIsWhatItsLevelLostOfTheFrame) {
       [&](std::size_t z0, std::size_t, std::span<float> out) {
         std::copy_n(v.data.data() + z0 * plane, out.size(), out.data());
       },
-      shape);
+      shape, true);
   w.advance(v.dims.planes());
   for (std::size_t l = 0; l < levels; ++l) {
     const auto& g = p.geometry[l];
@@ -865,7 +865,7 @@ TEST(Encoder, CoarseBricksAreCodedToWhatTheirDownsamplingLostAtSmallEpsilon) {
       [&](std::size_t z0, std::size_t, std::span<float> out) {
         std::copy_n(v.data.data() + z0 * plane, out.size(), out.data());
       },
-      format::BrickShape{12});
+      format::BrickShape{12}, true);
   w.advance(v.dims.planes());
   std::size_t coarse_bytes[2] = {0, 0}, finest_bytes[2] = {0, 0};
   for (int detail_rule = 0; detail_rule < 2; ++detail_rule) {

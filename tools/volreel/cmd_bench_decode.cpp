@@ -178,18 +178,18 @@ void run_bench_decode(const BenchDecodeOptions& o) {
       decoder.options().ring_size, vulkan::kernel_name(decoder.kernel()));
   const int threads = omp_get_max_threads();
   std::vector<float> scratch(2 * brick_voxels);
-  // Bricks i and i + 1 (when there is one) decoded as format::decode_payloads does: their codes
-  // read in step.
-  const auto decode_two = [&](std::size_t i, std::span<float> out) {
-    format::PayloadJob jobs[2];
-    const std::size_t count = std::min<std::size_t>(2, bricks.size() - i);
+  // Bricks i .. i + count − 1 (count ≤ 2) decoded together (format::decode_bricks: their codes
+  // read in step).
+  const auto decode_run = [&](std::size_t i, std::size_t count, std::span<float> out) {
+    format::BrickToDecode run[2];
     for (std::size_t j = 0; j < count; ++j)
-      jobs[j] = format::brick_job(*bricks[i + j].frame, bricks[i + j].brick,
-                                  out.subspan(j * brick_voxels, brick_voxels));
-    format::decode_payloads({jobs, count}, m.codec, atoms, m.shape());
+      run[j] = {bricks[i + j].frame, bricks[i + j].brick,
+                out.subspan(j * brick_voxels, brick_voxels)};
+    format::decode_bricks({run, count}, atoms);
   };
   const double cpu1 = time_passes(o.min_seconds, [&] {
-    for (std::size_t i = 0; i < bricks.size(); i += 2) decode_two(i, scratch);
+    for (std::size_t i = 0; i < bricks.size(); i += 2)
+      decode_run(i, std::min<std::size_t>(2, bricks.size() - i), scratch);
   });
   const double alone1 = time_passes(o.min_seconds, [&] {
     for (const BrickRef& r : bricks)
@@ -234,11 +234,8 @@ void run_bench_decode(const BenchDecodeOptions& o) {
 #pragma omp parallel for schedule(dynamic, 1)
         for (std::ptrdiff_t p = 0; p < pairs; ++p) {
           const std::size_t i = first + 2 * static_cast<std::size_t>(p);
-          std::span<float> out = outputs[static_cast<std::size_t>(omp_get_thread_num())];
-          if (i + 1 < end)
-            decode_two(i, out);
-          else
-            format::decode_brick(*bricks[i].frame, bricks[i].brick, atoms, out.first(brick_voxels));
+          decode_run(i, std::min<std::size_t>(2, end - i),
+                     outputs[static_cast<std::size_t>(omp_get_thread_num())]);
         }
       }
     });

@@ -89,6 +89,12 @@ struct CodingSettings {
   /// (0.97 dB at 0.5), while at small ε the coarse levels stop taking bits the finest level
   /// could use. 0: ε·F^d alone.
   double level_detail_ratio = 0.5;
+  /// Whether the coarse levels are coded by what they lost (ksvd variable rate, Lagrangian rule,
+  /// level_detail_ratio > 0): the pyramid then computes each coarse voxel's detail.
+  bool uses_level_detail() const {
+    return codec == format::Codec::ksvd && fixed_sparsity == 0 &&
+           rule == VariableRateRule::lagrangian && level_detail_ratio > 0;
+  }
   int fixed_sparsity =
       0;  ///< ksvd fixed rate: exactly min(S, needed) atoms per block (0: variable)
   /// Smax ≤ 216, one atom per value of a block. The dictionary spans every block (its DCT part), so

@@ -54,9 +54,10 @@ class PyramidWindow {
  public:
   /// read(z_begin, z_end, out): the finest level's planes [z_begin, z_end) into out.
   using ReadPlanes = std::function<void(std::size_t z_begin, std::size_t z_end, std::span<float>)>;
-  /// `geometry`: format::level_geometry of the frame's dims and `shape`.
+  /// `geometry`: format::level_geometry of the frame's dims and `shape`. `detail`: the levels
+  /// above the frame's also hold each voxel's detail (brick_detail).
   PyramidWindow(std::vector<format::LevelGeometry> geometry, ReadPlanes read,
-                format::BrickShape shape = {});
+                format::BrickShape shape = {}, bool detail = false);
   format::BrickShape shape() const { return shape_; }
 
   const std::vector<format::LevelGeometry>& geometry() const { return geometry_; }
@@ -74,7 +75,8 @@ class PyramidWindow {
                      std::span<float> out) const;
   /// The mean over brick (x, y, z)'s own voxels (its interior, inside the level) of their detail
   /// (downsample_planes): the mean squared difference between the frame and what a level above
-  /// the frame's draws in its place. 0 on the frame's level. Its planes must be in the window.
+  /// the frame's draws in its place. 0 on the frame's level and without `detail`. Its planes
+  /// must be in the window.
   double brick_detail(std::size_t level, std::uint32_t x, std::uint32_t y, std::uint32_t z) const;
   /// The most bytes of planes the window held at once.
   std::size_t peak_bytes() const { return peak_bytes_; }
@@ -86,7 +88,8 @@ class PyramidWindow {
     std::vector<std::vector<float>> spare;  ///< a released plane's storage, reused
   };
   const float* plane(std::size_t level, std::size_t z) const;
-  /// The detail plane stored after a level's plane z (null on the frame's level).
+  /// The detail plane stored after a level's plane z (null on the frame's level and without
+  /// detail).
   const float* detail(std::size_t level, std::size_t z) const;
   /// Floats a plane of `level` holds: its values, and its detail above the frame's level.
   std::size_t stored_values(std::size_t level) const;
@@ -94,6 +97,7 @@ class PyramidWindow {
 
   std::vector<format::LevelGeometry> geometry_;
   format::BrickShape shape_;
+  bool detail_ = false;
   ReadPlanes read_;
   std::vector<Level> levels_;
   std::size_t bytes_ = 0, peak_bytes_ = 0;
