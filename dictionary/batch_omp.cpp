@@ -78,6 +78,7 @@ struct OmpWorkspace {
   std::vector<int> support;
   std::vector<const float*> columns;  // G's columns of the support
   std::vector<float> chunk_max;       // largest |α| per chunk of α
+  std::vector<int> order;             // orthonormal atoms only: the candidates, best first
   // ORMP only:
   Eigen::VectorXf projected;  // K: ‖P⊥d_k‖², the atoms' squared norms orthogonal to the support
   std::vector<float> rows;  // S × K: row j = (L⁻¹ G_{I,:})_j, the support's Gram–Schmidt rows
@@ -323,6 +324,42 @@ int code_one_block_ormp(const float* alpha0, double energy, const Eigen::MatrixX
   return s;
 }
 
+/// OMP and ORMP for one block when the atoms are orthonormal (G = I), with the same stopping rules
+/// and outputs as code_one_block: both then take the atom of largest |α_k| (the first on ties),
+/// whose coefficient is α_k and whose gain is α_k², and leave the other correlations as they were.
+/// So the atoms are taken in order of |α⁰| without updating anything: under a gain stop only the
+/// atoms whose gain reaches it are candidates, sorted once.
+int code_one_block_orthonormal(const float* alpha0, double energy, Eigen::Index K,
+                               const StopRule& rule, OmpWorkspace& ws, std::int32_t* atoms_out,
+                               float* coefficients_out, float* residual_out) {
+  // An atom below the gain stop can be taken only while the residual is above the bound (the stop
+  // then does not apply) and the target; a gain stop of 0 stops nothing.
+  const bool gain_stops = rule.min_gain > 0 && energy <= rule.bound;
+  std::vector<int>& order = ws.order;
+  order.clear();
+  for (Eigen::Index k = 0; k < K; ++k) {
+    const double a = static_cast<double>(alpha0[k]);
+    if (a != 0 && (!gain_stops || a * a >= rule.min_gain)) order.push_back(static_cast<int>(k));
+  }
+  std::sort(order.begin(), order.end(), [alpha0](int a, int b) {
+    const float x = std::abs(alpha0[a]), y = std::abs(alpha0[b]);
+    return x > y || (x == y && a < b);
+  });
+  double residual = energy;
+  int s = 0;
+  for (const int k : order) {
+    if (!(residual > rule.target) || s >= rule.max_atoms) break;
+    const double z = static_cast<double>(alpha0[k]);
+    if (rule.min_gain > 0 && residual <= rule.bound && z * z < rule.min_gain) break;
+    atoms_out[s] = k;
+    coefficients_out[s] = alpha0[k];
+    ++s;
+    residual = std::max(residual - z * z, 0.0);
+  }
+  *residual_out = static_cast<float>(residual);
+  return s;
+}
+
 /// Buffers of refine_on_residual, one set per thread.
 struct ResidualWorkspace {
   Eigen::VectorXd residual;    // m: y − Dγ
@@ -397,6 +434,10 @@ BatchOmp::BatchOmp(const Eigen::MatrixXf& atoms, SparseCodingOptions options)
   if (atoms.cols() < 1) throw std::invalid_argument("a dictionary needs at least one atom");
   gram_.noalias() = atoms_.transpose() * atoms_;
   gram_diagonal_ = gram_.diagonal();
+  orthonormal_ =
+      atoms.cols() <= atoms.rows() &&
+      (gram_ - Eigen::MatrixXf::Identity(gram_.rows(), gram_.cols())).cwiseAbs().maxCoeff() <=
+          orthonormal_tolerance;
   // At least the smallest pivot: a zero atom (α = 0, ‖P⊥d‖² = 0) then scores 0, not 0/0.
   floored_diagonal_ =
       (gram_diagonal_ * static_cast<float>(ormp_projected_floor)).cwiseMax(min_pivot);
@@ -423,7 +464,8 @@ void BatchOmp::encode(const Eigen::Ref<const Eigen::MatrixXf>& blocks, SparseCod
   {
     Eigen::MatrixXf correlations(atoms_.cols(), batch);
     const bool ormp = options_.selection == AtomSelection::error;
-    OmpWorkspace ws(atoms_.cols(), S, ormp);
+    OmpWorkspace ws(atoms_.cols(), S, ormp && !orthonormal_);
+    if (orthonormal_) ws.order.reserve(static_cast<std::size_t>(atoms_.cols()));
     ResidualWorkspace rw(atoms_.rows(), atoms_.cols(), S);
 #pragma omp for schedule(dynamic, 1)
     for (std::int64_t b = 0; b < batches; ++b) {
@@ -443,6 +485,9 @@ void BatchOmp::encode(const Eigen::Ref<const Eigen::MatrixXf>& blocks, SparseCod
                                     : std::numeric_limits<double>::infinity();
         const auto pursue = [&](const float* alpha0, double e, const StopRule& r,
                                 std::int32_t* atom_out, float* coefficient_out, float* residual) {
+          if (orthonormal_)
+            return code_one_block_orthonormal(alpha0, e, atoms_.cols(), r, ws, atom_out,
+                                              coefficient_out, residual);
           return ormp
                      ? code_one_block_ormp(alpha0, e, gram_, gram_diagonal_.data(),
                                            floored_diagonal_.data(), r, ws, atom_out,

@@ -1,7 +1,8 @@
 // omp_test.cpp: batch-OMP recovers planted sparse codes exactly, agrees with a plain double
 // precision OMP, and stops exactly when the residual meets ε or at Smax, or (rate-distortion
 // stop) before the first atom worth less than its cost; the Lagrangian allocation beats the ε
-// rule at equal code count; ORMP agrees with a plain double precision ORMP and needs fewer atoms.
+// rule at equal code count; ORMP agrees with a plain double precision ORMP and needs fewer atoms;
+// orthonormal atoms, coded without Gram–Schmidt, agree with both.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -9,6 +10,8 @@
 #include <set>
 #include <utility>
 #include <vector>
+
+#include <Eigen/QR>
 
 #include "volreel/datasets/prng.hpp"
 #include "volreel/dictionary/dictionary.hpp"
@@ -94,16 +97,19 @@ std::vector<std::pair<std::size_t, ReferenceCode>> clear_cut_references(
   return out;
 }
 
-TEST(BatchOmp, AgreesWithReferenceOmp) {
-  const Eigen::Index m = 64, K = 200, n = 300;
-  const Eigen::MatrixXf D = random_dictionary(m, K, 3);
-  const Eigen::MatrixXf Y = random_signals(m, n, 4);
-  const SparseCodingOptions options{.tolerance = 0.45, .max_atoms = 12};
+/// Codes Y with BatchOmp under `options` and checks every clear-cut block against the reference
+/// pursuit: the same atoms in the same order, their coefficients and the residual up to float
+/// rounding. `*clear_cut`: how many blocks were compared.
+void expect_reference_codes(const Eigen::MatrixXf& D, const Eigen::MatrixXf& Y,
+                            const SparseCodingOptions& options, std::size_t* clear_cut) {
   SparseCodes codes;
   BatchOmp(D, options).encode(Y, codes);
   const auto references = clear_cut_references(D, Y, options);
+  *clear_cut = references.size();
   for (const auto& [i, ref] : references) {
-    ASSERT_EQ(codes.count[i], ref.atoms.size()) << "block " << i;
+    ASSERT_EQ(codes.count[i], ref.atoms.size())
+        << "block " << i << " gain " << options.min_atom_gain << " tolerance " << options.tolerance
+        << " " << pursuit_name(options.selection);
     for (std::size_t j = 0; j < ref.atoms.size(); ++j) {
       ASSERT_EQ(codes.atoms_of(i)[j], ref.atoms[j]) << "block " << i << " step " << j;
       EXPECT_NEAR(codes.coefficients_of(i)[j], ref.coefficients[j],
@@ -112,7 +118,15 @@ TEST(BatchOmp, AgreesWithReferenceOmp) {
     EXPECT_NEAR(codes.residual_energy[i], ref.residual_energy,
                 1e-4 * static_cast<double>(Y.col(static_cast<Eigen::Index>(i)).squaredNorm()));
   }
-  EXPECT_GT(references.size(), static_cast<std::size_t>(n * 8 / 10));
+}
+
+TEST(BatchOmp, AgreesWithReferenceOmp) {
+  const Eigen::Index m = 64, K = 200, n = 300;
+  const Eigen::MatrixXf D = random_dictionary(m, K, 3);
+  const Eigen::MatrixXf Y = random_signals(m, n, 4);
+  std::size_t clear_cut = 0;
+  expect_reference_codes(D, Y, {.tolerance = 0.45, .max_atoms = 12}, &clear_cut);
+  EXPECT_GT(clear_cut, static_cast<std::size_t>(n * 8 / 10));
 }
 
 TEST(BatchOmp, StopsAtToleranceWithTheFewestAtoms) {
@@ -438,22 +452,46 @@ TEST(BatchOmp, OrmpAgreesWithReferenceOrmp) {
         .min_atom_gain = 3.0,
         .max_error = 0.8,
         .selection = AtomSelection::error}}) {
-    SparseCodes codes;
-    BatchOmp(D, options).encode(Y, codes);
-    const auto references = clear_cut_references(D, Y, options);
-    for (const auto& [i, ref] : references) {
-      ASSERT_EQ(codes.count[i], ref.atoms.size())
-          << "block " << i << " gain " << options.min_atom_gain;
-      for (std::size_t j = 0; j < ref.atoms.size(); ++j) {
-        ASSERT_EQ(codes.atoms_of(i)[j], ref.atoms[j]) << "block " << i << " step " << j;
-        EXPECT_NEAR(codes.coefficients_of(i)[j], ref.coefficients[j],
-                    1e-4 * (1 + std::abs(ref.coefficients[j])));
-      }
-      EXPECT_NEAR(codes.residual_energy[i], ref.residual_energy,
-                  1e-4 * static_cast<double>(Y.col(static_cast<Eigen::Index>(i)).squaredNorm()));
-    }
-    EXPECT_GT(references.size(), static_cast<std::size_t>(n * 7 / 10));
+    std::size_t clear_cut = 0;
+    expect_reference_codes(D, Y, options, &clear_cut);
+    if (HasFatalFailure()) return;
+    EXPECT_GT(clear_cut, static_cast<std::size_t>(n * 7 / 10));
   }
+}
+
+/// m × K with orthonormal columns (K ≤ m): the first K columns of a random rotation.
+Eigen::MatrixXf random_orthonormal_atoms(Eigen::Index m, Eigen::Index K, std::uint64_t seed) {
+  const Eigen::MatrixXd A = random_dictionary(m, m, seed).cast<double>();
+  const Eigen::MatrixXd Q = Eigen::HouseholderQR<Eigen::MatrixXd>(A).householderQ();
+  return Q.leftCols(K).cast<float>();
+}
+
+TEST(BatchOmp, OrthonormalAtomsAgreeWithReferenceOmpAndOrmp) {
+  // Orthonormal atoms take the pursuit's shortcut (atoms in order of |α⁰|, no Gram–Schmidt); it
+  // must choose, weigh and stop as both pursuits do under every stopping rule.
+  const Eigen::Index m = 64, K = 60, n = 300;
+  const Eigen::MatrixXf D = random_orthonormal_atoms(m, K, 41);
+  const Eigen::MatrixXf Y = random_signals(m, n, 42);
+  ASSERT_TRUE(BatchOmp(D, {}).orthonormal());
+  ASSERT_FALSE(BatchOmp(random_dictionary(m, K, 43), {}).orthonormal());
+  Eigen::MatrixXf skewed = D;  // one atom leaning 1e-3 towards another is no longer orthonormal
+  skewed.col(1) += 1e-3f * skewed.col(0);
+  normalize_atoms(skewed);
+  ASSERT_FALSE(BatchOmp(skewed, {}).orthonormal());
+  for (const AtomSelection selection : {AtomSelection::correlation, AtomSelection::error})
+    for (SparseCodingOptions options :
+         {SparseCodingOptions{.tolerance = 0.45, .max_atoms = 40},
+          SparseCodingOptions{.tolerance = 0.1, .max_atoms = 9},
+          SparseCodingOptions{.tolerance = 0, .max_atoms = 40, .min_atom_gain = 1.0},
+          SparseCodingOptions{.tolerance = 0.3, .max_atoms = 40, .min_atom_gain = 0.5},
+          SparseCodingOptions{
+              .tolerance = 0, .max_atoms = 40, .min_atom_gain = 3.0, .max_error = 0.8}}) {
+      options.selection = selection;
+      std::size_t clear_cut = 0;
+      expect_reference_codes(D, Y, options, &clear_cut);
+      if (HasFatalFailure()) return;
+      EXPECT_GT(clear_cut, static_cast<std::size_t>(n / 2));  // up to 40 steps, each clear-cut
+    }
 }
 
 TEST(BatchOmp, OrmpFloorsTheProjectedNormOfAtomsMostlyInTheSpanOfTheSupport) {

@@ -122,9 +122,17 @@ class BatchOmp {
 
   const SparseCodingOptions& options() const { return options_; }
   const Eigen::MatrixXf& atoms() const { return atoms_; }
+  /// True when the atoms are orthonormal (every Gram entry within orthonormal_tolerance of the
+  /// identity's, as for the DCT basis): a pursuit then takes the atoms in order of |α⁰| and needs
+  /// no Gram–Schmidt.
+  bool orthonormal() const { return orthonormal_; }
+
+  /// The largest |G_ij − δ_ij| of atoms that BatchOmp codes as an orthonormal basis.
+  static constexpr float orthonormal_tolerance = 1e-5f;
 
  private:
   Eigen::MatrixXf atoms_;
+  bool orthonormal_ = false;
   Eigen::MatrixXf gram_;           ///< K × K
   Eigen::VectorXf gram_diagonal_;  ///< G_kk = ‖d_k‖²: ORMP's projected norms before any atom
   Eigen::VectorXf floored_diagonal_;  ///< ormp_projected_floor·G_kk
