@@ -84,7 +84,8 @@ double solve_first(double (&m)[15][15], double (&t)[15], int n) {
 /// than max_refit_atoms atoms) each OMP coefficient is rounded; with refit step k solves the
 /// trailing (s−k)×(s−k) normal equations G x = Dᵀy with the first k coefficients fixed at their
 /// quantized values, and rounds x_0, so later coefficients absorb the rounding error of earlier
-/// ones. Returns the squared error of the quantized block (mean error included) and fills q.
+/// ones. Orthonormal atoms (G = I) make x_0 the coefficient itself, so they are rounded without
+/// refit. Returns the squared error of the quantized block (mean error included) and fills q.
 constexpr int max_refit_atoms = 15;  ///< beyond this many atoms, each coefficient is rounded
 
 double quantize_block(const float* y, float mean_error, const std::int32_t* a, const float* c,
@@ -277,6 +278,7 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
                                ? MeanQuantizer(mean_mid, mean_mid, 0)
                                : MeanQuantizer(mean_lo, mean_hi, (1u << parts.mean_bits) - 1u);
   const bool pointwise = options.max_abs_error > 0;
+  const bool refit = options.refit && !options.orthonormal_atoms;
   const int max_atoms = std::min<int>(options.max_atoms, (1 << VR_MAX_SPARSITY_BITS) - 1);
   Eigen::VectorXf residual(VR_BLOCK_LENGTH), correlation;
   const std::size_t slots = static_cast<std::size_t>(std::max(max_atoms, codes.max_atoms)) + 1;
@@ -301,8 +303,7 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
       const float* y = columns + std::size_t{b} * VR_BLOCK_LENGTH;
       const std::uint32_t qmean = mq.quantize(static_cast<double>(means[b]));
       const float mean_error = means[b] - mq.value(qmean);
-      double e =
-          quantize_block(y, mean_error, a.data(), c.data(), s, atoms, cq, options.refit, q.data());
+      double e = quantize_block(y, mean_error, a.data(), c.data(), s, atoms, cq, refit, q.data());
       const auto misses = [&](double energy, const std::int32_t* quantized, int n) {
         if (options.target_energy >= 0 && energy > options.target_energy) return true;
         return pointwise && max_abs_residual(y, mean_error, a.data(), quantized, n, atoms, cq) >
@@ -329,8 +330,8 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
         if (s + 1 > max_refit_atoms)
           for (int k = 0; k < s; ++k)
             c[static_cast<std::size_t>(k)] = cq.value(q[static_cast<std::size_t>(k)]);
-        const double e2 = quantize_block(y, mean_error, a.data(), c.data(), s + 1, atoms, cq,
-                                         options.refit, q2.data());
+        const double e2 =
+            quantize_block(y, mean_error, a.data(), c.data(), s + 1, atoms, cq, refit, q2.data());
         const bool miss2 = misses(e2, q2.data(), s + 1);
         // Keep the atom when it lowers the squared error, or (pointwise) when it meets the bound.
         if (!(e2 < e) && (!pointwise || miss2)) break;

@@ -26,6 +26,9 @@ inline double seconds_since(Clock::time_point start) {
 /// How a brick's codes are quantized.
 struct QuantizeOptions {
   bool refit = true;  ///< sequential least-squares refit (see quantize_block)
+  /// The atoms are orthonormal (dictionary::BatchOmp::orthonormal): the refit would give each
+  /// coefficient back unchanged, so it is skipped.
+  bool orthonormal_atoms = false;
   double target_energy =
       -1;  ///< m·ε²: extend the pursuit while the quantized error exceeds it (< 0: never)
   /// > 0: extend the pursuit while a value of the block is off by more than this (data units),

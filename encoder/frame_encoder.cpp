@@ -601,6 +601,7 @@ double FrameEncoder::atom_gain_threshold() const {
 QuantizeOptions FrameEncoder::quantize_options() const {
   QuantizeOptions o;
   o.refit = settings_.refit_quantization;
+  o.orthonormal_atoms = omp_ != nullptr && omp_->orthonormal();
   o.max_atoms = settings_.max_atoms;
   o.mean_bits = settings_.mean_bits;
   o.coef_bits = settings_.coef_bits;

@@ -330,8 +330,10 @@ void add_encode_command(CLI::App& app) {
   cmd->add_flag("--resume", o->resume,
                 "Continue an interrupted encode: keep frames already written and valid");
   cmd->add_flag("--overwrite", o->overwrite, "Replace an existing container");
-  cmd->add_flag("--no-refit", o->no_refit,
-                "Quantize coefficients independently (no least-squares refit; for comparison)");
+  cmd->add_flag(
+      "--no-refit", o->no_refit,
+      "Quantize coefficients independently (no least-squares refit; for comparison; with the DCT "
+      "basis alone, whose atoms are orthonormal, the refit changes nothing)");
   cmd->add_flag("--extend-pursuit", o->extend,
                 "--rate-rule tolerance: add atoms to blocks whose quantized error exceeds eps "
                 "(quantization inside the\n"
