@@ -32,14 +32,21 @@ DefaultDictionary train_default_dictionary(const datasets::SeriesReader& series,
     dictionary::TrainingOptions to;
     to.atom_count = k;
     to.coding.tolerance = options.tolerance;
+    DictionaryCandidate candidate;
+    candidate.atoms = k;
+    candidate.dictionary_bytes = static_cast<double>(
+        format::dictionary_file_size(static_cast<std::uint64_t>(k), 216, options.half_atoms));
+    if (choose && candidate.dictionary_bytes >= best_total) {  // it cannot win: not trained
+      candidate.skipped = true;
+      candidate.best_bytes = best_total;
+      result.candidates.push_back(candidate);
+      if (on_candidate) on_candidate(candidate);
+      continue;
+    }
     const auto start = detail::Clock::now();
     dictionary::TrainingResult r;
     if (k > 0) r = dictionary::train_dictionary(h, to);  // K = 0: the DCT basis alone
-    DictionaryCandidate candidate;
-    candidate.atoms = k;
     candidate.train_seconds = detail::seconds_since(start);
-    candidate.dictionary_bytes = static_cast<double>(
-        format::dictionary_file_size(static_cast<std::uint64_t>(k), 216, options.half_atoms));
     const auto stored = dictionary::from_file(
         k > 0 ? format::container_dictionary(
                     dictionary::to_file(r.dictionary, format::DictionaryTraining{}),

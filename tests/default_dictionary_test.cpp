@@ -93,6 +93,33 @@ TEST_F(DefaultDictionary, TheDctBasisAloneIsACandidate) {
   EXPECT_EQ(chosen.dictionary.atom_count(), dct_smaller ? 0 : 32);
 }
 
+TEST_F(DefaultDictionary, ASizeWhoseDictionaryAloneCannotWinIsNotTrained) {
+  // The DCT basis first: its estimate (tens of kB for this series at this ε) is far below the
+  // dictionary file of 2048 atoms (over 800 kB), which is then not trained; 16 atoms still are.
+  options_.tolerance = 0.0005;
+  options_.candidate_atoms = {0, 2048, 16};
+  std::vector<encoder::DictionaryCandidate> reported;
+  const auto chosen = encoder::train_default_dictionary(
+      *series_, options_, {},
+      [&](const encoder::DictionaryCandidate& c) { reported.push_back(c); });
+  ASSERT_EQ(chosen.candidates.size(), 3u);
+  ASSERT_EQ(reported.size(), 3u);
+  const auto& dct = chosen.candidates[0];
+  const auto& large = chosen.candidates[1];
+  const auto& small = chosen.candidates[2];
+  EXPECT_FALSE(dct.skipped);
+  EXPECT_TRUE(large.skipped);
+  EXPECT_TRUE(reported[1].skipped);
+  EXPECT_EQ(large.atoms, 2048);
+  EXPECT_EQ(large.best_bytes, dct.estimated_bytes);
+  EXPECT_GE(large.dictionary_bytes, large.best_bytes);
+  EXPECT_EQ(large.estimated_bytes, 0);
+  EXPECT_EQ(large.train_seconds, 0);
+  EXPECT_FALSE(small.skipped) << "the DCT basis's estimate " << dct.estimated_bytes;  // 16: 7 kB
+  EXPECT_GT(small.estimated_bytes, small.dictionary_bytes);
+  EXPECT_NE(chosen.dictionary.atom_count(), 2048);
+}
+
 TEST_F(DefaultDictionary, AGivenSizeIsTrainedWithoutEstimates) {
   options_.atoms = 32;
   const auto chosen = encoder::train_default_dictionary(*series_, options_);

@@ -157,7 +157,12 @@ void run_encode(const EncodeOptions& o) {
     bar.reset();
   };
   events.candidate = [&](const encoder::DictionaryCandidate& k) {
-    if (o.atoms == 0 && k.atoms == 0)
+    if (k.skipped)
+      std::printf(
+          "  K = %4d: not trained: its dictionary alone (%.0f bytes) is at least the smallest "
+          "container estimated so far (%.0f bytes)\n",
+          k.atoms, k.dictionary_bytes, k.best_bytes);
+    else if (o.atoms == 0 && k.atoms == 0)
       std::printf("  the DCT basis alone: estimated container %.0f bytes (dictionary %.0f)\n",
                   k.estimated_bytes, k.dictionary_bytes);
     else if (o.atoms == 0)
@@ -211,9 +216,10 @@ void add_encode_command(CLI::App& app) {
       "dictionary). Default: train one, at the tolerance below (without one: that of\n55 dB PSNR), "
       "with volreel train's other defaults");
   cmd->add_option("--atoms", o->atoms,
-                  "Without --dictionary: K of the dictionary trained here (default 0: try 1024, "
-                  "512, 256, 128 and the DCT\nbasis alone, and keep the one that gives the "
-                  "smallest container, dictionary included)");
+                  "Without --dictionary: K of the dictionary trained here (default 0: try the "
+                  "DCT basis alone and 128, 256,\n512 and 1024 atoms, and keep the one that gives "
+                  "the smallest container, dictionary included;\na K whose dictionary alone is "
+                  "larger than a container already estimated is not trained)");
   o->tolerance_opt = cmd->add_option(
       "--tolerance", o->tolerance,
       "eps, data units: an atom is kept if it lowers its block's squared error by at least\n"

@@ -22,8 +22,10 @@ struct DefaultDictionaryOptions {
   /// container (sample frames' mean size × frames + dictionary file) is the smallest.
   int atoms = 0;
   /// 0: the DCT basis alone (nothing trained; the file is the 132-byte header and CRC), which wins
-  /// on series too small to pay for learned atoms.
-  std::vector<int> candidate_atoms = {1024, 512, 256, 128, 0};
+  /// on series too small to pay for learned atoms. Tried in this order: the DCT basis first, then
+  /// the learned sizes from the smallest; a K whose dictionary file alone is at least the smallest
+  /// container estimated before it cannot win, and is not trained.
+  std::vector<int> candidate_atoms = {0, 128, 256, 512, 1024};
   std::size_t frames = 0;         ///< frames the container will hold (0: all of the series)
   std::size_t sample_frames = 3;  ///< choosing K: frames coded with each dictionary, evenly spaced
   /// The container stores the atoms in binary16: dictionary sizes and sample frames count them so.
@@ -36,12 +38,17 @@ struct DefaultDictionaryOptions {
   dictionary::CoresetOptions coreset;
 };
 
-/// One K tried, reported as soon as its dictionary is trained (and, choosing K, measured).
+/// One K tried, reported as soon as its dictionary is trained (and, choosing K, measured) or
+/// skipped.
 struct DictionaryCandidate {
   int atoms = 0;                ///< K
   double train_seconds = 0;     ///< training time (the coreset is built once, before)
   double dictionary_bytes = 0;  ///< its file, the atoms stored as the container stores them
   double estimated_bytes = 0;   ///< choosing K: the estimated container; 0 when K was given
+  /// Choosing K: not trained, its dictionary_bytes being at least best_bytes, the smallest
+  /// container estimated before it (estimated_bytes and train_seconds are then 0).
+  bool skipped = false;
+  double best_bytes = 0;
 };
 using DictionaryCandidateCallback = std::function<void(const DictionaryCandidate&)>;
 
@@ -51,7 +58,7 @@ struct DefaultDictionary {
   bool dct_only = false;
   dictionary::Dictionary dictionary;    ///< the chosen one, float32 atoms as trained
   format::DictionaryTraining training;  ///< its provenance (dictionary::training_provenance)
-  std::vector<DictionaryCandidate> candidates;  ///< every K tried, in order
+  std::vector<DictionaryCandidate> candidates;  ///< every K, in the order tried, skipped ones too
 };
 
 /// Trains a dictionary on `coresets` (built from `series` with options.coreset) at
