@@ -339,7 +339,9 @@ int code_one_block_orthonormal(const float* alpha0, double energy, Eigen::Index 
   order.clear();
   for (Eigen::Index k = 0; k < K; ++k) {
     const double a = static_cast<double>(alpha0[k]);
-    if (a != 0 && (!gain_stops || a * a >= rule.min_gain)) order.push_back(static_cast<int>(k));
+    // |α| > 0 also leaves out a NaN, which would break the sort's ordering.
+    if (std::abs(a) > 0 && (!gain_stops || a * a >= rule.min_gain))
+      order.push_back(static_cast<int>(k));
   }
   std::sort(order.begin(), order.end(), [alpha0](int a, int b) {
     const float x = std::abs(alpha0[a]), y = std::abs(alpha0[b]);

@@ -25,7 +25,8 @@ DefaultDictionary train_default_dictionary(const datasets::SeriesReader& series,
   // 1. The sample frames, in memory.
   std::vector<Volume> samples;
   if (choose) samples = detail::evenly_spaced_frames(series, frames, options.sample_frames);
-  // 2. Each K: train; choosing, code the samples against the atoms as the container stores them.
+  // 2. Each K: train, unless (choosing) its dictionary alone cannot win; choosing, code the
+  //    samples against the atoms as the container stores them.
   DefaultDictionary result;
   double best_total = std::numeric_limits<double>::infinity();
   for (int k : choose ? options.candidate_atoms : std::vector<int>{options.atoms}) {

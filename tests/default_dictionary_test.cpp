@@ -94,6 +94,10 @@ TEST_F(DefaultDictionary, TheDctBasisAloneIsACandidate) {
 }
 
 TEST_F(DefaultDictionary, ASizeWhoseDictionaryAloneCannotWinIsNotTrained) {
+  // By default the DCT basis comes first, then the learned sizes from the smallest: each estimate
+  // can rule out the larger dictionaries after it.
+  EXPECT_EQ(encoder::DefaultDictionaryOptions{}.candidate_atoms,
+            (std::vector<int>{0, 128, 256, 512, 1024}));
   // The DCT basis first: its estimate (tens of kB for this series at this ε) is far below the
   // dictionary file of 2048 atoms (over 800 kB), which is then not trained; 16 atoms still are.
   options_.tolerance = 0.0005;

@@ -494,6 +494,28 @@ TEST(BatchOmp, OrthonormalAtomsAgreeWithReferenceOmpAndOrmp) {
     }
 }
 
+TEST(BatchOmp, OrthonormalAtomsBreakTiesByTheLowestIndex) {
+  // Atoms that are the unit vectors, and a block whose correlations are equal in magnitude on
+  // atoms 5, 2 and 9 (and smaller elsewhere): the atoms come lowest index first, as the pursuits
+  // take them.
+  const Eigen::Index m = 16;
+  const Eigen::MatrixXf D = Eigen::MatrixXf::Identity(m, m);
+  Eigen::MatrixXf Y = Eigen::MatrixXf::Zero(m, 1);
+  Y(5, 0) = -2.0f, Y(2, 0) = 2.0f, Y(9, 0) = 2.0f, Y(0, 0) = 1.0f;
+  for (const AtomSelection selection : {AtomSelection::correlation, AtomSelection::error}) {
+    SparseCodes codes;
+    BatchOmp omp(D, {.max_atoms = 3, .selection = selection});
+    ASSERT_TRUE(omp.orthonormal());
+    omp.encode(Y, codes);
+    ASSERT_EQ(codes.count[0], 3);
+    EXPECT_EQ(codes.atoms_of(0)[0], 2);
+    EXPECT_EQ(codes.atoms_of(0)[1], 5);
+    EXPECT_EQ(codes.atoms_of(0)[2], 9);
+    EXPECT_EQ(codes.coefficients_of(0)[1], -2.0f);
+    EXPECT_NEAR(codes.residual_energy[0], 1.0, 1e-6);
+  }
+}
+
 TEST(BatchOmp, OrmpFloorsTheProjectedNormOfAtomsMostlyInTheSpanOfTheSupport) {
   // Clusters of near-duplicate atoms: after one member is chosen, the others keep only a small part
   // of their energy outside the span (‖P⊥d‖² well below the floor), so the floor decides between

@@ -62,16 +62,27 @@ TEST(Quantization, OrthonormalAtomsNeedNoRefit) {
   encoder::detail::QuantizeOptions refit;
   refit.coef_step = 0.9;  // coarse against the coefficients: the rounding errors are large
   refit.mean_step = 1e-3;
-  encoder::detail::QuantizeOptions skipped = refit;
-  skipped.orthonormal_atoms = true;
   encoder::detail::QuantizeOptions rounded = refit;
   rounded.refit = false;
-  for (std::uint64_t seed = 1; seed <= 20; ++seed) {
-    const Blocks blocks = random_blocks(atoms, shape.blocks(), seed);
-    encoder::detail::BrickQuantization a, b;
-    EXPECT_EQ(payload(atoms, blocks, shape, refit, &a), payload(atoms, blocks, shape, skipped, &b))
-        << "seed " << seed;
-    EXPECT_NEAR(a.squared_error, b.squared_error, 1e-6 * a.squared_error);
+  // Also with the steps that add atoms after quantization: while a block's error exceeds m·ε²
+  // (target_energy) or one of its values exceeds a bound (max_abs_error, which also halves the
+  // step of a brick that misses it).
+  encoder::detail::QuantizeOptions extended = refit;
+  extended.target_energy = 216 * 0.2 * 0.2;
+  encoder::detail::QuantizeOptions bounded = refit;
+  bounded.max_abs_error = 0.25;
+  for (const auto& with_refit : {refit, extended, bounded}) {
+    encoder::detail::QuantizeOptions without = with_refit;
+    without.orthonormal_atoms = true;
+    for (std::uint64_t seed = 1; seed <= 20; ++seed) {
+      const Blocks blocks = random_blocks(atoms, shape.blocks(), seed);
+      encoder::detail::BrickQuantization a, b;
+      EXPECT_EQ(payload(atoms, blocks, shape, with_refit, &a),
+                payload(atoms, blocks, shape, without, &b))
+          << "seed " << seed << ", target energy " << with_refit.target_energy << ", bound "
+          << with_refit.max_abs_error;
+      EXPECT_NEAR(a.squared_error, b.squared_error, 1e-6 * a.squared_error);
+    }
   }
   // Atoms that all lean towards one (correlations near 0.2): there the refit changes the codes, so
   // the comparison above would see a refit that mattered.

@@ -18,8 +18,9 @@ namespace volreel::encoder {
 
 struct DefaultDictionaryOptions {
   double tolerance = 0;  ///< ε to train at and (choosing K) to code the sample frames at, > 0
-  /// K of the dictionary; 0: train one for each of candidate_atoms and keep the K whose estimated
-  /// container (sample frames' mean size × frames + dictionary file) is the smallest.
+  /// K of the dictionary; 0: train one for each of candidate_atoms that can still win and keep
+  /// the K whose estimated container (sample frames' mean size × frames + dictionary file) is the
+  /// smallest.
   int atoms = 0;
   /// 0: the DCT basis alone (nothing trained; the file is the 132-byte header and CRC), which wins
   /// on series too small to pay for learned atoms. Tried in this order: the DCT basis first, then
@@ -62,7 +63,9 @@ struct DefaultDictionary {
 };
 
 /// Trains a dictionary on `coresets` (built from `series` with options.coreset) at
-/// options.tolerance for options.atoms or each candidate K, reporting each K to on_candidate, and
+/// options.tolerance for options.atoms or each candidate K that can still win (a K whose
+/// dictionary alone is at least the smallest estimate so far is skipped), reporting each K, trained
+/// or skipped, to on_candidate, and
 /// returns the one chosen. Throws InputError when K is to be chosen without a candidate or a
 /// sample frame, and where training and the frame encoder do.
 DefaultDictionary train_default_dictionary(const datasets::SeriesReader& series,

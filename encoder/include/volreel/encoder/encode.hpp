@@ -63,7 +63,7 @@ struct EncodeEvents {
   /// Progress returned receives its progress until stage_done.
   std::function<Progress(const std::string& stage, const std::string& unit)> stage;
   std::function<void()> stage_done;
-  /// Training without K: each K as soon as it is measured.
+  /// Training without K: each K as soon as it is measured or skipped.
   DictionaryCandidateCallback candidate;
   /// ε chosen (ksvd), with the dictionary's K.
   std::function<void(const ToleranceChoice&, const CodingSettings&, std::uint32_t atoms)>
