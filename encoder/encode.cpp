@@ -11,6 +11,7 @@
 
 #include "volreel/dictionary/coreset.hpp"
 #include "volreel/dictionary/training.hpp"
+#include "volreel/encoder/pyramid.hpp"
 #include "volreel/format/container.hpp"
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/file_io.hpp"
@@ -228,12 +229,9 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
                        "give more --memory");
     // A row of bricks' planes (S, and as many again while the next row reads) on every level, the
     // coarser levels' with their detail where the coding uses it (PyramidWindow::brick_detail).
-    const std::vector<format::LevelGeometry> levels = format::level_geometry(dims, shape);
-    double window = 0;
-    for (std::size_t l = 0; l < levels.size(); ++l)
-      window += 4.0 * static_cast<double>(levels[l].dims[0]) *
-                static_cast<double>(levels[l].dims[1]) * 2 * static_cast<double>(shape.size) *
-                (l + 1 < levels.size() && request.coding.uses_level_detail() ? 2 : 1);
+    const double window = PyramidWindow::planes_bytes(format::level_geometry(dims, shape),
+                                                      2.0 * static_cast<double>(shape.size),
+                                                      request.coding.uses_level_detail());
     if (window > static_cast<double>(memory))
       throw InputError(frame_size + ", and coding them piecewise holds about " + mebibytes(window) +
                        " of planes: give at least that --memory");

@@ -135,9 +135,27 @@ PyramidWindow::PyramidWindow(std::vector<format::LevelGeometry> geometry, ReadPl
       read_(std::move(read)),
       levels_(geometry_.size()) {}
 
+namespace {
+
+/// Floats a plane of `level` holds: its values, and its detail above the frame's level.
+std::size_t plane_values(const std::vector<format::LevelGeometry>& geometry, std::size_t level,
+                         bool detail) {
+  const std::size_t plane_size = std::size_t{geometry[level].dims[0]} * geometry[level].dims[1];
+  return detail && level + 1 < geometry.size() ? 2 * plane_size : plane_size;
+}
+
+}  // namespace
+
 std::size_t PyramidWindow::stored_values(std::size_t level) const {
-  const std::size_t plane_size = std::size_t{geometry_[level].dims[0]} * geometry_[level].dims[1];
-  return detail_ && level + 1 < geometry_.size() ? 2 * plane_size : plane_size;
+  return plane_values(geometry_, level, detail_);
+}
+
+double PyramidWindow::planes_bytes(const std::vector<format::LevelGeometry>& geometry,
+                                   double planes, bool detail) {
+  double bytes = 0;
+  for (std::size_t level = 0; level < geometry.size(); ++level)
+    bytes += planes * sizeof(float) * static_cast<double>(plane_values(geometry, level, detail));
+  return bytes;
 }
 
 const float* PyramidWindow::detail(std::size_t level, std::size_t z) const {

@@ -80,6 +80,11 @@ class PyramidWindow {
   double brick_detail(std::size_t level, std::uint32_t x, std::uint32_t y, std::uint32_t z) const;
   /// The most bytes of planes the window held at once.
   std::size_t peak_bytes() const { return peak_bytes_; }
+  /// Bytes of `planes` planes of every level of `geometry` as a window stores them (with `detail`,
+  /// the levels above the frame's hold their detail too): what a window holding that many planes
+  /// of each level takes.
+  static double planes_bytes(const std::vector<format::LevelGeometry>& geometry, double planes,
+                             bool detail);
 
  private:
   struct Level {
@@ -91,7 +96,7 @@ class PyramidWindow {
   /// The detail plane stored after a level's plane z (null on the frame's level and without
   /// detail).
   const float* detail(std::size_t level, std::size_t z) const;
-  /// Floats a plane of `level` holds: its values, and its detail above the frame's level.
+  /// Floats a plane of `level` holds (plane_values).
   std::size_t stored_values(std::size_t level) const;
   void append_planes(std::size_t level, std::size_t end);
 
