@@ -68,7 +68,7 @@ std::vector<MosaicBrick> pool_of(const format::Container& c, std::size_t count) 
     // ones that code every block, which stand in for a brick anywhere.
     const vr_uint n = view.shape().blocks_per_axis();
     if (view.codec() == format::Codec::ksvd && bytes.size() != 4 &&
-        format::ksvd_box_word(bytes) != vr_make_box(n, n, n))
+        (format::ksvd_box_word(bytes) & VR_BOX_BLOCKS_MASK) != vr_make_box(n, n, n))
       continue;
     if (std::any_of(pool.begin(), pool.end(), [&](const MosaicBrick& p) {
           return std::equal(p.payload.begin(), p.payload.end(), bytes.begin(), bytes.end());

@@ -47,13 +47,14 @@ void CodeStatistics::add(std::span<const std::byte> payload, std::uint32_t atom_
     if (!vr_block_in_box(box_word, n, b)) continue;
     const vr_uint s = parts.sparsity[b];
     const vr_uint gap_rice = s > 0 ? vr_gap_rice(layout_word, s) : 0;
+    const vr_uint block_band_word = vr_block_band_word(band_word, box_word, s);
     const std::uint32_t s_class = vr_highest_bit(s + 1);
     std::uint32_t previous = ~0u;  // −1: before the block's first code
     for (vr_uint i = 0; i < s; ++i, ++k) {
       const std::uint32_t atom = parts.atoms[k];
       const std::uint32_t gap = atom - previous - 1;
       const std::uint32_t magnitude = static_cast<std::uint32_t>(std::abs(parts.values[k])) - 1;
-      const vr_uint magnitude_rice = vr_band_rice(layout_word, band_word, atom);
+      const vr_uint magnitude_rice = vr_band_rice(layout_word, block_band_word, atom);
       const std::uint64_t gap_length = rice_bits(gap, gap_rice, parts.atom_bits);
       const std::uint64_t magnitude_length = rice_bits(magnitude, magnitude_rice, parts.coef_bits);
       gap_bits += gap_length;

@@ -67,13 +67,12 @@ constexpr std::size_t payload_padding_words = 4;
 /// byte: the payload's zero padding words take them.
 class CodeStream {
  public:
-  /// band_rice: band_rice_table's, for the payload's layout and band words.
-  CodeStream(const vr_uint* payload, vr_uint first_word, vr_uint atom_bits,
-             const std::uint8_t* band_rice)
+  CodeStream(const vr_uint* payload, vr_uint first_word, vr_uint atom_bits)
       : bytes_(reinterpret_cast<const unsigned char*>(payload + first_word)),
-        band_rice_(band_rice),
         atom_limit_(1u << atom_bits) {}
   std::uint64_t bit() const { return bit_; }
+  /// The magnitudes' parameters of the block whose codes come next (BandRice::block).
+  void set_band_rice(const std::uint8_t* band_rice) { band_rice_ = band_rice; }
 
   /// The next code of a block whose gaps have Rice parameter `gap_rice` (vr_gap_rice), after the
   /// block's codes up to next_atom − 1; as vr_read_code.
@@ -122,21 +121,55 @@ class CodeStream {
   }
 
   const unsigned char* bytes_;
-  const std::uint8_t* band_rice_;
+  const std::uint8_t* band_rice_ = nullptr;
   vr_uint atom_limit_;
   std::uint64_t bit_ = 0;
 };
 
-/// The magnitudes' Rice parameter (vr_band_rice) of every atom index 0..2^a of a payload, in
-/// `table`: one load a code instead of the band's logarithm.
-const std::uint8_t* band_rice_table(vr_uint layout_word, vr_uint band_word,
-                                    std::vector<std::uint8_t>& table) {
-  const vr_uint limit = 1u << vr_layout_atom_bits(layout_word);
-  table.resize(std::size_t{limit} + 1);
-  for (vr_uint atom = 0; atom <= limit; ++atom)
-    table[atom] = static_cast<std::uint8_t>(vr_band_rice(layout_word, band_word, atom));
-  return table.data();
-}
+/// The magnitudes' Rice parameter (vr_band_rice) of every atom index 0..2^a of a payload, one
+/// table for each move of its magnitude model (vr_magnitude_move, −2..2), and the table of each
+/// sparsity class floor(log2(s + 1)) (0..8): one load a code instead of the band's logarithm,
+/// and one load a block for its table.
+class BandRice {
+ public:
+  /// For a payload's layout, band and box words.
+  void reset(vr_uint layout_word, vr_uint band_word, vr_uint box_word) {
+    const vr_uint atom_bits = vr_layout_atom_bits(layout_word);
+    const vr_uint split = vr_layout_band_split(layout_word);
+    const std::size_t stride = (std::size_t{1} << atom_bits) + 1;
+    if (stride != bands_.size() || split != split_) {  // each atom's band, kept while they hold
+      bands_.resize(stride);
+      for (vr_uint atom = 0; atom < stride; ++atom)
+        bands_[atom] = static_cast<std::uint8_t>(vr_atom_band(layout_word, atom));
+      split_ = split;
+    }
+    const bool moves = vr_box_magnitude_model(box_word) != 0;
+    tables_.resize((moves ? 2 * VR_MAGNITUDE_SWING + 1 : 1) * stride);
+    for (int move = moves ? -VR_MAGNITUDE_SWING : 0; move <= (moves ? VR_MAGNITUDE_SWING : 0);
+         ++move) {
+      const vr_uint moved = vr_moved_band_word(band_word, move);
+      std::uint8_t rice[VR_ATOM_BANDS];
+      for (vr_uint band = 0; band < VR_ATOM_BANDS; ++band) rice[band] = (moved >> (4 * band)) & 0xF;
+      std::uint8_t* table = tables_.data() + index(moves ? move : 0, moves) * stride;
+      for (std::size_t atom = 0; atom < stride; ++atom) table[atom] = rice[bands_[atom]];
+    }
+    for (vr_uint c = 0; c < classes; ++c)  // s = 2^c − 1 is of class c
+      class_table_[c] =
+          tables_.data() + index(vr_magnitude_move(box_word, (1u << c) - 1u), moves) * stride;
+  }
+  /// The table of a block of s codes (s < 2^VR_MAX_SPARSITY_BITS).
+  const std::uint8_t* block(vr_uint s) const { return class_table_[vr_highest_bit(s + 1u)]; }
+
+ private:
+  static constexpr vr_uint classes = VR_MAX_SPARSITY_BITS + 1;
+  /// The table of a move: the only one without moves.
+  static std::size_t index(int move, bool moves) {
+    return moves ? static_cast<std::size_t>(move + VR_MAGNITUDE_SWING) : 0;
+  }
+  std::vector<std::uint8_t> bands_, tables_;
+  vr_uint split_ = 0;
+  const std::uint8_t* class_table_[classes] = {};
+};
 
 /// One code as read: its atom and signed quantized coefficient.
 struct ParsedCode {
@@ -285,12 +318,15 @@ KsvdPayloadLayout parse_ksvd_header(const vr_uint* payload, std::size_t word_cou
          "values that reach " + std::to_string(bound));
   // 2. The box of coded blocks and their entries.
   const vr_uint n = shape.blocks_per_axis(), box = layout.box_word;
-  if ((box >> 12) != 0 || vr_box_blocks(box, 0) < 1 || vr_box_blocks(box, 0) > n ||
-      vr_box_blocks(box, 1) < 1 || vr_box_blocks(box, 1) > n || vr_box_blocks(box, 2) < 1 ||
-      vr_box_blocks(box, 2) > n)
-    fail(20, "box word of 1.." + str(n) + " coded blocks on each axis and zero bits 12..31",
+  if ((box >> 16) != 0 || vr_box_magnitude_model(box) > VR_MAX_MAGNITUDE_MODEL ||
+      vr_box_blocks(box, 0) < 1 || vr_box_blocks(box, 0) > n || vr_box_blocks(box, 1) < 1 ||
+      vr_box_blocks(box, 1) > n || vr_box_blocks(box, 2) < 1 || vr_box_blocks(box, 2) > n)
+    fail(20,
+         "box word of 1.." + str(n) + " coded blocks on each axis, magnitude model 0.." +
+             str(VR_MAX_MAGNITUDE_MODEL) + " and zero bits 16..31",
          str(vr_box_blocks(box, 0)) + " x " + str(vr_box_blocks(box, 1)) + " x " +
-             str(vr_box_blocks(box, 2)) + " blocks" + ((box >> 12) != 0 ? ", nonzero bits" : ""));
+             str(vr_box_blocks(box, 2)) + " blocks, magnitude model " +
+             str(vr_box_magnitude_model(box)) + ((box >> 16) != 0 ? ", nonzero bits" : ""));
   const vr_uint first = vr_code_first_word(layout.word, vr_box_entries(box));
   if (bytes < 4 * std::uint64_t{first})
     fail(0,
@@ -317,14 +353,16 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
   //    look-ahead of a code's windows and a damaged stream's overrun).
   const std::uint64_t stream_bits = (std::uint64_t{word_count} - first) * 32;
   const vr_uint largest = 1u << layout.coef_bits;
-  thread_local std::vector<std::uint8_t> band_rice;
-  CodeStream stream(payload, first, layout.atom_bits,
-                    band_rice_table(layout.word, layout.band_word, band_rice));
+  thread_local BandRice band_rice;
+  band_rice.reset(layout.word, layout.band_word, box);
+  CodeStream stream(payload, first, layout.atom_bits);
   for (vr_uint b = 0, e = 0; b < blocks; ++b) {
     if (!vr_block_in_box(box, n, b)) continue;
     const vr_uint s = vr_entry_sparsity(layout.word, vr_block_entry(payload, layout.word, e++));
     layout.codes += s;
-    const vr_uint gap_rice = s > 0 ? vr_gap_rice(layout.word, s) : 0;
+    if (s == 0) continue;
+    const vr_uint gap_rice = vr_gap_rice(layout.word, s);
+    stream.set_band_rice(band_rice.block(s));
     vr_uint next_atom = 0, atom = 0;
     for (vr_uint k = 0; k < s; ++k) {
       const std::uint64_t code_at = 4 * std::uint64_t{first} + stream.bit() / 8;
@@ -428,7 +466,7 @@ class SteppedCodes {
  public:
   /// After parse_ksvd_header on `payload` (word_count words and the zero padding words).
   SteppedCodes(const vr_uint* payload, std::size_t word_count, const KsvdPayloadLayout& layout,
-               BrickShape shape, std::uint32_t atom_count, const std::uint8_t* band_rice)
+               BrickShape shape, std::uint32_t atom_count, BandRice& band_rice)
       : payload_(payload),
         layout_(layout),
         n_(shape.blocks_per_axis()),
@@ -438,7 +476,9 @@ class SteppedCodes {
         word_count_(word_count),
         atom_count_(atom_count),
         largest_(1u << layout.coef_bits),
-        stream_(payload, first_, layout.atom_bits, band_rice) {
+        band_rice_(&band_rice),
+        stream_(payload, first_, layout.atom_bits) {
+    band_rice.reset(layout.word, layout.band_word, layout.box_word);
     for (vr_uint b = 0, e = 0; b < blocks_; ++b)
       if (vr_block_in_box(layout_.box_word, n_, b))
         layout_.codes +=
@@ -458,7 +498,9 @@ class SteppedCodes {
       const vr_uint b = block_++;
       if (!vr_block_in_box(layout_.box_word, n_, b)) continue;
       in_block_ = vr_entry_sparsity(layout_.word, vr_block_entry(payload_, layout_.word, entry_++));
-      gap_rice_ = in_block_ > 0 ? vr_gap_rice(layout_.word, in_block_) : 0;
+      if (in_block_ == 0) continue;
+      gap_rice_ = vr_gap_rice(layout_.word, in_block_);
+      stream_.set_band_rice(band_rice_->block(in_block_));
       next_atom_ = 0;
     }
   }
@@ -502,6 +544,7 @@ class SteppedCodes {
   vr_uint n_, blocks_, first_;
   std::uint64_t stream_bits_, word_count_;
   vr_uint atom_count_, largest_;
+  const BandRice* band_rice_;
   CodeStream stream_;
   vr_uint block_ = 0, entry_ = 0, in_block_ = 0, gap_rice_ = 0, next_atom_ = 0;
   std::uint32_t read_ = 0;
@@ -546,7 +589,7 @@ bool decode_ksvd_pair(const PayloadJob& first, const PayloadJob& second, const A
                       BrickShape shape) {
   thread_local std::vector<vr_uint> words[2];
   thread_local std::vector<ParsedCode> codes[2];
-  thread_local std::vector<std::uint8_t> band_rice[2];
+  thread_local BandRice band_rice[2];
   const PayloadJob* jobs[2] = {&first, &second};
   const auto alone = [&] {
     for (const PayloadJob* job : jobs)
@@ -561,7 +604,7 @@ bool decode_ksvd_pair(const PayloadJob& first, const PayloadJob& second, const A
       const KsvdPayloadLayout header = parse_ksvd_header(
           words[i].data(), bytes.size() / 4, bytes.size(), shape, jobs[i]->name, jobs[i]->offset);
       readers[i].emplace(words[i].data(), bytes.size() / 4, header, shape, atoms.count,
-                         band_rice_table(header.word, header.band_word, band_rice[i]));
+                         band_rice[i]);
       if (codes[i].size() < readers[i]->left()) codes[i].resize(readers[i]->left());
     }
   } catch (const FormatError&) {
@@ -610,13 +653,17 @@ class BitWriter {
   std::uint64_t bits_ = 0;
 };
 
-/// Writes (or, with out == nullptr, counts) the code stream of `parts` under `layout`.
-std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, vr_uint band_word,
-                          BitWriter* out) {
+/// Writes (or, with out == nullptr, counts) the code stream of `parts` under `layout` and the
+/// band and box words.
+std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, vr_uint payload_band_word,
+                          vr_uint box, BitWriter* out) {
   std::uint64_t bits = 0;
   std::size_t k = 0;
   for (std::size_t b = 0; b < parts.sparsity.size(); ++b) {
-    const vr_uint s = parts.sparsity[b], gap_rice = s > 0 ? vr_gap_rice(layout, s) : 0;
+    const vr_uint s = parts.sparsity[b];
+    if (s == 0) continue;
+    const vr_uint gap_rice = vr_gap_rice(layout, s);
+    const vr_uint band_word = vr_block_band_word(payload_band_word, box, s);
     vr_uint next_atom = 0;
     for (vr_uint j = 0; j < s; ++j, ++k) {
       const vr_uint gap = parts.atoms[k] - next_atom;
@@ -633,6 +680,58 @@ std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, vr_uint
     }
   }
   return bits;
+}
+
+/// The magnitude model (brick_decode.h, vr_magnitude_move) and band word with the fewest bits
+/// for `parts`, or those the parts fix (magnitude_model ≥ 0, a band_rice ≥ 0). The bits of every
+/// band, sparsity class floor(log2(s + 1)) and parameter are counted once, and each model adds
+/// them up.
+std::pair<vr_uint, vr_uint> choose_magnitude_model(const KsvdPayloadParts& parts, vr_uint layout) {
+  constexpr vr_uint classes = VR_MAX_SPARSITY_BITS + 1;  // floor(log2(s + 1)) ≤ 8
+  static_assert(VR_MAX_MAGNITUDE_MODEL == classes);
+  std::array<std::array<std::array<std::uint64_t, 16>, classes>, VR_ATOM_BANDS> bits{};
+  std::size_t k = 0;
+  for (std::size_t b = 0; b < parts.sparsity.size(); ++b) {
+    const vr_uint s = parts.sparsity[b], c = vr_highest_bit(s + 1u);
+    for (vr_uint j = 0; j < s; ++j, ++k) {
+      const vr_uint magnitude = static_cast<vr_uint>(std::abs(std::int64_t{parts.values[k]}) - 1);
+      auto& row = bits[vr_atom_band(layout, parts.atoms[k])][c];
+      for (vr_uint r = 0; r < 16; ++r) row[r] += rice_bits(magnitude, r, parts.coef_bits);
+    }
+  }
+  // The band word and bits of model m: a band's parameter r costs, in the blocks of class c,
+  // the bits of r moved by the class's move.
+  const auto candidate = [&](vr_uint m) {
+    const vr_uint box = vr_box_with_magnitude_model(0, m);
+    vr_uint band_word = 0;
+    std::uint64_t total = 0;
+    for (vr_uint band = 0; band < VR_ATOM_BANDS; ++band) {
+      std::array<std::uint64_t, 16> band_bits{};
+      for (vr_uint c = 0; c < classes; ++c) {
+        const int move = vr_magnitude_move(box, (1u << c) - 1u);  // s = 2^c − 1 is of class c
+        for (vr_uint r = 0; r < 16; ++r)
+          band_bits[r] +=
+              bits[band][c][static_cast<vr_uint>(std::clamp(static_cast<int>(r) + move, 0, 15))];
+      }
+      const vr_uint r =
+          parts.band_rice[band] >= 0
+              ? static_cast<vr_uint>(parts.band_rice[band])
+              : static_cast<vr_uint>(std::min_element(band_bits.begin(), band_bits.end()) -
+                                     band_bits.begin());
+      band_word |= r << (4 * band);
+      total += band_bits[r];
+    }
+    return std::pair{band_word, total};
+  };
+  vr_uint best = 0;
+  std::uint64_t fewest = ~std::uint64_t{0};
+  vr_uint best_band_word = 0;
+  for (vr_uint m = 0; m <= VR_MAX_MAGNITUDE_MODEL; ++m) {
+    if (parts.magnitude_model >= 0 && m != static_cast<vr_uint>(parts.magnitude_model)) continue;
+    const auto [band_word, total] = candidate(m);
+    if (total < fewest) best = m, fewest = total, best_band_word = band_word;
+  }
+  return {best, best_band_word};
 }
 
 }  // namespace
@@ -663,11 +762,13 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
       parts.coef_bits < 1 || parts.coef_bits > VR_MAX_COEF_BITS || parts.atom_bits < 1 ||
       parts.atom_bits > VR_MAX_ATOM_BITS || parts.gap_shift > int{VR_MAX_GAP_SHIFT} ||
       parts.band_split > VR_MAX_BAND_SPLIT ||
+      parts.magnitude_model > static_cast<int>(VR_MAX_MAGNITUDE_MODEL) ||
       std::any_of(parts.band_rice.begin(), parts.band_rice.end(), [](int k) { return k > 15; }))
     throw std::invalid_argument("payload widths out of range: mean " + str(parts.mean_bits) +
                                 ", sparsity " + str(parts.sparsity_bits) + ", magnitude " +
                                 str(parts.coef_bits) + ", atom " + str(parts.atom_bits) +
                                 " bits, gap shift " + std::to_string(parts.gap_shift) +
+                                ", magnitude model " + std::to_string(parts.magnitude_model) +
                                 " or a band's Rice parameter over 15");
   const std::size_t blocks = parts.sparsity.size();
   bool brick_blocks = false;  // n³ for a brick size 6n
@@ -686,10 +787,10 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
                                   " a side");
     box_n[a] = parts.box[a] == 0 ? n : parts.box[a];
   }
-  const vr_uint box = vr_make_box(box_n[0], box_n[1], box_n[2]);
+  const vr_uint blocks_box = vr_make_box(box_n[0], box_n[1], box_n[2]);
   std::uint64_t codes = 0;
   for (std::size_t b = 0; b < blocks; ++b) {
-    if (!vr_block_in_box(box, n, static_cast<vr_uint>(b)) && parts.sparsity[b] != 0)
+    if (!vr_block_in_box(blocks_box, n, static_cast<vr_uint>(b)) && parts.sparsity[b] != 0)
       throw std::invalid_argument("block " + str(b) + " outside the box of coded blocks has " +
                                   str(parts.sparsity[b]) + " atoms");
     if ((std::uint64_t{parts.sparsity[b]} >> parts.sparsity_bits) != 0 ||
@@ -713,33 +814,19 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
                                     std::to_string(parts.values[k]) +
                                     " does not fit its bits, is zero or is out of order");
     }
-  // The entropy coder's parameters: each band's magnitude parameter the one with the fewest
-  // bits for the band's magnitudes, then the gap shift with the fewest bits for the gaps.
+  // The entropy coder's parameters: the magnitude model and each band's parameter with the
+  // fewest bits for the magnitudes, then the gap shift with the fewest bits for the gaps.
   const auto layout_of = [&](vr_uint gap_shift) {
     return vr_make_layout(parts.mean_bits, parts.sparsity_bits, parts.coef_bits, parts.atom_bits,
                           gap_shift, parts.band_split);
   };
-  std::array<std::array<std::uint64_t, 16>, VR_ATOM_BANDS> band_bits{};
-  for (std::size_t j = 0; j < parts.atoms.size(); ++j) {
-    const vr_uint magnitude = static_cast<vr_uint>(std::abs(std::int64_t{parts.values[j]}) - 1);
-    for (vr_uint r = 0; r < 16; ++r)
-      band_bits[vr_atom_band(layout_of(0), parts.atoms[j])][r] +=
-          rice_bits(magnitude, r, parts.coef_bits);
-  }
-  vr_uint band_word = 0;
-  for (vr_uint band = 0; band < VR_ATOM_BANDS; ++band) {
-    const auto& bits = band_bits[band];
-    const vr_uint choice =
-        parts.band_rice[band] >= 0
-            ? static_cast<vr_uint>(parts.band_rice[band])
-            : static_cast<vr_uint>(std::min_element(bits.begin(), bits.end()) - bits.begin());
-    band_word |= choice << (4 * band);
-  }
+  const auto [magnitude_model, band_word] = choose_magnitude_model(parts, layout_of(0));
+  const vr_uint box = vr_box_with_magnitude_model(blocks_box, magnitude_model);
   vr_uint gap_shift = parts.gap_shift >= 0 ? static_cast<vr_uint>(parts.gap_shift) : 0;
   if (parts.gap_shift < 0) {
     std::uint64_t fewest = ~std::uint64_t{0};
     for (vr_uint g = 0; g <= VR_MAX_GAP_SHIFT; ++g) {
-      const std::uint64_t bits = write_codes(parts, layout_of(g), band_word, nullptr);
+      const std::uint64_t bits = write_codes(parts, layout_of(g), band_word, box, nullptr);
       if (bits < fewest) fewest = bits, gap_shift = g;
     }
   }
@@ -750,7 +837,7 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
     if (vr_block_in_box(box, n, static_cast<vr_uint>(b)))
       entries.put(vr_layout_entry_bits(layout),
                   parts.sparsity[b] | (parts.mean[b] << parts.sparsity_bits));
-  write_codes(parts, layout, band_word, &stream);
+  write_codes(parts, layout, band_word, box, &stream);
   const std::vector<vr_uint> entry_words = entries.words(), code_words = stream.words();
   std::vector<std::byte> payload(4 * (VR_HEADER_WORDS + entry_words.size() + code_words.size()));
   std::memcpy(payload.data(), parts.dequantization, 12);
@@ -786,6 +873,7 @@ KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint
   for (vr_uint band = 0; band < VR_ATOM_BANDS; ++band)
     parts.band_rice[band] = static_cast<int>((layout.band_word >> (4 * band)) & 0xF);
   parts.gap_shift = static_cast<int>(vr_layout_gap_shift(layout.word));
+  parts.magnitude_model = static_cast<int>(vr_box_magnitude_model(layout.box_word));
   parts.band_split = vr_layout_band_split(layout.word);
   const vr_uint n = shape.blocks_per_axis();
   for (std::size_t a = 0; a < 3; ++a)

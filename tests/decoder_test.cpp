@@ -184,6 +184,7 @@ std::vector<std::byte> random_payload(format::BrickShape shape, std::uint32_t co
       p.values.push_back(pick(2) ? m : -m);
     }
   }
+  p.magnitude_model = static_cast<int>(pick(VR_MAX_MAGNITUDE_MODEL + 1));  // every model
   return format::pack_ksvd_payload(p);
 }
 
@@ -202,6 +203,7 @@ TEST(Decoder, TheLongestCodesReadBack) {
   p.atom_bits = 16;
   p.gap_shift = 3;  // gap Rice parameter 16 − 1 − 2 − 3 = 10: gaps from 16·2^10 on escape
   p.band_rice.fill(0);
+  p.magnitude_model = 0;  // every block keeps parameter 0: every magnitude escapes
   for (std::uint32_t b = 0; b < shape.blocks(); ++b)
     for (std::uint32_t k = 0; k < 3; ++k) {
       p.atoms.push_back(20000 * (k + 1) + b);
@@ -214,7 +216,7 @@ TEST(Decoder, TheLongestCodesReadBack) {
   EXPECT_EQ(back.values, p.values);
   std::vector<vr_uint> words(payload.size() / 4 + 1, 0u);
   std::memcpy(words.data(), payload.data(), payload.size());
-  const vr_uint layout = words[3], band_word = words[4];
+  const vr_uint layout = words[3], band_word = vr_block_band_word(words[4], words[5], 3);
   const vr_uint first = vr_code_first_word(layout, shape.blocks());
   vr_uint bit = 0;
   std::size_t code = 0;

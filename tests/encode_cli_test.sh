@@ -124,7 +124,7 @@ expect_error "exceeds --max-error" "$volreel" compare "$work/s" "$work/m.vreel" 
 "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/p.vreel" --psnr 58 > "$work/psnr.txt" 2>&1
 grep -q "target PSNR 58.00 dB met by every frame" "$work/psnr.txt" || fail "--psnr 58: $(cat "$work/psnr.txt")"
 "$volreel" compare "$work/s" "$work/p.vreel" --no-ssim --min-psnr 58 > /dev/null 2>&1 || fail "--psnr 58 not delivered"
-sed -i 's/"format_version": 8/"format_version": 7/' "$work/m.vreel/manifest.json"
+sed -i 's/"format_version": 9/"format_version": 8/' "$work/m.vreel/manifest.json"
 expect_error "encode the series again" "$volreel" info "$work/m.vreel"
 
 # Frames larger than --memory: read and coded piecewise (a row of bricks at a time), giving the

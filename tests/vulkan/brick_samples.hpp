@@ -33,6 +33,7 @@ inline std::vector<float> random_atoms(SplitMix64& rng, std::uint32_t count) {
 /// (the entropy coder's common case), some at the largest magnitude (escapes). Styles 0 and 4:
 /// half of the payloads code a random box of blocks (1..n on each axis; brick_decode.h,
 /// vr_box_word), the others every block; style 3 codes all but the last layer of blocks in z.
+/// Styles 0 and 4 take a random magnitude model 0..9, style 3 model 1.
 inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t atom_count,
                                                   int style, format::BrickShape shape = {}) {
   const auto sign = [&] { return rng.below(2) ? 1.0f : -1.0f; };
@@ -98,6 +99,10 @@ inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t
       parts.values.push_back(static_cast<std::int32_t>(rng.below(2) ? value : -value));
     }
   }
+  // Every magnitude model (brick_decode.h, vr_magnitude_move), not only the fewest bits' choice.
+  if (style == 0 || style == 4)
+    parts.magnitude_model = static_cast<int>(rng.below(VR_MAX_MAGNITUDE_MODEL + 1));
+  if (style == 3) parts.magnitude_model = 1;  // blocks of 255 codes move by +2, of 1 by +1
   return format::pack_ksvd_payload(parts);
 }
 

@@ -37,9 +37,10 @@ void main() {
   for (uint c = 0u; c <= b; ++c) {
     if (!vr_block_in_box(box_word, VR_BLOCKS_PER_AXIS, c)) continue;
     const uint s = vr_entry_sparsity(layout_word, vr_block_entry(layout_word, e++));
+    const uint block_band_word = vr_block_band_word(band_word, box_word, s);
     uint next_atom = 0u, atom = 0u;
     for (uint k = 0u; k < s; ++k) {
-      const int q = vr_read_code(first, layout_word, band_word, s, bit, next_atom, atom);
+      const int q = vr_read_code(first, layout_word, block_band_word, s, bit, next_atom, atom);
       if (c == b && k == v) code = atom | (uint(q) << 16u);
     }
   }
@@ -64,6 +65,9 @@ void main() {
   results[7u * N + i] = vr_atlas_cell_x(i, 56u) | (vr_atlas_cell_y(i, 56u, 56u) << 8u) |
                         (vr_atlas_cell_z(i, 56u, 56u) << 16u);
   results[9u * N + i] = rice ^ (rice_bit << 20u);
+  // Band words moved by every magnitude model and sparsity.
+  results[10u * N + i] =
+      vr_block_band_word(i * 2654435761u, vr_box_with_magnitude_model(0u, i % 10u), i % 256u);
   if (i == 0u) {
     const uint constants[16] = uint[16](
         VR_BRICK_SIZE, VR_BRICK_INTERIOR, VR_BLOCK_SIZE, VR_BLOCK_LENGTH, VR_BLOCKS_PER_AXIS,

@@ -16,7 +16,7 @@
 namespace volreel::vulkan {
 namespace {
 
-constexpr std::uint32_t sections = 10;
+constexpr std::uint32_t sections = 11;
 
 class LayoutTest : public test::VulkanTest, public ::testing::WithParamInterface<std::uint32_t> {};
 
@@ -114,7 +114,7 @@ TEST_P(LayoutTest, GlslAndCppAgree) {
       const vr_uint entry = vr_block_entry(p, layout_word, i % entries);
       vr_uint rice_bit = (i * 7) % 900;
       const vr_uint rice = vr_read_rice(p, 0, rice_bit, i % 16, 1 + i % 16);
-      const std::uint32_t expected[10] = {
+      const std::uint32_t expected[sections] = {
           vr_brick_voxel(n, b, v),
           0,  // the decoded value, compared below
           vr_read_bits(p, 0, (i * 13) % 1024, i % 33),
@@ -130,8 +130,9 @@ TEST_P(LayoutTest, GlslAndCppAgree) {
           vr_atlas_cell_x(i, 56) | (vr_atlas_cell_y(i, 56, 56) << 8) |
               (vr_atlas_cell_z(i, 56, 56) << 16),
           0,  // constants
-          rice ^ (rice_bit << 20)};
-      for (std::uint32_t s = 0; s < 10; ++s)
+          rice ^ (rice_bit << 20),
+          vr_block_band_word(i * 2654435761u, vr_box_with_magnitude_model(0, i % 10), i % 256)};
+      for (std::uint32_t s = 0; s < sections; ++s)
         if (s != 1 && s != 8 && gpu[s * N + i] != expected[s] && ++mismatches <= 3000)
           ADD_FAILURE() << "section " << s << " index " << i << ": GLSL " << gpu[s * N + i]
                         << ", C++ " << expected[s];

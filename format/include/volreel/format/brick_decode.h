@@ -11,7 +11,8 @@
 //   word 4                the band word: the magnitudes' Rice parameter of each of 8 atom
 //                         bands, 4 bits each (vr_band_rice)
 //   word 5                the box word: the coded blocks nx·ny·nz of the brick's n³
-//                         (n = brick size / 6; vr_box_*)
+//                         (n = brick size / 6; vr_box_*) and the magnitude model, how a
+//                         block's sparsity moves the band parameters (vr_block_band_word)
 //   entry[nx·ny·nz]       per coded block, t + b bits each, one bit stream from bit 0 of word 6
 //                         (low bit first): sparsity s in the low t bits, quantized mean q above;
 //                         zero bits up to the next word
@@ -143,8 +144,9 @@ VR_INLINE vr_uint vr_band_word(VR_PAYLOAD_PARAM_ONLY) {
 }
 /* Word 5, the box word: the coded blocks of the brick are those with bx < nx, by < ny and
  * bz < nz (each 1..n), the blocks that hold a voxel of the brick's level or the voxel just past
- * its end; bits 0..3 nx, 4..7 ny, 8..11 nz, 12..31 zero. Only coded blocks have an entry (in
- * block order) and codes; every value of a block outside the box is mean_bias. */
+ * its end; bits 0..3 nx, 4..7 ny, 8..11 nz, 12..15 the magnitude model m (0..9,
+ * vr_block_band_word), 16..31 zero. Only coded blocks have an entry (in block order) and codes;
+ * every value of a block outside the box is mean_bias. */
 VR_INLINE vr_uint vr_box_word(VR_PAYLOAD_PARAM_ONLY) {
   return VR_LOAD_WORD(5u);
 }
@@ -157,6 +159,15 @@ VR_INLINE vr_uint vr_box_entries(vr_uint box_word) {
 }
 VR_INLINE vr_uint vr_make_box(vr_uint nx, vr_uint ny, vr_uint nz) {
   return nx | (ny << 4u) | (nz << 8u);
+}
+#define VR_BOX_BLOCKS_MASK 0xFFFu /* bits 0..11: nx, ny, nz */
+#define VR_MAX_MAGNITUDE_MODEL 9u /* m: 0, or 1 + a sparsity class 0..8 */
+#define VR_MAGNITUDE_SWING 2      /* the most a block's sparsity moves a band parameter */
+VR_INLINE vr_uint vr_box_magnitude_model(vr_uint box_word) {
+  return (box_word >> 12u) & 0xFu;
+}
+VR_INLINE vr_uint vr_box_with_magnitude_model(vr_uint box_word, vr_uint model) {
+  return (box_word & VR_BOX_BLOCKS_MASK) | (model << 12u);
 }
 /* Whether block b of a brick of n blocks a side is coded. */
 VR_INLINE bool vr_block_in_box(vr_uint box_word, vr_uint blocks_per_axis, vr_uint block) {
@@ -196,9 +207,10 @@ VR_INLINE vr_uint vr_code_first_word(vr_uint layout_word, vr_uint entries) {
  * each block's in increasing atom order. A code is the gap to its atom (atom − previous atom of the
  * block − 1; the first code of a block: its atom), then the value's magnitude |q| − 1 (q ≠ 0),
  * both as Rice codes (the gap's parameter from the block's sparsity, the magnitude's from the
- * atom's band), then the sign of q (1: negative). A Rice code of x with parameter k is
- * u = x >> k zero bits, a one, and the low k bits of x; when u would be 16 or more it is 16
- * zero bits and x in `escape_bits` bits instead (a bits for a gap, c bits for a magnitude). */
+ * atom's band and, under the magnitude model, the block's sparsity), then the sign of q (1:
+ * negative). A Rice code of x with parameter k is u = x >> k zero bits, a one, and the low k bits
+ * of x; when u would be 16 or more it is 16 zero bits and x in `escape_bits` bits instead (a bits
+ * for a gap, c bits for a magnitude). */
 
 /* Index of the lowest set bit of x ≠ 0. */
 #ifndef VR_GLSL
@@ -251,10 +263,37 @@ VR_INLINE vr_uint vr_band_rice(vr_uint layout_word, vr_uint band_word, vr_uint a
   return (band_word >> (4u * vr_atom_band(layout_word, atom))) & 0xFu;
 }
 
+/* The magnitude model (box word bits 12..15, m): how far a block of s codes moves every band's
+ * parameter. m = 0: not at all; m ≥ 1: clamp(floor(log2(s + 1)) − (m − 1), −2, 2), so that
+ * blocks of more codes than the centre class m − 1 (much detail: coefficients large against the
+ * quantization step) take larger parameters and sparser blocks smaller ones. */
+VR_INLINE int vr_magnitude_move(vr_uint box_word, vr_uint s) {
+  vr_uint m = vr_box_magnitude_model(box_word);
+  if (m == 0u) return 0;
+  int d = int(vr_highest_bit(s + 1u)) - int(m - 1u);
+  return d < -VR_MAGNITUDE_SWING ? -VR_MAGNITUDE_SWING
+                                 : (d > VR_MAGNITUDE_SWING ? VR_MAGNITUDE_SWING : d);
+}
+/* A band word with every band's parameter moved by d, within 0..15. */
+VR_INLINE vr_uint vr_moved_band_word(vr_uint band_word, int d) {
+  vr_uint moved = 0u;
+  for (vr_uint j = 0u; j < VR_ATOM_BANDS; ++j) {
+    int r = int((band_word >> (4u * j)) & 0xFu) + d;
+    r = r < 0 ? 0 : (r > 15 ? 15 : r);
+    moved |= vr_uint(r) << (4u * j);
+  }
+  return moved;
+}
+/* The band word of a block of s codes: the payload's, moved by the magnitude model
+ * (vr_magnitude_move). vr_read_code takes it. */
+VR_INLINE vr_uint vr_block_band_word(vr_uint band_word, vr_uint box_word, vr_uint s) {
+  return vr_moved_band_word(band_word, vr_magnitude_move(box_word, s));
+}
+
 /* Reads the next code of a block of s codes, starting at bit `bit` of the code stream that
  * begins at word `first` (vr_code_first_word; the stream runs on over the whole brick); before a
- * block's first code next_atom = 0. Sets atom; returns the signed quantized coefficient q
- * (coefficient = coef_scale·q). */
+ * block's first code next_atom = 0; band_word is the block's (vr_block_band_word). Sets atom;
+ * returns the signed quantized coefficient q (coefficient = coef_scale·q). */
 VR_INLINE int vr_read_code(VR_PAYLOAD_PARAM vr_uint first, vr_uint layout_word, vr_uint band_word,
                            vr_uint s, VR_INOUT(vr_uint, bit), VR_INOUT(vr_uint, next_atom),
                            VR_INOUT(vr_uint, atom)) {
@@ -276,7 +315,8 @@ VR_INLINE int vr_read_code(VR_PAYLOAD_PARAM vr_uint first, vr_uint layout_word, 
  *  1. read the layout and box words and, coded block by coded block (vr_block_in_box), the
  *     entry: sparsity s, quantized mean q;
  *  2. value = mean_bias + mean_scale·q (a block outside the box: mean_bias, no codes);
- *  3. for each of the block's s codes (vr_read_code): atom a, quantized coefficient q;
+ *  3. for each of the block's s codes (vr_read_code, with the block's band word,
+ *     vr_block_band_word): atom a, quantized coefficient q;
  *     value += coef_scale·q · atoms[a·216 + v]. */
 VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint blocks_per_axis,
                                 vr_uint block, vr_uint v) {
@@ -298,9 +338,11 @@ VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint blocks_p
     e += 1u;
     vr_uint s = vr_entry_sparsity(layout_word, entry);
     value = mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry));
+    vr_uint block_band_word = vr_block_band_word(band_word, box_word, s);
     vr_uint next_atom = 0u, atom = 0u;
     for (vr_uint k = 0u; k < s; ++k) {
-      int q = vr_read_code(VR_PAYLOAD_ARG first, layout_word, band_word, s, bit, next_atom, atom);
+      int q =
+          vr_read_code(VR_PAYLOAD_ARG first, layout_word, block_band_word, s, bit, next_atom, atom);
       if (b == block) value += coef_scale * float(q) * VR_LOAD_ATOM(atom * VR_BLOCK_LENGTH + v);
     }
   }

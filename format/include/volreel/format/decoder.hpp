@@ -86,6 +86,9 @@ struct KsvdPayloadParts {
   /// -1: the one giving the band the fewest bits.
   std::array<int, 8> band_rice{-1, -1, -1, -1, -1, -1, -1, -1};
   int gap_shift = -1;  ///< the gaps' Rice shift 0..3; -1: the one giving the fewest bits
+  /// The magnitude model 0..9 (brick_decode.h, vr_magnitude_move: how a block's sparsity moves
+  /// the band parameters); -1: the one giving the fewest bits, with the band parameters.
+  int magnitude_model = -1;
   /// Atoms below this form band 0 (0..4095): the learned atoms before the DCT basis.
   std::uint32_t band_split = 0;
   std::vector<std::uint32_t> sparsity = std::vector<std::uint32_t>(BrickShape{}.blocks());
