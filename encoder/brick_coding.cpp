@@ -269,6 +269,8 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
   parts.sparsity.assign(blocks, 0);
   parts.mean.assign(blocks, 0);
   parts.band_split = options.band_split;
+  parts.from_split = options.from_split;
+  const std::uint32_t first_atom = options.from_split ? options.band_split : 0;
   for (vr_uint a = 0; a < 3; ++a) parts.box[a] = vr_box_blocks(box, a);
   parts.mean_bits = choose_mean_bits(mean_lo, mean_hi, options.mean_step, options.mean_bits);
   parts.atom_bits =
@@ -355,7 +357,7 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
           value += block_codes[k].second;
         value = std::clamp<std::int64_t>(value, -cq.limit, cq.limit);
         if (value == 0) continue;
-        parts.atoms.push_back(atom);
+        parts.atoms.push_back(first_atom + atom);
         parts.values.push_back(static_cast<std::int32_t>(value));
         largest_q = std::max(largest_q, value < 0 ? -value : value);
         ++kept;

@@ -36,6 +36,9 @@ struct QuantizeOptions {
   double max_abs_error = 0;
   int max_atoms = 15;
   std::uint32_t band_split = 0;  ///< the payload's band split (format::KsvdPayloadParts)
+  /// The atoms are the dictionary's from band_split on (the DCT basis after the learned atoms),
+  /// indexed from 0: the payload takes the split flag (format::KsvdPayloadParts::from_split).
+  bool from_split = false;
   /// The step of the quantized coefficients (data units; never finer than the brick's largest
   /// coefficient / 2^16). 0: the brick's largest coefficient / 2^(fixed_coef_bits − 1).
   double coef_step = 0;

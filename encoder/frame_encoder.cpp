@@ -52,6 +52,10 @@ struct BrickCoding {
   format::BrickShape shape;
   const dictionary::BatchOmp* omp = nullptr;  ///< ksvd
   const Eigen::MatrixXf* atoms = nullptr;     ///< ksvd
+  /// ksvd, CodingSettings::split_bricks with learned atoms before the DCT basis: its pursuit and
+  /// atoms alone (else null).
+  const dictionary::BatchOmp* dct_omp = nullptr;
+  const Eigen::MatrixXf* dct_atoms = nullptr;
   QuantizeOptions quantize;
   double atom_gain_threshold = 0;
   std::size_t levels = 0;
@@ -89,8 +93,50 @@ struct ChunkWorkspace {
   std::vector<float> bricks;
   Eigen::MatrixXf columns;
   std::vector<float> means, weights;
-  dictionary::SparseCodes codes;
+  dictionary::SparseCodes codes, dct_codes;
 };
+
+/// Quantizes the brick of blocks first_block .. first_block + n³ − 1 of `codes` (quantize_brick)
+/// and, when dct_codes is not null, the same blocks' codes of the DCT basis alone (dct_atoms, coded
+/// by dct_omp; the payload's split flag), keeping the one of the lower cost (the first on a tie):
+/// its squared error plus code_cost (the Lagrangian rule's gain an atom must bring, at the brick's
+/// ε) per code's worth of bytes, a code's worth being the first coding's mean; with code_cost 0
+/// (the other rules, under which both meet the same per-block target), the shorter payload. Adds
+/// what it kept to *result; *used_dct says which.
+std::vector<std::byte> quantize_either(format::BrickShape shape, const float* columns,
+                                       const float* means, const dictionary::SparseCodes& codes,
+                                       const dictionary::SparseCodes* dct_codes,
+                                       std::size_t first_block, const Eigen::MatrixXf& atoms,
+                                       const dictionary::BatchOmp* dct_omp,
+                                       const Eigen::MatrixXf* dct_atoms,
+                                       const QuantizeOptions& options, double code_cost,
+                                       detail::BrickQuantization* result, bool* used_dct) {
+  *used_dct = false;
+  if (!dct_codes)
+    return detail::quantize_brick(shape, columns, means, codes, first_block, atoms, options,
+                                  result);
+  detail::BrickQuantization all, basis;
+  std::vector<std::byte> payload =
+      detail::quantize_brick(shape, columns, means, codes, first_block, atoms, options, &all);
+  QuantizeOptions split = options;
+  split.from_split = true;
+  split.orthonormal_atoms = dct_omp->orthonormal();
+  std::vector<std::byte> alone = detail::quantize_brick(shape, columns, means, *dct_codes,
+                                                        first_block, *dct_atoms, split, &basis);
+  bool dct = alone.size() < payload.size();
+  if (code_cost > 0 && all.codes > 0) {
+    const double per_byte =
+        code_cost * static_cast<double>(all.codes) / static_cast<double>(payload.size());
+    dct = basis.squared_error + per_byte * static_cast<double>(alone.size()) <
+          all.squared_error + per_byte * static_cast<double>(payload.size());
+  }
+  const detail::BrickQuantization& kept = dct ? basis : all;
+  result->squared_error += kept.squared_error;
+  result->codes += kept.codes;
+  result->blocks_over_bound += kept.blocks_over_bound;
+  *used_dct = dct;
+  return dct ? alone : payload;
+}
 
 /// Adds a stored brick's payload to the byte breakdown and sparsity histogram of a frame.
 void add_to_breakdown(format::BrickShape shape, const Cell& c,
@@ -127,7 +173,7 @@ void add_to_breakdown(format::BrickShape shape, const Cell& c,
               ? vr_entry_sparsity(layout, vr_block_entry(words.data(), layout, e++))
               : 0u;
       const vr_uint start = bit;
-      vr_uint next_atom = 0, atom = 0;
+      vr_uint next_atom = vr_block_first_atom(layout, box), atom = 0;
       const vr_uint block_band_word = vr_block_band_word(band_word, box, sparsity);
       for (vr_uint j = 0; j < sparsity; ++j)
         vr_read_code(words.data(), first, layout, block_band_word, sparsity, bit, next_atom, atom);
@@ -249,11 +295,13 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
   st.seconds_bricks += seconds_since(part);
   part = Clock::now();
   coding.omp->encode(work.columns, work.codes, work.weights);
+  if (coding.dct_omp) coding.dct_omp->encode(work.columns, work.dct_codes, work.weights);
   st.seconds_omp += seconds_since(part);
   part = Clock::now();
   double quantized_error = 0;
   std::size_t code_count = 0, over_bound = 0;
   const QuantizeOptions& qo = coding.quantize;
+  std::vector<char> used_dct(coded.size(), 0);  // the brick kept the basis's codes
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : quantized_error, code_count, over_bound)
   for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(coded.size()); ++k) {
     const auto kk = static_cast<std::size_t>(k);
@@ -263,10 +311,14 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
     brick_qo.coef_step *= coding.scale_of(cell);
     brick_qo.box = boxes[kk];
     detail::BrickQuantization result;
-    cell.payload = detail::quantize_brick(coding.shape,
-                                          work.columns.data() + kk * brick_blocks * VR_BLOCK_LENGTH,
-                                          work.means.data() + kk * brick_blocks, work.codes,
-                                          kk * brick_blocks, *coding.atoms, brick_qo, &result);
+    bool dct = false;
+    cell.payload = quantize_either(
+        coding.shape, work.columns.data() + kk * brick_blocks * VR_BLOCK_LENGTH,
+        work.means.data() + kk * brick_blocks, work.codes,
+        coding.dct_omp ? &work.dct_codes : nullptr, kk * brick_blocks, *coding.atoms,
+        coding.dct_omp, coding.dct_atoms, brick_qo,
+        coding.atom_gain_threshold * coding.scale_of(cell) * coding.scale_of(cell), &result, &dct);
+    used_dct[kk] = dct;
     cell.codes = result.codes;
     code_count += result.codes;
     quantized_error += result.squared_error;
@@ -276,11 +328,13 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
   st.blocks_over_bound += over_bound;
   st.quantized_squared_error += quantized_error;
   st.seconds_quantize += seconds_since(part);
-  for (std::size_t k = 0; k < coded.size(); ++k)  // the coded blocks, as quantize_brick's
+  for (std::size_t k = 0; k < coded.size(); ++k) {  // the coded blocks, as quantize_brick's
+    const dictionary::SparseCodes& kept = used_dct[k] ? work.dct_codes : work.codes;
     for (std::size_t b = 0; b < brick_blocks; ++b)
       if (vr_block_in_box(boxes[k], per_axis, static_cast<vr_uint>(b)))
         st.unquantized_squared_error +=
-            static_cast<double>(work.codes.residual_energy[k * brick_blocks + b]);
+            static_cast<double>(kept.residual_energy[k * brick_blocks + b]);
+  }
   st.blocks += static_cast<std::size_t>(blocks);
 }
 
@@ -583,6 +637,13 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
       o.max_atoms = settings_.max_atoms;
     }
     omp_ = std::make_shared<dictionary::BatchOmp>(dictionary_->atoms, o);
+    // The basis alone, for bricks where the learned atoms do not pay (split flag: its atoms are
+    // indexed from the band split, which must then be where the basis starts).
+    if (settings_.split_bricks && atoms_.dct_basis && atoms_.count > format::dct_basis_atoms &&
+        band_split_ == atoms_.count - format::dct_basis_atoms) {
+      dct_atoms_ = dictionary_->atoms.rightCols(format::dct_basis_atoms);
+      dct_omp_ = std::make_shared<dictionary::BatchOmp>(dct_atoms_, o);
+    }
   } else if (!(settings_.zfp_accuracy > 0 && std::isfinite(settings_.zfp_accuracy))) {
     throw InputError("--zfp-accuracy must be positive");
   } else if (!format::valid_brick_size(settings_.brick_size)) {
@@ -639,11 +700,15 @@ std::vector<std::byte> FrameEncoder::encode_brick(std::span<const float> brick) 
   Eigen::MatrixXf columns(VR_BLOCK_LENGTH, shape.blocks());
   std::vector<float> means(shape.blocks());
   detail::brick_to_blocks(shape, brick.data(), columns.data(), means.data());
-  dictionary::SparseCodes codes;
+  dictionary::SparseCodes codes, dct_codes;
   omp_->encode(columns, codes);
+  if (dct_omp_) dct_omp_->encode(columns, dct_codes);
   detail::BrickQuantization result;
-  return detail::quantize_brick(shape, columns.data(), means.data(), codes, 0, dictionary_->atoms,
-                                quantize_options(), &result);
+  bool dct = false;
+  return quantize_either(shape, columns.data(), means.data(), codes,
+                         dct_omp_ ? &dct_codes : nullptr, 0, dictionary_->atoms, dct_omp_.get(),
+                         dct_omp_ ? &dct_atoms_ : nullptr, quantize_options(),
+                         atom_gain_threshold(), &result, &dct);
 }
 
 CodedFrame FrameEncoder::code(std::size_t t, const Volume& frame, bool keep_originals) const {
@@ -690,6 +755,8 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
                      shape(),
                      omp_.get(),
                      ksvd ? &dictionary_->atoms : nullptr,
+                     dct_omp_.get(),
+                     dct_omp_ ? &dct_atoms_ : nullptr,
                      quantize_options(),
                      atom_gain_threshold(),
                      geometry.size(),

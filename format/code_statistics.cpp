@@ -49,7 +49,8 @@ void CodeStatistics::add(std::span<const std::byte> payload, std::uint32_t atom_
     const vr_uint gap_rice = s > 0 ? vr_gap_rice(layout_word, s) : 0;
     const vr_uint block_band_word = vr_block_band_word(band_word, box_word, s);
     const std::uint32_t s_class = vr_highest_bit(s + 1);
-    std::uint32_t previous = ~0u;  // −1: before the block's first code
+    // Before the block's first code: the atom before the first it may name (−1 without the flag).
+    std::uint32_t previous = vr_block_first_atom(layout_word, box_word) - 1u;
     for (vr_uint i = 0; i < s; ++i, ++k) {
       const std::uint32_t atom = parts.atoms[k];
       const std::uint32_t gap = atom - previous - 1;

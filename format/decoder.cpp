@@ -67,9 +67,10 @@ constexpr std::size_t payload_padding_words = 4;
 /// byte: the payload's zero padding words take them.
 class CodeStream {
  public:
-  CodeStream(const vr_uint* payload, vr_uint first_word, vr_uint atom_bits)
+  /// first_atom: vr_block_first_atom of the payload.
+  CodeStream(const vr_uint* payload, vr_uint first_word, vr_uint atom_bits, vr_uint first_atom)
       : bytes_(reinterpret_cast<const unsigned char*>(payload + first_word)),
-        atom_limit_(1u << atom_bits) {}
+        atom_limit_(first_atom + (1u << atom_bits)) {}
   std::uint64_t bit() const { return bit_; }
   /// The magnitudes' parameters of the block whose codes come next (BandRice::block).
   void set_band_rice(const std::uint8_t* band_rice) { band_rice_ = band_rice; }
@@ -87,8 +88,8 @@ class CodeStream {
       w = window(bit_);
       used = 0;
     }
-    // An atom index past 2^a is never valid (the caller refuses it); its Rice parameter is that of
-    // 2^a, so that the table stays small.
+    // An atom index past first atom + 2^a is never valid (the caller refuses it); its Rice
+    // parameter is that of first atom + 2^a, so that the table stays small.
     const vr_uint magnitude = rice(w, used, band_rice_[std::min(atom, atom_limit_)], coef_bits);
     const vr_uint negative = static_cast<vr_uint>(w) & 1u;
     bit_ += used + 1;
@@ -126,7 +127,8 @@ class CodeStream {
   std::uint64_t bit_ = 0;
 };
 
-/// The magnitudes' Rice parameter (vr_band_rice) of every atom index 0..2^a of a payload, one
+/// The magnitudes' Rice parameter (vr_band_rice) of every atom index 0..F + 2^a of a payload (F:
+/// vr_block_first_atom), one
 /// table for each move of its magnitude model (vr_magnitude_move, −2..2), and the table of each
 /// sparsity class floor(log2(s + 1)) (0..8): one load a code instead of the band's logarithm,
 /// and one load a block for its table.
@@ -136,7 +138,8 @@ class BandRice {
   void reset(vr_uint layout_word, vr_uint band_word, vr_uint box_word) {
     const vr_uint atom_bits = vr_layout_atom_bits(layout_word);
     const vr_uint split = vr_layout_band_split(layout_word);
-    const std::size_t stride = (std::size_t{1} << atom_bits) + 1;
+    const std::size_t stride =
+        std::size_t{vr_block_first_atom(layout_word, box_word)} + (std::size_t{1} << atom_bits) + 1;
     if (stride != bands_.size() || split != split_) {  // each atom's band, kept while they hold
       bands_.resize(stride);
       for (vr_uint atom = 0; atom < stride; ++atom)
@@ -318,15 +321,15 @@ KsvdPayloadLayout parse_ksvd_header(const vr_uint* payload, std::size_t word_cou
          "values that reach " + std::to_string(bound));
   // 2. The box of coded blocks and their entries.
   const vr_uint n = shape.blocks_per_axis(), box = layout.box_word;
-  if ((box >> 16) != 0 || vr_box_magnitude_model(box) > VR_MAX_MAGNITUDE_MODEL ||
+  if ((box >> 17) != 0 || vr_box_magnitude_model(box) > VR_MAX_MAGNITUDE_MODEL ||
       vr_box_blocks(box, 0) < 1 || vr_box_blocks(box, 0) > n || vr_box_blocks(box, 1) < 1 ||
       vr_box_blocks(box, 1) > n || vr_box_blocks(box, 2) < 1 || vr_box_blocks(box, 2) > n)
     fail(20,
          "box word of 1.." + str(n) + " coded blocks on each axis, magnitude model 0.." +
-             str(VR_MAX_MAGNITUDE_MODEL) + " and zero bits 16..31",
+             str(VR_MAX_MAGNITUDE_MODEL) + " and zero bits 17..31",
          str(vr_box_blocks(box, 0)) + " x " + str(vr_box_blocks(box, 1)) + " x " +
              str(vr_box_blocks(box, 2)) + " blocks, magnitude model " +
-             str(vr_box_magnitude_model(box)) + ((box >> 16) != 0 ? ", nonzero bits" : ""));
+             str(vr_box_magnitude_model(box)) + ((box >> 17) != 0 ? ", nonzero bits" : ""));
   const vr_uint first = vr_code_first_word(layout.word, vr_box_entries(box));
   if (bytes < 4 * std::uint64_t{first})
     fail(0,
@@ -355,7 +358,8 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
   const vr_uint largest = 1u << layout.coef_bits;
   thread_local BandRice band_rice;
   band_rice.reset(layout.word, layout.band_word, box);
-  CodeStream stream(payload, first, layout.atom_bits);
+  const vr_uint first_atom = vr_block_first_atom(layout.word, box);
+  CodeStream stream(payload, first, layout.atom_bits, first_atom);
   for (vr_uint b = 0, e = 0; b < blocks; ++b) {
     if (!vr_block_in_box(box, n, b)) continue;
     const vr_uint s = vr_entry_sparsity(layout.word, vr_block_entry(payload, layout.word, e++));
@@ -363,7 +367,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
     if (s == 0) continue;
     const vr_uint gap_rice = vr_gap_rice(layout.word, s);
     stream.set_band_rice(band_rice.block(s));
-    vr_uint next_atom = 0, atom = 0;
+    vr_uint next_atom = first_atom, atom = 0;
     for (vr_uint k = 0; k < s; ++k) {
       const std::uint64_t code_at = 4 * std::uint64_t{first} + stream.bit() / 8;
       if (stream.bit() >= stream_bits)
@@ -477,7 +481,8 @@ class SteppedCodes {
         atom_count_(atom_count),
         largest_(1u << layout.coef_bits),
         band_rice_(&band_rice),
-        stream_(payload, first_, layout.atom_bits) {
+        first_atom_(vr_block_first_atom(layout.word, layout.box_word)),
+        stream_(payload, first_, layout.atom_bits, first_atom_) {
     band_rice.reset(layout.word, layout.band_word, layout.box_word);
     for (vr_uint b = 0, e = 0; b < blocks_; ++b)
       if (vr_block_in_box(layout_.box_word, n_, b))
@@ -501,7 +506,7 @@ class SteppedCodes {
       if (in_block_ == 0) continue;
       gap_rice_ = vr_gap_rice(layout_.word, in_block_);
       stream_.set_band_rice(band_rice_->block(in_block_));
-      next_atom_ = 0;
+      next_atom_ = first_atom_;
     }
   }
 
@@ -545,6 +550,7 @@ class SteppedCodes {
   std::uint64_t stream_bits_, word_count_;
   vr_uint atom_count_, largest_;
   const BandRice* band_rice_;
+  vr_uint first_atom_;
   CodeStream stream_;
   vr_uint block_ = 0, entry_ = 0, in_block_ = 0, gap_rice_ = 0, next_atom_ = 0;
   std::uint32_t read_ = 0;
@@ -664,7 +670,7 @@ std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, vr_uint
     if (s == 0) continue;
     const vr_uint gap_rice = vr_gap_rice(layout, s);
     const vr_uint band_word = vr_block_band_word(payload_band_word, box, s);
-    vr_uint next_atom = 0;
+    vr_uint next_atom = vr_block_first_atom(layout, box);
     for (vr_uint j = 0; j < s; ++j, ++k) {
       const vr_uint gap = parts.atoms[k] - next_atom;
       next_atom = parts.atoms[k] + 1;
@@ -803,16 +809,19 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
     throw std::invalid_argument(str(parts.atoms.size()) + " atoms and " + str(parts.values.size()) +
                                 " values for sparsities summing to " + str(codes));
   std::size_t k = 0;
+  const vr_uint first_atom = parts.from_split ? parts.band_split : 0;
   for (std::size_t b = 0; b < blocks; ++b)
     for (vr_uint j = 0; j < parts.sparsity[b]; ++j, ++k) {
       const std::int64_t magnitude = std::abs(std::int64_t{parts.values[k]});
-      if ((std::uint64_t{parts.atoms[k]} >> parts.atom_bits) != 0 || magnitude == 0 ||
+      if (parts.atoms[k] < first_atom ||
+          (std::uint64_t{parts.atoms[k] - first_atom} >> parts.atom_bits) != 0 || magnitude == 0 ||
           magnitude > (std::int64_t{1} << parts.coef_bits) ||
           (j > 0 && parts.atoms[k] <= parts.atoms[k - 1]))
         throw std::invalid_argument("code " + str(k) + " (block " + str(b) + "): atom " +
                                     str(parts.atoms[k]) + " or value " +
                                     std::to_string(parts.values[k]) +
-                                    " does not fit its bits, is zero or is out of order");
+                                    " does not fit its bits, is zero, is out of order or is below "
+                                    "the band split under the split flag");
     }
   // The entropy coder's parameters: the magnitude model and each band's parameter with the
   // fewest bits for the magnitudes, then the gap shift with the fewest bits for the gaps.
@@ -821,7 +830,8 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
                           gap_shift, parts.band_split);
   };
   const auto [magnitude_model, band_word] = choose_magnitude_model(parts, layout_of(0));
-  const vr_uint box = vr_box_with_magnitude_model(blocks_box, magnitude_model);
+  const vr_uint box = vr_box_with_split_flag(
+      vr_box_with_magnitude_model(blocks_box, magnitude_model), parts.from_split ? 1u : 0u);
   vr_uint gap_shift = parts.gap_shift >= 0 ? static_cast<vr_uint>(parts.gap_shift) : 0;
   if (parts.gap_shift < 0) {
     std::uint64_t fewest = ~std::uint64_t{0};
@@ -874,6 +884,7 @@ KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint
     parts.band_rice[band] = static_cast<int>((layout.band_word >> (4 * band)) & 0xF);
   parts.gap_shift = static_cast<int>(vr_layout_gap_shift(layout.word));
   parts.magnitude_model = static_cast<int>(vr_box_magnitude_model(layout.box_word));
+  parts.from_split = vr_box_from_split(layout.box_word) != 0;
   parts.band_split = vr_layout_band_split(layout.word);
   const vr_uint n = shape.blocks_per_axis();
   for (std::size_t a = 0; a < 3; ++a)

@@ -167,12 +167,14 @@ std::vector<std::byte> random_payload(format::BrickShape shape, std::uint32_t co
   p.atom_bits = format::bits_for_count(count);
   p.band_split = pick(3) == 0 ? 0 : count / 4;
   for (std::uint32_t a = 0; a < 3; ++a) p.box[a] = 1 + pick(n);
-  std::vector<std::uint32_t> all(count);
-  std::iota(all.begin(), all.end(), 0u);
+  p.from_split = p.band_split > 0 && pick(3) == 0;  // atoms from the split on, a third of them
+  const std::uint32_t first_atom = p.from_split ? p.band_split : 0;
+  std::vector<std::uint32_t> all(count - first_atom);
+  std::iota(all.begin(), all.end(), first_atom);
   const int largest = 1 << p.coef_bits;
   for (std::uint32_t b = 0; b < shape.blocks(); ++b) {
     if (b % n >= p.box[0] || b / n % n >= p.box[1] || b / (n * n) >= p.box[2]) continue;
-    p.sparsity[b] = pick(max_sparsity + 1);
+    p.sparsity[b] = std::min<std::uint32_t>(pick(max_sparsity + 1), count - first_atom);
     p.mean[b] = pick(512);
     std::shuffle(all.begin(), all.end(), rng);
     std::vector<std::uint32_t> atoms(all.begin(), all.begin() + p.sparsity[b]);

@@ -450,7 +450,7 @@ TEST(Encoder, FinestOwnedCodesCountEachBlockByItsOwnVoxels) {
     const std::uint32_t pos[3] = {f.position(i).x, f.position(i).y, f.position(i).z};
     for (vr_uint b = 0; b < blocks_per_brick; ++b) {
       const vr_uint atoms = sparsities[b], start = bit;
-      vr_uint next_atom = 0, atom = 0;
+      vr_uint next_atom = vr_block_first_atom(lw, vr_box_word(words.data())), atom = 0;
       const vr_uint block_band_word =
           vr_block_band_word(band_word, vr_box_word(words.data()), atoms);
       for (vr_uint k = 0; k < atoms; ++k)
@@ -693,7 +693,7 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
     vr_uint bit = 0;
     std::size_t code = 0;
     for (vr_uint b = 0; b < blocks_per_brick; ++b) {
-      vr_uint next_atom = 0, atom = 0;
+      vr_uint next_atom = vr_block_first_atom(layout.word, layout.box_word), atom = 0;
       const vr_uint band_word =
           vr_block_band_word(layout.band_word, layout.box_word, parts.sparsity[b]);
       for (vr_uint k = 0; k < parts.sparsity[b]; ++k, ++code) {
@@ -722,18 +722,18 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
                    format::FormatError)
           << bad;
     }
-    // A box word with a magnitude model past 9 or a bit from 16 on set is refused by name.
+    // A box word with a magnitude model past 9 or a bit from 17 on set is refused by name.
     vr_uint box;
     std::memcpy(&box, payload.data() + 20, 4);
     for (vr_uint bad : {vr_box_with_magnitude_model(box, 10), vr_box_with_magnitude_model(box, 15),
-                        box | (1u << 16), box | (1u << 31)}) {
+                        box | (1u << 17), box | (1u << 31)}) {
       auto broken = payload;
       std::memcpy(broken.data() + 20, &bad, 4);
       try {
         format::check_ksvd_payload(broken, atom_count, shape36, "p", 0);
         ADD_FAILURE() << "box word " << bad << " accepted";
       } catch (const format::FormatError& e) {
-        EXPECT_NE(std::string(e.what()).find("magnitude model 0..9 and zero bits 16..31"),
+        EXPECT_NE(std::string(e.what()).find("magnitude model 0..9 and zero bits 17..31"),
                   std::string::npos)
             << e.what();
       }
@@ -1581,6 +1581,60 @@ TEST(Encoder, EveryBrickSizeMeetsItsTolerance) {
     auto s = ksvd_settings(eps, v);
     s.brick_size = bad;
     EXPECT_THROW(encoder::FrameEncoder(&d, s), InputError) << bad;
+  }
+}
+
+// A learned dictionary that does not pay on some bricks: those bricks are coded with the DCT basis
+// alone (the split flag, their atoms from the band split on), which decode like the others and
+// cost less than the dictionary's codes of the same bricks would, as the encoder's choice
+// (squared error plus the Lagrangian rule's price of the codes' bytes) says.
+TEST(Encoder, BricksWhereLearnedAtomsDoNotPayUseTheBasisAlone) {
+  const auto d = with_dct(random_dictionary(48, 31));  // random atoms: rarely worth their index
+  const Volume v = analytic_volume(datasets::AnalyticField::blobs, {72, 40, 36});
+  const auto [mn, mx] = std::minmax_element(v.data.begin(), v.data.end());
+  const double eps = 1e-3 * static_cast<double>(*mx - *mn);
+  const auto frame_of = [&](bool split) {
+    auto s = ksvd_settings(eps, v);
+    s.brick_size = 24;
+    s.split_bricks = split;
+    return encoder::FrameEncoder(&d, s).encode(0, v);
+  };
+  const auto split = frame_of(true), whole = frame_of(false);
+  const format::FrameView f(split, "split.vrf"), g(whole, "whole.vrf");
+  std::size_t flagged = 0, ksvd_bricks = 0;
+  for (std::uint32_t i = 0; i < f.brick_count(); ++i) {
+    const auto payload = f.brick_bytes(i);
+    if (payload.size() == 4) continue;
+    ++ksvd_bricks;
+    const auto parts =
+        format::unpack_ksvd_payload(payload, f.header().atom_count, f.shape(), "p", 0);
+    if (!parts.from_split) {
+      EXPECT_EQ(vr_box_from_split(format::ksvd_box_word(payload)), 0u);
+      continue;
+    }
+    ++flagged;
+    EXPECT_EQ(parts.band_split, 48u);
+    for (const std::uint32_t atom : parts.atoms) EXPECT_GE(atom, 48u);
+    EXPECT_LE(parts.atom_bits, 8u) << "indices into the 215 atoms of the basis";
+  }
+  EXPECT_GT(flagged, 0u);
+  EXPECT_LT(split.size(), whole.size());
+  format::validate_payloads(f, atom_table(d));
+  const auto [psnr_split, worst_split] = finest_level_error(split, d, v);
+  const auto [psnr_whole, worst_whole] = finest_level_error(whole, d, v);
+  EXPECT_GT(psnr_split, psnr_whole - 0.5) << "as good within half a dB, for fewer bytes";
+  EXPECT_GT(psnr_split, 50.0);
+  EXPECT_LT(worst_split, 40 * eps);
+  EXPECT_LT(worst_whole, 40 * eps);
+  // A dictionary without learned atoms (the basis alone) has nothing to split: no flag.
+  const auto dct = dictionary::from_file(format::dct_dictionary(6, "test"));
+  auto s = ksvd_settings(eps, v);
+  s.brick_size = 24;
+  const auto alone = encoder::FrameEncoder(&dct, s).encode(0, v);
+  const format::FrameView a(alone, "alone.vrf");
+  for (std::uint32_t i = 0; i < a.brick_count(); ++i) {
+    if (a.brick_bytes(i).size() == 4) continue;
+    EXPECT_EQ(vr_box_from_split(format::ksvd_box_word(a.brick_bytes(i))), 0u);
   }
 }
 

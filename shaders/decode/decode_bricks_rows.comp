@@ -118,6 +118,7 @@ void main() {
   const uint band_word = vr_band_word();
   const uint box_word = vr_box_word();
   const uint first = vr_code_first_word(layout_word, vr_box_entries(box_word));
+  const uint first_atom = vr_block_first_atom(layout_word, box_word);
   const uint box_x = vr_box_blocks(box_word, 0u), box_y = vr_box_blocks(box_word, 1u),
              box_z = vr_box_blocks(box_word, 2u);
   uint bit = 0u;
@@ -134,7 +135,7 @@ void main() {
         low0 = low1 = low2 = low3 = low4 = vec4(mean);
         high0 = high1 = high2 = high3 = high4 = vec2(mean);
         const uint block_band_word = vr_block_band_word(band_word, box_word, s);
-        uint next_atom = 0u, atom_index = 0u;
+        uint next_atom = first_atom, atom_index = 0u;
         for (uint k = 0u; k < s; ++k) {
           const float coefficient =
               coef_scale * float(vr_read_code(first, layout_word, block_band_word, s, bit,

@@ -33,7 +33,8 @@ inline std::vector<float> random_atoms(SplitMix64& rng, std::uint32_t count) {
 /// (the entropy coder's common case), some at the largest magnitude (escapes). Styles 0 and 4:
 /// half of the payloads code a random box of blocks (1..n on each axis; brick_decode.h,
 /// vr_box_word), the others every block; style 3 codes all but the last layer of blocks in z.
-/// Styles 0 and 4 take a random magnitude model 0..9, style 3 model 1.
+/// Styles 0 and 4 take a random magnitude model 0..9, style 3 model 1; a third of styles 0 and 4
+/// set the split flag (atoms from the band split on).
 inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t atom_count,
                                                   int style, format::BrickShape shape = {}) {
   const auto sign = [&] { return rng.below(2) ? 1.0f : -1.0f; };
@@ -60,7 +61,12 @@ inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t
                                : least_atom_bits + static_cast<std::uint32_t>(rng.below(
                                                        VR_MAX_ATOM_BITS - least_atom_bits + 1));
   parts.band_split = static_cast<std::uint32_t>(rng.below(atom_count + 1));
-  const std::uint32_t most = std::min((1u << parts.sparsity_bits) - 1u, atom_count);
+  // Styles 0 and 4: a third of the payloads name atoms from the band split on (the split flag).
+  parts.from_split =
+      (style == 0 || style == 4) && parts.band_split < atom_count && rng.below(3) == 0;
+  const std::uint32_t first_atom = parts.from_split ? parts.band_split : 0;
+  const std::uint32_t named = atom_count - first_atom;  // the atoms the codes may name
+  const std::uint32_t most = std::min((1u << parts.sparsity_bits) - 1u, named);
   const std::int64_t largest = std::int64_t{1} << parts.coef_bits;
   const std::uint32_t n = shape.blocks_per_axis();
   if ((style == 0 || style == 4) && rng.below(2) == 1)
@@ -84,8 +90,9 @@ inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t
     parts.mean[b] = mean;
     // s distinct atoms in increasing order: a partial shuffle, sorted (style 3: the first and the
     // last atom among them).
-    for (std::uint32_t k = 0; k < atom_count; ++k) order[k] = k;
-    for (std::uint32_t k = 0; k < s; ++k) std::swap(order[k], order[k + rng.below(atom_count - k)]);
+    s = std::min(s, named);
+    for (std::uint32_t k = 0; k < named; ++k) order[k] = first_atom + k;
+    for (std::uint32_t k = 0; k < s; ++k) std::swap(order[k], order[k + rng.below(named - k)]);
     std::sort(order.begin(), order.begin() + s);
     if (style == 3 && s >= 2) order[0] = 0, order[s - 1] = atom_count - 1;
     for (std::uint32_t k = 0; k < s; ++k) {

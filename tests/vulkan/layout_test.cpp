@@ -31,15 +31,16 @@ TEST_P(LayoutTest, GlslAndCppAgree) {
   SplitMix64 rng(5);
   const std::uint32_t atom_count = 1024;
   const std::vector<float> atoms = test::random_atoms(rng, atom_count);
-  // A payload that codes a box of blocks, not all of them (about every other one does).
+  // A payload that codes a box of blocks, not all of them (about every other one does), of at
+  // least the 34 words the probe's bit reads cover.
   const auto coded_blocks = [](const std::vector<std::byte>& payload) {
     return vr_box_entries(format::ksvd_box_word(payload));
   };
   std::vector<std::byte> bytes;
   do {
     bytes = test::random_ksvd_payload(rng, atom_count, 0, shape);
-  } while (coded_blocks(bytes) == blocks);
-  std::vector<vr_uint> payload(bytes.size() / 4 + 1, 0u);  // + the look-ahead word
+  } while (coded_blocks(bytes) == blocks || bytes.size() < 4 * 34);  // the probe reads 34 words
+  std::vector<vr_uint> payload(bytes.size() / 4 + 1, 0u);            // + the look-ahead word
   std::memcpy(payload.data(), bytes.data(), bytes.size());
   const format::KsvdPayloadParts parts =
       format::unpack_ksvd_payload(bytes, atom_count, shape, "<memory>", 0);

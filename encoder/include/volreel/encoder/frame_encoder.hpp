@@ -184,6 +184,10 @@ class FrameEncoder {
   const dictionary::Dictionary* dictionary_;
   CodingSettings settings_;
   std::shared_ptr<const dictionary::BatchOmp> omp_;
+  /// CodingSettings::split_bricks, when the dictionary has learned atoms before the DCT basis:
+  /// the basis alone (the dictionary's last 215 atoms) and its pursuit; else empty and null.
+  Eigen::MatrixXf dct_atoms_;
+  std::shared_ptr<const dictionary::BatchOmp> dct_omp_;
   /// The atoms before the DCT basis when the dictionary ends with it (the payloads' band split,
   /// format/SPEC.md), else 0; at most 4095.
   std::uint32_t band_split_ = 0;

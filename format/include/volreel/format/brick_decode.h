@@ -11,8 +11,9 @@
 //   word 4                the band word: the magnitudes' Rice parameter of each of 8 atom
 //                         bands, 4 bits each (vr_band_rice)
 //   word 5                the box word: the coded blocks nx·ny·nz of the brick's n³
-//                         (n = brick size / 6; vr_box_*) and the magnitude model, how a
-//                         block's sparsity moves the band parameters (vr_block_band_word)
+//                         (n = brick size / 6; vr_box_*), the magnitude model, how a
+//                         block's sparsity moves the band parameters (vr_block_band_word), and
+//                         whether the codes name atoms from the band split on (vr_block_first_atom)
 //   entry[nx·ny·nz]       per coded block, t + b bits each, one bit stream from bit 0 of word 6
 //                         (low bit first): sparsity s in the low t bits, quantized mean q above;
 //                         zero bits up to the next word
@@ -145,8 +146,8 @@ VR_INLINE vr_uint vr_band_word(VR_PAYLOAD_PARAM_ONLY) {
 /* Word 5, the box word: the coded blocks of the brick are those with bx < nx, by < ny and
  * bz < nz (each 1..n), the blocks that hold a voxel of the brick's level or the voxel just past
  * its end; bits 0..3 nx, 4..7 ny, 8..11 nz, 12..15 the magnitude model m (0..9,
- * vr_block_band_word), 16..31 zero. Only coded blocks have an entry (in block order) and codes;
- * every value of a block outside the box is mean_bias. */
+ * vr_block_band_word), bit 16 the split flag (vr_block_first_atom), 17..31 zero. Only coded blocks
+ * have an entry (in block order) and codes; every value of a block outside the box is mean_bias. */
 VR_INLINE vr_uint vr_box_word(VR_PAYLOAD_PARAM_ONLY) {
   return VR_LOAD_WORD(5u);
 }
@@ -167,7 +168,17 @@ VR_INLINE vr_uint vr_box_magnitude_model(vr_uint box_word) {
   return (box_word >> 12u) & 0xFu;
 }
 VR_INLINE vr_uint vr_box_with_magnitude_model(vr_uint box_word, vr_uint model) {
-  return (box_word & VR_BOX_BLOCKS_MASK) | (model << 12u);
+  return (box_word & ~0xF000u) | (model << 12u);
+}
+/* Bit 16, the split flag: every code of the brick names an atom from the layout's band split L on
+ * (the DCT basis after a learned dictionary's atoms), and a block's first gap counts from L
+ * instead of 0, so that such a brick pays for indices into the basis alone (a bits for its 215
+ * atoms, not for all K). */
+VR_INLINE vr_uint vr_box_from_split(vr_uint box_word) {
+  return (box_word >> 16u) & 1u;
+}
+VR_INLINE vr_uint vr_box_with_split_flag(vr_uint box_word, vr_uint from_split) {
+  return (box_word & ~0x10000u) | (from_split << 16u);
 }
 /* Whether block b of a brick of n blocks a side is coded. */
 VR_INLINE bool vr_block_in_box(vr_uint box_word, vr_uint blocks_per_axis, vr_uint block) {
@@ -205,12 +216,12 @@ VR_INLINE vr_uint vr_code_first_word(vr_uint layout_word, vr_uint entries) {
 
 /* The codes: one bit stream from word vr_code_first_word, the coded blocks' codes in block order,
  * each block's in increasing atom order. A code is the gap to its atom (atom − previous atom of the
- * block − 1; the first code of a block: its atom), then the value's magnitude |q| − 1 (q ≠ 0),
- * both as Rice codes (the gap's parameter from the block's sparsity, the magnitude's from the
- * atom's band and, under the magnitude model, the block's sparsity), then the sign of q (1:
- * negative). A Rice code of x with parameter k is u = x >> k zero bits, a one, and the low k bits
- * of x; when u would be 16 or more it is 16 zero bits and x in `escape_bits` bits instead (a bits
- * for a gap, c bits for a magnitude). */
+ * block − 1; the first code of a block: its atom − vr_block_first_atom), then the value's magnitude
+ * |q| − 1 (q ≠ 0), both as Rice codes (the gap's parameter from the block's sparsity, the
+ * magnitude's from the atom's band and, under the magnitude model, the block's sparsity), then the
+ * sign of q (1: negative). A Rice code of x with parameter k is u = x >> k zero bits, a one, and
+ * the low k bits of x; when u would be 16 or more it is 16 zero bits and x in `escape_bits` bits
+ * instead (a bits for a gap, c bits for a magnitude). */
 
 /* Index of the lowest set bit of x ≠ 0. */
 #ifndef VR_GLSL
@@ -247,6 +258,12 @@ VR_INLINE vr_uint vr_gap_rice(vr_uint layout_word, vr_uint s) {
   vr_uint lower = 1u + vr_highest_bit(s + 1u) + vr_layout_gap_shift(layout_word);
   vr_uint a = vr_layout_atom_bits(layout_word);
   return a > lower ? a - lower : 0u;
+}
+
+/* The atom a block's first gap counts from (next_atom before its first code, vr_read_code): the
+ * layout's band split L under the box word's split flag, else 0. */
+VR_INLINE vr_uint vr_block_first_atom(vr_uint layout_word, vr_uint box_word) {
+  return vr_box_from_split(box_word) != 0u ? vr_layout_band_split(layout_word) : 0u;
 }
 
 /* The band of an atom: 0 below the layout's split L (the learned atoms), else
@@ -292,7 +309,8 @@ VR_INLINE vr_uint vr_block_band_word(vr_uint band_word, vr_uint box_word, vr_uin
 
 /* Reads the next code of a block of s codes, starting at bit `bit` of the code stream that
  * begins at word `first` (vr_code_first_word; the stream runs on over the whole brick); before a
- * block's first code next_atom = 0; band_word is the block's (vr_block_band_word). Sets atom;
+ * block's first code next_atom = vr_block_first_atom; band_word is the block's
+ * (vr_block_band_word). Sets atom;
  * returns the signed quantized coefficient q (coefficient = coef_scale·q). */
 VR_INLINE int vr_read_code(VR_PAYLOAD_PARAM vr_uint first, vr_uint layout_word, vr_uint band_word,
                            vr_uint s, VR_INOUT(vr_uint, bit), VR_INOUT(vr_uint, next_atom),
@@ -339,7 +357,7 @@ VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint blocks_p
     vr_uint s = vr_entry_sparsity(layout_word, entry);
     value = mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry));
     vr_uint block_band_word = vr_block_band_word(band_word, box_word, s);
-    vr_uint next_atom = 0u, atom = 0u;
+    vr_uint next_atom = vr_block_first_atom(layout_word, box_word), atom = 0u;
     for (vr_uint k = 0u; k < s; ++k) {
       int q =
           vr_read_code(VR_PAYLOAD_ARG first, layout_word, block_band_word, s, bit, next_atom, atom);

@@ -89,6 +89,9 @@ struct KsvdPayloadParts {
   /// The magnitude model 0..9 (brick_decode.h, vr_magnitude_move: how a block's sparsity moves
   /// the band parameters); -1: the one giving the fewest bits, with the band parameters.
   int magnitude_model = -1;
+  /// The split flag (brick_decode.h, vr_block_first_atom): every atom is at least band_split, and
+  /// atom − band_split < 2^atom_bits (the DCT basis alone after a learned dictionary's atoms).
+  bool from_split = false;
   /// Atoms below this form band 0 (0..4095): the learned atoms before the DCT basis.
   std::uint32_t band_split = 0;
   std::vector<std::uint32_t> sparsity = std::vector<std::uint32_t>(BrickShape{}.blocks());
