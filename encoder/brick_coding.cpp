@@ -292,7 +292,7 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
     const Quantizer cq(static_cast<float>(step), std::int32_t{1} << VR_MAX_COEF_BITS);
     parts.atoms.clear();
     parts.values.clear();
-    double brick_error = 0;
+    double brick_error = 0, weighted_error = 0;
     std::size_t missed = 0;
     std::uint32_t most_atoms = 0;
     std::int64_t largest_q = 1;
@@ -366,6 +366,8 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
       parts.mean[b] = qmean;
       most_atoms = std::max(most_atoms, kept);
       brick_error += e;
+      weighted_error +=
+          (options.block_weights ? static_cast<double>(options.block_weights[b]) : 1.0) * e;
     }
     if (missed > 0 && step / 2 >= finest_step && options.coef_bits < 1) continue;
     parts.coef_bits = magnitude_bits(largest_q);
@@ -374,6 +376,7 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
     parts.dequantization[1] = mq.scale;
     parts.dequantization[2] = cq.scale;
     result->squared_error += brick_error;
+    result->weighted_error += weighted_error;
     result->codes += parts.atoms.size();
     result->blocks_over_bound += missed;
     return format::pack_ksvd_payload(parts);

@@ -39,6 +39,9 @@ struct QuantizeOptions {
   /// The atoms are the dictionary's from band_split on (the DCT basis after the learned atoms),
   /// indexed from 0: the payload takes the split flag (format::KsvdPayloadParts::from_split).
   bool from_split = false;
+  /// The brick's n³ block weights of the Lagrangian rule (null: 1 each), for
+  /// BrickQuantization::weighted_error.
+  const float* block_weights = nullptr;
   /// The step of the quantized coefficients (data units; never finer than the brick's largest
   /// coefficient / 2^16). 0: the brick's largest coefficient / 2^(fixed_coef_bits − 1).
   double coef_step = 0;
@@ -74,7 +77,8 @@ void owned_block_weights(format::BrickShape shape, std::uint32_t x, std::uint32_
 
 /// What quantize_brick adds up over the bricks it codes.
 struct BrickQuantization {
-  double squared_error = 0;  ///< of the quantized blocks (all n³ of each brick)
+  double squared_error = 0;   ///< of the quantized blocks (all n³ of each brick)
+  double weighted_error = 0;  ///< the same, each block's weighed by QuantizeOptions::block_weights
   std::size_t codes = 0;
   std::size_t blocks_over_bound = 0;  ///< blocks that missed max_abs_error even at 16 bits
 };

@@ -64,6 +64,7 @@ struct BrickCoding {
   bool weighted = false;
   bool measure_finest = false;       ///< PlaneCoding::measure_finest
   format::AtomTable decode_atoms{};  ///< ksvd, measure_finest: the atoms payloads decode with
+  double split_code_cost = 0;        ///< ksvd: FrameEncoder::split_code_cost
 
   bool ksvd() const { return settings.codec == format::Codec::ksvd; }
   /// The factor on ε for a brick of `level` whose own voxels differ from the frame by
@@ -96,13 +97,22 @@ struct ChunkWorkspace {
   dictionary::SparseCodes codes, dct_codes;
 };
 
+/// Bytes of a packed ksvd payload's code stream (after its header and entries).
+std::size_t code_stream_bytes(std::span<const std::byte> payload) {
+  vr_uint header[VR_HEADER_WORDS];
+  std::memcpy(header, payload.data(), sizeof header);
+  return payload.size() - 4 * std::size_t{vr_code_first_word(vr_layout_word(header),
+                                                             vr_box_entries(vr_box_word(header)))};
+}
+
 /// Quantizes the brick of blocks first_block .. first_block + n³ − 1 of `codes` (quantize_brick)
 /// and, when dct_codes is not null, the same blocks' codes of the DCT basis alone (dct_atoms, coded
-/// by dct_omp; the payload's split flag), keeping the one of the lower cost (the first on a tie):
-/// its squared error plus code_cost (the Lagrangian rule's gain an atom must bring, at the brick's
-/// ε) per code's worth of bytes, a code's worth being the first coding's mean; with code_cost 0
-/// (the other rules, under which both meet the same per-block target), the shorter payload. Adds
-/// what it kept to *result; *used_dct says which.
+/// by dct_omp; the payload's split flag), keeping the better (the first on a tie): the one with
+/// fewer blocks over the max-error bound, then the one of the lower cost, its squared error
+/// (weighed as the Lagrangian rule weighs the blocks, QuantizeOptions::block_weights) plus
+/// code_cost (the price of a code, lagrangian_factor·m·ε²) per code's worth of its bytes, a
+/// code's worth being the first coding's code stream bytes per code. Adds what it kept to
+/// *result; *used_dct says which.
 std::vector<std::byte> quantize_either(format::BrickShape shape, const float* columns,
                                        const float* means, const dictionary::SparseCodes& codes,
                                        const dictionary::SparseCodes* dct_codes,
@@ -123,15 +133,21 @@ std::vector<std::byte> quantize_either(format::BrickShape shape, const float* co
   split.orthonormal_atoms = dct_omp->orthonormal();
   std::vector<std::byte> alone = detail::quantize_brick(shape, columns, means, *dct_codes,
                                                         first_block, *dct_atoms, split, &basis);
-  bool dct = alone.size() < payload.size();
-  if (code_cost > 0 && all.codes > 0) {
+  bool dct;
+  if (basis.blocks_over_bound != all.blocks_over_bound) {
+    dct = basis.blocks_over_bound < all.blocks_over_bound;
+  } else if (all.codes > 0 && payload.size() > 4) {
     const double per_byte =
-        code_cost * static_cast<double>(all.codes) / static_cast<double>(payload.size());
-    dct = basis.squared_error + per_byte * static_cast<double>(alone.size()) <
-          all.squared_error + per_byte * static_cast<double>(payload.size());
+        code_cost * static_cast<double>(all.codes) /
+        static_cast<double>(std::max<std::size_t>(code_stream_bytes(payload), 1));
+    dct = basis.weighted_error + per_byte * static_cast<double>(alone.size()) <
+          all.weighted_error + per_byte * static_cast<double>(payload.size());
+  } else {
+    dct = alone.size() < payload.size();
   }
   const detail::BrickQuantization& kept = dct ? basis : all;
   result->squared_error += kept.squared_error;
+  result->weighted_error += kept.weighted_error;
   result->codes += kept.codes;
   result->blocks_over_bound += kept.blocks_over_bound;
   *used_dct = dct;
@@ -310,14 +326,14 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
     brick_qo.mean_step *= coding.scale_of(cell);
     brick_qo.coef_step *= coding.scale_of(cell);
     brick_qo.box = boxes[kk];
+    if (coding.weighted) brick_qo.block_weights = work.weights.data() + kk * brick_blocks;
     detail::BrickQuantization result;
     bool dct = false;
     cell.payload = quantize_either(
         coding.shape, work.columns.data() + kk * brick_blocks * VR_BLOCK_LENGTH,
         work.means.data() + kk * brick_blocks, work.codes,
         coding.dct_omp ? &work.dct_codes : nullptr, kk * brick_blocks, *coding.atoms,
-        coding.dct_omp, coding.dct_atoms, brick_qo,
-        coding.atom_gain_threshold * coding.scale_of(cell) * coding.scale_of(cell), &result, &dct);
+        coding.dct_omp, coding.dct_atoms, brick_qo, coding.split_code_cost, &result, &dct);
     used_dct[kk] = dct;
     cell.codes = result.codes;
     code_count += result.codes;
@@ -639,7 +655,8 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
     omp_ = std::make_shared<dictionary::BatchOmp>(dictionary_->atoms, o);
     // The basis alone, for bricks where the learned atoms do not pay (split flag: its atoms are
     // indexed from the band split, which must then be where the basis starts).
-    if (settings_.split_bricks && atoms_.dct_basis && atoms_.count > format::dct_basis_atoms &&
+    if (settings_.split_bricks && settings_.fixed_sparsity == 0 && atoms_.dct_basis &&
+        atoms_.count > format::dct_basis_atoms &&
         band_split_ == atoms_.count - format::dct_basis_atoms) {
       dct_atoms_ = dictionary_->atoms.rightCols(format::dct_basis_atoms);
       dct_omp_ = std::make_shared<dictionary::BatchOmp>(dct_atoms_, o);
@@ -650,6 +667,11 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
     throw InputError("the brick size must be a multiple of 6 in 12..66, not " +
                      std::to_string(settings_.brick_size));
   }
+}
+
+double FrameEncoder::split_code_cost() const {
+  return settings_.lagrangian_factor * static_cast<double>(VR_BLOCK_LENGTH) * settings_.tolerance *
+         settings_.tolerance;
 }
 
 double FrameEncoder::atom_gain_threshold() const {
@@ -707,8 +729,8 @@ std::vector<std::byte> FrameEncoder::encode_brick(std::span<const float> brick) 
   bool dct = false;
   return quantize_either(shape, columns.data(), means.data(), codes,
                          dct_omp_ ? &dct_codes : nullptr, 0, dictionary_->atoms, dct_omp_.get(),
-                         dct_omp_ ? &dct_atoms_ : nullptr, quantize_options(),
-                         atom_gain_threshold(), &result, &dct);
+                         dct_omp_ ? &dct_atoms_ : nullptr, quantize_options(), split_code_cost(),
+                         &result, &dct);
 }
 
 CodedFrame FrameEncoder::code(std::size_t t, const Volume& frame, bool keep_originals) const {
@@ -761,6 +783,7 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
                      atom_gain_threshold(),
                      geometry.size(),
                      false};
+  coding.split_code_cost = ksvd ? split_code_cost() : 0;
   coding.weighted = ksvd && coding.atom_gain_threshold > 0 &&
                     (settings_.weight_owned_voxels || settings_.level_tolerance_factor != 1 ||
                      settings_.uses_level_detail());

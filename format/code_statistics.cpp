@@ -49,8 +49,10 @@ void CodeStatistics::add(std::span<const std::byte> payload, std::uint32_t atom_
     const vr_uint gap_rice = s > 0 ? vr_gap_rice(layout_word, s) : 0;
     const vr_uint block_band_word = vr_block_band_word(band_word, box_word, s);
     const std::uint32_t s_class = vr_highest_bit(s + 1);
-    // Before the block's first code: the atom before the first it may name (−1 without the flag).
-    std::uint32_t previous = vr_block_first_atom(layout_word, box_word) - 1u;
+    // Before the block's first code: the atom before the first it may name (−1 without the flag);
+    // the gaps' context counts from there.
+    const std::uint32_t first_atom = vr_block_first_atom(layout_word, box_word);
+    std::uint32_t previous = first_atom - 1u;
     for (vr_uint i = 0; i < s; ++i, ++k) {
       const std::uint32_t atom = parts.atoms[k];
       const std::uint32_t gap = atom - previous - 1;
@@ -64,7 +66,7 @@ void CodeStatistics::add(std::span<const std::byte> payload, std::uint32_t atom_
       code_bits += gap_length + magnitude_length + 1;  // the code stream is nothing else
       escapes += (gap >> gap_rice) >= VR_ESCAPE_ZEROS;
       escapes += (magnitude >> magnitude_rice) >= VR_ESCAPE_ZEROS;
-      gaps.add((s_class << 8) | vr_highest_bit(previous + 2), gap);
+      gaps.add((s_class << 8) | vr_highest_bit(previous - first_atom + 2), gap);
       magnitudes.add((vr_atom_band(layout_word, atom) << 8) | s_class, magnitude);
       previous = atom;
     }

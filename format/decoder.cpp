@@ -140,12 +140,10 @@ class BandRice {
     const vr_uint split = vr_layout_band_split(layout_word);
     const std::size_t stride =
         std::size_t{vr_block_first_atom(layout_word, box_word)} + (std::size_t{1} << atom_bits) + 1;
-    if (stride != bands_.size() || split != split_) {  // each atom's band, kept while they hold
-      bands_.resize(stride);
-      for (vr_uint atom = 0; atom < stride; ++atom)
-        bands_[atom] = static_cast<std::uint8_t>(vr_atom_band(layout_word, atom));
-      split_ = split;
-    }
+    if (split != split_) bands_.clear(), split_ = split;  // each atom's band, for this split
+    for (std::size_t atom = bands_.size(); atom < stride; ++atom)
+      bands_.push_back(
+          static_cast<std::uint8_t>(vr_atom_band(layout_word, static_cast<vr_uint>(atom))));
     const bool moves = vr_box_magnitude_model(box_word) != 0;
     tables_.resize((moves ? 2 * VR_MAGNITUDE_SWING + 1 : 1) * stride);
     for (int move = moves ? -VR_MAGNITUDE_SWING : 0; move <= (moves ? VR_MAGNITUDE_SWING : 0);

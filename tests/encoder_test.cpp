@@ -645,21 +645,25 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
       parts.gap_shift = static_cast<int>(bits % 4);
       parts.magnitude_model = static_cast<int>(bits % (VR_MAX_MAGNITUDE_MODEL + 1));
     }
-    std::vector<std::uint32_t> order(atom_count);
+    // Widths 2, 6 and 10: the split flag, every atom from the band split on.
+    parts.from_split = bits % 4 == 2 && bits < 12;
+    const std::uint32_t first_atom = parts.from_split ? parts.band_split : 0;
+    const std::uint32_t named = atom_count - first_atom;
+    std::vector<std::uint32_t> order(named);
     for (std::uint32_t b = 0; b < blocks_per_brick; ++b) {
-      parts.sparsity[b] =
-          static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << parts.sparsity_bits));
+      parts.sparsity[b] = std::min<std::uint32_t>(
+          static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << parts.sparsity_bits)), named);
       parts.mean[b] = static_cast<std::uint32_t>(rng.below(std::uint64_t{1} << bits));
       if (b == 0) parts.mean[b] = (1u << bits) - 1u;  // the largest value of the width
-      if (b == 1) parts.sparsity[b] = (1u << parts.sparsity_bits) - 1u;
+      if (b == 1) parts.sparsity[b] = std::min((1u << parts.sparsity_bits) - 1u, named);
       // Distinct atoms in increasing order (a partial shuffle, sorted), the first and last atom
       // and the largest magnitudes among them; values of both signs, small and escaped.
-      for (std::uint32_t k = 0; k < atom_count; ++k) order[k] = k;
+      for (std::uint32_t k = 0; k < named; ++k) order[k] = first_atom + k;
       for (std::uint32_t k = 0; k < parts.sparsity[b]; ++k)
-        std::swap(order[k], order[k + rng.below(atom_count - k)]);
+        std::swap(order[k], order[k + rng.below(named - k)]);
       std::sort(order.begin(), order.begin() + parts.sparsity[b]);
       if (b == 2 && parts.sparsity[b] >= 2)
-        order[0] = 0, order[parts.sparsity[b] - 1] = atom_count - 1;
+        order[0] = first_atom, order[parts.sparsity[b] - 1] = atom_count - 1;
       for (std::uint32_t k = 0; k < parts.sparsity[b]; ++k) {
         parts.atoms.push_back(order[k]);
         const auto largest = std::int64_t{1} << parts.coef_bits;
@@ -709,6 +713,7 @@ TEST(BrickPayload, PackedFieldsReadBackAtEveryWidth) {
       ASSERT_EQ(back.gap_shift, parts.gap_shift);
       ASSERT_EQ(back.magnitude_model, parts.magnitude_model);
     }
+    ASSERT_EQ(back.from_split, parts.from_split) << bits << " bits";
     // A layout word with a width out of range (every 4-bit mean width is valid), a short
     // payload, a payload with a word too many, nonzero padding and an atom index past K are
     // refused.
@@ -777,9 +782,39 @@ TEST(BrickPayload, PackingRefusesWhatTheFormatCannotHold) {
   parts.magnitude_model = VR_MAX_MAGNITUDE_MODEL + 1;
   refused({3, 5}, {-8, 8});  // no such magnitude model
   parts.magnitude_model = -1;
+  parts.from_split = true;  // atoms from the band split on, less than 2^4 past it
+  parts.band_split = 4;
+  refused({3, 5}, {-8, 8});   // an atom below the split
+  refused({5, 20}, {-8, 8});  // 16 past the split: more than 4 bits
+  parts.atoms = {4, 19};
+  parts.values = {-8, 8};
+  EXPECT_NO_THROW(format::pack_ksvd_payload(parts));
+  parts.from_split = false;
+  parts.band_split = 0;
   parts.atoms = {3, 5};
   parts.values = {-8, 8};
   EXPECT_NO_THROW(format::pack_ksvd_payload(parts));
+}
+
+TEST(BrickPayload, TheMagnitudeMoveFollowsTheSpecification) {
+  // clamp(floor(log2(s + 1)) − (m − 1), −2, 2) for m ≥ 1, 0 for m = 0 (format/SPEC.md).
+  const struct {
+    vr_uint m, s;
+    int move;
+  } cases[] = {{0, 255, 0},  {1, 0, 0},   {1, 1, 1}, {1, 3, 2},  {1, 255, 2}, {9, 0, -2},
+               {9, 254, -1}, {9, 255, 0}, {3, 3, 0}, {3, 1, -1}, {3, 15, 2},  {5, 6, -2}};
+  for (const auto& c : cases) {
+    const vr_uint box = vr_box_with_magnitude_model(vr_make_box(2, 2, 2), c.m);
+    EXPECT_EQ(vr_magnitude_move(box, c.s), c.move) << "m " << c.m << ", s " << c.s;
+  }
+  // Every band's parameter moves, within 0..15.
+  EXPECT_EQ(vr_moved_band_word(0xF0123456u, 2), 0xF2345678u);
+  EXPECT_EQ(vr_moved_band_word(0xF0123456u, -2), 0xD0001234u);
+  EXPECT_EQ(vr_block_band_word(0x11111111u, vr_box_with_magnitude_model(0, 1), 255), 0x33333333u);
+  // The split flag starts a block's gaps at the band split.
+  const vr_uint layout = vr_make_layout(4, 4, 4, 8, 0, 1024);
+  EXPECT_EQ(vr_block_first_atom(layout, vr_make_box(2, 2, 2)), 0u);
+  EXPECT_EQ(vr_block_first_atom(layout, vr_box_with_split_flag(vr_make_box(2, 2, 2), 1)), 1024u);
 }
 
 TEST(BrickPayload, TheMagnitudeModelShortensBricksWhoseMagnitudesGrowWithSparsity) {
@@ -1626,6 +1661,27 @@ TEST(Encoder, BricksWhereLearnedAtomsDoNotPayUseTheBasisAlone) {
   EXPECT_GT(psnr_split, 50.0);
   EXPECT_LT(worst_split, 40 * eps);
   EXPECT_LT(worst_whole, 40 * eps);
+  // Under the ε rule the same choice holds (the price of a code is the same,
+  // lagrangian_factor·m·ε²); at fixed rate (a fixed number of atoms a block, whatever their error)
+  // no brick is split: its fewer bytes would not say it is as good.
+  const auto flagged_bricks = [&](const std::vector<std::byte>& bytes) {
+    const format::FrameView view(bytes, "rule.vrf");
+    std::size_t count = 0;
+    for (std::uint32_t i = 0; i < view.brick_count(); ++i)
+      count += view.brick_bytes(i).size() != 4 &&
+               vr_box_from_split(format::ksvd_box_word(view.brick_bytes(i))) != 0;
+    return count;
+  };
+  {
+    auto s = ksvd_settings(eps, v);
+    s.brick_size = 24;
+    s.rule = encoder::VariableRateRule::tolerance;
+    const auto bytes = encoder::FrameEncoder(&d, s).encode(0, v);
+    EXPECT_GT(flagged_bricks(bytes), 0u);
+    EXPECT_GT(finest_level_error(bytes, d, v).first, 50.0);
+    s.fixed_sparsity = 4;
+    EXPECT_EQ(flagged_bricks(encoder::FrameEncoder(&d, s).encode(0, v)), 0u);
+  }
   // A dictionary without learned atoms (the basis alone) has nothing to split: no flag.
   const auto dct = dictionary::from_file(format::dct_dictionary(6, "test"));
   auto s = ksvd_settings(eps, v);

@@ -137,9 +137,11 @@ struct CodingSettings {
   /// pursuit"). Off by default: it recovers part of the quantization loss for more bytes (about
   /// neutral at equal bps) and slows the encoding.
   bool extend_pursuit = false;
-  /// With a learned dictionary that ends with the DCT basis: code each brick also with the basis
-  /// alone (its atoms indexed from the band split, format/SPEC.md, "split flag") and keep the
-  /// shorter payload, so that the learned atoms are used only in the bricks where they pay.
+  /// Variable rate with a learned dictionary that ends with the DCT basis: code each brick also
+  /// with the basis alone (its atoms indexed from the band split, format/SPEC.md, "split flag")
+  /// and keep the coding of the lower cost (fewer blocks over --max-error, then squared error plus
+  /// lagrangian_factor·m·ε² per code's worth of bytes), so that the learned atoms are used only in
+  /// the bricks where they pay. Off at fixed rate.
   bool split_bricks = true;
   double value_min = 0, value_max = 0;  ///< the sequence's value range, for node histograms
 };

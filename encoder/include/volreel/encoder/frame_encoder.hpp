@@ -193,6 +193,10 @@ class FrameEncoder {
   std::uint32_t band_split_ = 0;
   format::AtomTable atoms_{};
   detail::QuantizeOptions quantize_options() const;
+  /// The price of a code when a brick's two codings are compared (split_bricks):
+  /// lagrangian_factor·m·ε², the Lagrangian rule's least gain of an atom, under either variable
+  /// rate rule.
+  double split_code_cost() const;
 };
 
 }  // namespace volreel::encoder

@@ -69,7 +69,7 @@ VR_INLINE float vr_as_float(vr_uint bits) {
 #define vr_as_float(bits) uintBitsToFloat(bits)
 #endif
 
-/* Constants of format version 8 (SPEC.md). A brick of a container is n·6 voxels a side (n
+/* Constants of format version 9 (SPEC.md). A brick of a container is n·6 voxels a side (n
  * blocks, 2 ≤ n ≤ 11: the manifest's brick_size), its blocks x fastest; the functions below take
  * the number of blocks of a brick, n³. A GLSL includer declares n as a specialization constant,
  * `layout(constant_id = ...) const uint VR_BLOCKS_PER_AXIS`, before including this file. */

@@ -74,8 +74,8 @@ std::uint32_t ksvd_box_word(std::span<const std::byte> payload);
 /// (n³ blocks for bricks of 6n voxels a side) its sparsity (< 2^t) and quantized mean (< 2^b),
 /// the coded blocks' box (brick_decode.h, vr_box_word: blocks outside it have sparsity 0 and are
 /// stored without an entry, decoding to mean_bias) and the codes of all blocks in block order,
-/// each block's in increasing atom order (atom index < 2^a, quantized value q ≠ 0 with
-/// |q| ≤ 2^c).
+/// each block's in increasing atom order (atom index < 2^a, or in L .. L + 2^a − 1 under the split
+/// flag with L = band_split; quantized value q ≠ 0 with |q| ≤ 2^c).
 struct KsvdPayloadParts {
   float dequantization[3] = {0, 0, 0};
   std::uint32_t mean_bits = 12;
