@@ -181,6 +181,7 @@ void add_to_breakdown(format::BrickShape shape, const Cell& c,
     const vr_uint first = vr_code_first_word(layout, vr_box_entries(box));
     ++st.mean_bits_histogram[vr_layout_mean_bits(layout)];
     ++st.coef_bits_histogram[vr_layout_coef_bits(layout)];
+    st.split_bricks += vr_box_from_split(box);
     const vr_uint band_word = vr_band_word(words.data());
     vr_uint bit = 0;
     for (std::uint32_t k = 0, e = 0; k < blocks; ++k) {

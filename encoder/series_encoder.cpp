@@ -307,6 +307,7 @@ void add_frame(const FrameStats& st, EncodeSummary& summary) {
   summary.bricks_stored += st.bricks;
   summary.nodes_interpolated += st.interpolated_nodes;
   summary.blocks_over_bound += st.blocks_over_bound;
+  summary.split_bricks += st.split_bricks;
 }
 
 }  // namespace
@@ -420,6 +421,7 @@ std::vector<double> additive_figures(const EncodeSummary& s) {
   for (std::size_t n : s.sparsity_histogram) v.push_back(static_cast<double>(n));
   for (std::size_t n : s.mean_bits_histogram) v.push_back(static_cast<double>(n));
   for (std::size_t n : s.coef_bits_histogram) v.push_back(static_cast<double>(n));
+  v.push_back(static_cast<double>(s.split_bricks));
   return v;
 }
 
@@ -456,6 +458,7 @@ void set_additive_figures(EncodeSummary& s, std::span<const double> v) {
   for (std::size_t& n : s.sparsity_histogram) n = count();
   for (std::size_t& n : s.mean_bits_histogram) n = count();
   for (std::size_t& n : s.coef_bits_histogram) n = count();
+  s.split_bricks = count();
 }
 
 /// Every rank's summary into one, on every rank: sums, the slowest rank's time, the worst frame.

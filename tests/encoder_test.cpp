@@ -1628,13 +1628,18 @@ TEST(Encoder, BricksWhereLearnedAtomsDoNotPayUseTheBasisAlone) {
   const Volume v = analytic_volume(datasets::AnalyticField::blobs, {72, 40, 36});
   const auto [mn, mx] = std::minmax_element(v.data.begin(), v.data.end());
   const double eps = 1e-3 * static_cast<double>(*mx - *mn);
+  encoder::FrameStats stats;
   const auto frame_of = [&](bool split) {
     auto s = ksvd_settings(eps, v);
     s.brick_size = 24;
     s.split_bricks = split;
-    return encoder::FrameEncoder(&d, s).encode(0, v);
+    stats = {};
+    return encoder::FrameEncoder(&d, s).encode(0, v, &stats);
   };
-  const auto split = frame_of(true), whole = frame_of(false);
+  const auto split = frame_of(true);
+  const std::size_t split_counted = stats.split_bricks;
+  const auto whole = frame_of(false);
+  EXPECT_EQ(stats.split_bricks, 0u);
   const format::FrameView f(split, "split.vrf"), g(whole, "whole.vrf");
   std::size_t flagged = 0, ksvd_bricks = 0;
   for (std::uint32_t i = 0; i < f.brick_count(); ++i) {
@@ -1653,6 +1658,7 @@ TEST(Encoder, BricksWhereLearnedAtomsDoNotPayUseTheBasisAlone) {
     EXPECT_LE(parts.atom_bits, 8u) << "indices into the 215 atoms of the basis";
   }
   EXPECT_GT(flagged, 0u);
+  EXPECT_EQ(split_counted, flagged) << "FrameStats::split_bricks counts them";
   EXPECT_LT(split.size(), whole.size());
   format::validate_payloads(f, atom_table(d));
   const auto [psnr_split, worst_split] = finest_level_error(split, d, v);

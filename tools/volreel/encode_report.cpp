@@ -78,6 +78,10 @@ void print_breakdown(const encoder::EncodeSummary& s) {
               static_cast<double>(bits) / brick_count, s.mean_bits_histogram.size() - 1);
   for (std::size_t count : s.mean_bits_histogram)
     std::printf(" %.1f", 100.0 * static_cast<double>(count) / brick_count);
+  if (s.split_bricks > 0)
+    std::printf(
+        "\ncoded with the DCT basis alone (the learned atoms did not pay): %zu of %zu bricks",
+        s.split_bricks, bricks);
   std::printf("\n");
 }
 

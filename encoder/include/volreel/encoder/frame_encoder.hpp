@@ -67,7 +67,8 @@ struct FrameStats {
   std::array<std::size_t, VR_MEAN_BITS + 1>
       mean_bits_histogram{};                          ///< coded bricks (ksvd) by mean bits
   std::array<std::size_t, 17> coef_bits_histogram{};  ///< coded bricks (ksvd) by magnitude bits
-  std::uint64_t code_bits = 0;  ///< ksvd: bits of the code streams (padding excluded)
+  std::size_t split_bricks = 0;  ///< coded bricks (ksvd) with the split flag: the DCT basis alone
+  std::uint64_t code_bits = 0;   ///< ksvd: bits of the code streams (padding excluded)
   /// Blocks that missed the pointwise bound (CodingSettings::max_error) even with 16-bit
   /// coefficients and Smax atoms: 0 whenever the bound holds.
   std::size_t blocks_over_bound = 0;

@@ -98,6 +98,7 @@ struct EncodeSummary {
   std::array<std::size_t, VR_MEAN_BITS + 1> mean_bits_histogram{};    ///< FrameStats', summed
   std::array<std::size_t, 17> coef_bits_histogram{};                  ///< FrameStats', summed
   std::uint64_t code_bits = 0;                                        ///< FrameStats', summed
+  std::size_t split_bricks = 0;                                       ///< FrameStats', summed
   std::size_t blocks_over_bound = 0;                                  ///< FrameStats', summed
   double seconds_pyramid = 0, seconds_bricks = 0, seconds_omp = 0, seconds_quantize = 0;
 
