@@ -679,8 +679,7 @@ double FrameEncoder::atom_gain_threshold() const {
   if (settings_.codec != format::Codec::ksvd || settings_.fixed_sparsity > 0 ||
       settings_.rule != VariableRateRule::lagrangian)
     return 0;
-  return settings_.lagrangian_factor * static_cast<double>(VR_BLOCK_LENGTH) * settings_.tolerance *
-         settings_.tolerance;
+  return split_code_cost();
 }
 
 QuantizeOptions FrameEncoder::quantize_options() const {

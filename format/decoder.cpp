@@ -127,11 +127,10 @@ class CodeStream {
   std::uint64_t bit_ = 0;
 };
 
-/// The magnitudes' Rice parameter (vr_band_rice) of every atom index 0..F + 2^a of a payload (F:
-/// vr_block_first_atom), one
-/// table for each move of its magnitude model (vr_magnitude_move, −2..2), and the table of each
-/// sparsity class floor(log2(s + 1)) (0..8): one load a code instead of the band's logarithm,
-/// and one load a block for its table.
+/// The magnitudes' Rice parameter (vr_band_rice) of every atom index 0..F + 2^a of a payload
+/// (F: vr_block_first_atom), one table for each move of its magnitude model (vr_magnitude_move,
+/// −2..2), and the table of each sparsity class floor(log2(s + 1)) (0..8): one load a code
+/// instead of the band's logarithm, and one load a block for its table.
 class BandRice {
  public:
   /// For a payload's layout, band and box words.
@@ -714,8 +713,7 @@ std::pair<vr_uint, vr_uint> choose_magnitude_model(const KsvdPayloadParts& parts
       for (vr_uint c = 0; c < classes; ++c) {
         const int move = vr_magnitude_move(box, (1u << c) - 1u);  // s = 2^c − 1 is of class c
         for (vr_uint r = 0; r < 16; ++r)
-          band_bits[r] +=
-              bits[band][c][static_cast<vr_uint>(std::clamp(static_cast<int>(r) + move, 0, 15))];
+          band_bits[r] += bits[band][c][vr_moved_band_word(r, move) & 0xFu];  // r as band 0
       }
       const vr_uint r =
           parts.band_rice[band] >= 0
