@@ -3,7 +3,10 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
+#include <functional>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -78,7 +81,8 @@ struct OmpWorkspace {
   std::vector<int> support;
   std::vector<const float*> columns;  // G's columns of the support
   std::vector<float> chunk_max;       // largest |α| per chunk of α
-  std::vector<int> order;             // orthonormal atoms only: the candidates, best first
+  /// Orthonormal atoms only: the candidates, best first, as keys (orthonormal_order_key).
+  std::vector<std::uint64_t> order;
   // ORMP only:
   Eigen::VectorXf projected;  // K: ‖P⊥d_k‖², the atoms' squared norms orthogonal to the support
   std::vector<float> rows;  // S × K: row j = (L⁻¹ G_{I,:})_j, the support's Gram–Schmidt rows
@@ -296,9 +300,9 @@ int code_one_block_ormp(const float* alpha0, double energy, const Eigen::MatrixX
     L(s, s) = root;
     Eigen::Map<Eigen::VectorXf> row(q, K);
     row = Eigen::Map<const Eigen::VectorXf>(g_k, K);
-    for (int c = 0; c < s; ++c)
-      row.noalias() -= L(s, c) * Eigen::Map<const Eigen::VectorXf>(
-                                     ws.rows.data() + static_cast<std::size_t>(c) * Ku, K);
+    if (s > 0)  // one matrix-vector product over the earlier rows, each read once
+      row.noalias() -=
+          Eigen::Map<const Eigen::MatrixXf>(ws.rows.data(), K, s) * L.row(s).head(s).transpose();
     row *= 1.0f / root;
     Eigen::Map<Eigen::VectorXf>(alpha, K).noalias() -= z * row;
     Eigen::Map<Eigen::VectorXf>(projected, K).array() -= row.array().square();
@@ -335,21 +339,24 @@ int code_one_block_orthonormal(const float* alpha0, double energy, Eigen::Index 
   // An atom below the gain stop can be taken only while the residual is above the bound (the stop
   // then does not apply) and the target; a gain stop of 0 stops nothing.
   const bool gain_stops = rule.min_gain > 0 && energy <= rule.bound;
-  std::vector<int>& order = ws.order;
+  std::vector<std::uint64_t>& order = ws.order;
   order.clear();
   for (Eigen::Index k = 0; k < K; ++k) {
     const double a = static_cast<double>(alpha0[k]);
     // |α| > 0 also leaves out a NaN, which would break the sort's ordering.
-    if (std::abs(a) > 0 && (!gain_stops || a * a >= rule.min_gain))
-      order.push_back(static_cast<int>(k));
+    if (std::abs(a) > 0 && (!gain_stops || a * a >= rule.min_gain)) {
+      // The bits of a positive float order as the float does: |α| in the high word, the index
+      // complemented in the low one, so that a descending sort puts the first index first on ties
+      // (and compares integers instead of loading α twice a comparison).
+      const std::uint32_t magnitude = std::bit_cast<std::uint32_t>(std::abs(alpha0[k]));
+      order.push_back((std::uint64_t{magnitude} << 32) | ~static_cast<std::uint32_t>(k));
+    }
   }
-  std::sort(order.begin(), order.end(), [alpha0](int a, int b) {
-    const float x = std::abs(alpha0[a]), y = std::abs(alpha0[b]);
-    return x > y || (x == y && a < b);
-  });
+  std::sort(order.begin(), order.end(), std::greater<>());
   double residual = energy;
   int s = 0;
-  for (const int k : order) {
+  for (const std::uint64_t key : order) {
+    const int k = static_cast<int>(~static_cast<std::uint32_t>(key));
     if (!(residual > rule.target) || s >= rule.max_atoms) break;
     const double z = static_cast<double>(alpha0[k]);
     if (rule.min_gain > 0 && residual <= rule.bound && z * z < rule.min_gain) break;

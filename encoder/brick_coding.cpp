@@ -282,22 +282,29 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
   const bool pointwise = options.max_abs_error > 0;
   const bool refit = options.refit && !options.orthonormal_atoms;
   const int max_atoms = std::min<int>(options.max_atoms, (1 << VR_MAX_SPARSITY_BITS) - 1);
-  Eigen::VectorXf residual(VR_BLOCK_LENGTH), correlation;
   const std::size_t slots = static_cast<std::size_t>(std::max(max_atoms, codes.max_atoms)) + 1;
-  std::vector<std::int32_t> a(slots);
-  std::vector<float> c(slots);
-  std::vector<std::int32_t> q(slots), q2(slots);
-  std::vector<std::pair<std::uint32_t, std::int32_t>> block_codes;
+  // What each block's quantization gives, kept per block so that blocks can be quantized in any
+  // order (in parallel) and the brick's sums still add up in block order.
+  struct BlockResult {
+    std::vector<std::pair<std::uint32_t, std::int32_t>> codes;  // atom, value; sorted, no zeros
+    double error = 0;
+    bool missed = false;
+  };
+  std::vector<BlockResult> block_results(blocks);
+  // One thread's buffers.
+  struct Scratch {
+    Eigen::VectorXf residual, correlation;
+    std::vector<std::int32_t> a, q, q2;
+    std::vector<float> c;
+    std::vector<std::pair<std::uint32_t, std::int32_t>> block_codes;
+    explicit Scratch(std::size_t n) : residual(VR_BLOCK_LENGTH), a(n), q(n), q2(n), c(n) {}
+  };
   for (double step = first_step;; step /= 2) {
     const Quantizer cq(static_cast<float>(step), std::int32_t{1} << VR_MAX_COEF_BITS);
-    parts.atoms.clear();
-    parts.values.clear();
-    double brick_error = 0, weighted_error = 0;
-    std::size_t missed = 0;
-    std::uint32_t most_atoms = 0;
-    std::int64_t largest_q = 1;
-    for (std::uint32_t b = 0; b < blocks; ++b) {
-      if (!coded(b)) continue;  // sparsity and mean 0: no entry in the payload
+    const auto code_block = [&](std::uint32_t b, Scratch& w) {
+      BlockResult& out = block_results[b];
+      auto &a = w.a, &q = w.q, &q2 = w.q2;
+      auto& c = w.c;
       const std::size_t i = first_block + b;
       int s = codes.count[i];
       std::copy_n(codes.atoms_of(i), s, a.data());
@@ -319,14 +326,14 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
           for (int k = 0; k < s; ++k)
             r -= cq.value(q[static_cast<std::size_t>(k)]) *
                  atoms(static_cast<Eigen::Index>(v), a[static_cast<std::size_t>(k)]);
-          residual(static_cast<Eigen::Index>(v)) = r;
+          w.residual(static_cast<Eigen::Index>(v)) = r;
         }
-        correlation.noalias() = atoms.transpose() * residual;
-        for (int k = 0; k < s; ++k) correlation(a[static_cast<std::size_t>(k)]) = 0;
+        w.correlation.noalias() = atoms.transpose() * w.residual;
+        for (int k = 0; k < s; ++k) w.correlation(a[static_cast<std::size_t>(k)]) = 0;
         Eigen::Index best = 0;
-        correlation.cwiseAbs().maxCoeff(&best);
+        w.correlation.cwiseAbs().maxCoeff(&best);
         a[static_cast<std::size_t>(s)] = static_cast<std::int32_t>(best);
-        c[static_cast<std::size_t>(s)] = correlation(best);
+        c[static_cast<std::size_t>(s)] = w.correlation(best);
         // Past max_refit_atoms each coefficient is rounded on its own: keep the ones already
         // quantized where they are.
         if (s + 1 > max_refit_atoms)
@@ -342,32 +349,58 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
         miss = miss2;
         std::copy_n(q2.begin(), s, q.begin());
       }
-      if (miss && pointwise) ++missed;
+      out.missed = miss && pointwise;
+      out.error = e;
       // The block's codes: zeros left out, in increasing atom order (an atom twice adds up).
+      auto& block_codes = w.block_codes;
       block_codes.clear();
       for (int k = 0; k < s; ++k)
         block_codes.emplace_back(static_cast<std::uint32_t>(a[static_cast<std::size_t>(k)]),
                                  q[static_cast<std::size_t>(k)]);
       std::sort(block_codes.begin(), block_codes.end());
-      std::uint32_t kept = 0;
+      out.codes.clear();
       for (std::size_t k = 0; k < block_codes.size();) {
         const std::uint32_t atom = block_codes[k].first;
         std::int64_t value = 0;
         for (; k < block_codes.size() && block_codes[k].first == atom; ++k)
           value += block_codes[k].second;
         value = std::clamp<std::int64_t>(value, -cq.limit, cq.limit);
-        if (value == 0) continue;
-        parts.atoms.push_back(first_atom + atom);
-        parts.values.push_back(static_cast<std::int32_t>(value));
-        largest_q = std::max(largest_q, value < 0 ? -value : value);
-        ++kept;
+        if (value != 0) out.codes.emplace_back(first_atom + atom, static_cast<std::int32_t>(value));
       }
-      parts.sparsity[b] = kept;
       parts.mean[b] = qmean;
+    };
+    // A brick's blocks are independent: with options.parallel_blocks (the caller codes fewer
+    // bricks at once than there are threads) they are shared among the threads.
+#pragma omp parallel if (options.parallel_blocks)
+    {
+      Scratch scratch(slots);
+#pragma omp for schedule(dynamic, 8)
+      for (std::ptrdiff_t bi = 0; bi < static_cast<std::ptrdiff_t>(blocks); ++bi) {
+        const auto b = static_cast<std::uint32_t>(bi);
+        if (coded(b)) code_block(b, scratch);  // others: sparsity and mean 0, no entry
+      }
+    }
+    parts.atoms.clear();
+    parts.values.clear();
+    double brick_error = 0, weighted_error = 0;
+    std::size_t missed = 0;
+    std::uint32_t most_atoms = 0;
+    std::int64_t largest_q = 1;
+    for (std::uint32_t b = 0; b < blocks; ++b) {
+      if (!coded(b)) continue;
+      const BlockResult& r = block_results[b];
+      for (const auto& [atom, value] : r.codes) {
+        parts.atoms.push_back(atom);
+        parts.values.push_back(value);
+        largest_q = std::max<std::int64_t>(largest_q, value < 0 ? -std::int64_t{value} : value);
+      }
+      const auto kept = static_cast<std::uint32_t>(r.codes.size());
+      parts.sparsity[b] = kept;
       most_atoms = std::max(most_atoms, kept);
-      brick_error += e;
+      missed += r.missed;
+      brick_error += r.error;
       weighted_error +=
-          (options.block_weights ? static_cast<double>(options.block_weights[b]) : 1.0) * e;
+          (options.block_weights ? static_cast<double>(options.block_weights[b]) : 1.0) * r.error;
     }
     if (missed > 0 && step / 2 >= finest_step && options.coef_bits < 1) continue;
     parts.coef_bits = magnitude_bits(largest_q);

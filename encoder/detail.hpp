@@ -54,6 +54,9 @@ struct QuantizeOptions {
   /// The brick's box word of coded blocks (brick_decode.h, vr_box_word; 0: every block): the
   /// blocks outside are not coded and decode to the payload's mean_bias.
   std::uint32_t box = 0;
+  /// Quantize the brick's blocks on all threads (OpenMP): for callers that code fewer bricks at
+  /// once than there are threads. The payload is the same either way.
+  bool parallel_blocks = false;
 };
 
 /// A constant brick's payload: its one value (4 bytes).

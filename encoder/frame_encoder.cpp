@@ -3,6 +3,8 @@
 // and the node table of the nodes kept.
 #include "volreel/encoder/frame_encoder.hpp"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -319,7 +321,10 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
   std::size_t code_count = 0, over_bound = 0;
   const QuantizeOptions& qo = coding.quantize;
   std::vector<char> used_dct(coded.size(), 0);  // the brick kept the basis's codes
-#pragma omp parallel for schedule(dynamic, 1) reduction(+ : quantized_error, code_count, over_bound)
+  // Fewer bricks than threads (a small volume's one brick a frame): the bricks one after the
+  // other, each brick's blocks on all threads.
+  const bool by_blocks = coded.size() < static_cast<std::size_t>(omp_get_max_threads());
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : quantized_error, code_count, over_bound) if (!by_blocks)
   for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(coded.size()); ++k) {
     const auto kk = static_cast<std::size_t>(k);
     Cell& cell = chunk[coded[kk]];
@@ -327,6 +332,7 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
     brick_qo.mean_step *= coding.scale_of(cell);
     brick_qo.coef_step *= coding.scale_of(cell);
     brick_qo.box = boxes[kk];
+    brick_qo.parallel_blocks = by_blocks;
     if (coding.weighted) brick_qo.block_weights = work.weights.data() + kk * brick_blocks;
     detail::BrickQuantization result;
     bool dct = false;

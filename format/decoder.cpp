@@ -2,12 +2,15 @@
 #include "volreel/format/decoder.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <exception>
+#include <functional>
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "volreel/format/brick_decode.h"
 #include "volreel/format/dictionary_file.hpp"
@@ -656,11 +659,9 @@ class BitWriter {
   std::uint64_t bits_ = 0;
 };
 
-/// Writes (or, with out == nullptr, counts) the code stream of `parts` under `layout` and the
-/// band and box words.
-std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, vr_uint payload_band_word,
-                          vr_uint box, BitWriter* out) {
-  std::uint64_t bits = 0;
+/// Writes the code stream of `parts` under `layout` and the band and box words.
+void write_codes(const KsvdPayloadParts& parts, vr_uint layout, vr_uint payload_band_word,
+                 vr_uint box, BitWriter& out) {
   std::size_t k = 0;
   for (std::size_t b = 0; b < parts.sparsity.size(); ++b) {
     const vr_uint s = parts.sparsity[b];
@@ -672,36 +673,75 @@ std::uint64_t write_codes(const KsvdPayloadParts& parts, vr_uint layout, vr_uint
       const vr_uint gap = parts.atoms[k] - next_atom;
       next_atom = parts.atoms[k] + 1;
       const vr_uint magnitude = static_cast<vr_uint>(std::abs(std::int64_t{parts.values[k]}) - 1);
-      const vr_uint value_rice = vr_band_rice(layout, band_word, parts.atoms[k]);
-      if (out) {
-        out->rice(gap, gap_rice, parts.atom_bits);
-        out->rice(magnitude, value_rice, parts.coef_bits);
-        out->put(1, parts.values[k] < 0 ? 1u : 0u);
-      }
-      bits += rice_bits(gap, gap_rice, parts.atom_bits) +
-              rice_bits(magnitude, value_rice, parts.coef_bits) + 1;
+      out.rice(gap, gap_rice, parts.atom_bits);
+      out.rice(magnitude, vr_band_rice(layout, band_word, parts.atoms[k]), parts.coef_bits);
+      out.put(1, parts.values[k] < 0 ? 1u : 0u);
     }
   }
-  return bits;
 }
 
-/// The magnitude model (brick_decode.h, vr_magnitude_move) and band word with the fewest bits
-/// for `parts`, or those the parts fix (magnitude_model ≥ 0, a band_rice ≥ 0). The bits of every
-/// band, sparsity class floor(log2(s + 1)) and parameter are counted once, and each model adds
-/// them up.
-std::pair<vr_uint, vr_uint> choose_magnitude_model(const KsvdPayloadParts& parts, vr_uint layout) {
+/// Counts of the values one Rice parameter codes, so that the bits of every parameter are summed
+/// over the distinct values rather than over the codes (a dense brick has 10⁵ codes and few
+/// distinct gaps and magnitudes).
+class RiceTally {
+ public:
+  void add(vr_uint x) {
+    if (x < small) {
+      ++counts_[x];
+      end_ = std::max(end_, x + 1);
+    } else {
+      large_.push_back(x);
+    }
+  }
+  /// Σ rice_bits(x, k, escape_bits) over the values added.
+  std::uint64_t bits(vr_uint k, vr_uint escape_bits) const {
+    std::uint64_t sum = 0;
+    for (vr_uint x = 0; x < end_; ++x)
+      if (counts_[x] != 0) sum += counts_[x] * rice_bits(x, k, escape_bits);
+    for (const vr_uint x : large_) sum += rice_bits(x, k, escape_bits);
+    return sum;
+  }
+  bool empty() const { return end_ == 0 && large_.empty(); }
+
+ private:
+  static constexpr vr_uint small = 64;
+  std::array<std::uint64_t, small> counts_{};
+  vr_uint end_ = 0;
+  std::vector<vr_uint> large_;
+};
+
+/// The entropy coder's parameters with the fewest bits for `parts` (or those the parts fix:
+/// magnitude_model ≥ 0, a band_rice ≥ 0, gap_shift ≥ 0): the magnitude model (brick_decode.h,
+/// vr_magnitude_move) and band word, then the gap shift. The magnitudes are tallied by band and
+/// sparsity class floor(log2(s + 1)), each model adding up the bits of its moved parameters; the
+/// gaps by sparsity class, each shift taking its class's parameter (vr_gap_rice).
+struct CoderChoice {
+  vr_uint magnitude_model, band_word, gap_shift;
+};
+CoderChoice choose_coder(const KsvdPayloadParts& parts, vr_uint first_atom,
+                         const std::function<vr_uint(vr_uint)>& layout_of) {
   constexpr vr_uint classes = VR_MAX_SPARSITY_BITS + 1;  // floor(log2(s + 1)) ≤ 8
   static_assert(VR_MAX_MAGNITUDE_MODEL == classes);
-  std::array<std::array<std::array<std::uint64_t, 16>, classes>, VR_ATOM_BANDS> bits{};
+  const vr_uint layout = layout_of(0);
+  std::vector<RiceTally> magnitudes(VR_ATOM_BANDS * classes), gaps(classes);
   std::size_t k = 0;
   for (std::size_t b = 0; b < parts.sparsity.size(); ++b) {
     const vr_uint s = parts.sparsity[b], c = vr_highest_bit(s + 1u);
+    vr_uint next_atom = first_atom;
     for (vr_uint j = 0; j < s; ++j, ++k) {
+      gaps[c].add(parts.atoms[k] - next_atom);
+      next_atom = parts.atoms[k] + 1;
       const vr_uint magnitude = static_cast<vr_uint>(std::abs(std::int64_t{parts.values[k]}) - 1);
-      auto& row = bits[vr_atom_band(layout, parts.atoms[k])][c];
-      for (vr_uint r = 0; r < 16; ++r) row[r] += rice_bits(magnitude, r, parts.coef_bits);
+      magnitudes[vr_atom_band(layout, parts.atoms[k]) * classes + c].add(magnitude);
     }
   }
+  std::array<std::array<std::array<std::uint64_t, 16>, classes>, VR_ATOM_BANDS> bits{};
+  for (vr_uint band = 0; band < VR_ATOM_BANDS; ++band)
+    for (vr_uint c = 0; c < classes; ++c) {
+      const RiceTally& tally = magnitudes[band * classes + c];
+      if (!tally.empty())
+        for (vr_uint r = 0; r < 16; ++r) bits[band][c][r] = tally.bits(r, parts.coef_bits);
+    }
   // The band word and bits of model m: a band's parameter r costs, in the blocks of class c,
   // the bits of r moved by the class's move.
   const auto candidate = [&](vr_uint m) {
@@ -725,15 +765,24 @@ std::pair<vr_uint, vr_uint> choose_magnitude_model(const KsvdPayloadParts& parts
     }
     return std::pair{band_word, total};
   };
-  vr_uint best = 0;
+  CoderChoice choice{0, 0, parts.gap_shift >= 0 ? static_cast<vr_uint>(parts.gap_shift) : 0};
   std::uint64_t fewest = ~std::uint64_t{0};
-  vr_uint best_band_word = 0;
   for (vr_uint m = 0; m <= VR_MAX_MAGNITUDE_MODEL; ++m) {
     if (parts.magnitude_model >= 0 && m != static_cast<vr_uint>(parts.magnitude_model)) continue;
     const auto [band_word, total] = candidate(m);
-    if (total < fewest) best = m, fewest = total, best_band_word = band_word;
+    if (total < fewest) choice.magnitude_model = m, fewest = total, choice.band_word = band_word;
   }
-  return {best, best_band_word};
+  if (parts.gap_shift < 0) {
+    fewest = ~std::uint64_t{0};
+    for (vr_uint g = 0; g <= VR_MAX_GAP_SHIFT; ++g) {
+      std::uint64_t total = 0;
+      for (vr_uint c = 0; c < classes; ++c)
+        if (!gaps[c].empty())
+          total += gaps[c].bits(vr_gap_rice(layout_of(g), (1u << c) - 1u), parts.atom_bits);
+      if (total < fewest) fewest = total, choice.gap_shift = g;
+    }
+  }
+  return choice;
 }
 
 }  // namespace
@@ -825,17 +874,9 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
     return vr_make_layout(parts.mean_bits, parts.sparsity_bits, parts.coef_bits, parts.atom_bits,
                           gap_shift, parts.band_split);
   };
-  const auto [magnitude_model, band_word] = choose_magnitude_model(parts, layout_of(0));
+  const auto [magnitude_model, band_word, gap_shift] = choose_coder(parts, first_atom, layout_of);
   const vr_uint box = vr_box_with_split_flag(
       vr_box_with_magnitude_model(blocks_box, magnitude_model), parts.from_split ? 1u : 0u);
-  vr_uint gap_shift = parts.gap_shift >= 0 ? static_cast<vr_uint>(parts.gap_shift) : 0;
-  if (parts.gap_shift < 0) {
-    std::uint64_t fewest = ~std::uint64_t{0};
-    for (vr_uint g = 0; g <= VR_MAX_GAP_SHIFT; ++g) {
-      const std::uint64_t bits = write_codes(parts, layout_of(g), band_word, box, nullptr);
-      if (bits < fewest) fewest = bits, gap_shift = g;
-    }
-  }
   const vr_uint layout = layout_of(gap_shift);
 
   BitWriter entries, stream;
@@ -843,7 +884,7 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
     if (vr_block_in_box(box, n, static_cast<vr_uint>(b)))
       entries.put(vr_layout_entry_bits(layout),
                   parts.sparsity[b] | (parts.mean[b] << parts.sparsity_bits));
-  write_codes(parts, layout, band_word, box, &stream);
+  write_codes(parts, layout, band_word, box, stream);
   const std::vector<vr_uint> entry_words = entries.words(), code_words = stream.words();
   std::vector<std::byte> payload(4 * (VR_HEADER_WORDS + entry_words.size() + code_words.size()));
   std::memcpy(payload.data(), parts.dequantization, 12);

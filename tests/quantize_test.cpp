@@ -2,6 +2,7 @@
 // atoms as they are, so skipping it there writes the same payload.
 #include <gtest/gtest.h>
 
+#include <utility>
 #include <vector>
 
 #include "detail.hpp"
@@ -97,6 +98,48 @@ TEST(Quantization, OrthonormalAtomsNeedNoRefit) {
         payload(skewed, blocks, shape, refit, &a) != payload(skewed, blocks, shape, rounded, &b);
   }
   EXPECT_GT(differ, 10);
+}
+
+TEST(Quantization, BlocksOnAllThreadsWriteTheSamePayload) {
+  // A brick of 64 blocks against skewed atoms (the refit matters) and against the DCT basis, with
+  // each of the quantizer's steps: the blocks shared among the threads give the payload and the
+  // sums of the blocks quantized one after the other.
+  const format::BrickShape shape{24};
+  const std::vector<float> dct = format::block_dct_atoms(VR_BLOCK_SIZE);
+  const Eigen::MatrixXf basis = Eigen::Map<const Eigen::MatrixXf>(
+      dct.data(), VR_BLOCK_LENGTH, static_cast<Eigen::Index>(dct.size() / VR_BLOCK_LENGTH));
+  Eigen::MatrixXf skewed = basis;
+  for (Eigen::Index k = 1; k < skewed.cols(); ++k) skewed.col(k) += 0.5f * basis.col(0);
+  dictionary::normalize_atoms(skewed);
+  encoder::detail::QuantizeOptions plain;
+  plain.coef_step = 0.3;
+  plain.mean_step = 1e-3;
+  encoder::detail::QuantizeOptions extended = plain, bounded = plain;
+  extended.target_energy = 216 * 0.05 * 0.05;
+  bounded.max_abs_error = 0.1;
+  std::vector<float> weights(shape.blocks());
+  for (std::size_t b = 0; b < weights.size(); ++b)
+    weights[b] = 0.25f + 0.01f * static_cast<float>(b);
+  for (const Eigen::MatrixXf* atoms : {&std::as_const(skewed), &basis})
+    for (encoder::detail::QuantizeOptions serial : {plain, extended, bounded}) {
+      serial.orthonormal_atoms = atoms == &basis;
+      serial.block_weights = weights.data();
+      serial.box = vr_make_box(4, 3, 4);  // the blocks past it are not coded
+      encoder::detail::QuantizeOptions parallel = serial;
+      parallel.parallel_blocks = true;
+      for (std::uint64_t seed = 1; seed <= 4; ++seed) {
+        const Blocks blocks = random_blocks(*atoms, shape.blocks(), seed);
+        encoder::detail::BrickQuantization a, b;
+        EXPECT_EQ(payload(*atoms, blocks, shape, serial, &a),
+                  payload(*atoms, blocks, shape, parallel, &b))
+            << "seed " << seed;
+        EXPECT_EQ(a.squared_error, b.squared_error);
+        EXPECT_EQ(a.weighted_error, b.weighted_error);
+        EXPECT_EQ(a.codes, b.codes);
+        EXPECT_EQ(a.blocks_over_bound, b.blocks_over_bound);
+        EXPECT_GT(a.codes, 0u);
+      }
+    }
 }
 
 }  // namespace
