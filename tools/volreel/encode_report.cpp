@@ -9,6 +9,8 @@
 #include <string>
 #include <utility>
 
+#include "volreel/format/brick_decode.h"
+
 namespace volreel::cli {
 
 namespace {
@@ -157,13 +159,17 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
   if (bps_target > 0 && std::abs(s.bps - bps_target) > bps_tolerance * bps_target) {
     const bool under = s.bps < bps_target;
     std::fflush(stdout);
-    // The search's smallest eps codes every value to about float precision: no eps spends more.
+    // The search's smallest eps asks for more precision than the payload's fields hold (a
+    // brick's coefficients to 2^-16 of its largest, block means to 2^-15 of their span): no eps
+    // spends more.
     if (under && c.tolerance <= 1e-7 * (c.value_max - c.value_min))
       std::fprintf(stderr,
                    "warning: target %.4f bps missed: the container is %.4f bps (%+.1f %%) at eps "
-                   "%.4g, where every value is coded to about float precision; no tolerance makes "
+                   "%.4g, where every brick is coded as finely as the format allows (coefficients "
+                   "to 2^-%u of the brick's largest, block means to %u bits); no tolerance makes "
                    "it larger: ask for fewer bps\n",
-                   bps_target, s.bps, 100.0 * (s.bps / bps_target - 1), c.tolerance);
+                   bps_target, s.bps, 100.0 * (s.bps / bps_target - 1), c.tolerance,
+                   VR_MAX_COEF_BITS, VR_MEAN_BITS);
     else
       std::fprintf(stderr,
                    "warning: target %.4f bps missed: the container is %.4f bps (%+.1f %%) at eps "
