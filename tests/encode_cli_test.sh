@@ -121,6 +121,11 @@ grep -q "pointwise bound: every coded block within" "$work/max.txt" || fail "--m
 "$volreel" compare "$work/s" "$work/m.vreel" --no-ssim --max-error 2e-3 > /dev/null 2>&1 ||
   fail "--max-error 2e-3: $("$volreel" compare "$work/s" "$work/m.vreel" --no-ssim --max-error 2e-3 2>&1 | tail -1)"
 expect_error "exceeds --max-error" "$volreel" compare "$work/s" "$work/m.vreel" --no-ssim --max-error 1e-7
+# A bound finer than the payload's finest steps: reported with what limits it and what holds it.
+"$volreel" encode "$work/s" --dictionary dct --out "$work/m7.vreel" --max-error 1e-7 > /dev/null 2> "$work/max7.txt" ||
+  fail "encode --max-error 1e-7: $(cat "$work/max7.txt")"
+grep -q "miss the pointwise bound 1e-07 even at the finest steps a payload holds (coefficients to 2^-16.*--codec zfp --zfp-accuracy 1e-07 holds it" "$work/max7.txt" ||
+  fail "--max-error 1e-7 report: $(cat "$work/max7.txt")"
 # --psnr P: the delivered PSNR reaches P (compare checks it).
 "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/p.vreel" --psnr 58 > "$work/psnr.txt" 2>&1
 grep -q "target PSNR 58.00 dB met by every frame" "$work/psnr.txt" || fail "--psnr 58: $(cat "$work/psnr.txt")"

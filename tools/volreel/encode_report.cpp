@@ -123,10 +123,11 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
       std::printf("pointwise bound: every coded block within %.4g of the original\n", c.max_error);
     else
       std::fprintf(stderr,
-                   "warning: %zu blocks miss the pointwise bound %.4g even with 16-bit "
-                   "coefficients (15-bit block means are too coarse for it); volreel compare "
-                   "prints the largest error\n",
-                   s.blocks_over_bound, c.max_error);
+                   "warning: %zu blocks miss the pointwise bound %.4g even at the finest steps a "
+                   "payload holds (coefficients to 2^-%u of the brick's largest, block means to "
+                   "%u bits): volreel compare prints the largest error; for a bound this tight "
+                   "against the values, --codec zfp --zfp-accuracy %.4g holds it\n",
+                   s.blocks_over_bound, c.max_error, VR_MAX_COEF_BITS, VR_MEAN_BITS, c.max_error);
   }
   std::printf(
       "encoding time%s: pyramid %.2f s, brick extraction + histograms %.2f s, batch-OMP %.2f s, "
