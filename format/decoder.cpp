@@ -55,26 +55,31 @@ struct ParsedCode;
                                                         const float* __restrict atoms,
                                                         float coef_scale, vr_uint dct_first);
 
-/// Zero words after a payload's copy: the look-ahead of a code's windows and the overrun of a
-/// damaged stream's last code read zeros (a code that starts inside the stream reads at most 12
-/// bytes from its first bit's byte on, CodeStream).
-constexpr std::size_t payload_padding_words = 4;
+/// Zero words after a payload's copy: the look-ahead of the code stream's refills and the overrun
+/// of a damaged stream's last code read zeros (a code that starts inside the stream reads at most
+/// 20 bytes past the stream's end, CodeStream).
+constexpr std::size_t payload_padding_words = 6;
 
-/// The code stream of a payload read in 64-bit windows: the codes of brick_decode.h's
+/// The code stream of a payload read through a 64-bit bit buffer: the codes of brick_decode.h's
 /// vr_read_code (which the GPU decoders run, and which the tests hold this reader to), with one
-/// unaligned load for a code's gap, magnitude and sign instead of up to five word reads with a
-/// branch each. A window loaded at a byte holds at least 57 bits of the stream from the code's
-/// first bit. A gap takes at most 32 bits (16 zeros and 16 escaped bits, or at most 15 zeros, the
-/// one and 15 low bits), a magnitude with its sign at most 33: a gap longer than 24 bits (rare)
-/// loads a second window for the magnitude. A code reads at most 12 bytes past its first bit's
-/// byte: the payload's zero padding words take them.
+/// unaligned load a code instead of up to five word reads with a branch each. The buffer holds
+/// the stream's bits up to a byte boundary (count_ of them from its low bit); a refill ORs in the
+/// 8 bytes from that boundary on and moves the boundary by whole bytes, leaving 56 to 63 bits.
+/// The load's address depends on the codes before the previous one only, so that it is not in
+/// the chain of dependent steps from one code to the next (a 64-bit window loaded at each code's
+/// bit was). A gap takes at most 32 bits (16 zeros and 16 escaped bits, or at most 15 zeros, the
+/// one and 15 low bits), a magnitude with its sign at most 33: a gap longer than 23 bits (rare)
+/// refills again before the magnitude. A code that starts inside the stream loads at most 20
+/// bytes past the stream's end: the payload's zero padding words take them.
 class CodeStream {
  public:
   /// first_atom: vr_block_first_atom of the payload.
   CodeStream(const vr_uint* payload, vr_uint first_word, vr_uint atom_bits, vr_uint first_atom)
-      : bytes_(reinterpret_cast<const unsigned char*>(payload + first_word)),
+      : start_(reinterpret_cast<const unsigned char*>(payload + first_word)),
+        next_(start_),
         atom_limit_(first_atom + (1u << atom_bits)) {}
-  std::uint64_t bit() const { return bit_; }
+  /// Bits read so far.
+  std::uint64_t bit() const { return 8 * static_cast<std::uint64_t>(next_ - start_) - count_; }
   /// The magnitudes' parameters of the block whose codes come next (BandRice::block).
   void set_band_rice(const std::uint8_t* band_rice) { band_rice_ = band_rice; }
 
@@ -82,30 +87,45 @@ class CodeStream {
   /// block's codes up to next_atom − 1; as vr_read_code.
   int read(vr_uint gap_rice, vr_uint atom_bits, vr_uint coef_bits, vr_uint& next_atom,
            vr_uint& atom) {
-    std::uint64_t w = window(bit_);
+    vr_uint magnitude;
+    return read(gap_rice, atom_bits, coef_bits, next_atom, atom, magnitude);
+  }
+  /// The same, and the magnitude's Rice value |q| − 1 in `magnitude`.
+  int read(vr_uint gap_rice, vr_uint atom_bits, vr_uint coef_bits, vr_uint& next_atom,
+           vr_uint& atom, vr_uint& magnitude) {
+    refill();
+    std::uint64_t w = buffer_;
     vr_uint used = 0;
     atom = next_atom + rice(w, used, gap_rice, atom_bits);
     next_atom = atom + 1;
-    if (used > 57 - 33) {  // fewer than 33 bits left in the window
-      bit_ += used;
-      w = window(bit_);
+    if (used > 56 - 33) {  // fewer than 33 bits left in the buffer
+      consume(used);
+      refill();
+      w = buffer_;
       used = 0;
     }
     // An atom index past first atom + 2^a is never valid (the caller refuses it); its Rice
     // parameter is that of first atom + 2^a, so that the table stays small.
-    const vr_uint magnitude = rice(w, used, band_rice_[std::min(atom, atom_limit_)], coef_bits);
+    magnitude = rice(w, used, band_rice_[std::min(atom, atom_limit_)], coef_bits);
     const vr_uint negative = static_cast<vr_uint>(w) & 1u;
-    bit_ += used + 1;
+    consume(used + 1);
     const int q = static_cast<int>(magnitude + 1);
     return negative ? -q : q;
   }
 
  private:
-  /// The stream from `bit` on, at least 57 bits.
-  std::uint64_t window(std::uint64_t bit) const {
+  /// At least 56 bits in the buffer. The bits past count_ are the stream's too (or zero), so ORing
+  /// the next bytes over them changes nothing.
+  void refill() {
     std::uint64_t w;
-    std::memcpy(&w, bytes_ + bit / 8, sizeof w);
-    return w >> (bit % 8);
+    std::memcpy(&w, next_, sizeof w);
+    buffer_ |= w << count_;
+    next_ += (63 - count_) >> 3;
+    count_ |= 56;
+  }
+  void consume(vr_uint bits) {
+    buffer_ >>= bits;
+    count_ -= bits;
   }
   /// The Rice code at the start of window w (vr_read_rice): w moves past it, `used` counts its
   /// bits.
@@ -124,10 +144,12 @@ class CodeStream {
     return value;
   }
 
-  const unsigned char* bytes_;
+  const unsigned char* start_;
+  const unsigned char* next_;  ///< the byte after the buffer's count_ bits
   const std::uint8_t* band_rice_ = nullptr;
   vr_uint atom_limit_;
-  std::uint64_t bit_ = 0;
+  std::uint64_t buffer_ = 0;
+  vr_uint count_ = 0;
 };
 
 /// The magnitudes' Rice parameter (vr_band_rice) of every atom index 0..F + 2^a of a payload
@@ -368,6 +390,26 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
     const vr_uint gap_rice = vr_gap_rice(layout.word, s);
     stream.set_band_rice(band_rice.block(s));
     vr_uint next_atom = first_atom, atom = 0;
+    if (stream.bit() + std::uint64_t{65} * s <= stream_bits) {
+      // No code of the block can start past the stream (a code takes at most 65 bits): its codes
+      // read without the checks, which hold for the block when they hold for its last atom (the
+      // largest) and for the OR of its magnitudes' Rice values |q| − 1 (< 2^c for |q| ≤ 2^c).
+      // Where they do not, the block is read again code by code, to name the code.
+      const CodeStream block_start = stream;
+      const std::size_t codes_before = codes ? codes->size() : 0;
+      vr_uint magnitudes = 0;
+      for (vr_uint k = 0; k < s; ++k) {
+        vr_uint magnitude = 0;
+        const int q =
+            stream.read(gap_rice, layout.atom_bits, layout.coef_bits, next_atom, atom, magnitude);
+        magnitudes |= magnitude;
+        if (codes) codes->push_back({atom, q});
+      }
+      if (atom < atom_count && (magnitudes >> layout.coef_bits) == 0) continue;
+      stream = block_start;
+      next_atom = first_atom;
+      if (codes) codes->resize(codes_before);
+    }
     for (vr_uint k = 0; k < s; ++k) {
       const std::uint64_t code_at = 4 * std::uint64_t{first} + stream.bit() / 8;
       if (stream.bit() >= stream_bits)
@@ -521,6 +563,27 @@ class SteppedCodes {
     return atom < atom_count_ && m <= largest_;
   }
 
+  /// Whether the current block's next `count` codes can be read with unchecked_codes: however
+  /// the bits read, they stay inside the stream (a code takes at most 65 bits).
+  bool fits(vr_uint count) const {
+    return stream_.bit() + std::uint64_t{65} * count <= stream_bits_;
+  }
+  /// The current block's next code (fits), without the checks of code: those of a run of the
+  /// block's codes are run_good's.
+  void unchecked_code(ParsedCode* out, vr_uint& magnitudes) {
+    vr_uint atom = 0, magnitude = 0;
+    const int q =
+        stream_.read(gap_rice_, layout_.atom_bits, layout_.coef_bits, next_atom_, atom, magnitude);
+    *out = {atom, q};
+    magnitudes |= magnitude;
+  }
+  /// code's checks over a run of unchecked codes of one block, the last of them `last`: a
+  /// block's atoms increase, so the last is the largest; every magnitude |q| ≤ 2^c is a Rice value
+  /// |q| − 1 < 2^c, so their OR `magnitudes` is too.
+  bool run_good(const ParsedCode& last, vr_uint magnitudes) const {
+    return last.atom < atom_count_ && (magnitudes >> layout_.coef_bits) == 0;
+  }
+
   /// Counts `count` codes of the current block as read.
   void taken(vr_uint count) {
     in_block_ -= count;
@@ -572,10 +635,21 @@ class SteppedCodes {
     first.begin_block();
     second.begin_block();
     const vr_uint count = std::min(first.in_block(), second.in_block());
-    for (vr_uint k = 0; k < count; ++k) {
-      const bool read_a = first.code(a++);
-      const bool read_b = second.code(b++);
-      if (!(read_a && read_b)) return false;
+    if (first.fits(count) && second.fits(count)) {
+      // Far enough from both streams' ends: the checks once for the run.
+      vr_uint magnitudes_a = 0, magnitudes_b = 0;
+      for (vr_uint k = 0; k < count; ++k) {
+        first.unchecked_code(a++, magnitudes_a);
+        second.unchecked_code(b++, magnitudes_b);
+      }
+      if (!first.run_good(a[-1], magnitudes_a) || !second.run_good(b[-1], magnitudes_b))
+        return false;
+    } else {
+      for (vr_uint k = 0; k < count; ++k) {
+        const bool read_a = first.code(a++);
+        const bool read_b = second.code(b++);
+        if (!(read_a && read_b)) return false;
+      }
     }
     first.taken(count);
     second.taken(count);

@@ -284,6 +284,70 @@ TEST(Decoder, PayloadsReadInStepDecodeAsOneAtATime) {
   }
 }
 
+TEST(Decoder, TheFirstCodePastTheDictionaryOrItsMagnitudeIsNamed) {
+  // Blocks far from the stream's end are read without per-code checks and checked once (their
+  // last atom, the OR of their magnitudes); a block that fails is read again code by code. The
+  // error names the first bad code, as a check of every code would, alone and in step.
+  const format::DictionaryFile d = learned_and_dct(40, 6);
+  const format::AtomTable atoms = format::atom_table(d.atoms, d.atom_count);
+  const format::BrickShape shape{18};
+  std::mt19937 rng(21);
+  int named = 0;
+  for (int trial = 0; trial < 60; ++trial) {
+    // 1. Codes of atoms up to 12 past the dictionary's.
+    const std::vector<std::byte> bad = random_payload(shape, d.atom_count + 12, 40, rng);
+    const format::KsvdPayloadParts parts =
+        format::unpack_ksvd_payload(bad, d.atom_count + 12, shape, "bad", 0);
+    std::string expected;
+    for (std::uint32_t b = 0, k = 0; b < shape.blocks() && expected.empty(); ++b)
+      for (std::uint32_t j = 0; j < parts.sparsity[b]; ++j, ++k)
+        if (parts.atoms[k] >= d.atom_count) {
+          expected = "atom index < " + std::to_string(d.atom_count) + " (block " +
+                     std::to_string(b) + ", code " + std::to_string(j) + ")";
+          break;
+        }
+    std::vector<float> out(shape.voxels()), other(shape.voxels());
+    const std::string alone = alone_error(bad, atoms, shape, out, "frame.vrf", 100);
+    if (expected.empty()) {
+      EXPECT_EQ(alone, "") << "trial " << trial;
+      continue;
+    }
+    ++named;
+    EXPECT_NE(alone.find(expected), std::string::npos) << alone << "; expected " << expected;
+    const std::vector<std::byte> good = random_payload(shape, d.atom_count, 40, rng);
+    const format::PayloadJob pair[2] = {{good, other, "frame.vrf", 100},
+                                        {bad, out, "frame.vrf", 100}};
+    EXPECT_EQ(decode_error(pair, atoms, shape), alone) << "trial " << trial;
+  }
+  EXPECT_GT(named, 40);
+  // 2. A magnitude past 2^c: a payload packed with c = 8 and no escapes (every band's Rice
+  //    parameter 6), one code of magnitude 200 in block 9, then c lowered to 7 in the layout
+  //    word (only the check changes: no code is an escape).
+  format::KsvdPayloadParts p;
+  p.sparsity.assign(shape.blocks(), 4);
+  p.mean.assign(shape.blocks(), 0);
+  p.mean_bits = 4;
+  p.sparsity_bits = 3;
+  p.coef_bits = 8;
+  p.atom_bits = format::bits_for_count(d.atom_count);
+  p.band_rice.fill(6);
+  p.magnitude_model = 0;
+  for (std::uint32_t b = 0; b < shape.blocks(); ++b)
+    for (std::uint32_t j = 0; j < 4; ++j) {
+      p.atoms.push_back(3 * j + b % 3);
+      p.values.push_back(b == 9 && j == 2 ? -200 : 1 + static_cast<int>(j));
+    }
+  std::vector<std::byte> payload = format::pack_ksvd_payload(p);
+  std::vector<float> out(shape.voxels());
+  EXPECT_EQ(alone_error(payload, atoms, shape, out, "frame.vrf", 100), "");
+  std::uint32_t layout;
+  std::memcpy(&layout, payload.data() + 12, 4);
+  layout = (layout & ~(31u << 8)) | (7u << 8);
+  std::memcpy(payload.data() + 12, &layout, 4);
+  const std::string error = alone_error(payload, atoms, shape, out, "frame.vrf", 100);
+  EXPECT_NE(error.find("magnitude ≤ 2^7 (block 9, code 2)"), std::string::npos) << error;
+}
+
 TEST(Decoder, APayloadReadInStepFailsAsItDoesAlone) {
   // A damaged payload, first or second of a pair, beside a good one or another damaged one: the
   // error is the one decode_payload gives for the first damaged payload, offset included.
