@@ -56,8 +56,8 @@ struct ParsedCode;
                                                         float coef_scale, vr_uint dct_first);
 
 /// Zero words after a payload's copy: the look-ahead of the code stream's refills and the overrun
-/// of a damaged stream's last code read zeros (a code that starts inside the stream reads at most
-/// 20 bytes past the stream's end, CodeStream).
+/// of a damaged stream's last code read zeros (a code that starts inside the stream loads at most
+/// 15 bytes past the stream's end, CodeStream; the rest is margin).
 constexpr std::size_t payload_padding_words = 6;
 
 /// The code stream of a payload read through a 64-bit bit buffer: the codes of brick_decode.h's
@@ -69,8 +69,10 @@ constexpr std::size_t payload_padding_words = 6;
 /// the chain of dependent steps from one code to the next (a 64-bit window loaded at each code's
 /// bit was). A gap takes at most 32 bits (16 zeros and 16 escaped bits, or at most 15 zeros, the
 /// one and 15 low bits), a magnitude with its sign at most 33: a gap longer than 23 bits (rare)
-/// refills again before the magnitude. A code that starts inside the stream loads at most 20
-/// bytes past the stream's end: the payload's zero padding words take them.
+/// refills again before the magnitude. A code that starts inside the stream loads at most 15
+/// bytes past the stream's end (the refill before it leaves at most 63 bits in the buffer, so the
+/// load starts at most 7 bytes past the stream's last bit): the payload's zero padding words take
+/// them.
 class CodeStream {
  public:
   /// first_atom: vr_block_first_atom of the payload.
@@ -127,7 +129,7 @@ class CodeStream {
     buffer_ >>= bits;
     count_ -= bits;
   }
-  /// The Rice code at the start of window w (vr_read_rice): w moves past it, `used` counts its
+  /// The Rice code at the start of the bits w (vr_read_rice): w moves past it, `used` counts its
   /// bits.
   static vr_uint rice(std::uint64_t& w, vr_uint& used, vr_uint k, vr_uint escape_bits) {
     const vr_uint zeros = vr_lowest_bit(static_cast<vr_uint>(w) | (1u << VR_ESCAPE_ZEROS));
@@ -361,6 +363,16 @@ KsvdPayloadLayout parse_ksvd_header(const vr_uint* payload, std::size_t word_cou
   return layout;
 }
 
+/// The end of the atom indices a payload's codes may name: the dictionary's K atoms, and no index
+/// its a bits cannot write from the block's first atom F (format/SPEC.md, "Decoding", step 5; the
+/// packer never writes one, and readers that look up an atom's band by a table of F + 2^a
+/// entries, as CodeStream does, would read a different Rice parameter for it than
+/// brick_decode.h's vr_read_code computes).
+vr_uint codes_atom_end(std::uint32_t atom_count, vr_uint first_atom, vr_uint atom_bits) {
+  return static_cast<vr_uint>(std::min<std::uint64_t>(
+      atom_count, std::uint64_t{first_atom} + (std::uint64_t{1} << atom_bits)));
+}
+
 /// check_ksvd_payload on `payload` (word_count words followed by payload_padding_words zero
 /// words), appending the codes to *codes when it is not null.
 KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_count,
@@ -375,12 +387,13 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
   const vr_uint blocks = shape.blocks(), n = shape.blocks_per_axis(), box = layout.box_word;
   const vr_uint first = vr_code_first_word(layout.word, vr_box_entries(box));
   // 3. The code stream, read as the decoders read it (the zero words after the payload take the
-  //    look-ahead of a code's windows and a damaged stream's overrun).
+  //    look-ahead of the reader's refills and a damaged stream's overrun).
   const std::uint64_t stream_bits = (std::uint64_t{word_count} - first) * 32;
   const vr_uint largest = 1u << layout.coef_bits;
   thread_local BandRice band_rice;
   band_rice.reset(layout.word, layout.band_word, box);
   const vr_uint first_atom = vr_block_first_atom(layout.word, box);
+  const vr_uint atom_end = codes_atom_end(atom_count, first_atom, layout.atom_bits);
   CodeStream stream(payload, first, layout.atom_bits, first_atom);
   for (vr_uint b = 0, e = 0; b < blocks; ++b) {
     if (!vr_block_in_box(box, n, b)) continue;
@@ -405,7 +418,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
         magnitudes |= magnitude;
         if (codes) codes->push_back({atom, q});
       }
-      if (atom < atom_count && (magnitudes >> layout.coef_bits) == 0) continue;
+      if (atom < atom_end && (magnitudes >> layout.coef_bits) == 0) continue;
       stream = block_start;
       next_atom = first_atom;
       if (codes) codes->resize(codes_before);
@@ -416,9 +429,9 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
         fail(code_at, "codes inside the payload (block " + str(b) + ", code " + str(k) + ")",
              "the payload's end");
       const int q = stream.read(gap_rice, layout.atom_bits, layout.coef_bits, next_atom, atom);
-      if (atom >= atom_count)
+      if (atom >= atom_end)
         fail(code_at,
-             "atom index < " + str(atom_count) + " (block " + str(b) + ", code " + str(k) + ")",
+             "atom index < " + str(atom_end) + " (block " + str(b) + ", code " + str(k) + ")",
              str(atom));
       const vr_uint m = static_cast<vr_uint>(q < 0 ? -static_cast<std::int64_t>(q) : q);
       if (m > largest)
@@ -520,7 +533,8 @@ class SteppedCodes {
         first_(vr_code_first_word(layout.word, vr_box_entries(layout.box_word))),
         stream_bits_((std::uint64_t{word_count} - first_) * 32),
         word_count_(word_count),
-        atom_count_(atom_count),
+        atom_count_(codes_atom_end(atom_count, vr_block_first_atom(layout.word, layout.box_word),
+                                   layout.atom_bits)),
         largest_(1u << layout.coef_bits),
         band_rice_(&band_rice),
         first_atom_(vr_block_first_atom(layout.word, layout.box_word)),
@@ -563,7 +577,7 @@ class SteppedCodes {
     return atom < atom_count_ && m <= largest_;
   }
 
-  /// Whether the current block's next `count` codes can be read with unchecked_codes: however
+  /// Whether the current block's next `count` codes can be read with unchecked_code: however
   /// the bits read, they stay inside the stream (a code takes at most 65 bits).
   bool fits(vr_uint count) const {
     return stream_.bit() + std::uint64_t{65} * count <= stream_bits_;

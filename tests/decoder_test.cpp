@@ -348,6 +348,50 @@ TEST(Decoder, TheFirstCodePastTheDictionaryOrItsMagnitudeIsNamed) {
   EXPECT_NE(error.find("magnitude ≤ 2^7 (block 9, code 2)"), std::string::npos) << error;
 }
 
+TEST(Decoder, AtomsPastTheIndexWidthAreRefused) {
+  // Blocks of atoms 0, 2, .., 18 packed with a = 5 and gap shift 1 (every gap's Rice parameter
+  // 0, no escape), then a lowered to 4 in the layout word: the codes read the same, but atoms
+  // 16 and 18 are past what 4 bits index (F + 2^a = 16), though the dictionary holds them. The
+  // reader refuses them (a reader that looks a band up by a table of F + 2^a entries would take
+  // another Rice parameter for them than vr_read_code computes), alone and in step.
+  const format::DictionaryFile d = learned_and_dct(40, 6);
+  const format::AtomTable atoms = format::atom_table(d.atoms, d.atom_count);
+  const format::BrickShape shape{12};
+  format::KsvdPayloadParts p;
+  p.sparsity.assign(shape.blocks(), 10);
+  p.mean.assign(shape.blocks(), 3);
+  p.mean_bits = 4;
+  p.sparsity_bits = 4;
+  p.coef_bits = 4;
+  p.atom_bits = 5;
+  p.gap_shift = 1;
+  p.band_rice.fill(1);
+  p.magnitude_model = 0;
+  for (std::uint32_t b = 0; b < shape.blocks(); ++b)
+    for (std::uint32_t j = 0; j < 10; ++j) {
+      p.atoms.push_back(2 * j);
+      p.values.push_back(j % 2 ? 2 : -3);
+    }
+  std::vector<std::byte> payload = format::pack_ksvd_payload(p);
+  std::vector<float> out(shape.voxels()), other(shape.voxels());
+  ASSERT_EQ(alone_error(payload, atoms, shape, out, "frame.vrf", 100), "");
+  std::uint32_t layout;
+  std::memcpy(&layout, payload.data() + 12, 4);
+  ASSERT_EQ(vr_layout_atom_bits(layout), 5u);
+  ASSERT_EQ(vr_gap_rice(layout, 10), 0u);
+  layout = (layout & ~(31u << 13)) | (4u << 13);
+  ASSERT_EQ(vr_layout_atom_bits(layout), 4u);
+  ASSERT_EQ(vr_gap_rice(layout, 10), 0u);  // the blocks' gaps read the same
+  std::memcpy(payload.data() + 12, &layout, 4);
+  const std::string alone = alone_error(payload, atoms, shape, out, "frame.vrf", 100);
+  EXPECT_NE(alone.find("atom index < 16 (block 0, code 8)"), std::string::npos) << alone;
+  std::mt19937 rng(5);
+  const std::vector<std::byte> good = random_payload(shape, d.atom_count, 20, rng);
+  const format::PayloadJob pair[2] = {{good, other, "frame.vrf", 100},
+                                      {payload, out, "frame.vrf", 100}};
+  EXPECT_EQ(decode_error(pair, atoms, shape), alone);
+}
+
 TEST(Decoder, APayloadReadInStepFailsAsItDoesAlone) {
   // A damaged payload, first or second of a pair, beside a good one or another damaged one: the
   // error is the one decode_payload gives for the first damaged payload, offset included.
