@@ -373,6 +373,20 @@ vr_uint codes_atom_end(std::uint32_t atom_count, vr_uint first_atom, vr_uint ato
       atom_count, std::uint64_t{first_atom} + (std::uint64_t{1} << atom_bits)));
 }
 
+/// The most bits one code takes (a 32-bit gap, a 32-bit magnitude and the sign): a run of `count`
+/// codes from bit `bit` cannot start a code past a stream of `stream_bits` when this holds.
+constexpr std::uint64_t max_code_bits = 65;
+bool run_inside(std::uint64_t bit, vr_uint count, std::uint64_t stream_bits) {
+  return bit + max_code_bits * count <= stream_bits;
+}
+
+/// The per-code checks (atom < atom_end, |q| ≤ 2^c) of a run of one block's codes read without
+/// them: a block's atoms increase, so the run's last atom is its largest; |q| ≤ 2^c is a Rice
+/// value |q| − 1 < 2^c, so the OR of the run's values `magnitudes` is below 2^c when each is.
+bool run_good(vr_uint last_atom, vr_uint magnitudes, vr_uint atom_end, vr_uint coef_bits) {
+  return last_atom < atom_end && (magnitudes >> coef_bits) == 0;
+}
+
 /// check_ksvd_payload on `payload` (word_count words followed by payload_padding_words zero
 /// words), appending the codes to *codes when it is not null.
 KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_count,
@@ -403,11 +417,10 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
     const vr_uint gap_rice = vr_gap_rice(layout.word, s);
     stream.set_band_rice(band_rice.block(s));
     vr_uint next_atom = first_atom, atom = 0;
-    if (stream.bit() + std::uint64_t{65} * s <= stream_bits) {
-      // No code of the block can start past the stream (a code takes at most 65 bits): its codes
-      // read without the checks, which hold for the block when they hold for its last atom (the
-      // largest) and for the OR of its magnitudes' Rice values |q| − 1 (< 2^c for |q| ≤ 2^c).
-      // Where they do not, the block is read again code by code, to name the code.
+    if (run_inside(stream.bit(), s, stream_bits)) {
+      // No code of the block can start past the stream: its codes read without the checks, then
+      // checked once (run_good). Where that fails, the block is read again code by code, to name
+      // the code.
       const CodeStream block_start = stream;
       const std::size_t codes_before = codes ? codes->size() : 0;
       vr_uint magnitudes = 0;
@@ -418,7 +431,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
         magnitudes |= magnitude;
         if (codes) codes->push_back({atom, q});
       }
-      if (atom < atom_end && (magnitudes >> layout.coef_bits) == 0) continue;
+      if (run_good(atom, magnitudes, atom_end, layout.coef_bits)) continue;
       stream = block_start;
       next_atom = first_atom;
       if (codes) codes->resize(codes_before);
@@ -533,8 +546,8 @@ class SteppedCodes {
         first_(vr_code_first_word(layout.word, vr_box_entries(layout.box_word))),
         stream_bits_((std::uint64_t{word_count} - first_) * 32),
         word_count_(word_count),
-        atom_count_(codes_atom_end(atom_count, vr_block_first_atom(layout.word, layout.box_word),
-                                   layout.atom_bits)),
+        atom_end_(codes_atom_end(atom_count, vr_block_first_atom(layout.word, layout.box_word),
+                                 layout.atom_bits)),
         largest_(1u << layout.coef_bits),
         band_rice_(&band_rice),
         first_atom_(vr_block_first_atom(layout.word, layout.box_word)),
@@ -574,16 +587,13 @@ class SteppedCodes {
     const int q = stream_.read(gap_rice_, layout_.atom_bits, layout_.coef_bits, next_atom_, atom);
     *out = {atom, q};
     const vr_uint m = static_cast<vr_uint>(q < 0 ? -static_cast<std::int64_t>(q) : q);
-    return atom < atom_count_ && m <= largest_;
+    return atom < atom_end_ && m <= largest_;
   }
 
-  /// Whether the current block's next `count` codes can be read with unchecked_code: however
-  /// the bits read, they stay inside the stream (a code takes at most 65 bits).
-  bool fits(vr_uint count) const {
-    return stream_.bit() + std::uint64_t{65} * count <= stream_bits_;
-  }
+  /// Whether the current block's next `count` codes can be read with unchecked_code (run_inside).
+  bool fits(vr_uint count) const { return run_inside(stream_.bit(), count, stream_bits_); }
   /// The current block's next code (fits), without the checks of code: those of a run of the
-  /// block's codes are run_good's.
+  /// block's codes are good's.
   void unchecked_code(ParsedCode* out, vr_uint& magnitudes) {
     vr_uint atom = 0, magnitude = 0;
     const int q =
@@ -591,11 +601,9 @@ class SteppedCodes {
     *out = {atom, q};
     magnitudes |= magnitude;
   }
-  /// code's checks over a run of unchecked codes of one block, the last of them `last`: a
-  /// block's atoms increase, so the last is the largest; every magnitude |q| ≤ 2^c is a Rice value
-  /// |q| − 1 < 2^c, so their OR `magnitudes` is too.
-  bool run_good(const ParsedCode& last, vr_uint magnitudes) const {
-    return last.atom < atom_count_ && (magnitudes >> layout_.coef_bits) == 0;
+  /// code's checks over a run of unchecked codes of one block, the last of them `last` (run_good).
+  bool good(const ParsedCode& last, vr_uint magnitudes) const {
+    return run_good(last.atom, magnitudes, atom_end_, layout_.coef_bits);
   }
 
   /// Counts `count` codes of the current block as read.
@@ -625,7 +633,7 @@ class SteppedCodes {
   KsvdPayloadLayout layout_;
   vr_uint n_, blocks_, first_;
   std::uint64_t stream_bits_, word_count_;
-  vr_uint atom_count_, largest_;
+  vr_uint atom_end_, largest_;
   const BandRice* band_rice_;
   vr_uint first_atom_;
   CodeStream stream_;
@@ -656,8 +664,7 @@ class SteppedCodes {
         first.unchecked_code(a++, magnitudes_a);
         second.unchecked_code(b++, magnitudes_b);
       }
-      if (!first.run_good(a[-1], magnitudes_a) || !second.run_good(b[-1], magnitudes_b))
-        return false;
+      if (!first.good(a[-1], magnitudes_a) || !second.good(b[-1], magnitudes_b)) return false;
     } else {
       for (vr_uint k = 0; k < count; ++k) {
         const bool read_a = first.code(a++);
