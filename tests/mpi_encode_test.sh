@@ -108,7 +108,10 @@ fi
 grep -q "already holds a container" <<< "$out" || fail "no message for an existing container: $out"
 
 # A rank killed mid-encode: the job fails; --resume under mpirun completes the same container.
-"$volreel" gen analytic --field noise --size 36 --frames 40 --out "$work/n" > /dev/null 2>&1
+# Enough frames that the kill, a poll after the second frame is written, lands long before the
+# last one however fast the frames encode (with 40 it sometimes came too late on a loaded machine).
+total_frames=120
+"$volreel" gen analytic --field noise --size 36 --frames "$total_frames" --out "$work/n" > /dev/null 2>&1
 args=(encode "$work/n" --dictionary dct --max-keyframe-gap 2 --tolerance 0.002)
 "$volreel" "${args[@]}" --out "$work/whole.vreel" > /dev/null 2>&1
 ( mpi 2 "$volreel" "${args[@]}" --out "$work/killed.vreel" > "$work/killed.txt" 2>&1
@@ -131,7 +134,7 @@ wait "$job" || true
 [ -n "$killed" ] || fail "found no rank 1 to kill: $(cat "$work/killed.txt")"
 grep -q "rc=0" "$work/killed.txt" && fail "the job should fail when a rank is killed"
 written=$(find "$work/killed.vreel/frames" -name '*.vrf' | wc -l)
-[ "$written" -lt 40 ] || fail "the killed job wrote every frame; kill came too late"
+[ "$written" -lt "$total_frames" ] || fail "the killed job wrote every frame; kill came too late"
 mpi 2 "$volreel" "${args[@]}" --out "$work/killed.vreel" --resume > "$work/resumed.txt" 2>&1 ||
   fail "--resume under mpirun: $(tail -5 "$work/resumed.txt")"
 grep -q "already there" "$work/resumed.txt" || fail "resume did not keep the frames written"
