@@ -176,6 +176,7 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   const std::size_t frames =
       request.max_frames ? std::min(request.max_frames, info.frames) : info.frames;
   const Ranks& ranks = request.ranks ? *request.ranks : single_process();
+  refuse_existing_output(out, request.resume, request.overwrite);
   // The brick size: given, the container's own (resume), or chosen for the volume.
   const std::array<std::uint32_t, 3> dims{static_cast<std::uint32_t>(info.dims.x),
                                           static_cast<std::uint32_t>(info.dims.y),

@@ -33,6 +33,19 @@ namespace fs = std::filesystem;
 using detail::Clock;
 using detail::seconds_since;
 
+void refuse_existing_output(const fs::path& out, bool resume, bool overwrite) {
+  std::error_code ec;
+  const fs::file_status status = fs::status(out, ec);
+  if (fs::exists(status) && !fs::is_directory(status))
+    throw InputError("'" + out.string() +
+                     "' is not a directory: --out names the container directory to write (e.g. "
+                     "NAME.vreel); remove that file or choose another name");
+  if (!resume && !overwrite && fs::exists(out / "manifest.json"))
+    throw InputError(
+        "'" + out.string() +
+        "' already holds a container: give --resume to continue it or --overwrite to replace it");
+}
+
 namespace {
 
 std::vector<std::byte> read_file_bytes(const fs::path& path) {
@@ -209,12 +222,9 @@ bool prepare_container(const fs::path& out, const EncodeJob& job, format::Manife
                          "start again");
       m.frames = old.manifest().frames;
       resuming = true;
-    } else if (!job.overwrite) {
-      throw InputError(
-          "'" + out.string() +
-          "' already holds a container: give --resume to continue it or --overwrite to replace it");
     }
   }
+  refuse_existing_output(out, job.resume, job.overwrite);
   if (!resuming && fs::exists(out)) {
     std::error_code ec;
     fs::remove_all(out / "frames", ec);

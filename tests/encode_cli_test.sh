@@ -34,6 +34,12 @@ echo "$out" | json '1 if d["bps"] > 0 and d["sequence"]["psnr"] > 35 else exit(1
 expect_error "levels 0..1" "$volreel" decode "$work/a.vreel" --frame 0 --level 5 --out "$work/x.f32"
 expect_error "the container has frames 0..2" "$volreel" decode "$work/a.vreel" --frame 3 --out "$work/x.f32"
 expect_error "already holds a container" "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/a.vreel"
+# ... refused before the long work: no training, no rate control, no value range.
+if out=$("$volreel" encode "$work/s" --bps 1 --out "$work/a.vreel" 2>&1); then fail "encode over a container: $out"; fi
+grep -q "already holds a container" <<< "$out" || fail "no message for an existing container: $out"
+! grep -q -e "training" -e "rate control" -e "value range" <<< "$out" || fail "the refusal came after the long work: $out"
+touch "$work/plain-file"
+expect_error "'$work/plain-file' is not a directory" "$volreel" encode "$work/s" --dictionary dct --overwrite --out "$work/plain-file"
 
 # The brick size: chosen per volume by default (42^3 holds 40x36x30 in one brick), or given.
 "$volreel" encode "$work/s" --dictionary dct --out "$work/auto.vreel" > "$work/auto.txt" 2>/dev/null

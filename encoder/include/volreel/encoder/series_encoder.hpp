@@ -121,6 +121,11 @@ struct EncodeSummary {
 EncodeSummary encode_series(const datasets::SeriesReader& series, const std::filesystem::path& out,
                             const EncodeJob& job, const Progress& progress = {});
 
+/// Throws InputError when `out` cannot take a new container: it is there and not a directory, or
+/// it holds a container and neither `resume` nor `overwrite` is given. encode() checks this before
+/// training and rate control, so that a name already taken is refused before the long work.
+void refuse_existing_output(const std::filesystem::path& out, bool resume, bool overwrite);
+
 /// Throws InputError naming `source` (the series) when a value of [value_min, value_max] is beyond
 /// max_input_magnitude.
 void check_value_range(double value_min, double value_max, const std::string& source);
