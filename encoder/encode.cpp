@@ -177,6 +177,9 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
       request.max_frames ? std::min(request.max_frames, info.frames) : info.frames;
   const Ranks& ranks = request.ranks ? *request.ranks : single_process();
   refuse_existing_output(out, request.resume, request.overwrite);
+  // A dictionary given is read (and checked) now, not after the value range and rate control.
+  if (!request.dictionary.empty() && request.dictionary != "dct")
+    (void)format::read_dictionary_file(request.dictionary);
   // The brick size: given, the container's own (resume), or chosen for the volume.
   const std::array<std::uint32_t, 3> dims{static_cast<std::uint32_t>(info.dims.x),
                                           static_cast<std::uint32_t>(info.dims.y),

@@ -40,10 +40,44 @@ void refuse_existing_output(const fs::path& out, bool resume, bool overwrite) {
     throw InputError("'" + out.string() +
                      "' is not a directory: --out names the container directory to write (e.g. "
                      "NAME.vreel); remove that file or choose another name");
-  if (!resume && !overwrite && fs::exists(out / "manifest.json"))
+  const fs::path manifest = out / "manifest.json";
+  if (!resume && !overwrite && fs::exists(manifest))
     throw InputError(
         "'" + out.string() +
         "' already holds a container: give --resume to continue it or --overwrite to replace it");
+  // What a container holds is replaced; nothing else is touched, so a directory that holds files
+  // volreel did not write where its frames or manifest go is refused, with or without --overwrite.
+  if (fs::exists(fs::symlink_status(manifest, ec))) {
+    bool ours = false;
+    try {
+      const auto bytes = format::detail::read_whole_file(manifest, format::detail::max_json_bytes);
+      const auto doc = nlohmann::json::parse(bytes.begin(), bytes.end(), nullptr, false);
+      ours = doc.is_object() && doc.contains("container_id") && doc.contains("frames");
+    } catch (const std::exception&) {
+    }
+    if (!ours)
+      throw InputError("'" + manifest.string() +
+                       "' is not a volreel container's manifest: volreel replaces only its own "
+                       "containers; choose another --out");
+  }
+  const fs::path frames = out / "frames";
+  if (fs::exists(fs::symlink_status(frames, ec))) {
+    if (!fs::is_directory(fs::symlink_status(frames, ec)))
+      throw InputError(
+          "'" + frames.string() +
+          "' is not a directory: volreel writes its frames there; choose another --out");
+    for (const auto& entry : fs::directory_iterator(frames, ec)) {
+      const std::string name = entry.path().filename().string();
+      const bool frame =
+          name.size() == 10 && name.ends_with(".vrf") && name.find_first_not_of("0123456789") == 6;
+      if (!(entry.is_regular_file(ec) && (frame || name.find(".tmp-") != std::string::npos)))
+        throw InputError("'" + entry.path().string() +
+                         "' was not written by volreel (a container's frames/ holds NNNNNN.vrf "
+                         "files only): volreel replaces only its own containers; choose another "
+                         "--out");
+    }
+  }
+  format::detail::check_writable(out, "--out");
 }
 
 namespace {

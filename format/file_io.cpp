@@ -151,4 +151,27 @@ std::uint64_t parse_byte_size(const std::string& text, const std::string& option
   return static_cast<std::uint64_t>(bytes);
 }
 
+void check_writable(const fs::path& target, const std::string& option) {
+  if (target.empty())
+    throw std::invalid_argument(option + " is empty: expected the name of what to write");
+  std::error_code ec;
+  fs::path at = fs::absolute(target, ec);
+  if (ec) throw FormatError(target, "cannot write it (" + option + "): " + ec.message());
+  // A file there is replaced: where it goes is its directory.
+  if (fs::exists(fs::symlink_status(at, ec)) && !fs::is_directory(fs::status(at, ec)))
+    at = at.parent_path();
+  while (!fs::exists(fs::symlink_status(at, ec)) && at.has_parent_path() && at != at.parent_path())
+    at = at.parent_path();
+  const fs::file_status status = fs::status(at, ec);
+  if (!fs::is_directory(status))
+    throw FormatError(target, "cannot write it (" + option + "): '" + at.string() + "' is " +
+                                  file_kind(status.type()) + ", not a directory");
+  const fs::path probe = at / (".volreel-write-check-" + std::to_string(::getpid()));
+  if (!fs::create_directory(probe, ec) || ec)
+    throw FormatError(
+        target, "cannot write it (" + option + "): cannot create anything in '" + at.string() +
+                    "': " + (ec ? ec.message() : std::string("a check's name is taken")));
+  fs::remove(probe, ec);
+}
+
 }  // namespace volreel::format::detail

@@ -53,6 +53,10 @@ expect_error "already holds a series" "$volreel" gen analytic --frames 2 --out "
 expect_error "unknown analytic field" "$volreel" gen analytic --field nope --out "$work/d"
 expect_error "--at-bps: expected bits per voxel > 0" "$volreel" bench rd "$work/a" --at-bps nan
 expect_error "not a PNG\|cannot\|PNG" "$volreel" compare "$work/frame.raw" "$work/frame.png"
+# A word that is no command is named, with the commands there are.
+expect_error "'encod' is not a command of volreel (its commands: gen" "$volreel" encod "$work/a"
+expect_error "'analytc' is not a command of volreel gen" "$volreel" gen analytc --out "$work/x"
+expect_error "--coef-step: expected a number > 0, found '0'" "$volreel" bench rd "$work/a" --coef-step 0
 # The player checks its options before it opens a window.
 expect_error "at least 64x64" "$volreel" play "$work/none.vreel" --size 10x10
 expect_error "WIDTHxHEIGHT" "$volreel" play "$work/none.vreel" --size big
@@ -70,6 +74,9 @@ grep -q "^At equal bps" "$work/rd.txt" || fail "bench rd prints no equal-bps tab
 # zfp only: 7 bps rows x 2 zfp families, and a header.
 [ "$(wc -l < "$work/rd/rd_equal_bps.csv")" = 15 ] || fail "rd_equal_bps.csv should have a header and 14 rows"
 head -c 4 "$work/rd/rd.png" | grep -q PNG || fail "rd.png is not a PNG"
+# Images: --min-psnr holds or fails like a volume's; --max-error is for volumes.
+"$volreel" compare "$work/rd/rd.png" "$work/rd/rd.png" --min-psnr 100 > /dev/null 2>&1 || fail "an image equal to itself failed --min-psnr"
+expect_error "bounds the values of volumes" "$volreel" compare "$work/rd/rd.png" "$work/rd/rd.png" --max-error 1
 # With sparse keyframes: one curve per gap, every time step decoded as the player draws it. Gap 1
 # stores every brick, so it delivers exactly the frame-by-frame variable rate's PSNR.
 "$volreel" bench rd "$work/a" --out "$work/rdk" --dictionary dct --tolerances 0.004 --sparsities 2 \
@@ -80,6 +87,12 @@ psnr_of() { awk -v f="$1" 'index($0, f) == 1 { print $(NF - 6); exit }' "$work/r
   fail "keyframes at gap 1 should deliver the frame-by-frame PSNR: $(cat "$work/rdk.txt")"
 [ ! -e "$work/rdk/keyframes.vreel" ] || fail "bench rd left its keyframe container behind"
 expect_error "--keyframe-gaps needs --dictionary" "$volreel" bench rd "$work/a" --keyframe-gaps 2
+# A container of the user's where bench rd puts (and then removes) its own is refused.
+mkdir -p "$work/rdk2/keyframes.vreel"; echo mine > "$work/rdk2/keyframes.vreel/notes.txt"
+expect_error "keyframes.vreel' exists" "$volreel" bench rd "$work/a" --out "$work/rdk2" --dictionary dct \
+  --tolerances 0.004 --sparsities 2 --keyframe-gaps 2 --ssim-frames 0 --no-plot
+[ -f "$work/rdk2/keyframes.vreel/notes.txt" ] || fail "bench rd removed a keyframes.vreel it did not write"
+expect_error "--out is empty" "$volreel" bench rd "$work/a" --out ""
 
 # Where a ksvd container's bits go: one row per level and one for all; gap, magnitude and sign
 # bits add up to the bits per code; a zfp container is refused with the reason.

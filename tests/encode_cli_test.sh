@@ -38,6 +38,31 @@ expect_error "already holds a container" "$volreel" encode "$work/s" --dictionar
 if out=$("$volreel" encode "$work/s" --bps 1 --out "$work/a.vreel" 2>&1); then fail "encode over a container: $out"; fi
 grep -q "already holds a container" <<< "$out" || fail "no message for an existing container: $out"
 ! grep -q -e "training" -e "rate control" -e "value range" <<< "$out" || fail "the refusal came after the long work: $out"
+# A series with fewer frames than the container is not the one it was encoded from.
+"$volreel" gen analytic --field blobs --dims 40x36x30 --frames 2 --out "$work/s2" 2>/dev/null
+expect_error "has 2 frames but the container" "$volreel" compare "$work/s2" "$work/a.vreel"
+# Options refused before any work: the ksvd codec's options with zfp, and values out of range.
+expect_error "--bps applies to the ksvd codec: --codec zfp" "$volreel" encode "$work/s" --codec zfp --bps 2 --out "$work/x.vreel"
+expect_error "--fixed-sparsity applies to the ksvd codec" "$volreel" encode "$work/s" --codec zfp --fixed-sparsity 2 --out "$work/x.vreel"
+expect_error "--zfp-accuracy applies to --codec zfp only" "$volreel" encode "$work/s" --dictionary dct --zfp-accuracy 0.1 --out "$work/x.vreel"
+expect_error "--tolerance: expected a number > 0, found '0'" "$volreel" encode "$work/s" --tolerance 0 --out "$work/x.vreel"
+expect_error "--psnr: expected a number > 0, found '-5'" "$volreel" encode "$work/s" --psnr -5 --out "$work/x.vreel"
+expect_error "--fixed-sparsity: Value 300 not in range 1 to 216" "$volreel" encode "$work/s" --fixed-sparsity 300 --out "$work/x.vreel"
+# The output and the dictionary, checked before the value range and training.
+if out=$("$volreel" encode "$work/s" --atoms 64 --out /proc/volreel-test.vreel 2>&1); then fail "encode into /proc: $out"; fi
+grep -q "cannot write it (--out)" <<< "$out" || fail "no message for an output that cannot be written: $out"
+! grep -q -e "training" -e "value range" <<< "$out" || fail "the unwritable output was found after the long work: $out"
+expect_error "nope.bin: cannot open: No such file" "$volreel" encode "$work/s" --dictionary "$work/nope.bin" --out "$work/x.vreel"
+expect_error "expected magic \"VREELDIC\"" "$volreel" encode "$work/s" --dictionary "$work/s/000000.f32" --out "$work/x.vreel"
+expect_error "--out is empty" "$volreel" encode "$work/s" --dictionary dct --out ""
+# Only a container's own files are replaced: a folder with other files in frames/, or another
+# program's manifest.json, is refused with or without --overwrite, and left as it was.
+mkdir -p "$work/proj/frames"; echo x > "$work/proj/frames/img_1.png"
+expect_error "img_1.png' was not written by volreel" "$volreel" encode "$work/s" --dictionary dct --overwrite --out "$work/proj"
+[ -f "$work/proj/frames/img_1.png" ] || fail "encode removed a file it did not write"
+mkdir -p "$work/other"; echo '{}' > "$work/other/manifest.json"
+expect_error "is not a volreel container's manifest" "$volreel" encode "$work/s" --dictionary dct --overwrite --out "$work/other"
+[ "$(cat "$work/other/manifest.json")" = '{}' ] || fail "encode replaced another program's manifest.json"
 touch "$work/plain-file"
 expect_error "'$work/plain-file' is not a directory" "$volreel" encode "$work/s" --dictionary dct --overwrite --out "$work/plain-file"
 

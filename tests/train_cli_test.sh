@@ -45,6 +45,18 @@ expect_error "does not exist" train "$work/nope" --out "$work/x.bin"
 expect_error "fewer than the 2^6" train "$work/a" --out "$work/x.bin" --coreset 10k
 expect_error "unknown suffix" train "$work/a" --out "$work/x.bin" --coreset 10q
 head -c 16384 /dev/zero > "$work/zeros.raw"
+# Checked before the frames are read and the dictionary trained: the output and the options.
+echo old > "$work/taken.bin"
+expect_error "already exists: give --overwrite" train "$work/a" --out "$work/taken.bin" --atoms 64
+[ "$(cat "$work/taken.bin")" = old ] || fail "train replaced an existing --out without --overwrite"
+expect_error "is a directory" train "$work/a" --out "$work/a"
+expect_error "cannot write it (--out)" train "$work/a" --out /proc/volreel-test.bin
+expect_error "iterations: Value 0 not in range" train "$work/a" --out "$work/x.bin" --iterations 0
+expect_error "convergence: expected a number >= 0, found '-1'" train "$work/a" --out "$work/x.bin" --convergence -1
+! grep -q "coreset" "$work/out.txt" || fail "an option was refused after the coreset was drawn"
+"$volreel" train "$work/a" --out "$work/taken.bin" --overwrite --atoms 64 --coreset 200k --levels 1 \
+  --iterations 1 > /dev/null 2>&1 || fail "train --overwrite failed"
+[ "$(head -c 8 "$work/taken.bin")" = VREELDIC ] || fail "train --overwrite did not replace the file"
 expect_error "flat (constant)" train "$work/zeros.raw" --dims 16x16x16 --out "$work/x.bin" --coreset 20k --levels 2 --tolerance 0.1
 
 # The benchmark: hierarchical, flat and two plain runs, evaluation on held-out frames, throughput.

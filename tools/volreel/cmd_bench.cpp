@@ -11,6 +11,7 @@
 #include "progress.hpp"
 #include "volreel/encoder/encode.hpp"
 #include "volreel/format/dictionary_file.hpp"
+#include "volreel/format/file_io.hpp"
 #include "volreel/psnr/rate_distortion.hpp"
 #include "volreel_codecs.hpp"
 
@@ -53,6 +54,10 @@ std::vector<psnr::RdPoint> keyframe_points(const datasets::SeriesReader& series,
                                            const RdCommandOptions& o, double range) {
   std::vector<psnr::RdPoint> points;
   const std::filesystem::path container = std::filesystem::path(o.out) / "keyframes.vreel";
+  if (std::filesystem::exists(std::filesystem::symlink_status(container)))
+    throw InputError("'" + container.string() +
+                     "' exists: --keyframe-gaps writes its containers there and removes it "
+                     "afterwards; move it away or choose another --out");
   std::filesystem::create_directories(o.out);
   const double runs = static_cast<double>(o.keyframe_gaps.size() * o.tolerances.size() *
                                           o.lagrangian_factors.size());
@@ -95,6 +100,7 @@ std::vector<psnr::RdPoint> keyframe_points(const datasets::SeriesReader& series,
 }
 
 void run_rd(const RdCommandOptions& o) {
+  format::detail::check_writable(o.out, "--out");
   const auto series = datasets::open_series(o.series, o.reader.to_open_options());
   const auto& info = series->info();
   const std::size_t frames = o.rd.max_frames ? std::min(o.rd.max_frames, info.frames) : info.frames;
@@ -261,7 +267,7 @@ void add_bench_command(CLI::App& app) {
   rd->add_option("--coef-step", o->coef_step,
                  "Variable rate: the largest coefficient step as a multiple of eps (as volreel "
                  "encode --coef-step)")
-      ->check(CLI::PositiveNumber)
+      ->check(positive())
       ->capture_default_str();
   rd->add_option("--at-bps", o->at_bps,
                  "Rows of the equal-bps table (OUT/rd_equal_bps.csv): each codec's PSNR at these "

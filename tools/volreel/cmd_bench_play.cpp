@@ -307,7 +307,7 @@ void add_bench_play_command(CLI::App& bench) {
   cmd->add_option("--frame-ms", o->frame_ms,
                   "Frame-time target while the view is busy (reduced resolution, full when "
                   "still), milliseconds; 0: every frame at full resolution")
-      ->check(CLI::NonNegativeNumber)
+      ->check(non_negative())
       ->capture_default_str();
   cmd->add_option("--transfer", o->transfer,
                   "Transfer function: auto (data quantiles), a preset or a JSON file")

@@ -41,6 +41,8 @@ nlohmann::json number(double v) {
 }
 
 void compare_images(const CompareOptions& o) {
+  if (o.max_error > 0)
+    throw InputError("--max-error bounds the values of volumes; for images give --min-psnr");
   const image::Image a = image::read_png(o.a), b = image::read_png(o.b);
   const psnr::ImageComparison c = psnr::compare_images(a, b);
   if (o.json) {
@@ -66,6 +68,9 @@ void compare_images(const CompareOptions& o) {
         "channel, averaged)\nMSE   %.4f\n",
         a.width, a.height, a.channels, c.psnr, c.ssim, c.mse);
   }
+  if (o.min_psnr > 0 && !(c.psnr >= o.min_psnr))
+    throw InputError("the images' PSNR " + std::to_string(c.psnr) + " dB is below --min-psnr " +
+                     std::to_string(o.min_psnr));
 }
 
 void compare_series(const CompareOptions& o) {
@@ -94,6 +99,11 @@ void compare_series(const CompareOptions& o) {
                      to_string(ib.dims));
   // A container encoded from the first frames of A (encode --max-frames) compares with those.
   const std::size_t frames = container ? std::min(ia.frames, ib.frames) : ia.frames;
+  if (container && ia.frames < ib.frames)
+    throw InputError("'" + o.a + "' has " + std::to_string(ia.frames) +
+                     " frames but the container '" + o.b + "' has " + std::to_string(ib.frames) +
+                     ": compare a container with the series it was encoded from (as many frames, "
+                     "or more when it was encoded with --max-frames)");
   if (!container && ia.frames != ib.frames)
     throw InputError("'" + o.a + "' has " + std::to_string(ia.frames) + " frames but '" + o.b +
                      "' has " + std::to_string(ib.frames));
@@ -224,10 +234,10 @@ void add_compare_command(CLI::App& app) {
   cmd->add_option("--max-error", o->max_error,
                   "Volumes: fail (exit status 1, naming the worst frame) if any value of B is off "
                   "by more than this\n(the bound of volreel encode --max-error)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive());
   cmd->add_option("--min-psnr", o->min_psnr,
                   "Volumes: fail (exit status 1) if the sequence PSNR is below this (dB)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive());
   cmd->callback([o] {
     const bool a_png = is_png(o->a), b_png = is_png(o->b);
     if (a_png != b_png)

@@ -47,12 +47,30 @@ struct EncodeOptions {
   CLI::Option *tolerance_opt = nullptr, *psnr_opt = nullptr, *bps_opt = nullptr, *zfp_opt = nullptr,
               *level_factor_opt = nullptr, *level_detail_opt = nullptr, *max_error_opt = nullptr,
               *max_atoms_opt = nullptr, *rate_rule_opt = nullptr, *keyframe_gap_opt = nullptr;
+  const CLI::App* command = nullptr;
 };
+
+/// Options of the ksvd codec alone, refused with --codec zfp rather than ignored.
+constexpr const char* ksvd_options[] = {
+    "--dictionary", "--atoms",          "--tolerance",         "--psnr",
+    "--bps",        "--max-error",      "--fixed-sparsity",    "--max-atoms",
+    "--rate-rule",  "--level-factor",   "--level-detail",      "--pursuit",
+    "--mean-bits",  "--coef-bits",      "--coef-step",         "--atom-storage",
+    "--no-refit",   "--extend-pursuit", "--rate-sample-frames"};
 
 /// The options' coding settings (the value range and ε not yet set).
 encoder::CodingSettings coding_settings(const EncodeOptions& o) {
   encoder::CodingSettings c;
   c.codec = encoder::codec_from_name(o.codec);
+  if (c.codec == format::Codec::zfp) {
+    for (const char* name : ksvd_options)
+      if (o.command->count(name) > 0)
+        throw InputError(std::string(name) +
+                         " applies to the ksvd codec: --codec zfp codes every brick to one "
+                         "absolute accuracy, --zfp-accuracy E (default range*1e-3)");
+  } else if (o.zfp_opt->count() > 0) {
+    throw InputError("--zfp-accuracy applies to --codec zfp only");
+  }
   c.max_atoms = o.max_atoms;
   c.fixed_sparsity = o.fixed_sparsity;
   c.rule = encoder::rate_rule_from_name(o.rate_rule);
@@ -237,13 +255,18 @@ void add_encode_command(CLI::App& app) {
       "Pointwise bound E, data units: every decoded value of the finest level within E of the "
       "original\n(blocks take atoms, bricks a finer coefficient step, until it holds; volreel "
       "compare --max-error checks it)");
-  o->max_error_opt->check(CLI::PositiveNumber);
+  o->max_error_opt->check(positive());
+  o->tolerance_opt->check(positive());
+  o->psnr_opt->check(positive());
+  o->bps_opt->check(positive());
   o->tolerance_opt->excludes(o->psnr_opt)->excludes(o->bps_opt)->excludes(o->max_error_opt);
   o->psnr_opt->excludes(o->bps_opt)->excludes(o->max_error_opt);
   o->bps_opt->excludes(o->max_error_opt);
   cmd->add_option("--fixed-sparsity", o->fixed_sparsity,
-                  "Fixed rate: S atoms per block (1..216) instead of a tolerance");
+                  "Fixed rate: S atoms per block (1..216) instead of a tolerance")
+      ->check(CLI::Range(1, 216));
   o->max_atoms_opt = cmd->add_option("--max-atoms", o->max_atoms, "Smax for variable rate (1..216)")
+                         ->check(CLI::Range(1, 216))
                          ->capture_default_str();
   o->rate_rule_opt =
       cmd->add_option(
@@ -289,7 +312,7 @@ void add_encode_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--coef-step", o->coef_step_factor,
                   "Variable rate: the coefficient quantization step as a multiple of eps")
-      ->check(CLI::PositiveNumber)
+      ->check(positive())
       ->capture_default_str();
   cmd->add_option("--atom-storage", o->atom_storage,
                   "How the container stores the dictionary's atoms: f16 (IEEE half: half the "
@@ -308,6 +331,7 @@ void add_encode_command(CLI::App& app) {
       ->capture_default_str();
   o->zfp_opt = cmd->add_option("--zfp-accuracy", o->zfp_accuracy,
                                "zfp absolute error tolerance (default range*1e-3)");
+  o->zfp_opt->check(positive());
   cmd->add_option("--max-frames", o->max_frames, "Encode only the first N frames (0: all)");
   o->keyframe_gap_opt =
       cmd->add_option("--max-keyframe-gap", o->max_keyframe_gap,
@@ -332,6 +356,7 @@ void add_encode_command(CLI::App& app) {
   cmd->add_option("--rate-sample-frames", o->rate_sample_frames,
                   "--bps: frames encoded per trial, evenly spaced; the eps found is checked on as "
                   "many others\n(twice at most) and searched again where they disagree")
+      ->check(CLI::Range(std::size_t{1}, std::size_t{1} << 20))
       ->capture_default_str();
   cmd->add_flag("--resume", o->resume,
                 "Continue an interrupted encode: keep frames already written and valid");
@@ -345,6 +370,7 @@ void add_encode_command(CLI::App& app) {
                 "(quantization inside the\n"
                 "pursuit): meets eps after quantization, at more bytes and half the speed");
   o->reader.add_to(*cmd);
+  o->command = cmd;
   cmd->callback([o] { run_encode(*o); });
 }
 

@@ -65,7 +65,10 @@ void run_play(PlayCommandOptions& o) {
     }
   }
   if (!o.script_inline.empty()) p.script += "\n" + o.script_inline;
-  if (!o.screenshot_on_exit.empty()) p.screenshot_on_exit = o.screenshot_on_exit;
+  if (!o.screenshot_on_exit.empty()) {
+    format::detail::check_writable(o.screenshot_on_exit, "--screenshot-on-exit");
+    p.screenshot_on_exit = o.screenshot_on_exit;
+  }
   p.source = open_container_source(p.container.string(), o.remote);
   try {
     app::run_player(p);
@@ -111,7 +114,7 @@ void add_play_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--upload-mb", o->upload_mb,
                   "Compressed brick data decoded per frame at most, MiB")
-      ->check(CLI::PositiveNumber)
+      ->check(positive())
       ->capture_default_str();
   cmd->add_option("--max-requests", o->player.max_requests, "Brick reads in flight at most")
       ->check(CLI::Range(1, 100000))
@@ -121,10 +124,10 @@ void add_play_command(CLI::App& app) {
                   "cool-warm, fire, turbulence, transparent) or a JSON file")
       ->capture_default_str();
   cmd->add_option("--sse", o->player.sse_target, "Screen-space error target, pixels per voxel")
-      ->check(CLI::PositiveNumber)
+      ->check(positive())
       ->capture_default_str();
   cmd->add_option("--keyframes-per-second", o->player.keyframes_per_second, "Playback rate at 1x")
-      ->check(CLI::PositiveNumber)
+      ->check(positive())
       ->capture_default_str();
   cmd->add_flag("--loop", o->player.loop, "Wrap around at the ends of the timeline");
   cmd->add_flag("!--no-vsync", o->player.vsync, "Present as fast as possible (mailbox/immediate)");
@@ -141,7 +144,7 @@ void add_play_command(CLI::App& app) {
                   "Frame-time target while the view is busy (orbiting, playing, streaming): the "
                   "volume is rendered smaller to hold it and at full size once the view is still, "
                   "milliseconds (0: always full size)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(non_negative())
       ->capture_default_str();
   cmd->add_option("--decode", o->decode,
                   "Where bricks are decoded: auto (on the CPU with a CPU Vulkan implementation "

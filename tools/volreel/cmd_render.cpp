@@ -30,6 +30,7 @@
 #include "volreel/cpu_render/tour.hpp"
 #include "volreel/datasets/series.hpp"
 #include "volreel/format/container.hpp"
+#include "volreel/format/file_io.hpp"
 #include "volreel/loop/auto_transfer.hpp"
 #include "volreel/loop/frame_loop.hpp"
 #include "volreel/loop/loop_settings.hpp"
@@ -76,6 +77,7 @@ void run_render(const RenderCommandOptions& o) {
   const fs::path out = o.out;
   if (fs::exists(out) && !fs::is_directory(out))
     throw InputError("--out " + o.out + ": exists and is not a directory");
+  format::detail::check_writable(out, "--out");
   fs::create_directories(out);
   loop::FrameLoopOptions options;
   options.width = tour.width();
@@ -241,7 +243,6 @@ void run_render(const RenderCommandOptions& o) {
                             " frames drawn incomplete after --wait-timeout")
                                .c_str()
                          : "");
-  if (errors) std::printf("%zu errors (see the warnings above)\n", errors);
   print_remote_summary(container.source(), "render");
   if (compared)
     std::printf(
@@ -272,6 +273,11 @@ void run_render(const RenderCommandOptions& o) {
                        o.video);
     std::printf("wrote %s (%zu frames, H.264)\n", o.video.c_str(), frames);
   }
+  // The frames are written (drawn without what failed); the exit status still says it failed.
+  if (errors)
+    throw InputError(std::to_string(errors) +
+                     " bricks or frames could not be read (see the warnings above): the frames "
+                     "were drawn without them; volreel verify names what is damaged");
 }
 
 }  // namespace
@@ -306,7 +312,7 @@ void add_render_command(CLI::App& app) {
   cmd->add_option("--wait-timeout", o->wait_timeout,
                   "Without --realtime: seconds a frame waits for its bricks before it is drawn "
                   "with what it has (reported)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(non_negative())
       ->capture_default_str();
   cmd->add_option("--max-frames", o->max_frames, "Render only the first N frames of the tour");
   cmd->add_option(

@@ -10,6 +10,7 @@
 #include "training_options.hpp"
 #include "volreel/dictionary/dictionary.hpp"
 #include "volreel/dictionary/training.hpp"
+#include "volreel/format/file_io.hpp"
 
 namespace volreel::cli {
 
@@ -23,10 +24,19 @@ double seconds_since(Clock::time_point start) {
 struct TrainCommandOptions {
   TrainingCli training;
   std::string out;
-  bool flat = false;
+  bool flat = false, overwrite = false;
 };
 
 void run_train(const TrainCommandOptions& o) {
+  // The output is checked before the frames are read and the dictionary trained.
+  std::error_code ec;
+  const auto out_status = std::filesystem::status(o.out, ec);
+  if (std::filesystem::is_directory(out_status))
+    throw InputError("--out '" + o.out + "' is a directory: expected the dictionary file to write");
+  if (std::filesystem::exists(out_status) && !o.overwrite)
+    throw InputError("'" + o.out +
+                     "' already exists: give --overwrite to replace it, or choose another --out");
+  format::detail::check_writable(o.out, "--out");
   const auto series = datasets::open_series(o.training.series, o.training.reader.to_open_options());
   const auto& info = series->info();
   std::printf("volreel train: %s, %s x %zu frames, variable '%s'\n", info.source.c_str(),
@@ -71,6 +81,7 @@ void add_train_command(CLI::App& app) {
                                        "per block, fraction of blocks meeting eps, time.");
   o->training.add_to(*train);
   train->add_option("--out", o->out, "Dictionary file to write")->required();
+  train->add_flag("--overwrite", o->overwrite, "Replace an existing --out file");
   train->add_flag(
       "--flat", o->flat,
       "Train on the largest coreset only (iterations x (levels+1) iterations), for comparison");

@@ -43,6 +43,16 @@ void add_bench_play_command(CLI::App& bench);
 /// The whole of text as a finite number > 0, or std::nullopt (empty, trailing characters, NaN,
 /// infinite, zero or negative): for options CLI11's own checks let NaN through.
 std::optional<double> positive_number(const std::string& text);
+/// Option checks with plain messages ("expected a number > 0, found '0'"), for options CLI11's
+/// PositiveNumber and NonNegativeNumber would check (they name a 309-digit bound and let NaN
+/// through).
+CLI::Validator positive();
+CLI::Validator non_negative();
+
+/// Throws InputError naming the word when the command line's first word that is not an option,
+/// or the next one under a command that takes subcommands (`volreel bench`, `volreel gen`), is
+/// no command ("volreel encod ..."); CLI11 alone would only say that a command is required.
+void refuse_unknown_command(const CLI::App& app, int argc, const char* const* argv);
 
 /// Options that say how to read a series whose file does not describe itself; shared by every
 /// command that reads one.

@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
   volreel::cli::add_render_command(app);
 #endif
   try {
+    volreel::cli::refuse_unknown_command(app, argc, argv);
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);

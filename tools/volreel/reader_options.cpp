@@ -1,7 +1,10 @@
 // reader_options.cpp: the command-line options that describe how to read a series, and the
 // parsing of option values shared by several commands.
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <string>
+#include <vector>
 
 #include "commands.hpp"
 
@@ -13,6 +16,48 @@ std::optional<double> positive_number(const std::string& text) {
   if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v) || !(v > 0))
     return std::nullopt;
   return v;
+}
+
+void refuse_unknown_command(const CLI::App& app, int argc, const char* const* argv) {
+  const CLI::App* at = &app;
+  std::string path = "volreel";
+  for (int i = 1; i < argc; ++i) {
+    const std::string word = argv[i];
+    if (word.empty() || word[0] == '-') return;  // options: CLI11's to judge
+    const std::vector<const CLI::App*> commands = at->get_subcommands({});
+    if (commands.empty() || at->get_require_subcommand_min() == 0) return;
+    const auto found = std::find_if(commands.begin(), commands.end(),
+                                    [&](const CLI::App* c) { return c->check_name(word); });
+    if (found == commands.end()) {
+      std::string names;
+      for (const CLI::App* c : commands) names += (names.empty() ? "" : ", ") + c->get_name();
+      throw InputError("'" + word + "' is not a command of " + path + " (its commands: " + names +
+                       "); run " + path + " --help");
+    }
+    at = *found;
+    path += " " + at->get_name();
+  }
+}
+
+CLI::Validator positive() {
+  return CLI::Validator(
+      [](const std::string& text) {
+        return positive_number(text) ? std::string()
+                                     : "expected a number > 0, found '" + text + "'";
+      },
+      "POSITIVE");
+}
+
+CLI::Validator non_negative() {
+  return CLI::Validator(
+      [](const std::string& text) {
+        char* end = nullptr;
+        const double v = std::strtod(text.c_str(), &end);
+        return !text.empty() && end == text.c_str() + text.size() && std::isfinite(v) && v >= 0
+                   ? std::string()
+                   : "expected a number >= 0, found '" + text + "'";
+      },
+      "NONNEGATIVE");
 }
 
 const char* const series_inputs_help = R"(Series (SERIES):

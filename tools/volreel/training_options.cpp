@@ -52,15 +52,25 @@ void TrainingCli::add_to(CLI::App& c) {
       "--tolerance", tolerance,
       "Error tolerance eps: RMS error per value of a block, in data units (a block is done when\n"
       "sqrt(|y - D g|^2 / M^3) <= eps). Overrides --psnr");
+  tolerance_option->check(positive());
   c.add_option(
        "--psnr", psnr,
        "Target PSNR in dB: eps = range * 10^(-PSNR/20), range = max - min of the training frames; "
        "PSNR is at\n"
        "least this if every block meets eps (usually higher, since many blocks fall below it)")
+      ->check(positive())
       ->capture_default_str();
-  c.add_option("--atoms", atoms, "Dictionary size K")->capture_default_str();
-  c.add_option("--block", block, "Block size M (blocks of M^3 values)")->capture_default_str();
-  c.add_option("--max-atoms", max_atoms, "Smax: atoms per block at most")->capture_default_str();
+  c.add_option("--atoms", atoms, "Dictionary size K (1..65536)")
+      ->check(CLI::Range(1, 65536))
+      ->capture_default_str();
+  c.add_option("--block", block,
+               "Block size M (blocks of M^3 values; volreel encode codes 6^3 blocks, so its "
+               "dictionaries need 6)")
+      ->check(CLI::Range(2, 16))
+      ->capture_default_str();
+  c.add_option("--max-atoms", max_atoms, "Smax: atoms per block at most (1..255, at most M^3)")
+      ->check(CLI::Range(1, 255))
+      ->capture_default_str();
   c.add_option(
        "--coreset", coreset,
        "Coreset size C in voxels (k, M, G suffixes, decimal): the largest level holds C/M^3 block "
@@ -68,8 +78,10 @@ void TrainingCli::add_to(CLI::App& c) {
        "frames are chosen until they hold 16*C voxels. Memory for training is about 12 bytes * C")
       ->capture_default_str();
   c.add_option("--levels", levels, "Coreset levels below C: C, C/2, ..., C/2^levels")
+      ->check(CLI::Range(0, 30))
       ->capture_default_str();
   c.add_option("--iterations", iterations, "K-SVD iterations per coreset level (Algorithm 1's N)")
+      ->check(CLI::Range(1, 1000000))
       ->capture_default_str();
   c.add_option("--seed", seed, "Seed for coreset sampling and dictionary initialization")
       ->capture_default_str();
@@ -77,6 +89,7 @@ void TrainingCli::add_to(CLI::App& c) {
                "Tolerance schedule: the first level codes at this many times eps, the next ones "
                "geometrically\n"
                "less, the last at eps (1: eps throughout, as in the paper)")
+      ->check(CLI::Range(1.0, 1e6))
       ->capture_default_str();
   c.add_flag(
       "--no-sparsity-ramp", no_sparsity_ramp,
@@ -87,6 +100,7 @@ void TrainingCli::add_to(CLI::App& c) {
                "this fraction (0: always N; flat mode tests it in its last stage only). On the "
                "default dataset 0.01\n"
                "trains 2.4x faster than 0 for -0.1 dB and +5% atoms per block at eps")
+      ->check(non_negative())
       ->capture_default_str();
   reader.add_to(c);
 }

@@ -38,6 +38,13 @@ constexpr std::uint64_t max_dictionary_bytes = std::uint64_t{1} << 30;
 /// written file; throws FormatError (and removes the temporary) on failure.
 void write_file_atomically(const std::filesystem::path& path, std::span<const std::byte> bytes);
 
+/// Checks, before long work, that `target` (a file or directory still to be written) can be
+/// created: its name is not empty, and a directory can be made in the nearest directory on its
+/// path that exists (`target` itself when it is one; the directory of a file `target` replaces),
+/// which is tried and removed again. Throws
+/// FormatError naming `target`, `option` (e.g. "--out") and why not.
+void check_writable(const std::filesystem::path& target, const std::string& option);
+
 /// "2G", "500M", "64k", "1T" or a number of bytes -> bytes (powers of 1024), for options such as
 /// --cache-size and --memory. Throws std::invalid_argument naming `option`.
 std::uint64_t parse_byte_size(const std::string& text, const std::string& option);
