@@ -33,6 +33,10 @@ echo "$out" | json '1 if d["bps"] > 0 and d["sequence"]["psnr"] > 35 else exit(1
 [ "$(stat -c %s "$work/f2l0.f32")" = $((20 * 18 * 15 * 4)) ] || fail "decode at level 0: wrong size"
 expect_error "levels 0..1" "$volreel" decode "$work/a.vreel" --frame 0 --level 5 --out "$work/x.f32"
 expect_error "the container has frames 0..2" "$volreel" decode "$work/a.vreel" --frame 3 --out "$work/x.f32"
+# The output must be a regular file or a new name: a FIFO would block the write (no reader).
+mkfifo "$work/fifo"
+expect_error "is a FIFO (named pipe): expected a regular file" timeout 60 "$volreel" decode "$work/a.vreel" --frame 0 --out "$work/fifo"
+expect_error "is a directory: expected a regular file" "$volreel" decode "$work/a.vreel" --frame 0 --out "$work/s"
 expect_error "already holds a container" "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/a.vreel"
 # ... refused before the long work: no training, no rate control, no value range.
 if out=$("$volreel" encode "$work/s" --bps 1 --out "$work/a.vreel" 2>&1); then fail "encode over a container: $out"; fi

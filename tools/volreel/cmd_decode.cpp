@@ -5,13 +5,15 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <fstream>
+#include <filesystem>
 #include <memory>
+#include <span>
 #include <string>
 
 #include "commands.hpp"
 #include "volreel/format/container.hpp"
 #include "volreel/format/decoder.hpp"
+#include "volreel/format/file_io.hpp"
 #include "volreel/format/time_step.hpp"
 
 namespace volreel::cli {
@@ -27,7 +29,16 @@ struct DecodeOptions {
   int repeat = 1;
 };
 
+namespace fs = std::filesystem;
+
 void run_decode(const DecodeOptions& o) {
+  // The output: a regular file or a new name (a FIFO would block the write, a device take it).
+  std::error_code ec;
+  const fs::file_status status = fs::status(o.out, ec);
+  if (fs::exists(status) && !fs::is_regular_file(status))
+    throw InputError("--out '" + o.out + "' is " + format::detail::file_kind(status.type()) +
+                     ": expected a regular file (or a new name) for the decoded values");
+  format::detail::check_writable(o.out, "--out");
   const format::Container c(o.dir);
   format::TimeStepDecoder steps(c);
   if (o.frame >= c.frame_count())
@@ -50,10 +61,8 @@ void run_decode(const DecodeOptions& o) {
     steps.decode(o.frame, level, v.data);
     seconds = std::min(seconds, std::chrono::duration<double>(Clock::now() - start).count());
   }
-  std::ofstream out(o.out, std::ios::binary);
-  out.write(reinterpret_cast<const char*>(v.data.data()),
-            static_cast<std::streamsize>(v.data.size() * sizeof(float)));
-  if (!out) throw InputError("cannot write '" + o.out + "'");
+  format::detail::write_file_atomically(
+      o.out, std::as_bytes(std::span<const float>(v.data.data(), v.data.size())));
   std::printf(
       "wrote %s: frame %zu level %u, %ux%ux%u float32 (x fastest); decoded in %.4f s (%.1f "
       "MVoxel/s of output; best of %d, %d threads)\n",
@@ -77,6 +86,7 @@ void add_decode_command(CLI::App& app) {
   decode
       ->add_option("--repeat", d->repeat,
                    "Decode this many times and report the fastest (a benchmark)")
+      ->check(CLI::Range(1, 1000000))
       ->capture_default_str();
   decode->callback([d] { run_decode(*d); });
 }
