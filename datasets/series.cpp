@@ -203,12 +203,38 @@ RawSeriesWriter::RawSeriesWriter(fs::path dir, Dims dims, std::string variable, 
     : dir_(std::move(dir)), dims_(dims), variable_(std::move(variable)) {
   if (dims_.voxels() == 0) throw InputError("cannot write a series with empty dimensions");
   std::error_code ec;
-  if (fs::exists(dir_ / "series.json", ec) && !overwrite)
+  const fs::path manifest = dir_ / "series.json";
+  if (fs::exists(manifest, ec) && !overwrite)
     throw InputError("'" + dir_.string() +
                      "' already holds a series; choose another --out or pass --overwrite");
+  // The directories this writer makes, deepest first (removed again without finish).
+  for (fs::path d = fs::absolute(dir_, ec);
+       !d.empty() && !fs::exists(d, ec) && d != d.parent_path(); d = d.parent_path())
+    created_.push_back(d);
   fs::create_directories(dir_, ec);
   if (ec) throw InputError("cannot create directory '" + dir_.string() + "': " + ec.message());
-  if (overwrite) fs::remove(dir_ / "series.json", ec);
+  if (overwrite && fs::exists(manifest, ec)) {
+    // The old series' frames (a shorter new series would leave them behind), then its manifest.
+    try {
+      const auto bytes = format::detail::read_whole_file(manifest, format::detail::max_json_bytes);
+      const auto old = nlohmann::json::parse(bytes.begin(), bytes.end(), nullptr, false);
+      if (old.is_object() && old.contains("frames") && old["frames"].is_array())
+        for (const auto& name : old["frames"])
+          if (name.is_string() &&
+              fs::path(name.get<std::string>()).filename() == name.get<std::string>())
+            fs::remove(dir_ / name.get<std::string>(), ec);
+    } catch (const std::exception&) {
+    }
+    fs::remove(manifest, ec);
+  }
+}
+
+RawSeriesWriter::~RawSeriesWriter() {
+  if (finished_) return;
+  std::error_code ec;
+  for (std::size_t t = 0; t < timestamps_.size(); ++t)
+    if (timestamps_[t]) fs::remove(dir_ / raw_frame_name(t), ec);
+  for (const fs::path& d : created_) fs::remove(d, ec);  // only if empty
 }
 
 namespace {
@@ -251,6 +277,7 @@ void RawSeriesWriter::finish() {
   if (!generator_.is_null()) j["generator"] = generator_;
   const std::string text = j.dump(2) + "\n";
   write_atomically(dir_ / "series.json", text.data(), text.size());
+  finished_ = true;
 }
 
 }  // namespace volreel::datasets

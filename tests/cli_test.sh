@@ -53,6 +53,18 @@ expect_error "already holds a series" "$volreel" gen analytic --frames 2 --out "
 expect_error "unknown analytic field" "$volreel" gen analytic --field nope --out "$work/d"
 expect_error "--at-bps: expected bits per voxel > 0" "$volreel" bench rd "$work/a" --at-bps nan
 expect_error "not a PNG\|cannot\|PNG" "$volreel" compare "$work/frame.raw" "$work/frame.png"
+# gen: sizes checked when parsed; a failed run leaves no folder behind; --overwrite with fewer
+# frames leaves none of the old frames.
+expect_error "--size: Value -4 not in range" "$volreel" gen analytic --size -4 --out "$work/neg"
+expect_error "CFL number must be in (0, 2]" "$volreel" gen turbulence --size 16 --frames 1 --cfl 3 --out "$work/failed/run"
+[ ! -e "$work/failed" ] || fail "a failed gen left $(ls -R "$work/failed")"
+expect_error "--power: expected a number > 0" "$volreel" gen turbulence --size 16 --power 0 --out "$work/p0"
+"$volreel" gen analytic --size 16 --frames 4 --out "$work/shrink" > /dev/null 2>&1
+"$volreel" gen analytic --size 16 --frames 2 --out "$work/shrink" --overwrite > /dev/null 2>&1
+[ "$(ls "$work/shrink" | tr '\n' ' ')" = "000000.f32 000001.f32 series.json " ] || fail "gen --overwrite left old frames: $(ls "$work/shrink")"
+expect_error "--resume excludes --overwrite" "$volreel" encode "$work/shrink" --resume --overwrite --out "$work/x.vreel"
+expect_error "--replace-nan: expected a finite number, found 'nan'" "$volreel" encode "$work/shrink" --replace-nan nan --out "$work/x.vreel"
+expect_error "--sparsities: Value 0 not in range 1 to 216" "$volreel" bench rd "$work/shrink" --sparsities 0
 # A word that is no command is named, with the commands there are.
 expect_error "'encod' is not a command of volreel (its commands: gen" "$volreel" encod "$work/a"
 expect_error "'analytc' is not a command of volreel gen" "$volreel" gen analytc --out "$work/x"

@@ -99,6 +99,36 @@ TEST(RawSeries, WriterRefusesToOverwriteAndToFinishWithGaps) {
   expect_error([&] { w.write_frame(0, 0.0, std::vector<float>(3)); }, {"has 3 values, expected 8"});
 }
 
+TEST(RawSeries, AWriterThatDoesNotFinishLeavesNothingBehind) {
+  TempDir dir("series-unfinished");
+  const Dims d{2, 2, 2};
+  {  // directories it made: removed with its frames
+    vd::RawSeriesWriter w(dir / "new" / "deeper", d, "p");
+    w.write_frame(0, 0.0, ramp(d, 0));
+    EXPECT_TRUE(fs::exists(dir / "new" / "deeper" / "000000.f32"));
+  }
+  EXPECT_FALSE(fs::exists(dir / "new"));
+  {  // a directory that was there stays, with what else it holds
+    fs::create_directories(dir / "kept");
+    std::ofstream(dir / "kept" / "notes.txt") << "mine";
+    vd::RawSeriesWriter w(dir / "kept", d, "p");
+    w.write_frame(0, 0.0, ramp(d, 0));
+  }
+  EXPECT_FALSE(fs::exists(dir / "kept" / "000000.f32"));
+  EXPECT_TRUE(fs::exists(dir / "kept" / "notes.txt"));
+  // --overwrite: the old series' frames go, so that a shorter one leaves none of them.
+  const fs::path old = write_series(dir, d, 3);
+  {
+    vd::RawSeriesWriter w(old, d, "p", true);
+    w.write_frame(0, 0.0, ramp(d, 5));
+    w.finish();
+  }
+  EXPECT_TRUE(fs::exists(old / "000000.f32"));
+  EXPECT_FALSE(fs::exists(old / "000001.f32"));
+  EXPECT_FALSE(fs::exists(old / "000002.f32"));
+  EXPECT_EQ(vd::open_series(old)->info().frames, 1u);
+}
+
 TEST(RawSeries, MissingAndShortFramesAreNamed) {
   TempDir dir("series-bad");
   const Dims d{4, 4, 4};

@@ -239,14 +239,17 @@ void add_bench_command(CLI::App& app) {
                  "Variable rate: eps as fractions of the value range; each block gets the atoms "
                  "that lower its squared\n"
                  "error by at least k*216*eps^2 (the rate-distortion optimal, Lagrangian rule)")
+      ->check(positive())
       ->capture_default_str();
   rd->add_option("--lagrangian-factors", o->lagrangian_factors,
                  "Variable rate: k, one row per value and eps")
+      ->check(positive())
       ->capture_default_str();
   rd->add_flag("--tolerance-rule", o->tolerance_rule,
                "Also variable rate with the eps rule (atoms until each block's RMS error <= eps), "
                "for comparison");
-  rd->add_option("--sparsities", o->sparsities, "Fixed rate: atoms per block")
+  rd->add_option("--sparsities", o->sparsities, "Fixed rate: atoms per block (1..216)")
+      ->check(CLI::Range(1, 216))
       ->capture_default_str();
   rd->add_option("--pursuit", o->pursuit,
                  "volreel's rows: ormp or omp (as volreel encode --pursuit)")
@@ -286,7 +289,8 @@ void add_bench_command(CLI::App& app) {
                  "(auto: chosen for the volume)")
       ->capture_default_str();
   rd->add_option("--zfp-bricks", o->zfp_bricks,
-                 "Also zfp per brick inside the container, accuracy as fractions of the range");
+                 "Also zfp per brick inside the container, accuracy as fractions of the range")
+      ->check(positive());
   rd->add_option("--keyframe-gaps", o->keyframe_gaps,
                  "Also volreel variable rate with sparse keyframes, one curve per gap G: each "
                  "--tolerances value encoded\n"

@@ -358,9 +358,10 @@ void add_encode_command(CLI::App& app) {
                   "many others\n(twice at most) and searched again where they disagree")
       ->check(CLI::Range(std::size_t{1}, std::size_t{1} << 20))
       ->capture_default_str();
-  cmd->add_flag("--resume", o->resume,
-                "Continue an interrupted encode: keep frames already written and valid");
-  cmd->add_flag("--overwrite", o->overwrite, "Replace an existing container");
+  CLI::Option* resume_opt =
+      cmd->add_flag("--resume", o->resume,
+                    "Continue an interrupted encode: keep frames already written and valid");
+  cmd->add_flag("--overwrite", o->overwrite, "Replace an existing container")->excludes(resume_opt);
   cmd->add_flag(
       "--no-refit", o->no_refit,
       "Quantize coefficients independently (no least-squares refit; for comparison; with the DCT "

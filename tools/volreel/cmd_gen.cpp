@@ -163,7 +163,10 @@ void add_gen_command(CLI::App& app) {
   turb->add_option("--spinup", t->run.spinup,
                    "Simulated time before the first frame, in large-eddy turnover times")
       ->capture_default_str();
-  turb->add_option("--power", t->run.params.forcing_power, "Injected power per unit mass P")
+  turb->add_option("--power", t->run.params.forcing_power,
+                   "Injected power per unit mass P (> 0; the viscosity follows from it and "
+                   "--kmax-eta)")
+      ->check(positive())
       ->capture_default_str();
   turb->add_option("--kmax-eta", t->run.params.kmax_eta,
                    "Resolution target k_max*eta that sets the viscosity")
@@ -189,7 +192,9 @@ void add_gen_command(CLI::App& app) {
       ->add_option("--field", a->field,
                    "blobs, rotating, noise or plume (a plume rising into a still box)")
       ->capture_default_str();
-  analytic->add_option("--size", a->size, "Voxels per side of a cube")->capture_default_str();
+  analytic->add_option("--size", a->size, "Voxels per side of a cube")
+      ->check(CLI::Range(1, 1 << 20))
+      ->capture_default_str();
   analytic->add_option("--dims", a->dims, "XxYxZ instead of a cube, e.g. 96x64x48");
   analytic->add_option("--frames", a->frames, "Frames")->capture_default_str();
   analytic->add_option("--seed", a->seed, "Seed")->capture_default_str();

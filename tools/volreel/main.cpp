@@ -37,9 +37,9 @@ int main(int argc, char** argv) {
     return app.exit(e);
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr,
-                 "volreel: error: out of memory: the input asks for more memory than this machine "
-                 "can give (check the dimensions in its manifest or series.json, or decode a "
-                 "coarser --level)\n");
+                 "volreel: error: out of memory: the input or the options ask for more memory than "
+                 "this machine can give (check the dimensions in the input's manifest or "
+                 "series.json and the sizes given as options)\n");
     volreel::cli::MpiSession::abort_job(1);
     return 1;
   } catch (const std::exception& e) {

@@ -97,6 +97,15 @@ void ReaderOptions::add_to(CLI::App& command) {
   command
       .add_option("--replace-nan", replace_nan,
                   "Substitute NaN/Inf values with this value instead of refusing the input")
+      ->check(CLI::Validator(
+          [](const std::string& text) {
+            char* end = nullptr;
+            const double v = std::strtod(text.c_str(), &end);
+            return !text.empty() && end == text.c_str() + text.size() && std::isfinite(v)
+                       ? std::string()
+                       : "expected a finite number, found '" + text + "'";
+          },
+          "FINITE"))
       ->each([this](const std::string&) { replace_nan_set = true; });
 }
 

@@ -90,9 +90,14 @@ std::unique_ptr<SeriesReader> open_series(const std::filesystem::path& path,
 class RawSeriesWriter {
  public:
   /// Creates dir (and parents). Throws InputError if dir exists and holds a series.json unless
-  /// overwrite is set.
+  /// overwrite is set; with overwrite, the old series.json and the frame files it lists go.
   RawSeriesWriter(std::filesystem::path dir, Dims dims, std::string variable,
                   bool overwrite = false);
+  /// Without finish (an error on the way): removes the frames written and the directory if this
+  /// writer created it, so that a failed run leaves nothing half-written.
+  ~RawSeriesWriter();
+  RawSeriesWriter(const RawSeriesWriter&) = delete;
+  RawSeriesWriter& operator=(const RawSeriesWriter&) = delete;
 
   const std::filesystem::path& directory() const { return dir_; }
   Dims dims() const { return dims_; }
@@ -112,6 +117,8 @@ class RawSeriesWriter {
   std::array<double, 3> spacing_{1.0, 1.0, 1.0};
   std::vector<std::optional<double>> timestamps_;
   nlohmann::json generator_;
+  std::vector<std::filesystem::path> created_;  ///< what to remove without finish: dirs last
+  bool finished_ = false;
 };
 
 /// Name of frame t's file inside a raw series directory: "000017.f32".
