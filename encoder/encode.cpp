@@ -1,12 +1,16 @@
 // encode.cpp: the whole encode (encode.hpp) — value range, dictionary, ε, the series encoder.
 #include "volreel/encoder/encode.hpp"
 
+#include <signal.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <cstdio>
+#include <mutex>
 #include <optional>
 #include <span>
+#include <string>
 #include <utility>
 
 #include "volreel/dictionary/coreset.hpp"
@@ -23,11 +27,34 @@ namespace {
 
 namespace fs = std::filesystem;
 
+/// Removes, once per process, the files "STEM-PID-N.bin" of the temporary folder whose process
+/// is gone: an encode killed (SIGTERM, SIGKILL, an MPI job aborted) never ran its destructors.
+void remove_orphaned_temporaries() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    std::error_code ec;
+    for (const auto& entry : fs::directory_iterator(fs::temp_directory_path(ec), ec)) {
+      const std::string name = entry.path().filename().string();
+      if (!name.starts_with("volreel-dictionary") || !name.ends_with(".bin")) continue;
+      // STEM-PID-N.bin: the PID is the second number from the end.
+      const std::size_t last = name.rfind('-'), before = name.rfind('-', last - 1);
+      if (last == std::string::npos || before == std::string::npos || before == 0) continue;
+      const std::string pid_text = name.substr(before + 1, last - before - 1);
+      if (pid_text.empty() || pid_text.find_first_not_of("0123456789") != std::string::npos ||
+          pid_text.size() > 9)
+        continue;
+      const auto pid = static_cast<pid_t>(std::stol(pid_text));
+      if (pid > 0 && ::kill(pid, 0) != 0 && errno == ESRCH) fs::remove(entry.path(), ec);
+    }
+  });
+}
+
 /// A file name in the temporary folder no other encode of this or another process uses; the
-/// file is removed when this goes.
+/// file is removed when this goes (and by a later encode if this process is killed first).
 class TemporaryFile {
  public:
   explicit TemporaryFile(const std::string& stem) {
+    remove_orphaned_temporaries();
     static std::atomic<unsigned> counter{0};
     path_ = fs::temp_directory_path() /
             (stem + "-" + std::to_string(::getpid()) + "-" + std::to_string(counter++) + ".bin");

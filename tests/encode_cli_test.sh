@@ -45,6 +45,15 @@ grep -q "already holds a container" <<< "$out" || fail "no message for an existi
 # A series with fewer frames than the container is not the one it was encoded from.
 "$volreel" gen analytic --field blobs --dims 40x36x30 --frames 2 --out "$work/s2" 2>/dev/null
 expect_error "has 2 frames but the container" "$volreel" compare "$work/s2" "$work/a.vreel"
+# The dictionary's temporary copy of an encode that was killed is removed by the next encode;
+# that of a process still running stays.
+mkdir -p "$work/tmp"
+sleep 0 & dead=$!; wait $dead
+touch "$work/tmp/volreel-dictionary-copy-$dead-0.bin" "$work/tmp/volreel-dictionary-copy-$$-0.bin"
+TMPDIR="$work/tmp" "$volreel" encode "$work/s" --dictionary dct --out "$work/tmpdir.vreel" > /dev/null 2>&1
+[ ! -e "$work/tmp/volreel-dictionary-copy-$dead-0.bin" ] || fail "a killed encode's temporary copy stayed"
+[ -e "$work/tmp/volreel-dictionary-copy-$$-0.bin" ] || fail "a running process's temporary copy was removed"
+[ "$(ls "$work/tmp" | wc -l)" = 1 ] || fail "encode left temporaries: $(ls "$work/tmp")"
 # Options refused before any work: the ksvd codec's options with zfp, and values out of range.
 expect_error "--bps applies to the ksvd codec: --codec zfp" "$volreel" encode "$work/s" --codec zfp --bps 2 --out "$work/x.vreel"
 expect_error "--fixed-sparsity applies to the ksvd codec" "$volreel" encode "$work/s" --codec zfp --fixed-sparsity 2 --out "$work/x.vreel"
