@@ -89,25 +89,70 @@ void SeriesReader::read_slab(std::size_t t, std::size_t z_begin, std::size_t z_e
             frame.begin() + static_cast<std::ptrdiff_t>(z_end * plane), out.begin());
 }
 
+namespace {
+
+/// A series that describes itself takes none of the options that describe raw files: they would
+/// be ignored, and a user who gives them expects them to apply.
+void refuse_raw_options(const fs::path& path, const OpenOptions& options, const char* kind) {
+  std::vector<std::string> given;
+  if (options.dims) given.emplace_back("--dims");
+  if (options.dtype) given.emplace_back("--dtype");
+  if (options.frames) given.emplace_back("--frames");
+  if (given.empty()) return;
+  std::string names;
+  for (std::size_t i = 0; i < given.size(); ++i)
+    names += (i == 0 ? "" : i + 1 == given.size() ? " and " : ", ") + given[i];
+  throw InputError("'" + path.string() + "' is " + kind +
+                   " that gives its own dimensions, type and frames: leave out " + names +
+                   " (options for raw files)");
+}
+
+}  // namespace
+
+namespace {
+
+bool is_hdf5_name(std::string ext) {
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext == ".h5" || ext == ".hdf5" || ext == ".hdf" || ext == ".he5";
+}
+
+bool is_netcdf_name(std::string ext) {
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext == ".nc" || ext == ".nc4" || ext == ".cdf" || ext == ".netcdf";
+}
+
+}  // namespace
+
+bool describes_itself(const fs::path& path) {
+  std::error_code ec;
+  return fs::is_directory(path, ec) || path.filename() == "series.json" ||
+         is_hdf5_name(path.extension().string()) || is_netcdf_name(path.extension().string());
+}
+
 std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOptions& options) {
   std::error_code ec;
   if (!fs::exists(path, ec) && detail::is_glob(path.string()))
     return detail::open_raw_glob(path.string(), options);
   if (!fs::exists(path, ec)) throw InputError("'" + path.string() + "' does not exist");
-  if (fs::is_directory(path, ec)) return detail::open_raw_series(path, options);
-  if (path.filename() == "series.json") return detail::open_raw_series(path.parent_path(), options);
+  if (fs::is_directory(path, ec) || path.filename() == "series.json") {
+    refuse_raw_options(path, options, "a series directory (series.json)");
+    return detail::open_raw_series(fs::is_directory(path, ec) ? path : path.parent_path(), options);
+  }
   // Never hand a FIFO or a device to a reader that would block on it or read it forever.
   const fs::file_type type = fs::status(path, ec).type();
   if (type != fs::file_type::regular)
     throw InputError("'" + path.string() + "' is " + format::detail::file_kind(type) +
                      ", expected a regular file (raw or HDF5) or a series directory");
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  if (ext == ".h5" || ext == ".hdf5" || ext == ".hdf" || ext == ".he5")
+  if (is_hdf5_name(path.extension().string())) {
+    refuse_raw_options(path, options, "an HDF5 file");
     return detail::open_hdf5(path, options);
-  if (ext == ".nc" || ext == ".nc4" || ext == ".cdf" || ext == ".netcdf")
+  }
+  if (is_netcdf_name(path.extension().string())) {
+    refuse_raw_options(path, options, "a NetCDF file");
     return detail::open_netcdf(path, options);
+  }
   return detail::open_raw_file(path, options);
 }
 

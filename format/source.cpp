@@ -62,8 +62,13 @@ std::string LocalRangeReader::read(const std::filesystem::path& file,
 }
 
 LocalSource::LocalSource(fs::path dir) : dir_(std::move(dir)), location_(dir_.string()) {
-  if (!fs::is_directory(dir_))
-    throw FormatError(dir_, "not a volreel container (no such directory)");
+  std::error_code ec;
+  const fs::file_status status = fs::status(dir_, ec);
+  if (!fs::exists(status)) throw FormatError(dir_, "not a volreel container (no such directory)");
+  if (!fs::is_directory(status))
+    throw FormatError(dir_, std::string("not a volreel container: it is ") +
+                                detail::file_kind(status.type()) +
+                                ", a container is a directory (NAME.vreel)");
 }
 
 std::vector<std::byte> LocalSource::read_file(const std::string& relative,

@@ -33,6 +33,9 @@ echo "$out" | json '1 if d["bps"] > 0 and d["sequence"]["psnr"] > 35 else exit(1
 [ "$(stat -c %s "$work/f2l0.f32")" = $((20 * 18 * 15 * 4)) ] || fail "decode at level 0: wrong size"
 expect_error "levels 0..1" "$volreel" decode "$work/a.vreel" --frame 0 --level 5 --out "$work/x.f32"
 expect_error "the container has frames 0..2" "$volreel" decode "$work/a.vreel" --frame 3 --out "$work/x.f32"
+expect_error "--frame: expected a number >= 0, found '-1'" "$volreel" decode "$work/a.vreel" --frame -1 --out "$work/x.f32"
+expect_error "not a volreel container: it is a regular file" "$volreel" info "$work/s/000000.f32"
+expect_error "leave out --dims (options for raw files)" "$volreel" encode "$work/s" --dims 40x36x30 --dictionary dct --out "$work/x.vreel"
 # The output must be a regular file or a new name: a FIFO would block the write (no reader).
 mkfifo "$work/fifo"
 expect_error "is a FIFO (named pipe): expected a regular file" timeout 60 "$volreel" decode "$work/a.vreel" --frame 0 --out "$work/fifo"

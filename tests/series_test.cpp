@@ -129,6 +129,24 @@ TEST(RawSeries, AWriterThatDoesNotFinishLeavesNothingBehind) {
   EXPECT_EQ(vd::open_series(old)->info().frames, 1u);
 }
 
+TEST(RawSeries, OptionsOfRawFilesAreRefusedForASeriesThatDescribesItself) {
+  TempDir dir("series-raw-options");
+  const Dims d{2, 2, 2};
+  const fs::path path = write_series(dir, d, 1);
+  vd::OpenOptions o;
+  o.dims = d;
+  expect_error([&] { vd::open_series(path, o); },
+               {"is a series directory", "leave out --dims (options for raw files)"});
+  o.frames = 1;
+  expect_error([&] { vd::open_series(path / "series.json", o); },
+               {"leave out --dims and --frames"});
+  EXPECT_TRUE(vd::describes_itself(path));
+  EXPECT_TRUE(vd::describes_itself("x.H5"));
+  EXPECT_TRUE(vd::describes_itself("x.nc"));
+  EXPECT_FALSE(vd::describes_itself(path / "000000.f32"));
+  EXPECT_EQ(vd::open_series(path)->info().dims, d);
+}
+
 TEST(RawSeries, MissingAndShortFramesAreNamed) {
   TempDir dir("series-bad");
   const Dims d{4, 4, 4};

@@ -165,12 +165,17 @@ std::unique_ptr<datasets::SeriesReader> open_original(const std::string& series,
                                                       const format::Container& container,
                                                       std::string& note) {
   const format::Manifest& m = container.manifest();
-  if (!options.dims) options.dims = Dims{m.dims[0], m.dims[1], m.dims[2]};
+  // A raw file or pattern without --dims has the container's.
+  const auto open = [&](const fs::path& p) {
+    datasets::OpenOptions o = options;
+    if (!o.dims && !datasets::describes_itself(p)) o.dims = Dims{m.dims[0], m.dims[1], m.dims[2]};
+    return datasets::open_series(p, o);
+  };
   if (!series.empty()) {
     if (!fs::exists(series) && series.find_first_of("*?[") == std::string::npos)
       throw InputError("--series " + series + ": no such file or folder");
     note = "--series " + series;
-    return datasets::open_series(series, options);
+    return open(series);
   }
   const auto local = container.source().local_directory();
   const fs::path dir = local ? fs::absolute(*local).lexically_normal() : fs::path();
@@ -184,7 +189,7 @@ std::unique_ptr<datasets::SeriesReader> open_original(const std::string& series,
       const bool pattern = p.string().find_first_of("*?[") != std::string::npos;
       if (!fs::exists(p) && !pattern) continue;
       try {
-        auto reader = datasets::open_series(p, options);
+        auto reader = open(p);
         note = "the manifest's source " + p.string();
         return reader;
       } catch (const InputError& e) {

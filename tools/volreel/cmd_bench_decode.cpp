@@ -305,7 +305,9 @@ void add_bench_decode_command(CLI::App& bench) {
   cmd->add_option("--upload-mib", o->upload_mib,
                   "Upload budget per staging buffer (per frame), MiB")
       ->capture_default_str();
-  cmd->add_option("--ring", o->ring, "Staging buffers in the ring")->capture_default_str();
+  cmd->add_option("--ring", o->ring, "Staging buffers in the ring")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
   cmd->add_option("--kernel", o->kernel,
                   "Decode kernel: auto (host on CPU devices, image stores otherwise), image, copy "
                   "or host (the CPU decoder, its texels copied into the atlas)")

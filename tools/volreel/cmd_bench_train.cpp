@@ -246,6 +246,7 @@ void add_bench_train_command(CLI::App& bench) {
   o->training.add_to(*cmd);
   cmd->add_option("--eval-frames", o->eval_frames,
                   "Frames held out of training and coded for PSNR and speed")
+      ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();
   cmd->add_option(
       "--flat-iterations", o->flat_iterations,

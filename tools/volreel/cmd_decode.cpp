@@ -79,7 +79,9 @@ void add_decode_command(CLI::App& app) {
       "decode",
       "Decode one frame at one level with the CPU reference decoder into a raw float32 file");
   decode->add_option("CONTAINER", d->dir, "NAME.vreel directory")->required();
-  decode->add_option("--frame", d->frame, "Time step")->capture_default_str();
+  decode->add_option("--frame", d->frame, "Time step")
+      ->check(non_negative())
+      ->capture_default_str();
   decode->add_option("--level", d->level,
                      "Octree level: 0 = root (one brick) ... levels-1 = full resolution (default)");
   decode->add_option("--out", d->out, "Output .f32 file")->required();

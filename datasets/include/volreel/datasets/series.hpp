@@ -77,6 +77,11 @@ class SeriesReader {
   SeriesInfo info_;
 };
 
+/// Whether `path` names a series that gives its own dimensions, type and frames (a series
+/// directory or its series.json, an HDF5 or NetCDF file): open_series refuses OpenOptions' dims,
+/// dtype and frames for it.
+bool describes_itself(const std::filesystem::path& path);
+
 /// Open a series: a raw series directory (or its series.json), an HDF5 file (.h5, .hdf5, .hdf),
 /// a NetCDF file (.nc, .nc4, .cdf),
 /// a single raw file, or a glob pattern (*, ?, [...]) of raw files with one frame each in
