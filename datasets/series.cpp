@@ -259,15 +259,16 @@ RawSeriesWriter::RawSeriesWriter(fs::path dir, Dims dims, std::string variable, 
   fs::create_directories(dir_, ec);
   if (ec) throw InputError("cannot create directory '" + dir_.string() + "': " + ec.message());
   if (overwrite && fs::exists(manifest, ec)) {
-    // The old series' frames (a shorter new series would leave them behind), then its manifest.
+    // A series this writer's kind wrote (it has a generator): its frames that the new one does
+    // not write are removed by finish(), so that a shorter series leaves none behind. Files of a
+    // series written by other means are never touched.
     try {
       const auto bytes = format::detail::read_whole_file(manifest, format::detail::max_json_bytes);
       const auto old = nlohmann::json::parse(bytes.begin(), bytes.end(), nullptr, false);
-      if (old.is_object() && old.contains("frames") && old["frames"].is_array())
-        for (const auto& name : old["frames"])
-          if (name.is_string() &&
-              fs::path(name.get<std::string>()).filename() == name.get<std::string>())
-            fs::remove(dir_ / name.get<std::string>(), ec);
+      if (old.is_object() && old.contains("generator") && old.contains("frames") &&
+          old["frames"].is_array())
+        for (std::size_t t = 0; t < old["frames"].size(); ++t)
+          if (old["frames"][t] == raw_frame_name(t)) stale_frames_ = t + 1;
     } catch (const std::exception&) {
     }
     fs::remove(manifest, ec);
@@ -323,6 +324,9 @@ void RawSeriesWriter::finish() {
   const std::string text = j.dump(2) + "\n";
   write_atomically(dir_ / "series.json", text.data(), text.size());
   finished_ = true;
+  std::error_code ec;
+  for (std::size_t t = timestamps_.size(); t < stale_frames_; ++t)
+    fs::remove(dir_ / raw_frame_name(t), ec);
 }
 
 }  // namespace volreel::datasets

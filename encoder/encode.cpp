@@ -27,21 +27,34 @@ namespace {
 
 namespace fs = std::filesystem;
 
-/// Removes, once per process, the files "STEM-PID-N.bin" of the temporary folder whose process
-/// is gone: an encode killed (SIGTERM, SIGKILL, an MPI job aborted) never ran its destructors.
+/// This machine's name, as temporary files carry it ("host" when it has none).
+std::string host_name() {
+  char name[256] = {};
+  if (::gethostname(name, sizeof name - 1) != 0 || name[0] == 0) return "host";
+  return name;
+}
+
+/// Removes, once per process, the files "volreel-dictionary…-HOST-PID-N.bin" of the temporary
+/// folder that this machine's processes left when they were killed (SIGTERM, SIGKILL, an MPI job
+/// aborted: no destructor ran): HOST this machine's name, PID a process that is gone. Files of
+/// other machines sharing the folder are left alone (their PIDs mean nothing here).
 void remove_orphaned_temporaries() {
   static std::once_flag once;
   std::call_once(once, [] {
+    const std::string host = "-" + host_name() + "-";
     std::error_code ec;
     for (const auto& entry : fs::directory_iterator(fs::temp_directory_path(ec), ec)) {
       const std::string name = entry.path().filename().string();
       if (!name.starts_with("volreel-dictionary") || !name.ends_with(".bin")) continue;
-      // STEM-PID-N.bin: the PID is the second number from the end.
-      const std::size_t last = name.rfind('-'), before = name.rfind('-', last - 1);
-      if (last == std::string::npos || before == std::string::npos || before == 0) continue;
+      const std::size_t last = name.rfind('-');
+      const std::size_t before =
+          last == std::string::npos || last == 0 ? std::string::npos : name.rfind('-', last - 1);
+      if (before == std::string::npos || before + 1 < host.size() ||
+          name.compare(before + 1 - host.size(), host.size(), host) != 0)
+        continue;
       const std::string pid_text = name.substr(before + 1, last - before - 1);
-      if (pid_text.empty() || pid_text.find_first_not_of("0123456789") != std::string::npos ||
-          pid_text.size() > 9)
+      if (pid_text.empty() || pid_text.size() > 9 ||
+          pid_text.find_first_not_of("0123456789") != std::string::npos)
         continue;
       const auto pid = static_cast<pid_t>(std::stol(pid_text));
       if (pid > 0 && ::kill(pid, 0) != 0 && errno == ESRCH) fs::remove(entry.path(), ec);
@@ -50,14 +63,16 @@ void remove_orphaned_temporaries() {
 }
 
 /// A file name in the temporary folder no other encode of this or another process uses; the
-/// file is removed when this goes (and by a later encode if this process is killed first).
+/// file is removed when this goes (and by a later encode on this machine if this process is
+/// killed first).
 class TemporaryFile {
  public:
   explicit TemporaryFile(const std::string& stem) {
     remove_orphaned_temporaries();
     static std::atomic<unsigned> counter{0};
-    path_ = fs::temp_directory_path() /
-            (stem + "-" + std::to_string(::getpid()) + "-" + std::to_string(counter++) + ".bin");
+    path_ =
+        fs::temp_directory_path() / (stem + "-" + host_name() + "-" + std::to_string(::getpid()) +
+                                     "-" + std::to_string(counter++) + ".bin");
   }
   ~TemporaryFile() {
     std::error_code ec;
@@ -205,7 +220,8 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   const Ranks& ranks = request.ranks ? *request.ranks : single_process();
   refuse_existing_output(out, request.resume, request.overwrite);
   // A dictionary given is read (and checked) now, not after the value range and rate control.
-  if (!request.dictionary.empty() && request.dictionary != "dct")
+  // (Rank 0 alone reads it, here and below; its error aborts the job.)
+  if (ranks.root() && !request.dictionary.empty() && request.dictionary != "dct")
     (void)format::read_dictionary_file(request.dictionary);
   // The brick size: given, the container's own (resume), or chosen for the volume.
   const std::array<std::uint32_t, 3> dims{static_cast<std::uint32_t>(info.dims.x),

@@ -68,8 +68,8 @@ void refuse_existing_output(const fs::path& out, bool resume, bool overwrite) {
           "' is not a directory: volreel writes its frames there; choose another --out");
     for (const auto& entry : fs::directory_iterator(frames, ec)) {
       const std::string name = entry.path().filename().string();
-      const bool frame =
-          name.size() == 10 && name.ends_with(".vrf") && name.find_first_not_of("0123456789") == 6;
+      const bool frame = name.size() >= 10 && name.ends_with(".vrf") &&
+                         name.find_first_not_of("0123456789") == name.size() - 4;
       if (!(entry.is_regular_file(ec) && (frame || name.find(".tmp-") != std::string::npos)))
         throw InputError("'" + entry.path().string() +
                          "' was not written by volreel (a container's frames/ holds NNNNNN.vrf "
@@ -77,6 +77,13 @@ void refuse_existing_output(const fs::path& out, bool resume, bool overwrite) {
                          "--out");
     }
   }
+  // Without a manifest there is no container here: a dictionary.bin is someone's file (e.g. the
+  // dictionary given, trained into this directory), which encode would replace.
+  if (!fs::exists(fs::symlink_status(manifest, ec)) &&
+      fs::exists(fs::symlink_status(out / "dictionary.bin", ec)))
+    throw InputError("'" + (out / "dictionary.bin").string() +
+                     "' is there but no container manifest: encode writes the container's own "
+                     "dictionary.bin; move that file away or choose another --out");
   format::detail::check_writable(out, "--out");
 }
 

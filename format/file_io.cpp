@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -166,7 +167,11 @@ void check_writable(const fs::path& target, const std::string& option) {
   if (!fs::is_directory(status))
     throw FormatError(target, "cannot write it (" + option + "): '" + at.string() + "' is " +
                                   file_kind(status.type()) + ", not a directory");
-  const fs::path probe = at / (".volreel-write-check-" + std::to_string(::getpid()));
+  static std::atomic<unsigned> counter{0};
+  char host[256] = {};
+  if (::gethostname(host, sizeof host - 1) != 0) host[0] = 0;
+  const fs::path probe = at / (".volreel-write-check-" + std::string(host) + "-" +
+                               std::to_string(::getpid()) + "-" + std::to_string(counter++));
   if (!fs::create_directory(probe, ec) || ec)
     throw FormatError(
         target, "cannot write it (" + option + "): cannot create anything in '" + at.string() +

@@ -64,6 +64,8 @@ std::string LocalRangeReader::read(const std::filesystem::path& file,
 LocalSource::LocalSource(fs::path dir) : dir_(std::move(dir)), location_(dir_.string()) {
   std::error_code ec;
   const fs::file_status status = fs::status(dir_, ec);
+  if (ec && ec != std::errc::no_such_file_or_directory)
+    throw FormatError(dir_, "cannot open the container: " + ec.message());
   if (!fs::exists(status)) throw FormatError(dir_, "not a volreel container (no such directory)");
   if (!fs::is_directory(status))
     throw FormatError(dir_, std::string("not a volreel container: it is ") +

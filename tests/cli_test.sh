@@ -101,9 +101,14 @@ psnr_of() { awk -v f="$1" 'index($0, f) == 1 { print $(NF - 6); exit }' "$work/r
 expect_error "--keyframe-gaps needs --dictionary" "$volreel" bench rd "$work/a" --keyframe-gaps 2
 # A container of the user's where bench rd puts (and then removes) its own is refused.
 mkdir -p "$work/rdk2/keyframes.vreel"; echo mine > "$work/rdk2/keyframes.vreel/notes.txt"
-expect_error "keyframes.vreel' exists" "$volreel" bench rd "$work/a" --out "$work/rdk2" --dictionary dct \
+expect_error "notes.txt' is not a container's file" "$volreel" bench rd "$work/a" --out "$work/rdk2" --dictionary dct \
   --tolerances 0.004 --sparsities 2 --keyframe-gaps 2 --ssim-frames 0 --no-plot
 [ -f "$work/rdk2/keyframes.vreel/notes.txt" ] || fail "bench rd removed a keyframes.vreel it did not write"
+# ... but one a stopped run left (a container) is taken and removed.
+"$volreel" encode "$work/a" --dictionary dct --out "$work/rdk3/keyframes.vreel" > /dev/null 2>&1
+"$volreel" bench rd "$work/a" --out "$work/rdk3" --dictionary dct --tolerances 0.004 --sparsities 2 \
+  --keyframe-gaps 2 --ssim-frames 0 --no-plot > /dev/null 2>&1 || fail "bench rd refused its own leftover keyframes.vreel"
+[ ! -e "$work/rdk3/keyframes.vreel" ] || fail "bench rd left its keyframe container behind"
 expect_error "--out is empty" "$volreel" bench rd "$work/a" --out ""
 
 # Where a ksvd container's bits go: one row per level and one for all; gap, magnitude and sign

@@ -38,7 +38,11 @@ expect_error "not a volreel container: it is a regular file" "$volreel" info "$w
 expect_error "leave out --dims (options for raw files)" "$volreel" encode "$work/s" --dims 40x36x30 --dictionary dct --out "$work/x.vreel"
 # The output must be a regular file or a new name: a FIFO would block the write (no reader).
 mkfifo "$work/fifo"
-expect_error "is a FIFO (named pipe): expected a regular file" timeout 60 "$volreel" decode "$work/a.vreel" --frame 0 --out "$work/fifo"
+expect_error "is a FIFO (named pipe): expected a regular file, a new name or a character device" timeout 60 "$volreel" decode "$work/a.vreel" --frame 0 --out "$work/fifo"
+"$volreel" decode "$work/a.vreel" --frame 0 --out /dev/null > /dev/null || fail "decode --out /dev/null"
+ln -s "$work/f2.f32" "$work/link.f32"
+"$volreel" decode "$work/a.vreel" --frame 0 --out "$work/link.f32" > /dev/null || fail "decode --out LINK"
+[ -L "$work/link.f32" ] || fail "decode replaced a link instead of writing through it"
 expect_error "is a directory: expected a regular file" "$volreel" decode "$work/a.vreel" --frame 0 --out "$work/s"
 expect_error "already holds a container" "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/a.vreel"
 # ... refused before the long work: no training, no rate control, no value range.
@@ -52,11 +56,14 @@ expect_error "has 2 frames but the container" "$volreel" compare "$work/s2" "$wo
 # that of a process still running stays.
 mkdir -p "$work/tmp"
 sleep 0 & dead=$!; wait $dead
-touch "$work/tmp/volreel-dictionary-copy-$dead-0.bin" "$work/tmp/volreel-dictionary-copy-$$-0.bin"
+host=$(hostname)
+touch "$work/tmp/volreel-dictionary-copy-$host-$dead-0.bin" "$work/tmp/volreel-dictionary-copy-$host-$$-0.bin" \
+  "$work/tmp/volreel-dictionary-copy-other-machine-$dead-0.bin"
 TMPDIR="$work/tmp" "$volreel" encode "$work/s" --dictionary dct --out "$work/tmpdir.vreel" > /dev/null 2>&1
-[ ! -e "$work/tmp/volreel-dictionary-copy-$dead-0.bin" ] || fail "a killed encode's temporary copy stayed"
-[ -e "$work/tmp/volreel-dictionary-copy-$$-0.bin" ] || fail "a running process's temporary copy was removed"
-[ "$(ls "$work/tmp" | wc -l)" = 1 ] || fail "encode left temporaries: $(ls "$work/tmp")"
+[ ! -e "$work/tmp/volreel-dictionary-copy-$host-$dead-0.bin" ] || fail "a killed encode's temporary copy stayed"
+[ -e "$work/tmp/volreel-dictionary-copy-$host-$$-0.bin" ] || fail "a running process's temporary copy was removed"
+[ -e "$work/tmp/volreel-dictionary-copy-other-machine-$dead-0.bin" ] || fail "another machine's temporary copy was removed"
+[ "$(ls "$work/tmp" | wc -l)" = 2 ] || fail "encode left temporaries: $(ls "$work/tmp")"
 # Options refused before any work: the ksvd codec's options with zfp, and values out of range.
 expect_error "--bps applies to the ksvd codec: --codec zfp" "$volreel" encode "$work/s" --codec zfp --bps 2 --out "$work/x.vreel"
 expect_error "--fixed-sparsity applies to the ksvd codec" "$volreel" encode "$work/s" --codec zfp --fixed-sparsity 2 --out "$work/x.vreel"
@@ -79,6 +86,9 @@ expect_error "img_1.png' was not written by volreel" "$volreel" encode "$work/s"
 mkdir -p "$work/other"; echo '{}' > "$work/other/manifest.json"
 expect_error "is not a volreel container's manifest" "$volreel" encode "$work/s" --dictionary dct --overwrite --out "$work/other"
 [ "$(cat "$work/other/manifest.json")" = '{}' ] || fail "encode replaced another program's manifest.json"
+mkdir -p "$work/dictdir"; cp "$work/dict.bin" "$work/dictdir/dictionary.bin"
+expect_error "dictionary.bin' is there but no container manifest" "$volreel" encode "$work/s" --dictionary "$work/dictdir/dictionary.bin" --out "$work/dictdir"
+cmp -s "$work/dict.bin" "$work/dictdir/dictionary.bin" || fail "encode replaced a dictionary.bin of no container"
 touch "$work/plain-file"
 expect_error "'$work/plain-file' is not a directory" "$volreel" encode "$work/s" --dictionary dct --overwrite --out "$work/plain-file"
 

@@ -127,6 +127,19 @@ TEST(RawSeries, AWriterThatDoesNotFinishLeavesNothingBehind) {
   EXPECT_FALSE(fs::exists(old / "000001.f32"));
   EXPECT_FALSE(fs::exists(old / "000002.f32"));
   EXPECT_EQ(vd::open_series(old)->info().frames, 1u);
+  // A series written by other means (no generator): its files stay whatever their names.
+  fs::create_directories(dir / "hand");
+  std::ofstream(dir / "hand" / "series.json")
+      << R"({"dims": [2, 2, 2], "frames": ["sim_1.raw", "000001.f32"]})";
+  std::ofstream(dir / "hand" / "sim_1.raw") << "data";
+  std::ofstream(dir / "hand" / "000001.f32") << "data";
+  {
+    vd::RawSeriesWriter w(dir / "hand", d, "p", true);
+    w.write_frame(0, 0.0, ramp(d, 5));
+    w.finish();
+  }
+  EXPECT_TRUE(fs::exists(dir / "hand" / "sim_1.raw"));
+  EXPECT_TRUE(fs::exists(dir / "hand" / "000001.f32"));
 }
 
 TEST(RawSeries, OptionsOfRawFilesAreRefusedForASeriesThatDescribesItself) {

@@ -10,6 +10,7 @@
 #include "container_series.hpp"
 #include "progress.hpp"
 #include "volreel/encoder/encode.hpp"
+#include "volreel/encoder/series_encoder.hpp"
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/file_io.hpp"
 #include "volreel/psnr/rate_distortion.hpp"
@@ -48,17 +49,46 @@ struct RdCommandOptions {
 };
 
 /// volreel variable rate with sparse keyframes: each tolerance encoded into a container as
+/// OUT/keyframes.vreel, where --keyframe-gaps writes its containers (and removes them after):
+/// refused unless nothing is there or a volreel container is (a run stopped before its end),
+/// checked before any measurement.
+std::filesystem::path keyframe_container(const RdCommandOptions& o) {
+  const std::filesystem::path container = std::filesystem::path(o.out) / "keyframes.vreel";
+  std::error_code ec;
+  if (std::filesystem::exists(std::filesystem::symlink_status(container, ec))) {
+    const std::string why = " (--keyframe-gaps writes its containers to '" + container.string() +
+                            "' and removes it afterwards: move it away or choose another --out)";
+    try {
+      encoder::refuse_existing_output(container, false, true);
+    } catch (const InputError& e) {
+      throw InputError(std::string(e.what()) + why);
+    }
+    // It is removed whole: only what a container holds may be there.
+    for (const auto& entry : std::filesystem::directory_iterator(container, ec)) {
+      const std::string name = entry.path().filename().string();
+      if (name != "manifest.json" && name != "dictionary.bin" && name != "frames" &&
+          name.find(".tmp-") == std::string::npos)
+        throw InputError("'" + entry.path().string() + "' is not a container's file" + why);
+    }
+  }
+  return container;
+}
+
 /// `volreel encode --max-keyframe-gap G` writes it (every byte counted), then every time step
 /// decoded as the player draws it, interpolated nodes included.
 std::vector<psnr::RdPoint> keyframe_points(const datasets::SeriesReader& series,
                                            const RdCommandOptions& o, double range) {
   std::vector<psnr::RdPoint> points;
-  const std::filesystem::path container = std::filesystem::path(o.out) / "keyframes.vreel";
-  if (std::filesystem::exists(std::filesystem::symlink_status(container)))
-    throw InputError("'" + container.string() +
-                     "' exists: --keyframe-gaps writes its containers there and removes it "
-                     "afterwards; move it away or choose another --out");
+  const std::filesystem::path container = keyframe_container(o);
   std::filesystem::create_directories(o.out);
+  // Removed afterwards, also when an encode or a measurement fails.
+  struct Remove {
+    std::filesystem::path path;
+    ~Remove() {
+      std::error_code ec;
+      std::filesystem::remove_all(path, ec);
+    }
+  } remove{container};
   const double runs = static_cast<double>(o.keyframe_gaps.size() * o.tolerances.size() *
                                           o.lagrangian_factors.size());
   ProgressBar bar("keyframes", "encodes");
@@ -95,12 +125,12 @@ std::vector<psnr::RdPoint> keyframe_points(const datasets::SeriesReader& series,
         bar.progress().report(done, runs, points.back().setting);
       }
   bar.finish();
-  std::filesystem::remove_all(container);
   return points;
 }
 
 void run_rd(const RdCommandOptions& o) {
   format::detail::check_writable(o.out, "--out");
+  if (!o.keyframe_gaps.empty()) keyframe_container(o);
   const auto series = datasets::open_series(o.series, o.reader.to_open_options());
   const auto& info = series->info();
   const std::size_t frames = o.rd.max_frames ? std::min(o.rd.max_frames, info.frames) : info.frames;

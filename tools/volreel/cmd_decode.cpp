@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <span>
 #include <string>
@@ -32,13 +33,16 @@ struct DecodeOptions {
 namespace fs = std::filesystem;
 
 void run_decode(const DecodeOptions& o) {
-  // The output: a regular file or a new name (a FIFO would block the write, a device take it).
+  // The output: a regular file (a link to one is written through), a new name, or a character
+  // device such as /dev/null; a FIFO would block the write until a reader comes.
   std::error_code ec;
   const fs::file_status status = fs::status(o.out, ec);
-  if (fs::exists(status) && !fs::is_regular_file(status))
+  const bool device = fs::is_character_file(status);
+  if (fs::exists(status) && !fs::is_regular_file(status) && !device)
     throw InputError("--out '" + o.out + "' is " + format::detail::file_kind(status.type()) +
-                     ": expected a regular file (or a new name) for the decoded values");
-  format::detail::check_writable(o.out, "--out");
+                     ": expected a regular file, a new name or a character device");
+  const fs::path out = fs::exists(status) ? fs::canonical(o.out, ec) : fs::path(o.out);
+  if (!device) format::detail::check_writable(out, "--out");
   const format::Container c(o.dir);
   format::TimeStepDecoder steps(c);
   if (o.frame >= c.frame_count())
@@ -61,8 +65,15 @@ void run_decode(const DecodeOptions& o) {
     steps.decode(o.frame, level, v.data);
     seconds = std::min(seconds, std::chrono::duration<double>(Clock::now() - start).count());
   }
-  format::detail::write_file_atomically(
-      o.out, std::as_bytes(std::span<const float>(v.data.data(), v.data.size())));
+  const auto bytes = std::as_bytes(std::span<const float>(v.data.data(), v.data.size()));
+  if (device) {
+    std::ofstream stream(out, std::ios::binary);
+    stream.write(reinterpret_cast<const char*>(bytes.data()),
+                 static_cast<std::streamsize>(bytes.size()));
+    if (!stream) throw InputError("cannot write '" + o.out + "'");
+  } else {
+    format::detail::write_file_atomically(out, bytes);
+  }
   std::printf(
       "wrote %s: frame %zu level %u, %ux%ux%u float32 (x fastest); decoded in %.4f s (%.1f "
       "MVoxel/s of output; best of %d, %d threads)\n",

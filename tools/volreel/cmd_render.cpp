@@ -276,8 +276,8 @@ void run_render(const RenderCommandOptions& o) {
   // The frames are written (drawn without what failed); the exit status still says it failed.
   if (errors)
     throw InputError(std::to_string(errors) +
-                     " bricks or frames could not be read (see the warnings above): the frames "
-                     "were drawn without them; volreel verify names what is damaged");
+                     " bricks or frames could not be read (see the warnings above, which name "
+                     "them): the frames were drawn without them");
 }
 
 }  // namespace

@@ -95,7 +95,8 @@ std::unique_ptr<SeriesReader> open_series(const std::filesystem::path& path,
 class RawSeriesWriter {
  public:
   /// Creates dir (and parents). Throws InputError if dir exists and holds a series.json unless
-  /// overwrite is set; with overwrite, the old series.json and the frame files it lists go.
+  /// overwrite is set; with overwrite the old series.json goes, and finish() removes the frames
+  /// 000000.f32 … of an old series a generator wrote that the new one does not replace.
   RawSeriesWriter(std::filesystem::path dir, Dims dims, std::string variable,
                   bool overwrite = false);
   /// Without finish (an error on the way): removes the frames written and the directory if this
@@ -123,6 +124,7 @@ class RawSeriesWriter {
   std::vector<std::optional<double>> timestamps_;
   nlohmann::json generator_;
   std::vector<std::filesystem::path> created_;  ///< what to remove without finish: dirs last
+  std::size_t stale_frames_ = 0;  ///< overwrite: the frame count of the old generated series
   bool finished_ = false;
 };
 

@@ -121,8 +121,10 @@ struct EncodeSummary {
 EncodeSummary encode_series(const datasets::SeriesReader& series, const std::filesystem::path& out,
                             const EncodeJob& job, const Progress& progress = {});
 
-/// Throws InputError when `out` cannot take a new container: it is there and not a directory, or
-/// it holds a container and neither `resume` nor `overwrite` is given. encode() checks this before
+/// Throws InputError when `out` cannot take a new container: it is there and not a directory, it
+/// holds a container and neither `resume` nor `overwrite` is given, or it holds files a container
+/// does not (other files in frames/, a manifest.json or dictionary.bin not of a container), which
+/// encode would replace. encode() checks this before
 /// training and rate control, so that a name already taken is refused before the long work.
 void refuse_existing_output(const std::filesystem::path& out, bool resume, bool overwrite);
 
