@@ -144,6 +144,11 @@ PY
 timeout 60 xvfb-run -a -s "-screen 0 1280x800x24" "$volreel" play "$work/a.vreel" --size 320x240 \
   --renderer cpu --script-inline "0 key h; 0 settle 30; 0 screenshot $work/cpu.png; 0 quit" \
   > "$work/out_cpu.txt" 2> "$work/err_cpu.txt" || fail "play --renderer cpu: $(cat "$work/err_cpu.txt")"
+# A screenshot that cannot be written is an error of the run (exit status 1), not only a message.
+if timeout 60 xvfb-run -a -s "-screen 0 1280x800x24" "$volreel" play "$work/a.vreel" --size 320x240 \
+  --renderer cpu --script-inline "0 screenshot /proc/volreel-test.png; 0 quit" \
+  > /dev/null 2> "$work/err_shot.txt"; then fail "play exited 0 after a screenshot failed"; fi
+grep -q "1 screenshot(s) could not be written" "$work/err_shot.txt" || fail "no message for the failed screenshot: $(cat "$work/err_shot.txt")"
 /usr/bin/python3 - "$work" <<'PY' || fail "the CPU renderer's picture differs from the Vulkan one"
 import sys
 import numpy as np

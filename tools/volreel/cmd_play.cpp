@@ -71,7 +71,9 @@ void run_play(PlayCommandOptions& o) {
   }
   p.source = open_container_source(p.container.string(), o.remote);
   try {
-    app::run_player(p);
+    if (const int failed = app::run_player(p); failed > 0)
+      throw InputError(std::to_string(failed) +
+                       " screenshot(s) could not be written (see the messages above)");
   } catch (const app::NoDisplayError& e) {
     std::fprintf(stderr, "volreel play: %s\n", e.what());
     throw CLI::RuntimeError(3);

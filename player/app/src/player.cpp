@@ -321,6 +321,7 @@ void Player::finish_screenshots(FrameSlot& slot) {
         std::fflush(stdout);
       }
     } catch (const std::exception& e) {
+      ++failed_screenshots_;
       renderer_->scheduler().report_error(std::string("screenshot: ") + e.what());
       std::fprintf(stderr, "volreel play: screenshot: %s\n", e.what());
     }
@@ -538,7 +539,7 @@ int Player::run() {
     for (std::size_t i = 0; i < std::min<std::size_t>(messages.size(), 20); ++i)
       std::fprintf(stderr, "  %s\n", messages[i].text.c_str());
   }
-  return 0;
+  return static_cast<int>(std::min<std::size_t>(failed_screenshots_, 1000));
 }
 
 }  // namespace detail

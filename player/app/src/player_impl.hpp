@@ -113,6 +113,7 @@ class Player {
   std::uint64_t frame_number_ = 0;  ///< frames submitted so far
   bool recreate_ = false, quit_ = false;
   std::vector<std::filesystem::path> pending_screenshots_;
+  std::size_t failed_screenshots_ = 0;  ///< screenshots that could not be written
   std::size_t next_action_ = 0;
   double script_clock_ = 0;
   std::uint64_t previous_action_frame_ = 0;  ///< when the last script entry ran

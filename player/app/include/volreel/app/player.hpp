@@ -84,9 +84,10 @@ class NoDisplayError : public std::runtime_error {
 };
 
 /// Runs the player until the window is closed, the script quits or max_frames is reached.
-/// Returns 0. Throws NoDisplayError without a display, vulkan::NoDeviceError without a Vulkan
-/// device with presentation support, and format::FormatError / InputError for a container or
-/// option that cannot be used. Bad frame files found while playing are HUD messages, not errors.
+/// Returns the number of screenshots that could not be written (0: all were). Throws NoDisplayError
+/// without a display, vulkan::NoDeviceError without a Vulkan device with presentation support, and
+/// format::FormatError / InputError for a container or option that cannot be used. Bad frame files
+/// found while playing are HUD messages, not errors.
 int run_player(const PlayerOptions& options);
 
 }  // namespace volreel::app
