@@ -27,13 +27,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-/// This machine's name, as temporary files carry it ("host" when it has none).
-std::string host_name() {
-  char name[256] = {};
-  if (::gethostname(name, sizeof name - 1) != 0 || name[0] == 0) return "host";
-  return name;
-}
-
 /// Removes, once per process, the files "volreel-dictionary…-HOST-PID-N.bin" of the temporary
 /// folder that this machine's processes left when they were killed (SIGTERM, SIGKILL, an MPI job
 /// aborted: no destructor ran): HOST this machine's name, PID a process that is gone. Files of
@@ -41,7 +34,7 @@ std::string host_name() {
 void remove_orphaned_temporaries() {
   static std::once_flag once;
   std::call_once(once, [] {
-    const std::string host = "-" + host_name() + "-";
+    const std::string host = "-" + format::detail::host_name() + "-";
     std::error_code ec;
     for (const auto& entry : fs::directory_iterator(fs::temp_directory_path(ec), ec)) {
       const std::string name = entry.path().filename().string();
@@ -70,9 +63,9 @@ class TemporaryFile {
   explicit TemporaryFile(const std::string& stem) {
     remove_orphaned_temporaries();
     static std::atomic<unsigned> counter{0};
-    path_ =
-        fs::temp_directory_path() / (stem + "-" + host_name() + "-" + std::to_string(::getpid()) +
-                                     "-" + std::to_string(counter++) + ".bin");
+    path_ = fs::temp_directory_path() /
+            (stem + "-" + format::detail::host_name() + "-" + std::to_string(::getpid()) + "-" +
+             std::to_string(counter++) + ".bin");
   }
   ~TemporaryFile() {
     std::error_code ec;

@@ -152,6 +152,12 @@ std::uint64_t parse_byte_size(const std::string& text, const std::string& option
   return static_cast<std::uint64_t>(bytes);
 }
 
+std::string host_name() {
+  char name[256] = {};
+  if (::gethostname(name, sizeof name - 1) != 0 || name[0] == 0) return "host";
+  return name;
+}
+
 void check_writable(const fs::path& target, const std::string& option) {
   if (target.empty())
     throw std::invalid_argument(option + " is empty: expected the name of what to write");
@@ -168,9 +174,7 @@ void check_writable(const fs::path& target, const std::string& option) {
     throw FormatError(target, "cannot write it (" + option + "): '" + at.string() + "' is " +
                                   file_kind(status.type()) + ", not a directory");
   static std::atomic<unsigned> counter{0};
-  char host[256] = {};
-  if (::gethostname(host, sizeof host - 1) != 0) host[0] = 0;
-  const fs::path probe = at / (".volreel-write-check-" + std::string(host) + "-" +
+  const fs::path probe = at / (".volreel-write-check-" + host_name() + "-" +
                                std::to_string(::getpid()) + "-" + std::to_string(counter++));
   if (!fs::create_directory(probe, ec) || ec)
     throw FormatError(

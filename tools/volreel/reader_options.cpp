@@ -10,12 +10,21 @@
 
 namespace volreel::cli {
 
-std::optional<double> positive_number(const std::string& text) {
+namespace {
+
+/// The whole of text as a finite number, or std::nullopt.
+std::optional<double> finite_number(const std::string& text) {
   char* end = nullptr;
   const double v = std::strtod(text.c_str(), &end);
-  if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v) || !(v > 0))
-    return std::nullopt;
+  if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v)) return std::nullopt;
   return v;
+}
+
+}  // namespace
+
+std::optional<double> positive_number(const std::string& text) {
+  const std::optional<double> v = finite_number(text);
+  return v && *v > 0 ? v : std::nullopt;
 }
 
 void refuse_unknown_command(const CLI::App& app, int argc, const char* const* argv) {
@@ -51,11 +60,8 @@ CLI::Validator positive() {
 CLI::Validator non_negative() {
   return CLI::Validator(
       [](const std::string& text) {
-        char* end = nullptr;
-        const double v = std::strtod(text.c_str(), &end);
-        return !text.empty() && end == text.c_str() + text.size() && std::isfinite(v) && v >= 0
-                   ? std::string()
-                   : "expected a number >= 0, found '" + text + "'";
+        const std::optional<double> v = finite_number(text);
+        return v && *v >= 0 ? std::string() : "expected a number >= 0, found '" + text + "'";
       },
       "NONNEGATIVE");
 }
@@ -99,11 +105,8 @@ void ReaderOptions::add_to(CLI::App& command) {
                   "Substitute NaN/Inf values with this value instead of refusing the input")
       ->check(CLI::Validator(
           [](const std::string& text) {
-            char* end = nullptr;
-            const double v = std::strtod(text.c_str(), &end);
-            return !text.empty() && end == text.c_str() + text.size() && std::isfinite(v)
-                       ? std::string()
-                       : "expected a finite number, found '" + text + "'";
+            return finite_number(text) ? std::string()
+                                       : "expected a finite number, found '" + text + "'";
           },
           "FINITE"))
       ->each([this](const std::string&) { replace_nan_set = true; });

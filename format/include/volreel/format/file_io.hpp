@@ -38,6 +38,10 @@ constexpr std::uint64_t max_dictionary_bytes = std::uint64_t{1} << 30;
 /// written file; throws FormatError (and removes the temporary) on failure.
 void write_file_atomically(const std::filesystem::path& path, std::span<const std::byte> bytes);
 
+/// This machine's name ("host" when it has none), which names of temporary files carry so that
+/// machines sharing a folder tell theirs apart.
+std::string host_name();
+
 /// Checks, before long work, that `target` (a file or directory still to be written) can be
 /// created: its name is not empty, and a directory can be made in the nearest directory on its
 /// path that exists (`target` itself when it is one; the directory of a file `target` replaces),
