@@ -360,6 +360,11 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
                                  request.tolerance, stage ? stage->progress() : Progress{});
         }
         c.tolerance = eps.tolerance;
+        // The learned atoms paid in none of the rate search's sample bricks at this ε: the
+        // whole dictionary's pursuit is skipped (CodingSettings::learned_pursuit).
+        c.learned_pursuit =
+            !(eps.source == ToleranceSource::bps && eps.rate_search.sample_bricks > 0 &&
+              eps.rate_search.learned_bricks == 0);
         if (events.tolerance_chosen) events.tolerance_chosen(eps, c, file.atom_count);
         dictionary_bytes =
             format::detail::read_whole_file(copy->path(), format::detail::max_dictionary_bytes);
@@ -378,6 +383,7 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
             std::string(reinterpret_cast<const char*>(message.data()), message.size()));
       ranks.broadcast(dictionary_bytes);
       c.tolerance = ranks.broadcast_value(c.tolerance);
+      c.learned_pursuit = ranks.broadcast_value(c.learned_pursuit ? 1.0 : 0.0) != 0;
       if (!ranks.root()) format::detail::write_file_atomically(copy->path(), dictionary_bytes);
     }
   }

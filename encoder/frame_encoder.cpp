@@ -67,6 +67,9 @@ struct BrickCoding {
   bool measure_finest = false;       ///< PlaneCoding::measure_finest
   format::AtomTable decode_atoms{};  ///< ksvd, measure_finest: the atoms payloads decode with
   double split_code_cost = 0;        ///< ksvd: FrameEncoder::split_code_cost
+  /// With dct_omp: false codes every brick with the basis alone, without the whole dictionary's
+  /// pursuit (CodingSettings::learned_pursuit).
+  bool learned_pursuit = true;
 
   bool ksvd() const { return settings.codec == format::Codec::ksvd; }
   /// The factor on ε for a brick of `level` whose own voxels differ from the frame by
@@ -113,10 +116,11 @@ std::size_t code_stream_bytes(std::span<const std::byte> payload) {
 /// fewer blocks over the max-error bound, then the one of the lower cost, its squared error
 /// (weighed as the Lagrangian rule weighs the blocks, QuantizeOptions::block_weights) plus
 /// code_cost (the price of a code, lagrangian_factor·m·ε²) per code's worth of its bytes, a
-/// code's worth being the first coding's code stream bytes per code. Adds what it kept to
-/// *result; *used_dct says which.
+/// code's worth being the first coding's code stream bytes per code. codes null (with dct_codes):
+/// the basis's codes alone, as if they were kept. Adds what it kept to *result; *used_dct says
+/// which.
 std::vector<std::byte> quantize_either(format::BrickShape shape, const float* columns,
-                                       const float* means, const dictionary::SparseCodes& codes,
+                                       const float* means, const dictionary::SparseCodes* codes,
                                        const dictionary::SparseCodes* dct_codes,
                                        std::size_t first_block, const Eigen::MatrixXf& atoms,
                                        const dictionary::BatchOmp* dct_omp,
@@ -125,18 +129,22 @@ std::vector<std::byte> quantize_either(format::BrickShape shape, const float* co
                                        detail::BrickQuantization* result, bool* used_dct) {
   *used_dct = false;
   if (!dct_codes)
-    return detail::quantize_brick(shape, columns, means, codes, first_block, atoms, options,
+    return detail::quantize_brick(shape, columns, means, *codes, first_block, atoms, options,
                                   result);
   detail::BrickQuantization all, basis;
-  std::vector<std::byte> payload =
-      detail::quantize_brick(shape, columns, means, codes, first_block, atoms, options, &all);
   QuantizeOptions split = options;
   split.from_split = true;
   split.orthonormal_atoms = dct_omp->orthonormal();
   std::vector<std::byte> alone = detail::quantize_brick(shape, columns, means, *dct_codes,
                                                         first_block, *dct_atoms, split, &basis);
+  std::vector<std::byte> payload;
+  if (codes)
+    payload =
+        detail::quantize_brick(shape, columns, means, *codes, first_block, atoms, options, &all);
   bool dct;
-  if (basis.blocks_over_bound != all.blocks_over_bound) {
+  if (!codes) {
+    dct = true;
+  } else if (basis.blocks_over_bound != all.blocks_over_bound) {
     dct = basis.blocks_over_bound < all.blocks_over_bound;
   } else if (all.codes > 0 && payload.size() > 4) {
     const double per_byte =
@@ -313,7 +321,8 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
   }
   st.seconds_bricks += seconds_since(part);
   part = Clock::now();
-  coding.omp->encode(work.columns, work.codes, work.weights);
+  const bool learned = !coding.dct_omp || coding.learned_pursuit;
+  if (learned) coding.omp->encode(work.columns, work.codes, work.weights);
   if (coding.dct_omp) coding.dct_omp->encode(work.columns, work.dct_codes, work.weights);
   st.seconds_omp += seconds_since(part);
   part = Clock::now();
@@ -338,7 +347,7 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
     bool dct = false;
     cell.payload = quantize_either(
         coding.shape, work.columns.data() + kk * brick_blocks * VR_BLOCK_LENGTH,
-        work.means.data() + kk * brick_blocks, work.codes,
+        work.means.data() + kk * brick_blocks, learned ? &work.codes : nullptr,
         coding.dct_omp ? &work.dct_codes : nullptr, kk * brick_blocks, *coding.atoms,
         coding.dct_omp, coding.dct_atoms, brick_qo, coding.split_code_cost, &result, &dct);
     used_dct[kk] = dct;
@@ -729,11 +738,12 @@ std::vector<std::byte> FrameEncoder::encode_brick(std::span<const float> brick) 
   std::vector<float> means(shape.blocks());
   detail::brick_to_blocks(shape, brick.data(), columns.data(), means.data());
   dictionary::SparseCodes codes, dct_codes;
-  omp_->encode(columns, codes);
+  const bool learned = !dct_omp_ || settings_.learned_pursuit;
+  if (learned) omp_->encode(columns, codes);
   if (dct_omp_) dct_omp_->encode(columns, dct_codes);
   detail::BrickQuantization result;
   bool dct = false;
-  return quantize_either(shape, columns.data(), means.data(), codes,
+  return quantize_either(shape, columns.data(), means.data(), learned ? &codes : nullptr,
                          dct_omp_ ? &dct_codes : nullptr, 0, dictionary_->atoms, dct_omp_.get(),
                          dct_omp_ ? &dct_atoms_ : nullptr, quantize_options(), split_code_cost(),
                          &result, &dct);
@@ -790,6 +800,7 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
                      geometry.size(),
                      false};
   coding.split_code_cost = ksvd ? split_code_cost() : 0;
+  coding.learned_pursuit = settings_.learned_pursuit;
   coding.weighted = ksvd && coding.atom_gain_threshold > 0 &&
                     (settings_.weight_owned_voxels || settings_.level_tolerance_factor != 1 ||
                      settings_.uses_level_detail());

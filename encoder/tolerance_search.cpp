@@ -60,16 +60,27 @@ RateSearch search_tolerance(const datasets::SeriesReader& series,
   const double range = tolerance_range(settings.value_min, settings.value_max);
   settings.fixed_sparsity = 0;
   RateSearch r;
-  // Each (ε, frame)'s bytes once encoded: the check (step 3) encodes only the frames it adds.
-  std::map<std::pair<double, std::size_t>, double> sized;
+  // Each (ε, frame) once encoded: its bytes, coded bricks and those that kept the learned atoms.
+  // The check (step 3) encodes only the frames it adds.
+  struct Trial {
+    double bytes = 0;
+    std::size_t bricks = 0, learned = 0;
+  };
+  std::map<std::pair<double, std::size_t>, Trial> sized;
   const auto estimate = [&](double eps) {
     settings.tolerance = eps;
     const FrameEncoder encoder(&dictionary, settings);
     double bytes = 0;
     for (std::size_t i : sample) {
-      auto [at, added] = sized.try_emplace({eps, i}, 0.0);
-      if (added) at->second = static_cast<double>(encoder.encode(i, series.read_frame(i)).size());
-      bytes += at->second;
+      auto [at, added] = sized.try_emplace({eps, i});
+      if (added) {
+        FrameStats stats;
+        at->second.bytes =
+            static_cast<double>(encoder.encode(i, series.read_frame(i), &stats).size());
+        for (std::size_t n : stats.mean_bits_histogram) at->second.bricks += n;
+        at->second.learned = at->second.bricks - stats.split_bricks;
+      }
+      bytes += at->second.bytes;
     }
     ++r.iterations;
     return 8 *
@@ -112,6 +123,17 @@ RateSearch search_tolerance(const datasets::SeriesReader& series,
     search(r.tolerance / 2, r.tolerance * 2);
   }
   r.sample_frames = sample.size();
+  // 4. The bricks of the final sample at the ε chosen (every search step ends with it estimated
+  //    on the sample), and those that kept the learned atoms.
+  for (std::size_t i : sample) {
+    const auto at = sized.find({r.tolerance, i});
+    if (at == sized.end()) {  // not coded at this ε: nothing known
+      r.sample_bricks = r.learned_bricks = 0;
+      break;
+    }
+    r.sample_bricks += at->second.bricks;
+    r.learned_bricks += at->second.learned;
+  }
   return r;
 }
 

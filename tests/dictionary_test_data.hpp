@@ -26,6 +26,24 @@ inline dictionary::Dictionary random_dictionary(int atoms, std::uint64_t seed) {
   return d;
 }
 
+/// K atoms that pay on `v`: blocks of 6³ of the volume itself, taken at spread-out places (the
+/// volume at least 6 a side), zero-mean and unit-norm.
+inline dictionary::Dictionary exemplar_dictionary(const Volume& v, int atoms) {
+  dictionary::Dictionary d;
+  d.block_size = 6;
+  d.atoms.resize(216, atoms);
+  const std::int64_t nx = v.dims.x / 6, ny = v.dims.y / 6, nz = v.dims.z / 6;
+  for (int k = 0; k < atoms; ++k) {
+    const std::int64_t x0 = 6 * (k % nx), y0 = 6 * (k / nx % ny), z0 = 6 * (k % nz);
+    for (std::int64_t z = 0; z < 6; ++z)
+      for (std::int64_t y = 0; y < 6; ++y)
+        for (std::int64_t x = 0; x < 6; ++x)
+          d.atoms(static_cast<Eigen::Index>(x + 6 * y + 36 * z), k) = v.at(x0 + x, y0 + y, z0 + z);
+  }
+  dictionary::normalize_atoms(d.atoms);
+  return d;
+}
+
 /// A smooth multi-scale field (a few random plane waves) with some noise; no two frames alike.
 inline Volume wavy_volume(Dims dims, std::uint64_t seed) {
   SplitMix64 rng(seed);

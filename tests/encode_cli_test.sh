@@ -71,6 +71,23 @@ expect_error "--zfp-accuracy applies to --codec zfp only" "$volreel" encode "$wo
 expect_error "--tolerance: expected a number > 0, found '0'" "$volreel" encode "$work/s" --tolerance 0 --out "$work/x.vreel"
 expect_error "--psnr: expected a number > 0, found '-5'" "$volreel" encode "$work/s" --psnr -5 --out "$work/x.vreel"
 expect_error "--fixed-sparsity: Value 300 not in range 1 to 216" "$volreel" encode "$work/s" --fixed-sparsity 300 --out "$work/x.vreel"
+# A size target at which the rate search finds the learned atoms kept in no brick of its sample
+# (blobs' atoms on the rotating field at 3 bps): the whole dictionary's pursuit is skipped, and
+# the frames are those of the same eps with the pursuit and the comparison, but for the container
+# identifier (offset 128, 8 bytes) and the trailing CRC.
+"$volreel" gen analytic --field rotating --dims 40x36x30 --frames 3 --out "$work/rot" > /dev/null 2>&1
+out=$("$volreel" encode "$work/rot" --dictionary "$work/dict.bin" --brick-size 36 --bps 3 --out "$work/skip.vreel" 2>/dev/null)
+grep -q "learned atoms: kept in none of the 15 bricks" <<< "$out" || fail "the learned pursuit was not skipped: $out"
+grep -q "DCT basis alone (the learned atoms did not pay): 15 of 15 bricks" <<< "$out" || fail "not every brick is the basis alone: $out"
+eps=$(json 'd["tolerance"]' < "$work/skip.vreel/manifest.json")
+out=$("$volreel" encode "$work/rot" --dictionary "$work/dict.bin" --brick-size 36 --tolerance "$eps" --out "$work/both.vreel" 2>/dev/null)
+! grep -q "learned atoms: kept in none" <<< "$out" || fail "an encode without a size target skipped the learned pursuit"
+strip() { head -c 128 "$1"; tail -c +137 "$1" | head -c -4; }
+for f in 000000 000001 000002; do
+  cmp -s <(strip "$work/skip.vreel/frames/$f.vrf") <(strip "$work/both.vreel/frames/$f.vrf") ||
+    fail "frame $f with the learned pursuit skipped differs from the frame coded with it"
+done
+
 # The output and the dictionary, checked before the value range and training.
 if out=$("$volreel" encode "$work/s" --atoms 64 --out /proc/volreel-test.vreel 2>&1); then fail "encode into /proc: $out"; fi
 grep -q "cannot write it (--out)" <<< "$out" || fail "no message for an output that cannot be written: $out"

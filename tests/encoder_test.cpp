@@ -1700,6 +1700,51 @@ TEST(Encoder, BricksWhereLearnedAtomsDoNotPayUseTheBasisAlone) {
   }
 }
 
+// Without the whole dictionary's pursuit (CodingSettings::learned_pursuit false, which encode
+// sets where the rate search found the learned atoms kept in no brick) every brick is coded with
+// the basis alone, and a brick that the comparison gave to the basis anyway is the same payload,
+// byte for byte.
+TEST(Encoder, WithoutTheLearnedPursuitEveryBrickIsTheBasisAloneAsTheComparisonCodesIt) {
+  const Volume v = analytic_volume(datasets::AnalyticField::blobs, {72, 40, 36});
+  const auto d = with_dct(test::exemplar_dictionary(v, 48));  // learned atoms that pay somewhere
+  const auto [mn, mx] = std::minmax_element(v.data.begin(), v.data.end());
+  const double eps = 1e-2 * static_cast<double>(*mx - *mn);
+  auto s = ksvd_settings(eps, v);
+  s.brick_size = 24;
+  encoder::FrameStats both_stats, basis_stats;
+  const auto both = encoder::FrameEncoder(&d, s).encode(0, v, &both_stats);
+  s.learned_pursuit = false;
+  const auto basis = encoder::FrameEncoder(&d, s).encode(0, v, &basis_stats);
+  const format::FrameView f(both, "both.vrf"), g(basis, "basis.vrf");
+  ASSERT_EQ(f.brick_count(), g.brick_count());
+  std::size_t coded = 0, same = 0;
+  for (std::uint32_t i = 0; i < f.brick_count(); ++i) {
+    const auto a = f.brick_bytes(i), b = g.brick_bytes(i);
+    if (a.size() == 4) {  // a constant brick: no pursuit either way
+      EXPECT_TRUE(std::equal(a.begin(), a.end(), b.begin(), b.end())) << i;
+      continue;
+    }
+    ++coded;
+    EXPECT_NE(vr_box_from_split(format::ksvd_box_word(b)), 0u) << "brick " << i;
+    if (vr_box_from_split(format::ksvd_box_word(a)) != 0) {
+      EXPECT_TRUE(std::equal(a.begin(), a.end(), b.begin(), b.end())) << "brick " << i;
+      ++same;
+    }
+  }
+  EXPECT_EQ(basis_stats.split_bricks, coded);
+  EXPECT_EQ(both_stats.split_bricks, same);
+  ASSERT_GT(same, 0u) << "the comparison gives some bricks to the basis";
+  ASSERT_LT(same, coded) << "and some to the learned atoms: the case differs";
+  format::validate_payloads(g, atom_table(d));
+  EXPECT_GT(finest_level_error(basis, d, v).first, 35.0);
+  // A dictionary of the basis alone has no other pursuit to skip: the same frame either way.
+  const auto dct = dictionary::from_file(format::dct_dictionary(6, "test"));
+  s.learned_pursuit = true;
+  const auto dct_on = encoder::FrameEncoder(&dct, s).encode(0, v);
+  s.learned_pursuit = false;
+  EXPECT_EQ(encoder::FrameEncoder(&dct, s).encode(0, v), dct_on);
+}
+
 TEST(Tiling, CodedBlocksPerVoxelAndTheChosenSize) {
   // 64³ in bricks of 36³: 12 blocks a side at the finest level, 6 at the 32³ root.
   EXPECT_NEAR(format::coded_block_share({64, 64, 64}, {36}), (1728.0 + 216.0) * 216 / 262144,

@@ -95,6 +95,31 @@ TEST_F(SmallSeries, ABitsPerVoxelTargetIsMetByTheRateSearch) {
   }
 }
 
+// The rate search counts, at the ε it chose, the coded bricks of its sample's frames and those
+// that kept the learned atoms: the figures of encodes of those frames at that ε.
+TEST_F(SmallSeries, TheRateSearchCountsTheBricksThatKeptTheLearnedAtoms) {
+  const auto d = dictionary::from_file(format::with_dct_atoms(dictionary::to_file(
+      test::exemplar_dictionary(series_->read_frame(1), 48), format::DictionaryTraining{})));
+  auto coding = coding_;
+  coding.brick_size = 24;  // several bricks a frame
+  const auto r = encoder::search_tolerance(*series_, d, 0, coding, 1.5, 3, 3, 0.03);
+  coding.tolerance = r.tolerance;
+  const encoder::FrameEncoder frames(&d, coding);
+  std::size_t bricks = 0, split = 0;
+  for (std::size_t t = 0; t < 3; ++t) {
+    encoder::FrameStats stats;
+    frames.encode(t, series_->read_frame(t), &stats);
+    for (std::size_t n : stats.mean_bits_histogram) bricks += n;
+    split += stats.split_bricks;
+  }
+  EXPECT_EQ(r.sample_frames, 3u);
+  EXPECT_GT(bricks, 3u);
+  EXPECT_EQ(r.sample_bricks, bricks);
+  EXPECT_EQ(r.learned_bricks, bricks - split);
+  EXPECT_GT(r.learned_bricks, 0u) << "the volume's own blocks pay in some bricks";
+  EXPECT_LT(r.learned_bricks, bricks) << "and the basis alone in others";
+}
+
 // A sequence whose frames differ in cost: frames 0, 2 and 5 (the three evenly spaced samples of
 // six) are a smooth field, frames 1, 3 and 4 white noise. The first sample misjudges the sequence
 // by far; the check on the other frames finds it and searches again on all six, so that the

@@ -100,6 +100,11 @@ void print_tolerance_choice(const encoder::ToleranceChoice& e, const encoder::Co
         "of %zu frames\n",
         e.rate_search.tolerance, e.rate_search.estimated_bps, target_bps, e.rate_search.iterations,
         e.rate_search.sample_frames);
+  if (e.source == Source::bps && !c.learned_pursuit)
+    std::printf(
+        "learned atoms: kept in none of the %zu bricks of those frames at this eps; every brick "
+        "is coded with the DCT basis alone (the whole dictionary's pursuit skipped)\n",
+        e.rate_search.sample_bricks);
   if (e.source == Source::dictionary_training)
     std::printf("tolerance from the dictionary's training: ");
   if (c.fixed_sparsity == 0 && c.rule == encoder::VariableRateRule::tolerance)

@@ -143,6 +143,12 @@ struct CodingSettings {
   /// lagrangian_factor·m·ε² per code's worth of bytes), so that the learned atoms are used only in
   /// the bricks where they pay. Off at fixed rate.
   bool split_bricks = true;
+  /// With split_bricks in effect: false skips the whole dictionary's pursuit and codes every
+  /// brick with the basis alone (split flag set), as the comparison would where the basis wins in
+  /// every brick — the same payloads then, for a fraction of the time. encode sets it false where
+  /// the rate search found the learned atoms kept in none of its sample's bricks at the ε it chose
+  /// (RateSearch::learned_bricks).
+  bool learned_pursuit = true;
   double value_min = 0, value_max = 0;  ///< the sequence's value range, for node histograms
 };
 

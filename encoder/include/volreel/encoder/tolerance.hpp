@@ -23,6 +23,9 @@ struct RateSearch {
   double tolerance = 0, estimated_bps = 0;
   int iterations = 0;             ///< trial encodes of the sample
   std::size_t sample_frames = 0;  ///< frames in the final estimate
+  /// Coded bricks (ksvd, not constant) of the final sample's frames at ε, and of those the ones
+  /// that kept the learned atoms (CodingSettings::split_bricks; without a split, every one).
+  std::size_t sample_bricks = 0, learned_bricks = 0;
 };
 inline constexpr int rate_check_rounds = 2;
 RateSearch search_tolerance(const datasets::SeriesReader& series,
