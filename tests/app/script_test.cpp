@@ -78,12 +78,23 @@ TEST(Script, ErrorsNameTheEntry) {
     return std::string("no error");
   };
   EXPECT_NE(message("1 jump").find("'1 jump': unknown action 'jump'"), std::string::npos);
-  EXPECT_NE(message("x key space").find("expected a time"), std::string::npos);
+  EXPECT_NE(message("x key space").find("expected when, a time"), std::string::npos);
   EXPECT_NE(message("1 key nosuchkey").find("unknown key"), std::string::npos);
   EXPECT_NE(message("1 seek").find("takes 1 argument"), std::string::npos);
   EXPECT_NE(message("1 zoom -2").find("positive"), std::string::npos);
   EXPECT_NE(message("1 resize 0 10").find("width and a height"), std::string::npos);
   EXPECT_NE(message("quit").find("expected WHEN ACTION"), std::string::npos);
+  // Not-a-number and infinity are no time, frame or argument (a NaN time never came, a NaN zoom
+  // drew nothing); nor is a frame number past what a count holds.
+  for (const std::string when : {"nan", "inf", "-inf", "nanf", "inff", "+nan", "1e300f"})
+    EXPECT_NE(
+        message(when + " quit").find("expected when, a time in seconds like '0.5' or a frame"),
+        std::string::npos)
+        << when;
+  for (const std::string entry :
+       {"1 zoom nan", "1 speed inf", "1 seek nan", "1 sse -inf", "1 orbit nan 0", "1 orbit 0 inf",
+        "1 settle nan", "1 resize nan 10"})
+    EXPECT_NE(message(entry).find("expected"), std::string::npos) << entry;
 }
 
 }  // namespace

@@ -145,7 +145,23 @@ PY
 expect_error "drop --tour or --seeds" "$volreel" bench stream "$work/a.vreel" --seeds 2 --tour "$work/m/seed_3/tour.json"
 expect_error "1..100 tours" "$volreel" bench stream "$work/a.vreel" --seeds 0
 
-# 5. Errors.
+# 5. A damaged container: the runs complete and say which file failed; the exit status is 1.
+cp -r "$work/a.vreel" "$work/damaged.vreel"
+truncate -s 3000 "$work/damaged.vreel/frames/000001.vrf"
+expect_error "reads of bricks or frames failed while streaming" "$volreel" bench stream "$work/damaged.vreel" \
+  --series "$work/s-moved" --duration 1 --size 32x32 --out "$work/damaged"
+[ -s "$work/damaged/summary.json" ] || fail "a run with a damaged frame wrote no summary"
+
+# 6. A source recorded relative to where the encode ran is looked for next to the container
+# first: a series of another size under that name in the current folder is not taken.
+(cd "$work" && "$volreel" encode s-moved --dictionary dct --out rel.vreel > /dev/null 2>&1)
+mkdir "$work/elsewhere"
+"$volreel" gen analytic --field blobs --dims 30x30x30 --frames 6 --out "$work/elsewhere/s-moved" > /dev/null 2>&1
+(cd "$work/elsewhere" && "$volreel" bench stream ../rel.vreel --duration 1 --size 32x32 --out ../rel) \
+  > "$work/rel.txt" 2>&1 || { cat "$work/rel.txt" >&2; fail "bench stream of a container with a relative source"; }
+grep -q "truth:   the original series.*$work/s-moved)" "$work/rel.txt" || fail "the wrong series was taken: $(grep truth "$work/rel.txt")"
+
+# 7. Errors.
 expect_error "expected a rate such as 20MB/s" "$volreel" bench stream "$work/a.vreel" --bandwidth fast
 expect_error "expected a duration such as 50ms" "$volreel" bench stream "$work/a.vreel" --latency soon
 expect_error "expected WIDTHxHEIGHT" "$volreel" bench stream "$work/a.vreel" --size 100

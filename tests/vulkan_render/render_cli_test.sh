@@ -63,4 +63,42 @@ if "$volreel" render "$dir/missing.vreel" --out "$dir/bad" > "$dir/bad.log" 2>&1
   echo "accepted a missing container"; exit 1
 fi
 grep -q "missing.vreel" "$dir/bad.log" || { cat "$dir/bad.log"; exit 1; }
+# Rendering again into a folder of a longer render: its frames past this run's are removed.
+"$volreel" render "$dir/test.vreel" --tour "$dir/tour.json" --out "$dir/cpu" --cpu --max-frames 3 \
+  > "$dir/again.log" 2>&1 || { cat "$dir/again.log"; exit 1; }
+[ "$(ls "$dir/cpu"/frame_*.png | wc -l)" -eq 3 ] || { echo "an earlier render's frames stayed: $(ls "$dir/cpu")"; exit 1; }
+[ "$(wc -l < "$dir/cpu/metrics.csv")" -eq 4 ] || { echo "metrics.csv of 3 frames expected"; exit 1; }
+grep -q "removed 17 frame_NNNNN.png past frame_00002.png" "$dir/again.log" || { cat "$dir/again.log"; exit 1; }
+# --video is checked before the frames are rendered; an option found bad leaves no --out folder.
+for video in /proc/x.mp4 "$dir/series" "$dir/series/000000.f32/x.mp4"; do
+  if "$volreel" render "$dir/test.vreel" --tour "$dir/tour.json" --out "$dir/novideo" --cpu \
+    --video "$video" > "$dir/bad.log" 2>&1; then
+    echo "accepted --video $video"; exit 1
+  fi
+  grep -q -- "--video" "$dir/bad.log" || { cat "$dir/bad.log"; exit 1; }
+  ! grep -q "rendering" "$dir/bad.log" || { echo "--video $video refused after rendering"; exit 1; }
+done
+"$volreel" gen analytic --field blobs --dims 30x30x30 --frames 4 --out "$dir/small" > /dev/null 2>&1
+if "$volreel" render "$dir/test.vreel" --out "$dir/nocompare" --compare "$dir/small" > "$dir/bad.log" 2>&1; then
+  echo "accepted --compare of another size"; exit 1
+fi
+[ ! -e "$dir/nocompare" ] || { echo "a refused render left its --out folder"; exit 1; }
+[ ! -e "$dir/novideo" ] || { echo "a refused render left its --out folder"; exit 1; }
+# A damaged frame: render draws without it and exits 1, naming the failure once; so does bench play.
+cp -r "$dir/test.vreel" "$dir/damaged.vreel"
+truncate -s 3000 "$dir/damaged.vreel/frames/000001.vrf"
+if "$volreel" render "$dir/damaged.vreel" --tour "$dir/tour.json" --out "$dir/damaged" --cpu > "$dir/bad.log" 2>&1; then
+  echo "render of a damaged container exited 0"; exit 1
+fi
+grep -q "^volreel: error: 1 bricks or frames could not be read" "$dir/bad.log" || { cat "$dir/bad.log"; exit 1; }
+[ "$(grep -c "warning: .*000001.vrf" "$dir/bad.log")" -eq 1 ] || { echo "the failure was not named once"; cat "$dir/bad.log"; exit 1; }
+if "$volreel" bench play "$dir/damaged.vreel" --cpu --size 32x32 --frames-per-phase 2 --seeks 1 > "$dir/bad.log" 2>&1; then
+  echo "bench play of a damaged container exited 0"; exit 1
+fi
+grep -q "error: 1 bricks or frames could not be read.*figures above" "$dir/bad.log" || { cat "$dir/bad.log"; exit 1; }
+for bad in "--frames-per-phase 0" "--speed nan" "--speed 0" "--timeout -1"; do
+  # shellcheck disable=SC2086
+  if "$volreel" bench play "$dir/test.vreel" --cpu $bad > "$dir/bad.log" 2>&1; then echo "bench play accepted $bad"; exit 1; fi
+  grep -q -- "${bad%% *}" "$dir/bad.log" || { cat "$dir/bad.log"; exit 1; }
+done
 echo "render CLI: OK"

@@ -15,6 +15,7 @@
 
 #include "volreel/datasets/prng.hpp"
 #include "volreel/datasets/volume.hpp"
+#include "volreel/format/file_io.hpp"
 #include "volreel/loop/auto_transfer.hpp"
 #include "volreel/loop/loop_settings.hpp"
 #include "volreel/stream_bench/run_report.hpp"
@@ -157,9 +158,11 @@ std::vector<std::string> source_candidates(const format::Manifest& m) {
   return out;
 }
 
-/// Opens the original series: --series, else the manifest's source if that path exists (as
-/// given, or relative to the container's folder and its parent). nullptr: none found (`note`
-/// says why).
+/// Opens the original series: --series, else the manifest's source where a path of that name
+/// holds a series of the container's size (relative to the folder holding the container, then to
+/// the one above it, then as given: a relative source is relative to where the encode ran, most
+/// often next to the container; the current folder may hold another series of that name).
+/// nullptr: none found (`note` says why).
 std::unique_ptr<datasets::SeriesReader> open_original(const std::string& series,
                                                       datasets::OpenOptions options,
                                                       const format::Container& container,
@@ -180,16 +183,27 @@ std::unique_ptr<datasets::SeriesReader> open_original(const std::string& series,
   const auto local = container.source().local_directory();
   const fs::path dir = local ? fs::absolute(*local).lexically_normal() : fs::path();
   for (const std::string& c : local ? source_candidates(m) : std::vector<std::string>{}) {
-    std::vector<fs::path> tries = {fs::path(c)};
+    std::vector<fs::path> tries;
     if (fs::path(c).is_relative()) {
       tries.push_back(dir.parent_path() / c);
       tries.push_back(dir.parent_path().parent_path() / c);
     }
+    tries.push_back(fs::path(c));
     for (const fs::path& p : tries) {
       const bool pattern = p.string().find_first_of("*?[") != std::string::npos;
       if (!fs::exists(p) && !pattern) continue;
       try {
         auto reader = open(p);
+        const Dims d = reader->info().dims;
+        if (d.x != static_cast<std::int64_t>(m.dims[0]) ||
+            d.y != static_cast<std::int64_t>(m.dims[1]) ||
+            d.z != static_cast<std::int64_t>(m.dims[2]) ||
+            reader->info().frames < container.frame_count()) {
+          note = "the manifest's source " + p.string() + " is another series (" +
+                 std::to_string(d.x) + "x" + std::to_string(d.y) + "x" + std::to_string(d.z) +
+                 ", " + std::to_string(reader->info().frames) + " frames)";
+          continue;
+        }
         note = "the manifest's source " + p.string();
         return reader;
       } catch (const InputError& e) {
@@ -300,6 +314,7 @@ fs::path bench_out_dir(const std::string& out) {
   }
   if (fs::exists(out) && !fs::is_directory(out))
     throw InputError("--out " + out + ": exists and is not a folder");
+  format::detail::check_writable(out, "--out");
   fs::create_directories(out);
   return out;
 }

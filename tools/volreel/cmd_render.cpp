@@ -6,6 +6,7 @@
 // frame is drawn once the bricks it needs have arrived (loop::wait_for_view, within
 // --wait-timeout), so a movie never starts black or shows data still streaming in; with it, frames
 // keep the tour's pace and show what has arrived, as the player does.
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -16,6 +17,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -55,6 +57,27 @@ struct RenderCommandOptions {
   RemoteCli remote;
 };
 
+/// Removes the files frame_NNNNN.png (five digits) of `dir` numbered `frames` and on: an earlier,
+/// longer render's into the same folder, which would otherwise pass for this one's. Returns how
+/// many.
+std::size_t remove_later_frames(const fs::path& dir, std::size_t frames) {
+  std::size_t removed = 0;
+  for (const fs::directory_entry& e : fs::directory_iterator(dir)) {
+    const std::string name = e.path().filename().string();
+    if (name.size() != 15 || name.compare(0, 6, "frame_") != 0 ||
+        name.compare(11, 4, ".png") != 0 || !e.is_regular_file())
+      continue;
+    std::size_t index = 0;
+    bool digits = true;
+    for (std::size_t k = 6; k < 11; ++k) {
+      digits = digits && std::isdigit(static_cast<unsigned char>(name[k]));
+      index = 10 * index + static_cast<std::size_t>(name[k] - '0');
+    }
+    if (digits && index >= frames && fs::remove(e.path())) ++removed;
+  }
+  return removed;
+}
+
 void run_render(const RenderCommandOptions& o) {
   // 1. Input, tour, output folder; ffmpeg is checked before any work.
   const format::Container container(open_container_source(o.container, o.remote));
@@ -78,7 +101,11 @@ void run_render(const RenderCommandOptions& o) {
   if (fs::exists(out) && !fs::is_directory(out))
     throw InputError("--out " + o.out + ": exists and is not a directory");
   format::detail::check_writable(out, "--out");
-  fs::create_directories(out);
+  if (!o.video.empty()) {
+    if (fs::is_directory(o.video))
+      throw InputError("--video " + o.video + ": is a directory; give the video file's name");
+    format::detail::check_writable(o.video, "--video");
+  }
   loop::FrameLoopOptions options;
   options.width = tour.width();
   options.height = tour.height();
@@ -95,6 +122,7 @@ void run_render(const RenderCommandOptions& o) {
   if (!transfer_spec.empty()) transfer = loop::transfer_from_spec(transfer_spec, container);
   std::optional<GroundTruth> truth;
   if (!o.compare.empty()) truth.emplace(o.compare, o.reader, m);
+  fs::create_directories(out);  // once every option is known good
 
   // 2. The renderer: Vulkan, or the CPU where there is no device.
   // Vulkan frames with readback (serial: the time split is exact), or the CPU loop.
@@ -133,7 +161,13 @@ void run_render(const RenderCommandOptions& o) {
   std::future<void> writing;
   double sum_ms[5] = {0, 0, 0, 0, 0};
   double sum_psnr = 0, sum_ssim = 0;
-  std::size_t compared = 0, errors = 0, timeouts = 0;
+  std::size_t compared = 0, timeouts = 0;
+  // Each failure once: a brick that cannot be read fails again each time it is requested.
+  std::set<std::string> failures;
+  const auto warn_once = [&](const std::vector<std::string>& messages) {
+    for (const std::string& e : messages)
+      if (failures.insert(e).second) std::fprintf(stderr, "\nvolreel: warning: %s\n", e.c_str());
+  };
   double waited_s = 0;
   loop::FrameReport last;
   const auto start = Clock::now();
@@ -156,9 +190,7 @@ void run_render(const RenderCommandOptions& o) {
             loop::wait_for_view(*renderer, tf.camera, tf.playhead, o.wait_timeout);
         wait_ms = 1000 * wait.seconds;
         waited_s += wait.seconds;
-        for (const std::string& e : wait.new_errors)
-          std::fprintf(stderr, "\nvolreel: warning: %s\n", e.c_str());
-        errors += wait.new_errors.size();
+        warn_once(wait.new_errors);
         if (wait.timed_out) {
           ++timeouts;
           std::fprintf(stderr,
@@ -174,9 +206,7 @@ void run_render(const RenderCommandOptions& o) {
       cpu_render::RgbaImage image = renderer->read_back(report.ticket);
       const double readback_ms =
           std::chrono::duration<double, std::milli>(Clock::now() - read_start).count();
-      for (const std::string& e : report.new_errors)
-        std::fprintf(stderr, "\nvolreel: warning: %s\n", e.c_str());
-      errors += report.new_errors.size();
+      warn_once(report.new_errors);
       std::optional<psnr::ImageComparison> quality;
       if (truth) {
         const auto reference = truth->render(tf.playhead, container.frame_count(), tf.camera,
@@ -211,7 +241,7 @@ void run_render(const RenderCommandOptions& o) {
                     report.new_errors.size(), wait_ms);
       csv << row;
       if (quality) csv << ',' << quality->psnr << ',' << quality->ssim;
-      csv << '\n';
+      csv << '\n' << std::flush;  // every frame's row, also when the run is interrupted
       char status[96];
       std::snprintf(status, sizeof status, "%.1f fps, %.0f%% at target LOD", 1000.0 / frame_ms,
                     100 * s.fraction_at_target);
@@ -252,6 +282,11 @@ void run_render(const RenderCommandOptions& o) {
         sum_psnr / double(compared), sum_ssim / double(compared), compared);
   std::printf("wrote %s/frame_00000.png .. frame_%05zu.png and %s\n", out.c_str(),
               frames ? frames - 1 : 0, (out / "metrics.csv").c_str());
+  if (const std::size_t stale = remove_later_frames(out, frames))
+    std::printf(
+        "removed %zu frame_NNNNN.png past frame_%05zu.png, left by an earlier, longer "
+        "render into %s\n",
+        stale, frames ? frames - 1 : 0, out.c_str());
   if (!ffmpeg.empty()) {
     // Exactly this run's frames (-frames:v: the folder may hold more frame_NNNNN.png from an
     // earlier, longer run); '%' in the folder name escaped for ffmpeg's image-sequence pattern;
@@ -274,8 +309,8 @@ void run_render(const RenderCommandOptions& o) {
     std::printf("wrote %s (%zu frames, H.264)\n", o.video.c_str(), frames);
   }
   // The frames are written (drawn without what failed); the exit status still says it failed.
-  if (errors)
-    throw InputError(std::to_string(errors) +
+  if (!failures.empty())
+    throw InputError(std::to_string(failures.size()) +
                      " bricks or frames could not be read (see the warnings above, which name "
                      "them): the frames were drawn without them");
 }
@@ -294,7 +329,11 @@ void add_render_command(CLI::App& app) {
       "--tour", o->tour,
       "Tour JSON (camera, playhead and transfer-function keys; see player/cpu_render tour.hpp); "
       "default: the built-in tour (play, reverse, seek, slow motion, one orbit)");
-  cmd->add_option("--out", o->out, "Output folder for frame_NNNNN.png and metrics.csv")->required();
+  cmd->add_option("--out", o->out,
+                  "Output folder for frame_NNNNN.png and metrics.csv (a row a frame); an earlier "
+                  "render's there are replaced, and its frames past this run's last removed at "
+                  "the end")
+      ->required();
   cmd->add_option("--size", o->loop.size, "Image size WxH (default: the tour's, 512x512)");
   cmd->add_option(
       "--transfer", o->transfer,
@@ -314,7 +353,9 @@ void add_render_command(CLI::App& app) {
                   "with what it has (reported)")
       ->check(non_negative())
       ->capture_default_str();
-  cmd->add_option("--max-frames", o->max_frames, "Render only the first N frames of the tour");
+  cmd->add_option("--max-frames", o->max_frames,
+                  "Render only the first N frames of the tour (0: all of them)")
+      ->capture_default_str();
   cmd->add_option(
       "--compare", o->compare,
       "Original series (raw series directory, HDF5 or raw file): measure each frame's image "

@@ -5,6 +5,7 @@
 
 #include <cctype>
 #include <charconv>
+#include <cmath>
 #include <map>
 #include <sstream>
 
@@ -21,11 +22,15 @@ std::string trim(const std::string& s) {
   return s.substr(b, e - b);
 }
 
+/// A finite number, the whole of s (from_chars alone takes "nan" and "inf").
 bool parse_double(const std::string& s, double& out) {
   const char* end = s.data() + s.size();
   auto [ptr, ec] = std::from_chars(s.data(), end, out);
-  return ec == std::errc{} && ptr == end;
+  return ec == std::errc{} && ptr == end && std::isfinite(out);
 }
+
+/// The largest frame number a script may name (far past any container, and exact in a double).
+constexpr double max_script_frame = 1e12;
 
 }  // namespace
 
@@ -83,14 +88,20 @@ std::vector<ScriptAction> parse_script(const std::string& text) {
       when.erase(0, 1);
     }
     double value = 0;
+    const auto bad_when = [&] {
+      fail(
+          "expected when, a time in seconds like '0.5' or a frame number like '12f' (either "
+          "after '+' for one relative to the entry before), found '" +
+          w[0] + "'");
+    };
     if (!when.empty() && when.back() == 'f') {
-      if (!parse_double(when.substr(0, when.size() - 1), value) || value < 0)
-        fail("expected a frame number like '12f', found '" + when + "'");
+      if (!parse_double(when.substr(0, when.size() - 1), value) || value < 0 ||
+          value > max_script_frame)
+        bad_when();
       a.at_frame = static_cast<std::int64_t>(value);
     } else {
       if (!when.empty() && when.back() == 's') when.pop_back();
-      if (!parse_double(when, value) || value < 0)
-        fail("expected a time in seconds like '0.5', found '" + w[0] + "'");
+      if (!parse_double(when, value) || value < 0) bad_when();
       a.at_seconds = value;
     }
     const auto k = kinds.find(w[1]);
@@ -112,7 +123,8 @@ std::vector<ScriptAction> parse_script(const std::string& text) {
         a.text = w[2];
         break;
       case Kind::orbit:
-        if (!parse_double(w[2], a.x) || !parse_double(w[3], a.y)) fail("expected two numbers");
+        if (!parse_double(w[2], a.x) || !parse_double(w[3], a.y))
+          fail("expected two finite numbers (degrees)");
         break;
       case Kind::resize:
         if (!parse_double(w[2], a.x) || !parse_double(w[3], a.y) || a.x < 1 || a.y < 1 ||
@@ -121,13 +133,14 @@ std::vector<ScriptAction> parse_script(const std::string& text) {
         break;
       case Kind::settle:
         a.x = 20;
-        if (args == 1 && (!parse_double(w[2], a.x) || a.x < 0)) fail("expected a timeout in s");
+        if (args == 1 && (!parse_double(w[2], a.x) || a.x < 0))
+          fail("expected a timeout in seconds >= 0, found '" + w[2] + "'");
         break;
       case Kind::seek:
       case Kind::speed:
       case Kind::zoom:
       case Kind::sse:
-        if (!parse_double(w[2], a.x)) fail("expected a number, found '" + w[2] + "'");
+        if (!parse_double(w[2], a.x)) fail("expected a finite number, found '" + w[2] + "'");
         if ((a.kind == Kind::zoom || a.kind == Kind::sse || a.kind == Kind::speed) && a.x <= 0)
           fail("expected a positive number");
         break;
