@@ -84,6 +84,17 @@ void refuse_existing_output(const fs::path& out, bool resume, bool overwrite) {
     throw InputError("'" + (out / "dictionary.bin").string() +
                      "' is there but no container manifest: encode writes the container's own "
                      "dictionary.bin; move that file away or choose another --out");
+  // Nor is a directory that holds other files and no container (a data folder, e.g. the series
+  // itself): a container would be mixed into it.
+  if (fs::is_directory(status) && !fs::exists(fs::symlink_status(manifest, ec))) {
+    for (const auto& entry : fs::directory_iterator(out, ec)) {
+      const std::string name = entry.path().filename().string();
+      if (name != "frames" && name.find(".tmp-") == std::string::npos)
+        throw InputError("'" + out.string() + "' holds '" + name +
+                         "' and is not a volreel container: encode writes a container into a "
+                         "new or empty directory (e.g. NAME.vreel); choose another --out");
+    }
+  }
   format::detail::check_writable(out, "--out");
 }
 

@@ -103,15 +103,17 @@ std::vector<std::byte> read_whole_file(const fs::path& path, std::uint64_t max_b
 void write_file_atomically(const fs::path& path, std::span<const std::byte> bytes) {
   const fs::path tmp = path.string() + ".tmp-" + std::to_string(getpid());
   std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) throw FormatError(tmp, std::string("cannot create: ") + std::strerror(errno));
+  if (!f)
+    throw FormatError(path, std::string("cannot create it (its temporary '") +
+                                tmp.filename().string() + "' first): " + std::strerror(errno));
   const std::size_t put = std::fwrite(bytes.data(), 1, bytes.size(), f);
   const bool flushed = std::fflush(f) == 0;
   const bool closed = std::fclose(f) == 0;
   std::error_code ec;
   if (put != bytes.size() || !flushed || !closed) {
     fs::remove(tmp, ec);
-    throw FormatError(tmp, "write failed after " + std::to_string(put) + " of " +
-                               std::to_string(bytes.size()) + " bytes (disk full?)");
+    throw FormatError(path, "write failed after " + std::to_string(put) + " of " +
+                                std::to_string(bytes.size()) + " bytes (disk full?)");
   }
   fs::rename(tmp, path, ec);
   if (ec) {

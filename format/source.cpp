@@ -71,6 +71,12 @@ LocalSource::LocalSource(fs::path dir) : dir_(std::move(dir)), location_(dir_.st
     throw FormatError(dir_, std::string("not a volreel container: it is ") +
                                 detail::file_kind(status.type()) +
                                 ", a container is a directory (NAME.vreel)");
+  if (!fs::exists(dir_ / "manifest.json", ec) && !fs::is_symlink(dir_ / "manifest.json", ec))
+    throw FormatError(dir_, std::string("not a volreel container: it holds no manifest.json") +
+                                (fs::exists(dir_ / "series.json", ec)
+                                     ? " but a series.json: a raw series, which `volreel encode "
+                                       "DIR --out NAME.vreel` makes a container of"
+                                     : ""));
 }
 
 std::vector<std::byte> LocalSource::read_file(const std::string& relative,

@@ -214,7 +214,8 @@ void write_png(const std::filesystem::path& path, const Image& image) {
   {
     FileCloser file{std::fopen(temporary.c_str(), "wb")};
     if (file.file == nullptr) {
-      throw std::runtime_error(temporary.string() + ": cannot create: " + std::strerror(errno));
+      throw std::runtime_error(path.string() + ": cannot create it (its temporary '" +
+                               temporary.filename().string() + "' first): " + std::strerror(errno));
     }
     written = write_png_c(file.file, state, image, rows.data());
     const bool closed = std::fclose(file.file) == 0;
@@ -228,7 +229,7 @@ void write_png(const std::filesystem::path& path, const Image& image) {
   if (!written) {
     std::error_code ignored;
     std::filesystem::remove(temporary, ignored);
-    throw std::runtime_error(temporary.string() + ": writing the PNG failed: " + state.message);
+    throw std::runtime_error(path.string() + ": writing the PNG failed: " + state.message);
   }
   std::error_code error;
   std::filesystem::rename(temporary, path, error);

@@ -7,6 +7,7 @@
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
+#include <omp.h>
 #include <unistd.h>
 #include <atomic>
 #include <cmath>
@@ -22,6 +23,7 @@
 #include "volreel/encoder/encode.hpp"
 #include "volreel/format/container.hpp"
 #include "volreel/format/error.hpp"
+#include "volreel/format/file_io.hpp"
 #include "volreel/format/time_step.hpp"
 #include "volreel/psnr/metrics.hpp"
 #include "volreel/remote/http_client.hpp"
@@ -62,14 +64,8 @@ class PyContainer {
       throw py::index_error("frame " + std::to_string(t < 0 ? t - n : t) +
                             " is out of range: the container has frames 0.." +
                             std::to_string(n - 1));
-    const auto levels = static_cast<std::int64_t>(manifest().levels);
-    std::int64_t l = level.value_or(levels - 1);
-    if (l < 0) l += levels;
-    if (l < 0 || l >= levels)
-      throw py::index_error("level " + std::to_string(level.value_or(0)) +
-                            " is out of range: the container has levels 0.." +
-                            std::to_string(levels - 1) + " (0 is the root brick)");
-    const auto dims = level_dims(static_cast<std::uint32_t>(l));
+    const std::uint32_t l = level_index(level.value_or(-1));
+    const auto dims = level_dims(l);
     const std::vector<py::ssize_t> shape = {dims[2], dims[1], dims[0]};
     py::array out;
     if (out_given) {
@@ -92,6 +88,19 @@ class PyContainer {
       steps_.decode(static_cast<std::size_t>(t), static_cast<std::uint32_t>(l), {data, count});
     }
     return out;
+  }
+
+  /// Level `level` (negative: from the finest, -1 being it) as an index 0..levels - 1; an
+  /// IndexError naming the range where there is no such level.
+  std::uint32_t level_index(std::int64_t level) const {
+    const auto levels = static_cast<std::int64_t>(manifest().levels);
+    const std::int64_t l = level < 0 ? level + levels : level;
+    if (l < 0 || l >= levels)
+      throw py::index_error("level " + std::to_string(level) +
+                            " is out of range: the container has levels 0.." +
+                            std::to_string(levels - 1) +
+                            " (0 is the root brick; negative levels count from the finest, -1)");
+    return static_cast<std::uint32_t>(l);
   }
 
   /// The size (x, y, z) of level l.
@@ -245,6 +254,11 @@ SeriesInput series_input(const py::object& frames, const fs::path& near,
     FloatArray a = FloatArray::ensure(frames);
     if (!a) throw py::type_error("frames: expected an array of numbers");
     const auto count = static_cast<std::size_t>(a.shape(0));
+    if (a.size() == 0)
+      throw py::value_error("frames: the array [t, z, y, x] of shape [" +
+                            std::to_string(a.shape(0)) + ", " + std::to_string(a.shape(1)) + ", " +
+                            std::to_string(a.shape(2)) + ", " + std::to_string(a.shape(3)) +
+                            "] holds no value: give at least one frame of at least one voxel");
     in.reader = std::make_unique<ArraySeries>(std::move(a), timestamps_for(times, count), variable);
     return in;
   }
@@ -261,6 +275,24 @@ SeriesInput series_input(const py::object& frames, const fs::path& near,
   return in;
 }
 
+/// Progress of an encode's stages that raises, in the encoding thread, what a signal handler
+/// raised (KeyboardInterrupt on Ctrl-C) as soon as Python has one pending: the encode stops there,
+/// as `volreel encode` does on Ctrl-C (its container is then continued with resume=True). Not
+/// inside a parallel region, which an exception must not leave.
+void raise_pending_signal(const ProgressUpdate&, void*) {
+  if (omp_in_parallel()) return;
+  py::gil_scoped_acquire gil;
+  if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+}
+
+encoder::EncodeEvents interruptible_events() {
+  encoder::EncodeEvents events;
+  events.stage = [](const std::string&, const std::string&) {
+    return Progress{raise_pending_signal, nullptr};
+  };
+  return events;
+}
+
 py::dict encode(const py::object& frames, const fs::path& out, std::optional<double> psnr,
                 std::optional<double> bps, std::optional<double> tolerance,
                 std::optional<double> max_error, const std::string& dictionary,
@@ -272,6 +304,9 @@ py::dict encode(const py::object& frames, const fs::path& out, std::optional<dou
           int(max_error.has_value()) >
       1)
     throw py::value_error("give at most one of psnr, bps, tolerance and max_error");
+  if (max_keyframe_gap && (*max_keyframe_gap < 1 || *max_keyframe_gap > 65535))
+    throw py::value_error("max_keyframe_gap must be in 1..65535 (1: every frame a keyframe), not " +
+                          std::to_string(*max_keyframe_gap));
   SeriesInput in = series_input(frames, out, times, variable);
   encoder::EncodeRequest r;
   r.coding.codec = encoder::codec_from_name(codec);
@@ -296,7 +331,7 @@ py::dict encode(const py::object& frames, const fs::path& out, std::optional<dou
   encoder::EncodeSummary s;
   {
     py::gil_scoped_release release;
-    s = encoder::encode(*in.reader, out, r);
+    s = encoder::encode(*in.reader, out, r, interruptible_events());
   }
   py::dict d;
   d["path"] = out.string();
@@ -315,9 +350,16 @@ py::dict encode(const py::object& frames, const fs::path& out, std::optional<dou
 }
 
 py::dict train(const py::object& frames, const fs::path& out, int atoms, std::optional<double> psnr,
-               std::optional<double> tolerance, const std::optional<std::vector<double>>& times) {
+               std::optional<double> tolerance, const std::optional<std::vector<double>>& times,
+               bool overwrite) {
   if (psnr && tolerance) throw py::value_error("give psnr or tolerance, not both");
   if (atoms < 1) throw py::value_error("atoms must be at least 1");
+  if (fs::is_directory(out))
+    throw InputError("'" + out.string() + "' is a directory: out names the dictionary file");
+  if (!overwrite && fs::exists(fs::symlink_status(out)))
+    throw InputError("'" + out.string() +
+                     "' already exists: pass overwrite=True to replace it, or choose another out");
+  format::detail::check_writable(out, "out");
   SeriesInput in = series_input(frames, out, times, "");
   dictionary::TrainingResult result;
   {
@@ -427,8 +469,10 @@ PYBIND11_MODULE(_volreel, m) {
       .def_property_readonly("location", &PyContainer::location, "The folder or URL")
       .def(
           "level_dims",
-          [](const PyContainer& c, std::uint32_t l) { return as_tuple(c.level_dims(l)); },
-          py::arg("level"), "The size (x, y, z) of a level")
+          [](const PyContainer& c, std::int64_t l) {
+            return as_tuple(c.level_dims(c.level_index(l)));
+          },
+          py::arg("level"), "The size (x, y, z) of a level (negative: from the finest, -1)")
       .def("frame", &PyContainer::frame, py::arg("t"), py::arg("level") = py::none(),
            py::arg("out") = py::none(),
            "Time step t (negative: from the end) at a level (default the finest) as a float32 "
@@ -447,7 +491,7 @@ PYBIND11_MODULE(_volreel, m) {
         "or stored voxels per brick axis, a multiple of 6 in 12..66, as --brick-size)");
   m.def("train", &train, py::arg("frames"), py::arg("out"), py::kw_only(), py::arg("atoms") = 256,
         py::arg("psnr") = py::none(), py::arg("tolerance") = py::none(),
-        py::arg("times") = py::none(),
+        py::arg("times") = py::none(), py::arg("overwrite") = false,
         "Trains a dictionary on frames (Algorithm 1 over a coreset hierarchy) into the file `out`");
   m.def("psnr", &psnr_of, py::arg("a"), py::arg("b"),
         "PSNR of b against the original a: 10 log10((max a - min a)^2 / MSE), in dB");

@@ -67,6 +67,11 @@ printf '\x5a' | dd of="$frame" bs=1 seek=$((size - 64)) conv=notrunc 2>/dev/null
 expect_error "000002.vrf: offset [0-9]*: expected brick [0-9]* payload of CRC-32C" "$volreel" decode "$work/b.vreel" --frame 2 --out "$work/x.f32"
 [ ! -e "$work/x.f32" ] || fail "decode left an output file behind after a corrupt brick"
 expect_error "1 problem found: .*000002.vrf" "$volreel" verify "$work/b.vreel"
+# A truncated frame that the steps around it take keyframes from: one problem, not one a step.
+"$volreel" gen analytic --field rotating --dims 40x36x30 --frames 6 --out "$work/slow" > /dev/null 2>&1
+"$volreel" encode "$work/slow" --dictionary dct --brick-size 18 --max-keyframe-gap 4 --out "$work/gaps.vreel" > /dev/null 2>&1
+truncate -s 3000 "$work/gaps.vreel/frames/000002.vrf"
+expect_error ": 1 problem found: .*000002.vrf: offset 112: expected file size" "$volreel" verify "$work/gaps.vreel"
 
 # Values too large for float32 sums: refused before anything is written.
 python3 -c "

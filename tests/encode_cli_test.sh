@@ -31,7 +31,11 @@ echo "$out" | json '1 if d["bps"] > 0 and d["sequence"]["psnr"] > 35 else exit(1
 [ "$(stat -c %s "$work/f2.f32")" = $((40 * 36 * 30 * 4)) ] || fail "decode at full resolution: wrong size"
 "$volreel" decode "$work/a.vreel" --frame 2 --level 0 --out "$work/f2l0.f32" > /dev/null
 [ "$(stat -c %s "$work/f2l0.f32")" = $((20 * 18 * 15 * 4)) ] || fail "decode at level 0: wrong size"
+expect_error "not a volreel container: it holds no manifest.json but a series.json" "$volreel" info "$work/s"
 expect_error "levels 0..1" "$volreel" decode "$work/a.vreel" --frame 0 --level 5 --out "$work/x.f32"
+"$volreel" decode "$work/a.vreel" --frame 2 --level -2 --out "$work/f2m2.f32" > /dev/null
+cmp -s "$work/f2m2.f32" "$work/f2l0.f32" || fail "decode --level -2 of 2 levels is not level 0"
+expect_error "levels 0..1 (negative levels count from the finest" "$volreel" decode "$work/a.vreel" --frame 0 --level -3 --out "$work/x.f32"
 expect_error "the container has frames 0..2" "$volreel" decode "$work/a.vreel" --frame 3 --out "$work/x.f32"
 expect_error "--frame: expected a number >= 0, found '-1'" "$volreel" decode "$work/a.vreel" --frame -1 --out "$work/x.f32"
 expect_error "not a volreel container: it is a regular file" "$volreel" info "$work/s/000000.f32"
@@ -99,6 +103,10 @@ expect_error "--out is empty" "$volreel" encode "$work/s" --dictionary dct --out
 # program's manifest.json, is refused with or without --overwrite, and left as it was.
 mkdir -p "$work/proj/frames"; echo x > "$work/proj/frames/img_1.png"
 expect_error "img_1.png' was not written by volreel" "$volreel" encode "$work/s" --dictionary dct --overwrite --out "$work/proj"
+# A folder of other files (here a copy of the series itself) is no container to write into.
+cp -r "$work/s" "$work/data-copy"
+expect_error "holds '.*' and is not a volreel container" "$volreel" encode "$work/s" --dictionary dct --out "$work/data-copy"
+[ ! -e "$work/data-copy/manifest.json" ] && [ ! -e "$work/data-copy/frames" ] || fail "a container was mixed into a data folder"
 [ -f "$work/proj/frames/img_1.png" ] || fail "encode removed a file it did not write"
 mkdir -p "$work/other"; echo '{}' > "$work/other/manifest.json"
 expect_error "is not a volreel container's manifest" "$volreel" encode "$work/s" --dictionary dct --overwrite --out "$work/other"

@@ -65,6 +65,7 @@ def encode(
     resume: bool = False,
     times: Optional[Sequence[float]] = None,
     variable: str = "",
+    brick_size: str = "auto",
 ) -> dict[str, Any]: ...
 def train(
     frames: Frames,
@@ -74,6 +75,7 @@ def train(
     psnr: Optional[float] = None,
     tolerance: Optional[float] = None,
     times: Optional[Sequence[float]] = None,
+    overwrite: bool = False,
 ) -> dict[str, Any]: ...
 def psnr(a: npt.ArrayLike, b: npt.ArrayLike) -> float: ...
 def ssim(a: npt.ArrayLike, b: npt.ArrayLike) -> float: ...

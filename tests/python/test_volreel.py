@@ -2,10 +2,13 @@
 metrics as `volreel compare`, encodes from arrays and generators, and clear exceptions for bad
 input. Run by ctest with PYTHONPATH at build/python and VOLREEL_CLI naming the volreel program."""
 
+import _thread
 import json
 import os
 import shutil
 import subprocess
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -138,6 +141,24 @@ def test_bad_input_raises_with_the_library_message(container, tmp_path):
         volreel.encode(np.zeros((2, 8, 8, 8)), tmp_path / "x.vreel", psnr=40, bps=1)
     with pytest.raises(ValueError, match="same shape"):
         volreel.psnr(np.zeros((4, 4)), np.zeros((4, 5)))
+    with pytest.raises(ValueError, match=r"shape \[0, 8, 8, 8\] holds no value"):
+        volreel.encode(np.zeros((0, 8, 8, 8), np.float32), tmp_path / "empty.vreel", codec="zfp")
+    with pytest.raises(ValueError, match="max_keyframe_gap must be in 1..65535"):
+        volreel.encode(np.zeros((2, 8, 8, 8)), tmp_path / "x.vreel", max_keyframe_gap=0)
+    # Levels count from the finest when negative, in frame() and level_dims() alike.
+    assert c.level_dims(-1) == c.dims and c.level_dims(-c.levels) == c.level_dims(0)
+    with pytest.raises(IndexError, match=r"level -5 is out of range"):
+        c.level_dims(-5)
+    with pytest.raises(IndexError, match=r"level -5 is out of range"):
+        c.frame(0, level=-5)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["damaged.vreel"]
+    # A folder of other files is no container to write into.
+    data = tmp_path / "data"
+    data.mkdir()
+    bad[:2].tofile(data / "000000.f32")
+    with pytest.raises(volreel.InputError, match="holds '000000.f32' and is not a volreel container"):
+        volreel.encode(bad[:2], data, codec="zfp")
+    assert sorted(p.name for p in data.iterdir()) == ["000000.f32"]
 
 
 def test_encode_from_a_generator(series, tmp_path):
@@ -184,8 +205,41 @@ def test_train_then_encode_with_the_dictionary(series, tmp_path):
     _, _, frames = series
     result = volreel.train(frames, tmp_path / "d.bin", atoms=32, psnr=45)
     assert result["atoms"] == 32 and (tmp_path / "d.bin").stat().st_size > 0
+    # An existing file is kept unless asked, as by `volreel train`.
+    before = (tmp_path / "d.bin").read_bytes()
+    with pytest.raises(volreel.InputError, match="already exists: pass overwrite=True"):
+        volreel.train(frames, tmp_path / "d.bin", atoms=16)
+    assert (tmp_path / "d.bin").read_bytes() == before
+    assert volreel.train(frames, tmp_path / "d.bin", atoms=16, overwrite=True)["atoms"] == 16
+    volreel.train(frames, tmp_path / "d.bin", atoms=32, psnr=45, overwrite=True)
+    with pytest.raises(volreel.InputError, match="is a directory"):
+        volreel.train(frames, tmp_path, atoms=16)
     s = volreel.encode(frames, tmp_path / "t.vreel", dictionary=str(tmp_path / "d.bin"), psnr=45)
     assert s["psnr"] >= 45 - 0.05
+
+
+def test_ctrl_c_stops_an_encode_which_resume_completes(tmp_path):
+    # Many small frames; once the first is written, a Ctrl-C (as the terminal sends it) arrives
+    # while the encode runs without the GIL. It raises KeyboardInterrupt in the caller at the next
+    # frame, not after the last; resume=True then completes the same container.
+    frames = np.random.default_rng(5).standard_normal((400, 16, 16, 16)).astype(np.float32)
+    out = tmp_path / "stopped.vreel"
+    first = out / "frames" / "000000.vrf"
+
+    def interrupt_once_started():
+        while not first.exists():
+            time.sleep(0.001)
+        _thread.interrupt_main()
+
+    watcher = threading.Thread(target=interrupt_once_started, daemon=True)
+    watcher.start()
+    with pytest.raises(KeyboardInterrupt):
+        volreel.encode(frames, out, dictionary="dct", psnr=40)
+    watcher.join()
+    written = len(list((out / "frames").glob("*.vrf")))
+    assert 1 <= written < 400
+    summary = volreel.encode(frames, out, dictionary="dct", psnr=40, resume=True)
+    assert summary["frames"] == 400 and volreel.open(out).frames == 400
 
 
 def test_psnr_and_ssim_are_those_of_volreel_compare(series, tmp_path):

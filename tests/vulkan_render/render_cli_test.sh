@@ -84,6 +84,10 @@ if "$volreel" render "$dir/test.vreel" --out "$dir/nocompare" --compare "$dir/sm
 fi
 [ ! -e "$dir/nocompare" ] || { echo "a refused render left its --out folder"; exit 1; }
 [ ! -e "$dir/novideo" ] || { echo "a refused render left its --out folder"; exit 1; }
+if "$volreel" render "$dir/test.vreel" --out "$dir/bad" --transfer "$dir/tf/missing.json" > "$dir/bad.log" 2>&1; then
+  echo "accepted a missing transfer function file"; exit 1
+fi
+grep -q "missing.json: no such file" "$dir/bad.log" || { cat "$dir/bad.log"; exit 1; }
 # A damaged frame: render draws without it and exits 1, naming the failure once; so does bench play.
 cp -r "$dir/test.vreel" "$dir/damaged.vreel"
 truncate -s 3000 "$dir/damaged.vreel/frames/000001.vrf"

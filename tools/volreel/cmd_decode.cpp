@@ -50,10 +50,11 @@ void run_decode(const DecodeOptions& o) {
                      std::to_string(c.frame_count() - 1));
   const format::FrameView& f = steps.frame(o.frame);
   const std::uint32_t levels = f.level_count();
-  const std::uint32_t level = o.level < 0 ? levels - 1 : static_cast<std::uint32_t>(o.level);
-  if (level >= levels)
+  const std::int64_t wanted = o.level < 0 ? std::int64_t{levels} + o.level : o.level;
+  if (wanted < 0 || wanted >= std::int64_t{levels})
     throw InputError("--level " + std::to_string(o.level) + ": the frame has levels 0.." +
-                     std::to_string(levels - 1));
+                     std::to_string(levels - 1) + " (negative levels count from the finest, -1)");
+  const auto level = static_cast<std::uint32_t>(wanted);
   format::LevelVolume v;
   const auto& e = f.level(level);
   v.dims = {e.dims[0], e.dims[1], e.dims[2]};
@@ -94,7 +95,8 @@ void add_decode_command(CLI::App& app) {
       ->check(non_negative())
       ->capture_default_str();
   decode->add_option("--level", d->level,
-                     "Octree level: 0 = root (one brick) ... levels-1 = full resolution (default)");
+                     "Octree level: 0 = root (one brick) ... levels-1 = full resolution; negative "
+                     "from the finest: -1 (the default) full resolution, -2 the level above, ...");
   decode->add_option("--out", d->out, "Output .f32 file")->required();
   decode
       ->add_option("--repeat", d->repeat,

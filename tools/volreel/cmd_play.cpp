@@ -187,8 +187,9 @@ void add_play_command(CLI::App& app) {
   cmd->add_option("--screenshot-on-exit", o->screenshot_on_exit,
                   "Write the last frame to this PNG");
   cmd->add_option(
-      "--fixed-frame-time", o->player.fixed_frame_seconds,
-      "Advance the playhead by this many seconds per frame instead of the real frame time");
+         "--fixed-frame-time", o->player.fixed_frame_seconds,
+         "Advance the playhead by this many seconds per frame instead of the real frame time")
+      ->check(positive());
   cmd->add_flag("--quiet", o->player.quiet, "No status lines on stdout");
   cmd->callback([o] { run_play(*o); });
 }

@@ -83,7 +83,12 @@ cpu_render::TransferFunction transfer_from_spec(const std::string& spec,
   if (!std::filesystem::exists(spec)) {
     std::string names = "auto";
     for (const std::string& p : presets) names += ", " + p;
-    throw InputError(option + " " + spec + ": not a preset (" + names + ") nor a JSON file");
+    const bool path_like = spec.find('/') != std::string::npos || spec.ends_with(".json");
+    throw InputError(option + " " + spec +
+                     (path_like ? ": no such file (a transfer function is a JSON file or a "
+                                  "preset: " +
+                                      names + ")"
+                                : ": not a preset (" + names + ") nor a JSON file"));
   }
   nlohmann::json json;
   try {

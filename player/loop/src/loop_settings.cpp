@@ -93,7 +93,7 @@ void apply(const LoopSettings& s, FrameLoopOptions& o) {
     o.height = h;
   }
   if (!(s.atlas_mb > 0) || s.atlas_mb > 1e6)
-    bad("--atlas-mb", "a size in MiB > 0", std::to_string(s.atlas_mb));
+    bad("--atlas-mb", "a size in MiB in (0, 1e6]", std::to_string(s.atlas_mb));
   o.atlas_bytes = static_cast<std::uint64_t>(s.atlas_mb * 1048576.0);
   o.scheduler.loader.bandwidth_bytes_per_s = parse_bandwidth(s.bandwidth);
   o.scheduler.loader.latency_s = parse_latency(s.latency);
@@ -101,7 +101,7 @@ void apply(const LoopSettings& s, FrameLoopOptions& o) {
     bad("--sse-target", "pixels per voxel > 0", std::to_string(s.sse_target));
   o.scheduler.priority.sse_target = s.sse_target;
   if (!(s.upload_budget_mb > 0) || s.upload_budget_mb > 1e6)
-    bad("--upload-budget", "a size in MiB > 0", std::to_string(s.upload_budget_mb));
+    bad("--upload-budget", "a size in MiB in (0, 1e6]", std::to_string(s.upload_budget_mb));
   o.scheduler.upload_budget_bytes = static_cast<std::uint64_t>(s.upload_budget_mb * 1048576.0);
   if (!(s.step > 0) || !std::isfinite(s.step))
     bad("--step", "a ray step in voxels > 0", std::to_string(s.step));
