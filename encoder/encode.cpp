@@ -360,11 +360,13 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
                                  request.tolerance, stage ? stage->progress() : Progress{});
         }
         c.tolerance = eps.tolerance;
-        // The learned atoms paid in none of the rate search's sample bricks at this ε: the
-        // whole dictionary's pursuit is skipped (CodingSettings::learned_pursuit).
-        c.learned_pursuit =
-            !(eps.source == ToleranceSource::bps && eps.rate_search.sample_bricks > 0 &&
-              eps.rate_search.learned_bricks == 0);
+        // The learned atoms paid in none of the rate search's sample bricks at this ε, the
+        // sample being every frame or at least min_skip_sample_bricks bricks: the whole
+        // dictionary's pursuit is skipped (CodingSettings::learned_pursuit).
+        const RateSearch& rs = eps.rate_search;
+        c.learned_pursuit = !(
+            eps.source == ToleranceSource::bps && rs.sample_bricks > 0 && rs.learned_bricks == 0 &&
+            (rs.sample_frames >= frames || rs.sample_bricks >= min_skip_sample_bricks));
         if (events.tolerance_chosen) events.tolerance_chosen(eps, c, file.atom_count);
         dictionary_bytes =
             format::detail::read_whole_file(copy->path(), format::detail::max_dictionary_bytes);
@@ -394,6 +396,7 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   job.provenance["max_atoms"] = c.max_atoms;
   job.provenance["coef_step_factor"] = c.coef_step_factor;
   job.provenance["max_error"] = c.max_error;
+  job.provenance["learned_pursuit"] = c.learned_pursuit;
   // encode_series adds the variable-rate rule and its parameters.
   Stage stage(events, "encoding", "frames");
   return encode_series(series, out, job, stage.progress());

@@ -85,11 +85,14 @@ void refuse_existing_output(const fs::path& out, bool resume, bool overwrite) {
                      "' is there but no container manifest: encode writes the container's own "
                      "dictionary.bin; move that file away or choose another --out");
   // Nor is a directory that holds other files and no container (a data folder, e.g. the series
-  // itself): a container would be mixed into it.
+  // itself): a container would be mixed into it. Hidden names (another process's write check,
+  // the Python module's temporary series, .nfs files, a desktop's) and a mount point's lost+found
+  // are not such files.
   if (fs::is_directory(status) && !fs::exists(fs::symlink_status(manifest, ec))) {
     for (const auto& entry : fs::directory_iterator(out, ec)) {
       const std::string name = entry.path().filename().string();
-      if (name != "frames" && name.find(".tmp-") == std::string::npos)
+      if (name != "frames" && !name.starts_with('.') && name != "lost+found" &&
+          name.find(".tmp-") == std::string::npos)
         throw InputError("'" + out.string() + "' holds '" + name +
                          "' and is not a volreel container: encode writes a container into a "
                          "new or empty directory (e.g. NAME.vreel); choose another --out");

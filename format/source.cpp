@@ -71,7 +71,10 @@ LocalSource::LocalSource(fs::path dir) : dir_(std::move(dir)), location_(dir_.st
     throw FormatError(dir_, std::string("not a volreel container: it is ") +
                                 detail::file_kind(status.type()) +
                                 ", a container is a directory (NAME.vreel)");
-  if (!fs::exists(dir_ / "manifest.json", ec) && !fs::is_symlink(dir_ / "manifest.json", ec))
+  const fs::file_status manifest = fs::symlink_status(dir_ / "manifest.json", ec);
+  if (ec && ec != std::errc::no_such_file_or_directory)
+    throw FormatError(dir_ / "manifest.json", "cannot open it: " + ec.message());
+  if (!fs::exists(manifest))
     throw FormatError(dir_, std::string("not a volreel container: it holds no manifest.json") +
                                 (fs::exists(dir_ / "series.json", ec)
                                      ? " but a series.json: a raw series, which `volreel encode "

@@ -10,6 +10,7 @@
 #include <omp.h>
 #include <unistd.h>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -192,9 +193,10 @@ class SpooledSeries {
   SpooledSeries(const py::iterable& frames, const fs::path& near,
                 const std::optional<std::vector<double>>& times, const std::string& variable) {
     static std::atomic<unsigned> counter{0};
-    dir_ = fs::absolute(near).parent_path() /
-           ("." + near.filename().string() + ".frames-" + std::to_string(::getpid()) + "-" +
-            std::to_string(counter++));
+    fs::path target = fs::absolute(near).lexically_normal();  // "out/" names out too
+    if (target.filename().empty()) target = target.parent_path();
+    dir_ = target.parent_path() / ("." + target.filename().string() + ".frames-" +
+                                   std::to_string(::getpid()) + "-" + std::to_string(counter++));
     std::optional<datasets::RawSeriesWriter> writer;
     std::size_t t = 0;
     try {
@@ -279,16 +281,27 @@ SeriesInput series_input(const py::object& frames, const fs::path& near,
 /// raised (KeyboardInterrupt on Ctrl-C) as soon as Python has one pending: the encode stops there,
 /// as `volreel encode` does on Ctrl-C (its container is then continued with resume=True). Not
 /// inside a parallel region, which an exception must not leave.
-void raise_pending_signal(const ProgressUpdate&, void*) {
+/// Looked at every signal_check_interval at most (each look takes the GIL, which another
+/// Python thread may hold for its switch interval).
+struct SignalCheck {
+  std::chrono::steady_clock::time_point last{};
+};
+constexpr std::chrono::milliseconds signal_check_interval{50};
+
+void raise_pending_signal(const ProgressUpdate&, void* user) {
   if (omp_in_parallel()) return;
+  auto& check = *static_cast<SignalCheck*>(user);
+  const auto now = std::chrono::steady_clock::now();
+  if (now - check.last < signal_check_interval) return;
+  check.last = now;
   py::gil_scoped_acquire gil;
   if (PyErr_CheckSignals() != 0) throw py::error_already_set();
 }
 
-encoder::EncodeEvents interruptible_events() {
+encoder::EncodeEvents interruptible_events(SignalCheck& check) {
   encoder::EncodeEvents events;
-  events.stage = [](const std::string&, const std::string&) {
-    return Progress{raise_pending_signal, nullptr};
+  events.stage = [&check](const std::string&, const std::string&) {
+    return Progress{raise_pending_signal, &check};
   };
   return events;
 }
@@ -307,6 +320,8 @@ py::dict encode(const py::object& frames, const fs::path& out, std::optional<dou
   if (max_keyframe_gap && (*max_keyframe_gap < 1 || *max_keyframe_gap > 65535))
     throw py::value_error("max_keyframe_gap must be in 1..65535 (1: every frame a keyframe), not " +
                           std::to_string(*max_keyframe_gap));
+  // Where the container goes, before an iterable is copied to a temporary series.
+  encoder::refuse_existing_output(out, resume, overwrite);
   SeriesInput in = series_input(frames, out, times, variable);
   encoder::EncodeRequest r;
   r.coding.codec = encoder::codec_from_name(codec);
@@ -331,7 +346,8 @@ py::dict encode(const py::object& frames, const fs::path& out, std::optional<dou
   encoder::EncodeSummary s;
   {
     py::gil_scoped_release release;
-    s = encoder::encode(*in.reader, out, r, interruptible_events());
+    SignalCheck check;
+    s = encoder::encode(*in.reader, out, r, interruptible_events(check));
   }
   py::dict d;
   d["path"] = out.string();

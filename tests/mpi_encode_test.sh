@@ -91,6 +91,18 @@ grep -q "coded again" "$work/psnr.txt" || fail "the PSNR case should code frames
 mpi 2 "$volreel" encode "$work/s" --out "$work/zfp2.vreel" --codec zfp > /dev/null 2>&1
 same "$work/zfp.vreel" "$work/zfp2.vreel" "zfp under -n 2 differs"
 
+# A size target at which the learned atoms pay in no sampled brick (atoms learned on noise, for
+# the plume): rank 0 decides to skip their pursuit and tells the others; the same container.
+"$volreel" gen analytic --field noise --dims 24x24x24 --frames 2 --out "$work/noise" > /dev/null 2>&1
+"$volreel" train "$work/noise" --out "$work/noise.bin" --atoms 64 --coreset 200k --levels 2 --iterations 2 \
+  --psnr 45 > /dev/null 2>&1
+"$volreel" encode "$work/s" --out "$work/skip.vreel" --dictionary "$work/noise.bin" --bps 2 --max-frames 4 \
+  > "$work/skip.txt" 2>&1
+grep -q "learned atoms: kept in none" "$work/skip.txt" || fail "the learned pursuit was not skipped: $(cat "$work/skip.txt")"
+mpi 2 "$volreel" encode "$work/s" --out "$work/skip2.vreel" --dictionary "$work/noise.bin" --bps 2 \
+  --max-frames 4 > "$work/skip2.txt" 2>&1 || fail "mpirun --bps: $(tail -5 "$work/skip2.txt")"
+same "$work/skip.vreel" "$work/skip2.vreel" "the skipped learned pursuit under -n 2 differs"
+
 # Training: each rank draws the coreset from its share of the frames, rank 0 merges the draws and
 # trains, the others receive the dictionary; the same dictionary and container as one process
 # (-n 3: shares of 2, 1 and 1 frames). K given, since the automatic choice trains four

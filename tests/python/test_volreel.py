@@ -181,6 +181,9 @@ def test_encode_from_a_generator(series, tmp_path):
     with pytest.raises(ValueError, match=r"frames\[1\].*differs"):
         volreel.encode(iter(mixed), tmp_path / "mixed.vreel")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["gen.vreel"]
+    # A name ending in a separator names the same folder; the temporary series goes beside it.
+    volreel.encode(iter(frames[:2]), str(tmp_path / "slash.vreel") + "/", dictionary="dct")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gen.vreel", "slash.vreel"]
 
 
 def test_encode_from_an_array_is_the_command_line_encode(series, tmp_path):

@@ -188,8 +188,9 @@ void add_play_command(CLI::App& app) {
                   "Write the last frame to this PNG");
   cmd->add_option(
          "--fixed-frame-time", o->player.fixed_frame_seconds,
-         "Advance the playhead by this many seconds per frame instead of the real frame time")
-      ->check(positive());
+         "Advance the playhead by this many seconds per frame instead of the real frame time (0: "
+         "the real frame time)")
+      ->check(non_negative());
   cmd->add_flag("--quiet", o->player.quiet, "No status lines on stdout");
   cmd->callback([o] { run_play(*o); });
 }

@@ -6,7 +6,6 @@
 // frame is drawn once the bricks it needs have arrived (loop::wait_for_view, within
 // --wait-timeout), so a movie never starts black or shows data still streaming in; with it, frames
 // keep the tour's pace and show what has arrived, as the player does.
-#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -57,23 +56,28 @@ struct RenderCommandOptions {
   RemoteCli remote;
 };
 
-/// Removes the files frame_NNNNN.png (five digits) of `dir` numbered `frames` and on: an earlier,
-/// longer render's into the same folder, which would otherwise pass for this one's. Returns how
-/// many.
-std::size_t remove_later_frames(const fs::path& dir, std::size_t frames) {
+/// The frames an earlier render wrote into `dir`: the rows of its metrics.csv (a row a frame,
+/// under volreel's header), 0 where there is none.
+std::size_t earlier_render_frames(const fs::path& dir) {
+  std::ifstream csv(dir / "metrics.csv");
+  std::string line;
+  if (!csv || !std::getline(csv, line) || !line.starts_with("frame,time_s,playhead,")) return 0;
+  std::size_t rows = 0;
+  while (std::getline(csv, line)) rows += !line.empty();
+  return rows;
+}
+
+/// Removes frame_NNNNN.png of `dir` for N in [frames, earlier): those of an earlier, longer render
+/// into the same folder (earlier_render_frames), which would otherwise pass for this one's.
+/// Returns how many it removed.
+std::size_t remove_later_frames(const fs::path& dir, std::size_t frames, std::size_t earlier) {
   std::size_t removed = 0;
-  for (const fs::directory_entry& e : fs::directory_iterator(dir)) {
-    const std::string name = e.path().filename().string();
-    if (name.size() != 15 || name.compare(0, 6, "frame_") != 0 ||
-        name.compare(11, 4, ".png") != 0 || !e.is_regular_file())
-      continue;
-    std::size_t index = 0;
-    bool digits = true;
-    for (std::size_t k = 6; k < 11; ++k) {
-      digits = digits && std::isdigit(static_cast<unsigned char>(name[k]));
-      index = 10 * index + static_cast<std::size_t>(name[k] - '0');
-    }
-    if (digits && index >= frames && fs::remove(e.path())) ++removed;
+  for (std::size_t i = frames; i < earlier; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%05zu.png", i);
+    std::error_code ec;
+    if (fs::is_regular_file(fs::symlink_status(dir / name, ec)) && fs::remove(dir / name, ec))
+      ++removed;
   }
   return removed;
 }
@@ -150,6 +154,7 @@ void run_render(const RenderCommandOptions& o) {
   std::fflush(stdout);
 
   // 3. Frames: render, write the PNG on a worker thread while the next frame renders.
+  const std::size_t earlier = earlier_render_frames(out);
   std::ofstream csv(out / "metrics.csv");
   if (!csv) throw InputError("cannot write " + (out / "metrics.csv").string());
   csv << "frame,time_s,playhead,frame_ms,fps,schedule_ms,upload_ms,decode_ms,render_ms,readback_ms,"
@@ -282,15 +287,15 @@ void run_render(const RenderCommandOptions& o) {
         sum_psnr / double(compared), sum_ssim / double(compared), compared);
   std::printf("wrote %s/frame_00000.png .. frame_%05zu.png and %s\n", out.c_str(),
               frames ? frames - 1 : 0, (out / "metrics.csv").c_str());
-  if (const std::size_t stale = remove_later_frames(out, frames))
+  if (const std::size_t stale = remove_later_frames(out, frames, earlier))
     std::printf(
         "removed %zu frame_NNNNN.png past frame_%05zu.png, left by an earlier, longer "
         "render into %s\n",
         stale, frames ? frames - 1 : 0, out.c_str());
   if (!ffmpeg.empty()) {
-    // Exactly this run's frames (-frames:v: the folder may hold more frame_NNNNN.png from an
-    // earlier, longer run); '%' in the folder name escaped for ffmpeg's image-sequence pattern;
-    // -nostdin: ffmpeg must not read the terminal (it stops a `volreel render ... &` job).
+    // Exactly this run's frames (-frames:v: the folder may hold more frame_NNNNN.png that no
+    // render's metrics.csv listed); '%' in the folder name escaped for ffmpeg's image-sequence
+    // pattern; -nostdin: ffmpeg must not read the terminal (it stops a `volreel render ... &` job).
     std::string pattern;
     for (const char c : (out / "frame_").string())
       pattern += c == '%' ? std::string("%%") : std::string(1, c);
