@@ -78,12 +78,22 @@ void refuse_existing_output(const fs::path& out, bool resume, bool overwrite) {
     }
   }
   // Without a manifest there is no container here: a dictionary.bin is someone's file (e.g. the
-  // dictionary given, trained into this directory), which encode would replace.
+  // dictionary given, trained into this directory), which encode would replace; unless it is a
+  // container's own copy (its header names a container: an encode stopped before its first
+  // manifest wrote it).
+  const fs::path dictionary = out / "dictionary.bin";
+  bool dictionary_copy = false;
   if (!fs::exists(fs::symlink_status(manifest, ec)) &&
-      fs::exists(fs::symlink_status(out / "dictionary.bin", ec)))
-    throw InputError("'" + (out / "dictionary.bin").string() +
-                     "' is there but no container manifest: encode writes the container's own "
-                     "dictionary.bin; move that file away or choose another --out");
+      fs::exists(fs::symlink_status(dictionary, ec))) {
+    try {
+      dictionary_copy = format::read_dictionary_file(dictionary).container_id != 0;
+    } catch (const std::exception&) {
+    }
+    if (!dictionary_copy)
+      throw InputError("'" + dictionary.string() +
+                       "' is there but no container manifest: encode writes the container's own "
+                       "dictionary.bin; move that file away or choose another --out");
+  }
   // Nor is a directory that holds other files and no container (a data folder, e.g. the series
   // itself): a container would be mixed into it. Hidden names (another process's write check,
   // the Python module's temporary series, .nfs files, a desktop's) and a mount point's lost+found
@@ -92,7 +102,7 @@ void refuse_existing_output(const fs::path& out, bool resume, bool overwrite) {
     for (const auto& entry : fs::directory_iterator(out, ec)) {
       const std::string name = entry.path().filename().string();
       if (name != "frames" && !name.starts_with('.') && name != "lost+found" &&
-          name.find(".tmp-") == std::string::npos)
+          !(name == "dictionary.bin" && dictionary_copy) && name.find(".tmp-") == std::string::npos)
         throw InputError("'" + out.string() + "' holds '" + name +
                          "' and is not a volreel container: encode writes a container into a "
                          "new or empty directory (e.g. NAME.vreel); choose another --out");

@@ -113,6 +113,12 @@ expect_error "is not a volreel container's manifest" "$volreel" encode "$work/s"
 [ "$(cat "$work/other/manifest.json")" = '{}' ] || fail "encode replaced another program's manifest.json"
 mkdir -p "$work/dictdir"; cp "$work/dict.bin" "$work/dictdir/dictionary.bin"
 expect_error "dictionary.bin' is there but no container manifest" "$volreel" encode "$work/s" --dictionary "$work/dictdir/dictionary.bin" --out "$work/dictdir"
+# ... but a container's own copy (an encode stopped before its first manifest) is its to replace.
+cp -r "$work/a.vreel" "$work/early.vreel"
+rm -r "$work/early.vreel/manifest.json" "$work/early.vreel/frames"
+"$volreel" encode "$work/s" --dictionary "$work/dict.bin" --brick-size 36 --out "$work/early.vreel" --resume > /dev/null 2>&1 ||
+  fail "--resume of an encode stopped before its first manifest was refused"
+"$volreel" verify "$work/early.vreel" > /dev/null 2>&1 || fail "the container resumed from its dictionary alone does not verify"
 cmp -s "$work/dict.bin" "$work/dictdir/dictionary.bin" || fail "encode replaced a dictionary.bin of no container"
 touch "$work/plain-file"
 expect_error "'$work/plain-file' is not a directory" "$volreel" encode "$work/s" --dictionary dct --overwrite --out "$work/plain-file"
