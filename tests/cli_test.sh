@@ -42,6 +42,10 @@ expect_error() {
   if msg=$("$@" 2>&1 >/dev/null); then fail "expected failure: $*"; fi
   grep -q -e "$pattern" <<< "$msg" || fail "message for '$*' lacks '$pattern': $msg"
 }
+# A seed is a whole number written in digits: "-1" was taken as 2^64 - 1.
+for seed in -1 1.5 abc; do
+  expect_error "expected a seed, a whole number" "$volreel" gen turbulence --size 16 --frames 1 --seed "$seed" --out "$work/x"
+done
 expect_error "does not exist" "$volreel" compare "$work/a" "$work/nowhere"
 expect_error "--dims" "$volreel" compare "$work/frame.raw" "$work/frame.raw"
 expect_error "is 30720 bytes.*needs 61440" "$volreel" compare "$work/frame.raw" "$work/frame.raw" --dims 24x20x32

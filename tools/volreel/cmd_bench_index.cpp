@@ -253,7 +253,9 @@ void add_bench_index_command(CLI::App& bench) {
   cmd->add_option("--atlas-mb", o->atlas_mb,
                   "Brick atlas memory budget, MiB, as the player's: its slots")
       ->capture_default_str();
-  cmd->add_option("--seed", o->seed, "Seed of the random seeks")->capture_default_str();
+  cmd->add_option("--seed", o->seed, "Seed of the random seeks")
+      ->check(seed_number())
+      ->capture_default_str();
   cmd->callback([o] { run_bench_index(*o); });
 }
 

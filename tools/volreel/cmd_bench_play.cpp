@@ -331,7 +331,9 @@ void add_bench_play_command(CLI::App& bench) {
       ->capture_default_str();
   add_loop_options(*cmd, o->loop);
   add_renderer_options(*cmd, o->renderer, o->cpu);
-  cmd->add_option("--seed", o->seed, "Seed of the seek positions")->capture_default_str();
+  cmd->add_option("--seed", o->seed, "Seed of the seek positions")
+      ->check(seed_number())
+      ->capture_default_str();
   cmd->callback([o] { run_bench_play(*o); });
 }
 

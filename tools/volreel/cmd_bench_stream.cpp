@@ -129,6 +129,7 @@ void add_bench_stream_command(CLI::App& bench) {
   cmd->add_option("--duration", o->s.duration, "Length of the built-in bench tour, seconds")
       ->capture_default_str();
   cmd->add_option("--seed", o->s.seed, "Seed of the built-in tour's random seeks")
+      ->check(seed_number())
       ->capture_default_str();
   cmd->add_option("--seeds", o->s.seeds,
                   "Replay this many built-in tours (seeds --seed, --seed + 1, ...): with five "

@@ -174,6 +174,7 @@ void add_gen_command(CLI::App& app) {
   turb->add_option("--cfl", t->run.params.cfl, "Courant number of the time step")
       ->capture_default_str();
   turb->add_option("--seed", t->run.params.seed, "Seed of the random initial field")
+      ->check(seed_number())
       ->capture_default_str();
   turb->add_flag(
       "--decaying", t->run.decaying,
@@ -197,7 +198,7 @@ void add_gen_command(CLI::App& app) {
       ->capture_default_str();
   analytic->add_option("--dims", a->dims, "XxYxZ instead of a cube, e.g. 96x64x48");
   analytic->add_option("--frames", a->frames, "Frames")->capture_default_str();
-  analytic->add_option("--seed", a->seed, "Seed")->capture_default_str();
+  analytic->add_option("--seed", a->seed, "Seed")->check(seed_number())->capture_default_str();
   analytic->add_option("--out", a->out, "Output directory")->required();
   analytic->add_flag("--overwrite", a->overwrite, "Replace an existing series in --out");
   analytic->callback([a] { run_analytic(*a); });

@@ -48,6 +48,8 @@ std::optional<double> positive_number(const std::string& text);
 /// through).
 CLI::Validator positive();
 CLI::Validator non_negative();
+/// A seed: a whole number 0 .. 2^64 − 1 written in digits alone (CLI11 wraps "-1" to 2^64 − 1).
+CLI::Validator seed_number();
 
 /// Throws InputError naming the word when the command line's first word that is not an option,
 /// or the next one under a command that takes subcommands (`volreel bench`, `volreel gen`), is

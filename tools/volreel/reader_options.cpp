@@ -1,6 +1,7 @@
 // reader_options.cpp: the command-line options that describe how to read a series, and the
 // parsing of option values shared by several commands.
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdlib>
 #include <string>
@@ -64,6 +65,20 @@ CLI::Validator non_negative() {
         return v && *v >= 0 ? std::string() : "expected a number >= 0, found '" + text + "'";
       },
       "NONNEGATIVE");
+}
+
+CLI::Validator seed_number() {
+  return CLI::Validator(
+      [](const std::string& text) {
+        std::uint64_t value = 0;
+        const char* end = text.data() + text.size();
+        const auto [ptr, ec] = std::from_chars(text.data(), end, value);
+        return !text.empty() && text[0] != '-' && text[0] != '+' && ec == std::errc{} && ptr == end
+                   ? std::string()
+                   : "expected a seed, a whole number 0 .. 18446744073709551615, found '" + text +
+                         "'";
+      },
+      "SEED");
 }
 
 const char* const series_inputs_help = R"(Series (SERIES):

@@ -84,6 +84,7 @@ void TrainingCli::add_to(CLI::App& c) {
       ->check(CLI::Range(1, 1000000))
       ->capture_default_str();
   c.add_option("--seed", seed, "Seed for coreset sampling and dictionary initialization")
+      ->check(seed_number())
       ->capture_default_str();
   c.add_option("--coarse-tolerance", coarse_tolerance,
                "Tolerance schedule: the first level codes at this many times eps, the next ones "
