@@ -43,6 +43,10 @@ expect_error() {  # expect_error "message fragment" volreel-args...
 }
 expect_error "does not exist" train "$work/nope" --out "$work/x.bin"
 expect_error "fewer than the 2^6" train "$work/a" --out "$work/x.bin" --coreset 10k
+expect_error "expected a count of voxels in 1 .. 1e15" train "$work/a" --out "$work/x.bin" --coreset 1e30
+expect_error "eval-frames 6 holds out every frame of 6.*--eval-frames 5 or fewer" bench train "$work/a" --eval-frames 6
+expect_error "flat-iterations: expected a number in \[1, 1e+06\], found '0'" bench train "$work/a" --flat-iterations 0
+expect_error "coarse-tolerance: expected a number in \[1, 1e+06\], found 'nan'" train "$work/a" --out "$work/x.bin" --coarse-tolerance nan
 expect_error "unknown suffix" train "$work/a" --out "$work/x.bin" --coreset 10q
 head -c 16384 /dev/zero > "$work/zeros.raw"
 # Checked before the frames are read and the dictionary trained: the output and the options.

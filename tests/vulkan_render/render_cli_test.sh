@@ -100,6 +100,29 @@ if "$volreel" bench play "$dir/damaged.vreel" --cpu --size 32x32 --frames-per-ph
   echo "bench play of a damaged container exited 0"; exit 1
 fi
 grep -q "error: 1 bricks or frames could not be read.*figures above" "$dir/bad.log" || { cat "$dir/bad.log"; exit 1; }
+# bench decode checks every payload before its threads decode them (a corrupt one ended the
+# program); bench index exits 1 after failed reads.
+cp -r "$dir/test.vreel" "$dir/flipped.vreel"
+frame="$dir/flipped.vreel/frames/000001.vrf"
+printf '\x5a' | dd of="$frame" bs=1 seek=$(($(stat -c %s "$frame") - 64)) conv=notrunc 2>/dev/null
+set +e
+"$volreel" bench decode "$dir/flipped.vreel" --min-seconds 0 > "$dir/bad.log" 2>&1; rc=$?
+set -e
+[ "$rc" -eq 1 ] && grep -q "000001.vrf: offset .*corrupt" "$dir/bad.log" || { echo "bench decode: rc $rc"; cat "$dir/bad.log"; exit 1; }
+if "$volreel" bench index "$dir/flipped.vreel" --play-seconds 1 --seeks 1 > "$dir/bad.log" 2>&1; then
+  echo "bench index exited 0 after failed reads"; exit 1
+fi
+grep -q "reads of bricks failed" "$dir/bad.log" || { cat "$dir/bad.log"; exit 1; }
+# Numbers out of range or not finite are refused before any work (nan and inf ran for ever).
+for args in "bench index --play-seconds nan" "bench index --seeks -1" "bench index --fps nan" \
+  "bench index --atlas-mb 1e15" "bench decode --min-seconds inf" "bench decode --batch 0" \
+  "bench decode --frames -3" "bench decode --upload-mib nan" "bench decode --atlas-mib -5"; do
+  read -r command sub option value <<< "$args"
+  if "$volreel" "$command" "$sub" "$dir/test.vreel" "$option" "$value" > "$dir/bad.log" 2>&1; then
+    echo "accepted: $args"; exit 1
+  fi
+  grep -q -- "$option: expected a number in .*found '$value'" "$dir/bad.log" || { echo "$args:"; cat "$dir/bad.log"; exit 1; }
+done
 for bad in "--frames-per-phase 0" "--speed nan" "--speed 0" "--timeout -1"; do
   # shellcheck disable=SC2086
   if "$volreel" bench play "$dir/test.vreel" --cpu $bad > "$dir/bad.log" 2>&1; then echo "bench play accepted $bad"; exit 1; fi

@@ -161,8 +161,8 @@ std::vector<std::string> source_candidates(const format::Manifest& m) {
 /// Opens the original series: --series, else the manifest's source where a path of that name
 /// holds a series of the container's size (relative to the folder holding the container, then to
 /// the one above it, then as given: a relative source is relative to where the encode ran, most
-/// often next to the container; the current folder may hold another series of that name).
-/// nullptr: none found (`note` says why).
+/// often next to the container; the current folder may hold another series of that name; for a
+/// container read over HTTP, an absolute path only). nullptr: none found (`note` says why).
 std::unique_ptr<datasets::SeriesReader> open_original(const std::string& series,
                                                       datasets::OpenOptions options,
                                                       const format::Container& container,
@@ -180,9 +180,11 @@ std::unique_ptr<datasets::SeriesReader> open_original(const std::string& series,
     note = "--series " + series;
     return open(series);
   }
+  // A container read over HTTP: the source where it is an absolute path on this machine.
   const auto local = container.source().local_directory();
   const fs::path dir = local ? fs::absolute(*local).lexically_normal() : fs::path();
-  for (const std::string& c : local ? source_candidates(m) : std::vector<std::string>{}) {
+  for (const std::string& c : source_candidates(m)) {
+    if (!local && fs::path(c).is_relative()) continue;
     std::vector<fs::path> tries;
     if (fs::path(c).is_relative()) {
       tries.push_back(dir.parent_path() / c);

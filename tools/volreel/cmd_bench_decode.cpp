@@ -63,7 +63,14 @@ void run_bench_decode(const BenchDecodeOptions& o) {
       std::min(o.frames ? o.frames : container.frame_count(), container.frame_count());
   std::vector<format::FrameFile> files;
   files.reserve(frames);
-  for (std::size_t t = 0; t < frames; ++t) files.push_back(container.open_frame(t));
+  // Every payload checked here, one frame at a time, so that the timed decoding on all threads
+  // (where an error could only end the program) decodes only good bricks.
+  const format::AtomTable table = container.atoms();
+  for (std::size_t t = 0; t < frames; ++t) {
+    files.push_back(container.open_frame(t));
+    files.back().view().check_payload_crc();
+    format::validate_payloads(files.back().view(), table);
+  }
   std::vector<BrickRef> bricks;
   std::uint64_t compressed = 0;
   for (const format::FrameFile& f : files)
@@ -72,7 +79,7 @@ void run_bench_decode(const BenchDecodeOptions& o) {
       compressed += f.view().brick_bytes(b).size();
     }
   if (bricks.empty()) throw InputError(o.container + " has no bricks in its first frames");
-  const format::AtomTable atoms = container.atoms();
+  const format::AtomTable& atoms = table;
   const std::size_t brick_voxels = m.shape().voxels();
   const double brick_mvoxel = static_cast<double>(brick_voxels) * 1e-6;
   const double total_mvoxel = static_cast<double>(bricks.size()) * brick_mvoxel;
@@ -293,17 +300,23 @@ void add_bench_decode_command(CLI::App& bench) {
   cmd->add_option("CONTAINER", o->container, "Container directory NAME.vreel")->required();
   cmd->add_option("--batch", o->batches, "Bricks per batch (comma-separated list)")
       ->delimiter(',')
+      ->check(in_range(1, 1e6))
       ->capture_default_str();
   cmd->add_option("--frames", o->frames, "Use the bricks of the first N frames (0: all)")
+      ->check(in_range(0, 1e9))
       ->capture_default_str();
   cmd->add_option("--min-seconds", o->min_seconds, "Repeat each measurement for at least this long")
+      ->check(in_range(0, 3600))
       ->capture_default_str();
   cmd->add_option("--format", o->format, "Atlas format of the throughput runs: unorm or sfloat")
       ->check(CLI::IsMember({"unorm", "sfloat"}))
       ->capture_default_str();
-  cmd->add_option("--atlas-mib", o->atlas_mib, "Atlas memory budget, MiB")->capture_default_str();
+  cmd->add_option("--atlas-mib", o->atlas_mib, "Atlas memory budget, MiB")
+      ->check(in_range(1, 1048576))
+      ->capture_default_str();
   cmd->add_option("--upload-mib", o->upload_mib,
                   "Upload budget per staging buffer (per frame), MiB")
+      ->check(in_range(1.0 / 1024, 65536))
       ->capture_default_str();
   cmd->add_option("--ring", o->ring, "Staging buffers in the ring")
       ->check(CLI::Range(1, 64))

@@ -210,6 +210,10 @@ void run_bench_index(const BenchIndexOptions& o) {
               static_cast<unsigned long long>(last_stats.bricks_loaded),
               1e-6 * static_cast<double>(last_stats.bytes_loaded), scheduler.error_count());
   for (const std::string& e : scheduler.errors()) std::printf("  error: %s\n", e.c_str());
+  if (scheduler.error_count() > 0)
+    throw InputError(std::to_string(scheduler.error_count()) +
+                     " reads of bricks failed (listed above): the figures are of a run without "
+                     "them");
 }
 
 }  // namespace
@@ -233,18 +237,20 @@ void add_bench_index_command(CLI::App& bench) {
   cmd->add_option("--size", o->size, "Viewport WIDTHxHEIGHT (sets the levels of detail wanted)")
       ->capture_default_str();
   cmd->add_option("--play-seconds", o->play_seconds, "Seconds of playback")
-      ->check(CLI::Range(0.0, 3600.0))
+      ->check(in_range(0, 3600))
       ->capture_default_str();
   cmd->add_option("--fps", o->fps, "Displayed frames per second (the loop is paced)")
-      ->check(CLI::Range(1.0, 1000.0))
+      ->check(in_range(1, 1000))
       ->capture_default_str();
   cmd->add_option("--speed", o->speed, "Keyframes the playhead advances a displayed frame")
-      ->check(CLI::Range(0.0, 1000.0))
+      ->check(in_range(0, 1000))
       ->capture_default_str();
-  cmd->add_option("--seeks", o->seeks, "Random seeks after playing")->capture_default_str();
+  cmd->add_option("--seeks", o->seeks, "Random seeks after playing")
+      ->check(in_range(0, 1e6))
+      ->capture_default_str();
   cmd->add_option("--settle-seconds", o->settle_seconds,
                   "Longest wait after a seek for the view to settle")
-      ->check(CLI::Range(0.1, 600.0))
+      ->check(in_range(0.1, 600))
       ->capture_default_str();
   cmd->add_option("--index-memory", o->index_memory,
                   "Keyframe nodes the index may hold (e.g. 128M, 1G); a container that needs "
@@ -252,6 +258,7 @@ void add_bench_index_command(CLI::App& bench) {
       ->capture_default_str();
   cmd->add_option("--atlas-mb", o->atlas_mb,
                   "Brick atlas memory budget, MiB, as the player's: its slots")
+      ->check(in_range(1, 1048576))
       ->capture_default_str();
   cmd->add_option("--seed", o->seed, "Seed of the random seeks")
       ->check(seed_number())

@@ -99,6 +99,14 @@ Evaluation evaluate(const datasets::SeriesReader& series, const std::vector<std:
 void run_bench_train(const BenchTrainOptions& o) {
   const auto series = datasets::open_series(o.training.series, o.training.reader.to_open_options());
   const auto& info = series->info();
+  if (info.frames < 2)
+    throw InputError(o.training.series + ": " + std::to_string(info.frames) +
+                     " frame; bench train needs at least 2 (one to train on, one to evaluate)");
+  if (static_cast<std::size_t>(o.eval_frames) >= info.frames)
+    throw InputError("--eval-frames " + std::to_string(o.eval_frames) +
+                     " holds out every frame of " + std::to_string(info.frames) +
+                     ", leaving none to train on: give --eval-frames " +
+                     std::to_string(info.frames - 1) + " or fewer");
   std::printf("volreel bench train\nmachine: %s\ninput:   %s, %s, %zu frames, variable '%s'\n",
               describe_machine().c_str(), info.source.c_str(), to_string(info.dims).c_str(),
               info.frames, info.variable.c_str());
@@ -248,13 +256,15 @@ void add_bench_train_command(CLI::App& bench) {
                   "Frames held out of training and coded for PSNR and speed")
       ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();
-  cmd->add_option(
-      "--flat-iterations", o->flat_iterations,
-      "Iteration counts of the flat runs to compare with (default: the hierarchical run's count,\n"
-      "iterations x (levels+1))");
+  cmd->add_option("--flat-iterations", o->flat_iterations,
+                  "Iteration counts of the flat runs to compare with (default: the hierarchical "
+                  "run's count,\n"
+                  "iterations x (levels+1))")
+      ->check(in_range(1, 1e6));
   cmd->add_option("--plain-iterations", o->plain_iterations,
                   "Iteration counts of the plain flat runs (default: the hierarchical run's count "
-                  "and twice that)");
+                  "and twice that)")
+      ->check(in_range(1, 1e6));
   cmd->add_flag("--no-plain", o->no_plain,
                 "Skip the flat run without tolerance and sparsity schedules (plain K-SVD at eps, "
                 "as in the paper's baseline)");

@@ -50,6 +50,9 @@ CLI::Validator positive();
 CLI::Validator non_negative();
 /// A seed: a whole number 0 .. 2^64 − 1 written in digits alone (CLI11 wraps "-1" to 2^64 − 1).
 CLI::Validator seed_number();
+/// A finite number in [lo, hi] ("expected a number in [1, 1000], found 'nan'"): CLI11's Range
+/// lets NaN through, and for unsigned options "-1" wraps before it is checked.
+CLI::Validator in_range(double lo, double hi);
 
 /// Throws InputError naming the word when the command line's first word that is not an option,
 /// or the next one under a command that takes subcommands (`volreel bench`, `volreel gen`), is

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <vector>
@@ -65,6 +66,18 @@ CLI::Validator non_negative() {
         return v && *v >= 0 ? std::string() : "expected a number >= 0, found '" + text + "'";
       },
       "NONNEGATIVE");
+}
+
+CLI::Validator in_range(double lo, double hi) {
+  return CLI::Validator(
+      [lo, hi](const std::string& text) {
+        const std::optional<double> v = finite_number(text);
+        if (v && *v >= lo && *v <= hi) return std::string();
+        char range[96];
+        std::snprintf(range, sizeof range, "[%g, %g]", lo, hi);
+        return "expected a number in " + std::string(range) + ", found '" + text + "'";
+      },
+      "RANGE");
 }
 
 CLI::Validator seed_number() {

@@ -31,7 +31,8 @@ std::uint64_t parse_voxels(const std::string& text) {
     scale = 1e9;
   else if (!suffix.empty())
     throw InputError("--coreset '" + text + "': unknown suffix '" + suffix + "' (k, M or G)");
-  if (!(value > 0)) throw InputError("--coreset must be positive");
+  if (!(value * scale >= 1) || !(value * scale <= 1e15))
+    throw InputError("--coreset '" + text + "': expected a count of voxels in 1 .. 1e15");
   return static_cast<std::uint64_t>(value * scale);
 }
 
@@ -90,7 +91,7 @@ void TrainingCli::add_to(CLI::App& c) {
                "Tolerance schedule: the first level codes at this many times eps, the next ones "
                "geometrically\n"
                "less, the last at eps (1: eps throughout, as in the paper)")
-      ->check(CLI::Range(1.0, 1e6))
+      ->check(in_range(1, 1e6))
       ->capture_default_str();
   c.add_flag(
       "--no-sparsity-ramp", no_sparsity_ramp,
