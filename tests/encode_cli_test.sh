@@ -71,6 +71,7 @@ TMPDIR="$work/tmp" "$volreel" encode "$work/s" --dictionary dct --out "$work/tmp
 # Options refused before any work: the ksvd codec's options with zfp, and values out of range.
 expect_error "--bps applies to the ksvd codec: --codec zfp" "$volreel" encode "$work/s" --codec zfp --bps 2 --out "$work/x.vreel"
 expect_error "--fixed-sparsity applies to the ksvd codec" "$volreel" encode "$work/s" --codec zfp --fixed-sparsity 2 --out "$work/x.vreel"
+expect_error "level-factor: expected a number in \[1, 16\], found 'nan'" "$volreel" encode "$work/s" --dictionary dct --level-factor nan --out "$work/x.vreel"
 expect_error "--zfp-accuracy applies to --codec zfp only" "$volreel" encode "$work/s" --dictionary dct --zfp-accuracy 0.1 --out "$work/x.vreel"
 expect_error "--tolerance: expected a number > 0, found '0'" "$volreel" encode "$work/s" --tolerance 0 --out "$work/x.vreel"
 expect_error "--psnr: expected a number > 0, found '-5'" "$volreel" encode "$work/s" --psnr -5 --out "$work/x.vreel"

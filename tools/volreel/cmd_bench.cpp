@@ -289,13 +289,13 @@ void add_bench_command(CLI::App& app) {
                  "Variable rate: code level d above the finest to eps*F^d (as volreel encode "
                  "--level-factor; the\n"
                  "finest level, which the table measures, is the same, so F changes only the bps)")
-      ->check(CLI::Range(1.0, 16.0))
+      ->check(in_range(1, 16))
       ->capture_default_str();
   rd->add_option("--level-detail", o->level_detail,
                  "Variable rate: also code a brick above the finest level to R times what its "
                  "downsampling lost where\nthat is coarser than eps*F^d (as volreel encode "
                  "--level-detail; changes only the bps, as --level-factor)")
-      ->check(CLI::Range(0.0, 4.0))
+      ->check(in_range(0, 4))
       ->capture_default_str();
   rd->add_option("--coef-step", o->coef_step,
                  "Variable rate: the largest coefficient step as a multiple of eps (as volreel "

@@ -283,7 +283,7 @@ void add_encode_command(CLI::App& app) {
                                         "coarse levels are drawn only where they are small on "
                                         "screen, and differ from the data\nby more than eps "
                                         "already); 1 codes every level to eps");
-  o->level_factor_opt->check(CLI::Range(1.0, 16.0))->capture_default_str();
+  o->level_factor_opt->check(in_range(1, 16))->capture_default_str();
   o->level_detail_opt = cmd->add_option(
       "--level-detail", o->level_detail,
       "Lagrangian rule: also code a brick above the finest level to R times what its "
@@ -291,7 +291,7 @@ void add_encode_command(CLI::App& app) {
       "where that is coarser than\neps*F^d: at small eps coarse levels then leave their bits to "
       "the finest, and their drawing\nstays within sqrt(1 + R^2)*delta of the data; 0: eps*F^d "
       "alone");
-  o->level_detail_opt->check(CLI::Range(0.0, 4.0))->capture_default_str();
+  o->level_detail_opt->check(in_range(0, 4))->capture_default_str();
   cmd->add_option("--pursuit", o->pursuit,
                   "Which atom each pursuit step adds: ormp (the one that lowers the block's "
                   "squared error most: fewer atoms\nfor the same error) or omp (the one most "

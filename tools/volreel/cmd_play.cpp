@@ -140,7 +140,7 @@ void add_play_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--render-scale", o->player.render_scale,
                   "Volume image size relative to the window")
-      ->check(CLI::Range(0.05, 1.0))
+      ->check(in_range(0.05, 1))
       ->capture_default_str();
   cmd->add_option("--frame-ms", o->player.frame_ms,
                   "Frame-time target while the view is busy (orbiting, playing, streaming): the "
