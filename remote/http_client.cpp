@@ -106,7 +106,10 @@ HttpResponse finish(Transfer& t, CURLcode code) {
                 "serve byte ranges)";
     else
       r.error = what + ": expected HTTP " + std::to_string(wanted) + ", found HTTP " +
-                std::to_string(status);
+                std::to_string(status) +
+                (status == 404   ? " (no such file on the server: check the URL)"
+                 : status == 403 ? " (the server refuses to serve it)"
+                                 : "");
     r.transient = status == 408 || status == 429 || status >= 500;
     return r;
   }

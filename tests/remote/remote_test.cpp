@@ -502,7 +502,9 @@ TEST_F(RemoteContainer, TheCommandsReadAUrl) {
   EXPECT_NE(run("info " + nginx_->url("missing.vreel"), "missing.txt"), 0);
   EXPECT_NE(text("missing.txt").find("missing.vreel/manifest.json"), std::string::npos)
       << text("missing.txt");
-  EXPECT_NE(text("missing.txt").find("HTTP 404"), std::string::npos) << text("missing.txt");
+  EXPECT_NE(text("missing.txt").find("HTTP 404 (no such file on the server: check the URL)"),
+            std::string::npos)
+      << text("missing.txt");
 }
 
 }  // namespace

@@ -151,6 +151,11 @@ void run_render(const RenderCommandOptions& o) {
       o.loop.upload_budget_mb,
       options.scheduler.loader.bandwidth_bytes_per_s > 0 ? o.loop.bandwidth.c_str() : "unlimited",
       o.loop.latency.c_str(), o.loop.sse_target);
+  if (remote::is_url(o.container) && (options.scheduler.loader.bandwidth_bytes_per_s > 0 ||
+                                      options.scheduler.loader.latency_s > 0))
+    std::printf(
+        "note: for a URL the network is the link: --bandwidth and --latency are not simulated on "
+        "top of it\n");
   std::fflush(stdout);
 
   // 3. Frames: render, write the PNG on a worker thread while the next frame renders.
