@@ -71,11 +71,12 @@ class VolreelReader(VTKPythonAlgorithmBase):
         c = self._open()
         level = self._level_index()
         x, y, z = c.level_dims(level)
-        fx, fy, fz = c.dims
-        sx, sy, sz = c.spacing
-        # A coarser level covers the same box with fewer, larger voxels.
-        spacing = (sx * fx / x, sy * fy / y, sz * fz / z)
-        return level, (x, y, z), spacing
+        # A level d above the finest averages 2^d fine voxels a side: its voxel i is centred on
+        # fine voxel 2^d i + (2^d - 1) / 2 (the last one of an odd level holds its edge's copy).
+        factor = 2 ** (c.levels - 1 - level)
+        spacing = tuple(s * factor for s in c.spacing)
+        origin = tuple(s * (factor - 1) / 2 for s in c.spacing)
+        return level, (x, y, z), spacing, origin
 
     def RequestInformation(self, request, in_info, out_info):
         executive = self.GetExecutive()
@@ -87,9 +88,10 @@ class VolreelReader(VTKPythonAlgorithmBase):
             info.Append(executive.TIME_STEPS(), t)
         info.Append(executive.TIME_RANGE(), times[0])
         info.Append(executive.TIME_RANGE(), times[-1])
-        _, (x, y, z), spacing = self._geometry()
+        _, (x, y, z), spacing, origin = self._geometry()
         info.Set(executive.WHOLE_EXTENT(), 0, x - 1, 0, y - 1, 0, z - 1)
         info.Set(vtkImageData.SPACING(), *spacing)
+        info.Set(vtkImageData.ORIGIN(), *origin)
         return 1
 
     def RequestData(self, request, in_info, out_info):
@@ -101,12 +103,12 @@ class VolreelReader(VTKPythonAlgorithmBase):
         if info.Has(executive.UPDATE_TIME_STEP()):
             wanted = info.Get(executive.UPDATE_TIME_STEP())
             step = min(range(len(times)), key=lambda i: abs(times[i] - wanted))
-        level, (x, y, z), spacing = self._geometry()
+        level, (x, y, z), spacing, origin = self._geometry()
         volume = c.frame(step, level=level)  # [z, y, x]: x fastest, as VTK's point order
         output = dsa.WrapDataObject(vtkImageData.GetData(out_info, 0))
         output.SetDimensions(x, y, z)
         output.SetSpacing(*spacing)
-        output.SetOrigin(0.0, 0.0, 0.0)
+        output.SetOrigin(*origin)
         output.PointData.append(volume.ravel(), c.variable or "value")
         output.PointData.SetActiveScalars(c.variable or "value")
         output.GetInformation().Set(output.DATA_TIME_STEP(), times[step])

@@ -47,6 +47,13 @@ reader.UpdatePipeline(times[3])
 coarse = servermanager.Fetch(reader)
 cx, cy, cz = coarse.GetDimensions()
 assert cx * cy * cz < x * y * z, (coarse.GetDimensions(), (x, y, z))
+# Its voxels average 2^d fine ones a side (d levels above the finest), centred among them.
+import volreel  # noqa: E402
+opened = volreel.open(container)
+factor = 2 ** (opened.levels - 1)
+assert opened.levels > 1, opened.levels
+assert coarse.GetSpacing() == tuple(s * factor for s in opened.spacing), coarse.GetSpacing()
+assert coarse.GetOrigin() == tuple(s * (factor - 1) / 2 for s in opened.spacing), coarse.GetOrigin()
 bounds_fine, bounds_coarse = data.GetBounds(), coarse.GetBounds()
 assert all(abs(a - b) <= max(1e-9, 0.02 * abs(a) + 1.0) for a, b in zip(bounds_fine, bounds_coarse))
 print(f"paraview reader: time step 3 of {container} ({x}x{y}x{z}) equals volreel decode; "
