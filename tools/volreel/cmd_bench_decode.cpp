@@ -227,9 +227,12 @@ void run_bench_decode(const BenchDecodeOptions& o) {
               "Vulkan decoder (upload + decode, all submitted, then waited)");
   std::printf("%7s | %12s %15s | %12s %15s %15s\n", "batch", "MVoxel/s", "bricks/s", "MVoxel/s",
               "bricks/s", "upload MB/s");
+  std::vector<std::size_t> measured;  // batches larger than the bricks (or slots) are one row
   for (std::size_t requested : o.batches) {
     const std::size_t batch = std::clamp<std::size_t>(
         requested, 1, std::min<std::size_t>(bricks.size(), atlas.slot_count()));
+    if (std::find(measured.begin(), measured.end(), batch) != measured.end()) continue;
+    measured.push_back(batch);
     // CPU, all threads, a batch at a time (the threads meet at the end of each batch).
     std::vector<std::vector<float>> outputs(static_cast<std::size_t>(threads),
                                             std::vector<float>(2 * brick_voxels));
@@ -249,11 +252,14 @@ void run_bench_decode(const BenchDecodeOptions& o) {
     // Vulkan: every batch submitted (the ring blocks when all staging buffers are in flight), then
     // one wait; slots reused round-robin.
     std::vector<vulkan::BrickUpload> uploads;
-    const std::uint64_t bytes_before = decoder.stats().uploaded_bytes;
-    const double host_before = decoder.stats().cpu_decode_seconds;
-    std::size_t passes = 0;
+    std::uint64_t bytes_before = 0;
+    double host_before = 0;
+    std::size_t passes = 0;  // the warm-up's included
     const double gpu = time_passes(o.min_seconds, [&] {
-      ++passes;
+      if (passes++ == 1) {  // the first timed pass: the counters from here on
+        bytes_before = decoder.stats().uploaded_bytes;
+        host_before = decoder.stats().cpu_decode_seconds;
+      }
       std::uint32_t slot = 0;
       for (std::size_t first = 0; first < bricks.size(); first += batch) {
         uploads.clear();
@@ -265,16 +271,15 @@ void run_bench_decode(const BenchDecodeOptions& o) {
       }
       decoder.wait_all();
     });
+    const auto timed = static_cast<double>(passes - 1);
     const double bytes_per_pass =
-        static_cast<double>(decoder.stats().uploaded_bytes - bytes_before) /
-        static_cast<double>(passes);
+        static_cast<double>(decoder.stats().uploaded_bytes - bytes_before) / timed;
     std::printf("%7zu | %12.1f %15.0f | %12.1f %15.0f %15.1f", batch, total_mvoxel / cpu,
                 static_cast<double>(bricks.size()) / cpu, total_mvoxel / gpu,
                 static_cast<double>(bricks.size()) / gpu, bytes_per_pass * 1e-6 / gpu);
     if (decoder.kernel() == vulkan::DecoderOptions::Kernel::host)
       std::printf("   (%.0f%% decoding on the CPU, the rest copying into the atlas)",
-                  100 * (decoder.stats().cpu_decode_seconds - host_before) /
-                      (gpu * static_cast<double>(passes)));
+                  100 * (decoder.stats().cpu_decode_seconds - host_before) / (gpu * timed));
     std::printf("\n");
   }
   std::printf(
