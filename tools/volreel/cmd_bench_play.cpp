@@ -11,13 +11,13 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
-#include <set>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "commands.hpp"
 #include "loop_options.hpp"
+#include "read_failures.hpp"
 #include "volreel/cpu_render/transfer_function.hpp"
 #include "volreel/datasets/prng.hpp"
 #include "volreel/format/container.hpp"
@@ -136,13 +136,7 @@ void run_bench_play(const BenchPlayOptions& o) {
   double scale = 1;
   Clock::time_point previous_start;
   bool previous_drawn = false;
-  // Each failure once (a brick that cannot be read fails each time it is requested); any makes
-  // the run fail at the end, its figures being of frames drawn without it.
-  std::set<std::string> failures;
-  const auto warn_once = [&](const std::vector<std::string>& messages) {
-    for (const std::string& e : messages)
-      if (failures.insert(e).second) std::fprintf(stderr, "volreel: warning: %s\n", e.c_str());
-  };
+  ReadFailures failures;  // any makes the run fail at the end
   const auto draw = [&](player::OrbitCamera view, double at, bool busy) {
     scale = o.frame_ms > 0 ? control.next(busy) : 1.0;
     const auto [w, h] = loop::scaled_size(full_width, full_height, scale);
@@ -159,7 +153,7 @@ void run_bench_play(const BenchPlayOptions& o) {
         options.scheduler.priority.sse_target * scale;
     const auto start = Clock::now();
     loop::FrameReport r = loop->frame(view, at, tf);
-    warn_once(r.new_errors);
+    failures.add(r.new_errors);
     // Serial frames: their own time; overlapped ones: the time between frame starts.
     const double ms = loop->options().pipelined && previous_drawn
                           ? 1000 * std::chrono::duration<double>(start - previous_start).count()
@@ -176,7 +170,7 @@ void run_bench_play(const BenchPlayOptions& o) {
     // The stream step first: a view whose bricks are all there is drawn at full resolution at
     // once (as in the player, whose previous frame says so).
     const loop::FrameReport probe = loop->stream(camera, at);
-    warn_once(probe.new_errors);
+    failures.add(probe.new_errors);
     bool complete = probe.stats.fraction_at_target >= 1.0;
     do {
       r = draw(camera, at, !complete);
@@ -292,10 +286,7 @@ void run_bench_play(const BenchPlayOptions& o) {
                 *std::max_element(times.begin(), times.end()));
   }
   loop->finish();
-  if (!failures.empty())
-    throw InputError(std::to_string(failures.size()) +
-                     " bricks or frames could not be read (see the warnings above, which name "
-                     "them): the figures above are of frames drawn without them");
+  failures.fail_if_any("the figures above are of frames drawn without them");
 }
 
 }  // namespace
@@ -312,7 +303,7 @@ void add_bench_play_command(CLI::App& bench) {
   cmd->add_option("CONTAINER", o->container, "The container directory NAME.vreel")->required();
   cmd->add_option("--size", o->loop.size, "Image size WxH")->capture_default_str();
   cmd->add_option("--frames-per-phase", o->frames_per_phase, "Frames measured per phase")
-      ->check(CLI::Range(std::size_t{1}, std::size_t{1} << 20))
+      ->check(in_range(1, 1 << 20))
       ->capture_default_str();
   cmd->add_option("--seeks", o->seeks, "Random seeks timed to full quality")->capture_default_str();
   cmd->add_option("--speed", o->speed, "Playback rate, keyframes per second")

@@ -16,7 +16,6 @@
 #include <map>
 #include <memory>
 #include <optional>
-#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -25,6 +24,7 @@
 #include "loop_options.hpp"
 #include "process.hpp"
 #include "progress.hpp"
+#include "read_failures.hpp"
 #include "remote_options.hpp"
 #include "render_truth.hpp"
 #include "volreel/cpu_render/renderer.hpp"
@@ -172,12 +172,7 @@ void run_render(const RenderCommandOptions& o) {
   double sum_ms[5] = {0, 0, 0, 0, 0};
   double sum_psnr = 0, sum_ssim = 0;
   std::size_t compared = 0, timeouts = 0;
-  // Each failure once: a brick that cannot be read fails again each time it is requested.
-  std::set<std::string> failures;
-  const auto warn_once = [&](const std::vector<std::string>& messages) {
-    for (const std::string& e : messages)
-      if (failures.insert(e).second) std::fprintf(stderr, "\nvolreel: warning: %s\n", e.c_str());
-  };
+  ReadFailures failures;
   double waited_s = 0;
   loop::FrameReport last;
   const auto start = Clock::now();
@@ -200,7 +195,7 @@ void run_render(const RenderCommandOptions& o) {
             loop::wait_for_view(*renderer, tf.camera, tf.playhead, o.wait_timeout);
         wait_ms = 1000 * wait.seconds;
         waited_s += wait.seconds;
-        warn_once(wait.new_errors);
+        failures.add(wait.new_errors, "\n");
         if (wait.timed_out) {
           ++timeouts;
           std::fprintf(stderr,
@@ -216,7 +211,7 @@ void run_render(const RenderCommandOptions& o) {
       cpu_render::RgbaImage image = renderer->read_back(report.ticket);
       const double readback_ms =
           std::chrono::duration<double, std::milli>(Clock::now() - read_start).count();
-      warn_once(report.new_errors);
+      failures.add(report.new_errors, "\n");
       std::optional<psnr::ImageComparison> quality;
       if (truth) {
         const auto reference = truth->render(tf.playhead, container.frame_count(), tf.camera,
@@ -319,10 +314,7 @@ void run_render(const RenderCommandOptions& o) {
     std::printf("wrote %s (%zu frames, H.264)\n", o.video.c_str(), frames);
   }
   // The frames are written (drawn without what failed); the exit status still says it failed.
-  if (!failures.empty())
-    throw InputError(std::to_string(failures.size()) +
-                     " bricks or frames could not be read (see the warnings above, which name "
-                     "them): the frames were drawn without them");
+  failures.fail_if_any("the frames were drawn without them");
 }
 
 }  // namespace
