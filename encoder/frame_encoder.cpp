@@ -67,9 +67,6 @@ struct BrickCoding {
   bool measure_finest = false;       ///< PlaneCoding::measure_finest
   format::AtomTable decode_atoms{};  ///< ksvd, measure_finest: the atoms payloads decode with
   double split_code_cost = 0;        ///< ksvd: FrameEncoder::split_code_cost
-  /// With dct_omp: false codes every brick with the basis alone, without the whole dictionary's
-  /// pursuit (CodingSettings::learned_pursuit).
-  bool learned_pursuit = true;
 
   bool ksvd() const { return settings.codec == format::Codec::ksvd; }
   /// The factor on ε for a brick of `level` whose own voxels differ from the frame by
@@ -321,7 +318,7 @@ void code_ksvd_chunk(const std::vector<format::LevelGeometry>& geometry, std::sp
   }
   st.seconds_bricks += seconds_since(part);
   part = Clock::now();
-  const bool learned = !coding.dct_omp || coding.learned_pursuit;
+  const bool learned = !coding.dct_omp || coding.settings.learned_pursuit;
   if (learned) coding.omp->encode(work.columns, work.codes, work.weights);
   if (coding.dct_omp) coding.dct_omp->encode(work.columns, work.dct_codes, work.weights);
   st.seconds_omp += seconds_since(part);
@@ -800,7 +797,6 @@ void FrameEncoder::code_planes(std::size_t t, const Dims& dims,
                      geometry.size(),
                      false};
   coding.split_code_cost = ksvd ? split_code_cost() : 0;
-  coding.learned_pursuit = settings_.learned_pursuit;
   coding.weighted = ksvd && coding.atom_gain_threshold > 0 &&
                     (settings_.weight_owned_voxels || settings_.level_tolerance_factor != 1 ||
                      settings_.uses_level_detail());

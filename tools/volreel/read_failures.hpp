@@ -17,7 +17,8 @@ class ReadFailures {
   /// each time it is requested). `prefix` goes before it (a newline after a progress bar).
   void add(const std::vector<std::string>& messages, const char* prefix = "") {
     for (const std::string& e : messages)
-      if (seen_.insert(e).second) std::fprintf(stderr, "%svolreel: warning: %s\n", prefix, e.c_str());
+      if (seen_.insert(e).second)
+        std::fprintf(stderr, "%svolreel: warning: %s\n", prefix, e.c_str());
   }
   /// Throws InputError with the count when there was any: the run's output is of frames drawn
   /// without them (`what_was_made`, e.g. "the frames were drawn without them").
