@@ -446,9 +446,24 @@ PYBIND11_MODULE(_volreel, m) {
 
   static py::exception<format::FormatError> format_error(m, "FormatError", PyExc_ValueError);
   static py::exception<InputError> input_error(m, "InputError", PyExc_ValueError);
+  // Both a FormatError and a ConnectionError (an OSError), as a network failure is either.
+  // Held for the life of the process (never released at exit, after the interpreter).
+  static PyObject* const network_error =
+      py::module_::import("builtins")
+          .attr("type")("NetworkError",
+                        py::make_tuple(format_error, py::handle(PyExc_ConnectionError)),
+                        py::dict(py::arg("__module__") = "volreel",
+                                 py::arg("__doc__") =
+                                     "Reading a container over HTTP failed: no connection, a "
+                                     "timeout, an HTTP error status or a short answer"))
+          .release()
+          .ptr();
+  m.attr("NetworkError") = py::handle(network_error);
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
+    } catch (const remote::NetworkError& e) {
+      PyErr_SetString(network_error, e.what());
     } catch (const format::FormatError& e) {
       format_error(e.what());
     } catch (const InputError& e) {

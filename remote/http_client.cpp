@@ -81,7 +81,24 @@ bool transient_failure(CURLcode code) {
   }
 }
 
-HttpResponse finish(Transfer& t, CURLcode code) {
+/// What a timeout means, from whether a connection was made: the server never answered, or it
+/// stopped sending.
+std::string timeout_error(CURL* e, const Transfer& t, const HttpOptions& o) {
+  curl_off_t connected_us = 0;
+  curl_easy_getinfo(e, CURLINFO_CONNECT_TIME_T, &connected_us);
+  char text[200];
+  if (connected_us == 0)
+    std::snprintf(text, sizeof text, "no connection within %.3g s (connect timeout)",
+                  o.connect_timeout_s);
+  else
+    std::snprintf(text, sizeof text,
+                  "no byte arrived for %ld s after %zu bytes of the body (stall timeout: the "
+                  "server accepted the request, then stopped sending)",
+                  std::max(1L, static_cast<long>(o.stall_timeout_s + 0.5)), t.body.size());
+  return text;
+}
+
+HttpResponse finish(Transfer& t, CURLcode code, const HttpOptions& o) {
   HttpResponse r;
   long status = 0;
   curl_easy_getinfo(t.easy, CURLINFO_RESPONSE_CODE, &status);
@@ -93,8 +110,12 @@ HttpResponse finish(Transfer& t, CURLcode code) {
     if (t.over_limit) {
       r.error = what + ": expected " + expected_size + ", found more";
     } else {
-      r.error = what + ": " + curl_easy_strerror(code);
-      if (t.error[0] != '\0') r.error += std::string(" (") + t.error + ")";
+      if (code == CURLE_OPERATION_TIMEDOUT) {
+        r.error = what + ": " + timeout_error(t.easy, t, o);
+      } else {
+        r.error = what + ": " + curl_easy_strerror(code);
+        if (t.error[0] != '\0') r.error += std::string(" (") + t.error + ")";
+      }
       r.transient = transient_failure(code);
     }
     return r;
@@ -222,7 +243,7 @@ struct HttpClient::Impl {
     fail(waiting, why);
   }
 
-  void run(const HttpOptions& options, HttpClient& client) {
+  void run(const HttpOptions& o, HttpClient& client) {
     for (;;) {
       std::deque<std::unique_ptr<Transfer>> added;
       bool cancel = false;
@@ -236,7 +257,7 @@ struct HttpClient::Impl {
       // added since is a later request and runs.
       if (cancel) fail_active("cancelled");
       for (auto& t : added) {
-        start(*t, options);
+        start(*t, o);
         if (t->easy) active.emplace(t->easy, std::move(t));
       }
       int running = 0;
@@ -257,7 +278,7 @@ struct HttpClient::Impl {
           curl_easy_getinfo(e, CURLINFO_NUM_CONNECTS, &connects);
           if (version == CURL_HTTP_VERSION_2_0) ++client.http2_responses_;
           client.connections_opened_ += static_cast<std::uint64_t>(std::max(0L, connects));
-          t->promise.set_value(finish(*t, code));
+          t->promise.set_value(finish(*t, code, o));
         }
         curl_easy_cleanup(e);
       }

@@ -2,6 +2,7 @@
 #include "volreel/remote/http_source.hpp"
 
 #include <chrono>
+#include <cstdio>
 #include <stdexcept>
 #include <thread>
 
@@ -85,8 +86,10 @@ std::uint64_t HttpSource::cache_bytes_served() const {
 std::vector<std::byte> HttpSource::fetch(const std::string& relative, std::uint64_t offset,
                                          std::uint64_t bytes) const {
   double wait = options_.retry_initial_s;
+  const auto start = std::chrono::steady_clock::now();
   HttpResponse r;
-  for (unsigned attempt = 1;; ++attempt) {
+  unsigned attempt = 1;
+  for (;; ++attempt) {
     r = client_->get(url_ + "/" + relative, offset, bytes).get();
     if (r.ok()) return std::move(r.body);
     if (!r.transient || attempt >= std::max(1u, options_.attempts)) break;
@@ -95,9 +98,16 @@ std::vector<std::byte> HttpSource::fetch(const std::string& relative, std::uint6
   }
   // The message already names the URL and the range.
   const std::string prefix = url_ + "/" + relative + ": ";
-  throw format::FormatError(name(relative), r.error.compare(0, prefix.size(), prefix) == 0
-                                                ? r.error.substr(prefix.size())
-                                                : r.error);
+  std::string error =
+      r.error.compare(0, prefix.size(), prefix) == 0 ? r.error.substr(prefix.size()) : r.error;
+  if (attempt > 1) {
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    char tries[96];
+    std::snprintf(tries, sizeof tries, " (the last of %u tries over %.1f s)", attempt, seconds);
+    error += tries;
+  }
+  throw NetworkError(name(relative), error);
 }
 
 std::vector<std::byte> HttpSource::read_file(const std::string& relative,

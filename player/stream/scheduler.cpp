@@ -336,8 +336,9 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     out.stats.target_nodes = svo_stats.target_nodes;
     out.stats.at_target_nodes = svo_stats.at_target_nodes;
     out.stats.index_ready = index_.holds_around(playhead);
+    out.stats.index_failed = index_.failed_around(playhead);
     out.stats.fraction_at_target =
-        !out.stats.index_ready ? 0.0
+        !out.stats.index_ready || out.stats.index_failed ? 0.0
         : svo_stats.target_nodes > 0
             ? static_cast<double>(svo_stats.at_target_nodes) / svo_stats.target_nodes
             : 1.0;

@@ -487,6 +487,17 @@ bool SpatialIndex::holds_around(double playhead) const {
   return held_begin_ <= lo && hi < held_end_;
 }
 
+bool SpatialIndex::failed_around(double playhead) const {
+  if (frame_count() == 0) return false;
+  const auto last = static_cast<double>(frame_count() - 1);
+  const double p = std::clamp(playhead, 0.0, last);
+  const auto lo = static_cast<std::uint32_t>(std::max(0.0, std::floor(p) - max_gap_));
+  const auto hi = static_cast<std::uint32_t>(std::min(last, std::ceil(p) + max_gap_));
+  for (std::uint32_t t = std::max(lo, held_begin_); t <= hi && t < held_end_; ++t)
+    if (!held_[t % ring_].error.empty()) return true;
+  return false;
+}
+
 void SpatialIndex::follow(double playhead, double velocity, std::vector<std::string>* errors) {
   if (!reader_ || frame_count() == 0) return;
   const auto frames = static_cast<std::uint32_t>(frame_count());

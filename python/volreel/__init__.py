@@ -12,8 +12,9 @@
     volreel.psnr(original, decoded), volreel.ssim(original, decoded)
 
 Errors are volreel.FormatError (a damaged or unexpected container) and volreel.InputError (bad
-input data or options), both ValueErrors carrying the library's message; IndexError for a time step
-or level out of range.
+input data or options), both ValueErrors carrying the library's message; volreel.NetworkError, a
+FormatError and a ConnectionError, when a container over HTTP cannot be read (no connection, a
+timeout, an HTTP error status); IndexError for a time step or level out of range.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from typing import Iterator, Optional, Union
 from ._volreel import (  # noqa: F401  (re-exported)
     FormatError,
     InputError,
+    NetworkError,
     __version__,
     encode,
     psnr,
@@ -36,6 +38,7 @@ __all__ = [
     "Container",
     "FormatError",
     "InputError",
+    "NetworkError",
     "encode",
     "open",
     "psnr",

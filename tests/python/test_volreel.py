@@ -311,6 +311,11 @@ def test_a_container_on_a_web_server_reads_as_the_folder(container, tmp_path):
             assert np.array_equal(remote.frame(t), local.frame(t))
         with pytest.raises(volreel.FormatError, match="404"):
             volreel.open(f"http://127.0.0.1:{port}/missing.vreel")
+        # A network failure is also a ConnectionError, as Python's own are.
+        with pytest.raises(ConnectionError, match="404"):
+            volreel.open(f"http://127.0.0.1:{port}/missing.vreel")
+        with pytest.raises(volreel.NetworkError, match="missing.vreel/manifest.json"):
+            volreel.open(f"http://127.0.0.1:{port}/missing.vreel")
     finally:
         server.terminate()
         server.wait(timeout=10)

@@ -350,7 +350,7 @@ TEST_F(RemoteContainer, ErrorStatusesTruncationAndStallsAreClearErrors) {
                                                         {"status 503", "found HTTP 503"},
                                                         {"status 200", "found HTTP 200"},
                                                         {"truncate", "bytes"},
-                                                        {"stall", "imeout"},
+                                                        {"stall", "no byte arrived for 1 s"},
                                                         {"flip", "payload corrupt"}}) {
     const std::string e = error_of(mode);
     EXPECT_EQ(e.rfind(name, 0), 0u) << mode << ": " << e;
@@ -363,9 +363,22 @@ TEST_F(RemoteContainer, ErrorStatusesTruncationAndStallsAreClearErrors) {
   try {
     format::Container again(std::make_shared<HttpSource>(proxy.url("test.vreel"), o));
     ADD_FAILURE() << "opened";
-  } catch (const format::FormatError& e) {
+  } catch (const NetworkError& e) {
     EXPECT_NE(std::string(e.what()).find("manifest.json"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("HTTP 500"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("the last of 2 tries"), std::string::npos) << e.what();
+  }
+  // A stalled one says what stalled and how long it was waited for.
+  proxy.set_mode("stall");
+  try {
+    format::Container again(std::make_shared<HttpSource>(proxy.url("test.vreel"), o));
+    ADD_FAILURE() << "opened";
+  } catch (const NetworkError& e) {
+    const std::string what = e.what();
+    EXPECT_EQ(what.rfind(proxy.url("test.vreel/manifest.json"), 0), 0u) << what;
+    EXPECT_NE(what.find("no byte arrived for 1 s after 1 bytes"), std::string::npos) << what;
+    EXPECT_NE(what.find("then stopped sending"), std::string::npos) << what;
+    EXPECT_NE(what.find("the last of 2 tries over "), std::string::npos) << what;
   }
 }
 
@@ -505,6 +518,16 @@ TEST_F(RemoteContainer, TheCommandsReadAUrl) {
   EXPECT_NE(text("missing.txt").find("HTTP 404 (no such file on the server: check the URL)"),
             std::string::npos)
       << text("missing.txt");
+  // A server that stops sending is given up after --stall-timeout, --tries times.
+  test::FaultProxy proxy(proxy_script, nginx_->port(), dir_->path());
+  proxy.set_mode("stall");
+  EXPECT_NE(run("info " + proxy.url("test.vreel") + " --stall-timeout 1 --tries 2", "stall.txt"),
+            0);
+  EXPECT_NE(text("stall.txt").find("manifest.json: no byte arrived for 1 s"), std::string::npos)
+      << text("stall.txt");
+  EXPECT_NE(text("stall.txt").find("the last of 2 tries"), std::string::npos) << text("stall.txt");
+  EXPECT_NE(run("info " + url() + " --stall-timeout nan", "nan.txt"), 0);
+  EXPECT_NE(text("nan.txt").find("--stall-timeout"), std::string::npos) << text("nan.txt");
 }
 
 }  // namespace

@@ -144,6 +144,8 @@ TEST(StreamIndex, ABadFrameBecomesAnErrorAndIsLeftOut) {
   EXPECT_EQ(index.times(0).size(), 2u);
   EXPECT_EQ(index.find_keyframe(0, 1), no_keyframe);
   EXPECT_NE(index.find_keyframe(0, 2), no_keyframe);
+  EXPECT_TRUE(index.failed_around(0));  // frame 1 is within max_keyframe_gap (1)
+  EXPECT_TRUE(index.failed_around(2));
 }
 
 /// Follows the playhead until the index holds the frames around it (the reader runs on its own
@@ -263,7 +265,11 @@ TEST(StreamIndex, AWindowReportsABadFrameOnceAndHoldsTheRest) {
   SpatialIndex index = build_spatial_index(c, nullptr, o);
   ASSERT_EQ(index.window_frames(), 6u);  // the least: 2·max_keyframe_gap + 4
   std::vector<std::string> errors;
-  for (double p = 0; p <= 11; p += 0.5) ASSERT_TRUE(follow_until_held(index, p, 2, &errors));
+  for (double p = 0; p <= 11; p += 0.5) {
+    ASSERT_TRUE(follow_until_held(index, p, 2, &errors));
+    // Frame 5 is within max_keyframe_gap (1) of the playhead from 3.5 to 6.5.
+    EXPECT_EQ(index.failed_around(p), p > 3 && p < 7) << p;
+  }
   ASSERT_EQ(errors.size(), 1u);
   EXPECT_NE(errors[0].find("000005.vrf"), std::string::npos) << errors[0];
   EXPECT_EQ(index.find_keyframe(0, 5), no_keyframe);

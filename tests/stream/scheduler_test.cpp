@@ -793,6 +793,16 @@ TEST(StreamScheduler, ABadFrameAtIndexTimeIsReportedNotThrown) {
   EXPECT_EQ(u.stats.holes, 0u);
   EXPECT_EQ(u.stats.at_target_nodes, 8u);
   expect_svo_references_resident_slots(s, u);
+  // Drawn, but not as encoded: the view is not at its target (a render waiting for it, or a
+  // seek timed to full quality, must not count it complete).
+  EXPECT_TRUE(u.stats.index_failed);
+  EXPECT_EQ(u.stats.fraction_at_target, 0.0);
+  // Farther than max_keyframe_gap (1) from the bad frame, the view completes.
+  const FrameUpdate away = run_until(s, cam, 1.0, frame, [](const FrameUpdate& f) {
+    return f.stats.fraction_at_target == 1.0 && f.stats.requests_in_flight == 0;
+  });
+  EXPECT_FALSE(away.stats.index_failed);
+  EXPECT_EQ(away.stats.fraction_at_target, 1.0);
 }
 
 }  // namespace

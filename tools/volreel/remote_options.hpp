@@ -1,6 +1,6 @@
 // remote_options.hpp: how the commands that read a container (info, verify, render, play, bench
 // stream) open one named by a path or an http(s):// URL, with the options of remote reading:
-// --cache DIR, --cache-size, --connections.
+// --cache DIR, --cache-size, --connections, --ca-file, --stall-timeout, --tries.
 #pragma once
 
 #include <cstdio>
@@ -10,6 +10,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "commands.hpp"
 #include "volreel/datasets/volume.hpp"
 #include "volreel/format/file_io.hpp"
 #include "volreel/format/source.hpp"
@@ -22,6 +23,8 @@ struct RemoteCli {
   std::string cache_size = "2G";
   unsigned connections = 4;
   std::string ca_file;
+  double stall_timeout = remote::HttpOptions{}.stall_timeout_s;
+  unsigned tries = remote::RemoteOptions{}.attempts;
 };
 
 /// The CONTAINER argument's help: a folder or a URL.
@@ -45,6 +48,17 @@ inline void add_remote_options(CLI::App& cmd, RemoteCli& o) {
                  "For an https URL: trust the certificate authorities in this PEM file (a "
                  "centre's own CA) instead of the system's")
       ->check(CLI::ExistingFile);
+  cmd.add_option("--stall-timeout", o.stall_timeout,
+                 "For a URL: give a request up when no byte has arrived for this many seconds "
+                 "(the server accepted it, then stopped sending)")
+      ->check(in_range(1, 3600))
+      ->capture_default_str();
+  cmd.add_option("--tries", o.tries,
+                 "For a URL: how many times a read of the manifest, dictionary or a frame index "
+                 "is tried when it fails in a way that may pass (timeout, refused or reset "
+                 "connection, HTTP 5xx), waiting 0.25 s, then twice as long each time")
+      ->check(in_range(1, 20))
+      ->capture_default_str();
 }
 
 /// The source of the container at `location` (a folder or a URL). Throws InputError for a bad URL
@@ -55,6 +69,8 @@ inline std::shared_ptr<const format::ContainerSource> open_container_source(
   remote::RemoteOptions options;
   options.http.max_connections = o.connections;
   options.http.ca_file = o.ca_file;
+  options.http.stall_timeout_s = o.stall_timeout;
+  options.attempts = o.tries;
   try {
     if (!o.cache.empty()) {
       options.cache_dir = o.cache;

@@ -22,11 +22,19 @@
 #include <string>
 #include <vector>
 
+#include "volreel/format/error.hpp"
 #include "volreel/format/source.hpp"
 #include "volreel/remote/disk_cache.hpp"
 #include "volreel/remote/http_client.hpp"
 
 namespace volreel::remote {
+
+/// A container read over HTTP that failed: no connection, a timeout, an HTTP error status, a short
+/// answer (after the retries). A FormatError, so that what catches the one catches the other.
+class NetworkError : public format::FormatError {
+ public:
+  using FormatError::FormatError;
+};
 
 struct RemoteOptions {
   HttpOptions http;
@@ -100,7 +108,7 @@ class HttpSource final : public format::ContainerSource,
                         const std::string& bytes) const;
   std::optional<std::vector<std::byte>> cached(const std::string& relative, std::uint64_t offset,
                                                std::uint64_t bytes) const;
-  /// GET with retries of transient failures; throws FormatError with the last error.
+  /// GET with retries of transient failures; throws NetworkError with the last error.
   std::vector<std::byte> fetch(const std::string& relative, std::uint64_t offset,
                                std::uint64_t bytes) const;
   /// Records the manifest's identifier and CRCs for cache keys.

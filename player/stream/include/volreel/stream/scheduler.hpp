@@ -96,9 +96,11 @@ struct StreamStats {
   std::uint32_t forced_nodes = 0;
   /// Nodes drawn coarser for the restricted drawing (SelectionSettings::restricted).
   std::uint32_t restricted_nodes = 0;
-  double fraction_at_target = 0;  ///< at_target_nodes / target_nodes (1 when none; 0 while
-                                  ///< the index does not hold the frames around the playhead)
+  /// at_target_nodes / target_nodes (1 when none; 0 while the index does not hold the frames
+  /// around the playhead, or one of them failed to read)
+  double fraction_at_target = 0;
   bool index_ready = true;        ///< the index holds the frames around the playhead
+  bool index_failed = false;      ///< a frame around the playhead failed to read (SpatialIndex)
   std::uint32_t holes = 0;        ///< target nodes with nothing to draw yet
   std::uint32_t selected = 0;     ///< keyframe nodes in the heap this frame
   std::size_t requests_sent = 0;  ///< this frame

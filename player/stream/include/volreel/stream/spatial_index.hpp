@@ -285,6 +285,9 @@ class SpatialIndex {
   /// Whether every frame within max_keyframe_gap of the playhead is held: the frames the
   /// selection and the scheduler need there.
   bool holds_around(double playhead) const;
+  /// Whether a held frame within max_keyframe_gap of the playhead failed to read: the view
+  /// there cannot be drawn as encoded.
+  bool failed_around(double playhead) const;
   /// Moves the window with the playhead (keyframe units; velocity in keyframes per second, for
   /// the direction of travel): adds the frames the reader has that extend the held range (within
   /// IndexOptions::follow_budget_s), drops those outside the window, and tells the reader what
