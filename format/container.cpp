@@ -631,15 +631,16 @@ std::vector<std::string> verify_container(std::shared_ptr<const ContainerSource>
   TimeStepDecoder steps(*container);
   for (std::size_t t = 0; t < m.frames.size(); ++t) {
     try {
-      const FrameFile f = container->open_frame(t);
+      // The frame as the decoder holds it (opened once: over HTTP, read once).
       steps.check_keyframes(t);
-      f.view().check_payload_crc();
-      const std::uint32_t crc = manifest_crc(f.view().bytes());
+      const FrameView& f = steps.frame(t);
+      f.check_payload_crc();
+      const std::uint32_t crc = manifest_crc(f.bytes());
       if (crc != m.frames[t]->crc32c)
-        problems.push_back(f.view().name().string() + ": expected CRC-32C " +
+        problems.push_back(f.name().string() + ": expected CRC-32C " +
                            std::to_string(m.frames[t]->crc32c) + " (manifest.json), found " +
                            std::to_string(crc));
-      decode_and_check_histograms(f.view(), container->atoms());
+      decode_and_check_histograms(f, container->atoms());
     } catch (const FormatError& e) {
       // A frame that other steps' keyframes come from fails each of their checks alike: once.
       if (std::find(problems.begin(), problems.end(), e.what()) == problems.end())

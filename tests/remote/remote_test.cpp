@@ -193,6 +193,13 @@ TEST_F(RemoteContainer, ReadsWhatTheFolderHolds) {
   }
   EXPECT_TRUE(format::verify_container(source).empty());
   EXPECT_GT(source->requests(), 0u);
+  // verify reads every file once: the container's bytes and no more.
+  std::uint64_t files = 0;
+  for (const auto& e : fs::recursive_directory_iterator(*container_))
+    if (e.is_regular_file()) files += e.file_size();
+  const auto fresh = std::make_shared<HttpSource>(url());
+  EXPECT_TRUE(format::verify_container(fresh).empty());
+  EXPECT_EQ(fresh->bytes_received(), files);
 }
 
 TEST_F(RemoteContainer, CoalescesBackToBackBricksIntoFewRequests) {
