@@ -174,6 +174,9 @@ expect_error "seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --sp
 expect_error "an exponent in \[0, 64\]" "$volreel" bench stream "$work/a.vreel" --ancestor-handicap -2
 expect_error "seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --lod-fade -0.5
 expect_error "lod-fade-out.*seconds in \[0, 60\]" "$volreel" bench stream "$work/a.vreel" --lod-fade-out 61
+# A disk cache would let every run after the first start warm: one policy, one tour with it.
+expect_error "--cache with --policy both: every run after the first" "$volreel" bench stream http://127.0.0.1:9/a.vreel --cache "$work/cache"
+expect_error "--cache with --seeds 2" "$volreel" bench stream http://127.0.0.1:9/a.vreel --policy patent --seeds 2 --cache "$work/cache"
 "$volreel" bench stream --help > "$work/help.txt" && grep -q -e "--bandwidth" "$work/help.txt" || fail "--help lacks --bandwidth"
 for o in --due-window --lookahead --speculative-link --ancestor-handicap --sse-priority --seeds --lod-fade --lod-fade-out --spatial-blend; do grep -q -e "$o" "$work/help.txt" || fail "--help lacks $o"; done
 echo "stream bench CLI: OK"

@@ -44,6 +44,14 @@ void stage(const std::string& title, const std::string& unit,
 void run_bench_stream(const BenchStreamOptions& o) {
   // 1. Settings (all checked before any work), the container, the tour, the link, the truth.
   const sb::BenchStreamSettings& s = o.s;
+  if (!o.remote.cache.empty() && remote::is_url(o.container) &&
+      (s.policies().size() > 1 || s.seeds > 1))
+    throw InputError(
+        "--cache with " +
+        std::string(s.seeds > 1 ? "--seeds " + std::to_string(s.seeds) : "--policy both") +
+        ": every run after the first would read the bricks the first kept from the cache "
+        "instead of the server, and the runs would not compare; with --cache give --policy "
+        "patent or nearest and --seeds 1 (a second invocation then measures the warm start)");
   const sb::BenchPlan plan = sb::prepare_bench(
       s, o.container, o.series, o.reader.to_open_options(), o.out,
       remote::is_url(o.container) ? open_container_source(o.container, o.remote) : nullptr);
