@@ -252,6 +252,22 @@ RawSeriesWriter::RawSeriesWriter(fs::path dir, Dims dims, std::string variable, 
   if (fs::exists(manifest, ec) && !overwrite)
     throw InputError("'" + dir_.string() +
                      "' already holds a series; choose another --out or pass --overwrite");
+  // A folder of other files (the user's data, a container, an interrupted run's frames) is never
+  // written into: its files could be replaced. Hidden names and a mount point's lost+found aside.
+  if (fs::is_directory(dir_, ec) && !fs::exists(manifest, ec)) {
+    for (const auto& entry : fs::directory_iterator(dir_, ec)) {
+      const std::string name = entry.path().filename().string();
+      if (!name.starts_with('.') && name != "lost+found")
+        throw InputError("'" + dir_.string() + "' holds '" + name +
+                         "' but no series.json: a series is written into a new or empty folder "
+                         "(or over a series, with --overwrite); choose another --out, or remove "
+                         "the folder if an interrupted run left it");
+    }
+  } else if (fs::exists(dir_, ec) && !fs::is_directory(dir_, ec)) {
+    throw InputError("'" + dir_.string() + "' is " +
+                     format::detail::file_kind(fs::status(dir_, ec).type()) +
+                     ", not a folder: choose another --out");
+  }
   // The directories this writer makes, deepest first (removed again without finish).
   for (fs::path d = fs::absolute(dir_, ec);
        !d.empty() && !fs::exists(d, ec) && d != d.parent_path(); d = d.parent_path())

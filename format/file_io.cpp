@@ -100,7 +100,24 @@ std::vector<std::byte> read_whole_file(const fs::path& path, std::uint64_t max_b
   return bytes;
 }
 
+namespace {
+
+/// Throws unless `path` is absent, a regular file or a directory (a device or FIFO there would
+/// be replaced by the rename that puts a new file in place).
+void refuse_special_file(const fs::path& path, const std::string& option) {
+  std::error_code ec;
+  const fs::file_status status = fs::status(path, ec);
+  if (!fs::exists(status) || fs::is_regular_file(status) || fs::is_directory(status)) return;
+  throw FormatError(path, "cannot write it" + (option.empty() ? "" : " (" + option + ")") +
+                              ": it is " + file_kind(status.type()) +
+                              ", and volreel writes a new file and renames it into place, which "
+                              "would replace it: choose another name");
+}
+
+}  // namespace
+
 void write_file_atomically(const fs::path& path, std::span<const std::byte> bytes) {
+  refuse_special_file(path, "");
   const fs::path tmp = path.string() + ".tmp-" + std::to_string(getpid());
   std::FILE* f = std::fopen(tmp.c_str(), "wb");
   if (!f)
@@ -163,6 +180,7 @@ std::string host_name() {
 void check_writable(const fs::path& target, const std::string& option) {
   if (target.empty())
     throw std::invalid_argument(option + " is empty: expected the name of what to write");
+  refuse_special_file(target, option);
   std::error_code ec;
   fs::path at = fs::absolute(target, ec);
   if (ec) throw FormatError(target, "cannot write it (" + option + "): " + ec.message());

@@ -55,6 +55,15 @@ rm "$work/b/000003.f32"
 expect_error "000003.f32.*missing" "$volreel" compare "$work/a" "$work/b"
 expect_error "already holds a series" "$volreel" gen analytic --frames 2 --out "$work/a"
 expect_error "unknown analytic field" "$volreel" gen analytic --field nope --out "$work/d"
+# gen never writes into a folder of other files (its frames would replace the user's).
+mkdir "$work/data" && echo keep > "$work/data/000000.f32"
+expect_error "holds '000000.f32' but no series.json" "$volreel" gen analytic --frames 2 --out "$work/data"
+expect_error "holds '000000.f32' but no series.json" "$volreel" gen analytic --frames 2 --out "$work/data" --overwrite
+[ "$(cat "$work/data/000000.f32")" = keep ] || fail "gen replaced a file of a folder without a series"
+expect_error "--frames: expected a number in \[1, 1e+08\], found '-1'" "$volreel" gen analytic --frames -1 --out "$work/neg"
+[ ! -e "$work/neg" ] || fail "gen --frames -1 wrote $work/neg"
+expect_error "--frames: expected a number in" "$volreel" gen turbulence --frames -1 --out "$work/neg"
+expect_error "--frames: expected a number in" "$volreel" gen mosaic --from "$work/a" --size 8 --frames -2 --out "$work/neg.vreel"
 expect_error "--at-bps: expected bits per voxel > 0" "$volreel" bench rd "$work/a" --at-bps nan
 expect_error "not a PNG\|cannot\|PNG" "$volreel" compare "$work/frame.raw" "$work/frame.png"
 # gen: sizes checked when parsed; a failed run leaves no folder behind; --overwrite with fewer

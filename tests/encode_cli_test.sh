@@ -184,7 +184,7 @@ grep -q OK <<< "$("$volreel" verify "$work/mosaic.vreel" 2>/dev/null)" || fail "
 [ "$("$volreel" info "$work/mosaic.vreel" --json | json 'd["max_keyframe_gap"]')" = 2 ] || fail "mosaic keyframe gap"
 expect_error "already exists" "$volreel" gen mosaic --from "$work/a.vreel" --size 8 --frames 1 --out "$work/mosaic.vreel"
 expect_error "is not a volreel container" "$volreel" gen mosaic --from "$work/s" --size 8 --frames 1 --out "$work/x.vreel"
-expect_error "frames must be at least 1" "$volreel" gen mosaic --from "$work/a.vreel" --size 8 --frames 0 --out "$work/x.vreel"
+expect_error "--frames: expected a number in \\[1, 1e+08\\]" "$volreel" gen mosaic --from "$work/a.vreel" --size 8 --frames 0 --out "$work/x.vreel"
 expect_error "size must be 1" "$volreel" gen mosaic --from "$work/a.vreel" --size 0 --frames 1 --out "$work/x.vreel"
 expect_error "not of the form XxYxZ" "$volreel" gen mosaic --from "$work/a.vreel" --size 8x8 --frames 1 --out "$work/x.vreel"
 

@@ -108,14 +108,26 @@ TEST(RawSeries, AWriterThatDoesNotFinishLeavesNothingBehind) {
     EXPECT_TRUE(fs::exists(dir / "new" / "deeper" / "000000.f32"));
   }
   EXPECT_FALSE(fs::exists(dir / "new"));
-  {  // a directory that was there stays, with what else it holds
+  {  // a directory that was there stays, with its hidden files
     fs::create_directories(dir / "kept");
-    std::ofstream(dir / "kept" / "notes.txt") << "mine";
+    std::ofstream(dir / "kept" / ".hidden") << "mine";
     vd::RawSeriesWriter w(dir / "kept", d, "p");
     w.write_frame(0, 0.0, ramp(d, 0));
   }
   EXPECT_FALSE(fs::exists(dir / "kept" / "000000.f32"));
-  EXPECT_TRUE(fs::exists(dir / "kept" / "notes.txt"));
+  EXPECT_TRUE(fs::exists(dir / "kept" / ".hidden"));
+  // A folder of other files and no series is never written into (its files could be replaced),
+  // --overwrite or not.
+  std::ofstream(dir / "kept" / "000000.f32") << "mine";
+  for (const bool overwrite : {false, true}) try {
+      vd::RawSeriesWriter w(dir / "kept", d, "p", overwrite);
+      ADD_FAILURE() << "wrote into a folder of other files";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("holds '000000.f32' but no series.json"),
+                std::string::npos)
+          << e.what();
+    }
+  EXPECT_EQ(fs::file_size(dir / "kept" / "000000.f32"), 4u);
   // --overwrite: the old series' frames go, so that a shorter one leaves none of them.
   const fs::path old = write_series(dir, d, 3);
   {

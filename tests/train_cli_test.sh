@@ -53,6 +53,11 @@ head -c 16384 /dev/zero > "$work/zeros.raw"
 echo old > "$work/taken.bin"
 expect_error "already exists: give --overwrite" train "$work/a" --out "$work/taken.bin" --atoms 64
 [ "$(cat "$work/taken.bin")" = old ] || fail "train replaced an existing --out without --overwrite"
+# A FIFO (or a device) is never renamed over, --overwrite or not.
+mkfifo "$work/fifo"
+expect_error "it is a FIFO (named pipe), and volreel writes a new file" train "$work/a" --out "$work/fifo" --atoms 64
+expect_error "it is a FIFO (named pipe), and volreel writes a new file" train "$work/a" --out "$work/fifo" --atoms 64 --overwrite
+[ -p "$work/fifo" ] || fail "train --overwrite replaced a FIFO"
 expect_error "is a directory" train "$work/a" --out "$work/a"
 expect_error "cannot write it (--out)" train "$work/a" --out /proc/volreel-test.bin
 expect_error "iterations: Value 0 not in range" train "$work/a" --out "$work/x.bin" --iterations 0

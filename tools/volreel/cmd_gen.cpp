@@ -28,7 +28,6 @@ void run_turbulence(const TurbulenceOptions& o) {
   const int n = run.params.size;
   if (n < 16 || n > 1024 || n % 2 != 0)
     throw InputError("--size must be even and between 16 and 1024 (got " + std::to_string(n) + ")");
-  if (run.frames < 1) throw InputError("--frames must be at least 1");
   if (run.frame_interval <= 0) throw InputError("--interval must be positive");
   datasets::RawSeriesWriter writer(o.out, Dims{n, n, n}, datasets::to_string(run.variable),
                                    o.overwrite);
@@ -63,7 +62,6 @@ void run_analytic(const AnalyticOptions& o) {
   params.dims = o.dims.empty() ? Dims{o.size, o.size, o.size} : parse_dims(o.dims);
   params.frames = o.frames;
   params.seed = o.seed;
-  if (params.frames < 1) throw InputError("--frames must be at least 1");
   datasets::RawSeriesWriter writer(o.out, params.dims, "analytic-" + o.field, o.overwrite);
   ProgressBar bar("generating", "frames");
   datasets::generate_analytic(params, writer, bar.progress());
@@ -103,7 +101,6 @@ void run_mosaic(const MosaicOptions& o) {
   p.source = o.from;
   p.out = o.out;
   p.dims = parse_mosaic_size(o.size);
-  if (o.frames < 1) throw InputError("--frames must be at least 1 (got 0)");
   if (o.max_keyframe_gap < 1 || o.max_keyframe_gap > 65535)
     throw InputError("--max-keyframe-gap must be 1..65535 (got " +
                      std::to_string(o.max_keyframe_gap) + ")");
@@ -153,7 +150,9 @@ void add_gen_command(CLI::App& app) {
                                        "viscosity for k_max*eta >= 1, CFL-limited steps).");
   turb->add_option("--size", t->run.params.size, "Grid points per side N (even, 16..1024)")
       ->capture_default_str();
-  turb->add_option("--frames", t->run.frames, "Frames to record")->capture_default_str();
+  turb->add_option("--frames", t->run.frames, "Frames to record")
+      ->check(in_range(1, 1e6))
+      ->capture_default_str();
   turb->add_option("--out", t->out, "Output directory")->required();
   turb->add_option("--variable", t->variable, "Recorded field: pressure, vorticity, u, v or w")
       ->capture_default_str();
@@ -197,7 +196,9 @@ void add_gen_command(CLI::App& app) {
       ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();
   analytic->add_option("--dims", a->dims, "XxYxZ instead of a cube, e.g. 96x64x48");
-  analytic->add_option("--frames", a->frames, "Frames")->capture_default_str();
+  analytic->add_option("--frames", a->frames, "Frames")
+      ->check(in_range(1, 1e8))
+      ->capture_default_str();
   analytic->add_option("--seed", a->seed, "Seed")->check(seed_number())->capture_default_str();
   analytic->add_option("--out", a->out, "Output directory")->required();
   analytic->add_flag("--overwrite", a->overwrite, "Replace an existing series in --out");
@@ -218,7 +219,9 @@ void add_gen_command(CLI::App& app) {
   mosaic->add_option("--from", m->from, "Source container (NAME.vreel) whose bricks are repeated")
       ->required();
   mosaic->add_option("--size", m->size, "Voxels: N (a cube) or XxYxZ")->required();
-  mosaic->add_option("--frames", m->frames, "Frames (time steps)")->required();
+  mosaic->add_option("--frames", m->frames, "Frames (time steps)")
+      ->check(in_range(1, 1e8))
+      ->required();
   mosaic
       ->add_option("--max-keyframe-gap", m->max_keyframe_gap,
                    "G: frames 0, T-1 and every multiple of G store every node (as volreel encode)")

@@ -33,10 +33,10 @@ void run_train(const TrainCommandOptions& o) {
   const auto out_status = std::filesystem::status(o.out, ec);
   if (std::filesystem::is_directory(out_status))
     throw InputError("--out '" + o.out + "' is a directory: expected the dictionary file to write");
+  format::detail::check_writable(o.out, "--out");  // a device or FIFO is refused
   if (std::filesystem::exists(out_status) && !o.overwrite)
     throw InputError("'" + o.out +
                      "' already exists: give --overwrite to replace it, or choose another --out");
-  format::detail::check_writable(o.out, "--out");
   const auto series = datasets::open_series(o.training.series, o.training.reader.to_open_options());
   const auto& info = series->info();
   std::printf("volreel train: %s, %s x %zu frames, variable '%s'\n", info.source.c_str(),
