@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <mutex>
 #include <vector>
 
@@ -34,6 +35,7 @@ class NetcdfReader final : public SeriesReader {
     std::lock_guard lock(netcdf_mutex());
     check(nc_open(file_.c_str(), NC_NOWRITE, &ncid_), "cannot open it as NetCDF");
     try {
+      check_classic_size();
       open(options);
     } catch (...) {
       nc_close(ncid_);
@@ -63,10 +65,26 @@ class NetcdfReader final : public SeriesReader {
       check(nc_get_vara_float(ncid_, varid_, start.data(), count.data(), out.data()),
             "variable '" + variable_ + "' frame " + std::to_string(t));
     }
-    // Missing values become NaN (refused below unless replaced); packed values are unpacked.
-    for (float& v : out) {
+    // Missing values are refused, naming what they hold, unless replaced; packed values are
+    // unpacked.
+    for (std::size_t i = 0; i < out.size(); ++i) {
+      float& v = out[i];
       if ((fill_ && v == *fill_) || (missing_ && v == *missing_)) {
-        v = std::numeric_limits<float>::quiet_NaN();
+        if (!replace_nan_) {
+          const std::size_t nx = static_cast<std::size_t>(info_.dims.x);
+          const std::size_t ny = static_cast<std::size_t>(info_.dims.y);
+          char value[32];
+          std::snprintf(value, sizeof value, "%.9g", static_cast<double>(v));
+          const char* what = fill_ && v == *fill_
+                                 ? (fill_default_ ? "NetCDF's default fill value (never written)"
+                                                  : "the variable's _FillValue")
+                                 : "the variable's missing_value";
+          fail("variable '" + variable_ + "' frame " + std::to_string(t) + ": voxel (" +
+               std::to_string(i % nx) + ", " + std::to_string(i / nx % ny) + ", " +
+               std::to_string(z_begin + i / (nx * ny)) + ") holds " + value + ", " + what +
+               ": a missing value; use --replace-nan V to substitute a value");
+        }
+        v = *replace_nan_;
         continue;
       }
       if (scale_ != 1 || offset_ != 0)
@@ -83,6 +101,7 @@ class NetcdfReader final : public SeriesReader {
   int ncid_ = -1, varid_ = -1, rank_ = 0;
   std::string variable_;
   std::optional<float> fill_, missing_;
+  bool fill_default_ = false;  ///< fill_ is NetCDF's default for the type, not an attribute
   double scale_ = 1, offset_ = 0;
 
   [[noreturn]] void fail(const std::string& what) const {
@@ -90,6 +109,45 @@ class NetcdfReader final : public SeriesReader {
   }
   void check(int status, const std::string& what) const {
     if (status != NC_NOERR) fail(what + ": " + nc_strerror(status));
+  }
+
+  /// A classic-format file (CDF-1, 2 or 5) stores every variable's values in full after its
+  /// header, and NetCDF reads past a truncated end as zeros: the file must be at least as long
+  /// as its variables' data (records included). NetCDF-4 (HDF5) files are checked by HDF5.
+  void check_classic_size() const {
+    int format = 0;
+    check(nc_inq_format(ncid_, &format), "format");
+    if (format != NC_FORMAT_CLASSIC && format != NC_FORMAT_64BIT_OFFSET && format != NC_FORMAT_CDF5)
+      return;
+    int variables = 0, unlimited = -1;
+    check(nc_inq_nvars(ncid_, &variables), "variables");
+    check(nc_inq_unlimdim(ncid_, &unlimited), "the unlimited dimension");
+    const std::size_t records = unlimited >= 0 ? dimension_length(unlimited) : 0;
+    long double need = 0;
+    for (int v = 0; v < variables; ++v) {
+      nc_type type = 0;
+      std::size_t type_bytes = 0;
+      check(nc_inq_vartype(ncid_, v, &type), "variable " + std::to_string(v));
+      check(nc_inq_type(ncid_, type, nullptr, &type_bytes), "variable " + std::to_string(v));
+      long double values = 1;
+      bool record = false;
+      for (const int d : variable_dimensions(v)) {
+        if (d == unlimited)
+          record = true;
+        else
+          values *= static_cast<long double>(dimension_length(d));
+      }
+      // A fixed-size variable's values are padded to 4 bytes (a record's are not, when it is
+      // the only record variable: a lower bound leaves that out).
+      const long double bytes = values * static_cast<long double>(type_bytes);
+      need += record ? bytes * static_cast<long double>(records) : std::ceil(bytes / 4) * 4;
+    }
+    std::error_code ec;
+    const std::uintmax_t size = fs::file_size(file_, ec);
+    if (!ec && static_cast<long double>(size) < need)
+      fail("the file is " + std::to_string(size) + " bytes, but its variables' values alone take " +
+           std::to_string(static_cast<unsigned long long>(need)) +
+           " (and the header more): it is truncated");
   }
 
   std::string dimension_name(int dimid) const {
@@ -259,10 +317,12 @@ class NetcdfReader final : public SeriesReader {
       for (std::size_t t = 0; t < info_.frames; ++t)
         info_.timestamps.push_back(static_cast<double>(t));
     }
-    if (const auto v = number_attribute(varid_, "_FillValue"))
+    if (const auto v = number_attribute(varid_, "_FillValue")) {
       fill_ = static_cast<float>(*v);
-    else
+    } else {
       fill_ = default_fill(type);
+      fill_default_ = true;
+    }
     if (const auto v = number_attribute(varid_, "missing_value")) missing_ = static_cast<float>(*v);
     scale_ = number_attribute(varid_, "scale_factor").value_or(1.0);
     offset_ = number_attribute(varid_, "add_offset").value_or(0.0);

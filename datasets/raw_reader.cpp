@@ -67,6 +67,7 @@ class RawSeriesReader final : public SeriesReader {
       dims[a] = d[a].get<std::int64_t>();
     }
     info_.dims = Dims{dims[0], dims[1], dims[2]};
+    check_frame_voxels(info_.dims, "'" + manifest.string() + "': field \"dims\"");
     const json& dtype = *field("dtype", true);
     if (dtype != "f32") wrong("dtype", "\"f32\" (32-bit floats, little-endian)", dtype);
     const json& frames = *field("frames", true);
@@ -177,11 +178,7 @@ class RawFileReader final : public SeriesReader {
                                                     : std::string(" (one frame per file)")) +
                                 " needs " + std::to_string(frame_bytes_ * frames_per_file_);
       throw InputError("'" + file.string() + "' is " + std::to_string(size) + " bytes, but " +
-                       needs +
-                       (files_.size() == 1 && size % frame_bytes_ == 0
-                            ? " (it holds " + std::to_string(size / frame_bytes_) +
-                                  " such frames: pass --frames)"
-                            : ""));
+                       needs + size_hint(size));
     }
     for (std::size_t t = 0; t < info_.frames; ++t)
       info_.timestamps.push_back(static_cast<double>(t));
@@ -212,6 +209,27 @@ class RawFileReader final : public SeriesReader {
   Dtype dtype_;
   std::size_t frame_bytes_ = 0;
   std::optional<float> replace_nan_;
+
+  /// What a file of `size` bytes (not the size expected) could be instead, " (...)", or "".
+  std::string size_hint(std::uintmax_t size) const {
+    if (size == 0) return " (it is empty)";
+    const std::uintmax_t voxels = info_.dims.voxels();
+    std::vector<std::string> could;
+    if (files_.size() == 1 && size % frame_bytes_ == 0)
+      could.push_back("it holds " + std::to_string(size / frame_bytes_) +
+                      " such frames: pass --frames " + std::to_string(size / frame_bytes_));
+    for (const Dtype d : {Dtype::f32, Dtype::f64, Dtype::u8, Dtype::u16})
+      if (d != dtype_ && size == voxels * dtype_size(d) * frames_per_file_)
+        could.push_back("it is the size of --dtype " + to_string(d));
+    if (could.empty() && files_.size() == 1)
+      for (const Dtype d : {Dtype::f32, Dtype::f64, Dtype::u8, Dtype::u16})
+        if (d != dtype_ && size % (voxels * dtype_size(d)) == 0)
+          could.push_back("it holds " + std::to_string(size / (voxels * dtype_size(d))) +
+                          " frames of --dtype " + to_string(d));
+    std::string hint;
+    for (const std::string& c : could) hint += (hint.empty() ? " (" : "; or ") + c;
+    return hint.empty() ? hint : hint + ")";
+  }
 };
 
 /// Natural order: runs of digits compare as numbers ("p_2" before "p_10"), the rest bytewise.

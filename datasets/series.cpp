@@ -131,7 +131,9 @@ bool describes_itself(const fs::path& path) {
          is_hdf5_name(path.extension().string()) || is_netcdf_name(path.extension().string());
 }
 
-std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOptions& options) {
+namespace {
+
+std::unique_ptr<SeriesReader> open_any(const fs::path& path, const OpenOptions& options) {
   std::error_code ec;
   if (!fs::exists(path, ec) && detail::is_glob(path.string()))
     return detail::open_raw_glob(path.string(), options);
@@ -154,6 +156,20 @@ std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOption
     return detail::open_netcdf(path, options);
   }
   return detail::open_raw_file(path, options);
+}
+
+}  // namespace
+
+std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOptions& options) {
+  auto reader = open_any(path, options);
+  // A reader hands out frames of voxels: a dataset or variable of none is refused here, once.
+  const SeriesInfo& info = reader->info();
+  if (info.frames == 0) throw InputError(info.source + ": 0 time steps (nothing to read)");
+  if (info.dims.voxels() == 0)
+    throw InputError(info.source + ": frames of " + std::to_string(info.dims.x) + "x" +
+                     std::to_string(info.dims.y) + "x" + std::to_string(info.dims.z) +
+                     " voxels (none)");
+  return reader;
 }
 
 namespace detail {

@@ -62,6 +62,10 @@ TEST(Dims, ParsesAndRejects) {
   EXPECT_EQ(volreel::to_string(Dims{3, 4, 5}), "3x4x5");
   for (const char* bad : {"", "256x256", "0x1x1", "1x1x-1", "axbxc", "1x2x3x", "1x2x3 "})
     expect_error([&] { volreel::parse_dims(bad); }, {"dimensions"});
+  expect_error([] { volreel::parse_dims("16777216x1x1"); }, {"at most 1048576 voxels an axis"});
+  // A frame whose byte count would overflow is refused, not wrapped.
+  expect_error([] { volreel::parse_dims("1048576x1048576x1048576"); },
+               {"expected at most 2^48 voxels a frame", "1.15e+18"});
 }
 
 TEST(Dtype, ParsesAndRejects) {
@@ -203,6 +207,10 @@ TEST(RawSeries, MalformedManifestsAreRejected) {
   // A fractional size, a missing dtype and a mistyped field are named, never accepted.
   put(head + R"("dims":[64.5,2,2],"frames":["000000.f32"],"timestamps":[0]})");
   expect_error([&] { vd::open_series(path); }, {"\"dims\"", "integers", "found 64.5"});
+  // Sizes within the limit each whose product overflows a frame's byte count.
+  put(head + R"("dims":[16777216,16777216,16777216],"frames":["000000.f32"],"timestamps":[0]})");
+  expect_error([&] { vd::open_series(path); },
+               {"\"dims\"", "at most 2^48 voxels a frame", "16777216x16777216x16777216"});
   put(R"({"format":"volreel-raw-series","version":1,"dims":[2,2,2],"frames":["000000.f32"],"timestamps":[0]})");
   expect_error([&] { vd::open_series(path); }, {"field \"dtype\" is missing"});
   put(head + R"("dims":[2,2,2],"frames":["000000.f32"],"timestamps":[0],"variable":7})");
@@ -275,7 +283,15 @@ TEST(RawFile, AllDtypesConvert) {
     EXPECT_EQ(s->read_frame(1).data[1], 13000.0f);
     o.frames.reset();
     expect_error([&] { vd::open_series(dir / "u16.raw", o); },
-                 {"u16.raw", "is 48 bytes", "needs 24", "holds 2 such frames"});
+                 {"u16.raw", "is 48 bytes", "needs 24", "holds 2 such frames: pass --frames 2",
+                  "or it is the size of --dtype f32"});
+    // Read as f32 (the default) with --frames 2, it is 2 frames of u16: the hint says so.
+    o.dtype.reset();
+    o.frames = 2;
+    expect_error([&] { vd::open_series(dir / "u16.raw", o); },
+                 {"u16.raw", "is 48 bytes", "needs 96", "it is the size of --dtype u16"});
+    o.frames.reset();
+    o.dtype = vd::Dtype::u16;
   }
   {
     std::vector<double> v(d.voxels(), 0.125);
@@ -391,6 +407,13 @@ TEST(Hdf5, FourDimensionalDatasetAndMismatches) {
   EXPECT_EQ(s->read_frame(4).data.back(), 119.0f);
   o.dataset = "a_*";
   expect_error([&] { vd::open_series(path, o); }, {"a_2", "3x2x2 but earlier frames are 2x2x2"});
+  // A dataset of no time steps (its first dimension 0) is refused at open.
+  const fs::path empty = dir / "empty.h5";
+  const hid_t e = H5Fcreate(empty.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  h5_write(e, "pressure", {0, 2, 3, 4}, {});
+  H5Fclose(e);
+  o.dataset = "pressure";
+  expect_error([&] { vd::open_series(empty, o); }, {"empty.h5", "0 time steps"});
 }
 
 TEST(Hdf5, CorruptFilesAreRejected) {
@@ -424,9 +447,9 @@ namespace {
 /// A CF-style NetCDF file: temp(time, lev, lat, lon) packed as shorts with scale_factor,
 /// add_offset and a _FillValue; salt(time, lev, lat, lon) as floats; lev non-uniform; a 3D
 /// variable depth(lev, lat, lon).
-void write_netcdf(const fs::path& file, bool with_fill) {
+void write_netcdf(const fs::path& file, bool with_fill, int format = NC_NETCDF4) {
   int nc = 0, time = 0, lev = 0, lat = 0, lon = 0;
-  ASSERT_EQ(nc_create(file.c_str(), NC_CLOBBER | NC_NETCDF4, &nc), NC_NOERR);
+  ASSERT_EQ(nc_create(file.c_str(), NC_CLOBBER | format, &nc), NC_NOERR);
   nc_def_dim(nc, "time", NC_UNLIMITED, &time);
   nc_def_dim(nc, "lev", 3, &lev);
   nc_def_dim(nc, "lat", 4, &lat);
@@ -512,14 +535,24 @@ TEST(NetCdf, MissingValuesAndWrongChoicesAreClearErrors) {
   const auto s = datasets::open_series(file, o);
   EXPECT_NO_THROW(s->read_frame(0));
   expect_error([&] { s->read_frame(1); },
-               {"ocean.nc", "variable 'temp' frame 1", "voxel (2, 1, 0)", "--replace-nan"});
+               {"ocean.nc", "variable 'temp' frame 1", "voxel (2, 1, 0)",
+                "holds -999, the variable's _FillValue", "--replace-nan"});
   o.replace_nan = -1.0f;
   EXPECT_EQ(datasets::open_series(file, o)->read_frame(1).at(2, 1, 0), -1.0f);
   // Data never written reads as NetCDF's default fill: missing, not 9.97e36.
   o.variable = "empty";
   o.replace_nan.reset();
-  expect_error([&] { datasets::open_series(file, o)->read_frame(0); },
-               {"variable 'empty' frame 0", "not finite", "--replace-nan"});
+  expect_error(
+      [&] { datasets::open_series(file, o)->read_frame(0); },
+      {"variable 'empty' frame 0", "NetCDF's default fill value (never written)", "--replace-nan"});
+  // A classic file cut short: NetCDF reads what is missing as zeros; refused at open.
+  const fs::path classic = dir.path() / "classic.nc";
+  write_netcdf(classic, false, 0);  // CDF-1
+  o.variable = "salt";
+  EXPECT_FLOAT_EQ(datasets::open_series(classic, o)->read_frame(1).at(4, 3, 2), 35.0f + 1.19f);
+  fs::resize_file(classic, fs::file_size(classic) / 2);
+  expect_error([&] { datasets::open_series(classic, o); },
+               {"classic.nc", "bytes, but its variables' values alone take", "truncated"});
   // Not a NetCDF file.
   const fs::path bad = dir.path() / "bad.nc";
   std::ofstream(bad) << "not netcdf";

@@ -119,7 +119,8 @@ void ReaderOptions::add_to(CLI::App& command) {
                      "Raw file or pattern: volume size XxYxZ (x fastest), e.g. 256x256x128");
   command.add_option("--dtype", dtype,
                      "Raw file or pattern: f32 (default), f64, u8 or u16, little-endian");
-  command.add_option("--frames", frames, "Raw file: frames stored back to back (default 1)");
+  command.add_option("--frames", frames, "Raw file: frames stored back to back (default 1)")
+      ->check(in_range(1, 1e8));
   command.add_option("--dataset", dataset,
                      "HDF5: a 4D dataset [t][z][y][x], or one 3D dataset per step by pattern: "
                      "'Pressure_####' (# = a digit) or 'Pressure_*'");

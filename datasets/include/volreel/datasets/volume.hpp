@@ -33,6 +33,11 @@ struct Dims {
   friend constexpr bool operator==(const Dims&, const Dims&) = default;
 };
 
+/// The most voxels a frame may have (2^48: a frame's byte count never overflows).
+inline constexpr std::uint64_t max_frame_voxels = std::uint64_t{1} << 48;
+/// Throws InputError "WHAT: expected at most 2^48 voxels a frame, found ..." for a larger frame.
+void check_frame_voxels(const Dims& dims, const std::string& what);
+
 /// "256x256x128" -> Dims; throws InputError naming the text when it does not parse.
 Dims parse_dims(const std::string& text);
 std::string to_string(const Dims& dims);
