@@ -5,8 +5,11 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <numeric>
 #include <string>
+
+#include <unistd.h>
 
 #include "volreel/datasets/prng.hpp"
 #include "volreel/dictionary/ksvd.hpp"
@@ -47,6 +50,25 @@ TrainingResult train_dictionary(const CoresetHierarchy& coresets, const Training
   if (options.atom_count < 1 || options.atom_count > 65536)
     throw InputError("atom count " + std::to_string(options.atom_count) + " is outside 1..65536");
   if (options.iterations < 1) throw InputError("iterations per level must be at least 1");
+  {
+    // The pursuit keeps the K x K Gram matrix and the K correlations of every block of the
+    // largest coreset (floats): refused up front where they would not fit in memory.
+    const double k = options.atom_count;
+    const double need = 4.0 * k * (k + static_cast<double>(coresets.largest().blocks.cols()));
+    const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
+    const double memory =
+        pages > 0 && page > 0 ? static_cast<double>(pages) * static_cast<double>(page) : 0;
+    if (memory > 0 && need > memory / 2) {
+      char text[256];
+      std::snprintf(text, sizeof text,
+                    "K = %d atoms: training needs about %.1f GB (a K x K Gram matrix and K "
+                    "correlations of each of the %lld training blocks), more than half of this "
+                    "machine's %.1f GB: choose fewer atoms",
+                    options.atom_count, need / 1e9,
+                    static_cast<long long>(coresets.largest().blocks.cols()), memory / 1e9);
+      throw InputError(text);
+    }
+  }
   if (!(options.coarse_tolerance_factor >= 1))
     throw InputError("the coarse tolerance factor must be at least 1");
   const auto start = std::chrono::steady_clock::now();
