@@ -324,31 +324,36 @@ MosaicReport write_mosaic(const MosaicParams& params, const Progress& progress) 
     std::atomic<bool> failed{false};
     std::exception_ptr error;
     std::atomic<std::uint64_t> bricks{0};
-    std::size_t done = 0;
     const int threads = params.threads > 0 ? params.threads : std::max(1, omp_get_max_threads());
-    const auto count = static_cast<std::ptrdiff_t>(params.frames);
+    // A few frames a thread at a time, the progress reported between them, outside the parallel
+    // region (a progress callback may throw: an interruption).
+    const std::size_t chunk = 4 * static_cast<std::size_t>(threads);
+    for (std::size_t first = 0; first < params.frames; first += chunk) {
+      const auto begin = static_cast<std::ptrdiff_t>(first);
+      const auto end = static_cast<std::ptrdiff_t>(std::min(params.frames, first + chunk));
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
-    for (std::ptrdiff_t i = 0; i < count; ++i) {
-      if (failed.load()) continue;
-      const auto t = static_cast<std::size_t>(i);
-      try {
-        const format::FrameContents contents = frames.contents(t);
-        const std::vector<std::byte> bytes = format::serialize_frame(contents);
-        // Never write a frame a reader would refuse (its payloads are the pool's, decoded above).
-        const format::FrameView check(bytes, format::frame_file_name(t));
-        format::write_container_file(params.out, format::frame_file_name(t), bytes);
-        m.frames[t] = format::ManifestFrame{format::frame_file_name(t), bytes.size(),
-                                            format::manifest_crc(bytes)};
-        bricks += contents.payloads.size();
-#pragma omp critical(volreel_mosaic_progress)
-        progress.report(static_cast<double>(++done), static_cast<double>(params.frames));
-      } catch (...) {
+      for (std::ptrdiff_t i = begin; i < end; ++i) {
+        if (failed.load()) continue;
+        const auto t = static_cast<std::size_t>(i);
+        try {
+          const format::FrameContents contents = frames.contents(t);
+          const std::vector<std::byte> bytes = format::serialize_frame(contents);
+          // Never write a frame a reader would refuse (its payloads are the pool's, decoded
+          // above).
+          const format::FrameView check(bytes, format::frame_file_name(t));
+          format::write_container_file(params.out, format::frame_file_name(t), bytes);
+          m.frames[t] = format::ManifestFrame{format::frame_file_name(t), bytes.size(),
+                                              format::manifest_crc(bytes)};
+          bricks += contents.payloads.size();
+        } catch (...) {
 #pragma omp critical(volreel_mosaic_error)
-        if (!error) error = std::current_exception();
-        failed = true;
+          if (!error) error = std::current_exception();
+          failed = true;
+        }
       }
+      if (error) std::rethrow_exception(error);
+      progress.report(static_cast<double>(end), static_cast<double>(params.frames));
     }
-    if (error) std::rethrow_exception(error);
     m.complete = true;
     format::write_manifest(params.out, m);
     report.bricks = bricks.load();

@@ -135,4 +135,16 @@ awk '$1 == "all" { t = $8; s = $9 + $10 + $11; if (t < 1 || s < t - 0.015 || s >
 "$volreel" encode "$work/a" --codec zfp --out "$work/z.vreel" > /dev/null 2>&1
 expect_error "reads ksvd containers" "$volreel" bench codes "$work/z.vreel"
 
+# Ctrl-C in gen: it stops at the next step, removes the frames it wrote and exits 130.
+"$volreel" gen turbulence --size 32 --frames 400 --spinup 0 --interval 0.5 --out "$work/int" \
+  > /dev/null 2> "$work/int.err" &
+gen=$!
+for _ in $(seq 600); do [ -e "$work/int/000001.f32" ] && break; sleep 0.1; done
+[ -e "$work/int/000001.f32" ] || fail "gen wrote no frame in 60 s"
+kill -INT "$gen"
+status=0; wait "$gen" || status=$?
+[ "$status" = 130 ] || fail "gen interrupted: exit status $status, expected 130: $(cat "$work/int.err")"
+[ ! -e "$work/int" ] || fail "an interrupted gen left $(ls "$work/int" | wc -l) files in $work/int"
+grep -q "interrupted; what it was writing has been removed" "$work/int.err" || fail "no message: $(cat "$work/int.err")"
+
 echo "cli_end_to_end: all checks passed"

@@ -129,6 +129,12 @@ std::vector<psnr::RdPoint> keyframe_points(const datasets::SeriesReader& series,
 }
 
 void run_rd(const RdCommandOptions& o) {
+  const StopOnSignal stop;  // Ctrl-C removes OUT/keyframes.vreel
+  std::error_code ec;
+  if (std::filesystem::exists(o.out, ec) && !std::filesystem::is_directory(o.out, ec))
+    throw InputError("--out '" + o.out + "' is " +
+                     format::detail::file_kind(std::filesystem::status(o.out, ec).type()) +
+                     ": expected a folder for rd.csv, rd_equal_bps.csv and rd.png");
   format::detail::check_writable(o.out, "--out");
   if (!o.keyframe_gaps.empty()) keyframe_container(o);
   const auto series = datasets::open_series(o.series, o.reader.to_open_options());

@@ -23,6 +23,7 @@ struct TurbulenceOptions {
 };
 
 void run_turbulence(const TurbulenceOptions& o) {
+  const StopOnSignal stop;  // Ctrl-C removes what was written
   datasets::TurbulenceRun run = o.run;
   run.variable = datasets::parse_turbulence_variable(o.variable);
   const int n = run.params.size;
@@ -57,6 +58,7 @@ struct AnalyticOptions {
 };
 
 void run_analytic(const AnalyticOptions& o) {
+  const StopOnSignal stop;  // Ctrl-C removes what was written
   datasets::AnalyticParams params;
   params.field = datasets::parse_analytic_field(o.field);
   params.dims = o.dims.empty() ? Dims{o.size, o.size, o.size} : parse_dims(o.dims);
@@ -97,6 +99,7 @@ std::array<std::uint32_t, 3> parse_mosaic_size(const std::string& text) {
 }
 
 void run_mosaic(const MosaicOptions& o) {
+  const StopOnSignal stop;  // Ctrl-C removes what was written
   datasets::MosaicParams p;
   p.source = o.from;
   p.out = o.out;

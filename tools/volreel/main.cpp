@@ -8,6 +8,7 @@
 
 #include "commands.hpp"
 #include "mpi_ranks.hpp"
+#include "progress.hpp"
 
 int main(int argc, char** argv) {
   // Under mpirun, MPI for `encode`'s ranks (mpi_ranks.hpp); otherwise nothing.
@@ -35,6 +36,9 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
+  } catch (const volreel::cli::Interrupted&) {
+    std::fprintf(stderr, "volreel: interrupted; what it was writing has been removed\n");
+    return 130;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr,
                  "volreel: error: out of memory: the input or the options ask for more memory than "

@@ -1,13 +1,66 @@
 // progress.cpp: the terminal progress bar.
 #include "progress.hpp"
 
+#include <omp.h>
+#include <signal.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
+#include <thread>
 
 namespace volreel::cli {
+
+namespace {
+
+volatile std::sig_atomic_t signals_seen = 0;
+std::atomic<bool> stop_active{false};
+std::thread::id stop_thread;
+struct sigaction previous_int, previous_term;
+
+extern "C" void on_stop_signal(int signal) {
+  const bool again = signals_seen != 0;
+  signals_seen = 1;
+  if (again) {
+    // The second: at once, as without the handler.
+    sigaction(SIGINT, &previous_int, nullptr);
+    sigaction(SIGTERM, &previous_term, nullptr);
+    std::raise(signal);
+    return;
+  }
+  static const char message[] =
+      "\nvolreel: interrupted: stopping at the next step and removing what was half-written "
+      "(again to stop at once)\n";
+  [[maybe_unused]] const ssize_t n = ::write(STDERR_FILENO, message, sizeof message - 1);
+}
+
+}  // namespace
+
+StopOnSignal::StopOnSignal() {
+  signals_seen = 0;
+  stop_thread = std::this_thread::get_id();
+  struct sigaction action {};
+  action.sa_handler = on_stop_signal;
+  sigemptyset(&action.sa_mask);
+  sigaction(SIGINT, &action, &previous_int);
+  sigaction(SIGTERM, &action, &previous_term);
+  stop_active = true;
+}
+
+StopOnSignal::~StopOnSignal() {
+  stop_active = false;
+  sigaction(SIGINT, &previous_int, nullptr);
+  sigaction(SIGTERM, &previous_term, nullptr);
+}
+
+void stop_if_interrupted() {
+  if (stop_active && signals_seen > 0 && std::this_thread::get_id() == stop_thread &&
+      omp_get_level() == 0)
+    throw Interrupted();
+}
 
 std::string format_duration(double seconds) {
   if (!std::isfinite(seconds) || seconds < 0) return "?";
@@ -40,6 +93,7 @@ Progress ProgressBar::progress() {
 }
 
 void ProgressBar::update(const ProgressUpdate& update) {
+  stop_if_interrupted();
   last_ = update;
   const auto now = std::chrono::steady_clock::now();
   const double fraction = update.total > 0 ? update.done / update.total : 0;

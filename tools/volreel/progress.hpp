@@ -2,6 +2,7 @@
 #pragma once
 
 #include <chrono>
+#include <stdexcept>
 #include <string>
 
 #include "volreel/datasets/volume.hpp"
@@ -32,6 +33,28 @@ class ProgressBar {
   double last_logged_fraction_ = -1;
   void draw(bool final);
 };
+
+/// Ctrl-C (SIGINT) and SIGTERM for a command whose output an interruption would leave
+/// half-written (gen, bench rd), while one is alive: the first signal asks the work to stop at
+/// its next progress update, where Interrupted unwinds it so that what it was writing is removed
+/// as on any error; a second signal ends the process at once. The handlers before are restored
+/// when it goes.
+class StopOnSignal {
+ public:
+  StopOnSignal();
+  ~StopOnSignal();
+  StopOnSignal(const StopOnSignal&) = delete;
+  StopOnSignal& operator=(const StopOnSignal&) = delete;
+};
+
+/// What a progress update throws after a StopOnSignal's signal (main catches it: exit 130).
+struct Interrupted : std::runtime_error {
+  Interrupted() : std::runtime_error("interrupted") {}
+};
+
+/// Throws Interrupted when a StopOnSignal's signal came, on the thread that made it and outside
+/// any OpenMP parallel region (an exception must not leave one); otherwise nothing.
+void stop_if_interrupted();
 
 /// "1h02m", "3m07s", "12s".
 std::string format_duration(double seconds);
