@@ -6,7 +6,7 @@ volreel=$1
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 fail() { echo "FAIL: $*" >&2; exit 1; }
-json() { /usr/bin/python3 -c "import json,sys; d=json.load(sys.stdin); print($1)"; }
+json() { /usr/bin/python3 -c "import json,math,sys; d=json.load(sys.stdin); print($1)"; }
 
 grep -q "gen" <<< "$("$volreel" --help)" || fail "--help does not list gen"
 grep -q "compare" <<< "$("$volreel" --help)" || fail "--help does not list compare"
@@ -27,6 +27,9 @@ out=$("$volreel" compare "$work/a" "$work/a" --json 2>/dev/null)
 out=$("$volreel" compare "$work/a" "$work/b" --json 2>/dev/null)
 [ "$(echo "$out" | json 'len(d["frames"])')" = 4 ] || fail "expected 4 frames"
 echo "$out" | json '1 if 0 < d["sequence"]["psnr"] < 60 else exit(1)' > /dev/null || fail "PSNR of different series out of range"
+# Every frame is rated against the sequence's range, as 'all' and encode --psnr are.
+echo "$out" | json '1 if all(abs(f["psnr"] - 20 * math.log10(d["sequence"]["range"] / f["rmse"])) < 1e-6 for f in d["frames"]) else exit(1)' > /dev/null \
+  || fail "a frame's PSNR is not against the sequence's range: $out"
 grep -q '^all,' <<< "$("$volreel" compare "$work/a" "$work/b" --csv 2>/dev/null)" || fail "CSV lacks the sequence row"
 grep -q 'PSNR' <<< "$("$volreel" compare "$work/a" "$work/b" 2>/dev/null)" || fail "table lacks PSNR"
 

@@ -108,11 +108,15 @@ void ErrorAccumulator::add(std::span<const float> original, std::span<const floa
 ErrorStats ErrorAccumulator::result() const {
   ErrorStats stats;
   stats.count = count_;
-  stats.original_min = min_;
-  stats.original_max = max_;
   stats.mse = count_ == 0 ? 0.0 : sum_squared_ / static_cast<double>(count_);
   stats.rmse = std::sqrt(stats.mse);
   stats.max_abs_error = max_abs_;
+  return against_range(stats, min_, max_);
+}
+
+ErrorStats against_range(ErrorStats stats, double min, double max) {
+  stats.original_min = min;
+  stats.original_max = max;
   stats.psnr = psnr_from(stats.range(), stats.mse);
   // zfp's 20·log10(range / (2·RMSE)) = 10·log10(range² / MSE) − 20·log10(2), same edge cases.
   stats.psnr_zfp = std::isfinite(stats.psnr) ? 20.0 * std::log10(stats.range() / (2.0 * stats.rmse))

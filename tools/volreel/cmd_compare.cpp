@@ -131,6 +131,9 @@ void compare_series(const CompareOptions& o) {
   }
   if (frames > 1) bar.finish();
   const psnr::ErrorStats total = sequence.result();
+  // Every frame rated against the sequence's value range, as the 'all' row, encode's --psnr and
+  // the container's value range are.
+  for (Row& row : rows) row.e = psnr::against_range(row.e, total.original_min, total.original_max);
   const double mean_ssim = o.no_ssim ? std::nan("") : ssim_sum / static_cast<double>(frames);
   // After the tables: the bounds asked for, as an error naming the worst frame.
   const auto enforce_bounds = [&] {
@@ -172,7 +175,9 @@ void compare_series(const CompareOptions& o) {
           {"range", total.range()}}},
         {"bps", number(bps)},
         {"definitions",
-         {{"psnr", "10*log10(range^2/MSE), range of the first input (MTV-Player)"},
+         {{"psnr",
+           "10*log10(range^2/MSE), range: max - min of the first input over the sequence "
+           "(MTV-Player)"},
           {"psnr_zfp", "20*log10(range/(2*RMSE)) (zfp's definition)"},
           {"ssim", "3D Gaussian-window SSIM (sigma 1.5), data range of the first input"}}}};
     std::cout << j.dump(2) << '\n';
@@ -204,8 +209,8 @@ void compare_series(const CompareOptions& o) {
         "B is a volreel container: %.4f bps (8 * all its bytes / (voxels per frame * frames))\n",
         bps);
   std::printf(
-      "PSNR = 10*log10(range^2/MSE), range = max-min of A (per frame; 'all' uses the whole "
-      "sequence).\n"
+      "PSNR = 10*log10(range^2/MSE), range = max-min of A over the whole sequence (every row, "
+      "as encode's --psnr).\n"
       "PSNRzfp = 20*log10(range/(2*RMSE)), zfp's definition (6.02 dB lower). SSIM: 3D, Gaussian "
       "window sigma 1.5.\n");
   enforce_bounds();

@@ -43,6 +43,9 @@ class ErrorAccumulator {
 };
 
 ErrorStats compare(std::span<const float> original, std::span<const float> decoded);
+/// The same errors with PSNR rated against another value range [min, max] (a frame against its
+/// sequence's, as encode's --psnr and a container's value range do).
+ErrorStats against_range(ErrorStats stats, double min, double max);
 
 struct SsimOptions {
   double sigma = 1.5;
