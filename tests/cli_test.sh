@@ -138,6 +138,10 @@ awk '$1 == "all" { t = $8; s = $9 + $10 + $11; if (t < 1 || s < t - 0.015 || s >
 "$volreel" encode "$work/a" --codec zfp --out "$work/z.vreel" > /dev/null 2>&1
 expect_error "reads ksvd containers" "$volreel" bench codes "$work/z.vreel"
 
+# Volumes smaller than SSIM's window: the message says how to compare them.
+"$volreel" gen analytic --dims 4x4x4 --frames 2 --out "$work/tiny" > /dev/null 2>&1
+expect_error "fewer than the 11-voxel window: give --no-ssim" "$volreel" compare "$work/tiny" "$work/tiny"
+"$volreel" compare "$work/tiny" "$work/tiny" --no-ssim > /dev/null 2>&1 || fail "compare --no-ssim of tiny volumes"
 # Ctrl-C in gen: it stops at the next step, removes the frames it wrote and exits 130.
 "$volreel" gen turbulence --size 32 --frames 400 --spinup 0 --interval 0.5 --out "$work/int" \
   > /dev/null 2> "$work/int.err" &

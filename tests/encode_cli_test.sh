@@ -238,6 +238,7 @@ expect_error "training a dictionary reads frames whole" "$volreel" encode "$work
 expect_error "bps codes sample frames whole" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1200K --bps 1 --out "$work/x.vreel"
 expect_error "holds about 1.09 MiB of planes: give at least that --memory" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 100k --out "$work/x.vreel"
 expect_error "expected a size such as 2G" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory lots --out "$work/x.vreel"
+expect_error "--atoms: expected a number in \\[0, 65536\\]" "$volreel" encode "$work/tall" --atoms -5 --out "$work/x.vreel"
 [ ! -e "$work/x.vreel" ] || fail "a refused encode left a container behind"
 
 echo "encode_cli_end_to_end: all checks passed"

@@ -422,6 +422,27 @@ TEST(Images, CompareKnownDifference) {
   EXPECT_GT(offset.ssim, 0.99);
 }
 
+TEST(Images, AnAlphaChannelIsLeftOut) {
+  // RGBA: the colour channels as the RGB image of them; the alpha (differing here) not counted.
+  const image::Image rgb_a = random_image(40, 30, 3, 93), rgb_b = random_image(40, 30, 3, 94);
+  const auto with_alpha = [](const image::Image& rgb, std::uint8_t alpha) {
+    image::Image rgba = rgb;
+    rgba.channels = 4;
+    rgba.pixels.clear();
+    for (std::size_t i = 0; i < rgb.pixels.size(); i += 3)
+      rgba.pixels.insert(rgba.pixels.end(),
+                         {rgb.pixels[i], rgb.pixels[i + 1], rgb.pixels[i + 2], alpha});
+    return rgba;
+  };
+  const psnr::ImageComparison rgb = psnr::compare_images(rgb_a, rgb_b);
+  const psnr::ImageComparison rgba =
+      psnr::compare_images(with_alpha(rgb_a, 255), with_alpha(rgb_b, 0));
+  EXPECT_EQ(rgba.colour_channels, 3);
+  EXPECT_DOUBLE_EQ(rgba.mse, rgb.mse);
+  EXPECT_DOUBLE_EQ(rgba.psnr, rgb.psnr);
+  EXPECT_DOUBLE_EQ(rgba.ssim, rgb.ssim);
+}
+
 TEST(Images, MismatchedSizesGiveInputError) {
   const image::Image a = random_image(40, 30, 3, 91);
   EXPECT_THROW(psnr::compare_images(a, random_image(41, 30, 3, 92)), InputError);

@@ -62,6 +62,7 @@ expect_error "is a directory" train "$work/a" --out "$work/a"
 expect_error "cannot write it (--out)" train "$work/a" --out /proc/volreel-test.bin
 expect_error "iterations: Value 0 not in range" train "$work/a" --out "$work/x.bin" --iterations 0
 expect_error "convergence: expected a number >= 0, found '-1'" train "$work/a" --out "$work/x.bin" --convergence -1
+expect_error "max-atoms 100: blocks of 2^3 have 8 values, so at most 8" train "$work/a" --out "$work/x.bin" --block 2 --max-atoms 100
 ! grep -q "coreset" "$work/out.txt" || fail "an option was refused after the coreset was drawn"
 "$volreel" train "$work/a" --out "$work/taken.bin" --overwrite --atoms 64 --coreset 200k --levels 1 \
   --iterations 1 > /dev/null 2>&1 || fail "train --overwrite failed"

@@ -55,8 +55,8 @@ void compare_images(const CompareOptions& o) {
                      {"ssim", c.ssim},
                      {"mse", c.mse},
                      {"definitions",
-                      {{"psnr", "10*log10(255^2/MSE) over all channels"},
-                       {"ssim", "Gaussian-window SSIM (sigma 1.5) per channel, averaged"}}}};
+                      {{"psnr", "10*log10(255^2/MSE) over the colour channels (alpha left out)"},
+                       {"ssim", "Gaussian-window SSIM (sigma 1.5) per colour channel, averaged"}}}};
     std::cout << j.dump(2) << '\n';
   } else if (o.csv) {
     std::printf(
@@ -64,9 +64,10 @@ void compare_images(const CompareOptions& o) {
         o.a.c_str(), o.b.c_str(), a.width, a.height, a.channels, c.psnr, c.ssim, c.mse);
   } else {
     std::printf(
-        "images %dx%d, %d channel(s)\nPSNR  %.3f dB  (10*log10(255^2/MSE))\nSSIM  %.5f  (per "
+        "images %dx%d, %d channel(s)%s\nPSNR  %.3f dB  (10*log10(255^2/MSE))\nSSIM  %.5f  (per "
         "channel, averaged)\nMSE   %.4f\n",
-        a.width, a.height, a.channels, c.psnr, c.ssim, c.mse);
+        a.width, a.height, a.channels, c.colour_channels < a.channels ? " (alpha left out)" : "",
+        c.psnr, c.ssim, c.mse);
   }
   if (o.min_psnr > 0 && !(c.psnr >= o.min_psnr))
     throw InputError("the images' PSNR " + std::to_string(c.psnr) + " dB is below --min-psnr " +
@@ -123,7 +124,11 @@ void compare_series(const CompareOptions& o) {
     sequence.add(va.data, vb.data);
     Row row{psnr::compare(va.data, vb.data), std::nan("")};
     if (!o.no_ssim) {
-      row.ssim = psnr::ssim(ia.dims, va.data, vb.data);
+      try {
+        row.ssim = psnr::ssim(ia.dims, va.data, vb.data);
+      } catch (const InputError& e) {
+        throw InputError(std::string(e.what()) + ": give --no-ssim to compare without SSIM");
+      }
       ssim_sum += row.ssim;
     }
     rows.push_back(row);
@@ -241,7 +246,8 @@ void add_compare_command(CLI::App& app) {
                   "by more than this\n(the bound of volreel encode --max-error)")
       ->check(positive());
   cmd->add_option("--min-psnr", o->min_psnr,
-                  "Volumes: fail (exit status 1) if the sequence PSNR is below this (dB)")
+                  "Fail (exit status 1) if the sequence PSNR (volumes) or the images' PSNR is "
+                  "below this (dB)")
       ->check(positive());
   cmd->callback([o] {
     const bool a_png = is_png(o->a), b_png = is_png(o->b);

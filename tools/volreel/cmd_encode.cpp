@@ -237,7 +237,8 @@ void add_encode_command(CLI::App& app) {
                   "Without --dictionary: K of the dictionary trained here (default 0: try the "
                   "DCT basis alone and 128, 256,\n512 and 1024 atoms, and keep the one that gives "
                   "the smallest container, dictionary included;\na K whose dictionary alone is "
-                  "at least the smallest container estimated so far is not trained)");
+                  "at least the smallest container estimated so far is not trained)")
+      ->check(in_range(0, 65536));
   o->tolerance_opt = cmd->add_option(
       "--tolerance", o->tolerance,
       "eps, data units: an atom is kept if it lowers its block's squared error by at least\n"

@@ -108,6 +108,12 @@ void TrainingCli::add_to(CLI::App& c) {
 }
 
 dictionary::CoresetOptions TrainingCli::coreset_options() const {
+  // Checked before the frames are read (coreset_options comes first).
+  if (max_atoms > block * block * block)
+    throw InputError("--max-atoms " + std::to_string(max_atoms) + ": blocks of " +
+                     std::to_string(block) + "^3 have " + std::to_string(block * block * block) +
+                     " values, so at most " + std::to_string(block * block * block) +
+                     " atoms a block");
   dictionary::CoresetOptions o;
   o.block_size = block;
   o.coreset_voxels = parse_voxels(coreset);

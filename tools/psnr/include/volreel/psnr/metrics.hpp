@@ -62,9 +62,10 @@ double ssim(Dims dims, std::span<const float> original, std::span<const float> d
             const SsimOptions& options = {});
 
 struct ImageComparison {
-  double psnr = 0;  ///< 10·log10(255² / MSE) over all channels (8-bit data range)
-  double ssim = 0;  ///< grayscale SSIM of each channel with data range 255, averaged
+  double psnr = 0;  ///< 10·log10(255² / MSE) over the colour channels (8-bit data range)
+  double ssim = 0;  ///< grayscale SSIM of each colour channel with data range 255, averaged
   double mse = 0;
+  int colour_channels = 0;  ///< those compared: an alpha channel (of 2 or 4) is left out
 };
 /// Images must have equal width, height and channels (InputError otherwise).
 ImageComparison compare_images(const image::Image& original, const image::Image& decoded);
