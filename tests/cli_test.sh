@@ -138,6 +138,13 @@ awk '$1 == "all" { t = $8; s = $9 + $10 + $11; if (t < 1 || s < t - 0.015 || s >
 "$volreel" encode "$work/a" --codec zfp --out "$work/z.vreel" > /dev/null 2>&1
 expect_error "reads ksvd containers" "$volreel" bench codes "$work/z.vreel"
 
+# A raw file of every frame against the series it came from: the raw options are the raw side's.
+cat "$work/a"/00000[0-3].f32 > "$work/all.raw"
+out=$("$volreel" compare "$work/all.raw" "$work/a" --dims 24x20x16 --frames 4 --no-ssim --json 2>/dev/null) \
+  || fail "compare of a raw file with a series directory"
+[ "$(echo "$out" | json 'd["sequence"]["psnr"]')" = None ] || fail "raw file against its series: $out"
+"$volreel" encode "$work/a" --dictionary dct --out "$work/ab.vreel" > /dev/null 2>&1
+expect_error "is a volreel container: compare takes the original as A" "$volreel" compare "$work/ab.vreel" "$work/a"
 # Volumes smaller than SSIM's window: the message says how to compare them.
 "$volreel" gen analytic --dims 4x4x4 --frames 2 --out "$work/tiny" > /dev/null 2>&1
 expect_error "fewer than the 11-voxel window: give --no-ssim" "$volreel" compare "$work/tiny" "$work/tiny"

@@ -75,8 +75,26 @@ void compare_images(const CompareOptions& o) {
 }
 
 void compare_series(const CompareOptions& o) {
+  if (is_container(o.a))
+    throw InputError("'" + o.a +
+                     "' is a volreel container: compare takes the original as A and the container "
+                     "as B (volreel compare ORIGINAL " +
+                     o.a + ")");
   const datasets::OpenOptions open = o.reader.to_open_options();
-  const auto a = datasets::open_series(o.a, open);
+  // The raw options (--dims, --dtype, --frames) are for the side that is raw: a series that
+  // describes itself, or a container, compared with a raw file takes none of them.
+  const bool a_raw = !datasets::describes_itself(o.a);
+  const bool b_raw = !is_container(o.b) && !datasets::describes_itself(o.b);
+  const auto options_for = [&](bool raw) {
+    datasets::OpenOptions side = open;
+    if (!raw && (a_raw || b_raw)) {
+      side.dims.reset();
+      side.dtype.reset();
+      side.frames.reset();
+    }
+    return side;
+  };
+  const auto a = datasets::open_series(o.a, options_for(a_raw));
   // B may be a NAME.vreel container: its frames are decoded at full resolution (CPU decoder).
   const ContainerSeries* container = nullptr;
   std::unique_ptr<datasets::SeriesReader> b;
@@ -85,7 +103,7 @@ void compare_series(const CompareOptions& o) {
     container = c.get();
     b = std::move(c);
   } else {
-    b = datasets::open_series(o.b, open);
+    b = datasets::open_series(o.b, options_for(b_raw));
   }
   const auto& ia = a->info();
   const auto& ib = b->info();
