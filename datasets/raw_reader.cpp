@@ -162,6 +162,12 @@ class RawFileReader final : public SeriesReader {
     info_.dims = *options.dims;
     info_.frames = files_.size() * frames_per_file_;
     if (info_.frames == 0) throw InputError("--frames must be at least 1");
+    // Every byte count below fits (voxels <= 2^48 from parse_dims): f64 frames of one file.
+    if (static_cast<long double>(info_.dims.voxels()) * 8.0L *
+            static_cast<long double>(frames_per_file_) >
+        0x1p62L)
+      throw InputError(described + ": " + std::to_string(frames_per_file_) + " frames of " +
+                       to_string(info_.dims) + " voxels are more bytes than a file can hold");
     frame_bytes_ = info_.dims.voxels() * dtype_size(dtype_);
     for (const fs::path& file : files_) {
       std::error_code ec;

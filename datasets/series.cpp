@@ -164,6 +164,7 @@ std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOption
   auto reader = open_any(path, options);
   // A reader hands out frames of voxels: a dataset or variable of none is refused here, once.
   const SeriesInfo& info = reader->info();
+  check_frame_voxels(info.dims, info.source);
   if (info.frames == 0) throw InputError(info.source + ": 0 time steps (nothing to read)");
   if (info.dims.voxels() == 0)
     throw InputError(info.source + ": frames of " + std::to_string(info.dims.x) + "x" +
@@ -268,17 +269,28 @@ RawSeriesWriter::RawSeriesWriter(fs::path dir, Dims dims, std::string variable, 
   if (fs::exists(manifest, ec) && !overwrite)
     throw InputError("'" + dir_.string() +
                      "' already holds a series; choose another --out or pass --overwrite");
-  // A folder of other files (the user's data, a container, an interrupted run's frames) is never
-  // written into: its files could be replaced. Hidden names and a mount point's lost+found aside.
+  // A folder of other files (the user's data, a container) is never written into: its files
+  // could be replaced. Hidden names and a mount point's lost+found aside. Frame files alone
+  // (NNNNNN.f32, no series.json) are what an interrupted writer leaves: replaced with overwrite.
+  std::size_t interrupted_frames = 0;
   if (fs::is_directory(dir_, ec) && !fs::exists(manifest, ec)) {
     for (const auto& entry : fs::directory_iterator(dir_, ec)) {
       const std::string name = entry.path().filename().string();
-      if (!name.starts_with('.') && name != "lost+found")
+      if (name.starts_with('.') || name == "lost+found") continue;
+      const bool frame = name.size() == 10 && name.ends_with(".f32") &&
+                         std::all_of(name.begin(), name.begin() + 6,
+                                     [](unsigned char c) { return std::isdigit(c) != 0; });
+      if (!frame)
         throw InputError("'" + dir_.string() + "' holds '" + name +
                          "' but no series.json: a series is written into a new or empty folder "
-                         "(or over a series, with --overwrite); choose another --out, or remove "
-                         "the folder if an interrupted run left it");
+                         "(or over a series, with --overwrite); choose another --out");
+      interrupted_frames = std::max(interrupted_frames, std::stoul(name.substr(0, 6)) + 1);
     }
+    if (interrupted_frames > 0 && !overwrite)
+      throw InputError("'" + dir_.string() +
+                       "' holds frame files but no series.json, as an interrupted run leaves "
+                       "them: pass --overwrite to replace them, or choose another --out");
+    stale_frames_ = interrupted_frames;
   } else if (fs::exists(dir_, ec) && !fs::is_directory(dir_, ec)) {
     throw InputError("'" + dir_.string() + "' is " +
                      format::detail::file_kind(fs::status(dir_, ec).type()) +

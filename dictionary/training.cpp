@@ -9,6 +9,7 @@
 #include <numeric>
 #include <string>
 
+#include <omp.h>
 #include <unistd.h>
 
 #include "volreel/datasets/prng.hpp"
@@ -51,21 +52,24 @@ TrainingResult train_dictionary(const CoresetHierarchy& coresets, const Training
     throw InputError("atom count " + std::to_string(options.atom_count) + " is outside 1..65536");
   if (options.iterations < 1) throw InputError("iterations per level must be at least 1");
   {
-    // The pursuit keeps the K x K Gram matrix and the K correlations of every block of the
-    // largest coreset (floats): refused up front where they would not fit in memory.
+    // What training holds besides the coresets' blocks: the K x K Gram matrix, the K
+    // correlations of a batch of 256 blocks on each thread, and the residual of the largest
+    // coreset (floats). Refused up front where that alone passes half the machine's memory (the
+    // pursuit's and the update's working sets come on top).
     const double k = options.atom_count;
-    const double need = 4.0 * k * (k + static_cast<double>(coresets.largest().blocks.cols()));
+    const double n = static_cast<double>(coresets.largest().blocks.cols());
+    const double need = 4.0 * (k * k + k * 256.0 * omp_get_max_threads() +
+                               static_cast<double>(coresets.largest().blocks.rows()) * n);
     const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
     const double memory =
         pages > 0 && page > 0 ? static_cast<double>(pages) * static_cast<double>(page) : 0;
     if (memory > 0 && need > memory / 2) {
       char text[256];
       std::snprintf(text, sizeof text,
-                    "K = %d atoms: training needs about %.1f GB (a K x K Gram matrix and K "
-                    "correlations of each of the %lld training blocks), more than half of this "
-                    "machine's %.1f GB: choose fewer atoms",
-                    options.atom_count, need / 1e9,
-                    static_cast<long long>(coresets.largest().blocks.cols()), memory / 1e9);
+                    "K = %d atoms: training needs about %.1f GB besides the training blocks (a K "
+                    "x K Gram matrix, correlations and the residual of %.0f blocks), more than "
+                    "half of this machine's %.1f GB: choose fewer atoms or a smaller --coreset",
+                    options.atom_count, need / 1e9, n, memory / 1e9);
       throw InputError(text);
     }
   }

@@ -81,14 +81,17 @@ bool transient_failure(CURLcode code) {
   }
 }
 
-/// What a timeout means, from whether a connection was made: the server never answered, or it
-/// stopped sending.
+/// What a timeout means, from whether this transfer's request went out (on a new or a reused
+/// connection): the server never answered the connection (or its TLS handshake), or it stopped
+/// sending.
 std::string timeout_error(CURL* e, const Transfer& t, const HttpOptions& o) {
-  curl_off_t connected_us = 0;
-  curl_easy_getinfo(e, CURLINFO_CONNECT_TIME_T, &connected_us);
+  long request_bytes = 0;
+  curl_easy_getinfo(e, CURLINFO_REQUEST_SIZE, &request_bytes);
   char text[200];
-  if (connected_us == 0)
-    std::snprintf(text, sizeof text, "no connection within %.3g s (connect timeout)",
+  if (request_bytes == 0)
+    std::snprintf(text, sizeof text,
+                  "no connection within %.3g s (connect timeout: the server did not answer the "
+                  "connection or its TLS handshake)",
                   o.connect_timeout_s);
   else
     std::snprintf(text, sizeof text,

@@ -1,6 +1,7 @@
 // http_source.cpp: a container read over HTTP(S) (see http_source.hpp).
 #include "volreel/remote/http_source.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <stdexcept>
@@ -94,7 +95,7 @@ std::vector<std::byte> HttpSource::fetch(const std::string& relative, std::uint6
     if (r.ok()) return std::move(r.body);
     if (!r.transient || attempt >= std::max(1u, options_.attempts)) break;
     std::this_thread::sleep_for(std::chrono::duration<double>(wait));
-    wait *= 2;
+    wait = std::min(2 * wait, options_.retry_max_s);
   }
   // The message already names the URL and the range.
   const std::string prefix = url_ + "/" + relative + ": ";

@@ -121,17 +121,35 @@ TEST(RawSeries, AWriterThatDoesNotFinishLeavesNothingBehind) {
   EXPECT_FALSE(fs::exists(dir / "kept" / "000000.f32"));
   EXPECT_TRUE(fs::exists(dir / "kept" / ".hidden"));
   // A folder of other files and no series is never written into (its files could be replaced),
-  // --overwrite or not.
+  // overwrite or not.
   std::ofstream(dir / "kept" / "000000.f32") << "mine";
-  for (const bool overwrite : {false, true}) try {
+  std::ofstream(dir / "kept" / "notes.txt") << "mine";
+  for (const bool overwrite : {false, true}) {
+    try {
       vd::RawSeriesWriter w(dir / "kept", d, "p", overwrite);
       ADD_FAILURE() << "wrote into a folder of other files";
     } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("holds '000000.f32' but no series.json"),
+      EXPECT_NE(std::string(e.what()).find("holds 'notes.txt' but no series.json"),
                 std::string::npos)
           << e.what();
     }
+  }
   EXPECT_EQ(fs::file_size(dir / "kept" / "000000.f32"), 4u);
+  // Frame files alone, as an interrupted writer leaves them: replaced with overwrite only, and
+  // those past the new series removed.
+  fs::remove(dir / "kept" / "notes.txt");
+  std::ofstream(dir / "kept" / "000004.f32") << "mine";
+  expect_error([&] { vd::RawSeriesWriter w(dir / "kept", d, "p"); },
+               {"holds frame files but no series.json", "--overwrite"});
+  {
+    vd::RawSeriesWriter w(dir / "kept", d, "p", true);
+    w.write_frame(0, 0.0, ramp(d, 0));
+    w.write_frame(1, 1.0, ramp(d, 1));
+    w.finish();
+  }
+  EXPECT_EQ(fs::file_size(dir / "kept" / "000000.f32"), d.voxels() * 4);
+  EXPECT_FALSE(fs::exists(dir / "kept" / "000004.f32"));
+  EXPECT_TRUE(fs::exists(dir / "kept" / "series.json"));
   // --overwrite: the old series' frames go, so that a shorter one leaves none of them.
   const fs::path old = write_series(dir, d, 3);
   {

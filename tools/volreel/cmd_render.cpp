@@ -108,7 +108,10 @@ void run_render(const RenderCommandOptions& o) {
   if (!o.video.empty()) {
     if (fs::is_directory(o.video))
       throw InputError("--video " + o.video + ": is a directory; give the video file's name");
-    format::detail::check_writable(o.video, "--video");
+    // ffmpeg writes the video in place: into a FIFO or a device too.
+    const fs::file_type type = fs::status(o.video).type();
+    if (type != fs::file_type::fifo && type != fs::file_type::character)
+      format::detail::check_writable(o.video, "--video");
   }
   loop::FrameLoopOptions options;
   options.width = tour.width();

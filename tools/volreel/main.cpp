@@ -37,7 +37,8 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   } catch (const volreel::cli::Interrupted&) {
-    std::fprintf(stderr, "volreel: interrupted; what it was writing has been removed\n");
+    std::fprintf(stderr, "volreel: interrupted; nothing half-written was left\n");
+    volreel::cli::end_by_stop_signal();
     return 130;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr,

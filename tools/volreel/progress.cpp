@@ -16,15 +16,15 @@ namespace volreel::cli {
 
 namespace {
 
-volatile std::sig_atomic_t signals_seen = 0;
+std::atomic<int> stop_signal{0};  // the first signal received, 0 before
+static_assert(std::atomic<int>::is_always_lock_free, "read and written in a signal handler");
 std::atomic<bool> stop_active{false};
 std::thread::id stop_thread;
 struct sigaction previous_int, previous_term;
 
 extern "C" void on_stop_signal(int signal) {
-  const bool again = signals_seen != 0;
-  signals_seen = 1;
-  if (again) {
+  int none = 0;
+  if (!stop_signal.compare_exchange_strong(none, signal)) {
     // The second: at once, as without the handler.
     sigaction(SIGINT, &previous_int, nullptr);
     sigaction(SIGTERM, &previous_term, nullptr);
@@ -32,21 +32,28 @@ extern "C" void on_stop_signal(int signal) {
     return;
   }
   static const char message[] =
-      "\nvolreel: interrupted: stopping at the next step and removing what was half-written "
-      "(again to stop at once)\n";
+      "\nvolreel: interrupted: stopping at the next step (again to stop at once)\n";
   [[maybe_unused]] const ssize_t n = ::write(STDERR_FILENO, message, sizeof message - 1);
+}
+
+/// Handles `signal` unless it is ignored (a background job's SIGINT stays ignored).
+void handle(int signal, struct sigaction& previous) {
+  sigaction(signal, nullptr, &previous);
+  if (previous.sa_handler == SIG_IGN) return;
+  struct sigaction action {};
+  action.sa_handler = on_stop_signal;
+  action.sa_flags = SA_RESTART;
+  sigemptyset(&action.sa_mask);
+  sigaction(signal, &action, nullptr);
 }
 
 }  // namespace
 
 StopOnSignal::StopOnSignal() {
-  signals_seen = 0;
+  stop_signal = 0;
   stop_thread = std::this_thread::get_id();
-  struct sigaction action {};
-  action.sa_handler = on_stop_signal;
-  sigemptyset(&action.sa_mask);
-  sigaction(SIGINT, &action, &previous_int);
-  sigaction(SIGTERM, &action, &previous_term);
+  handle(SIGINT, previous_int);
+  handle(SIGTERM, previous_term);
   stop_active = true;
 }
 
@@ -56,8 +63,18 @@ StopOnSignal::~StopOnSignal() {
   sigaction(SIGTERM, &previous_term, nullptr);
 }
 
+void end_by_stop_signal() {
+  const int signal = stop_signal.load();
+  if (signal == 0) return;
+  struct sigaction action {};
+  action.sa_handler = SIG_DFL;
+  sigemptyset(&action.sa_mask);
+  sigaction(signal, &action, nullptr);
+  std::raise(signal);
+}
+
 void stop_if_interrupted() {
-  if (stop_active && signals_seen > 0 && std::this_thread::get_id() == stop_thread &&
+  if (stop_active && stop_signal.load() != 0 && std::this_thread::get_id() == stop_thread &&
       omp_get_level() == 0)
     throw Interrupted();
 }

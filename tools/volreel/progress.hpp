@@ -37,8 +37,8 @@ class ProgressBar {
 /// Ctrl-C (SIGINT) and SIGTERM for a command whose output an interruption would leave
 /// half-written (gen, bench rd), while one is alive: the first signal asks the work to stop at
 /// its next progress update, where Interrupted unwinds it so that what it was writing is removed
-/// as on any error; a second signal ends the process at once. The handlers before are restored
-/// when it goes.
+/// as on any error; a second signal ends the process at once. A signal ignored when it is made
+/// (a background job's SIGINT) stays ignored; the handlers before are restored when it goes.
 class StopOnSignal {
  public:
   StopOnSignal();
@@ -51,6 +51,10 @@ class StopOnSignal {
 struct Interrupted : std::runtime_error {
   Interrupted() : std::runtime_error("interrupted") {}
 };
+
+/// After an Interrupted has unwound the work: ends the process by the signal that stopped it (a
+/// shell running volreel in a loop then stops too); returns if none came.
+void end_by_stop_signal();
 
 /// Throws Interrupted when a StopOnSignal's signal came, on the thread that made it and outside
 /// any OpenMP parallel region (an exception must not leave one); otherwise nothing.

@@ -53,10 +53,11 @@ inline void add_remote_options(CLI::App& cmd, RemoteCli& o) {
                  "(the server accepted it, then stopped sending)")
       ->check(in_range(1, 3600))
       ->capture_default_str();
-  cmd.add_option("--tries", o.tries,
-                 "For a URL: how many times a read of the manifest, dictionary or a frame index "
-                 "is tried when it fails in a way that may pass (timeout, refused or reset "
-                 "connection, HTTP 5xx), waiting 0.25 s, then twice as long each time")
+  cmd.add_option(
+         "--tries", o.tries,
+         "For a URL: how many times a read of the manifest, dictionary or a frame index "
+         "is tried when it fails in a way that may pass (timeout, refused or reset "
+         "connection, HTTP 5xx), waiting 0.25 s, then twice as long each time (at most 8 s)")
       ->check(in_range(1, 20))
       ->capture_default_str();
 }

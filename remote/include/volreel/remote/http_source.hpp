@@ -40,6 +40,7 @@ struct RemoteOptions {
   HttpOptions http;
   unsigned attempts = 4;          ///< tries of a container read (manifest, dictionary, index)
   double retry_initial_s = 0.25;  ///< back-off before the second try, doubling after
+  double retry_max_s = 8;         ///< up to this
   std::uint64_t coalesce_bytes = std::uint64_t{1} << 20;  ///< the largest range of several bricks
   std::filesystem::path cache_dir;                        ///< empty: no cache
   std::uint64_t cache_bytes = std::uint64_t{2} << 30;
