@@ -12,6 +12,9 @@
 
 namespace volreel::datasets::detail {
 
+/// "(x, y, z)" of value i of a slab of planes from z_begin on.
+std::string voxel_name(std::size_t i, Dims dims, std::size_t z_begin);
+
 /// Throw InputError naming `what` and the first non-finite voxel (values: planes from z_begin
 /// on), or replace every non-finite value when `replacement` is set.
 void check_finite(std::span<float> values, Dims dims, const std::string& what,

@@ -71,17 +71,14 @@ class NetcdfReader final : public SeriesReader {
       float& v = out[i];
       if ((fill_ && v == *fill_) || (missing_ && v == *missing_)) {
         if (!replace_nan_) {
-          const std::size_t nx = static_cast<std::size_t>(info_.dims.x);
-          const std::size_t ny = static_cast<std::size_t>(info_.dims.y);
           char value[32];
           std::snprintf(value, sizeof value, "%.9g", static_cast<double>(v));
           const char* what = fill_ && v == *fill_
                                  ? (fill_default_ ? "NetCDF's default fill value (never written)"
                                                   : "the variable's _FillValue")
                                  : "the variable's missing_value";
-          fail("variable '" + variable_ + "' frame " + std::to_string(t) + ": voxel (" +
-               std::to_string(i % nx) + ", " + std::to_string(i / nx % ny) + ", " +
-               std::to_string(z_begin + i / (nx * ny)) + ") holds " + value + ", " + what +
+          fail("variable '" + variable_ + "' frame " + std::to_string(t) + ": voxel " +
+               voxel_name(i, info_.dims, z_begin) + " holds " + value + ", " + what +
                ": a missing value; use --replace-nan V to substitute a value");
         }
         v = *replace_nan_;

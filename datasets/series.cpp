@@ -167,9 +167,7 @@ std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOption
   check_frame_voxels(info.dims, info.source);
   if (info.frames == 0) throw InputError(info.source + ": 0 time steps (nothing to read)");
   if (info.dims.voxels() == 0)
-    throw InputError(info.source + ": frames of " + std::to_string(info.dims.x) + "x" +
-                     std::to_string(info.dims.y) + "x" + std::to_string(info.dims.z) +
-                     " voxels (none)");
+    throw InputError(info.source + ": frames of " + to_string(info.dims) + " voxels (none)");
   return reader;
 }
 
@@ -188,6 +186,13 @@ void check_slab(const SeriesInfo& info, std::size_t t, std::size_t z_begin, std:
     throw InputError("read_slab: output has the wrong size");
 }
 
+std::string voxel_name(std::size_t i, Dims dims, std::size_t z_begin) {
+  const auto x = static_cast<std::int64_t>(i) % dims.x;
+  const auto y = static_cast<std::int64_t>(i) / dims.x % dims.y;
+  const auto z = i / dims.plane() + z_begin;
+  return "(" + std::to_string(x) + ", " + std::to_string(y) + ", " + std::to_string(z) + ")";
+}
+
 void check_finite(std::span<float> values, Dims dims, const std::string& what,
                   std::optional<float> replacement, std::size_t z_begin) {
   for (std::size_t i = 0; i < values.size(); ++i) {
@@ -196,12 +201,9 @@ void check_finite(std::span<float> values, Dims dims, const std::string& what,
       values[i] = *replacement;
       continue;
     }
-    const auto x = static_cast<std::int64_t>(i) % dims.x;
-    const auto y = static_cast<std::int64_t>(i) / dims.x % dims.y;
-    const auto z = i / dims.plane() + z_begin;
-    throw InputError(what + ": value " + std::to_string(values[i]) + " at voxel (" +
-                     std::to_string(x) + ", " + std::to_string(y) + ", " + std::to_string(z) +
-                     ") is not finite; use --replace-nan V to substitute a value");
+    throw InputError(what + ": value " + std::to_string(values[i]) + " at voxel " +
+                     voxel_name(i, dims, z_begin) +
+                     " is not finite; use --replace-nan V to substitute a value");
   }
 }
 

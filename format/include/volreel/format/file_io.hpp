@@ -45,8 +45,9 @@ std::string host_name();
 /// Checks, before long work, that `target` (a file or directory still to be written) can be
 /// created: its name is not empty, and a directory can be made in the nearest directory on its
 /// path that exists (`target` itself when it is one; the directory of a file `target` replaces),
-/// which is tried and removed again. Throws
-/// FormatError naming `target`, `option` (e.g. "--out") and why not.
+/// which is tried and removed again; and `target` is not a device or FIFO (writers put a new file
+/// in place by renaming it, which would replace one). Throws FormatError naming `target`,
+/// `option` (e.g. "--out") and why not.
 void check_writable(const std::filesystem::path& target, const std::string& option);
 
 /// "2G", "500M", "64k", "1T" or a number of bytes -> bytes (powers of 1024), for options such as
