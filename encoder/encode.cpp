@@ -202,6 +202,16 @@ std::uint32_t default_keyframe_gap(const Dims& dims, format::BrickShape shape, b
   return gap;
 }
 
+MissedTargets missed_targets(const EncodeSummary& s, double psnr_target, double bps_target) {
+  const CodingSettings& c = s.coding;
+  MissedTargets m;
+  m.psnr = psnr_target > 0 && c.codec == format::Codec::ksvd && c.fixed_sparsity == 0 &&
+           s.delivered.frames > 0 && s.delivered.worst_frame_psnr < psnr_target;
+  m.bps = bps_target > 0 && std::abs(s.bps - bps_target) > bps_tolerance * bps_target;
+  m.max_error = c.max_error > 0 && s.blocks_over_bound > 0;
+  return m;
+}
+
 EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
                      EncodeRequest request, const EncodeEvents& events) {
   const auto say = [&](const std::string& line) {

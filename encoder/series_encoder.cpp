@@ -19,6 +19,7 @@
 #include "detail.hpp"
 #include "volreel/dictionary/dictionary.hpp"
 #include "volreel/encoder/keyframes.hpp"
+#include "volreel/encoder/tolerance.hpp"
 #include "volreel/format/container.hpp"
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/decoder.hpp"
@@ -490,6 +491,7 @@ std::vector<double> additive_figures(const EncodeSummary& s) {
                            s.delivered.squared_error,
                            s.delivered.voxels,
                            static_cast<double>(s.delivered.frames_coded_again),
+                           static_cast<double>(s.delivered.frames_at_finest),
                            static_cast<double>(s.bricks_stored),
                            static_cast<double>(s.nodes_interpolated),
                            s.process_seconds};
@@ -527,6 +529,7 @@ void set_additive_figures(EncodeSummary& s, std::span<const double> v) {
   s.delivered.squared_error = v[i++];
   s.delivered.voxels = v[i++];
   s.delivered.frames_coded_again = count();
+  s.delivered.frames_at_finest = count();
   s.bricks_stored = count();
   s.nodes_interpolated = count();
   s.process_seconds = v[i++];
@@ -598,6 +601,11 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   const bool holds_psnr =
       job.psnr_target > 0 && coding.codec == format::Codec::ksvd && coding.fixed_sparsity == 0;
   const double range = coding.value_max - coding.value_min;
+  // The smallest ε a try for psnr_target takes, against the job's.
+  const double smallest_scale =
+      holds_psnr ? smallest_relative_tolerance *
+                       tolerance_range(coding.value_min, coding.value_max) / coding.tolerance
+                 : 0.0;
   const format::AtomTable atoms = encoder->atoms();  // the dictionary's; a later ε keeps them
 
   // 1. An existing container: resume (same settings) or refuse unless told to overwrite. Rank 0
@@ -723,15 +731,25 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     };
     use_scale(scale);
     code(t, step);
+    double reached = -std::numeric_limits<double>::infinity();  // the PSNR of the try before
     for (int retry = 0; holds_psnr && retry < max_tolerance_retries; ++retry) {
       const double squared =
           job.piecewise
               ? step.coded.stats.finest_squared_error
               : finest_level_error(encoder->write(step.coded), atoms, step.volume, t).first;
-      if (frame_psnr(squared) >= job.psnr_target) break;
+      const double psnr = frame_psnr(squared);
+      if (psnr >= job.psnr_target) break;
+      // The payload's finest steps reached (a smaller ε gained nothing), or ε at its floor: the
+      // target is out of reach (reported with what the frame reached).
+      if (psnr < reached + min_retry_gain_db || scale <= smallest_scale) {
+        if (!done[t] && writer) ++summary.delivered.frames_at_finest;
+        break;
+      }
+      reached = psnr;
       if (retry == 0 && !done[t] && writer) ++summary.delivered.frames_coded_again;
       // 0.1 dB more than the shortfall, so that the next try lands above the target.
-      scale *= std::pow(10.0, -(job.psnr_target - frame_psnr(squared) + 0.1) / 20);
+      scale =
+          std::max(scale * std::pow(10.0, -(job.psnr_target - psnr + 0.1) / 20), smallest_scale);
       use_scale(scale);
       code(t, step);
     }

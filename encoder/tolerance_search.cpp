@@ -151,7 +151,7 @@ ToleranceChoice choose_tolerance(const datasets::SeriesReader& series,
     choice.tolerance = *request.tolerance;
   } else if (request.psnr) {
     choice.source = ToleranceSource::psnr;
-    choice.tolerance = dictionary::tolerance_for_psnr(*request.psnr, range);
+    choice.tolerance = tolerance_for_psnr_target(*request.psnr, range);
   } else if (request.bps) {
     choice.source = ToleranceSource::bps;
     choice.rate_search = search_tolerance(
@@ -173,10 +173,15 @@ double tolerance_range(double value_min, double value_max) {
   return range > 0 ? range : std::max(1.0, std::abs(value_max));
 }
 
+double tolerance_for_psnr_target(double psnr_db, double value_range) {
+  return std::max(dictionary::tolerance_for_psnr(psnr_db, value_range),
+                  smallest_relative_tolerance * value_range);
+}
+
 double tolerance_to_train_at(const ToleranceRequest& request, double value_range) {
   if (request.tolerance) return *request.tolerance;
-  return dictionary::tolerance_for_psnr(
-      request.psnr ? *request.psnr : dictionary::default_encoding_psnr, value_range);
+  return tolerance_for_psnr_target(request.psnr ? *request.psnr : dictionary::default_encoding_psnr,
+                                   value_range);
 }
 
 }  // namespace volreel::encoder

@@ -12,6 +12,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <memory>
@@ -362,6 +363,33 @@ py::dict encode(const py::object& frames, const fs::path& out, std::optional<dou
   d["worst_frame_psnr"] = s.delivered.worst_frame_psnr;
   d["max_abs_error"] = s.delivered.max_abs_error;
   d["tolerance"] = s.coding.tolerance;
+  // A target the container misses: a RuntimeWarning (the container is complete and valid), and
+  // "targets_met" false, as `volreel encode` warns and exits with status 3.
+  const encoder::MissedTargets missed =
+      encoder::missed_targets(s, psnr.value_or(0), bps.value_or(0));
+  d["targets_met"] = !missed.any();
+  if (missed.any()) {
+    char text[320];
+    if (missed.psnr)
+      std::snprintf(text, sizeof text,
+                    "volreel.encode: target PSNR %.2f dB missed: frame %zu reached %.2f dB (the "
+                    "container %s is complete and valid)",
+                    *psnr, s.delivered.worst_frame, s.delivered.worst_frame_psnr,
+                    out.string().c_str());
+    else if (missed.bps)
+      std::snprintf(text, sizeof text,
+                    "volreel.encode: target %.4f bps missed: the container %s is %.4f bps (%+.1f "
+                    "%%), complete and valid",
+                    *bps, out.string().c_str(), s.bps, 100.0 * (s.bps / *bps - 1));
+    else
+      std::snprintf(text, sizeof text,
+                    "volreel.encode: %zu blocks miss max_error %.4g even at the finest steps a "
+                    "payload holds (the container %s is complete and valid; codec=\"zfp\" with "
+                    "zfp_accuracy=%.4g holds it)",
+                    s.blocks_over_bound, s.coding.max_error, out.string().c_str(),
+                    s.coding.max_error);
+    if (PyErr_WarnEx(PyExc_RuntimeWarning, text, 1) != 0) throw py::error_already_set();
+  }
   return d;
 }
 
@@ -519,7 +547,9 @@ PYBIND11_MODULE(_volreel, m) {
         py::arg("overwrite") = false, py::arg("resume") = false, py::arg("times") = py::none(),
         py::arg("variable") = "", py::arg("brick_size") = "auto",
         "Encodes frames into the container `out` as `volreel encode` does (brick_size: \"auto\" "
-        "or stored voxels per brick axis, a multiple of 6 in 12..66, as --brick-size)");
+        "or stored voxels per brick axis, a multiple of 6 in 12..66, as --brick-size); returns a "
+        "dict of what it wrote and delivered. A psnr, bps or max_error target the container "
+        "misses: a RuntimeWarning saying by how much, and \"targets_met\" false");
   m.def("train", &train, py::arg("frames"), py::arg("out"), py::kw_only(), py::arg("atoms") = 256,
         py::arg("psnr") = py::none(), py::arg("tolerance") = py::none(),
         py::arg("times") = py::none(), py::arg("overwrite") = false,

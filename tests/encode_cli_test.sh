@@ -171,10 +171,23 @@ echo "$out" | json '1 if d["sequence"]["max_abs_error"] <= 1e-3 else exit(1)' > 
 bps=$("$volreel" info "$work/r.vreel" --json | json 'd["bps"]')
 /usr/bin/python3 -c "import sys; b=$bps; sys.exit(0 if abs(b-2)/2 <= 0.05 else 1)" || fail "--bps 2 gave $bps bps"
 # A size the codec cannot reach (more bits than the payload's finest coding spends) is reported as
-# such, with what limits it.
-"$volreel" encode "$work/s" --dictionary dct --out "$work/r40.vreel" --bps 40 > /dev/null 2> "$work/r40.txt"
+# such, with what limits it, and exit status 3: the container is written and valid.
+status=0
+"$volreel" encode "$work/s" --dictionary dct --out "$work/r40.vreel" --bps 40 > /dev/null 2> "$work/r40.txt" || status=$?
+[ "$status" = 3 ] || fail "--bps 40: exit status $status, expected 3"
 grep -q "target 40.0000 bps missed.*as finely as the format allows (coefficients to 2^-16 .*no tolerance makes it larger" "$work/r40.txt" ||
   fail "--bps 40: $(cat "$work/r40.txt")"
+grep -q "container $work/r40.vreel is complete and valid, but misses its target.*exit status 3" "$work/r40.txt" ||
+  fail "--bps 40 exit message: $(cat "$work/r40.txt")"
+"$volreel" verify "$work/r40.vreel" > /dev/null 2>&1 || fail "verify of the container that missed --bps 40"
+# So is a PSNR past what the payload's finest steps hold: the tries stop once a smaller eps gains
+# nothing (the eps stays far above float underflow).
+status=0
+"$volreel" encode "$work/s" --dictionary dct --out "$work/p400.vreel" --psnr 400 > "$work/p400.out" 2> "$work/p400.txt" || status=$?
+[ "$status" = 3 ] || fail "--psnr 400: exit status $status, expected 3: $(cat "$work/p400.txt")"
+grep -q "target PSNR 400.00 dB missed: frame [0-9]* reached [0-9.]* dB, and in [0-9]* frames a smaller eps gained nothing more" "$work/p400.txt" ||
+  fail "--psnr 400: $(cat "$work/p400.txt")"
+grep -q -E "smallest eps [0-9.]+e-[01][0-9]," "$work/p400.out" || fail "--psnr 400 eps: $(grep "smallest eps" "$work/p400.out")"
 
 # gen mosaic: a larger valid container repeating a.vreel's bricks; never over an existing one.
 "$volreel" gen mosaic --from "$work/a.vreel" --size 70x50x40 --frames 6 --max-keyframe-gap 2 --out "$work/mosaic.vreel" \
@@ -211,8 +224,9 @@ grep -q "pointwise bound: every coded block within" "$work/max.txt" || fail "--m
   fail "--max-error 2e-3: $("$volreel" compare "$work/s" "$work/m.vreel" --no-ssim --max-error 2e-3 2>&1 | tail -1)"
 expect_error "exceeds --max-error" "$volreel" compare "$work/s" "$work/m.vreel" --no-ssim --max-error 1e-7
 # A bound finer than the payload's finest steps: reported with what limits it and what holds it.
-"$volreel" encode "$work/s" --dictionary dct --out "$work/m7.vreel" --max-error 1e-7 > /dev/null 2> "$work/max7.txt" ||
-  fail "encode --max-error 1e-7: $(cat "$work/max7.txt")"
+status=0
+"$volreel" encode "$work/s" --dictionary dct --out "$work/m7.vreel" --max-error 1e-7 > /dev/null 2> "$work/max7.txt" || status=$?
+[ "$status" = 3 ] || fail "encode --max-error 1e-7: exit status $status, expected 3: $(cat "$work/max7.txt")"
 grep -q "miss the pointwise bound 1e-07 even at the finest steps a payload holds (coefficients to 2^-16.*--codec zfp --zfp-accuracy 1e-07 holds it" "$work/max7.txt" ||
   fail "--max-error 1e-7 report: $(cat "$work/max7.txt")"
 # --psnr P: the delivered PSNR reaches P (compare checks it).

@@ -204,6 +204,18 @@ def test_encode_from_an_array_is_the_command_line_encode(series, tmp_path):
     assert volreel.open(tmp_path / "py.vreel").info()["codec"] == "zfp"
 
 
+def test_a_missed_target_warns_and_says_so(series, tmp_path):
+    _, _, frames = series
+    met = volreel.encode(frames[:2], tmp_path / "met.vreel", dictionary="dct", psnr=40)
+    assert met["targets_met"] is True
+    # Past what the payload's finest steps hold: a warning with what was reached, and the
+    # container is kept (complete and valid).
+    with pytest.warns(RuntimeWarning, match=r"target PSNR 400\.00 dB missed: frame \d+ reached"):
+        missed = volreel.encode(frames[:2], tmp_path / "missed.vreel", dictionary="dct", psnr=400)
+    assert missed["targets_met"] is False and missed["psnr"] < 400
+    assert volreel.open(tmp_path / "missed.vreel").frames == 2
+
+
 def test_train_then_encode_with_the_dictionary(series, tmp_path):
     _, _, frames = series
     result = volreel.train(frames, tmp_path / "d.bin", atoms=32, psnr=45)

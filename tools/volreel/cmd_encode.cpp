@@ -196,14 +196,20 @@ void run_encode(const EncodeOptions& o) {
                            atoms);
   };
   const encoder::EncodeSummary s = encoder::encode(*series, o.out, r, events);
-  print_encode_summary(s, s.coding, o.out, r.tolerance.psnr.value_or(0),
-                       r.tolerance.bps.value_or(0));
+  const bool missed = print_encode_summary(s, s.coding, o.out, r.tolerance.psnr.value_or(0),
+                                           r.tolerance.bps.value_or(0));
   const std::uint64_t rss = peak_resident_bytes();
   const std::vector<std::uint64_t> each =
       ranks ? ranks->gather({&rss, 1}) : std::vector<std::uint64_t>{rss};
   std::string line = ranks ? "peak resident memory per rank:" : "peak resident memory:";
   for (const std::uint64_t b : each) line += " " + std::to_string((b + (1u << 19)) >> 20) + " MiB";
   std::printf("%s\n", line.c_str());
+  std::fflush(stdout);
+  if (missed)
+    throw TargetMissed("the container " + o.out +
+                       " is complete and valid, but misses its target (the warning above): exit "
+                       "status " +
+                       std::to_string(target_missed_status));
 }
 
 }  // namespace
@@ -221,7 +227,9 @@ void add_encode_command(CLI::App& app) {
       "quantized, or each brick coded by zfp (--codec zfp).\nUnder mpirun -n N the ranks share "
       "the frames and write the same container as one process;\nframes coded piecewise "
       "(--memory) are shared brick by brick when there are fewer keyframe stretches\nthan "
-      "ranks.");
+      "ranks.\nExit status: 0; 1 on an error (nothing half-written is left); 3 when the container "
+      "is written and\nvalid but misses --psnr, --bps (by more than 5 %) or --max-error (a "
+      "warning says by how much).");
   cmd->add_option(
          "SERIES", o->series,
          "Raw series directory, HDF5 file, raw file or quoted pattern of raw files (see below)")

@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <stdexcept>
 #include <string>
 
 #include <CLI/CLI.hpp>
@@ -10,6 +11,15 @@
 #include "volreel/datasets/series.hpp"
 
 namespace volreel::cli {
+
+/// The exit status of a command that wrote complete, valid output but missed a target asked of it
+/// (encode's --psnr, --bps, --max-error), so that a script tells it from a failure (1).
+inline constexpr int target_missed_status = 3;
+/// Thrown by such a command after its output is written; main prints it and exits with
+/// target_missed_status.
+struct TargetMissed : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
 
 void add_gen_command(CLI::App& app);
 void add_compare_command(CLI::App& app);

@@ -121,10 +121,11 @@ void print_tolerance_choice(const encoder::ToleranceChoice& e, const encoder::Co
         dictionary::psnr_for_tolerance(c.tolerance, range), atoms);
 }
 
-void print_encode_summary(const encoder::EncodeSummary& s, const encoder::CodingSettings& c,
+bool print_encode_summary(const encoder::EncodeSummary& s, const encoder::CodingSettings& c,
                           const std::string& out, double psnr_target, double bps_target) {
+  const encoder::MissedTargets missed = encoder::missed_targets(s, psnr_target, bps_target);
   if (c.max_error > 0) {
-    if (s.blocks_over_bound == 0)
+    if (!missed.max_error)
       std::printf("pointwise bound: every coded block within %.4g of the original\n", c.max_error);
     else
       std::fprintf(stderr,
@@ -162,7 +163,7 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
       s.team_size > 1
           ? (", each frame coded by " + std::to_string(s.team_size) + " processes together").c_str()
           : "");
-  if (bps_target > 0 && std::abs(s.bps - bps_target) > bps_tolerance * bps_target) {
+  if (missed.bps) {
     const bool under = s.bps < bps_target;
     std::fflush(stdout);
     // The search's smallest eps asks for more precision than the payload's fields hold (a
@@ -193,7 +194,7 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
         100.0 * static_cast<double>(s.bricks_stored) / static_cast<double>(node_steps),
         s.nodes_interpolated);
   const encoder::DeliveredQuality& q = s.delivered;
-  if (q.frames == 0) return;
+  if (q.frames == 0) return missed.any();
   const double range = c.value_max - c.value_min;
   std::printf(
       "delivered (finest level of the %zu time steps encoded, decoded as the player draws them and "
@@ -201,17 +202,32 @@ void print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
       "the sequence, worst frame %zu at %.2f dB, largest error %.4g\n",
       q.frames, q.sequence_psnr(range), q.worst_frame, q.worst_frame_psnr, q.max_abs_error);
   if (psnr_target > 0 && c.codec == format::Codec::ksvd && c.fixed_sparsity == 0) {
-    if (q.worst_frame_psnr >= psnr_target)
-      std::printf("target PSNR %.2f dB met by every frame", psnr_target);
-    else
-      std::fprintf(stderr,
-                   "warning: target PSNR %.2f dB missed: frame %zu reached %.2f dB after %d "
-                   "smaller tolerances",
-                   psnr_target, q.worst_frame, q.worst_frame_psnr, encoder::max_tolerance_retries);
     std::printf(
-        "; %zu frames coded again at a smaller eps (smallest eps %.4g, %.3f of the first)\n",
+        "%zu frames coded again at a smaller eps for the PSNR target (smallest eps %.4g, "
+        "%.3g of the first)\n",
         q.frames_coded_again, c.tolerance * q.tolerance_scale, q.tolerance_scale);
+    if (!missed.psnr) {
+      std::printf("target PSNR %.2f dB met by every frame\n", psnr_target);
+    } else {
+      std::fflush(stdout);
+      if (q.frames_at_finest > 0)
+        std::fprintf(stderr,
+                     "warning: target PSNR %.2f dB missed: frame %zu reached %.2f dB, and in %zu "
+                     "frames a smaller eps gained nothing more: every brick is coded as finely as "
+                     "the format allows (coefficients to 2^-%u of the brick's largest, block means "
+                     "to %u bits); for a higher PSNR, --codec zfp with a small --zfp-accuracy\n",
+                     psnr_target, q.worst_frame, q.worst_frame_psnr, q.frames_at_finest,
+                     VR_MAX_COEF_BITS, VR_MEAN_BITS);
+      else
+        std::fprintf(stderr,
+                     "warning: target PSNR %.2f dB missed: frame %zu reached %.2f dB after %d "
+                     "smaller tolerances: encode again with --tolerance %.4g or smaller\n",
+                     psnr_target, q.worst_frame, q.worst_frame_psnr, encoder::max_tolerance_retries,
+                     c.tolerance * q.tolerance_scale *
+                         std::pow(10.0, -(psnr_target - q.worst_frame_psnr) / 20));
+    }
   }
+  return missed.any();
 }
 
 }  // namespace volreel::cli

@@ -20,12 +20,11 @@ void print_tolerance_choice(const encoder::ToleranceChoice& choice,
 /// The encode's times, quantization loss, byte breakdown, histograms and totals (written to
 /// `out`).
 /// psnr_target: the --psnr of the encode (0: none), reported as met or missed; bps_target: the
-/// --bps (0: none), a warning when the container lands more than bps_tolerance from it.
-void print_encode_summary(const encoder::EncodeSummary& summary,
+/// --bps (0: none), a warning when the container lands more than encoder::bps_tolerance from it;
+/// a --max-error (coding.max_error) that blocks miss, a warning. Returns whether a target was
+/// missed (encoder::missed_targets; a warning printed for each).
+bool print_encode_summary(const encoder::EncodeSummary& summary,
                           const encoder::CodingSettings& coding, const std::string& out,
                           double psnr_target = 0, double bps_target = 0);
-
-/// How far from --bps a container may land before the encode warns: 5 %.
-inline constexpr double bps_tolerance = 0.05;
 
 }  // namespace volreel::cli

@@ -40,6 +40,9 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "volreel: interrupted; nothing half-written was left\n");
     volreel::cli::end_by_stop_signal();
     return 130;
+  } catch (const volreel::cli::TargetMissed& e) {
+    std::fprintf(stderr, "volreel: %s\n", e.what());
+    return volreel::cli::target_missed_status;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr,
                  "volreel: error: out of memory: the input or the options ask for more memory than "

@@ -81,6 +81,20 @@ double whole_frame_bytes(const Dims& dims);
 /// EncodeRequest::memory when 0: half the machine's physical memory.
 std::uint64_t default_encode_memory();
 
+/// How far a container may land from a bps target (EncodeRequest's tolerance.bps): 5 %.
+inline constexpr double bps_tolerance = 0.05;
+
+/// The targets an encode asked for that its container misses (none: met, or not asked for).
+struct MissedTargets {
+  bool psnr = false;       ///< a frame's finest level below the --psnr target
+  bool bps = false;        ///< more than bps_tolerance from the --bps target
+  bool max_error = false;  ///< coded blocks past the --max-error bound (coding.max_error)
+  bool any() const { return psnr || bps || max_error; }
+};
+/// What `summary` (of an encode asked for `psnr_target` and `bps_target` dB and bps, 0: none)
+/// misses.
+MissedTargets missed_targets(const EncodeSummary& summary, double psnr_target, double bps_target);
+
 /// Encodes `series` into the container `out` as asked. With several ranks, only rank 0 should be
 /// given events (one progress bar, one report). Temporary dictionary files are removed
 /// whatever happens. Throws InputError/FormatError with what was wrong.

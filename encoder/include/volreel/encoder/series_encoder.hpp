@@ -63,6 +63,9 @@ struct EncodeJob {
 
 /// How often encode_series codes a frame again for EncodeJob::psnr_target.
 inline constexpr int max_tolerance_retries = 6;
+/// A try for EncodeJob::psnr_target that raises the frame's PSNR by less than this (dB) is the
+/// last: a smaller ε no longer buys precision (the payload's finest steps are reached).
+inline constexpr double min_retry_gain_db = 0.01;
 
 /// The largest magnitude of an input value: a decoded value is a block mean plus up to 255
 /// coefficients (each up to about 15 times the value range), and must stay below
@@ -79,7 +82,11 @@ struct DeliveredQuality {
   double worst_frame_psnr = std::numeric_limits<double>::infinity();
   std::size_t worst_frame = 0;
   std::size_t frames_coded_again = 0;  ///< frames coded more than once for psnr_target
-  double tolerance_scale = 1;          ///< the smallest ε a frame needed, against the job's
+  /// Frames whose tries for psnr_target stopped because a smaller ε raised their PSNR by less
+  /// than min_retry_gain_db (the payload's finest steps reached) or ε reached its floor
+  /// (smallest_relative_tolerance of the range).
+  std::size_t frames_at_finest = 0;
+  double tolerance_scale = 1;  ///< the smallest ε a frame needed, against the job's
   /// PSNR of all measured voxels together, 10·log10(range²/MSE) (∞ when lossless).
   double sequence_psnr(double range) const;
 };

@@ -70,13 +70,22 @@ ToleranceChoice choose_tolerance(const datasets::SeriesReader& series,
                                  std::size_t frames, const ToleranceRequest& request,
                                  const Progress& progress = {});
 
-/// ε at which to train a dictionary for the encode when none is given, over `value_range` (max −
-/// min of the frames): request.tolerance, else request.psnr, else (also for a bps target, which
-/// needs a dictionary to search with) dictionary::default_encoding_psnr.
 /// The range that PSNR targets and the tolerance search scale ε by: max − min, or for a constant
 /// series (max = min, every brick a constant) max(1, |value|), so that ε stays positive.
 double tolerance_range(double value_min, double value_max);
 
+/// The smallest ε a PSNR target leads to, against the range (2^-40, about 241 dB): finer than a
+/// float32 value holds, and far below the finest steps a payload stores (a brick's coefficients
+/// to 2^-16 of its largest), so a smaller ε would change nothing but underflow the arithmetic.
+inline constexpr double smallest_relative_tolerance = 0x1p-40;
+
+/// ε for a PSNR target of `psnr_db` over `value_range`: dictionary::tolerance_for_psnr, at least
+/// smallest_relative_tolerance of the range.
+double tolerance_for_psnr_target(double psnr_db, double value_range);
+
+/// ε at which to train a dictionary for the encode when none is given, over `value_range` (max −
+/// min of the frames): request.tolerance, else request.psnr, else (also for a bps target, which
+/// needs a dictionary to search with) dictionary::default_encoding_psnr.
 double tolerance_to_train_at(const ToleranceRequest& request, double value_range);
 
 }  // namespace volreel::encoder
