@@ -9,8 +9,9 @@
 # stay inside the window without overlapping at each size (and, where the validation layer is
 # installed, that it reports no error). Then: the CPU reference renderer in the same window draws
 # keyframe 0 like the Vulkan ray caster (PSNR > 30 dB); a copy with a truncated frame file plays to
-# the end with the problem reported; without a display the command says how to get one. Real
-# mouse input and minimizing are tested by play_input_test.sh. Frame-time control: while playing
+# the end with the problem reported, and a settle at that frame ends when nothing more can load;
+# without a display the command says how to get one. Real mouse input and minimizing are tested
+# by play_input_test.sh. Frame-time control: while playing
 # the volume image is smaller, paused and settled it is at full size.
 # Exits 77 (skipped) without xvfb-run or without a Vulkan device that can present to a window.
 # Usage: play_window_test.sh PATH/TO/volreel
@@ -183,6 +184,13 @@ timeout 60 xvfb-run -a -s "-screen 0 1280x800x24" "$volreel" play "$work/b.vreel
 grep -q "000002.vrf" "$work/err_b.txt" || fail "the truncated frame was not reported: $(cat "$work/err_b.txt")"
 tail -1 "$work/out_b.txt" | grep -q "keyframe 3.00" || fail "playback stopped early: $(tail -1 "$work/out_b.txt")"
 tail -1 "$work/out_b.txt" | grep -Eq "errors [1-9]" || fail "no error counted: $(tail -1 "$work/out_b.txt")"
+# A settle at the damaged keyframe ends once nothing more can be loaded, not at its timeout.
+timeout 60 xvfb-run -a -s "-screen 0 1280x800x24" "$volreel" play "$work/b.vreel" --size 200x150 \
+  --fixed-frame-time 0.05 --script-inline "0 seek 2; 0 settle 40; 0 quit" ${VOLREEL_PLAY_TEST_ARGS:-} \
+  > "$work/out_c.txt" 2> "$work/err_c.txt" || fail "settle at a damaged frame exited with $?: $(cat "$work/err_c.txt")"
+grep -q "settle ended after .* nothing more to load (read errors: [1-9]" "$work/err_c.txt" ||
+  fail "settle at a damaged frame: $(cat "$work/err_c.txt")"
+grep -q "settle timed out" "$work/err_c.txt" && fail "settle at a damaged frame timed out: $(cat "$work/err_c.txt")"
 
 # No display: a clear message and exit code 3.
 set +e

@@ -123,6 +123,7 @@ class Player {
   double settle_timeout_ = 0, settle_waited_ = 0;
   std::uint64_t settle_from_ = 0;  ///< first frame whose statistics count
   int idle_frames_ = 0;
+  int quiet_frames_ = 0;  ///< settling: frames in a row with nothing in flight, waiting or uploaded
 
   // HUD figures.
   stream::StreamStats stats_;

@@ -17,14 +17,26 @@ void Player::run_script(double dt) {
   if (settling_) {
     // stats_ are those of the previous frame: only frames after the one that started settling
     // count, and two complete frames in a row end it. Prefetching of other keyframes may go on.
+    // So do two quiet frames in a row (nothing in flight, waiting or uploaded: the scheduler had
+    // a chance to request more and did not), as loop::wait_for_view: a view whose bricks cannot
+    // be read (a damaged frame) never completes, and waiting for it would only run out the time.
     settle_waited_ += dt;
-    const bool idle =
-        frame_number_ > settle_from_ && stats_.fraction_at_target >= 1.0 && stats_.holes == 0;
+    const bool counted = frame_number_ > settle_from_;
+    const bool idle = counted && stats_.fraction_at_target >= 1.0 && stats_.holes == 0;
+    const bool quiet = counted && stats_.requests_in_flight == 0 && stats_.arrivals_waiting == 0 &&
+                       stats_.uploads == 0;
     idle_frames_ = idle ? idle_frames_ + 1 : 0;
-    if (idle_frames_ >= 2 || settle_waited_ >= settle_timeout_) {
-      if (idle_frames_ < 2)
+    quiet_frames_ = quiet ? quiet_frames_ + 1 : 0;
+    if (idle_frames_ >= 2 || quiet_frames_ >= 2 || settle_waited_ >= settle_timeout_) {
+      if (idle_frames_ < 2 && quiet_frames_ >= 2) {
+        std::fprintf(stderr,
+                     "volreel play: script: settle ended after %.1f s with %.0f %% of the view at "
+                     "its target level of detail and nothing more to load (read errors: %zu)\n",
+                     settle_waited_, 100 * stats_.fraction_at_target, stats_.errors);
+      } else if (idle_frames_ < 2) {
         std::fprintf(stderr, "volreel play: script: settle timed out after %.1f s\n",
                      settle_waited_);
+      }
       settling_ = false;
     }
     return;  // the script clock stops while settling
@@ -82,7 +94,7 @@ void Player::run_script(double dt) {
         settle_timeout_ = a.x;
         settle_waited_ = 0;
         settle_from_ = frame_number_;
-        idle_frames_ = 0;
+        idle_frames_ = quiet_frames_ = 0;
         break;
       case Kind::resize:
         glfwSetWindowSize(window_.get(), static_cast<int>(a.x), static_cast<int>(a.y));
