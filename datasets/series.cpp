@@ -91,20 +91,35 @@ void SeriesReader::read_slab(std::size_t t, std::size_t z_begin, std::size_t z_e
 
 namespace {
 
-/// A series that describes itself takes none of the options that describe raw files: they would
-/// be ignored, and a user who gives them expects them to apply.
-void refuse_raw_options(const fs::path& path, const OpenOptions& options, const char* kind) {
-  std::vector<std::string> given;
-  if (options.dims) given.emplace_back("--dims");
-  if (options.dtype) given.emplace_back("--dtype");
-  if (options.frames) given.emplace_back("--frames");
-  if (given.empty()) return;
-  std::string names;
-  for (std::size_t i = 0; i < given.size(); ++i)
-    names += (i == 0 ? "" : i + 1 == given.size() ? " and " : ", ") + given[i];
-  throw InputError("'" + path.string() + "' is " + kind +
-                   " that gives its own dimensions, type and frames: leave out " + names +
-                   " (options for raw files)");
+/// An input takes none of the options of the other kinds: they would be ignored, and a user who
+/// gives them expects them to apply. `kind_name`: what the input is ("an HDF5 file").
+void refuse_other_options(const fs::path& path, const OpenOptions& options, InputKind kind,
+                          const char* kind_name) {
+  const bool raw = kind == InputKind::raw;
+  std::vector<std::string> raw_given, given;
+  if (!raw && options.dims) raw_given.emplace_back("--dims");
+  if (!raw && options.dtype) raw_given.emplace_back("--dtype");
+  if (!raw && options.frames) raw_given.emplace_back("--frames");
+  const auto names = [](const std::vector<std::string>& list) {
+    std::string text;
+    for (std::size_t i = 0; i < list.size(); ++i)
+      text += (i == 0 ? "" : i + 1 == list.size() ? " and " : ", ") + list[i];
+    return text;
+  };
+  if (!raw_given.empty())
+    throw InputError("'" + path.string() + "' is " + kind_name +
+                     " that gives its own dimensions, type and frames: leave out " +
+                     names(raw_given) + " (options for raw files)");
+  if (kind != InputKind::hdf5 && !options.dataset.empty()) given.emplace_back("--dataset (HDF5)");
+  if (kind != InputKind::netcdf && !options.variable.empty())
+    given.emplace_back("--variable (NetCDF)");
+  if (kind != InputKind::netcdf && !options.time_dimension.empty())
+    given.emplace_back("--time-dim (NetCDF)");
+  if (!given.empty())
+    throw InputError("'" + path.string() + "' is " + kind_name + ": leave out " + names(given) +
+                     ", options for " +
+                     (given.size() == 1 ? "another kind of input" : "other kinds of input") +
+                     " (see Series in the command's --help)");
 }
 
 }  // namespace
@@ -125,21 +140,41 @@ bool is_netcdf_name(std::string ext) {
 
 }  // namespace
 
-bool describes_itself(const fs::path& path) {
+InputKind input_kind(const fs::path& path) {
   std::error_code ec;
-  return fs::is_directory(path, ec) || path.filename() == "series.json" ||
-         is_hdf5_name(path.extension().string()) || is_netcdf_name(path.extension().string());
+  if (fs::is_directory(path, ec) || path.filename() == "series.json") return InputKind::raw_series;
+  if (is_hdf5_name(path.extension().string())) return InputKind::hdf5;
+  if (is_netcdf_name(path.extension().string())) return InputKind::netcdf;
+  return InputKind::raw;
+}
+
+bool describes_itself(const fs::path& path) {
+  return input_kind(path) != InputKind::raw;
+}
+
+OpenOptions options_for(const fs::path& path, const OpenOptions& options, const fs::path* other) {
+  OpenOptions side = options;
+  const InputKind kind = input_kind(path);
+  const auto other_takes = [&](InputKind k) {
+    return other != nullptr && kind != k && input_kind(*other) == k;
+  };
+  if (other_takes(InputKind::raw)) side.dims.reset(), side.dtype.reset(), side.frames.reset();
+  if (other_takes(InputKind::hdf5)) side.dataset.clear();
+  if (other_takes(InputKind::netcdf)) side.variable.clear(), side.time_dimension.clear();
+  return side;
 }
 
 namespace {
 
 std::unique_ptr<SeriesReader> open_any(const fs::path& path, const OpenOptions& options) {
   std::error_code ec;
-  if (!fs::exists(path, ec) && detail::is_glob(path.string()))
+  if (!fs::exists(path, ec) && detail::is_glob(path.string())) {
+    refuse_other_options(path, options, InputKind::raw, "a pattern of raw files");
     return detail::open_raw_glob(path.string(), options);
+  }
   if (!fs::exists(path, ec)) throw InputError("'" + path.string() + "' does not exist");
   if (fs::is_directory(path, ec) || path.filename() == "series.json") {
-    refuse_raw_options(path, options, "a series directory (series.json)");
+    refuse_other_options(path, options, InputKind::raw_series, "a series directory (series.json)");
     return detail::open_raw_series(fs::is_directory(path, ec) ? path : path.parent_path(), options);
   }
   // Never hand a FIFO or a device to a reader that would block on it or read it forever.
@@ -148,13 +183,14 @@ std::unique_ptr<SeriesReader> open_any(const fs::path& path, const OpenOptions& 
     throw InputError("'" + path.string() + "' is " + format::detail::file_kind(type) +
                      ", expected a regular file (raw or HDF5) or a series directory");
   if (is_hdf5_name(path.extension().string())) {
-    refuse_raw_options(path, options, "an HDF5 file");
+    refuse_other_options(path, options, InputKind::hdf5, "an HDF5 file");
     return detail::open_hdf5(path, options);
   }
   if (is_netcdf_name(path.extension().string())) {
-    refuse_raw_options(path, options, "a NetCDF file");
+    refuse_other_options(path, options, InputKind::netcdf, "a NetCDF file");
     return detail::open_netcdf(path, options);
   }
+  refuse_other_options(path, options, InputKind::raw, "a raw file");
   return detail::open_raw_file(path, options);
 }
 

@@ -52,6 +52,9 @@ done
 expect_error "does not exist" "$volreel" compare "$work/a" "$work/nowhere"
 expect_error "--dims" "$volreel" compare "$work/frame.raw" "$work/frame.raw"
 expect_error "is 30720 bytes.*needs 61440" "$volreel" compare "$work/frame.raw" "$work/frame.raw" --dims 24x20x32
+# An option of another kind of input is refused, not ignored.
+expect_error "is a series directory (series.json): leave out --variable (NetCDF)" "$volreel" compare "$work/a" "$work/a" --variable p
+expect_error "is a raw file: leave out --dataset (HDF5)" "$volreel" compare "$work/frame.raw" "$work/frame.raw" --dims 24x20x16 --dataset p
 "$volreel" gen analytic --dims 24x20x8 --frames 4 --out "$work/c" 2>/dev/null
 expect_error "24x20x16.*24x20x8" "$volreel" compare "$work/a" "$work/c"
 rm "$work/b/000003.f32"

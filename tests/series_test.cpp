@@ -194,6 +194,38 @@ TEST(RawSeries, OptionsOfRawFilesAreRefusedForASeriesThatDescribesItself) {
   EXPECT_EQ(vd::open_series(path)->info().dims, d);
 }
 
+TEST(RawSeries, OptionsOfOtherInputKindsAreRefusedAndSharedByKind) {
+  TempDir dir("series-other-options");
+  const Dims d{2, 2, 2};
+  const fs::path path = write_series(dir, d, 1);
+  // HDF5's and NetCDF's options for a series directory or a raw file: refused, not ignored.
+  vd::OpenOptions o;
+  o.variable = "p";
+  expect_error([&] { vd::open_series(path, o); },
+               {"is a series directory", "leave out --variable (NetCDF), options for another"});
+  o.dataset = "Pressure";
+  o.time_dimension = "t";
+  vd::OpenOptions raw = o;
+  raw.dims = d;
+  expect_error([&] { vd::open_series(path / "000000.f32", raw); },
+               {"is a raw file", "--dataset (HDF5), --variable (NetCDF) and --time-dim (NetCDF)"});
+  // Two inputs of different kinds (compare A B): each keeps what its kind takes, and an option
+  // neither takes stays with both (for open_series to refuse).
+  EXPECT_EQ(vd::input_kind("x.nc"), vd::InputKind::netcdf);
+  EXPECT_EQ(vd::input_kind("x.hdf5"), vd::InputKind::hdf5);
+  EXPECT_EQ(vd::input_kind(path), vd::InputKind::raw_series);
+  EXPECT_EQ(vd::input_kind(path / "000000.f32"), vd::InputKind::raw);
+  const fs::path nc = "x.nc", raw_file = path / "000000.f32";
+  const vd::OpenOptions for_series = vd::options_for(path, raw, &nc);
+  EXPECT_TRUE(for_series.variable.empty() && for_series.time_dimension.empty());
+  EXPECT_EQ(for_series.dataset, "Pressure");  // neither is HDF5
+  EXPECT_TRUE(for_series.dims.has_value());   // neither is raw
+  const vd::OpenOptions for_netcdf = vd::options_for(nc, raw, &raw_file);
+  EXPECT_FALSE(for_netcdf.dims.has_value());
+  EXPECT_EQ(for_netcdf.variable, "p");
+  EXPECT_EQ(vd::options_for(nc, raw, nullptr).dims, d);  // the other is not a series
+}
+
 TEST(RawSeries, MissingAndShortFramesAreNamed) {
   TempDir dir("series-bad");
   const Dims d{4, 4, 4};

@@ -2,6 +2,7 @@
 // PNG images, as a table, JSON or CSV.
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 
@@ -81,20 +82,13 @@ void compare_series(const CompareOptions& o) {
                      "as B (volreel compare ORIGINAL " +
                      o.a + ")");
   const datasets::OpenOptions open = o.reader.to_open_options();
-  // The raw options (--dims, --dtype, --frames) are for the side that is raw: a series that
-  // describes itself, or a container, compared with a raw file takes none of them.
-  const bool a_raw = !datasets::describes_itself(o.a);
-  const bool b_raw = !is_container(o.b) && !datasets::describes_itself(o.b);
-  const auto options_for = [&](bool raw) {
-    datasets::OpenOptions side = open;
-    if (!raw && (a_raw || b_raw)) {
-      side.dims.reset();
-      side.dtype.reset();
-      side.frames.reset();
-    }
-    return side;
-  };
-  const auto a = datasets::open_series(o.a, options_for(a_raw));
+  // Each input kind's options (raw: --dims, --dtype, --frames; HDF5: --dataset; NetCDF:
+  // --variable, --time-dim) are for the side of that kind: a container, or a series of another
+  // kind, compared with it takes none of them.
+  const std::filesystem::path a_path = o.a, b_path = o.b;
+  const bool b_series = !is_container(o.b);
+  const auto a =
+      datasets::open_series(o.a, datasets::options_for(a_path, open, b_series ? &b_path : nullptr));
   // B may be a NAME.vreel container: its frames are decoded at full resolution (CPU decoder).
   const ContainerSeries* container = nullptr;
   std::unique_ptr<datasets::SeriesReader> b;
@@ -103,7 +97,7 @@ void compare_series(const CompareOptions& o) {
     container = c.get();
     b = std::move(c);
   } else {
-    b = datasets::open_series(o.b, options_for(b_raw));
+    b = datasets::open_series(o.b, datasets::options_for(b_path, open, &a_path));
   }
   const auto& ia = a->info();
   const auto& ib = b->info();

@@ -103,6 +103,7 @@ const char* const series_inputs_help = R"(Series (SERIES):
   FILE.nc [--variable V]  NetCDF: a variable (time, z, y, x) or (z, y, x), x the last; spacing
                           and times from CF coordinate variables, scale_factor/add_offset
                           applied, _FillValue/missing_value refused unless --replace-nan
+  (an option of another kind of input is refused, not ignored)
 
 series.json (every key required unless marked optional):
   "format": "volreel-raw-series"    "version": 1

@@ -77,10 +77,23 @@ class SeriesReader {
   SeriesInfo info_;
 };
 
+/// The kinds of input open_series reads, each with its OpenOptions: dims, dtype and frames for
+/// raw files (one, or a pattern), dataset for HDF5, variable and time_dimension for NetCDF; a
+/// series directory takes none.
+enum class InputKind { raw, raw_series, hdf5, netcdf };
+/// The kind of input `path` names, by what it is or its extension (raw: anything else).
+InputKind input_kind(const std::filesystem::path& path);
+
 /// Whether `path` names a series that gives its own dimensions, type and frames (a series
 /// directory or its series.json, an HDF5 or NetCDF file): open_series refuses OpenOptions' dims,
 /// dtype and frames for it.
 bool describes_itself(const std::filesystem::path& path);
+
+/// `options` without those that `path`'s kind does not take but `other`'s does, so that one set
+/// of options can describe two inputs of different kinds (compare A B); those neither takes stay,
+/// for open_series to refuse. other: null when the other input is not a series (a container).
+OpenOptions options_for(const std::filesystem::path& path, const OpenOptions& options,
+                        const std::filesystem::path* other);
 
 /// Open a series: a raw series directory (or its series.json), an HDF5 file (.h5, .hdf5, .hdf),
 /// a NetCDF file (.nc, .nc4, .cdf),
