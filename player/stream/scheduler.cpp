@@ -322,8 +322,9 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
     blend_.settings = settings_.lod_blend;
     // The blending state also holds the restricted drawing's scratch (build_svo uses it alone
     // when nothing blends).
+    built_at_ = loader_.now_seconds();
     SvoArrays svo = build_svo(index_, view_, resident_, playhead, settings_.selection, &svo_stats,
-                              &stored_times_, hidden_, &blend_, loader_.now_seconds());
+                              &stored_times_, hidden_, &blend_, *built_at_);
     out.stats.blended_leaves = svo_stats.blended_leaves;
     out.stats.restricted_nodes = svo_stats.restricted_nodes;
     for (const std::uint32_t slot : svo_stats.used_slots) atlas_.mark_used(slot, gpu_frame_number);
@@ -359,6 +360,16 @@ FrameUpdate StreamScheduler::update(const player::OrbitCamera& camera, double pl
   out.new_errors = std::move(frame_errors_);
   frame_errors_.clear();
   return out;
+}
+
+SvoArrays StreamScheduler::previous_svo(double playhead) const {
+  if (!built_at_) return {};
+  const double last = index_.frame_count() > 0 ? static_cast<double>(index_.frame_count() - 1) : 0;
+  // A copy of the blending state, at the last build's time: the regions this build draws are
+  // those of the last one, so no fade starts and every weight is as it was drawn.
+  LodBlendState blend = blend_;
+  return build_svo(index_, view_, resident_, std::clamp(playhead, 0.0, last), settings_.selection,
+                   nullptr, nullptr, hidden_, &blend, *built_at_);
 }
 
 // ---- Ray-guided feedback (Thiele, Matthes, Froehlich, §3) -------------------------------------

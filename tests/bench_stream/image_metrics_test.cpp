@@ -211,6 +211,16 @@ TEST(StreamBenchPopping, ZeroWhenTheImageMovesWithTheTruthAndTheRmsOfAJump) {
                std::invalid_argument);
 }
 
+TEST(StreamBenchPopping, ImageChangeIsTheRmsOfTheDifference) {
+  const image::Image a = bar(2);
+  image::Image b = a;
+  EXPECT_DOUBLE_EQ(stream_bench::image_change_rms(a, b), 0.0);
+  set(b, 0, 0, 80, 80, 80);  // one pixel's 3 of 48 values change by 30 (from 50)
+  EXPECT_DOUBLE_EQ(stream_bench::image_change_rms(a, b), std::sqrt(3.0 * 900 / 48));
+  EXPECT_TRUE(std::isnan(stream_bench::image_change_rms(a, rgb(4, 4, 1))));
+  EXPECT_TRUE(std::isnan(stream_bench::image_change_rms(image::Image{}, image::Image{})));
+}
+
 /// A frame at `time` with `uploads` bricks uploaded, its popping and seam error.
 FrameRecord frame(double time, std::size_t uploads, double popping, double seam) {
   FrameRecord f;
@@ -287,6 +297,22 @@ TEST(StreamBenchPopping, RunAveragesJsonAndCsv) {
   stream_bench::summarize(fading, {});
   EXPECT_DOUBLE_EQ(fading.mean_popping, std::sqrt((16.0 + 1 + 64) / 3));
   EXPECT_EQ(fading.popping_frames, 3u);
+
+  // Working-set popping: over the frames popping_all counts (a frame of no change counts 0; the
+  // first frame, cuts and frames after holes left out), NaN ones (not measured) not at all.
+  EXPECT_TRUE(std::isnan(r.mean_working_set_popping));
+  EXPECT_EQ(r.working_set_popping_frames, 0u);
+  RunResult measured = r;
+  const double ws[] = {9, 2, 0, 6, 4, nan};
+  for (std::size_t i = 0; i < 6; ++i) measured.frames[i].working_set_popping = ws[i];
+  measured.frames[2].stats.holes = 1;  // frame 3 follows a frame with holes
+  stream_bench::summarize(measured, {});
+  EXPECT_DOUBLE_EQ(measured.mean_working_set_popping, std::sqrt((4.0 + 0 + 16) / 3));
+  EXPECT_DOUBLE_EQ(measured.max_working_set_popping, 4);
+  EXPECT_EQ(measured.working_set_popping_frames, 3u);
+  const nlohmann::json jm = stream_bench::summary_json(measured);
+  EXPECT_DOUBLE_EQ(jm["max_working_set_popping"].get<double>(), 4);
+  EXPECT_EQ(jm["working_set_popping_frames"], 3u);
 
   // Frame 1's predecessor had holes (nothing drawn there yet): frame 1 shows an appearance and is
   // left out too.

@@ -51,6 +51,14 @@ for r in rows:
 assert math.isnan(float(rows[0]["popping"])), f"first frame's popping {rows[0]['popping']}"
 for r in rows[1:]:
     assert 0 <= float(r["popping"]) <= 255, f"popping {r['popping']}"
+# Working-set popping (simulated clock): none for the first frame, then an RMS in 8-bit units,
+# above 0 where arrivals changed the picture.
+assert math.isnan(float(rows[0]["working_set_popping"])), "first frame's working-set popping"
+for r in rows[1:]:
+    w = float(r["working_set_popping"])
+    assert 0 <= w <= 255, f"working-set popping {w}"
+assert any(float(r["working_set_popping"]) > 0 for r in rows[1:] if int(r["uploads"]) > 0), \
+    "no arrival changed the image"
 for r in rows:
     seam = float(r["seam"])
     assert math.isnan(seam) or 0 <= seam <= 255, f"seam {seam}"
@@ -68,6 +76,7 @@ for r in d["runs"]:
     assert len(r["seeks"]) == 5
     assert r["mean_popping_all"] is not None and r["mean_popping_all"] >= 0
     assert (r["mean_popping"] is None) == (r["popping_frames"] == 0) == (r["max_popping"] is None)
+    assert r["working_set_popping_frames"] > 0 and r["max_working_set_popping"] >= r["mean_working_set_popping"] >= 0
     assert (r["mean_seam"] is None) == (r["seam_frames"] == 0)
 assert "target_higher_psnr" in d and "target_no_holes" in d
 PY

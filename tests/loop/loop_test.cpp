@@ -26,6 +26,16 @@ void make_container(const test::TempDir& dir) {
   test::write_blobs_container(dir.path(), {40, 36, 30}, 4);
 }
 
+/// Frames of 48×40 over a slow link: the container's bricks arrive over several frames.
+loop::FrameLoopOptions slow_link_options() {
+  loop::FrameLoopOptions o;
+  o.width = 48;
+  o.height = 40;
+  o.scheduler.loader.bandwidth_bytes_per_s = 2e6;
+  o.scheduler.loader.latency_s = 0.01;
+  return o;
+}
+
 TEST(CpuFrameLoop, ConvergesAndKeepsTheLastImage) {
   test::TempDir dir("loop-cpu");
   make_container(dir);
@@ -66,15 +76,43 @@ TEST(CpuFrameLoop, ConvergesAndKeepsTheLastImage) {
   EXPECT_EQ(frames.options().height, 32);
 }
 
+TEST(CpuFrameLoop, ThePreviousWorkingSetDrawsTheLastFrameAgainAndChangesNothing) {
+  test::TempDir dir("loop-previous");
+  make_container(dir);
+  const format::Container container(dir / "test.vreel");
+  loop::FrameLoopOptions o = slow_link_options();
+  o.scheduler.lod_blend.fade_s = 0.05;  // bricks fade in
+  const auto camera = player::OrbitCamera::framing({40, 36, 30}, 48, 40);
+  const auto tf = cpu_render::TransferFunction::preset("cool-warm", -1, 1);
+  loop::CpuFrameLoop frames(container, o);
+  EXPECT_EQ(frames.render_previous_working_set(camera, 1.5, tf).width, 0);  // no frame yet
+  std::size_t changed = 0, unchanged = 0;
+  for (int i = 0; i < 400; ++i) {
+    const cpu_render::RgbaImage before = frames.render_previous_working_set(camera, 1.5, tf);
+    const loop::FrameReport report = frames.frame(camera, 1.5, tf);
+    const cpu_render::RgbaImage& drawn = frames.last_image(report.ticket);
+    // Right after a frame, its own working set at its own view and time draws it again, to the
+    // bit, whatever arrived or was fading in it.
+    ASSERT_EQ(frames.render_previous_working_set(camera, 1.5, tf).rgba, drawn.rgba)
+        << "frame " << i;
+    if (i > 0 && report.stats.uploads == 0 && report.stats.blended_leaves == 0) {
+      EXPECT_EQ(before.rgba, drawn.rgba) << "frame " << i << ": nothing arrived or faded";
+      ++unchanged;
+    }
+    if (i > 0 && before.rgba != drawn.rgba) ++changed;
+    if (report.stats.fraction_at_target == 1.0 && report.stats.requests_in_flight == 0 &&
+        report.stats.uploads == 0 && report.stats.blended_leaves == 0 && unchanged > 2)
+      break;
+  }
+  EXPECT_GT(changed, 0u);  // arrivals changed the picture
+  EXPECT_GT(unchanged, 0u);
+}
+
 TEST(CpuFrameLoop, WaitingForAViewDrawsItCompleteOnTheFirstFrame) {
   test::TempDir dir("loop-wait");
   make_container(dir);
   const format::Container container(dir / "test.vreel");
-  loop::FrameLoopOptions o;
-  o.width = 48;
-  o.height = 40;
-  o.scheduler.loader.bandwidth_bytes_per_s = 2e6;  // a slow link: bricks take a while
-  o.scheduler.loader.latency_s = 0.01;
+  const loop::FrameLoopOptions o = slow_link_options();
   const auto camera = player::OrbitCamera::framing({40, 36, 30}, 48, 40);
   const auto tf = cpu_render::TransferFunction::preset("cool-warm", -1, 1);
   {

@@ -20,7 +20,8 @@ void write_csv(const std::filesystem::path& path, const RunResult& r,
                const std::vector<std::pair<double, double>>& seeks) {
   std::ofstream csv(path);
   if (!csv) throw InputError("cannot write " + path.string());
-  csv << "frame,time_s,playhead,seek,psnr_db,ssim,popping,seam,fraction_at_target,fraction_current,"
+  csv << "frame,time_s,playhead,seek,psnr_db,ssim,popping,working_set_popping,seam,"
+         "fraction_at_target,fraction_current,"
          "at_target_nodes,current_nodes,target_nodes,holes,root_resident,bytes_loaded,"
          "bytes_uploaded_total,uploads,bytes_uploaded,requests_sent,requests_in_flight,"
          "arrivals_discarded,atlas_occupied,selected,svo_nodes,svo_leaves,hidden_nodes,"
@@ -39,11 +40,12 @@ void write_csv(const std::filesystem::path& path, const RunResult& r,
     char row[512];
     std::snprintf(
         row, sizeof row,
-        "%zu,%.4f,%.4f,%d,%.4f,%.5f,%.4f,%.4f,%.5f,%.5f,%u,%u,%u,%u,%d,%llu,%llu,%zu,%llu,%zu,%zu,%"
+        "%zu,%.4f,%.4f,%d,%.4f,%.5f,%.4f,%.4f,%.4f,%.5f,%.5f,%u,%u,%u,%u,%d,%llu,%llu,%zu,%llu,%zu,"
+        "%zu,%"
         "zu,%u,%u,%u,%u,%u,%u,%u,%u,%u,%.3f,%.3f,"
         "%.3f,%.3f,%.3f\n",
-        i, f.time, f.playhead, seek ? 1 : 0, f.psnr, f.ssim, f.popping, f.seam,
-        s.fraction_at_target, f.fraction_current, s.at_target_nodes, f.current_nodes,
+        i, f.time, f.playhead, seek ? 1 : 0, f.psnr, f.ssim, f.popping, f.working_set_popping,
+        f.seam, s.fraction_at_target, f.fraction_current, s.at_target_nodes, f.current_nodes,
         s.target_nodes, s.holes, f.root_resident ? 1 : 0,
         static_cast<unsigned long long>(s.bytes_loaded),
         static_cast<unsigned long long>(f.bytes_uploaded), s.uploads,
@@ -87,6 +89,9 @@ nlohmann::json summary_json(const RunResult& r) {
           {"max_popping", finite(r.max_popping)},
           {"popping_frames", r.popping_frames},
           {"mean_popping_all", finite(r.mean_popping_all)},
+          {"mean_working_set_popping", finite(r.mean_working_set_popping)},
+          {"max_working_set_popping", finite(r.max_working_set_popping)},
+          {"working_set_popping_frames", r.working_set_popping_frames},
           {"mean_seam", finite(r.mean_seam)},
           {"seam_frames", r.seam_frames},
           {"mean_fraction_at_target", r.mean_fraction},
@@ -141,6 +146,10 @@ void print_side_by_side(const std::vector<RunResult>& runs) {
   row("popping: uploads RMS, max / all RMS", [&](const RunResult& r) {
     return units(r.mean_popping) + ", " + units(r.max_popping) + " / " + units(r.mean_popping_all);
   });
+  if (runs.front().working_set_popping_frames > 0)
+    row("working-set popping: RMS, max", [&](const RunResult& r) {
+      return units(r.mean_working_set_popping) + ", " + units(r.max_working_set_popping);
+    });
   row("mean error step at LOD seams (frames)", [&](const RunResult& r) {
     return units(r.mean_seam) + " (" + std::to_string(r.seam_frames) + ")";
   });
@@ -201,8 +210,11 @@ void print_side_by_side(const std::vector<RunResult>& runs) {
       "before the next\n"
       "   seek; seek times have the resolution of one rendered frame; popping: RMS change of the "
       "image error\n"
-      "   from the previous frame, its RMS over frames with uploads and over all; seam: RMS step "
-      "of the image\n"
+      "   from the previous frame, its RMS over frames with uploads and over all; working-set "
+      "popping: RMS\n"
+      "   change of the image from what the previous frame's bricks and blending draw at this "
+      "frame's view and\n"
+      "   time (simulated clock only), over all frames; seam: RMS step of the image\n"
       "   error between neighbouring pixels within 2 pixels of a level-of-detail boundary; both in "
       "8-bit units)\n");
 }

@@ -47,10 +47,10 @@ void summarize(RunResult& r, const std::vector<std::pair<double, double>>& seeks
         cut[i] = true;
         break;
       }
-  double popping = 0, popping_all = 0, seam = 0;
+  double popping = 0, popping_all = 0, seam = 0, working_set = 0;
   std::size_t popping_all_frames = 0;
-  r.popping_frames = r.seam_frames = 0;
-  r.max_popping = std::numeric_limits<double>::quiet_NaN();
+  r.popping_frames = r.seam_frames = r.working_set_popping_frames = 0;
+  r.max_popping = r.max_working_set_popping = std::numeric_limits<double>::quiet_NaN();
   for (std::size_t i = 0; i < r.frames.size(); ++i) {
     const FrameRecord& f = r.frames[i];
     if (std::isfinite(f.seam)) {
@@ -59,7 +59,15 @@ void summarize(RunResult& r, const std::vector<std::pair<double, double>>& seeks
     }
     // A frame after one with holes shows what was not drawn before (at start-up, the first
     // bricks): an appearance, not a change between drawings.
-    if (i == 0 || cut[i] || r.frames[i - 1].stats.holes > 0 || !std::isfinite(f.popping)) continue;
+    if (i == 0 || cut[i] || r.frames[i - 1].stats.holes > 0) continue;
+    if (std::isfinite(f.working_set_popping)) {
+      working_set += f.working_set_popping * f.working_set_popping;
+      r.max_working_set_popping = r.working_set_popping_frames == 0
+                                      ? f.working_set_popping
+                                      : std::max(r.max_working_set_popping, f.working_set_popping);
+      ++r.working_set_popping_frames;
+    }
+    if (!std::isfinite(f.popping)) continue;
     popping_all += f.popping * f.popping;
     ++popping_all_frames;
     if (f.stats.uploads > 0 || f.stats.blended_leaves > 0) {
@@ -74,6 +82,7 @@ void summarize(RunResult& r, const std::vector<std::pair<double, double>>& seeks
   // Quadratic means: a change spread over several frames counts less than the same change at once.
   r.mean_popping = std::sqrt(mean(popping, r.popping_frames));
   r.mean_popping_all = std::sqrt(mean(popping_all, popping_all_frames));
+  r.mean_working_set_popping = std::sqrt(mean(working_set, r.working_set_popping_frames));
   r.mean_seam = mean(seam, r.seam_frames);
   // 2. Time to full quality after each seek: the first frame at or after the seek whose target
   // nodes are all drawn as with everything loaded, before the next seek (and the same for the
@@ -126,6 +135,19 @@ double popping_rms(const image::Image& previous_reference, const image::Image& p
     const int e = int{image.pixels[k]} - int{reference.pixels[k]};
     const int e_previous = int{previous_image.pixels[k]} - int{previous_reference.pixels[k]};
     const auto d = static_cast<double>(e - e_previous);
+    sum += d * d;
+  }
+  return std::sqrt(sum / static_cast<double>(n));
+}
+
+double image_change_rms(const image::Image& before, const image::Image& after) {
+  const std::size_t n = after.pixels.size();
+  if (before.width != after.width || before.height != after.height ||
+      before.channels != after.channels || before.pixels.size() != n || n == 0)
+    return std::numeric_limits<double>::quiet_NaN();
+  double sum = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto d = static_cast<double>(int{after.pixels[k]} - int{before.pixels[k]});
     sum += d * d;
   }
   return std::sqrt(sum / static_cast<double>(n));

@@ -195,6 +195,12 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy, const Progr
     FrameRecord rec;
     rec.time = time;
     rec.playhead = tf.playhead;
+    // 0. On the simulated clock: what the previous frame's working set draws at this frame's
+    //    view and time, before this frame's uploads change the atlas (working-set popping).
+    cpu_render::RgbaImage previous_working_set;
+    if (s.simulated_fps > 0)
+      previous_working_set =
+          frames.render_previous_working_set(tf.camera, tf.playhead, tf.transfer);
     // 1.-4. Scheduler, decode (a bad payload becomes the lowest value), render, retire.
     const loop::FrameReport report = frames.frame(tf.camera, tf.playhead, tf.transfer);
     if (report.ticket != frame) throw std::logic_error("bench stream: frame numbers out of step");
@@ -211,6 +217,9 @@ RunResult run_tour(const RunSetup& s, stream::PriorityPolicy policy, const Progr
     rec.render_ms = report.timings.render_ms;
     const cpu_render::RgbaImage& drawn = frames.last_image(report.ticket);
     rec.image = cpu_render::to_image(drawn);
+    if (previous_working_set.width > 0)
+      rec.working_set_popping =
+          image_change_rms(cpu_render::to_image(previous_working_set), rec.image);
     rec.lod_map = drawn.levels;
     rec.stats = report.stats;
     rec.root_resident = root;

@@ -110,6 +110,18 @@ FrameReport CpuFrameLoop::frame(const player::OrbitCamera& camera, double playhe
   return report;
 }
 
+cpu_render::RgbaImage CpuFrameLoop::render_previous_working_set(
+    const player::OrbitCamera& camera, double playhead,
+    const cpu_render::TransferFunction& transfer) const {
+  if (ticket_ == 0) return {};
+  const stream::SvoArrays previous = scheduler_->previous_svo(playhead);
+  cpu_render::SvoView svo;
+  svo.nodes = previous.nodes;
+  svo.leaves = previous.leaves;
+  return cpu_render::render_svo(svo, *atlas_, geometry_, camera, transfer, options_.render,
+                                nullptr);
+}
+
 const cpu_render::RgbaImage& CpuFrameLoop::last_image(Ticket ticket) const {
   if (ticket != ticket_ || ticket == 0)
     throw std::invalid_argument("CpuFrameLoop::read_back: only the last frame's image is kept");

@@ -34,6 +34,14 @@ class CpuFrameLoop final : public FrameLoop {
   FrameReport frame(const player::OrbitCamera& camera, double playhead,
                     const cpu_render::TransferFunction& transfer, bool readback = false) override;
   FrameReport stream(const player::OrbitCamera& camera, double playhead) override;
+  /// What the last frame's working set (its view's nodes and resident bricks, blended as it drew
+  /// them: StreamScheduler::previous_svo) draws at this camera, playhead and transfer function,
+  /// from the atlas as that frame left it: call it before the next frame(), whose uploads change
+  /// the atlas. Next to that frame's image it shows the change due to the working set alone (no
+  /// camera motion, no change of time step). An empty image before the first frame.
+  cpu_render::RgbaImage render_previous_working_set(
+      const player::OrbitCamera& camera, double playhead,
+      const cpu_render::TransferFunction& transfer) const;
   /// The image of the last frame; throws std::invalid_argument for any other ticket.
   cpu_render::RgbaImage read_back(Ticket ticket) const override { return last_image(ticket); }
   /// The same without a copy.

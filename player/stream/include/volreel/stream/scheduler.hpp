@@ -32,6 +32,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <deque>
+#include <optional>
 #include <span>
 #include <string>
 #include <unordered_map>
@@ -164,6 +165,13 @@ class StreamScheduler {
   /// such as a wait for a complete view, where no ray tells what the view reaches).
   /// Tables of frames before the last update's are refused after it.
   void forget_feedback();
+  /// The SVO of the last update's view and resident keyframe nodes, blended as that update drew
+  /// them, at playhead p: what the last frame's working set draws at a later time step (volreel
+  /// bench stream compares it, drawn from the atlas before the next frame's uploads, with the next
+  /// frame: the image change due to the working set alone). Changes nothing; empty arrays before
+  /// the first update.
+  SvoArrays previous_svo(double playhead) const;
+
   /// Whether the last update hid the node (feedback: no ray reached it).
   bool hidden(std::uint32_t node) const { return node < hidden_.size() && hidden_[node] != 0; }
 
@@ -207,9 +215,10 @@ class StreamScheduler {
   std::vector<double> random_table_, temporal_;
   std::vector<DueTime> due_;                               ///< one node's due window
   std::vector<std::pair<double, std::uint32_t>> by_time_;  ///< held steps by priority part
-  StoredTimes stored_times_;       ///< the selection's, kept from frame to frame (its memory)
-  LodBlendState blend_;            ///< level-of-detail blending's, kept from frame to frame
-  std::vector<double> level_sse_;  ///< SseScope::level: per level, this frame
+  StoredTimes stored_times_;        ///< the selection's, kept from frame to frame (its memory)
+  std::optional<double> built_at_;  ///< the last update's SVO build: its clock time
+  LodBlendState blend_;             ///< level-of-detail blending's, kept from frame to frame
+  std::vector<double> level_sse_;   ///< SseScope::level: per level, this frame
   PlayheadMotion motion_;
   /// Requests in flight: bytes and whether speculative (outside the due window when requested).
   struct InFlight {

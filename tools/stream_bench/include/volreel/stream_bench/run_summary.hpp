@@ -1,9 +1,10 @@
 // run_summary.hpp: what `volreel bench stream` records of a run of its tour with one priority
 // policy — per rendered frame (FrameRecord), per seek (SeekResult) and per run (RunResult) — and
 // summarize(), which turns a run's frame records into its averages and the time from each seek to
-// full quality; and the two image metrics beyond PSNR and SSIM: popping (popping_rms: how much
-// the image error changes from one frame to the next) and the error at level-of-detail seams
-// (lod_boundary, seam_rms).
+// full quality; and the image metrics beyond PSNR and SSIM: popping (popping_rms: how much the
+// image error changes from one frame to the next; working-set popping, image_change_rms against
+// what the previous working set draws) and the error at level-of-detail seams (lod_boundary,
+// seam_rms).
 #pragma once
 
 #include <cstddef>
@@ -39,6 +40,12 @@ struct FrameRecord {
   /// popping_rms of the previous frame in time order and this one (8-bit units); NaN for the
   /// first frame, a pair of different image sizes, or before measure().
   double popping = std::numeric_limits<double>::quiet_NaN();
+  /// Working-set popping: image_change_rms of this frame and the image the previous frame's
+  /// working set draws at this frame's camera, playhead and transfer function
+  /// (loop::CpuFrameLoop::render_previous_working_set): the change due to bricks arriving and
+  /// leaving and to blending weights alone, neither the camera's motion nor the data's. NaN for
+  /// the first frame and on the wall clock (not measured there: it takes a second render).
+  double working_set_popping = std::numeric_limits<double>::quiet_NaN();
   /// seam_rms of this frame with lod_map (8-bit units); NaN without a lod_map, without boundary
   /// pixels, or before measure().
   double seam = std::numeric_limits<double>::quiet_NaN();
@@ -86,6 +93,12 @@ struct RunResult {
   /// out above (NaN when there is none): the
   /// baseline that the camera and the data's own motion leave unexplained anyway.
   double mean_popping_all = std::numeric_limits<double>::quiet_NaN();
+  /// Working-set popping (FrameRecord::working_set_popping): the quadratic mean and the maximum
+  /// over the frames counted in mean_popping_all (a frame where nothing changed counts 0, so that
+  /// runs of one tour compare over the same frames), and how many frames that is; NaN when none.
+  double mean_working_set_popping = std::numeric_limits<double>::quiet_NaN();
+  double max_working_set_popping = std::numeric_limits<double>::quiet_NaN();
+  std::size_t working_set_popping_frames = 0;
   /// Mean seam error (FrameRecord::seam) over the seam_frames frames where it is finite (NaN
   /// when there are none).
   double mean_seam = std::numeric_limits<double>::quiet_NaN();
@@ -106,6 +119,10 @@ void summarize(RunResult& run, const std::vector<std::pair<double, double>>& see
 /// std::invalid_argument when a frame's reference and image differ in size or channels.
 double popping_rms(const image::Image& previous_reference, const image::Image& previous_image,
                    const image::Image& reference, const image::Image& image);
+
+/// How much an image changed: the root mean square over every pixel and channel of after −
+/// before (8-bit units); NaN when the two differ in size or channels or are empty.
+double image_change_rms(const image::Image& before, const image::Image& after);
 
 /// The level-of-detail boundary pixels of `lod_map` (width·height values, row-major, 255: no
 /// level): 1 for a pixel p with lod_map[p] != 255 such that a pixel within Chebyshev distance
