@@ -106,20 +106,23 @@ void refuse_other_options(const fs::path& path, const OpenOptions& options, Inpu
       text += (i == 0 ? "" : i + 1 == list.size() ? " and " : ", ") + list[i];
     return text;
   };
-  if (!raw_given.empty())
-    throw InputError("'" + path.string() + "' is " + kind_name +
-                     " that gives its own dimensions, type and frames: leave out " +
-                     names(raw_given) + " (options for raw files)");
   if (kind != InputKind::hdf5 && !options.dataset.empty()) given.emplace_back("--dataset (HDF5)");
   if (kind != InputKind::netcdf && !options.variable.empty())
     given.emplace_back("--variable (NetCDF)");
   if (kind != InputKind::netcdf && !options.time_dimension.empty())
     given.emplace_back("--time-dim (NetCDF)");
+  if (raw_given.empty() && given.empty()) return;
+  // Every option at fault in one message, so that one run says all that is to leave out.
+  std::string message = "'" + path.string() + "' is " + kind_name;
+  if (!raw_given.empty())
+    message += " that gives its own dimensions, type and frames: leave out " + names(raw_given) +
+               " (options for raw files)";
   if (!given.empty())
-    throw InputError("'" + path.string() + "' is " + kind_name + ": leave out " + names(given) +
-                     ", options for " +
-                     (given.size() == 1 ? "another kind of input" : "other kinds of input") +
-                     " (see Series in the command's --help)");
+    message += std::string(raw_given.empty() ? ": leave out " : "; and ") + names(given) +
+               ", options for " +
+               (given.size() == 1 ? "another kind of input" : "other kinds of input") +
+               " (see Series in the command's --help)";
+  throw InputError(message);
 }
 
 }  // namespace

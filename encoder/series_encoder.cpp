@@ -732,6 +732,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     use_scale(scale);
     code(t, step);
     double reached = -std::numeric_limits<double>::infinity();  // the PSNR of the try before
+    double reached_scale = scale;                               // and its ε, against the job's
     for (int retry = 0; holds_psnr && retry < max_tolerance_retries; ++retry) {
       const double squared =
           job.piecewise
@@ -743,9 +744,17 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       // target is out of reach (reported with what the frame reached).
       if (psnr < reached + min_retry_gain_db || scale <= smallest_scale) {
         if (!done[t] && writer) ++summary.delivered.frames_at_finest;
+        // The try that gained nothing spent more bytes for it: the frame keeps the try before
+        // (coded again: the same bytes), and so does the next frame of its stretch.
+        if (psnr < reached + min_retry_gain_db) {
+          scale = reached_scale;
+          use_scale(scale);
+          code(t, step);
+        }
         break;
       }
       reached = psnr;
+      reached_scale = scale;
       if (retry == 0 && !done[t] && writer) ++summary.delivered.frames_coded_again;
       // 0.1 dB more than the shortfall, so that the next try lands above the target.
       scale =

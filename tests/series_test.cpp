@@ -209,6 +209,9 @@ TEST(RawSeries, OptionsOfOtherInputKindsAreRefusedAndSharedByKind) {
   raw.dims = d;
   expect_error([&] { vd::open_series(path / "000000.f32", raw); },
                {"is a raw file", "--dataset (HDF5), --variable (NetCDF) and --time-dim (NetCDF)"});
+  // Raw options and others together: one message names them all.
+  expect_error([&] { vd::open_series(path, raw); },
+               {"leave out --dims (options for raw files); and --dataset (HDF5), --variable"});
   // Two inputs of different kinds (compare A B): each keeps what its kind takes, and an option
   // neither takes stays with both (for open_series to refuse).
   EXPECT_EQ(vd::input_kind("x.nc"), vd::InputKind::netcdf);

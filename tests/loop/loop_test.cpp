@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
@@ -80,21 +81,34 @@ TEST(CpuFrameLoop, ThePreviousWorkingSetDrawsTheLastFrameAgainAndChangesNothing)
   test::TempDir dir("loop-previous");
   make_container(dir);
   const format::Container container(dir / "test.vreel");
-  loop::FrameLoopOptions o = slow_link_options();
-  o.scheduler.lod_blend.fade_s = 0.05;  // bricks fade in
+  // Two loops on simulated clocks that advance alike (10 ms a frame): one draws the previous
+  // working set before every frame, the other never does.
+  double clock[2] = {0, 0};
+  std::unique_ptr<loop::CpuFrameLoop> loops[2];
+  for (int k = 0; k < 2; ++k) {
+    loop::FrameLoopOptions o = slow_link_options();
+    o.scheduler.lod_blend.fade_s = 0.05;  // bricks fade in
+    o.scheduler.loader.clock = [&clock, k] { return clock[k]; };
+    loops[k] = std::make_unique<loop::CpuFrameLoop>(container, o);
+  }
+  loop::CpuFrameLoop& frames = *loops[0];
   const auto camera = player::OrbitCamera::framing({40, 36, 30}, 48, 40);
   const auto tf = cpu_render::TransferFunction::preset("cool-warm", -1, 1);
-  loop::CpuFrameLoop frames(container, o);
   EXPECT_EQ(frames.render_previous_working_set(camera, 1.5, tf).width, 0);  // no frame yet
-  std::size_t changed = 0, unchanged = 0;
+  std::size_t changed = 0, unchanged = 0, blended = 0;
   for (int i = 0; i < 400; ++i) {
     const cpu_render::RgbaImage before = frames.render_previous_working_set(camera, 1.5, tf);
     const loop::FrameReport report = frames.frame(camera, 1.5, tf);
+    const loop::FrameReport other = loops[1]->frame(camera, 1.5, tf);
+    clock[0] += 0.01, clock[1] += 0.01;
     const cpu_render::RgbaImage& drawn = frames.last_image(report.ticket);
+    // Drawing the previous working set changes nothing the loop does.
+    ASSERT_EQ(drawn.rgba, loops[1]->last_image(other.ticket).rgba) << "frame " << i;
     // Right after a frame, its own working set at its own view and time draws it again, to the
     // bit, whatever arrived or was fading in it.
     ASSERT_EQ(frames.render_previous_working_set(camera, 1.5, tf).rgba, drawn.rgba)
         << "frame " << i;
+    blended += report.stats.blended_leaves > 0 ? 1 : 0;
     if (i > 0 && report.stats.uploads == 0 && report.stats.blended_leaves == 0) {
       EXPECT_EQ(before.rgba, drawn.rgba) << "frame " << i << ": nothing arrived or faded";
       ++unchanged;
@@ -106,6 +120,7 @@ TEST(CpuFrameLoop, ThePreviousWorkingSetDrawsTheLastFrameAgainAndChangesNothing)
   }
   EXPECT_GT(changed, 0u);  // arrivals changed the picture
   EXPECT_GT(unchanged, 0u);
+  EXPECT_GT(blended, 0u);  // and some faded in
 }
 
 TEST(CpuFrameLoop, WaitingForAViewDrawsItCompleteOnTheFirstFrame) {

@@ -210,13 +210,15 @@ void print_side_by_side(const std::vector<RunResult>& runs) {
       "before the next\n"
       "   seek; seek times have the resolution of one rendered frame; popping: RMS change of the "
       "image error\n"
-      "   from the previous frame, its RMS over frames with uploads and over all; working-set "
-      "popping: RMS\n"
-      "   change of the image from what the previous frame's bricks and blending draw at this "
-      "frame's view and\n"
-      "   time (simulated clock only), over all frames; seam: RMS step of the image\n"
-      "   error between neighbouring pixels within 2 pixels of a level-of-detail boundary; both in "
-      "8-bit units)\n");
+      "   from the previous frame, its RMS over frames with uploads and over all (seeks and "
+      "frames after holes\n"
+      "   left out);%s seam: RMS step of the image\n"
+      "   error between neighbouring pixels within 2 pixels of a level-of-detail boundary; all in "
+      "8-bit units)\n",
+      runs.front().working_set_popping_frames > 0
+          ? " working-set popping: RMS change of the image from what the previous frame's\n"
+            "   bricks and blending draw at this frame's view and time, over the same frames;"
+          : "");
 }
 
 }  // namespace volreel::stream_bench

@@ -227,9 +227,9 @@ void add_encode_command(CLI::App& app) {
       "quantized, or each brick coded by zfp (--codec zfp).\nUnder mpirun -n N the ranks share "
       "the frames and write the same container as one process;\nframes coded piecewise "
       "(--memory) are shared brick by brick when there are fewer keyframe stretches\nthan "
-      "ranks.\nExit status: 0; 1 on an error (nothing half-written is left); 3 when the container "
-      "is written and\nvalid but misses --psnr, --bps (by more than 5 %) or --max-error (a "
-      "warning says by how much).");
+      "ranks.\nExit status: 0; 3 when the container is written and valid but misses --psnr, "
+      "--bps (by more than\n5 %) or --max-error (a warning says by how much); any other non-zero "
+      "status is an error (130:\ninterrupted), after which nothing half-written is left.");
   cmd->add_option(
          "SERIES", o->series,
          "Raw series directory, HDF5 file, raw file or quoted pattern of raw files (see below)")

@@ -213,9 +213,10 @@ bool print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
       if (q.frames_at_finest > 0)
         std::fprintf(stderr,
                      "warning: target PSNR %.2f dB missed: frame %zu reached %.2f dB, and in %zu "
-                     "frames a smaller eps gained nothing more: every brick is coded as finely as "
-                     "the format allows (coefficients to 2^-%u of the brick's largest, block means "
-                     "to %u bits); for a higher PSNR, --codec zfp with a small --zfp-accuracy\n",
+                     "frames no smaller eps could raise the PSNR: every brick is coded as finely "
+                     "as the format allows (coefficients to 2^-%u of the brick's largest, block "
+                     "means to %u bits), or eps is at its floor (2^-40 of the range); for a "
+                     "higher PSNR, --codec zfp with a small --zfp-accuracy\n",
                      psnr_target, q.worst_frame, q.worst_frame_psnr, q.frames_at_finest,
                      VR_MAX_COEF_BITS, VR_MEAN_BITS);
       else

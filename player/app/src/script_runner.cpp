@@ -17,13 +17,15 @@ void Player::run_script(double dt) {
   if (settling_) {
     // stats_ are those of the previous frame: only frames after the one that started settling
     // count, and two complete frames in a row end it. Prefetching of other keyframes may go on.
-    // So do two quiet frames in a row (nothing in flight, waiting or uploaded: the scheduler had
-    // a chance to request more and did not), as loop::wait_for_view: a view whose bricks cannot
-    // be read (a damaged frame) never completes, and waiting for it would only run out the time.
+    // So do two quiet frames in a row (the frame indexes around the playhead read or failed, and
+    // nothing in flight, waiting or uploaded: the scheduler had a chance to request more and did
+    // not), as loop::wait_for_view: a view whose bricks cannot be read (a damaged frame) never
+    // completes, and waiting for it would only run out the time.
     settle_waited_ += dt;
     const bool counted = frame_number_ > settle_from_;
     const bool idle = counted && stats_.fraction_at_target >= 1.0 && stats_.holes == 0;
-    const bool quiet = counted && stats_.requests_in_flight == 0 && stats_.arrivals_waiting == 0 &&
+    const bool quiet = counted && (stats_.index_ready || stats_.index_failed) &&
+                       stats_.requests_in_flight == 0 && stats_.arrivals_waiting == 0 &&
                        stats_.uploads == 0;
     idle_frames_ = idle ? idle_frames_ + 1 : 0;
     quiet_frames_ = quiet ? quiet_frames_ + 1 : 0;

@@ -83,8 +83,8 @@ struct DeliveredQuality {
   std::size_t worst_frame = 0;
   std::size_t frames_coded_again = 0;  ///< frames coded more than once for psnr_target
   /// Frames whose tries for psnr_target stopped because a smaller ε raised their PSNR by less
-  /// than min_retry_gain_db (the payload's finest steps reached) or ε reached its floor
-  /// (smallest_relative_tolerance of the range).
+  /// than min_retry_gain_db (the payload's finest steps reached: the frame keeps the try before)
+  /// or ε was at its floor (smallest_relative_tolerance of the range).
   std::size_t frames_at_finest = 0;
   double tolerance_scale = 1;  ///< the smallest ε a frame needed, against the job's
   /// PSNR of all measured voxels together, 10·log10(range²/MSE) (∞ when lossless).

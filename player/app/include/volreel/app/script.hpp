@@ -17,9 +17,10 @@
 //           resize W H        resize the window to W × H pixels
 //           settle [SECONDS]  hold the script until two frames in a row draw every visible
 //                             node at its target LOD with both keyframes (prefetching of other
-//                             keyframes may go on), or two in a row have nothing in flight,
-//                             waiting or uploaded (what is missing cannot be read: said on
-//                             stderr), or the timeout (default 20 s) passes
+//                             keyframes may go on), or two in a row have the frame indexes
+//                             around the playhead and nothing in flight, waiting or uploaded
+//                             (what is missing cannot be read: said on stderr), or the timeout
+//                             (default 20 s) passes
 //           screenshot PATH   write this frame, as presented, to PATH (PNG); later entries
 //                             run from the next frame on
 //           camera            print the camera ("camera (script): azimuth A deg elevation E deg

@@ -112,8 +112,9 @@ struct ViewWait {
 };
 
 /// Streams (FrameLoop::stream) at a fixed view until every visible node is drawn at its target
-/// LOD, nothing more can come (no request in flight and nothing waiting to be uploaded, as after
-/// read errors or with an atlas too small for the view) or `timeout_s` passed. Sleeps briefly
+/// LOD, nothing more can come (the frame indexes around the playhead read or failed, no request
+/// in flight and nothing waiting to be uploaded, as after read errors or with an atlas too small
+/// for the view) or `timeout_s` passed. Sleeps briefly
 /// while requests are in flight and nothing arrived.
 ViewWait wait_for_view(FrameLoop& loop, const player::OrbitCamera& camera, double playhead,
                        double timeout_s);
