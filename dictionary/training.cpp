@@ -10,10 +10,10 @@
 #include <string>
 
 #include <omp.h>
-#include <unistd.h>
 
 #include "volreel/datasets/prng.hpp"
 #include "volreel/dictionary/ksvd.hpp"
+#include "volreel/format/memory.hpp"
 
 namespace volreel::dictionary {
 
@@ -54,21 +54,20 @@ TrainingResult train_dictionary(const CoresetHierarchy& coresets, const Training
   {
     // What training holds besides the coresets' blocks: the K x K Gram matrix, the K
     // correlations of a batch of 256 blocks on each thread, and the residual of the largest
-    // coreset (floats). Refused up front where that alone passes half the machine's memory (the
-    // pursuit's and the update's working sets come on top).
+    // coreset (floats). Refused up front where that alone passes half the memory the process may
+    // use (the pursuit's and the update's working sets come on top).
     const double k = options.atom_count;
     const double n = static_cast<double>(coresets.largest().blocks.cols());
     const double need = 4.0 * (k * k + k * 256.0 * omp_get_max_threads() +
                                static_cast<double>(coresets.largest().blocks.rows()) * n);
-    const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
-    const double memory =
-        pages > 0 && page > 0 ? static_cast<double>(pages) * static_cast<double>(page) : 0;
+    const auto memory = static_cast<double>(format::detail::usable_memory_bytes());
     if (memory > 0 && need > memory / 2) {
-      char text[256];
+      char text[384];
       std::snprintf(text, sizeof text,
                     "K = %d atoms: training needs about %.1f GB besides the training blocks (a K "
                     "x K Gram matrix, correlations and the residual of %.0f blocks), more than "
-                    "half of this machine's %.1f GB: choose fewer atoms or a smaller --coreset",
+                    "half of the %.1f GB this process may use (the machine's memory or its "
+                    "container's limit): choose fewer atoms or a smaller --coreset",
                     options.atom_count, need / 1e9, n, memory / 1e9);
       throw InputError(text);
     }

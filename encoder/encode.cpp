@@ -20,6 +20,7 @@
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/file_io.hpp"
 #include "volreel/format/frame_file.hpp"
+#include "volreel/format/memory.hpp"
 
 namespace volreel::encoder {
 
@@ -181,9 +182,7 @@ void train_dictionary(const datasets::SeriesReader& series, const EncodeRequest&
 }  // namespace
 
 std::uint64_t default_encode_memory() {
-  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
-  if (pages <= 0 || page <= 0) return 0;
-  return static_cast<std::uint64_t>(pages) * static_cast<std::uint64_t>(page) / 2;
+  return format::detail::usable_memory_bytes() / 2;
 }
 
 double whole_frame_bytes(const Dims& dims) {

@@ -357,7 +357,7 @@ void add_encode_command(CLI::App& app) {
           ->capture_default_str();
   cmd->add_option("--memory", o->memory,
                   "The memory the encode may hold for frames, e.g. 2G, 512M (default: half the "
-                  "machine's). Frames that do\n"
+                  "machine's, or of its\ncontainer's limit where lower). Frames that do\n"
                   "not fit whole (twice their float32 size) are read and coded piecewise, a row "
                   "of bricks at a time,\n"
                   "with keyframe gap 1 and a dictionary given; smaller frames lower the default "

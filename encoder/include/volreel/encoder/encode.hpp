@@ -42,7 +42,7 @@ struct EncodeRequest {
   /// until G + 1 frames take at most `memory`; 1 with a size target (its search codes whole
   /// frames) and for frames coded piecewise.
   std::optional<std::uint32_t> max_keyframe_gap;
-  /// The bytes the encode may hold for frames (0: half the machine's memory). A frame that does
+  /// The bytes the encode may hold for frames (0: half the usable memory). A frame that does
   /// not fit whole (whole_frame_bytes) is coded piecewise (EncodeJob::piecewise), a few planes at a
   /// time, without keyframe gaps; that needs a dictionary given (training and --bps read whole
   /// frames).
@@ -78,7 +78,8 @@ std::uint32_t default_keyframe_gap(const Dims& dims, format::BrickShape shape, b
 /// What coding a frame of `dims` whole holds: the frame, and its finest level decoded to measure
 /// it (float32 each). Frames larger than EncodeRequest::memory are coded piecewise.
 double whole_frame_bytes(const Dims& dims);
-/// EncodeRequest::memory when 0: half the machine's physical memory.
+/// EncodeRequest::memory when 0: half of format::detail::usable_memory_bytes (the machine's
+/// physical memory, or its container's limit where lower).
 std::uint64_t default_encode_memory();
 
 /// How far a container may land from a bps target (EncodeRequest's tolerance.bps): 5 %.
