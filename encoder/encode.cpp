@@ -223,8 +223,13 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   refuse_existing_output(out, request.resume, request.overwrite);
   // A dictionary given is read (and checked) now, not after the value range and rate control.
   // (Rank 0 alone reads it, here and below; its error aborts the job.)
-  if (ranks.root() && !request.dictionary.empty() && request.dictionary != "dct")
-    (void)format::read_dictionary_file(request.dictionary);
+  if (ranks.root() && !request.dictionary.empty() && request.dictionary != "dct") {
+    const format::DictionaryFile given = format::read_dictionary_file(request.dictionary);
+    if (given.block_size != 6)
+      throw InputError(request.dictionary + ": the dictionary has blocks of " +
+                       std::to_string(given.block_size) +
+                       "^3; volreel's bricks need 6^3 (volreel train --block 6, its default)");
+  }
   // The brick size: given, the container's own (resume), or chosen for the volume.
   const std::array<std::uint32_t, 3> dims{static_cast<std::uint32_t>(info.dims.x),
                                           static_cast<std::uint32_t>(info.dims.y),

@@ -25,9 +25,9 @@ std::uint64_t cgroup_limit(const std::filesystem::path& path) {
 
 std::uint64_t usable_memory_bytes(const std::filesystem::path& cgroup_root) {
   const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
-  std::uint64_t memory = pages > 0 && page > 0 ? static_cast<std::uint64_t>(pages) *
-                                                     static_cast<std::uint64_t>(page)
-                                               : 0;
+  std::uint64_t memory = pages > 0 && page > 0
+                             ? static_cast<std::uint64_t>(pages) * static_cast<std::uint64_t>(page)
+                             : 0;
   // cgroup v1 writes "no limit" as a number near 2^63: any limit above the physical memory is none.
   for (const std::filesystem::path& path :
        {cgroup_root / "memory.max", cgroup_root / "memory" / "memory.limit_in_bytes"}) {

@@ -53,6 +53,11 @@ expect_error "already holds a container" "$volreel" encode "$work/s" --dictionar
 if out=$("$volreel" encode "$work/s" --bps 1 --out "$work/a.vreel" 2>&1); then fail "encode over a container: $out"; fi
 grep -q "already holds a container" <<< "$out" || fail "no message for an existing container: $out"
 ! grep -q -e "training" -e "rate control" -e "value range" <<< "$out" || fail "the refusal came after the long work: $out"
+# So is a dictionary of blocks other than 6^3.
+"$volreel" train "$work/s" --out "$work/d4.bin" --block 4 --atoms 16 --coreset 200k --levels 2 --iterations 1 > /dev/null 2>&1
+if out=$("$volreel" encode "$work/s" --dictionary "$work/d4.bin" --out "$work/d4.vreel" 2>&1); then fail "encode with 4^3 blocks: $out"; fi
+grep -q "d4.bin: the dictionary has blocks of 4^3; volreel's bricks need 6^3" <<< "$out" || fail "no message for 4^3 blocks: $out"
+! grep -q -e "value range" <<< "$out" || fail "the dictionary's blocks were refused after the value range: $out"
 # A series with fewer frames than the container is not the one it was encoded from.
 "$volreel" gen analytic --field blobs --dims 40x36x30 --frames 2 --out "$work/s2" 2>/dev/null
 expect_error "has 2 frames but the container" "$volreel" compare "$work/s2" "$work/a.vreel"
