@@ -11,8 +11,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <mutex>
+#include <optional>
 #include <vector>
 
 #include "detail.hpp"
@@ -26,6 +28,126 @@ namespace {
 std::mutex& netcdf_mutex() {
   static std::mutex m;
   return m;
+}
+
+/// The byte of a classic-format file (CDF-1, CDF-2, CDF-5, as "The NetCDF Classic Format
+/// Specification" lays them out) that its variables' values end at: the largest begin + size of
+/// a fixed-size variable, and begin + (records − 1)·record size + size of a record variable, with
+/// each variable's begin offset read from the header (the library exposes none). `records`: the
+/// records the library will read. std::nullopt where the header cannot be walked (then the caller
+/// keeps its lower bound).
+std::optional<long double> classic_values_end(const std::vector<unsigned char>& header,
+                                              int variables, std::size_t records) {
+  std::size_t at = 0;
+  bool failed = false;
+  const auto take = [&](std::size_t bytes) -> std::uint64_t {
+    if (failed || bytes > header.size() - std::min(at, header.size())) {
+      failed = true;
+      return 0;
+    }
+    std::uint64_t v = 0;
+    for (std::size_t i = 0; i < bytes; ++i) v = (v << 8) | header[at + i];  // big-endian
+    at += bytes;
+    return v;
+  };
+  const auto skip = [&](std::uint64_t bytes) {
+    if (bytes > header.size() - std::min(at, header.size()))
+      failed = true;
+    else
+      at += static_cast<std::size_t>(bytes);
+  };
+  const auto padded = [](std::uint64_t bytes) { return (bytes + 3) / 4 * 4; };
+  if (header.size() < 4 || header[0] != 'C' || header[1] != 'D' || header[2] != 'F')
+    return std::nullopt;
+  const unsigned version = header[3];
+  if (version != 1 && version != 2 && version != 5) return std::nullopt;
+  at = 4;
+  const std::size_t count = version == 5 ? 8 : 4;   // nelems, dim lengths, dimids, vsize
+  const std::size_t offset = version == 1 ? 4 : 8;  // begin
+  const auto type_bytes = [](std::uint64_t type) -> std::uint64_t {
+    switch (type) {
+      case 1:
+      case 2:
+      case 7:
+        return 1;  // byte, char, ubyte
+      case 3:
+      case 8:
+        return 2;  // short, ushort
+      case 4:
+      case 5:
+      case 9:
+        return 4;  // int, float, uint
+      case 6:
+      case 10:
+      case 11:
+        return 8;  // double, int64, uint64
+      default:
+        return 0;
+    }
+  };
+  const auto name = [&] { skip(padded(take(count))); };
+  const auto attributes = [&] {
+    take(4);  // NC_ATTRIBUTE, or 0 (absent)
+    const std::uint64_t n = take(count);
+    for (std::uint64_t i = 0; i < n && !failed; ++i) {
+      name();
+      const std::uint64_t bytes = type_bytes(take(4));
+      if (bytes == 0) failed = true;
+      skip(padded(take(count) * bytes));
+    }
+  };
+  take(count);  // numrecs (the library's count is used: it also handles streaming files)
+  take(4);      // NC_DIMENSION, or 0 (absent)
+  const std::uint64_t dimensions = take(count);
+  std::vector<std::uint64_t> lengths;
+  for (std::uint64_t i = 0; i < dimensions && !failed && i < header.size(); ++i) {
+    name();
+    lengths.push_back(take(count));  // 0: the record dimension
+  }
+  attributes();  // global attributes
+  take(4);       // NC_VARIABLE, or 0 (absent)
+  if (take(count) != static_cast<std::uint64_t>(variables) || failed) return std::nullopt;
+  struct Var {
+    long double size = 0, begin = 0;
+    bool record = false;
+  };
+  std::vector<Var> vars;
+  for (int v = 0; v < variables && !failed; ++v) {
+    Var var;
+    name();
+    const std::uint64_t rank = take(count);
+    var.size = 1;
+    for (std::uint64_t d = 0; d < rank && !failed; ++d) {
+      const std::uint64_t id = take(count);
+      if (id >= lengths.size()) return std::nullopt;
+      if (lengths[id] == 0)
+        var.record = true;
+      else
+        var.size *= static_cast<long double>(lengths[id]);
+    }
+    attributes();
+    const std::uint64_t bytes = type_bytes(take(4));
+    take(count);  // vsize: redundant, and wrong for large variables; computed instead
+    var.begin = static_cast<long double>(take(offset));
+    if (bytes == 0) return std::nullopt;
+    var.size *= static_cast<long double>(bytes);
+    vars.push_back(var);
+  }
+  if (failed) return std::nullopt;
+  // A record holds every record variable's values, each padded to 4 bytes unless it is the only
+  // one.
+  long double record_bytes = 0;
+  const auto record_variables =
+      std::count_if(vars.begin(), vars.end(), [](const Var& v) { return v.record; });
+  for (const Var& v : vars)
+    if (v.record) record_bytes += record_variables == 1 ? v.size : std::ceil(v.size / 4) * 4;
+  long double end = static_cast<long double>(at);  // the header
+  for (const Var& v : vars) {
+    if (v.record && records == 0) continue;
+    end = std::max(end, v.begin + v.size +
+                            (v.record ? static_cast<long double>(records - 1) * record_bytes : 0));
+  }
+  return end;
 }
 
 class NetcdfReader final : public SeriesReader {
@@ -141,10 +263,20 @@ class NetcdfReader final : public SeriesReader {
     }
     std::error_code ec;
     const std::uintmax_t size = fs::file_size(file_, ec);
-    if (!ec && static_cast<long double>(size) < need)
+    if (ec) return;
+    if (static_cast<long double>(size) < need)
       fail("the file is " + std::to_string(size) + " bytes, but its variables' values alone take " +
            std::to_string(static_cast<unsigned long long>(need)) +
            " (and the header more): it is truncated");
+    // Exactly, from the header's offsets: where the last value ends (a header larger than the
+    // first MiB, or one that cannot be walked, keeps the bound above).
+    std::vector<unsigned char> header(std::min<std::uintmax_t>(size, std::uintmax_t{1} << 20));
+    read_exact(file_, 0, header);
+    const std::optional<long double> end = classic_values_end(header, variables, records);
+    if (end && static_cast<long double>(size) < *end)
+      fail("the file is " + std::to_string(size) +
+           " bytes, but its header places values up to byte " +
+           std::to_string(static_cast<unsigned long long>(*end)) + ": it is truncated");
   }
 
   std::string dimension_name(int dimid) const {

@@ -606,6 +606,14 @@ TEST(NetCdf, MissingValuesAndWrongChoicesAreClearErrors) {
   fs::resize_file(classic, fs::file_size(classic) / 2);
   expect_error([&] { datasets::open_series(classic, o); },
                {"classic.nc", "bytes, but its variables' values alone take", "truncated"});
+  // Cut by a single byte, in each classic variant: the header's offsets say where values end.
+  for (const int format : {0, NC_64BIT_OFFSET, NC_64BIT_DATA}) {
+    write_netcdf(classic, false, format);
+    EXPECT_NO_THROW(datasets::open_series(classic, o)) << "format " << format;
+    fs::resize_file(classic, fs::file_size(classic) - 1);
+    expect_error([&] { datasets::open_series(classic, o); },
+                 {"classic.nc", "its header places values up to byte", "truncated"});
+  }
   // Not a NetCDF file.
   const fs::path bad = dir.path() / "bad.nc";
   std::ofstream(bad) << "not netcdf";
