@@ -158,15 +158,9 @@ expect_error "fewer than the 11-voxel window: give --no-ssim" "$volreel" compare
 "$volreel" compare "$work/tiny" "$work/tiny" --no-ssim > /dev/null 2>&1 || fail "compare --no-ssim of tiny volumes"
 # SIGTERM (or Ctrl-C's SIGINT, which a background job ignores) in gen: it stops at the next
 # step, removes the frames it wrote and ends by the signal, as a shell expects.
-"$volreel" gen turbulence --size 32 --frames 400 --spinup 0 --interval 0.5 --out "$work/int" \
-  > /dev/null 2> "$work/int.err" &
-gen=$!
-for _ in $(seq 600); do [ -e "$work/int/000001.f32" ] && break; sleep 0.1; done
-[ -e "$work/int/000001.f32" ] || fail "gen wrote no frame in 60 s"
-kill -TERM "$gen"
-status=0; wait "$gen" || status=$?
-[ "$status" = 143 ] || fail "gen interrupted: exit status $status, expected 143 (SIGTERM): $(cat "$work/int.err")"
-[ ! -e "$work/int" ] || fail "an interrupted gen left $(ls "$work/int" | wc -l) files in $work/int"
-grep -q "interrupted; nothing half-written was left" "$work/int.err" || fail "no message: $(cat "$work/int.err")"
+# shellcheck source=interrupt_lib.sh
+. "$(dirname "$0")/interrupt_lib.sh"
+expect_stopped_by_sigterm "$work/int/000001.f32" "$work/int" \
+  "$volreel" gen turbulence --size 32 --frames 400 --spinup 0 --interval 0.5 --out "$work/int"
 
 echo "cli_end_to_end: all checks passed"

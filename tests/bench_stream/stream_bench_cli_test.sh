@@ -186,6 +186,12 @@ expect_error "lod-fade-out.*seconds in \[0, 60\]" "$volreel" bench stream "$work
 # A disk cache would let every run after the first start warm: one policy, one tour with it.
 expect_error "--cache with --policy both: every run after the first" "$volreel" bench stream http://127.0.0.1:9/a.vreel --cache "$work/cache"
 expect_error "--cache with --seeds 2" "$volreel" bench stream http://127.0.0.1:9/a.vreel --policy patent --seeds 2 --cache "$work/cache"
+# SIGTERM (or Ctrl-C) during a run: it stops at the next step, removes the folder it created and
+# ends by the signal.
+# shellcheck source=../interrupt_lib.sh
+. "$(dirname "$0")/../interrupt_lib.sh"
+expect_stopped_by_sigterm "$work/int/tour.json" "$work/int" \
+  "$volreel" bench stream "$work/a.vreel" --duration 600 --size 32x32 --out "$work/int"
 "$volreel" bench stream --help > "$work/help.txt" && grep -q -e "--bandwidth" "$work/help.txt" || fail "--help lacks --bandwidth"
 for o in --due-window --lookahead --speculative-link --ancestor-handicap --sse-priority --seeds --lod-fade --lod-fade-out --spatial-blend; do grep -q -e "$o" "$work/help.txt" || fail "--help lacks $o"; done
 echo "stream bench CLI: OK"

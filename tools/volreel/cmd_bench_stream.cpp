@@ -3,6 +3,7 @@
 // then prepare_bench and run_tours, then the header, the side-by-side tables, the checks and the
 // files written.
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <memory>
@@ -31,17 +32,21 @@ struct BenchStreamOptions {
   RemoteCli remote;
 };
 
-/// Each long step of the library on its own progress bar.
+/// Each long step of the library on its own progress bar; Ctrl-C or SIGTERM (StopOnSignal) stops
+/// it at the next update.
 void stage(const std::string& title, const std::string& unit,
            const std::function<void(const sb::Progress&)>& step) {
   ProgressBar bar(title, unit);
   step([&bar](double done, double total, const std::string& status) {
+    stop_if_interrupted();
     bar.update({done, total, status});
   });
   bar.finish();
 }
 
-void run_bench_stream(const BenchStreamOptions& o) {
+/// run_bench_stream's work, up to the files written; returns how many reads of bricks or frames
+/// failed while streaming (the runs' figures are of frames drawn without them).
+std::size_t run_bench_stream_into(const BenchStreamOptions& o) {
   // 1. Settings (all checked before any work), the container, the tour, the link, the truth.
   const sb::BenchStreamSettings& s = o.s;
   if (!o.remote.cache.empty() && remote::is_url(o.container) &&
@@ -92,10 +97,27 @@ void run_bench_stream(const BenchStreamOptions& o) {
       "(streamed | ground truth)\n",
       plan.out.c_str(), s.seeds > 1 ? "seed_S/" : "", s.seeds > 1 ? "seed_S/" : "",
       s.seeds > 1 ? "seed_S/" : "");
-  // The files are written (runs drawn without what failed); the exit status says it failed.
   std::size_t errors = 0;
   for (const sb::TourRuns& tour : tours)
     for (const sb::RunResult& run : tour.runs) errors += run.errors;
+  return errors;
+}
+
+void run_bench_stream(const BenchStreamOptions& o) {
+  const StopOnSignal stop;
+  // A folder this run creates is removed if the run fails or is interrupted before its files are
+  // written: no half-written results (an existing one keeps what it held and what this run
+  // replaced in it).
+  std::error_code ec;
+  const bool fresh_out = !o.out.empty() && !std::filesystem::exists(o.out, ec);
+  std::size_t errors = 0;
+  try {
+    errors = run_bench_stream_into(o);
+  } catch (...) {
+    if (fresh_out) std::filesystem::remove_all(o.out, ec);
+    throw;
+  }
+  // The files are written (runs drawn without what failed); the exit status says it failed.
   if (errors)
     throw InputError(std::to_string(errors) +
                      " reads of bricks or frames failed while streaming, over the runs of every "

@@ -35,10 +35,10 @@ class ProgressBar {
 };
 
 /// Ctrl-C (SIGINT) and SIGTERM for a command whose output an interruption would leave
-/// half-written (gen, bench rd), while one is alive: the first signal asks the work to stop at
-/// its next progress update, where Interrupted unwinds it so that what it was writing is removed
-/// as on any error; a second signal ends the process at once. A signal ignored when it is made
-/// (a background job's SIGINT) stays ignored; the handlers before are restored when it goes.
+/// half-written (gen, bench rd, bench stream), while one is alive: the first signal asks the work
+/// to stop at its next progress update, where Interrupted unwinds it so that what it was writing is
+/// removed as on any error; a second signal ends the process at once. A signal ignored when it is
+/// made (a background job's SIGINT) stays ignored; the handlers before are restored when it goes.
 class StopOnSignal {
  public:
   StopOnSignal();
