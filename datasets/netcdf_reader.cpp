@@ -85,7 +85,13 @@ std::optional<long double> classic_values_end(const std::vector<unsigned char>& 
         return 0;
     }
   };
-  const auto name = [&] { skip(padded(take(count))); };
+  // A count past the header cannot be (and would wrap the arithmetic below): the walk fails.
+  const auto length = [&] {
+    const std::uint64_t n = take(count);
+    if (n > header.size()) failed = true;
+    return failed ? 0 : n;
+  };
+  const auto name = [&] { skip(padded(length())); };
   const auto attributes = [&] {
     take(4);  // NC_ATTRIBUTE, or 0 (absent)
     const std::uint64_t n = take(count);
@@ -93,7 +99,7 @@ std::optional<long double> classic_values_end(const std::vector<unsigned char>& 
       name();
       const std::uint64_t bytes = type_bytes(take(4));
       if (bytes == 0) failed = true;
-      skip(padded(take(count) * bytes));
+      skip(padded(length() * bytes));
     }
   };
   take(count);  // numrecs (the library's count is used: it also handles streaming files)

@@ -10,7 +10,10 @@ expect_stopped_by_sigterm() {
   "$@" > /dev/null 2> "$err" &
   local pid=$!
   for _ in $(seq 600); do [ -e "$marker" ] && break; sleep 0.1; done
-  [ -e "$marker" ] || fail "$1 $2 wrote no $marker in 60 s"
+  if [ ! -e "$marker" ]; then
+    kill "$pid" 2> /dev/null; wait "$pid" 2> /dev/null; rm -f "$err"
+    fail "$1 $2 wrote no $marker in 60 s"
+  fi
   kill -TERM "$pid"
   local status=0
   wait "$pid" || status=$?

@@ -190,8 +190,28 @@ expect_error "--cache with --seeds 2" "$volreel" bench stream http://127.0.0.1:9
 # ends by the signal.
 # shellcheck source=../interrupt_lib.sh
 . "$(dirname "$0")/../interrupt_lib.sh"
-expect_stopped_by_sigterm "$work/int/tour.json" "$work/int" \
-  "$volreel" bench stream "$work/a.vreel" --duration 600 --size 32x32 --out "$work/int"
+expect_stopped_by_sigterm "$work/int/b/tour.json" "$work/int" \
+  "$volreel" bench stream "$work/a.vreel" --duration 600 --size 32x32 --out "$work/int/b"
+# Into a folder that exists the run writes beside it and moves its files in once all are written:
+# interrupted, the folder keeps what it held and nothing of the run; completed, the run's files
+# replace those of the same names.
+mkdir -p "$work/ex"; echo old > "$work/ex/keep.txt"; echo old > "$work/ex/tour.json"
+"$volreel" bench stream "$work/a.vreel" --duration 600 --size 32x32 --out "$work/ex" > /dev/null 2>&1 &
+bench=$!
+for _ in $(seq 600); do compgen -G "$work/ex.partial-*/tour.json" > /dev/null && break; sleep 0.1; done
+compgen -G "$work/ex.partial-*/tour.json" > /dev/null || fail "bench stream staged no tour.json in 60 s"
+kill -TERM "$bench"
+status=0; wait "$bench" || status=$?
+[ "$status" = 143 ] || fail "bench stream into an existing folder, interrupted: exit status $status"
+[ "$(ls "$work/ex")" = "$(printf 'keep.txt\ntour.json')" ] && [ "$(cat "$work/ex/tour.json")" = old ] ||
+  fail "an interrupted run changed the existing folder: $(ls "$work/ex")"
+! compgen -G "$work/ex.partial-*" > /dev/null || fail "an interrupted run left its staging folder"
+"$volreel" bench stream "$work/a.vreel" --duration 1 --size 32x32 --policy patent --out "$work/ex" > "$work/ex.txt" 2>&1 ||
+  fail "bench stream into an existing folder: $(cat "$work/ex.txt")"
+[ -s "$work/ex/summary.json" ] && [ -f "$work/ex/keep.txt" ] && [ "$(cat "$work/ex/tour.json")" != old ] ||
+  fail "a completed run did not replace its files in the existing folder: $(ls "$work/ex")"
+! compgen -G "$work/ex.partial-*" > /dev/null || fail "a completed run left its staging folder"
+grep -q "wrote $work/ex:" "$work/ex.txt" || fail "the report names the staging folder: $(tail -2 "$work/ex.txt")"
 "$volreel" bench stream --help > "$work/help.txt" && grep -q -e "--bandwidth" "$work/help.txt" || fail "--help lacks --bandwidth"
 for o in --due-window --lookahead --speculative-link --ancestor-handicap --sse-priority --seeds --lod-fade --lod-fade-out --spatial-blend; do grep -q -e "$o" "$work/help.txt" || fail "--help lacks $o"; done
 echo "stream bench CLI: OK"

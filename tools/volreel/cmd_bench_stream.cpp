@@ -2,6 +2,8 @@
 // (docs/design.md, "Streaming"; the library: volreel/stream_bench/bench_stream.hpp). Its options,
 // then prepare_bench and run_tours, then the header, the side-by-side tables, the checks and the
 // files written.
+#include <unistd.h>
+
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -44,9 +46,12 @@ void stage(const std::string& title, const std::string& unit,
   bar.finish();
 }
 
-/// run_bench_stream's work, up to the files written; returns how many reads of bricks or frames
-/// failed while streaming (the runs' figures are of frames drawn without them).
-std::size_t run_bench_stream_into(const BenchStreamOptions& o) {
+/// run_bench_stream's work, up to the files written into `folder` (--out, or where this run
+/// stages its files for it; empty: a new temporary folder, which *made names); returns how many
+/// reads of bricks or frames failed while streaming (the runs' figures are of frames drawn
+/// without them).
+std::size_t run_bench_stream_into(const BenchStreamOptions& o, const std::string& folder,
+                                  std::filesystem::path* made) {
   // 1. Settings (all checked before any work), the container, the tour, the link, the truth.
   const sb::BenchStreamSettings& s = o.s;
   if (!o.remote.cache.empty() && remote::is_url(o.container) &&
@@ -58,8 +63,9 @@ std::size_t run_bench_stream_into(const BenchStreamOptions& o) {
         "instead of the server, and the runs would not compare; with --cache give --policy "
         "patent or nearest and --seeds 1 (a second invocation then measures the warm start)");
   const sb::BenchPlan plan = sb::prepare_bench(
-      s, o.container, o.series, o.reader.to_open_options(), o.out,
+      s, o.container, o.series, o.reader.to_open_options(), folder,
       remote::is_url(o.container) ? open_container_source(o.container, o.remote) : nullptr);
+  if (folder.empty()) *made = plan.out;
   const sb::RunSetup& setup = plan.setup;
   const sb::GroundTruth& truth = *plan.truth;
   sb::print_bench_header(plan, s, o.container, describe_machine());
@@ -95,8 +101,8 @@ std::size_t run_bench_stream_into(const BenchStreamOptions& o) {
       "\nwrote %s: %sstream_<policy>.csv (per frame), summary.json, %stour.json, "
       "%sframes_<policy>/frame_NNNNN.png "
       "(streamed | ground truth)\n",
-      plan.out.c_str(), s.seeds > 1 ? "seed_S/" : "", s.seeds > 1 ? "seed_S/" : "",
-      s.seeds > 1 ? "seed_S/" : "");
+      o.out.empty() ? plan.out.c_str() : o.out.c_str(), s.seeds > 1 ? "seed_S/" : "",
+      s.seeds > 1 ? "seed_S/" : "", s.seeds > 1 ? "seed_S/" : "");
   std::size_t errors = 0;
   for (const sb::TourRuns& tour : tours)
     for (const sb::RunResult& run : tour.runs) errors += run.errors;
@@ -104,17 +110,45 @@ std::size_t run_bench_stream_into(const BenchStreamOptions& o) {
 }
 
 void run_bench_stream(const BenchStreamOptions& o) {
+  namespace fs = std::filesystem;
   const StopOnSignal stop;
-  // A folder this run creates is removed if the run fails or is interrupted before its files are
-  // written: no half-written results (an existing one keeps what it held and what this run
-  // replaced in it).
+  // Nothing half-written on a failure or Ctrl-C: a --out that does not exist is created by the
+  // run and removed (with the parents it created) if the run fails; into one that exists the run
+  // writes a staging folder beside it, whose files replace those of the same names in --out only
+  // once all are written. Without --out, the temporary folder made is removed.
   std::error_code ec;
-  const bool fresh_out = !o.out.empty() && !std::filesystem::exists(o.out, ec);
+  fs::path remove_on_failure, staging;
+  if (!o.out.empty()) {
+    // Not there at all (file_type::none instead when it cannot be told, as without permission).
+    const auto missing = [&](const fs::path& p) {
+      return fs::symlink_status(p, ec).type() == fs::file_type::not_found;
+    };
+    if (missing(o.out)) {
+      remove_on_failure = fs::absolute(o.out, ec);
+      while (remove_on_failure.has_relative_path() && missing(remove_on_failure.parent_path()))
+        remove_on_failure = remove_on_failure.parent_path();
+    } else if (fs::is_directory(o.out, ec)) {
+      staging = fs::path(o.out).lexically_normal();
+      if (!staging.has_filename()) staging = staging.parent_path();
+      staging += ".partial-" + std::to_string(::getpid());
+      remove_on_failure = staging;
+    }
+  }
+  fs::path made;
   std::size_t errors = 0;
   try {
-    errors = run_bench_stream_into(o);
+    errors = run_bench_stream_into(o, staging.empty() ? o.out : staging.string(), &made);
+    if (!staging.empty()) {
+      for (const fs::directory_entry& e : fs::directory_iterator(staging)) {
+        const fs::path target = fs::path(o.out) / e.path().filename();
+        fs::remove_all(target);
+        fs::rename(e.path(), target);
+      }
+      fs::remove(staging);
+    }
   } catch (...) {
-    if (fresh_out) std::filesystem::remove_all(o.out, ec);
+    if (!remove_on_failure.empty()) fs::remove_all(remove_on_failure, ec);
+    if (!made.empty()) fs::remove_all(made, ec);
     throw;
   }
   // The files are written (runs drawn without what failed); the exit status says it failed.
