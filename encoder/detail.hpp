@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -101,6 +102,10 @@ std::vector<std::byte> zfp_payload(format::BrickShape shape, const float* brick,
 /// The indices of `count` frames of the first `frames`, evenly spaced (the middle one if count is
 /// 1), in increasing order.
 std::vector<std::size_t> evenly_spaced_indices(std::size_t frames, std::size_t count);
+
+/// Refuses (InputError) a dictionary whose atoms are not 6³ blocks, the blocks of volreel's
+/// bricks; `where` names it in the message ("d.bin: ", or empty).
+void require_brick_blocks(std::uint32_t block_size, const std::string& where);
 
 /// Those frames read into memory: the samples that size estimates encode.
 std::vector<Volume> evenly_spaced_frames(const datasets::SeriesReader& series, std::size_t frames,

@@ -13,6 +13,7 @@
 #include <string>
 #include <utility>
 
+#include "detail.hpp"
 #include "volreel/dictionary/coreset.hpp"
 #include "volreel/dictionary/training.hpp"
 #include "volreel/encoder/pyramid.hpp"
@@ -224,11 +225,8 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   // A dictionary given is read (and checked) now, not after the value range and rate control.
   // (Rank 0 alone reads it, here and below; its error aborts the job.)
   if (ranks.root() && !request.dictionary.empty() && request.dictionary != "dct") {
-    const format::DictionaryFile given = format::read_dictionary_file(request.dictionary);
-    if (given.block_size != 6)
-      throw InputError(request.dictionary + ": the dictionary has blocks of " +
-                       std::to_string(given.block_size) +
-                       "^3; volreel's bricks need 6^3 (volreel train --block 6, its default)");
+    detail::require_brick_blocks(format::read_dictionary_file(request.dictionary).block_size,
+                                 request.dictionary + ": ");
   }
   // The brick size: given, the container's own (resume), or chosen for the volume.
   const std::array<std::uint32_t, 3> dims{static_cast<std::uint32_t>(info.dims.x),

@@ -610,9 +610,7 @@ FrameEncoder::FrameEncoder(const dictionary::Dictionary* dictionary, CodingSetti
     if (!format::valid_brick_size(settings_.brick_size))
       throw InputError("the brick size must be a multiple of 6 in 12..66, not " +
                        std::to_string(settings_.brick_size));
-    if (dictionary_->block_size != 6 || dictionary_->block_length() != 216)
-      throw InputError("the dictionary has blocks of " + std::to_string(dictionary_->block_size) +
-                       "^3; volreel's bricks need 6^3");
+    detail::require_brick_blocks(static_cast<std::uint32_t>(dictionary_->block_size), "");
     if (dictionary_->atom_count() < 1 ||
         static_cast<std::uint32_t>(dictionary_->atom_count()) > format::dictionary_max_atoms)
       throw InputError("the dictionary has " + std::to_string(dictionary_->atom_count()) +

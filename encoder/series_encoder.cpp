@@ -742,11 +742,12 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       if (psnr >= job.psnr_target) break;
       // The payload's finest steps reached (a smaller ε gained nothing), or ε at its floor: the
       // target is out of reach (reported with what the frame reached).
-      if (psnr < reached + min_retry_gain_db || scale <= smallest_scale) {
+      const bool gained_nothing = psnr < reached + min_retry_gain_db;
+      if (gained_nothing || scale <= smallest_scale) {
         if (!done[t] && writer) ++summary.delivered.frames_at_finest;
         // The try that gained nothing spent more bytes for it: the frame keeps the try before
         // (coded again: the same bytes), and so does the next frame of its stretch.
-        if (psnr < reached + min_retry_gain_db) {
+        if (gained_nothing) {
           scale = reached_scale;
           use_scale(scale);
           code(t, step);

@@ -24,6 +24,12 @@ double manifest_estimate(std::size_t frames) {
 
 }  // namespace
 
+void detail::require_brick_blocks(std::uint32_t block_size, const std::string& where) {
+  if (block_size != VR_BLOCK_SIZE)
+    throw InputError(where + "the dictionary has blocks of " + std::to_string(block_size) +
+                     "^3; volreel's bricks need 6^3 (volreel train --block 6, its default)");
+}
+
 std::vector<std::size_t> detail::evenly_spaced_indices(std::size_t frames, std::size_t count) {
   std::vector<std::size_t> indices;
   const std::size_t n = std::min(count, frames);

@@ -159,9 +159,7 @@ void run_bench_index(const BenchIndexOptions& o) {
     while (seconds_since(start) < o.settle_seconds) {
       const stream::StreamStats s = step(playhead, seeking);
       if (index_s < 0 && s.index_ready) index_s = seconds_since(start);
-      idle = s.index_ready && s.requests_in_flight == 0 && s.arrivals_waiting == 0 && s.uploads == 0
-                 ? idle + 1
-                 : 0;
+      idle = s.index_ready && s.quiet() ? idle + 1 : 0;
       if (s.index_ready && (s.fraction_at_target >= 1.0 || idle >= 3)) {
         settled = true;
         settled_fraction.push_back(s.fraction_at_target);

@@ -24,9 +24,7 @@ void Player::run_script(double dt) {
     settle_waited_ += dt;
     const bool counted = frame_number_ > settle_from_;
     const bool idle = counted && stats_.fraction_at_target >= 1.0 && stats_.holes == 0;
-    const bool quiet = counted && (stats_.index_ready || stats_.index_failed) &&
-                       stats_.requests_in_flight == 0 && stats_.arrivals_waiting == 0 &&
-                       stats_.uploads == 0;
+    const bool quiet = counted && stats_.quiet();
     idle_frames_ = idle ? idle_frames_ + 1 : 0;
     quiet_frames_ = quiet ? quiet_frames_ + 1 : 0;
     if (idle_frames_ >= 2 || quiet_frames_ >= 2 || settle_waited_ >= settle_timeout_) {

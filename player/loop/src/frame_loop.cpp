@@ -25,9 +25,7 @@ ViewWait wait_for_view(FrameLoop& loop, const player::OrbitCamera& camera, doubl
     }
     // Two quiet steps in a row: the scheduler had a chance to request more and did not (once the
     // frame indexes around the playhead are read or failed: before, it has nothing to request).
-    const bool quiet = (s.index_ready || s.index_failed) && s.requests_in_flight == 0 &&
-                       s.arrivals_waiting == 0 && s.uploads == 0;
-    idle = quiet ? idle + 1 : 0;
+    idle = s.quiet() ? idle + 1 : 0;
     if (idle >= 2) break;
     if (elapsed() >= timeout_s) {
       wait.timed_out = true;

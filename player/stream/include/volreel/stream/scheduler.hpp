@@ -117,6 +117,14 @@ struct StreamStats {
   std::uint32_t svo_nodes = 0, svo_leaves = 0;
   std::uint32_t blended_leaves = 0;  ///< leaf records that blend in their parent's drawing
   std::size_t errors = 0;            ///< since construction
+
+  /// Nothing more is on its way for this view: the frame indexes around the playhead are read (or
+  /// failed), no request is in flight, no arrival waits and nothing was uploaded this frame. Two
+  /// such frames in a row: the scheduler had its chance to request more and did not.
+  bool quiet() const {
+    return (index_ready || index_failed) && requests_in_flight == 0 && arrivals_waiting == 0 &&
+           uploads == 0;
+  }
 };
 
 struct FrameUpdate {
