@@ -1,11 +1,13 @@
 // tolerance_search.cpp: choosing ε — the order of the sources (choose_tolerance), and rate
-// control for a size target: bracket ε in log space with trial encodes of sample frames, then
-// bisect geometrically (search_tolerance).
+// control for a size target: trial encodes of sample frames, stepping along the slope of ln bps
+// against ln ε until the target is bracketed, then regula falsi (search_tolerance, solve_for_bps).
 #include "volreel/encoder/tolerance.hpp"
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <map>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -44,6 +46,70 @@ std::vector<Volume> detail::evenly_spaced_frames(const datasets::SeriesReader& s
   for (std::size_t i : evenly_spaced_indices(frames, count))
     samples.push_back(series.read_frame(i));
   return samples;
+}
+
+BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double target_bps,
+                          double start, double min_tolerance, double max_tolerance, double relative,
+                          double& slope, const Progress& progress) {
+  // In x = ln ε and y = ln(bps/target), bps(ε) falls as ε grows and y is close to a line.
+  struct Point {
+    double x = 0, y = 0;
+  };
+  const double x_min = std::log(min_tolerance), x_max = std::log(max_tolerance);
+  const double max_step = std::log(max_rate_step);
+  std::optional<Point> fine, coarse;  // the bracket: y > 0 (too many bits) and y < 0
+  std::optional<Point> previous;
+  int kept_fine = 0, kept_coarse = 0;  // how many times in a row each end stayed (Illinois)
+  BpsSolution best;
+  double x = std::clamp(std::log(start), x_min, x_max);
+  for (int trial = 1; trial <= max_rate_trials; ++trial) {
+    const double eps = std::exp(x);
+    const double bps = bps_at(eps);
+    char text[64];
+    std::snprintf(text, sizeof text, "eps %.4g -> %.4f bps", eps, bps);
+    progress.report(trial, max_rate_trials, text);
+    ++best.trials;
+    if (best.tolerance == 0 || std::abs(bps - target_bps) < std::abs(best.bps - target_bps))
+      best.tolerance = eps, best.bps = bps;
+    if (std::abs(bps - target_bps) <= relative * target_bps || !(bps > 0)) break;
+    const Point p{x, std::log(bps / target_bps)};
+    // The slope between the last two trials. Flatter than min_rate_slope (or rising), the rate
+    // barely moves with ε there: a stretch where every block is coded as finely as the format
+    // allows, or holds its mean alone. The next step is then the largest, towards the target
+    // or the end of the range.
+    bool flat = false;
+    if (previous && p.x != previous->x) {
+      const double measured = (p.y - previous->y) / (p.x - previous->x);
+      flat = !(measured < -min_rate_slope);
+      if (measured < 0 && std::isfinite(measured))
+        slope = std::clamp(measured, -1 / min_rate_slope, -min_rate_slope);
+    }
+    previous = p;
+    if (p.y > 0)
+      fine = p, ++kept_coarse, kept_fine = 0;
+    else
+      coarse = p, ++kept_fine, kept_coarse = 0;
+    double next;
+    if (fine && coarse) {
+      // Regula falsi between the ends, the Illinois way: an end kept twice in a row counts
+      // half, so that the other end moves too.
+      const double yf = fine->y / (kept_fine > 1 ? 1 << (kept_fine - 1) : 1);
+      const double yc = coarse->y / (kept_coarse > 1 ? 1 << (kept_coarse - 1) : 1);
+      next = fine->x + yf * (coarse->x - fine->x) / (yf - yc);
+      if (!(std::abs(coarse->x - fine->x) > 1e-12)) break;  // the bracket closed: bps jumps across
+    } else {
+      // One side known: a step along the slope, at most a factor max_rate_step in ε.
+      next = x + (flat ? (p.y > 0 ? max_step : -max_step)
+                       : std::clamp(-p.y / slope, -max_step, max_step));
+      next = std::clamp(next, x_min, x_max);
+      if (next == x) {  // at the end of the range and still on one side: out of reach
+        best.tolerance = eps, best.bps = bps;
+        break;
+      }
+    }
+    x = next;
+  }
+  return best;
 }
 
 RateSearch search_tolerance(const datasets::SeriesReader& series,
@@ -94,28 +160,20 @@ RateSearch search_tolerance(const datasets::SeriesReader& series,
             fixed_bytes) /
            voxels;
   };
-  // 2. Bracket in log ε (bps falls as ε grows), then bisect geometrically.
-  const auto search = [&](double lo, double hi) {
-    double bps_lo = estimate(lo), bps_hi = estimate(hi);
-    while (bps_lo < target_bps && lo > range * 1e-9) lo /= 4, bps_lo = estimate(lo);
-    while (bps_hi > target_bps && hi < range) hi *= 4, bps_hi = estimate(hi);
-    r.tolerance = std::abs(bps_lo - target_bps) < std::abs(bps_hi - target_bps) ? lo : hi;
-    r.estimated_bps = r.tolerance == lo ? bps_lo : bps_hi;
-    for (int i = 0; i < 30 && std::abs(r.estimated_bps - target_bps) > relative * target_bps; ++i) {
-      const double mid = std::sqrt(lo * hi);
-      const double bps = estimate(mid);
-      r.tolerance = mid;
-      r.estimated_bps = bps;
-      (bps > target_bps ? lo : hi) = mid;
-      progress.report(i + 1, 30,
-                      "eps " + std::to_string(mid) + " -> " + std::to_string(bps) + " bps");
-    }
+  // 2. Solve bps(ε) = target from a start in the middle of the usual range (60 dB), carrying
+  //    the slope the first search measured into the check's.
+  double slope = default_rate_slope;
+  const auto search = [&](double start) {
+    const auto solved =
+        solve_for_bps(estimate, target_bps, start, range * 1e-9, range, relative, slope, progress);
+    r.tolerance = solved.tolerance;
+    r.estimated_bps = solved.bps;
   };
-  search(range * 1e-4, range * 1e-2);
+  search(range * 1e-3);
   // 3. The ε found, checked on as many frames again, evenly spaced among the others: a sequence
   //    whose frames differ in cost (a flow going from smooth to turbulent and back) can mislead
   //    the first sample by 20 % and more. Where the estimate over both misses the target, the
-  //    search runs again on both, near the ε found; at most rate_check_rounds times.
+  //    search runs again on both from the ε found; at most rate_check_rounds times.
   for (int round = 0; round < rate_check_rounds && sample.size() < frames; ++round) {
     std::vector<std::size_t> rest;
     for (std::size_t i = 0; i < frames; ++i)
@@ -123,10 +181,8 @@ RateSearch search_tolerance(const datasets::SeriesReader& series,
     for (std::size_t k : detail::evenly_spaced_indices(rest.size(), sample_frames))
       sample.push_back(rest[k]);
     std::sort(sample.begin(), sample.end());
-    const double bps = estimate(r.tolerance);
-    r.estimated_bps = bps;
-    if (std::abs(bps - target_bps) <= relative * target_bps) break;
-    search(r.tolerance / 2, r.tolerance * 2);
+    search(r.tolerance);
+    if (std::abs(r.estimated_bps - target_bps) <= relative * target_bps) break;
   }
   r.sample_frames = sample.size();
   // 4. The bricks of the final sample at the ε chosen (every search step ends with it estimated

@@ -3,7 +3,9 @@
 // names and figures around an encode: rate rules, codecs, mean bits, the summary's derived figures.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <functional>
 #include <string>
 
 #include "dictionary_test_data.hpp"
@@ -169,6 +171,55 @@ TEST(Tolerance, TheRateSearchChecksItsEpsilonOnOtherFrames) {
   // The first sample alone would have been far off at that ε (several times the 3 % the search
   // aims at).
   EXPECT_GT(std::abs(sampled - bytes), 0.2 * bytes);
+}
+
+// solve_for_bps on rate curves of known shape: power laws steeper and flatter than the slope it
+// starts from, a staircase, a wobbling curve, and curves that level off before the target (every
+// block as fine as the format allows; means alone).
+TEST(Tolerance, TheBpsSolverFindsTheTargetInFewTrialsOrStopsAtTheClosest) {
+  const auto solve = [](const std::function<double(double)>& bps_at, double target) {
+    double slope = encoder::default_rate_slope;
+    return encoder::solve_for_bps(bps_at, target, 1e-3, 1e-9, 1, 0.03, slope);
+  };
+  int most_trials = 0;
+  for (double exponent : {0.25, 0.35, 0.5, 1.0, 2.0})
+    for (double target : {0.25, 0.5, 1.0, 2.0, 4.0, 8.0}) {
+      // 1 bps at ε = 10^-2.5 (the start, 10^-3, is off by a factor 10^(0.5·exponent)).
+      const auto power = [&](double eps) { return std::pow(eps / 3.16e-3, -exponent); };
+      const auto r = solve(power, target);
+      EXPECT_NEAR(r.bps, target, 0.03 * target) << "exponent " << exponent;
+      EXPECT_DOUBLE_EQ(r.bps, power(r.tolerance));
+      most_trials = std::max(most_trials, r.trials);
+      // Steps of 1/20 bps, and ±2 % wobbles: not smooth, still found.
+      const auto stairs = [&](double eps) { return std::ceil(20 * power(eps)) / 20; };
+      EXPECT_NEAR(solve(stairs, target).bps, target, 0.03 * target + 0.05);
+      const auto wobble = [&](double eps) {
+        return power(eps) * (1 + 0.02 * std::sin(40 * std::log(eps)));
+      };
+      const auto w = solve(wobble, target);
+      EXPECT_NEAR(w.bps, target, 0.03 * target) << "exponent " << exponent;
+      EXPECT_LE(w.trials, 12);
+    }
+  // Geometric bisection from a bracket of 10^-4..10^-2 took 7 to 16 trials on the suite.
+  EXPECT_LE(most_trials, 8);
+  // A curve that levels off at 3.6 bps below ε = 3·10^-5: 4 bps is out of reach. The solver
+  // stops at the closest, without creeping down the flat stretch.
+  const auto ceiling = [](double eps) { return std::min(3.6, 0.02 * std::pow(eps, -0.5)); };
+  auto r = solve(ceiling, 4);
+  EXPECT_DOUBLE_EQ(r.bps, 3.6);
+  EXPECT_DOUBLE_EQ(r.tolerance, 1e-9) << "out of reach: the finest end of the range";
+  EXPECT_LE(r.trials, 12);
+  // Means alone above ε = 0.01: 0.2 bps, so 0.1 is out of reach the other way.
+  const auto floor = [](double eps) { return std::max(0.2, 0.02 * std::pow(eps, -0.5)); };
+  r = solve(floor, 0.1);
+  EXPECT_DOUBLE_EQ(r.bps, 0.2);
+  EXPECT_DOUBLE_EQ(r.tolerance, 1);
+  EXPECT_LE(r.trials, 8);
+  // Starting on the flat stretch with the target reachable: it leaves the stretch.
+  double slope = encoder::default_rate_slope;
+  r = encoder::solve_for_bps(floor, 1.0, 0.5, 1e-9, 1, 0.03, slope);
+  EXPECT_NEAR(r.bps, 1.0, 0.03);
+  EXPECT_LT(slope, -0.4) << "the slope measured on the curve is handed back";
 }
 
 TEST(Tolerance, ADictionaryIsTrainedAtTheToleranceOrPsnrAskedElseTheEncodingDefault) {

@@ -5,6 +5,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <optional>
 
 #include "volreel/datasets/series.hpp"
@@ -28,6 +29,31 @@ struct RateSearch {
   std::size_t sample_bricks = 0, learned_bricks = 0;
 };
 inline constexpr int rate_check_rounds = 2;
+
+/// The search behind search_tolerance, on any bps(ε) that falls as ε grows: ε such that
+/// |bps(ε) − target| ≤ relative·target, from `start`, within [min_tolerance, max_tolerance]. In
+/// ln ε against ln bps, which is close to a line, it steps along the slope (at first `slope`, then
+/// that of its last two trials; at most a factor max_rate_step in ε a step) until the target is
+/// bracketed, then closes in by regula falsi (the Illinois variant, which moves both ends). So the
+/// trials stay near the target: those far below it cost little and those far above it, which cost
+/// most, are not run. Returns the closest trial, or where the target is out of reach (bps still
+/// on one side of it at min_tolerance or max_tolerance) that end of the range; `slope` is left at
+/// the last one measured (the start of a later search near the same ε).
+struct BpsSolution {
+  double tolerance = 0, bps = 0;
+  int trials = 0;
+};
+/// d ln bps / d ln ε before any is measured; only the first step's length depends on it (the
+/// suite's members measure −0.3 to −0.6 between 0.5 and 8 bps).
+inline constexpr double default_rate_slope = -0.5;
+/// Measured slopes are kept within [−1/min_rate_slope, −min_rate_slope]: a flat stretch (the rate
+/// barely moving) does not send the next step to the end of the range.
+inline constexpr double min_rate_slope = 0.1;
+inline constexpr double max_rate_step = 16;
+inline constexpr int max_rate_trials = 30;
+BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double target_bps,
+                          double start, double min_tolerance, double max_tolerance, double relative,
+                          double& slope, const Progress& progress = {});
 /// encode skips the whole dictionary's pursuit (CodingSettings::learned_pursuit) where the rate
 /// search's sample kept the learned atoms in none of its bricks, if that sample is every frame or
 /// at least this many bricks: none in 30 bounds the share of bricks where they would pay by 10 %
