@@ -6,10 +6,12 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <functional>
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include <Eigen/QR>
 
@@ -73,6 +75,17 @@ double bound_energy(const SparseCodingOptions& options, Eigen::Index block_lengt
 constexpr Eigen::Index chunk = 64;
 using Chunk = Eigen::Matrix<float, chunk, 1>;
 
+typedef float Lanes [[gnu::vector_size(32)]];  // 8 floats: one AVX2 register or two SSE ones
+constexpr std::size_t lanes = 8;
+/// ORMP's Gram–Schmidt rows are summed this many atoms at a time: 8 vectors, as many independent
+/// sums as it takes to keep two vector units busy through their latency.
+constexpr Eigen::Index row_chunk = 8 * static_cast<Eigen::Index>(lanes);
+/// K rounded up to whole vectors: the length of ORMP's padded arrays.
+Eigen::Index padded_atoms(Eigen::Index K) {
+  const auto n = static_cast<Eigen::Index>(lanes);
+  return (K + n - 1) / n * n;
+}
+
 /// Scratch space of one thread, sized once.
 struct OmpWorkspace {
   Eigen::VectorXf alpha;  // K: Dᵀr, the residual's correlations
@@ -84,8 +97,11 @@ struct OmpWorkspace {
   /// Orthonormal atoms only: the candidates, best first, as keys (orthonormal_order_key).
   std::vector<std::uint64_t> order;
   // ORMP only:
+  // (alpha, projected and gram_row padded with zeros to whole vectors, padded_atoms)
   Eigen::VectorXf projected;  // K: ‖P⊥d_k‖², the atoms' squared norms orthogonal to the support
-  std::vector<float> rows;  // S × K: row j = (L⁻¹ G_{I,:})_j, the support's Gram–Schmidt rows
+  Eigen::VectorXf gram_row;  // K: G_{k,:} of the atom being added
+  std::vector<float> rows;  // S × K: row j = (L⁻¹ G_{I,:})_j, the support's Gram–Schmidt rows,
+                            // by chunks of atoms (row_index), padded
 
   OmpWorkspace(Eigen::Index atoms, int slots, bool ormp)
       : alpha(atoms),
@@ -97,8 +113,17 @@ struct OmpWorkspace {
         support(static_cast<std::size_t>(slots)),
         columns(static_cast<std::size_t>(slots)),
         chunk_max(static_cast<std::size_t>(atoms / chunk + 1)),
-        projected(ormp ? atoms : 0),
-        rows(ormp ? static_cast<std::size_t>(atoms) * static_cast<std::size_t>(slots) : 0) {}
+        projected(ormp ? padded_atoms(atoms) : 0),
+        gram_row(ormp ? padded_atoms(atoms) : 0),
+        rows(ormp ? static_cast<std::size_t>(padded_atoms(atoms)) * static_cast<std::size_t>(slots)
+                  : 0) {
+    if (ormp) {
+      alpha.resize(padded_atoms(atoms));
+      alpha.setZero();
+      projected.setZero();
+      gram_row.setZero();
+    }
+  }
 };
 
 /// The hot loop of batch-OMP (Σ_s s·K multiply-adds per block), fused with the search for the next
@@ -262,6 +287,68 @@ Eigen::Index ormp_best(const float* alpha, const float* projected, const float* 
   return at;
 }
 
+/// The support's Gram–Schmidt rows, S × K (K padded to whole vectors), stored by chunks of
+/// row_chunk atoms (the last one narrower): a chunk holds, row after row, its values of each row,
+/// so that its sums over the rows read one contiguous stretch.
+std::size_t row_index(int j, Eigen::Index atom, int slots, Eigen::Index padded) {
+  const Eigen::Index start = atom / row_chunk * row_chunk;
+  const Eigen::Index width = std::min(row_chunk, padded - start);
+  return static_cast<std::size_t>(start * slots + j * width + (atom - start));
+}
+
+/// One chunk of `V` vectors of ORMP's step 3 (gram_schmidt_row): V independent sums.
+template <std::size_t V>
+void gram_schmidt_chunk(float* __restrict rows, const float* __restrict g_k,
+                        const float* __restrict l, int s, float inverse_root, float z,
+                        float* __restrict alpha, float* __restrict projected) {
+  // Vectors go through memcpy, not through functions (a 32-byte vector argument changes the ABI
+  // of a build without AVX).
+  Lanes sum[V] = {};
+  const float* r = rows;
+  for (int j = 0; j < s; ++j, r += V * lanes)
+    for (std::size_t v = 0; v < V; ++v) {
+      Lanes row;
+      std::memcpy(&row, r + v * lanes, sizeof row);
+      sum[v] += l[j] * row;
+    }
+  float* q = rows + static_cast<std::size_t>(s) * V * lanes;
+  for (std::size_t v = 0; v < V; ++v) {
+    const std::size_t i = v * lanes;
+    Lanes g, a, p;
+    std::memcpy(&g, g_k + i, sizeof g);
+    std::memcpy(&a, alpha + i, sizeof a);
+    std::memcpy(&p, projected + i, sizeof p);
+    const Lanes value = (g - sum[v]) * inverse_root;
+    a -= z * value;
+    p -= value * value;
+    std::memcpy(q + i, &value, sizeof value);
+    std::memcpy(alpha + i, &a, sizeof a);
+    std::memcpy(projected + i, &p, sizeof p);
+  }
+}
+
+/// ORMP's step 3: row s, q = (G_{k,:} − Σ_j L_kj q_j)/√p over the earlier rows, then α ← α − z·q
+/// and ‖P⊥d‖² ← ‖P⊥d‖² − q², a chunk at a time while its sums are in registers. g_k, α and
+/// ‖P⊥d‖² are padded with zeros to whole vectors, which the padding keeps.
+void gram_schmidt_row(float* rows, int slots, const float* g_k, const float* l, int s,
+                      float inverse_root, float z, float* alpha, float* projected,
+                      Eigen::Index padded) {
+  constexpr std::size_t most = static_cast<std::size_t>(row_chunk) / lanes;
+  for (Eigen::Index at = 0; at < padded; at += row_chunk) {
+    const auto vectors = static_cast<std::size_t>(std::min(row_chunk, padded - at)) / lanes;
+    // gram_schmidt_chunk<vectors> (1..most), called directly so that it inlines.
+    [&]<std::size_t... V>(std::index_sequence<V...>) {
+      static_cast<void>(((vectors == V + 1 ? (gram_schmidt_chunk<V + 1>(rows + at * slots, g_k + at,
+                                                                        l, s, inverse_root, z,
+                                                                        alpha + at, projected + at),
+                                              true)
+                                           : false) ||
+                         ...));
+    }
+    (std::make_index_sequence<most>{});
+  }
+}
+
 /// ORMP for one block (see AtomSelection), from α⁰ = Dᵀy and ‖y‖², with the same stopping rules and
 /// outputs as code_one_block. Gram–Schmidt in the coefficient domain: adding atom k with pivot
 /// p = ‖P⊥d_k‖² gives the row q = (G_{k,:} − Σ_j L_kj q_j)/√p (L_kj = q_j[k], the new row of the
@@ -273,7 +360,8 @@ int code_one_block_ormp(const float* alpha0, double energy, const Eigen::MatrixX
                         OmpWorkspace& ws, std::int32_t* atoms_out, float* coefficients_out,
                         float* residual_out) {
   const Eigen::Index K = gram.rows();
-  const auto Ku = static_cast<std::size_t>(K);
+  const auto slots = static_cast<int>(ws.lower.rows());  // S, the rows' chunk length
+  const Eigen::Index padded = padded_atoms(K);
   float* alpha = ws.alpha.data();
   float* projected = ws.projected.data();
   auto& L = ws.lower;
@@ -293,19 +381,12 @@ int code_one_block_ormp(const float* alpha0, double energy, const Eigen::MatrixX
         static_cast<double>(z) * static_cast<double>(z) < rule.min_gain)
       break;
     // 3. The Cholesky row and the Gram–Schmidt row of atom k; α and ‖P⊥d‖² updated.
-    float* q = ws.rows.data() + static_cast<std::size_t>(s) * Ku;
-    const float* g_k = gram.col(k).data();
-    for (int c = 0; c < s; ++c)
-      L(s, c) = ws.rows[static_cast<std::size_t>(c) * Ku + static_cast<std::size_t>(k)];
+    float* g_k = ws.gram_row.data();  // padded with zeros
+    std::copy_n(gram.col(k).data(), K, g_k);
+    float* l = ws.w.data();  // row s of L, contiguous
+    for (int c = 0; c < s; ++c) l[c] = L(s, c) = ws.rows[row_index(c, k, slots, padded)];
     L(s, s) = root;
-    Eigen::Map<Eigen::VectorXf> row(q, K);
-    row = Eigen::Map<const Eigen::VectorXf>(g_k, K);
-    if (s > 0)  // one matrix-vector product over the earlier rows, each read once
-      row.noalias() -=
-          Eigen::Map<const Eigen::MatrixXf>(ws.rows.data(), K, s) * L.row(s).head(s).transpose();
-    row *= 1.0f / root;
-    Eigen::Map<Eigen::VectorXf>(alpha, K).noalias() -= z * row;
-    Eigen::Map<Eigen::VectorXf>(projected, K).array() -= row.array().square();
+    gram_schmidt_row(ws.rows.data(), slots, g_k, l, s, 1.0f / root, z, alpha, projected, padded);
     ws.support[static_cast<std::size_t>(s)] = static_cast<int>(k);
     ws.z[s] = z;
     ++s;
