@@ -4,16 +4,20 @@
 #pragma once
 
 #include <arpa/inet.h>
+#include <fcntl.h>
 #include <netinet/in.h>
 #include <signal.h>
-#include <spawn.h>
+#include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <stdexcept>
@@ -22,8 +26,6 @@
 #include <vector>
 
 #include "../test_util.hpp"
-
-extern char** environ;
 
 namespace volreel::test {
 
@@ -54,17 +56,54 @@ inline bool port_open(int port) {
   return ok;
 }
 
+/// `program` as execv takes it: itself where it names a path, else the first match on PATH.
+inline std::string program_path(const std::string& program) {
+  if (program.find('/') != std::string::npos) return program;
+  const char* path = std::getenv("PATH");
+  std::string dirs = path ? path : "/usr/bin:/bin";
+  for (std::size_t at = 0; at <= dirs.size();) {
+    const std::size_t end = std::min(dirs.find(':', at), dirs.size());
+    const std::string candidate = dirs.substr(at, end - at) + "/" + program;
+    if (::access(candidate.c_str(), X_OK) == 0) return candidate;
+    at = end + 1;
+  }
+  throw std::runtime_error("cannot start " + program + ": not found on PATH");
+}
+
+/// Starts a server process that ends when the test process does (PR_SET_PDEATHSIG): a test that
+/// crashes leaves no server behind holding the test's output open, which would keep ctest waiting
+/// until its timeout. Throws naming the program if it cannot be started.
 inline pid_t spawn(const std::vector<std::string>& args, int stdout_fd = -1) {
+  const std::string program = program_path(args[0]);
   std::vector<char*> argv;
   for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  if (stdout_fd >= 0) posix_spawn_file_actions_adddup2(&actions, stdout_fd, 1);
-  pid_t pid = 0;
-  const int rc = posix_spawnp(&pid, argv[0], &actions, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  if (rc != 0) throw std::runtime_error("cannot start " + args[0]);
+  int status_pipe[2];  // the child writes errno here if exec fails; closed by a successful exec
+  if (::pipe2(status_pipe, O_CLOEXEC) != 0) throw std::runtime_error("cannot start " + args[0]);
+  const pid_t parent = ::getpid();
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    ::close(status_pipe[0]);
+    ::close(status_pipe[1]);
+    throw std::runtime_error("cannot start " + args[0] + ": fork failed");
+  }
+  if (pid == 0) {  // only async-signal-safe calls until exec
+    ::prctl(PR_SET_PDEATHSIG, SIGTERM);
+    if (::getppid() != parent) ::_exit(127);  // the test ended before prctl
+    if (stdout_fd >= 0) ::dup2(stdout_fd, 1);
+    ::execv(program.c_str(), argv.data());
+    const int error = errno;
+    [[maybe_unused]] const auto written = ::write(status_pipe[1], &error, sizeof error);
+    ::_exit(127);
+  }
+  ::close(status_pipe[1]);
+  int error = 0;
+  const auto got = ::read(status_pipe[0], &error, sizeof error);
+  ::close(status_pipe[0]);
+  if (got == static_cast<ssize_t>(sizeof error)) {
+    ::waitpid(pid, nullptr, 0);
+    throw std::runtime_error("cannot start " + program + ": " + std::strerror(error));
+  }
   return pid;
 }
 
