@@ -29,6 +29,8 @@ DefaultDictionary train_default_dictionary(const datasets::SeriesReader& series,
   //    samples against the atoms as the container stores them.
   DefaultDictionary result;
   double best_total = std::numeric_limits<double>::infinity();
+  double previous_total = std::numeric_limits<double>::infinity();  // the last one trained
+  int rises = 0;  // candidates in a row whose estimate was larger than the one before
   for (int k : choose ? options.candidate_atoms : std::vector<int>{options.atoms}) {
     dictionary::TrainingOptions to;
     to.atom_count = k;
@@ -37,8 +39,10 @@ DefaultDictionary train_default_dictionary(const datasets::SeriesReader& series,
     candidate.atoms = k;
     candidate.dictionary_bytes = static_cast<double>(
         format::dictionary_file_size(static_cast<std::uint64_t>(k), 216, options.half_atoms));
-    if (choose && candidate.dictionary_bytes >= best_total) {  // it cannot win: not trained
+    const bool past_minimum = rises >= max_rising_estimates;
+    if (choose && (candidate.dictionary_bytes >= best_total || past_minimum)) {  // not trained
       candidate.skipped = true;
+      candidate.past_minimum = candidate.dictionary_bytes < best_total;  // the other reason
       candidate.best_bytes = best_total;
       result.candidates.push_back(candidate);
       if (on_candidate) on_candidate(candidate);
@@ -64,6 +68,8 @@ DefaultDictionary train_default_dictionary(const datasets::SeriesReader& series,
         bytes += static_cast<double>(enc.encode(i, samples[i]).size());
       total += bytes / static_cast<double>(samples.size()) * static_cast<double>(frames);
       candidate.estimated_bytes = total;
+      rises = total > previous_total ? rises + 1 : 0;
+      previous_total = total;
     }
     result.candidates.push_back(candidate);
     if (on_candidate) on_candidate(candidate);

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "test_util.hpp"
@@ -122,6 +123,53 @@ TEST_F(DefaultDictionary, ASizeWhoseDictionaryAloneCannotWinIsNotTrained) {
   EXPECT_FALSE(small.skipped) << "the DCT basis's estimate " << dct.estimated_bytes;  // 16: 7 kB
   EXPECT_GT(small.estimated_bytes, small.dictionary_bytes);
   EXPECT_NE(chosen.dictionary.atom_count(), 2048);
+}
+
+// A noise field, which no learned atom codes much better than the basis: each larger dictionary
+// adds more bytes than it saves, and after two rising estimates in a row the next sizes are not
+// trained.
+TEST(DefaultDictionarySizes, SizesAfterTwoRisingEstimatesAreNotTrained) {
+  test::TempDir dir("default-dictionary-noise");
+  datasets::AnalyticParams p;
+  p.field = datasets::AnalyticField::noise;
+  p.dims = {36, 36, 36};
+  p.frames = 2;
+  {
+    datasets::RawSeriesWriter w(dir / "series", p.dims, "noise");
+    datasets::generate_analytic(p, w);
+  }
+  const auto series = datasets::open_series(dir / "series");
+  encoder::DefaultDictionaryOptions options;
+  std::tie(options.coding.value_min, options.coding.value_max) = encoder::value_range(*series, 0);
+  options.tolerance = 0.001 * (options.coding.value_max - options.coding.value_min);
+  options.candidate_atoms = {0, 16, 24, 32, 40};  // dictionaries far smaller than the frames
+  options.sample_frames = 2;
+  options.coreset.coreset_voxels = 216 * 2000;
+  options.coreset.levels = 2;
+  std::vector<encoder::DictionaryCandidate> reported;
+  const auto chosen = encoder::train_default_dictionary(
+      *series, options, {}, [&](const encoder::DictionaryCandidate& c) { reported.push_back(c); });
+  ASSERT_EQ(chosen.candidates.size(), 5u);
+  ASSERT_EQ(reported.size(), 5u);
+  const auto& c = chosen.candidates;
+  // The premise: the estimate rises from the basis to 16 atoms and from 16 to 24.
+  ASSERT_FALSE(c[1].skipped || c[2].skipped);
+  ASSERT_GT(c[1].estimated_bytes, c[0].estimated_bytes);
+  ASSERT_GT(c[2].estimated_bytes, c[1].estimated_bytes);
+  for (std::size_t i = 3; i < 5; ++i) {
+    EXPECT_TRUE(c[i].skipped) << c[i].atoms;
+    EXPECT_TRUE(c[i].past_minimum) << c[i].atoms;
+    EXPECT_TRUE(reported[i].past_minimum) << c[i].atoms;
+    EXPECT_EQ(c[i].best_bytes, c[0].estimated_bytes);
+    EXPECT_EQ(c[i].estimated_bytes, 0);
+    EXPECT_LT(c[i].dictionary_bytes, c[i].best_bytes) << "not ruled out by its size";
+  }
+  EXPECT_TRUE(chosen.dct_only);
+  // One rise is not enough: with 16 atoms alone before them, 32 and 40 are trained.
+  options.candidate_atoms = {0, 16, 32, 40};
+  const auto again = encoder::train_default_dictionary(*series, options);
+  ASSERT_EQ(again.candidates.size(), 4u);
+  EXPECT_FALSE(again.candidates[2].skipped);
 }
 
 TEST_F(DefaultDictionary, AGivenSizeIsTrainedWithoutEstimates) {

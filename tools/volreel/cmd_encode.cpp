@@ -175,7 +175,12 @@ void run_encode(const EncodeOptions& o) {
     bar.reset();
   };
   events.candidate = [&](const encoder::DictionaryCandidate& k) {
-    if (k.skipped)
+    if (k.past_minimum)
+      std::printf(
+          "  K = %4d: not trained: the estimate rose with each of the last %d sizes (smallest so "
+          "far %.0f bytes)\n",
+          k.atoms, encoder::max_rising_estimates, k.best_bytes);
+    else if (k.skipped)
       std::printf(
           "  K = %4d: not trained: its dictionary alone (%.0f bytes) is at least the smallest "
           "container estimated so far (%.0f bytes)\n",
@@ -245,7 +250,8 @@ void add_encode_command(CLI::App& app) {
                   "Without --dictionary: K of the dictionary trained here (default 0: try the "
                   "DCT basis alone and 128, 256,\n512 and 1024 atoms, and keep the one that gives "
                   "the smallest container, dictionary included;\na K whose dictionary alone is "
-                  "at least the smallest container estimated so far is not trained)")
+                  "at least the smallest container estimated so far is not trained, nor\nthe sizes "
+                  "after two in a row whose estimate rose)")
       ->check(in_range(0, 65536));
   o->tolerance_opt = cmd->add_option(
       "--tolerance", o->tolerance,

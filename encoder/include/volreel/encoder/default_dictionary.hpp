@@ -25,7 +25,9 @@ struct DefaultDictionaryOptions {
   /// 0: the DCT basis alone (nothing trained; the file is the 132-byte header and CRC), which wins
   /// on series too small to pay for learned atoms. Tried in this order: the DCT basis first, then
   /// the learned sizes from the smallest; a K whose dictionary file alone is at least the smallest
-  /// container estimated before it cannot win, and is not trained.
+  /// container estimated before it cannot win, and is not trained; nor is any K after
+  /// max_rising_estimates candidates in a row whose estimate rose (past the minimum of a curve
+  /// that falls while more atoms save more than they cost and rises after).
   std::vector<int> candidate_atoms = {0, 128, 256, 512, 1024};
   std::size_t frames = 0;         ///< frames the container will hold (0: all of the series)
   std::size_t sample_frames = 3;  ///< choosing K: frames coded with each dictionary, evenly spaced
@@ -46,11 +48,16 @@ struct DictionaryCandidate {
   double train_seconds = 0;     ///< training time (the coreset is built once, before)
   double dictionary_bytes = 0;  ///< its file, the atoms stored as the container stores them
   double estimated_bytes = 0;   ///< choosing K: the estimated container; 0 when K was given
-  /// Choosing K: not trained, its dictionary_bytes being at least best_bytes, the smallest
-  /// container estimated before it (estimated_bytes and train_seconds are then 0).
+  /// Choosing K: not trained (estimated_bytes and train_seconds are then 0), its dictionary_bytes
+  /// being at least best_bytes, the smallest container estimated before it; or, `past_minimum`,
+  /// after max_rising_estimates candidates in a row whose estimate rose.
   bool skipped = false;
+  bool past_minimum = false;
   double best_bytes = 0;
 };
+/// See DefaultDictionaryOptions::candidate_atoms. Two rises in a row rather than one, so that a
+/// size that happens to code the sample frames a little worse does not end the search.
+inline constexpr int max_rising_estimates = 2;
 using DictionaryCandidateCallback = std::function<void(const DictionaryCandidate&)>;
 
 struct DefaultDictionary {
@@ -64,7 +71,8 @@ struct DefaultDictionary {
 
 /// Trains a dictionary on `coresets` (built from `series` with options.coreset) at
 /// options.tolerance for options.atoms or each candidate K that can still win (a K whose
-/// dictionary alone is at least the smallest estimate so far is skipped), reporting each K, trained
+/// dictionary alone is at least the smallest estimate so far is skipped, and every K after
+/// max_rising_estimates rising estimates in a row), reporting each K, trained
 /// or skipped, to on_candidate, and
 /// returns the one chosen. Throws InputError when K is to be chosen without a candidate or a
 /// sample frame, and where training and the frame encoder do.
