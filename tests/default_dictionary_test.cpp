@@ -8,6 +8,7 @@
 #include <tuple>
 #include <vector>
 
+#include "analytic_series.hpp"
 #include "test_util.hpp"
 #include "volreel/datasets/analytic.hpp"
 #include "volreel/datasets/series.hpp"
@@ -21,15 +22,7 @@ namespace {
 class DefaultDictionary : public ::testing::Test {
  protected:
   void SetUp() override {
-    datasets::AnalyticParams p;
-    p.field = datasets::AnalyticField::blobs;
-    p.dims = {40, 36, 30};
-    p.frames = 3;
-    {
-      datasets::RawSeriesWriter w(dir_ / "series", p.dims, "blobs");
-      datasets::generate_analytic(p, w);
-    }
-    series_ = datasets::open_series(dir_ / "series");
+    series_ = test::analytic_series(dir_.path(), datasets::AnalyticField::blobs, 3, "blobs");
     options_.coding.value_min = 0;
     options_.coding.value_max = 1.5;
     options_.tolerance = 0.01;
@@ -130,15 +123,8 @@ TEST_F(DefaultDictionary, ASizeWhoseDictionaryAloneCannotWinIsNotTrained) {
 // trained.
 TEST(DefaultDictionarySizes, SizesAfterTwoRisingEstimatesAreNotTrained) {
   test::TempDir dir("default-dictionary-noise");
-  datasets::AnalyticParams p;
-  p.field = datasets::AnalyticField::noise;
-  p.dims = {36, 36, 36};
-  p.frames = 2;
-  {
-    datasets::RawSeriesWriter w(dir / "series", p.dims, "noise");
-    datasets::generate_analytic(p, w);
-  }
-  const auto series = datasets::open_series(dir / "series");
+  const auto series =
+      test::analytic_series(dir.path(), datasets::AnalyticField::noise, 2, "noise", {36, 36, 36});
   encoder::DefaultDictionaryOptions options;
   std::tie(options.coding.value_min, options.coding.value_max) = encoder::value_range(*series, 0);
   options.tolerance = 0.001 * (options.coding.value_max - options.coding.value_min);

@@ -13,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "analytic_series.hpp"
 #include "dictionary_test_data.hpp"
 #include "frame_edit.hpp"
 #include "test_util.hpp"
@@ -66,20 +67,7 @@ dictionary::Dictionary trained_dictionary(const Volume& v, double eps, int atoms
   return dictionary::train_dictionary(h, to).dictionary;
 }
 
-/// A raw series of an analytic field, 40×36×30, in dir/series, opened.
-std::unique_ptr<datasets::SeriesReader> analytic_series(const std::filesystem::path& dir,
-                                                        datasets::AnalyticField field,
-                                                        std::size_t frames, const char* variable) {
-  datasets::AnalyticParams p;
-  p.field = field;
-  p.dims = {40, 36, 30};
-  p.frames = frames;
-  {
-    datasets::RawSeriesWriter w(dir / "series", p.dims, variable);
-    datasets::generate_analytic(p, w);
-  }
-  return datasets::open_series(dir / "series");
-}
+using test::analytic_series;
 
 encoder::CodingSettings ksvd_settings(double eps, const Volume& v) {
   encoder::CodingSettings s;

@@ -8,6 +8,7 @@
 #include <functional>
 #include <string>
 
+#include "analytic_series.hpp"
 #include "dictionary_test_data.hpp"
 #include "test_util.hpp"
 #include "volreel/datasets/analytic.hpp"
@@ -23,15 +24,7 @@ namespace {
 class SmallSeries : public ::testing::Test {
  protected:
   void SetUp() override {
-    datasets::AnalyticParams p;
-    p.field = datasets::AnalyticField::blobs;
-    p.dims = {40, 36, 30};
-    p.frames = 3;
-    {
-      datasets::RawSeriesWriter w(dir_ / "series", p.dims, "blobs");
-      datasets::generate_analytic(p, w);
-    }
-    series_ = datasets::open_series(dir_ / "series");
+    series_ = test::analytic_series(dir_.path(), datasets::AnalyticField::blobs, 3, "blobs");
     std::tie(coding_.value_min, coding_.value_max) = encoder::value_range(*series_, 0);
   }
   double range() const { return coding_.value_max - coding_.value_min; }
