@@ -100,6 +100,19 @@ class Stage {
   Progress progress_;
 };
 
+/// The request's provenance with the coding choices encode records (encode_series adds the
+/// variable-rate rule and its parameters).
+nlohmann::json job_provenance(nlohmann::json provenance, const CodingSettings& c) {
+  if (!provenance.is_object()) provenance = nlohmann::json::object();
+  provenance["refit_quantization"] = c.refit_quantization;
+  provenance["extend_pursuit"] = c.extend_pursuit;
+  provenance["max_atoms"] = c.max_atoms;
+  provenance["coef_step_factor"] = c.coef_step_factor;
+  provenance["max_error"] = c.max_error;
+  provenance["learned_pursuit"] = c.learned_pursuit;
+  return provenance;
+}
+
 std::string printed(const char* format, double a, double b = 0) {
   char text[160];
   std::snprintf(text, sizeof text, format, a, b);
@@ -368,8 +381,14 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
           std::optional<Stage> stage;
           if (request.tolerance.bps && c.fixed_sparsity == 0)
             stage.emplace(events, "rate control", "steps");
-          eps = choose_tolerance(series, file, fs::file_size(copy->path()), c, frames,
-                                 request.tolerance, stage ? stage->progress() : Progress{});
+          // The container's bytes besides its frames: the dictionary and the manifest (with the
+          // provenance keys added below, of the same size).
+          const std::uint64_t fixed_bytes =
+              fs::file_size(copy->path()) +
+              estimated_manifest_bytes(series.info(), frames, c, job.max_keyframe_gap,
+                                       job_provenance(request.provenance, c), file.atom_count);
+          eps = choose_tolerance(series, file, fixed_bytes, c, frames, request.tolerance,
+                                 stage ? stage->progress() : Progress{});
         }
         c.tolerance = eps.tolerance;
         // The learned atoms paid in none of the rate search's sample bricks at this ε, the
@@ -401,15 +420,7 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
       if (!ranks.root()) format::detail::write_file_atomically(copy->path(), dictionary_bytes);
     }
   }
-  job.provenance = std::move(request.provenance);
-  if (!job.provenance.is_object()) job.provenance = nlohmann::json::object();
-  job.provenance["refit_quantization"] = c.refit_quantization;
-  job.provenance["extend_pursuit"] = c.extend_pursuit;
-  job.provenance["max_atoms"] = c.max_atoms;
-  job.provenance["coef_step_factor"] = c.coef_step_factor;
-  job.provenance["max_error"] = c.max_error;
-  job.provenance["learned_pursuit"] = c.learned_pursuit;
-  // encode_series adds the variable-rate rule and its parameters.
+  job.provenance = job_provenance(std::move(request.provenance), c);
   Stage stage(events, "encoding", "frames");
   return encode_series(series, out, job, stage.progress());
 }

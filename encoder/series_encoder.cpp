@@ -388,6 +388,19 @@ void add_frame(const FrameStats& st, EncodeSummary& summary) {
 
 }  // namespace
 
+std::uint64_t estimated_manifest_bytes(const datasets::SeriesInfo& info, std::size_t frames,
+                                       const CodingSettings& coding, std::uint32_t max_keyframe_gap,
+                                       const nlohmann::json& provenance, std::uint32_t atom_count) {
+  format::Manifest m = new_manifest(info, frames, coding, max_keyframe_gap, provenance);
+  m.container_id = ~std::uint64_t{0} >> 1;
+  m.complete = true;
+  if (coding.codec == format::Codec::ksvd)
+    m.dictionary = format::ManifestDictionary{"dictionary.bin", 1000000, 4000000000u, atom_count};
+  for (std::size_t t = 0; t < frames; ++t)  // a frame's size as a megabyte's digits
+    m.frames[t] = format::ManifestFrame{format::frame_file_name(t), 1000000, 4000000000u};
+  return format::manifest_text(format::manifest_to_json(m)).size();
+}
+
 double EncodeSummary::quantization_loss_db() const {
   if (!(unquantized_squared_error > 0)) return 0;
   return 10 * std::log10(quantized_squared_error / unquantized_squared_error);

@@ -6,8 +6,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <map>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -16,15 +18,6 @@
 #include "volreel/encoder/frame_encoder.hpp"
 
 namespace volreel::encoder {
-
-namespace {
-
-/// Manifest bytes are counted in bps; before it exists, estimate them.
-double manifest_estimate(std::size_t frames) {
-  return 900.0 + 70.0 * static_cast<double>(frames);
-}
-
-}  // namespace
 
 void detail::require_brick_blocks(std::uint32_t block_size, const std::string& where) {
   if (block_size != VR_BLOCK_SIZE)
@@ -51,6 +44,11 @@ std::vector<Volume> detail::evenly_spaced_frames(const datasets::SeriesReader& s
 BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double target_bps,
                           double start, double min_tolerance, double max_tolerance, double relative,
                           double& slope, const Progress& progress) {
+  if (!(target_bps > 0) || !std::isfinite(target_bps) || !(min_tolerance > 0) ||
+      !(max_tolerance >= min_tolerance) || !std::isfinite(max_tolerance))
+    throw std::invalid_argument(
+        "solve_for_bps: the target must be positive and finite, and the "
+        "tolerances 0 < min <= max, finite");
   // In x = ln ε and y = ln(bps/target), bps(ε) falls as ε grows and y is close to a line.
   struct Point {
     double x = 0, y = 0;
@@ -61,6 +59,7 @@ BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double ta
   std::optional<Point> previous;
   int kept_fine = 0, kept_coarse = 0;  // how many times in a row each end stayed (Illinois)
   BpsSolution best;
+  bool found = false;  // best holds a trial
   double x = std::clamp(std::log(start), x_min, x_max);
   for (int trial = 1; trial <= max_rate_trials; ++trial) {
     const double eps = std::exp(x);
@@ -69,18 +68,21 @@ BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double ta
     std::snprintf(text, sizeof text, "eps %.4g -> %.4f bps", eps, bps);
     progress.report(trial, max_rate_trials, text);
     ++best.trials;
-    if (best.tolerance == 0 || std::abs(bps - target_bps) < std::abs(best.bps - target_bps))
-      best.tolerance = eps, best.bps = bps;
-    if (std::abs(bps - target_bps) <= relative * target_bps || !(bps > 0)) break;
-    const Point p{x, std::log(bps / target_bps)};
-    // The slope between the last two trials. Flatter than min_rate_slope (or rising), the rate
-    // barely moves with ε there: a stretch where every block is coded as finely as the format
-    // allows, or holds its mean alone. The next step is then the largest, towards the target
-    // or the end of the range.
-    bool flat = false;
-    if (previous && p.x != previous->x) {
+    if (std::isnan(bps)) break;  // nothing to go on
+    if (!found || std::abs(bps - target_bps) < std::abs(best.bps - target_bps))
+      best.tolerance = eps, best.bps = bps, found = true;
+    if (std::abs(bps - target_bps) <= relative * target_bps) break;
+    // bps ≤ 0 (nothing coded at all): too few bits by any measure, y = −∞.
+    const Point p{x,
+                  bps > 0 ? std::log(bps / target_bps) : -std::numeric_limits<double>::infinity()};
+    // The slope between the last two trials, where they are far enough apart to measure one.
+    // Flatter than min_rate_slope (or rising, or not finite), the rate barely moves with ε there:
+    // a stretch where every block is coded as finely as the format allows, or holds its mean
+    // alone. The next step is then the largest, towards the target or the end of the range.
+    bool flat = !std::isfinite(p.y);
+    if (previous && std::abs(p.x - previous->x) >= min_slope_spacing) {
       const double measured = (p.y - previous->y) / (p.x - previous->x);
-      flat = !(measured < -min_rate_slope);
+      flat = flat || !(measured < -min_rate_slope);
       if (measured < 0 && std::isfinite(measured))
         slope = std::clamp(measured, -1 / min_rate_slope, -min_rate_slope);
     }
@@ -91,12 +93,17 @@ BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double ta
       coarse = p, ++kept_fine, kept_coarse = 0;
     double next;
     if (fine && coarse) {
-      // Regula falsi between the ends, the Illinois way: an end kept twice in a row counts
-      // half, so that the other end moves too.
-      const double yf = fine->y / (kept_fine > 1 ? 1 << (kept_fine - 1) : 1);
-      const double yc = coarse->y / (kept_coarse > 1 ? 1 << (kept_coarse - 1) : 1);
-      next = fine->x + yf * (coarse->x - fine->x) / (yf - yc);
-      if (!(std::abs(coarse->x - fine->x) > 1e-12)) break;  // the bracket closed: bps jumps across
+      // Narrower than this, bps jumps across the target's window: the closest trial it is.
+      if (!(std::abs(coarse->x - fine->x) > min_bracket)) break;
+      if (!std::isfinite(coarse->y)) {
+        next = (fine->x + coarse->x) / 2;
+      } else {
+        // Regula falsi between the ends, the Illinois way: an end kept twice in a row counts
+        // half, so that the other end moves too.
+        const double yf = fine->y / (kept_fine > 1 ? 1 << (kept_fine - 1) : 1);
+        const double yc = coarse->y / (kept_coarse > 1 ? 1 << (kept_coarse - 1) : 1);
+        next = fine->x + yf * (coarse->x - fine->x) / (yf - yc);
+      }
     } else {
       // One side known: a step along the slope, at most a factor max_rate_step in ε.
       next = x + (flat ? (p.y > 0 ? max_step : -max_step)
@@ -113,15 +120,13 @@ BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double ta
 }
 
 RateSearch search_tolerance(const datasets::SeriesReader& series,
-                            const dictionary::Dictionary& dictionary,
-                            std::uint64_t dictionary_bytes, CodingSettings settings,
-                            double target_bps, std::size_t frames, std::size_t sample_frames,
-                            double relative, const Progress& progress) {
+                            const dictionary::Dictionary& dictionary, std::uint64_t fixed_bytes,
+                            CodingSettings settings, double target_bps, std::size_t frames,
+                            std::size_t sample_frames, double relative, const Progress& progress) {
   const auto& info = series.info();
   if (frames == 0) frames = info.frames;
   const double voxels = static_cast<double>(info.dims.voxels()) * static_cast<double>(frames);
-  const double fixed_bytes = static_cast<double>(dictionary_bytes) + manifest_estimate(frames);
-  const double floor_bps = 8 * fixed_bytes / voxels;
+  const double floor_bps = 8 * static_cast<double>(fixed_bytes) / voxels;
   if (!(target_bps > floor_bps))
     throw InputError("--bps " + std::to_string(target_bps) +
                      " is below what the dictionary and manifest alone take (" +
@@ -157,7 +162,7 @@ RateSearch search_tolerance(const datasets::SeriesReader& series,
     ++r.iterations;
     return 8 *
            (bytes / static_cast<double>(sample.size()) * static_cast<double>(frames) +
-            fixed_bytes) /
+            static_cast<double>(fixed_bytes)) /
            voxels;
   };
   // 2. Solve bps(ε) = target from a start in the middle of the usual range (60 dB), carrying
@@ -201,7 +206,7 @@ RateSearch search_tolerance(const datasets::SeriesReader& series,
 
 ToleranceChoice choose_tolerance(const datasets::SeriesReader& series,
                                  const format::DictionaryFile& dictionary,
-                                 std::uint64_t dictionary_bytes, const CodingSettings& settings,
+                                 std::uint64_t fixed_bytes, const CodingSettings& settings,
                                  std::size_t frames, const ToleranceRequest& request,
                                  const Progress& progress) {
   const double range = tolerance_range(settings.value_min, settings.value_max);
@@ -217,7 +222,7 @@ ToleranceChoice choose_tolerance(const datasets::SeriesReader& series,
   } else if (request.bps) {
     choice.source = ToleranceSource::bps;
     choice.rate_search = search_tolerance(
-        series, dictionary::from_file(dictionary), dictionary_bytes, settings, *request.bps, frames,
+        series, dictionary::from_file(dictionary), fixed_bytes, settings, *request.bps, frames,
         request.rate_sample_frames, request.rate_relative, progress);
     choice.tolerance = choice.rate_search.tolerance;
   } else if (dictionary.training.tolerance > 0) {

@@ -437,10 +437,13 @@ TEST(BatchOmp, OrmpRecoversPlantedSupport) {
   }
 }
 
-// K = 200 ends the Gram–Schmidt rows' chunks of 64 atoms with one of 8; K = 343 (128 learned
-// atoms and the DCT basis but one) with one of 24 whose last vector is one atom and padding.
+// The Gram–Schmidt rows go by chunks of 64 atoms, padded to whole vectors of 8: K = 200 ends
+// with a chunk of 8; K = 343 (128 learned atoms and the DCT basis but one) with one of 24 whose
+// last vector holds 7 atoms and a padding lane; K = 65 with one of 8 holding one atom; K = 5 is
+// one vector, mostly padding.
 TEST(BatchOmp, OrmpAgreesWithReferenceOrmp) {
-  for (const Eigen::Index K : {Eigen::Index{200}, Eigen::Index{343}}) {
+  for (const Eigen::Index K :
+       {Eigen::Index{200}, Eigen::Index{343}, Eigen::Index{65}, Eigen::Index{5}}) {
     const Eigen::Index m = 64, n = 300;
     const Eigen::MatrixXf D = random_dictionary(m, K, 33);
     const Eigen::MatrixXf Y = random_signals(m, n, 34);

@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <limits>
+#include <stdexcept>
 #include <string>
 
 #include "analytic_series.hpp"
@@ -16,6 +18,8 @@
 #include "volreel/dictionary/dictionary.hpp"
 #include "volreel/dictionary/omp.hpp"
 #include "volreel/encoder/encoder.hpp"
+#include "volreel/format/container.hpp"
+#include "volreel/format/dictionary_file.hpp"
 
 namespace volreel {
 namespace {
@@ -148,8 +152,8 @@ TEST(Tolerance, TheRateSearchChecksItsEpsilonOnOtherFrames) {
       encoder::search_tolerance(*series, d, dictionary_bytes, coding, target, 6, 3, 0.03);
   EXPECT_EQ(r.sample_frames, 6u);
   EXPECT_NEAR(r.estimated_bps, target, 0.03 * target);
-  // The estimate is what the six frames cost at that ε, with the dictionary and about a
-  // manifest's bytes (search_tolerance's estimate, 900 + 70 per frame).
+  // The estimate is what the six frames cost at that ε, with the bytes besides them (here the
+  // dictionary alone).
   coding.tolerance = r.tolerance;
   const encoder::FrameEncoder encoder(&d, coding);
   double bytes = 0, sampled = 0;
@@ -159,7 +163,7 @@ TEST(Tolerance, TheRateSearchChecksItsEpsilonOnOtherFrames) {
     if (t == 0 || t == 2 || t == 5) sampled += 2 * size;
   }
   const double voxels = 6.0 * static_cast<double>(series->info().dims.voxels());
-  const double fixed = static_cast<double>(dictionary_bytes) + 900 + 70 * 6;
+  const double fixed = static_cast<double>(dictionary_bytes);
   EXPECT_LT(std::abs(8 * (bytes + fixed) / voxels - target), 0.05 * target);
   // The first sample alone would have been far off at that ε (several times the 3 % the search
   // aims at).
@@ -208,11 +212,62 @@ TEST(Tolerance, TheBpsSolverFindsTheTargetInFewTrialsOrStopsAtTheClosest) {
   EXPECT_DOUBLE_EQ(r.bps, 0.2);
   EXPECT_DOUBLE_EQ(r.tolerance, 1);
   EXPECT_LE(r.trials, 8);
-  // Starting on the flat stretch with the target reachable: it leaves the stretch.
+  // A rate that jumps across the target's window (2.2 to 1.8 bps at ε = 10^-3.5), or moves in
+  // steps of 0.2 bps: the closest trial, once the bracket is narrow, without using every trial.
+  const auto jump = [](double eps) { return eps < 3.16e-4 ? 2.2 : 1.8; };
+  r = solve(jump, 2);
+  EXPECT_NEAR(std::abs(r.bps - 2), 0.2, 1e-12);
+  EXPECT_LE(r.trials, 16) << "of " << encoder::max_rate_trials;
+  const auto steps = [](double eps) { return std::ceil(5 * 0.02 * std::pow(eps, -0.5)) / 5; };
+  r = solve(steps, 1.1);
+  EXPECT_NEAR(std::abs(r.bps - 1.1), 0.1, 1e-9);
+  EXPECT_LE(r.trials, 16);
+  // Nothing coded at all (0 bps) above ε = 10^-2.5: too few bits, and it goes finer.
+  const auto nothing = [](double eps) { return eps > 3.16e-3 ? 0.0 : 0.02 * std::pow(eps, -0.5); };
   double slope = encoder::default_rate_slope;
+  r = encoder::solve_for_bps(nothing, 1.0, 0.5, 1e-9, 1, 0.03, slope);
+  EXPECT_NEAR(r.bps, 1.0, 0.03);
+  // A NaN ends the search and is not returned.
+  int calls = 0;
+  const auto broken = [&](double eps) {
+    return ++calls > 1 ? std::numeric_limits<double>::quiet_NaN() : 0.02 * std::pow(eps, -0.5);
+  };
+  r = solve(broken, 4);
+  EXPECT_EQ(r.trials, 2);
+  EXPECT_FALSE(std::isnan(r.bps));
+  EXPECT_DOUBLE_EQ(r.tolerance, 1e-3);
+  for (double bad : {0.0, -1.0, std::numeric_limits<double>::infinity(),
+                     std::numeric_limits<double>::quiet_NaN()})
+    EXPECT_THROW(solve(ceiling, bad), std::invalid_argument) << bad;
+  // Starting on the flat stretch with the target reachable: it leaves the stretch.
+  slope = encoder::default_rate_slope;
   r = encoder::solve_for_bps(floor, 1.0, 0.5, 1e-9, 1, 0.03, slope);
   EXPECT_NEAR(r.bps, 1.0, 0.03);
   EXPECT_LT(slope, -0.4) << "the slope measured on the curve is handed back";
+}
+
+// The manifest the rate search counts before anything is coded is, to within a few bytes a frame
+// (the frames' sizes and checksums have other digits), the one encode_series writes.
+TEST(Tolerance, TheManifestIsEstimatedAsItWillBeWritten) {
+  test::TempDir dir("manifest-estimate");
+  for (const std::size_t frames : {std::size_t{1}, std::size_t{5}}) {
+    const auto series = test::analytic_series(dir / ("s" + std::to_string(frames)),
+                                              datasets::AnalyticField::blobs, frames, "blobs");
+    format::write_dictionary_file(dir / "dct.bin", format::dct_dictionary(6, "test"));
+    encoder::EncodeJob job;
+    std::tie(job.coding.value_min, job.coding.value_max) = encoder::value_range(*series, 0);
+    job.coding.tolerance = 0.004;
+    job.dictionary_file = dir / "dct.bin";
+    job.max_keyframe_gap = 4;
+    job.provenance = {{"program", "volreel test"}, {"arguments", "encode s --bps 1"}};
+    const auto out = dir / ("c" + std::to_string(frames) + ".vreel");
+    encoder::encode_series(*series, out, job);
+    const auto written = static_cast<double>(std::filesystem::file_size(out / "manifest.json"));
+    const auto estimate = static_cast<double>(
+        encoder::estimated_manifest_bytes(series->info(), frames, job.coding, job.max_keyframe_gap,
+                                          job.provenance, format::Container(out).atoms().count));
+    EXPECT_NEAR(estimate, written, 16.0 * static_cast<double>(frames) + 16) << frames << " frames";
+  }
 }
 
 TEST(Tolerance, ADictionaryIsTrainedAtTheToleranceOrPsnrAskedElseTheEncodingDefault) {

@@ -63,8 +63,10 @@ inline std::string program_path(const std::string& program) {
   std::string dirs = path ? path : "/usr/bin:/bin";
   for (std::size_t at = 0; at <= dirs.size();) {
     const std::size_t end = std::min(dirs.find(':', at), dirs.size());
-    const std::string candidate = dirs.substr(at, end - at) + "/" + program;
-    if (::access(candidate.c_str(), X_OK) == 0) return candidate;
+    const std::string dir = end > at ? dirs.substr(at, end - at) : ".";  // "": the current one
+    const std::string candidate = dir + "/" + program;
+    if (std::filesystem::is_regular_file(candidate) && ::access(candidate.c_str(), X_OK) == 0)
+      return candidate;
     at = end + 1;
   }
   throw std::runtime_error("cannot start " + program + ": not found on PATH");
@@ -72,7 +74,9 @@ inline std::string program_path(const std::string& program) {
 
 /// Starts a server process that ends when the test process does (PR_SET_PDEATHSIG): a test that
 /// crashes leaves no server behind holding the test's output open, which would keep ctest waiting
-/// until its timeout. Throws naming the program if it cannot be started.
+/// until its timeout. The signal follows the thread that calls this: call it from the test's own
+/// thread, not from one that ends before the server should. Throws naming the program if it
+/// cannot be started.
 inline pid_t spawn(const std::vector<std::string>& args, int stdout_fd = -1) {
   const std::string program = program_path(args[0]);
   std::vector<char*> argv;
@@ -98,7 +102,9 @@ inline pid_t spawn(const std::vector<std::string>& args, int stdout_fd = -1) {
   }
   ::close(status_pipe[1]);
   int error = 0;
-  const auto got = ::read(status_pipe[0], &error, sizeof error);
+  ssize_t got;
+  do got = ::read(status_pipe[0], &error, sizeof error);
+  while (got < 0 && errno == EINTR);
   ::close(status_pipe[0]);
   if (got == static_cast<ssize_t>(sizeof error)) {
     ::waitpid(pid, nullptr, 0);

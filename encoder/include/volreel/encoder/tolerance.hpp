@@ -17,7 +17,9 @@
 namespace volreel::encoder {
 
 /// Rate control for --bps: ε such that the container's bps, estimated from `sample_frames` evenly
-/// spaced frames (encoded in memory, one at a time) plus the dictionary, is within `relative` of
+/// spaced frames (encoded in memory, one at a time) plus `fixed_bytes` (the container's files
+/// besides its frames: the dictionary and the manifest, estimated_manifest_bytes), is within
+/// `relative` of
 /// target_bps; then checked on as many other frames, and searched again on all of them where the
 /// estimate misses (at most rate_check_rounds times). Returns ε and the estimated bps.
 struct RateSearch {
@@ -38,7 +40,11 @@ inline constexpr int rate_check_rounds = 2;
 /// trials stay near the target: those far below it cost little and those far above it, which cost
 /// most, are not run. Returns the closest trial, or where the target is out of reach (bps still
 /// on one side of it at min_tolerance or max_tolerance) that end of the range; `slope` is left at
-/// the last one measured (the start of a later search near the same ε).
+/// the last one measured (the start of a later search near the same ε). A trial of 0 bps counts
+/// as too few bits; a NaN one ends the search and is never returned (a first trial of NaN leaves
+/// tolerance 0).
+/// Throws std::invalid_argument unless target_bps is positive and finite and
+/// 0 < min_tolerance ≤ max_tolerance < ∞.
 struct BpsSolution {
   double tolerance = 0, bps = 0;
   int trials = 0;
@@ -51,6 +57,12 @@ inline constexpr double default_rate_slope = -0.5;
 inline constexpr double min_rate_slope = 0.1;
 inline constexpr double max_rate_step = 16;
 inline constexpr int max_rate_trials = 30;
+/// Trials closer than this in ln ε do not measure a slope (a jump in the rate between them
+/// would read as a cliff).
+inline constexpr double min_slope_spacing = 0.05;
+/// A bracket narrower than this in ln ε (1 % in ε, where a smooth rate curve moves by about
+/// 0.5 %) holds a jump in the rate across the target's window: the search ends with the closest.
+inline constexpr double min_bracket = 0.01;
 BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double target_bps,
                           double start, double min_tolerance, double max_tolerance, double relative,
                           double& slope, const Progress& progress = {});
@@ -60,10 +72,10 @@ BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double ta
 /// at 95 % confidence (the rule of three, 3/n).
 inline constexpr std::size_t min_skip_sample_bricks = 30;
 RateSearch search_tolerance(const datasets::SeriesReader& series,
-                            const dictionary::Dictionary& dictionary,
-                            std::uint64_t dictionary_bytes, CodingSettings settings,
-                            double target_bps, std::size_t frames, std::size_t sample_frames = 3,
-                            double relative = 0.03, const Progress& progress = {});
+                            const dictionary::Dictionary& dictionary, std::uint64_t fixed_bytes,
+                            CodingSettings settings, double target_bps, std::size_t frames,
+                            std::size_t sample_frames = 3, double relative = 0.03,
+                            const Progress& progress = {});
 
 /// What ε is asked to be: at most one of tolerance, psnr and bps is set (none: the dictionary's
 /// training ε, else dictionary::default_encoding_psnr).
@@ -85,14 +97,15 @@ struct ToleranceChoice {
 };
 
 /// ε for coding the first `frames` frames of `series` with `settings` (value range set) against
-/// `dictionary`, as the container will store it (`dictionary_bytes`: its file's size): none at
+/// `dictionary`, as the container will store it (`fixed_bytes`: its file's size and the
+/// manifest's, as search_tolerance takes them): none at
 /// fixed rate (settings.fixed_sparsity > 0); else, in this order, request.tolerance,
 /// request.psnr over the value range, request.bps by search_tolerance, the tolerance the
 /// dictionary was trained at, and dictionary::default_encoding_psnr. Throws InputError where
 /// search_tolerance does (a target below what the dictionary and manifest alone take).
 ToleranceChoice choose_tolerance(const datasets::SeriesReader& series,
                                  const format::DictionaryFile& dictionary,
-                                 std::uint64_t dictionary_bytes, const CodingSettings& settings,
+                                 std::uint64_t fixed_bytes, const CodingSettings& settings,
                                  std::size_t frames, const ToleranceRequest& request,
                                  const Progress& progress = {});
 
