@@ -383,10 +383,13 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
             stage.emplace(events, "rate control", "steps");
           // The container's bytes besides its frames: the dictionary and the manifest (with the
           // provenance keys added below, of the same size).
+          const bool search = request.tolerance.bps && c.fixed_sparsity == 0;
           const std::uint64_t fixed_bytes =
               fs::file_size(copy->path()) +
-              estimated_manifest_bytes(series.info(), frames, c, job.max_keyframe_gap,
-                                       job_provenance(request.provenance, c), file.atom_count);
+              (search ? estimated_manifest_bytes(series.info(), frames, c, job.max_keyframe_gap,
+                                                 job_provenance(request.provenance, c),
+                                                 file.atom_count)
+                      : 0);
           eps = choose_tolerance(series, file, fixed_bytes, c, frames, request.tolerance,
                                  stage ? stage->progress() : Progress{});
         }

@@ -392,6 +392,8 @@ std::uint64_t estimated_manifest_bytes(const datasets::SeriesInfo& info, std::si
                                        const CodingSettings& coding, std::uint32_t max_keyframe_gap,
                                        const nlohmann::json& provenance, std::uint32_t atom_count) {
   format::Manifest m = new_manifest(info, frames, coding, max_keyframe_gap, provenance);
+  // A variable-rate ε not chosen yet takes as many digits as a chosen one.
+  if (m.codec == format::Codec::ksvd && m.fixed_sparsity == 0) m.tolerance = 1.0 / 3.0;
   m.container_id = ~std::uint64_t{0} >> 1;
   m.complete = true;
   if (coding.codec == format::Codec::ksvd)

@@ -58,6 +58,10 @@ BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double ta
   std::optional<Point> fine, coarse;  // the bracket: y > 0 (too many bits) and y < 0
   std::optional<Point> previous;
   int kept_fine = 0, kept_coarse = 0;  // how many times in a row each end stayed (Illinois)
+  // The bracket's width when it last halved, and the steps since: regula falsi that does not halve
+  // it in two steps (a rate shaped like a step) gives way to a bisection.
+  double halved_width = std::numeric_limits<double>::infinity();
+  int slow_steps = 0;
   BpsSolution best;
   bool found = false;  // best holds a trial
   double x = std::clamp(std::log(start), x_min, x_max);
@@ -79,14 +83,18 @@ BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double ta
     // Flatter than min_rate_slope (or rising, or not finite), the rate barely moves with ε there:
     // a stretch where every block is coded as finely as the format allows, or holds its mean
     // alone. The next step is then the largest, towards the target or the end of the range.
+    // The trial measured from stays until one lands far enough from it, so that short steps
+    // add up to a measurement instead of never making one.
     bool flat = !std::isfinite(p.y);
-    if (previous && std::abs(p.x - previous->x) >= min_slope_spacing) {
+    if (!previous) {
+      previous = p;
+    } else if (std::abs(p.x - previous->x) >= min_slope_spacing) {
       const double measured = (p.y - previous->y) / (p.x - previous->x);
       flat = flat || !(measured < -min_rate_slope);
       if (measured < 0 && std::isfinite(measured))
         slope = std::clamp(measured, -1 / min_rate_slope, -min_rate_slope);
+      previous = p;
     }
-    previous = p;
     if (p.y > 0)
       fine = p, ++kept_coarse, kept_fine = 0;
     else
@@ -94,9 +102,15 @@ BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double ta
     double next;
     if (fine && coarse) {
       // Narrower than this, bps jumps across the target's window: the closest trial it is.
-      if (!(std::abs(coarse->x - fine->x) > min_bracket)) break;
-      if (!std::isfinite(coarse->y)) {
+      const double width = std::abs(coarse->x - fine->x);
+      if (!(width > min_bracket)) break;
+      if (width <= halved_width / 2)
+        halved_width = width, slow_steps = 0;
+      else
+        ++slow_steps;
+      if (!std::isfinite(coarse->y) || !std::isfinite(fine->y) || slow_steps >= 2) {
         next = (fine->x + coarse->x) / 2;
+        halved_width = width, slow_steps = 0;  // the next bracket is half of this one
       } else {
         // Regula falsi between the ends, the Illinois way: an end kept twice in a row counts
         // half, so that the other end moves too.

@@ -222,11 +222,26 @@ TEST(Tolerance, TheBpsSolverFindsTheTargetInFewTrialsOrStopsAtTheClosest) {
   r = solve(steps, 1.1);
   EXPECT_NEAR(std::abs(r.bps - 1.1), 0.1, 1e-9);
   EXPECT_LE(r.trials, 16);
-  // Nothing coded at all (0 bps) above ε = 10^-2.5: too few bits, and it goes finer.
+  // Nothing coded at all (0 bps) above ε = 10^-2.5: too few bits, and it goes finer; with the
+  // target just below that edge, the bracket's coarse end is a trial of 0 bps and it bisects.
   const auto nothing = [](double eps) { return eps > 3.16e-3 ? 0.0 : 0.02 * std::pow(eps, -0.5); };
   double slope = encoder::default_rate_slope;
   r = encoder::solve_for_bps(nothing, 1.0, 0.5, 1e-9, 1, 0.03, slope);
   EXPECT_NEAR(r.bps, 1.0, 0.03);
+  slope = encoder::default_rate_slope;
+  r = encoder::solve_for_bps(nothing, 0.38, 0.5, 1e-9, 1, 0.03, slope);
+  EXPECT_NEAR(r.bps, 0.38, 0.03 * 0.38);
+  EXPECT_LE(r.trials, 12);
+  // Short steps from a steep slope (carried from an earlier search) across a stretch 6 % above
+  // the target: the trials measure from the first until one lands far enough away to see the
+  // stretch is flat, then the search steps off it.
+  const auto shelf = [](double eps) {
+    return eps < 3e-2 ? 1.06 : 1.06 * std::pow(eps / 3e-2, -0.5);
+  };
+  slope = -1 / encoder::min_rate_slope;
+  r = encoder::solve_for_bps(shelf, 1.0, 1.1e-3, 1e-9, 1, 0.03, slope);
+  EXPECT_NEAR(r.bps, 1.0, 0.03);
+  EXPECT_LE(r.trials, 20);
   // A NaN ends the search and is not returned.
   int calls = 0;
   const auto broken = [&](double eps) {
@@ -236,6 +251,10 @@ TEST(Tolerance, TheBpsSolverFindsTheTargetInFewTrialsOrStopsAtTheClosest) {
   EXPECT_EQ(r.trials, 2);
   EXPECT_FALSE(std::isnan(r.bps));
   EXPECT_DOUBLE_EQ(r.tolerance, 1e-3);
+  calls = 1;  // NaN from the first trial on: no ε at all
+  r = solve(broken, 4);
+  EXPECT_EQ(r.trials, 1);
+  EXPECT_EQ(r.tolerance, 0);
   for (double bad : {0.0, -1.0, std::numeric_limits<double>::infinity(),
                      std::numeric_limits<double>::quiet_NaN()})
     EXPECT_THROW(solve(ceiling, bad), std::invalid_argument) << bad;

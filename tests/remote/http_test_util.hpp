@@ -65,7 +65,9 @@ inline std::string program_path(const std::string& program) {
     const std::size_t end = std::min(dirs.find(':', at), dirs.size());
     const std::string dir = end > at ? dirs.substr(at, end - at) : ".";  // "": the current one
     const std::string candidate = dir + "/" + program;
-    if (std::filesystem::is_regular_file(candidate) && ::access(candidate.c_str(), X_OK) == 0)
+    std::error_code unreadable;  // a folder on PATH that cannot be searched: the next one
+    if (std::filesystem::is_regular_file(candidate, unreadable) &&
+        ::access(candidate.c_str(), X_OK) == 0)
       return candidate;
     at = end + 1;
   }

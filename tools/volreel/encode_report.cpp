@@ -9,6 +9,7 @@
 #include <string>
 #include <utility>
 
+#include "volreel/encoder/tolerance.hpp"
 #include "volreel/format/brick_decode.h"
 
 namespace volreel::cli {
@@ -177,7 +178,7 @@ bool print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
                    "it larger: ask for fewer bps\n",
                    bps_target, s.bps, 100.0 * (s.bps / bps_target - 1), c.tolerance,
                    VR_MAX_COEF_BITS, VR_MEAN_BITS);
-    else if (!under && c.tolerance >= 0.999 * (c.value_max - c.value_min))
+    else if (!under && c.tolerance >= 0.999 * encoder::tolerance_range(c.value_min, c.value_max))
       // The search's largest eps, the value range: every block holds little more than its mean.
       std::fprintf(stderr,
                    "warning: target %.4f bps missed: the container is %.4f bps (%+.1f %%) at eps "

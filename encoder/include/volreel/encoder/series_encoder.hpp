@@ -131,7 +131,8 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const std::fil
 /// The size of the manifest.json that encode_series writes for the first `frames` frames of a
 /// series coded with `coding` (value range set), the job's keyframe gap and provenance, and a
 /// dictionary of `atom_count` atoms, before anything is coded: the same manifest with every frame
-/// and the dictionary listed (their sizes given a megabyte's digits). The rate search counts it.
+/// and the dictionary listed (their sizes given a megabyte's digits, a variable-rate ε not chosen
+/// yet a double's). The rate search counts it.
 std::uint64_t estimated_manifest_bytes(const datasets::SeriesInfo& info, std::size_t frames,
                                        const CodingSettings& coding, std::uint32_t max_keyframe_gap,
                                        const nlohmann::json& provenance, std::uint32_t atom_count);
