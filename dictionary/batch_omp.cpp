@@ -104,7 +104,7 @@ struct OmpWorkspace {
                             // by chunks of atoms (row_index), padded
 
   OmpWorkspace(Eigen::Index atoms, int slots, bool ormp)
-      : alpha(atoms),
+      : alpha(Eigen::VectorXf::Zero(ormp ? padded_atoms(atoms) : atoms)),
         lower(slots, slots),
         w(slots),
         z(slots),
@@ -113,17 +113,10 @@ struct OmpWorkspace {
         support(static_cast<std::size_t>(slots)),
         columns(static_cast<std::size_t>(slots)),
         chunk_max(static_cast<std::size_t>(atoms / chunk + 1)),
-        projected(ormp ? padded_atoms(atoms) : 0),
-        gram_row(ormp ? padded_atoms(atoms) : 0),
+        projected(Eigen::VectorXf::Zero(ormp ? padded_atoms(atoms) : 0)),
+        gram_row(Eigen::VectorXf::Zero(ormp ? padded_atoms(atoms) : 0)),
         rows(ormp ? static_cast<std::size_t>(padded_atoms(atoms)) * static_cast<std::size_t>(slots)
-                  : 0) {
-    if (ormp) {
-      alpha.resize(padded_atoms(atoms));
-      alpha.setZero();
-      projected.setZero();
-      gram_row.setZero();
-    }
-  }
+                  : 0) {}
 };
 
 /// The hot loop of batch-OMP (Σ_s s·K multiply-adds per block), fused with the search for the next

@@ -378,12 +378,11 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
         }
         ToleranceChoice eps;
         {
+          const bool search = request.tolerance.bps && c.fixed_sparsity == 0;
           std::optional<Stage> stage;
-          if (request.tolerance.bps && c.fixed_sparsity == 0)
-            stage.emplace(events, "rate control", "steps");
+          if (search) stage.emplace(events, "rate control", "steps");
           // The container's bytes besides its frames: the dictionary and the manifest (with the
           // provenance keys added below, of the same size).
-          const bool search = request.tolerance.bps && c.fixed_sparsity == 0;
           const std::uint64_t fixed_bytes =
               fs::file_size(copy->path()) +
               (search ? estimated_manifest_bytes(series.info(), frames, c, job.max_keyframe_gap,

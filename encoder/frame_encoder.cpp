@@ -21,6 +21,12 @@
 
 namespace volreel::encoder {
 
+void detail::require_brick_blocks(std::uint32_t block_size, const std::string& where) {
+  if (block_size != VR_BLOCK_SIZE)
+    throw InputError(where + "the dictionary has blocks of " + std::to_string(block_size) +
+                     "^3; volreel's bricks need 6^3 (volreel train --block 6, its default)");
+}
+
 using detail::Clock;
 using detail::QuantizeOptions;
 using detail::seconds_since;

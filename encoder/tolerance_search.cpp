@@ -19,12 +19,6 @@
 
 namespace volreel::encoder {
 
-void detail::require_brick_blocks(std::uint32_t block_size, const std::string& where) {
-  if (block_size != VR_BLOCK_SIZE)
-    throw InputError(where + "the dictionary has blocks of " + std::to_string(block_size) +
-                     "^3; volreel's bricks need 6^3 (volreel train --block 6, its default)");
-}
-
 std::vector<std::size_t> detail::evenly_spaced_indices(std::size_t frames, std::size_t count) {
   std::vector<std::size_t> indices;
   const std::size_t n = std::min(count, frames);
@@ -62,8 +56,7 @@ BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double ta
   // it in two steps (a rate shaped like a step) gives way to a bisection.
   double halved_width = std::numeric_limits<double>::infinity();
   int slow_steps = 0;
-  BpsSolution best;
-  bool found = false;  // best holds a trial
+  BpsSolution best;  // tolerance 0 until a trial (ε > 0) is kept
   double x = std::clamp(std::log(start), x_min, x_max);
   for (int trial = 1; trial <= max_rate_trials; ++trial) {
     const double eps = std::exp(x);
@@ -73,8 +66,8 @@ BpsSolution solve_for_bps(const std::function<double(double)>& bps_at, double ta
     progress.report(trial, max_rate_trials, text);
     ++best.trials;
     if (std::isnan(bps)) break;  // nothing to go on
-    if (!found || std::abs(bps - target_bps) < std::abs(best.bps - target_bps))
-      best.tolerance = eps, best.bps = bps, found = true;
+    if (best.tolerance == 0 || std::abs(bps - target_bps) < std::abs(best.bps - target_bps))
+      best.tolerance = eps, best.bps = bps;
     if (std::abs(bps - target_bps) <= relative * target_bps) break;
     // bps ≤ 0 (nothing coded at all): too few bits by any measure, y = −∞.
     const Point p{x,
