@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -110,5 +111,24 @@ void require_brick_blocks(std::uint32_t block_size, const std::string& where);
 /// Those frames read into memory: the samples that size estimates encode.
 std::vector<Volume> evenly_spaced_frames(const datasets::SeriesReader& series, std::size_t frames,
                                          std::size_t count);
+
+/// Frames of fewer bricks (all levels) than this many per thread are coded side by side
+/// (for_each_side_by_side): a frame's serial parts — reading, extraction, packing, the bricks
+/// left when the others are done — leave threads idle when a few bricks share them.
+constexpr std::size_t side_by_side_bricks_per_thread = 4;
+
+/// The bricks of a frame of `dims` in bricks of `shape`, all levels of its octree.
+std::uint64_t frame_bricks(const Dims& dims, format::BrickShape shape);
+
+/// Whether frames of `dims` in bricks of `shape` are coded side by side, one thread each.
+bool frames_side_by_side(const Dims& dims, format::BrickShape shape);
+
+/// How many frames are coded side by side at once: one per thread.
+std::size_t side_by_side_frames();
+
+/// fn(0) … fn(n − 1), the calls shared among the threads, each on one (the OpenMP regions inside
+/// run on the calling thread alone; n = 1: fn(0) with all threads). Rethrows the first exception
+/// after every call has ended.
+void for_each_side_by_side(std::size_t n, const std::function<void(std::size_t)>& fn);
 
 }  // namespace volreel::encoder::detail

@@ -128,12 +128,7 @@ std::string mebibytes(double bytes) {
 /// What the encoder holds per frame of a stretch with keyframe gaps: the frame and the original
 /// voxels of every brick of its octree.
 double stretch_bytes_per_frame(const Dims& dims, format::BrickShape shape) {
-  std::uint64_t bricks = 0;
-  for (const auto& g : format::level_geometry(
-           {static_cast<std::uint32_t>(dims.x), static_cast<std::uint32_t>(dims.y),
-            static_cast<std::uint32_t>(dims.z)},
-           shape))
-    bricks += std::uint64_t{g.grid[0]} * g.grid[1] * g.grid[2];
+  const std::uint64_t bricks = detail::frame_bricks(dims, shape);
   return 4.0 * (static_cast<double>(dims.voxels()) +
                 static_cast<double>(bricks) * static_cast<double>(shape.voxels()));
 }

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <exception>
 #include <functional>
 #include <stdexcept>
 #include <string>
@@ -25,6 +26,44 @@ void detail::require_brick_blocks(std::uint32_t block_size, const std::string& w
   if (block_size != VR_BLOCK_SIZE)
     throw InputError(where + "the dictionary has blocks of " + std::to_string(block_size) +
                      "^3; volreel's bricks need 6^3 (volreel train --block 6, its default)");
+}
+
+std::uint64_t detail::frame_bricks(const Dims& dims, format::BrickShape shape) {
+  std::uint64_t bricks = 0;
+  for (const format::LevelGeometry& level : format::level_geometry(
+           {static_cast<std::uint32_t>(dims.x), static_cast<std::uint32_t>(dims.y),
+            static_cast<std::uint32_t>(dims.z)},
+           shape))
+    bricks += std::uint64_t{level.grid[0]} * level.grid[1] * level.grid[2];
+  return bricks;
+}
+
+bool detail::frames_side_by_side(const Dims& dims, format::BrickShape shape) {
+  const auto threads = static_cast<std::uint64_t>(omp_get_max_threads());
+  return threads > 1 && frame_bricks(dims, shape) < side_by_side_bricks_per_thread * threads;
+}
+
+std::size_t detail::side_by_side_frames() {
+  return static_cast<std::size_t>(std::max(1, omp_get_max_threads()));
+}
+
+void detail::for_each_side_by_side(std::size_t n, const std::function<void(std::size_t)>& fn) {
+  if (n == 1) return fn(0);
+  // One level of threads: a call's own parallel regions run on its thread.
+  const int levels = omp_get_max_active_levels();
+  omp_set_max_active_levels(1);
+  std::exception_ptr failure;
+#pragma omp parallel for schedule(dynamic, 1)
+  for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i) {
+    try {
+      fn(static_cast<std::size_t>(i));
+    } catch (...) {
+#pragma omp critical(volreel_side_by_side_failure)
+      if (!failure) failure = std::current_exception();
+    }
+  }
+  omp_set_max_active_levels(levels);
+  if (failure) std::rethrow_exception(failure);
 }
 
 using detail::Clock;

@@ -8,10 +8,12 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <exception>
 #include <fstream>
 #include <functional>
 #include <iterator>
 #include <limits>
+#include <map>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -781,11 +783,50 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     step.scale = scale;
     summary.delivered.tolerance_scale = std::min(summary.delivered.tolerance_scale, scale);
   };
+  // Frames of a few bricks each (detail::frames_side_by_side), without a PSNR target (whose
+  // retries make a frame's ε depend on the frame before), whole and on one process: coded side
+  // by side, one thread each.
+  const bool side_by_side = !holds_psnr && !job.piecewise && ranks.size() == 1 &&
+                            detail::frames_side_by_side(info.dims, encoder->shape());
+  if (side_by_side) summary.frames_at_once = detail::side_by_side_frames();
   std::optional<Step> carried;  // the last frame of the previous stretch
   std::vector<Step> pool;       // the other frames of the previous stretch: their buffers reused
   std::size_t coded_frames = 0;
   const std::size_t share_frames = writer ? end_frame - first_frame : 0;
   double reported = 0;  // this process's frames added to the job's progress count
+  // Side by side, frames are read one after another and coded ahead of their stretch, a batch at
+  // a time (with a size target every stretch adds one frame): frame t and the next ones of this
+  // process's share not written yet.
+  std::map<std::size_t, Step> ahead;
+  const std::size_t batch = 4 * detail::side_by_side_frames();  // the threads end together
+  const auto code_ahead = [&](std::size_t t, const std::function<void(std::size_t)>& coded) {
+    std::vector<std::size_t> next{t};
+    for (std::size_t u = t + 1; u < end_frame && next.size() < batch; ++u)
+      if (!done[u]) next.push_back(u);
+    std::vector<Step> batch_steps(next.size());
+    for (std::size_t i = 0; i < next.size(); ++i) {
+      Step& step = batch_steps[i];
+      if (!pool.empty()) {
+        step = std::move(pool.back());
+        pool.pop_back();
+      }
+      if (step.volume.data.size() != info.dims.voxels()) step.volume = Volume(info.dims);
+      series.read_frame(next[i], step.volume.data);
+      step.scale = 1;  // the job's ε: no PSNR target
+    }
+    detail::for_each_side_by_side(next.size(), [&](std::size_t i) {
+      code(next[i], batch_steps[i]);
+      std::exception_ptr stopped;  // the progress callback's (an interrupt): not out of critical
+#pragma omp critical(volreel_encode_progress)
+      try {
+        coded(next[i]);
+      } catch (...) {
+        stopped = std::current_exception();
+      }
+      if (stopped) std::rethrow_exception(stopped);
+    });
+    for (std::size_t i = 0; i < next.size(); ++i) ahead[next[i]] = std::move(batch_steps[i]);
+  };
   for (std::size_t k = first_stretch; k < last_stretch; ++k) {
     const std::size_t s = k * gap, e = std::min(s + gap, frames - 1);
     if (std::all_of(done.begin() + static_cast<std::ptrdiff_t>(s),
@@ -799,40 +840,51 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     // Without gaps a stretch's first frame serves nothing when another process writes it (no
     // keyframe choice, and its last frame stores every node): it is not coded here.
     const bool skip_first = gap == 1 && done[s] && !carried;
+    const auto report = [&](std::size_t t, double frames_coded) {
+      if (!writer) return;  // a team's progress is its writer's
+      char status[64];
+      std::snprintf(
+          status, sizeof status, "coding frame %zu, %.1f MVoxel/s", t,
+          voxels * frames_coded / 1e6 / std::max(1e-9, summary.seconds + seconds_since(start)));
+      const double mine = std::min(frames_coded + static_cast<double>(summary.skipped),
+                                   static_cast<double>(share_frames));
+      if (ranks.size() == 1) {
+        progress.report(mine, static_cast<double>(share_frames), status);
+        return;
+      }
+      // One bar for the job: the frames every process has done (rank 0's status).
+      ranks.add_progress(mine - reported);
+      reported = mine;
+      if (ranks.root())
+        progress.report(ranks.progress_count(), static_cast<double>(frames), status);
+    };
     for (std::size_t t = s; t <= e; ++t) {
       if (t == s && carried) {
         steps[0] = std::move(*carried);
         continue;
       }
       if (t == s && skip_first) continue;
+      if (side_by_side) {
+        if (!ahead.contains(t))
+          code_ahead(t, [&](std::size_t u) {
+            if (!done[u]) ++coded_frames;
+            report(u, static_cast<double>(coded_frames));
+          });
+        const auto coded = ahead.find(t);
+        steps[t - s] = std::move(coded->second);
+        ahead.erase(coded);
+        continue;
+      }
       if (!pool.empty()) {
         steps[t - s] = std::move(pool.back());
         pool.pop_back();
       }
-      const auto report = [&](double frames_coded) {
-        if (!writer) return;  // a team's progress is its writer's
-        char status[64];
-        std::snprintf(
-            status, sizeof status, "coding frame %zu, %.1f MVoxel/s", t,
-            voxels * frames_coded / 1e6 / std::max(1e-9, summary.seconds + seconds_since(start)));
-        const double mine = std::min(frames_coded + static_cast<double>(summary.skipped),
-                                     static_cast<double>(share_frames));
-        if (ranks.size() == 1) {
-          progress.report(mine, static_cast<double>(share_frames), status);
-          return;
-        }
-        // One bar for the job: the frames every process has done (rank 0's status).
-        ranks.add_progress(mine - reported);
-        reported = mine;
-        if (ranks.root())
-          progress.report(ranks.progress_count(), static_cast<double>(frames), status);
-      };
       frame_progress = [&](double fraction) {
-        if (!done[t]) report(static_cast<double>(coded_frames) + fraction);
+        if (!done[t]) report(t, static_cast<double>(coded_frames) + fraction);
       };
       code_step(t, steps[t - s], t == s || t == e ? 1.0 : steps[t - s - 1].scale);
       if (!done[t]) ++coded_frames;
-      report(static_cast<double>(coded_frames));
+      report(t, static_cast<double>(coded_frames));
     }
     std::vector<std::vector<char>> keep(steps.size());
     if (gap > 1 && steps.size() > 2) {

@@ -151,21 +151,31 @@ RateSearch search_tolerance(const datasets::SeriesReader& series,
     std::size_t bricks = 0, learned = 0;
   };
   std::map<std::pair<double, std::size_t>, Trial> sized;
+  const bool side_by_side =
+      detail::frames_side_by_side(info.dims, format::BrickShape{settings.brick_size});
   const auto estimate = [&](double eps) {
     settings.tolerance = eps;
     const FrameEncoder encoder(&dictionary, settings);
-    double bytes = 0;
-    for (std::size_t i : sample) {
-      auto [at, added] = sized.try_emplace({eps, i});
-      if (added) {
-        FrameStats stats;
-        at->second.bytes =
-            static_cast<double>(encoder.encode(i, series.read_frame(i), &stats).size());
-        for (std::size_t n : stats.mean_bits_histogram) at->second.bricks += n;
-        at->second.learned = at->second.bricks - stats.split_bricks;
-      }
-      bytes += at->second.bytes;
+    std::vector<std::size_t> todo;
+    for (std::size_t i : sample)
+      if (!sized.contains({eps, i})) todo.push_back(i);
+    std::vector<Trial> trials(todo.size());
+    const auto trial = [&](std::size_t k, const Volume& frame) {
+      FrameStats stats;
+      trials[k].bytes = static_cast<double>(encoder.encode(todo[k], frame, &stats).size());
+      for (std::size_t n : stats.mean_bits_histogram) trials[k].bricks += n;
+      trials[k].learned = trials[k].bricks - stats.split_bricks;
+    };
+    if (side_by_side) {  // small frames: read, then coded side by side
+      std::vector<Volume> read;
+      for (std::size_t i : todo) read.push_back(series.read_frame(i));
+      detail::for_each_side_by_side(todo.size(), [&](std::size_t k) { trial(k, read[k]); });
+    } else {
+      for (std::size_t k = 0; k < todo.size(); ++k) trial(k, series.read_frame(todo[k]));
     }
+    for (std::size_t k = 0; k < todo.size(); ++k) sized[{eps, todo[k]}] = trials[k];
+    double bytes = 0;
+    for (std::size_t i : sample) bytes += sized.at({eps, i}).bytes;
     ++r.iterations;
     return 8 *
            (bytes / static_cast<double>(sample.size()) * static_cast<double>(frames) +

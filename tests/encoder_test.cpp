@@ -2,6 +2,7 @@
 // error within tolerance, the rate-distortion (Lagrangian) rule against the ε rule, the node table,
 // zfp bricks, the container with resume, and regression checksums of encoded output.
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -14,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "analytic_series.hpp"
+#include "detail.hpp"
 #include "dictionary_test_data.hpp"
 #include "frame_edit.hpp"
 #include "test_util.hpp"
@@ -1426,6 +1428,94 @@ TEST(Container, EncodeResumeVerifyAndDecode) {
   const auto root = format::decode_level(frame.view(), 0, c.atoms());
   EXPECT_EQ(root.data.size(), std::size_t{20} * 18 * 15);
   EXPECT_THROW(c.open_frame(4), format::FormatError);
+}
+
+/// The frame files and manifest of a container, by name.
+std::map<std::string, std::vector<char>> container_files(const std::filesystem::path& dir) {
+  std::map<std::string, std::vector<char>> files;
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(dir))
+    if (entry.is_regular_file()) {
+      std::ifstream in(entry.path(), std::ios::binary);
+      files[std::filesystem::relative(entry.path(), dir).string()] = {
+          std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+    }
+  return files;
+}
+
+TEST(Encoder, FramesCodedSideBySideAreTheFramesCodedOneAtATime) {
+  test::TempDir dir("side_by_side");
+  const auto series = analytic_series(dir.path(), datasets::AnalyticField::blobs, 7, "blobs");
+  format::DictionaryTraining t;
+  t.tolerance = 0.01;
+  dictionary::save_dictionary(dir / "dict.bin", trained_dictionary(series->read_frame(0), 0.01), t);
+  format::write_dictionary_file(dir / "dct.bin", format::dct_dictionary(6, "test"));
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(2);
+  EXPECT_TRUE(encoder::detail::frames_side_by_side(series->info().dims,
+                                                   format::BrickShape{format::default_brick_size}));
+  // Keyframe gaps of 1 (what a size target takes: a frame a stretch, coded ahead of it) and 3
+  // (stretches of three new frames and a last one of two), a learned dictionary and the basis.
+  for (const std::uint32_t gap : {1u, 3u})
+    for (const char* dictionary : {"dict.bin", "dct.bin"}) {
+      encoder::EncodeJob job;
+      job.coding.tolerance = 0.005;
+      job.dictionary_file = dir / dictionary;
+      job.max_keyframe_gap = gap;
+      const std::string name = std::string(dictionary) + std::to_string(gap);
+      omp_set_num_threads(1);
+      const auto alone = encoder::encode_series(*series, dir / (name + "-alone"), job);
+      omp_set_num_threads(2);
+      const auto side = encoder::encode_series(*series, dir / (name + "-side"), job);
+      EXPECT_EQ(side.encoded, 7u);
+      EXPECT_EQ(side.container_bytes, alone.container_bytes) << name;
+      EXPECT_EQ(side.delivered.squared_error, alone.delivered.squared_error) << name;
+      EXPECT_EQ(container_files(dir / (name + "-side")), container_files(dir / (name + "-alone")))
+          << name;
+      EXPECT_TRUE(format::verify_container(dir / (name + "-side")).empty()) << name;
+    }
+  omp_set_num_threads(threads);
+}
+
+TEST(Encoder, CallsSideBySideRunOnOneThreadEachAndRethrowTheFirstFailure) {
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(2);
+  const int levels = omp_get_max_active_levels();
+  std::vector<int> calls(9, 0), inner(9, 0);
+  encoder::detail::for_each_side_by_side(calls.size(), [&](std::size_t i) {
+    ++calls[i];
+#pragma omp parallel
+    {
+#pragma omp single
+      inner[i] = omp_get_num_threads();
+    }
+  });
+  EXPECT_EQ(calls, std::vector<int>(9, 1));
+  EXPECT_EQ(inner, std::vector<int>(9, 1));
+  EXPECT_EQ(omp_get_max_active_levels(), levels);
+  // One call: its regions have every thread.
+  encoder::detail::for_each_side_by_side(1, [&](std::size_t) {
+#pragma omp parallel
+    {
+#pragma omp single
+      inner[0] = omp_get_num_threads();
+    }
+  });
+  EXPECT_EQ(inner[0], 2);
+  // A failure ends nothing early; the first one is rethrown.
+  std::fill(calls.begin(), calls.end(), 0);
+  try {
+    encoder::detail::for_each_side_by_side(calls.size(), [&](std::size_t i) {
+#pragma omp atomic
+      ++calls[i];
+      if (i == 4) throw std::runtime_error("frame 4");
+    });
+    ADD_FAILURE() << "the failure was not rethrown";
+  } catch (const std::runtime_error& e) {
+    EXPECT_STREQ(e.what(), "frame 4");
+  }
+  EXPECT_EQ(calls, std::vector<int>(9, 1));
+  EXPECT_EQ(omp_get_max_active_levels(), levels);
+  omp_set_num_threads(threads);
 }
 
 }  // namespace

@@ -136,14 +136,19 @@ bool print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
                    "against the values, --codec zfp --zfp-accuracy %.4g holds it\n",
                    s.blocks_over_bound, c.max_error, VR_MAX_COEF_BITS, VR_MEAN_BITS, c.max_error);
   }
+  // Frames side by side: each frame's parts, summed, against the threads' seconds.
+  const double parts = s.seconds_pyramid + s.seconds_bricks + s.seconds_omp + s.seconds_quantize;
+  const std::string at_once = s.frames_at_once > 1
+                                  ? " (" + std::to_string(s.frames_at_once) +
+                                        " frames at once, side by side: each frame's parts summed)"
+                                  : "";
   std::printf(
-      "encoding time%s: pyramid %.2f s, brick extraction + histograms %.2f s, batch-OMP %.2f s, "
-      "quantization %.2f s, "
-      "other (reading excluded) %.2f s\n",
-      s.processes > 1 ? " (summed over the processes)" : "", s.seconds_pyramid, s.seconds_bricks,
-      s.seconds_omp, s.seconds_quantize,
-      s.process_seconds - s.seconds_pyramid - s.seconds_bricks - s.seconds_omp -
-          s.seconds_quantize);
+      "encoding time%s%s: pyramid %.2f s, brick extraction + histograms %.2f s, batch-OMP %.2f s, "
+      "quantization %.2f s, other (reading excluded%s) %.2f s\n",
+      s.processes > 1 ? " (summed over the processes)" : "", at_once.c_str(), s.seconds_pyramid,
+      s.seconds_bricks, s.seconds_omp, s.seconds_quantize,
+      s.frames_at_once > 1 ? ", idle threads included" : "",
+      std::max(0.0, s.process_seconds * static_cast<double>(s.frames_at_once) - parts));
   if (s.unquantized_squared_error > 0)
     std::printf(
         "quantization: %.3f dB lost against the unquantized sparse approximation (squared error "

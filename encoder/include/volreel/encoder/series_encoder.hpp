@@ -98,6 +98,9 @@ struct EncodeSummary {
   std::size_t processes = 1;   ///< that coded frames together (EncodeJob::ranks)
   std::size_t team_size = 1;   ///< the most processes that coded one frame together
   double process_seconds = 0;  ///< seconds summed over the processes (the parts below are too)
+  /// Frames coded at once, side by side, one thread each (frames of a few bricks); the parts
+  /// below are then each frame's, summed: thread seconds.
+  std::size_t frames_at_once = 1;
   double mvoxels_per_s = 0;
   double unquantized_squared_error = 0, quantized_squared_error = 0;  ///< FrameStats', summed
   ByteBreakdown breakdown;                                            ///< of the frames encoded
