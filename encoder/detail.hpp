@@ -120,11 +120,22 @@ constexpr std::size_t side_by_side_bricks_per_thread = 4;
 /// The bricks of a frame of `dims` in bricks of `shape`, all levels of its octree.
 std::uint64_t frame_bricks(const Dims& dims, format::BrickShape shape);
 
-/// Whether frames of `dims` in bricks of `shape` are coded side by side, one thread each.
+/// What the encoder holds per frame of a stretch with keyframe gaps: the frame and the original
+/// voxels of every brick of its octree.
+double stretch_bytes_per_frame(const Dims& dims, format::BrickShape shape);
+
+/// Whether frames of `dims` in bricks of `shape` are coded side by side, one thread each (a few
+/// bricks a frame, and more than one thread).
 bool frames_side_by_side(const Dims& dims, format::BrickShape shape);
 
 /// How many frames are coded side by side at once: one per thread.
 std::size_t side_by_side_frames();
+
+/// How many frames the encoder codes ahead of its stretches, side by side (4 a thread, so that the
+/// threads end together), where `memory` bytes hold them and the stretch of gap + 1 frames, each
+/// frame counted twice its stretch_bytes_per_frame (its coding's buffers); fewer than 2: none.
+std::size_t side_by_side_batch(const Dims& dims, format::BrickShape shape, std::uint32_t gap,
+                               std::uint64_t memory);
 
 /// fn(0) … fn(n − 1), the calls shared among the threads, each on one (the OpenMP regions inside
 /// run on the calling thread alone; n = 1: fn(0) with all threads). Rethrows the first exception

@@ -125,14 +125,6 @@ std::string mebibytes(double bytes) {
   return mib >= 100 ? printed("%.0f MiB", mib) : printed("%.3g MiB", mib);
 }
 
-/// What the encoder holds per frame of a stretch with keyframe gaps: the frame and the original
-/// voxels of every brick of its octree.
-double stretch_bytes_per_frame(const Dims& dims, format::BrickShape shape) {
-  const std::uint64_t bricks = detail::frame_bricks(dims, shape);
-  return 4.0 * (static_cast<double>(dims.voxels()) +
-                static_cast<double>(bricks) * static_cast<double>(shape.voxels()));
-}
-
 /// The training settings of an encode given no dictionary (volreel train's defaults).
 DefaultDictionaryOptions training_options(const EncodeRequest& request, double eps,
                                           std::size_t frames) {
@@ -203,7 +195,7 @@ std::uint32_t default_keyframe_gap(const Dims& dims, format::BrickShape shape, b
   if (lowered) *lowered = false;
   if (size_target) return 1;
   if (memory == 0) memory = default_encode_memory();
-  const double per_frame = stretch_bytes_per_frame(dims, shape);
+  const double per_frame = detail::stretch_bytes_per_frame(dims, shape);
   std::uint32_t gap = default_max_keyframe_gap;
   while (gap > 1 && memory > 0 && (gap + 1) * per_frame > static_cast<double>(memory)) --gap;
   if (lowered) *lowered = gap < default_max_keyframe_gap;
@@ -269,6 +261,7 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   const std::string memory_text = request.memory
                                       ? "--memory (" + mebibytes(static_cast<double>(memory)) + ")"
                                       : std::string("half the memory");
+  job.memory = memory;
   job.piecewise = memory > 0 && whole_frame_bytes(info.dims) > static_cast<double>(memory);
   if (job.piecewise) {
     const std::string frame_size = "frames of " +
@@ -308,7 +301,7 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
           std::to_string(default_max_keyframe_gap) +
           "): " + std::to_string(job.max_keyframe_gap + 1) +
           printed(" frames of %.0f MB each fit in ",
-                  stretch_bytes_per_frame(info.dims, shape) / 1e6) +
+                  detail::stretch_bytes_per_frame(info.dims, shape) / 1e6) +
           memory_text);
   }
   auto& c = job.coding;

@@ -38,6 +38,22 @@ std::uint64_t detail::frame_bricks(const Dims& dims, format::BrickShape shape) {
   return bricks;
 }
 
+double detail::stretch_bytes_per_frame(const Dims& dims, format::BrickShape shape) {
+  return 4.0 *
+         (static_cast<double>(dims.voxels()) +
+          static_cast<double>(frame_bricks(dims, shape)) * static_cast<double>(shape.voxels()));
+}
+
+std::size_t detail::side_by_side_batch(const Dims& dims, format::BrickShape shape,
+                                       std::uint32_t gap, std::uint64_t memory) {
+  if (!frames_side_by_side(dims, shape)) return 0;
+  const double fit =
+      std::floor(static_cast<double>(memory) / (2 * stretch_bytes_per_frame(dims, shape))) -
+      (static_cast<double>(gap) + 1);
+  const double batch = std::min(fit, 4.0 * static_cast<double>(side_by_side_frames()));
+  return batch >= 2 ? static_cast<std::size_t>(batch) : 0;
+}
+
 bool detail::frames_side_by_side(const Dims& dims, format::BrickShape shape) {
   const auto threads = static_cast<std::uint64_t>(omp_get_max_threads());
   return threads > 1 && frame_bricks(dims, shape) < side_by_side_bricks_per_thread * threads;

@@ -20,6 +20,7 @@
 
 #include "detail.hpp"
 #include "volreel/dictionary/dictionary.hpp"
+#include "volreel/encoder/encode.hpp"
 #include "volreel/encoder/keyframes.hpp"
 #include "volreel/encoder/tolerance.hpp"
 #include "volreel/format/container.hpp"
@@ -785,24 +786,29 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   };
   // Frames of a few bricks each (detail::frames_side_by_side), without a PSNR target (whose
   // retries make a frame's ε depend on the frame before), whole and on one process: coded side
-  // by side, one thread each.
-  const bool side_by_side = !holds_psnr && !job.piecewise && ranks.size() == 1 &&
-                            detail::frames_side_by_side(info.dims, encoder->shape());
+  // by side, one thread each, a batch at a time ahead of their stretch (with a size target every
+  // stretch adds one frame), as many as the memory holds besides the stretch.
+  const std::size_t batch =
+      holds_psnr || job.piecewise || ranks.size() != 1
+          ? 0
+          : detail::side_by_side_batch(info.dims, encoder->shape(), static_cast<std::uint32_t>(gap),
+                                       job.memory ? job.memory : default_encode_memory());
+  const bool side_by_side = batch > 0;
   if (side_by_side) summary.frames_at_once = detail::side_by_side_frames();
   std::optional<Step> carried;  // the last frame of the previous stretch
   std::vector<Step> pool;       // the other frames of the previous stretch: their buffers reused
   std::size_t coded_frames = 0;
   const std::size_t share_frames = writer ? end_frame - first_frame : 0;
   double reported = 0;  // this process's frames added to the job's progress count
-  // Side by side, frames are read one after another and coded ahead of their stretch, a batch at
-  // a time (with a size target every stretch adds one frame): frame t and the next ones of this
-  // process's share not written yet.
+  // Frames coded ahead: frame t and the next ones of this process's share that are neither
+  // written nor coded yet, read one after another, then coded side by side; `coded` is called
+  // for each afterwards, in order, from this thread (where the progress callback may stop the
+  // encode).
   std::map<std::size_t, Step> ahead;
-  const std::size_t batch = 4 * detail::side_by_side_frames();  // the threads end together
   const auto code_ahead = [&](std::size_t t, const std::function<void(std::size_t)>& coded) {
     std::vector<std::size_t> next{t};
-    for (std::size_t u = t + 1; u < end_frame && next.size() < batch; ++u)
-      if (!done[u]) next.push_back(u);
+    for (std::size_t u = t + 1; u < end_frame && next.size() + ahead.size() < batch; ++u)
+      if (!done[u] && !ahead.contains(u)) next.push_back(u);
     std::vector<Step> batch_steps(next.size());
     for (std::size_t i = 0; i < next.size(); ++i) {
       Step& step = batch_steps[i];
@@ -814,18 +820,12 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       series.read_frame(next[i], step.volume.data);
       step.scale = 1;  // the job's ε: no PSNR target
     }
-    detail::for_each_side_by_side(next.size(), [&](std::size_t i) {
-      code(next[i], batch_steps[i]);
-      std::exception_ptr stopped;  // the progress callback's (an interrupt): not out of critical
-#pragma omp critical(volreel_encode_progress)
-      try {
-        coded(next[i]);
-      } catch (...) {
-        stopped = std::current_exception();
-      }
-      if (stopped) std::rethrow_exception(stopped);
-    });
-    for (std::size_t i = 0; i < next.size(); ++i) ahead[next[i]] = std::move(batch_steps[i]);
+    detail::for_each_side_by_side(next.size(),
+                                  [&](std::size_t i) { code(next[i], batch_steps[i]); });
+    for (std::size_t i = 0; i < next.size(); ++i) {
+      ahead[next[i]] = std::move(batch_steps[i]);
+      coded(next[i]);
+    }
   };
   for (std::size_t k = first_stretch; k < last_stretch; ++k) {
     const std::size_t s = k * gap, e = std::min(s + gap, frames - 1);

@@ -1442,19 +1442,54 @@ std::map<std::string, std::vector<char>> container_files(const std::filesystem::
   return files;
 }
 
+/// Sets OpenMP's thread count for the scope, restoring it after (also when a test fails).
+class Threads {
+ public:
+  explicit Threads(int n) : before_(omp_get_max_threads()) { omp_set_num_threads(n); }
+  ~Threads() { omp_set_num_threads(before_); }
+  Threads(const Threads&) = delete;
+  Threads& operator=(const Threads&) = delete;
+
+ private:
+  int before_;
+};
+
+/// A progress callback that stops the work at its third report, as the command line's stops on
+/// an interrupt: only where it is called outside parallel regions.
+void stop_at_the_third_report(const ProgressUpdate&, void* user) {
+  if (omp_get_level() != 0) return;
+  if (++*static_cast<int*>(user) == 3) throw std::runtime_error("interrupted");
+}
+
 TEST(Encoder, FramesCodedSideBySideAreTheFramesCodedOneAtATime) {
   test::TempDir dir("side_by_side");
-  const auto series = analytic_series(dir.path(), datasets::AnalyticField::blobs, 7, "blobs");
+  const auto series = analytic_series(dir.path(), datasets::AnalyticField::blobs, 19, "blobs");
   format::DictionaryTraining t;
   t.tolerance = 0.01;
-  dictionary::save_dictionary(dir / "dict.bin", trained_dictionary(series->read_frame(0), 0.01), t);
+  const auto learned = trained_dictionary(series->read_frame(0), 0.01);
+  dictionary::save_dictionary(dir / "dict.bin", learned, t);
   format::write_dictionary_file(dir / "dct.bin", format::dct_dictionary(6, "test"));
-  const int threads = omp_get_max_threads();
-  omp_set_num_threads(2);
-  EXPECT_TRUE(encoder::detail::frames_side_by_side(series->info().dims,
-                                                   format::BrickShape{format::default_brick_size}));
-  // Keyframe gaps of 1 (what a size target takes: a frame a stretch, coded ahead of it) and 3
-  // (stretches of three new frames and a last one of two), a learned dictionary and the basis.
+  const Dims dims = series->info().dims;
+  const format::BrickShape shape{format::default_brick_size};
+  {
+    const Threads two(2);
+    EXPECT_TRUE(encoder::detail::frames_side_by_side(dims, shape));
+    // 8 frames a batch (4 a thread), fewer where the memory holds fewer besides the stretch.
+    const double frame = encoder::detail::stretch_bytes_per_frame(dims, shape);
+    EXPECT_EQ(encoder::detail::side_by_side_batch(dims, shape, 8, 1ull << 40), 8u);
+    EXPECT_EQ(encoder::detail::side_by_side_batch(
+                  dims, shape, 8, static_cast<std::uint64_t>(2 * frame * (9 + 5) + 1)),
+              5u);
+    EXPECT_EQ(encoder::detail::side_by_side_batch(
+                  dims, shape, 8, static_cast<std::uint64_t>(2 * frame * (9 + 1) + 1)),
+              0u);
+  }
+  {
+    const Threads one(1);
+    EXPECT_FALSE(encoder::detail::frames_side_by_side(dims, shape));
+  }
+  // Keyframe gaps of 1 (what a size target takes: a frame a stretch) and 3, a learned dictionary
+  // and the basis: 19 frames are three batches.
   for (const std::uint32_t gap : {1u, 3u})
     for (const char* dictionary : {"dict.bin", "dct.bin"}) {
       encoder::EncodeJob job;
@@ -1462,24 +1497,81 @@ TEST(Encoder, FramesCodedSideBySideAreTheFramesCodedOneAtATime) {
       job.dictionary_file = dir / dictionary;
       job.max_keyframe_gap = gap;
       const std::string name = std::string(dictionary) + std::to_string(gap);
-      omp_set_num_threads(1);
-      const auto alone = encoder::encode_series(*series, dir / (name + "-alone"), job);
-      omp_set_num_threads(2);
-      const auto side = encoder::encode_series(*series, dir / (name + "-side"), job);
-      EXPECT_EQ(side.encoded, 7u);
+      const auto alone_dir = dir / (name + "-alone"), side_dir = dir / (name + "-side");
+      encoder::EncodeSummary alone, side;
+      {
+        const Threads one(1);
+        alone = encoder::encode_series(*series, alone_dir, job);
+      }
+      {
+        const Threads two(2);
+        side = encoder::encode_series(*series, side_dir, job);
+      }
+      EXPECT_EQ(alone.frames_at_once, 1u) << name;
+      EXPECT_EQ(side.frames_at_once, 2u) << name;
+      EXPECT_EQ(side.encoded, 19u) << name;
       EXPECT_EQ(side.container_bytes, alone.container_bytes) << name;
       EXPECT_EQ(side.delivered.squared_error, alone.delivered.squared_error) << name;
-      EXPECT_EQ(container_files(dir / (name + "-side")), container_files(dir / (name + "-alone")))
+      EXPECT_EQ(container_files(side_dir), container_files(alone_dir)) << name;
+      // Resumed with frames missing inside stretches (a stretch partly written), one corrupt:
+      // each coded once, the container the same.
+      for (const std::size_t frame : {std::size_t{5}, std::size_t{11}, std::size_t{12}})
+        std::filesystem::remove(side_dir / format::frame_file_name(frame));
+      {
+        std::fstream f(side_dir / format::frame_file_name(8),
+                       std::ios::in | std::ios::out | std::ios::binary);
+        ASSERT_TRUE(f.is_open());
+        f.seekp(200);
+        f.put('\x5a');
+      }
+      ASSERT_FALSE(format::verify_container(side_dir).empty());
+      auto resume = job;
+      resume.resume = true;
+      const Threads two(2);
+      const auto resumed = encoder::encode_series(*series, side_dir, resume);
+      EXPECT_EQ(resumed.encoded, 4u) << name;
+      EXPECT_EQ(container_files(side_dir), container_files(alone_dir)) << name;
+      // An interrupt the progress callback raises stops the encode; resumed, the same container.
+      const auto stopped_dir = dir / (name + "-stopped");
+      int reports = 0;
+      EXPECT_THROW(encoder::encode_series(*series, stopped_dir, job,
+                                          Progress{stop_at_the_third_report, &reports}),
+                   std::runtime_error)
           << name;
-      EXPECT_TRUE(format::verify_container(dir / (name + "-side")).empty()) << name;
+      EXPECT_EQ(reports, 3) << name;
+      EXPECT_LT(encoder::encode_series(*series, stopped_dir, resume).skipped, 19u) << name;
+      EXPECT_EQ(container_files(stopped_dir), container_files(alone_dir)) << name;
     }
-  omp_set_num_threads(threads);
+  // The rate search's trials: the same ε on one thread and two.
+  {
+    auto coding = encoder::CodingSettings{};
+    std::tie(coding.value_min, coding.value_max) = encoder::value_range(*series, 0);
+    const auto d = dictionary::from_file(
+        format::with_dct_atoms(dictionary::to_file(learned, format::DictionaryTraining{})));
+    encoder::RateSearch one, two;
+    {
+      const Threads threads(1);
+      one = encoder::search_tolerance(*series, d, 0, coding, 2, 19, 6, 0.03);
+    }
+    {
+      const Threads threads(2);
+      two = encoder::search_tolerance(*series, d, 0, coding, 2, 19, 6, 0.03);
+    }
+    EXPECT_EQ(two.tolerance, one.tolerance);
+    EXPECT_EQ(two.estimated_bps, one.estimated_bps);
+    EXPECT_EQ(two.iterations, one.iterations);
+    EXPECT_EQ(two.learned_bricks, one.learned_bricks);
+  }
 }
 
 TEST(Encoder, CallsSideBySideRunOnOneThreadEachAndRethrowTheFirstFailure) {
-  const int threads = omp_get_max_threads();
-  omp_set_num_threads(2);
+  const Threads two(2);
+  // Nested regions allowed (OMP_MAX_ACTIVE_LEVELS, say): side by side still runs each call's on
+  // its thread alone, and the setting comes back.
   const int levels = omp_get_max_active_levels();
+  omp_set_max_active_levels(omp_get_supported_active_levels());
+  const int allowed = omp_get_max_active_levels();
+  ASSERT_GT(allowed, 1);
   std::vector<int> calls(9, 0), inner(9, 0);
   encoder::detail::for_each_side_by_side(calls.size(), [&](std::size_t i) {
     ++calls[i];
@@ -1491,7 +1583,7 @@ TEST(Encoder, CallsSideBySideRunOnOneThreadEachAndRethrowTheFirstFailure) {
   });
   EXPECT_EQ(calls, std::vector<int>(9, 1));
   EXPECT_EQ(inner, std::vector<int>(9, 1));
-  EXPECT_EQ(omp_get_max_active_levels(), levels);
+  EXPECT_EQ(omp_get_max_active_levels(), allowed);
   // One call: its regions have every thread.
   encoder::detail::for_each_side_by_side(1, [&](std::size_t) {
 #pragma omp parallel
@@ -1514,8 +1606,8 @@ TEST(Encoder, CallsSideBySideRunOnOneThreadEachAndRethrowTheFirstFailure) {
     EXPECT_STREQ(e.what(), "frame 4");
   }
   EXPECT_EQ(calls, std::vector<int>(9, 1));
-  EXPECT_EQ(omp_get_max_active_levels(), levels);
-  omp_set_num_threads(threads);
+  EXPECT_EQ(omp_get_max_active_levels(), allowed);
+  omp_set_max_active_levels(levels);
 }
 
 }  // namespace

@@ -45,7 +45,7 @@ struct EncodeRequest {
   /// The bytes the encode may hold for frames (0: half the usable memory). A frame that does
   /// not fit whole (whole_frame_bytes) is coded piecewise (EncodeJob::piecewise), a few planes at a
   /// time, without keyframe gaps; that needs a dictionary given (training and --bps read whole
-  /// frames).
+  /// frames). Frames of a few bricks are coded side by side, as many as fit (EncodeJob::memory).
   std::uint64_t memory = 0;
   nlohmann::json provenance;  ///< stored under "encoder" in the manifest, with the program's
   /// The processes that encode together (MPI ranks); null: this process alone. Each reads its

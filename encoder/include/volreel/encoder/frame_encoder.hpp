@@ -141,8 +141,8 @@ std::vector<std::byte> team_part(const CodedFrame& coded, const PlaneCoding& opt
 void join_team_parts(CodedFrame& coded, std::span<const std::vector<std::byte>> parts,
                      const PlaneCoding& options);
 
-/// Encodes frames with fixed settings and dictionary; safe to use from one thread at a time
-/// (it parallelizes inside with OpenMP).
+/// Encodes frames with fixed settings and dictionary; it parallelizes inside with OpenMP, and its
+/// const members may run on several threads at once (frames coded side by side).
 class FrameEncoder {
  public:
   /// dictionary: required for ksvd (K ≤ 65536, M = 6). Throws InputError on bad settings.

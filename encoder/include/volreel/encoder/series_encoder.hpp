@@ -46,6 +46,9 @@ struct EncodeJob {
   /// and measure its delivered error as it is coded, so that no whole frame is ever in memory:
   /// the container is the same. Needs max_keyframe_gap 1 (a stretch with gaps holds its frames).
   bool piecewise = false;
+  /// Bytes the encoder may hold (EncodeRequest::memory; 0: default_encode_memory()): frames of a
+  /// few bricks are coded side by side, as many ahead of their stretch as fit besides it.
+  std::uint64_t memory = 0;
   /// > 0 (dB, ksvd variable rate): every frame's finest-level PSNR over the sequence's value range
   /// at least this (volreel encode --psnr). A frame that falls short is coded again at a smaller
   /// ε (ε·10^(−shortfall/20), a little less), up to max_tolerance_retries times; the next frame
