@@ -49,4 +49,16 @@ std::unique_ptr<SeriesReader> open_netcdf(const std::filesystem::path& file,
 std::unique_ptr<SeriesReader> open_hdf5(const std::filesystem::path& file,
                                         const OpenOptions& options);
 
+/// The most classic_values_end returns: 2^63 bytes, past any file.
+constexpr long double classic_end_limit = 9223372036854775808.0L;
+/// The byte of a classic-format NetCDF file (CDF-1, CDF-2, CDF-5, as "The NetCDF Classic Format
+/// Specification" lays them out) that its variables' values end at, from the file's first bytes
+/// `header`: the largest begin + size of a fixed-size variable, and begin + (records − 1)·record
+/// size + size of a record variable, with each variable's begin offset read from the header (the
+/// library exposes none), at most classic_end_limit. `variables`, `records`: the counts the
+/// library reads. std::nullopt where the header cannot be walked (not classic, cut short, other
+/// counts, an unknown type).
+std::optional<long double> classic_values_end(const std::vector<unsigned char>& header,
+                                              int variables, std::size_t records);
+
 }  // namespace volreel::datasets::detail

@@ -23,19 +23,6 @@ namespace volreel::datasets::detail {
 
 namespace fs = std::filesystem;
 
-namespace {
-
-std::mutex& netcdf_mutex() {
-  static std::mutex m;
-  return m;
-}
-
-/// The byte of a classic-format file (CDF-1, CDF-2, CDF-5, as "The NetCDF Classic Format
-/// Specification" lays them out) that its variables' values end at: the largest begin + size of
-/// a fixed-size variable, and begin + (records − 1)·record size + size of a record variable, with
-/// each variable's begin offset read from the header (the library exposes none). `records`: the
-/// records the library will read. std::nullopt where the header cannot be walked (then the caller
-/// keeps its lower bound).
 std::optional<long double> classic_values_end(const std::vector<unsigned char>& header,
                                               int variables, std::size_t records) {
   std::size_t at = 0;
@@ -153,7 +140,22 @@ std::optional<long double> classic_values_end(const std::vector<unsigned char>& 
     end = std::max(end, v.begin + v.size +
                             (v.record ? static_cast<long double>(records - 1) * record_bytes : 0));
   }
-  return end;
+  // Dimension lengths multiply past any file (and past long double's range): the largest end a
+  // byte count holds says as much.
+  return std::isfinite(end) ? std::min(end, classic_end_limit) : classic_end_limit;
+}
+
+namespace {
+
+/// A byte count as text: the integer below classic_end_limit, past it a bound.
+std::string bytes_text(long double bytes) {
+  return bytes < classic_end_limit ? std::to_string(static_cast<unsigned long long>(bytes))
+                                   : std::string("more than 2^63");
+}
+
+std::mutex& netcdf_mutex() {
+  static std::mutex m;
+  return m;
 }
 
 class NetcdfReader final : public SeriesReader {
@@ -272,8 +274,7 @@ class NetcdfReader final : public SeriesReader {
     if (ec) return;
     if (static_cast<long double>(size) < need)
       fail("the file is " + std::to_string(size) + " bytes, but its variables' values alone take " +
-           std::to_string(static_cast<unsigned long long>(need)) +
-           " (and the header more): it is truncated");
+           bytes_text(need) + " (and the header more): it is truncated");
     // Exactly, from the header's offsets: where the last value ends (a header larger than the
     // first MiB, or one that cannot be walked, keeps the bound above).
     std::vector<unsigned char> header(std::min<std::uintmax_t>(size, std::uintmax_t{1} << 20));
@@ -281,8 +282,8 @@ class NetcdfReader final : public SeriesReader {
     const std::optional<long double> end = classic_values_end(header, variables, records);
     if (end && static_cast<long double>(size) < *end)
       fail("the file is " + std::to_string(size) +
-           " bytes, but its header places values up to byte " +
-           std::to_string(static_cast<unsigned long long>(*end)) + ": it is truncated");
+           " bytes, but its header places values up to byte " + bytes_text(*end) +
+           ": it is truncated");
   }
 
   std::string dimension_name(int dimid) const {

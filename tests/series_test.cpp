@@ -10,6 +10,7 @@
 #include <fstream>
 #include <limits>
 
+#include "detail.hpp"
 #include "test_util.hpp"
 #include "volreel/datasets/series.hpp"
 
@@ -570,6 +571,59 @@ TEST(NetCdf, ReadsAVariableWithItsCfCoordinatesAndPacking) {
   EXPECT_FLOAT_EQ(datasets::open_series(file, o)->read_frame(0).at(1, 0, 0), 35.01f);
   o.variable = "depth";
   EXPECT_EQ(datasets::open_series(file, o)->info().frames, 1u);
+}
+
+/// A classic NetCDF header (CDF-1, 2 or 5) of one float variable over dimensions of `lengths`
+/// (0: the record dimension), its values from byte `begin`.
+std::vector<unsigned char> classic_header(int version, const std::vector<std::uint64_t>& lengths,
+                                          std::uint64_t begin) {
+  std::vector<unsigned char> h = {'C', 'D', 'F', static_cast<unsigned char>(version)};
+  const int count = version == 5 ? 8 : 4, offset = version == 1 ? 4 : 8;
+  const auto put = [&](std::uint64_t v, int bytes) {
+    for (int i = bytes - 1; i >= 0; --i) h.push_back(static_cast<unsigned char>(v >> (8 * i)));
+  };
+  const auto name = [&](const std::string& text) {
+    put(text.size(), count);
+    h.insert(h.end(), text.begin(), text.end());
+    while (h.size() % 4 != 0) h.push_back(0);
+  };
+  put(2, count);  // records
+  put(0x0A, 4);   // NC_DIMENSION
+  put(lengths.size(), count);
+  for (std::size_t i = 0; i < lengths.size(); ++i) {
+    name("d" + std::to_string(i));
+    put(lengths[i], count);
+  }
+  put(0, 4), put(0, count);  // no global attributes
+  put(0x0B, 4);              // NC_VARIABLE
+  put(1, count);
+  name("v");
+  put(lengths.size(), count);
+  for (std::size_t i = 0; i < lengths.size(); ++i) put(i, count);
+  put(0, 4), put(0, count);  // no attributes
+  put(5, 4);                 // NC_FLOAT
+  put(0, count);             // vsize
+  put(begin, offset);
+  return h;
+}
+
+TEST(NetCdf, TheHeaderWalkEndsValuesWhereTheOffsetsSayAndNeverPastTwoToTheSixtyThree) {
+  using vd::detail::classic_values_end;
+  // Two records of 2·3·4 floats from byte 100.
+  for (const int version : {1, 2, 5}) {
+    const auto header = classic_header(version, {0, 2, 3, 4}, 100);
+    EXPECT_EQ(classic_values_end(header, 1, 2), 100.0L + 2 * 96) << version;
+    EXPECT_EQ(classic_values_end(header, 1, 0), static_cast<long double>(header.size()));
+    EXPECT_FALSE(classic_values_end(header, 2, 2)) << "another variable count";
+    EXPECT_FALSE(classic_values_end({header.begin(), header.end() - 3}, 1, 2)) << "cut short";
+  }
+  // Dimensions whose product passes any file, and long double's range: the bound.
+  EXPECT_EQ(classic_values_end(classic_header(5, {1ull << 62, 1ull << 62}, 0), 1, 0),
+            vd::detail::classic_end_limit);
+  EXPECT_EQ(
+      classic_values_end(
+          classic_header(5, std::vector<std::uint64_t>(300, std::uint64_t{1} << 62), 0), 1, 0),
+      vd::detail::classic_end_limit);
 }
 
 TEST(NetCdf, MissingValuesAndWrongChoicesAreClearErrors) {
