@@ -17,8 +17,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::size_t records = std::size_t{data[1]} << 8 | data[2];
   const std::vector<unsigned char> header(data + 3, data + size);
   const auto end = volreel::datasets::detail::classic_values_end(header, variables, records);
-  if (end && !(std::isfinite(*end) && *end >= 4 &&
-               *end <= volreel::datasets::detail::classic_end_limit))
+  if (end &&
+      !(std::isfinite(*end) && *end >= 4 && *end <= volreel::datasets::detail::classic_end_limit))
     std::abort();
   return 0;
 }
