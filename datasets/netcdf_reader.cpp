@@ -127,6 +127,10 @@ std::optional<long double> classic_values_end(const std::vector<unsigned char>& 
     vars.push_back(var);
   }
   if (failed) return std::nullopt;
+  // Dimension lengths multiply past any file (and past long double's range): the largest end a
+  // byte count holds says as much.
+  for (const Var& v : vars)
+    if (!(v.size < classic_end_limit)) return classic_end_limit;
   // A record holds every record variable's values, each padded to 4 bytes unless it is the only
   // one.
   long double record_bytes = 0;
@@ -140,8 +144,6 @@ std::optional<long double> classic_values_end(const std::vector<unsigned char>& 
     end = std::max(end, v.begin + v.size +
                             (v.record ? static_cast<long double>(records - 1) * record_bytes : 0));
   }
-  // Dimension lengths multiply past any file (and past long double's range): the largest end a
-  // byte count holds says as much.
   return std::isfinite(end) ? std::min(end, classic_end_limit) : classic_end_limit;
 }
 

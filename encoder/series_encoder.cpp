@@ -788,13 +788,15 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   // retries make a frame's ε depend on the frame before), whole and on one process: coded side
   // by side, one thread each, a batch at a time ahead of their stretch (with a size target every
   // stretch adds one frame), as many as the memory holds besides the stretch.
+  // (A machine whose memory is not known bounds nothing, as for the keyframe gap.)
+  const std::uint64_t memory = job.memory ? job.memory : default_encode_memory();
   const std::size_t batch =
       holds_psnr || job.piecewise || ranks.size() != 1
           ? 0
           : detail::side_by_side_batch(info.dims, encoder->shape(), static_cast<std::uint32_t>(gap),
-                                       job.memory ? job.memory : default_encode_memory());
+                                       memory ? memory : std::numeric_limits<std::uint64_t>::max());
   const bool side_by_side = batch > 0;
-  if (side_by_side) summary.frames_at_once = detail::side_by_side_frames();
+  if (side_by_side) summary.frames_at_once = std::min(batch, detail::side_by_side_frames());
   std::optional<Step> carried;  // the last frame of the previous stretch
   std::vector<Step> pool;       // the other frames of the previous stretch: their buffers reused
   std::size_t coded_frames = 0;

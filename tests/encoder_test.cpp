@@ -1454,11 +1454,16 @@ class Threads {
   int before_;
 };
 
-/// A progress callback that stops the work at its third report, as the command line's stops on
+/// A progress callback that stops the work at its tenth report, as the command line's stops on
 /// an interrupt: only where it is called outside parallel regions.
-void stop_at_the_third_report(const ProgressUpdate&, void* user) {
+void stop_at_the_tenth_report(const ProgressUpdate&, void* user) {
   if (omp_get_level() != 0) return;
-  if (++*static_cast<int*>(user) == 3) throw std::runtime_error("interrupted");
+  if (++*static_cast<int*>(user) == 10) throw std::runtime_error("interrupted");
+}
+
+/// A progress callback that counts its reports.
+void count_reports(const ProgressUpdate&, void* user) {
+  ++*static_cast<int*>(user);
 }
 
 TEST(Encoder, FramesCodedSideBySideAreTheFramesCodedOneAtATime) {
@@ -1513,12 +1518,13 @@ TEST(Encoder, FramesCodedSideBySideAreTheFramesCodedOneAtATime) {
       EXPECT_EQ(side.container_bytes, alone.container_bytes) << name;
       EXPECT_EQ(side.delivered.squared_error, alone.delivered.squared_error) << name;
       EXPECT_EQ(container_files(side_dir), container_files(alone_dir)) << name;
-      // Resumed with frames missing inside stretches (a stretch partly written), one corrupt:
-      // each coded once, the container the same.
-      for (const std::size_t frame : {std::size_t{5}, std::size_t{11}, std::size_t{12}})
-        std::filesystem::remove(side_dir / format::frame_file_name(frame));
-      {
-        std::fstream f(side_dir / format::frame_file_name(8),
+      // Resumed with frames missing inside stretches (a stretch partly written), one corrupt: the
+      // frames coded (one report each) those one thread codes, the container the same.
+      const auto pristine = container_files(alone_dir);
+      for (const auto& damaged : {alone_dir, side_dir}) {
+        for (const std::size_t frame : {std::size_t{5}, std::size_t{11}, std::size_t{12}})
+          std::filesystem::remove(damaged / format::frame_file_name(frame));
+        std::fstream f(damaged / format::frame_file_name(8),
                        std::ios::in | std::ios::out | std::ios::binary);
         ASSERT_TRUE(f.is_open());
         f.seekp(200);
@@ -1527,20 +1533,35 @@ TEST(Encoder, FramesCodedSideBySideAreTheFramesCodedOneAtATime) {
       ASSERT_FALSE(format::verify_container(side_dir).empty());
       auto resume = job;
       resume.resume = true;
+      int alone_reports = 0, side_reports = 0;
+      {
+        const Threads one(1);
+        EXPECT_EQ(encoder::encode_series(*series, alone_dir, resume,
+                                         Progress{count_reports, &alone_reports})
+                      .encoded,
+                  4u)
+            << name;
+      }
       const Threads two(2);
-      const auto resumed = encoder::encode_series(*series, side_dir, resume);
+      const auto resumed =
+          encoder::encode_series(*series, side_dir, resume, Progress{count_reports, &side_reports});
       EXPECT_EQ(resumed.encoded, 4u) << name;
-      EXPECT_EQ(container_files(side_dir), container_files(alone_dir)) << name;
-      // An interrupt the progress callback raises stops the encode; resumed, the same container.
+      EXPECT_EQ(side_reports, alone_reports) << name;
+      EXPECT_EQ(container_files(alone_dir), pristine) << name;
+      EXPECT_EQ(container_files(side_dir), pristine) << name;
+      // An interrupt the progress callback raises in the second batch stops the encode after
+      // the first batch's frames were written; resumed, they are kept, the container the same.
       const auto stopped_dir = dir / (name + "-stopped");
       int reports = 0;
       EXPECT_THROW(encoder::encode_series(*series, stopped_dir, job,
-                                          Progress{stop_at_the_third_report, &reports}),
+                                          Progress{stop_at_the_tenth_report, &reports}),
                    std::runtime_error)
           << name;
-      EXPECT_EQ(reports, 3) << name;
-      EXPECT_LT(encoder::encode_series(*series, stopped_dir, resume).skipped, 19u) << name;
-      EXPECT_EQ(container_files(stopped_dir), container_files(alone_dir)) << name;
+      EXPECT_EQ(reports, 10) << name;
+      const auto rest = encoder::encode_series(*series, stopped_dir, resume);
+      EXPECT_GT(rest.skipped, 0u) << name;
+      EXPECT_EQ(rest.skipped + rest.encoded, 19u) << name;
+      EXPECT_EQ(container_files(stopped_dir), pristine) << name;
     }
   // The rate search's trials: the same ε on one thread and two.
   {
@@ -1568,7 +1589,10 @@ TEST(Encoder, CallsSideBySideRunOnOneThreadEachAndRethrowTheFirstFailure) {
   const Threads two(2);
   // Nested regions allowed (OMP_MAX_ACTIVE_LEVELS, say): side by side still runs each call's on
   // its thread alone, and the setting comes back.
-  const int levels = omp_get_max_active_levels();
+  struct Levels {
+    int before = omp_get_max_active_levels();
+    ~Levels() { omp_set_max_active_levels(before); }
+  } const levels;
   omp_set_max_active_levels(omp_get_supported_active_levels());
   const int allowed = omp_get_max_active_levels();
   ASSERT_GT(allowed, 1);
@@ -1607,7 +1631,6 @@ TEST(Encoder, CallsSideBySideRunOnOneThreadEachAndRethrowTheFirstFailure) {
   }
   EXPECT_EQ(calls, std::vector<int>(9, 1));
   EXPECT_EQ(omp_get_max_active_levels(), allowed);
-  omp_set_max_active_levels(levels);
 }
 
 }  // namespace

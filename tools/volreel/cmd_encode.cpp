@@ -367,8 +367,8 @@ void add_encode_command(CLI::App& app) {
                   "not fit whole (twice their float32 size) are read and coded piecewise, a row "
                   "of bricks at a time,\n"
                   "with keyframe gap 1 and a dictionary given; smaller frames lower the default "
-                  "keyframe gap to fit,\nand frames of a few bricks are coded side by side, as "
-                  "many at once as fit");
+                  "keyframe gap to fit,\nand frames of a few bricks are coded side by side, "
+                  "as many ahead of their keyframe stretch as fit");
   cmd->add_option("--rate-sample-frames", o->rate_sample_frames,
                   "--bps: frames encoded per trial, evenly spaced; the eps found is checked on as "
                   "many others\n(twice at most) and searched again where they disagree")
