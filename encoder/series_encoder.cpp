@@ -403,7 +403,12 @@ std::uint64_t estimated_manifest_bytes(const datasets::SeriesInfo& info, std::si
     m.dictionary = format::ManifestDictionary{"dictionary.bin", 1000000, 4000000000u, atom_count};
   for (std::size_t t = 0; t < frames; ++t)  // a frame's size as a megabyte's digits
     m.frames[t] = format::ManifestFrame{format::frame_file_name(t), 1000000, 4000000000u};
-  return format::manifest_text(format::manifest_to_json(m)).size();
+  const std::string text = format::manifest_text(format::manifest_to_json(m));
+  // The manifest's own CRC is a decimal number: counted at its widest (10 digits), so that the
+  // estimate, and the ε a size target finds, do not hang on the CRC of the text (of the series'
+  // path, say, which differs from run to run for the Python module's spooled frames).
+  const auto crc = nlohmann::json::parse(text).at("manifest_crc32c").get<std::uint32_t>();
+  return text.size() - std::to_string(crc).size() + std::to_string(~std::uint32_t{0}).size();
 }
 
 double EncodeSummary::quantization_loss_db() const {
