@@ -740,11 +740,13 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     step.coded.stats.finest_squared_error =
         team->broadcast_value(step.coded.stats.finest_squared_error);
   };
+  // Frame t read whole into step's volume (its storage reused).
+  const auto read_whole = [&](std::size_t t, Step& step) {
+    if (step.volume.data.size() != info.dims.voxels()) step.volume = Volume(info.dims);
+    series.read_frame(t, step.volume.data);
+  };
   const auto code_step = [&](std::size_t t, Step& step, double scale) {
-    if (!job.piecewise) {
-      if (step.volume.data.size() != info.dims.voxels()) step.volume = Volume(info.dims);
-      series.read_frame(t, step.volume.data);
-    }
+    if (!job.piecewise) read_whole(t, step);
     const auto use_scale = [&](double wanted) {
       if (wanted == encoder_scale) return;
       CodingSettings scaled = coding;
@@ -806,7 +808,15 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
   std::vector<Step> pool;       // the other frames of the previous stretch: their buffers reused
   std::size_t coded_frames = 0;
   const std::size_t share_frames = writer ? end_frame - first_frame : 0;
-  double reported = 0;  // this process's frames added to the job's progress count
+  double reported = 0;          // this process's frames added to the job's progress count
+  const auto from_pool = [&] {  // a step whose buffers are reused, where there is one
+    Step step;
+    if (!pool.empty()) {
+      step = std::move(pool.back());
+      pool.pop_back();
+    }
+    return step;
+  };
   // Frames coded ahead: frame t and the next ones of this process's share that are neither
   // written nor coded yet, read one after another, then coded side by side; `coded` is called
   // for each afterwards, in order, from this thread (where the progress callback may stop the
@@ -818,14 +828,9 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       if (!done[u] && !ahead.contains(u)) next.push_back(u);
     std::vector<Step> batch_steps(next.size());
     for (std::size_t i = 0; i < next.size(); ++i) {
-      Step& step = batch_steps[i];
-      if (!pool.empty()) {
-        step = std::move(pool.back());
-        pool.pop_back();
-      }
-      if (step.volume.data.size() != info.dims.voxels()) step.volume = Volume(info.dims);
-      series.read_frame(next[i], step.volume.data);
-      step.scale = 1;  // the job's ε: no PSNR target
+      batch_steps[i] = from_pool();
+      read_whole(next[i], batch_steps[i]);
+      batch_steps[i].scale = 1;  // the job's ε: no PSNR target
     }
     detail::for_each_side_by_side(next.size(),
                                   [&](std::size_t i) { code(next[i], batch_steps[i]); });
@@ -882,10 +887,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
         ahead.erase(coded);
         continue;
       }
-      if (!pool.empty()) {
-        steps[t - s] = std::move(pool.back());
-        pool.pop_back();
-      }
+      steps[t - s] = from_pool();
       frame_progress = [&](double fraction) {
         if (!done[t]) report(t, static_cast<double>(coded_frames) + fraction);
       };
