@@ -258,10 +258,11 @@ void add_to_breakdown(format::BrickShape shape, const Cell& c,
               ? vr_entry_sparsity(layout, vr_block_entry(words.data(), layout, e++))
               : 0u;
       const vr_uint start = bit;
-      vr_uint next_atom = vr_block_first_atom(layout, box), atom = 0;
+      vr_uint next_atom = vr_block_first_atom(layout, box), run = 0, atom = 0;
       const vr_uint block_band_word = vr_block_band_word(band_word, box, sparsity);
       for (vr_uint j = 0; j < sparsity; ++j)
-        vr_read_code(words.data(), first, layout, block_band_word, sparsity, bit, next_atom, atom);
+        vr_read_code(words.data(), first, layout, block_band_word, box, sparsity, bit, next_atom,
+                     run, atom);
       ++st.sparsity_histogram[sparsity];
       if (!coarse) b.finest_owned_codes += (bit - start) / 8.0 * static_cast<double>(shares[k]);
     }

@@ -53,18 +53,30 @@ void CodeStatistics::add(std::span<const std::byte> payload, std::uint32_t atom_
     // the gaps' context counts from there.
     const std::uint32_t first_atom = vr_block_first_atom(layout_word, box_word);
     std::uint32_t previous = first_atom - 1u;
+    BlockGaps block_gaps(parts.atoms.data() + k, s, first_atom, vr_box_run_limit(box_word));
     for (vr_uint i = 0; i < s; ++i, ++k) {
       const std::uint32_t atom = parts.atoms[k];
       const std::uint32_t gap = atom - previous - 1;
       const std::uint32_t magnitude = static_cast<std::uint32_t>(std::abs(parts.values[k])) - 1;
       const vr_uint magnitude_rice = vr_band_rice(layout_word, block_band_word, atom);
-      const std::uint64_t gap_length = rice_bits(gap, gap_rice, parts.atom_bits);
+      // The gap's codes: a run length, a Rice value, both or neither (in a run).
+      const BlockGaps::Codes gap_codes = block_gaps.next();
+      std::uint64_t gap_length = 0;
+      if (gap_codes.run >= 0) {
+        const auto run = static_cast<std::uint32_t>(gap_codes.run);
+        gap_length += rice_bits(run, vr_box_run_rice(box_word), VR_MAX_SPARSITY_BITS);
+        escapes += (run >> vr_box_run_rice(box_word)) >= VR_ESCAPE_ZEROS;
+      }
+      if (gap_codes.gap >= 0) {
+        const auto value = static_cast<std::uint32_t>(gap_codes.gap);
+        gap_length += rice_bits(value, gap_rice, parts.atom_bits);
+        escapes += (value >> gap_rice) >= VR_ESCAPE_ZEROS;
+      }
       const std::uint64_t magnitude_length = rice_bits(magnitude, magnitude_rice, parts.coef_bits);
       gap_bits += gap_length;
       magnitude_bits += magnitude_length;
       sign_bits += 1;
       code_bits += gap_length + magnitude_length + 1;  // the code stream is nothing else
-      escapes += (gap >> gap_rice) >= VR_ESCAPE_ZEROS;
       escapes += (magnitude >> magnitude_rice) >= VR_ESCAPE_ZEROS;
       gaps.add((s_class << 8) | vr_highest_bit(previous - first_atom + 2), gap);
       magnitudes.add((vr_atom_band(layout_word, atom) << 8) | s_class, magnitude);

@@ -8,6 +8,7 @@
 #include <exception>
 #include <functional>
 #include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -68,37 +69,58 @@ constexpr std::size_t payload_padding_words = 6;
 /// The load's address depends on the codes before the previous one only, so that it is not in
 /// the chain of dependent steps from one code to the next (a 64-bit window loaded at each code's
 /// bit was). A gap takes at most 32 bits (16 zeros and 16 escaped bits, or at most 15 zeros, the
-/// one and 15 low bits), a magnitude with its sign at most 33: a gap longer than 23 bits (rare)
-/// refills again before the magnitude. A code that starts inside the stream loads at most 15
+/// one and 15 low bits) and a run length before it at most 24 (16 zeros and 8 escaped bits), 56
+/// together; a magnitude with its sign at most 33: after more than 23 bits of gap (rare) the
+/// reader refills again before the magnitude. A code that starts inside the stream loads at most 15
 /// bytes past the stream's end (the refill before it leaves at most 63 bits in the buffer, so the
 /// load starts at most 7 bytes past the stream's last bit): the payload's zero padding words take
 /// them.
 class CodeStream {
  public:
-  /// first_atom: vr_block_first_atom of the payload.
-  CodeStream(const vr_uint* payload, vr_uint first_word, vr_uint atom_bits, vr_uint first_atom)
+  /// first_atom: vr_block_first_atom of the payload; box_word: its box word (the runs).
+  CodeStream(const vr_uint* payload, vr_uint first_word, vr_uint atom_bits, vr_uint first_atom,
+             vr_uint box_word)
       : start_(reinterpret_cast<const unsigned char*>(payload + first_word)),
         next_(start_),
-        atom_limit_(first_atom + (1u << atom_bits)) {}
+        atom_limit_(first_atom + (1u << atom_bits)),
+        run_end_(first_atom + vr_box_run_limit(box_word)),
+        run_rice_(vr_box_run_rice(box_word)) {}
   /// Bits read so far.
   std::uint64_t bit() const { return 8 * static_cast<std::uint64_t>(next_ - start_) - count_; }
   /// The magnitudes' parameters of the block whose codes come next (BandRice::block).
   void set_band_rice(const std::uint8_t* band_rice) { band_rice_ = band_rice; }
 
   /// The next code of a block whose gaps have Rice parameter `gap_rice` (vr_gap_rice), after the
-  /// block's codes up to next_atom − 1; as vr_read_code.
-  int read(vr_uint gap_rice, vr_uint atom_bits, vr_uint coef_bits, vr_uint& next_atom,
+  /// block's codes up to next_atom − 1, in the block's run state `run` (0 before its first code);
+  /// as vr_read_code.
+  int read(vr_uint gap_rice, vr_uint atom_bits, vr_uint coef_bits, vr_uint& next_atom, vr_uint& run,
            vr_uint& atom) {
     vr_uint magnitude;
-    return read(gap_rice, atom_bits, coef_bits, next_atom, atom, magnitude);
+    return read(gap_rice, atom_bits, coef_bits, next_atom, run, atom, magnitude);
   }
   /// The same, and the magnitude's Rice value |q| − 1 in `magnitude`.
-  int read(vr_uint gap_rice, vr_uint atom_bits, vr_uint coef_bits, vr_uint& next_atom,
+  int read(vr_uint gap_rice, vr_uint atom_bits, vr_uint coef_bits, vr_uint& next_atom, vr_uint& run,
            vr_uint& atom, vr_uint& magnitude) {
     refill();
     std::uint64_t w = buffer_;
     vr_uint used = 0;
-    atom = next_atom + rice(w, used, gap_rice, atom_bits);
+    // The gap, as vr_read_gap; a gap coded as itself (no run limit, or past it) first.
+    if (run == 0 && next_atom >= run_end_) {
+      atom = next_atom + rice(w, used, gap_rice, atom_bits);
+    } else if (run >= 2) {
+      run -= 2;
+      atom = next_atom;
+    } else {
+      // Below the run limit a run length first (run 0); right after a run (run 1) none.
+      const vr_uint z = run == 0 ? rice(w, used, run_rice_, VR_MAX_SPARSITY_BITS) : 0;
+      if (z != 0) {  // a run starts: this code's gap is 0, z − 1 more to come
+        run = 2 * z - 1;
+        atom = next_atom;
+      } else {  // no run here, or right after one: the gap is at least 1
+        run = 0;
+        atom = next_atom + 1 + rice(w, used, gap_rice, atom_bits);
+      }
+    }
     next_atom = atom + 1;
     if (used > 56 - 33) {  // fewer than 33 bits left in the buffer
       consume(used);
@@ -129,6 +151,16 @@ class CodeStream {
     buffer_ >>= bits;
     count_ -= bits;
   }
+  /// The Rice code at the start of the bits w (vr_read_rice) and its length in bits.
+  static vr_uint peek_rice(std::uint64_t w, vr_uint k, vr_uint escape_bits, vr_uint& length) {
+    const vr_uint zeros = vr_lowest_bit(static_cast<vr_uint>(w) | (1u << VR_ESCAPE_ZEROS));
+    if (zeros == VR_ESCAPE_ZEROS) {
+      length = VR_ESCAPE_ZEROS + escape_bits;
+      return static_cast<vr_uint>(w >> VR_ESCAPE_ZEROS) & ((1u << escape_bits) - 1u);
+    }
+    length = zeros + 1 + k;
+    return (zeros << k) | (static_cast<vr_uint>(w >> (zeros + 1)) & ((1u << k) - 1u));
+  }
   /// The Rice code at the start of the bits w (vr_read_rice): w moves past it, `used` counts its
   /// bits.
   static vr_uint rice(std::uint64_t& w, vr_uint& used, vr_uint k, vr_uint escape_bits) {
@@ -150,6 +182,8 @@ class CodeStream {
   const unsigned char* next_;  ///< the byte after the buffer's count_ bits
   const std::uint8_t* band_rice_ = nullptr;
   vr_uint atom_limit_;
+  vr_uint run_end_;   ///< first atom + run limit: a run may start below it
+  vr_uint run_rice_;  ///< the runs' Rice parameter
   std::uint64_t buffer_ = 0;
   vr_uint count_ = 0;
 };
@@ -345,15 +379,15 @@ KsvdPayloadLayout parse_ksvd_header(const vr_uint* payload, std::size_t word_cou
          "values that reach " + std::to_string(bound));
   // 2. The box of coded blocks and their entries.
   const vr_uint n = shape.blocks_per_axis(), box = layout.box_word;
-  if ((box >> 17) != 0 || vr_box_magnitude_model(box) > VR_MAX_MAGNITUDE_MODEL ||
+  if ((box >> 28) != 0 || vr_box_magnitude_model(box) > VR_MAX_MAGNITUDE_MODEL ||
       vr_box_blocks(box, 0) < 1 || vr_box_blocks(box, 0) > n || vr_box_blocks(box, 1) < 1 ||
       vr_box_blocks(box, 1) > n || vr_box_blocks(box, 2) < 1 || vr_box_blocks(box, 2) > n)
     fail(20,
          "box word of 1.." + str(n) + " coded blocks on each axis, magnitude model 0.." +
-             str(VR_MAX_MAGNITUDE_MODEL) + " and zero bits 17..31",
+             str(VR_MAX_MAGNITUDE_MODEL) + " and zero bits 28..31",
          str(vr_box_blocks(box, 0)) + " x " + str(vr_box_blocks(box, 1)) + " x " +
              str(vr_box_blocks(box, 2)) + " blocks, magnitude model " +
-             str(vr_box_magnitude_model(box)) + ((box >> 17) != 0 ? ", nonzero bits" : ""));
+             str(vr_box_magnitude_model(box)) + ((box >> 28) != 0 ? ", nonzero bits" : ""));
   const vr_uint first = vr_code_first_word(layout.word, vr_box_entries(box));
   if (bytes < 4 * std::uint64_t{first})
     fail(0,
@@ -373,9 +407,10 @@ vr_uint codes_atom_end(std::uint32_t atom_count, vr_uint first_atom, vr_uint ato
       atom_count, std::uint64_t{first_atom} + (std::uint64_t{1} << atom_bits)));
 }
 
-/// The most bits one code takes (a 32-bit gap, a 32-bit magnitude and the sign): a run of `count`
-/// codes from bit `bit` cannot start a code past a stream of `stream_bits` when this holds.
-constexpr std::uint64_t max_code_bits = 65;
+/// The most bits one code takes (a 24-bit run length, a 32-bit gap, a 32-bit magnitude and the
+/// sign): a run of `count` codes from bit `bit` cannot start a code past a stream of `stream_bits`
+/// when this holds.
+constexpr std::uint64_t max_code_bits = 89;
 bool run_inside(std::uint64_t bit, vr_uint count, std::uint64_t stream_bits) {
   return bit + max_code_bits * count <= stream_bits;
 }
@@ -385,6 +420,12 @@ bool run_inside(std::uint64_t bit, vr_uint count, std::uint64_t stream_bits) {
 /// value |q| − 1 < 2^c, so the OR of the run's values `magnitudes` is below 2^c when each is.
 bool run_good(vr_uint last_atom, vr_uint magnitudes, vr_uint atom_end, vr_uint coef_bits) {
   return last_atom < atom_end && (magnitudes >> coef_bits) == 0;
+}
+
+/// Whether a block's run state after its last code is that of a stream the packer writes: no run
+/// of consecutive atoms (vr_read_gap) reaching past the block's codes.
+bool run_ended(vr_uint run) {
+  return run < 2;
 }
 
 /// check_ksvd_payload on `payload` (word_count words followed by payload_padding_words zero
@@ -408,7 +449,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
   band_rice.reset(layout.word, layout.band_word, box);
   const vr_uint first_atom = vr_block_first_atom(layout.word, box);
   const vr_uint atom_end = codes_atom_end(atom_count, first_atom, layout.atom_bits);
-  CodeStream stream(payload, first, layout.atom_bits, first_atom);
+  CodeStream stream(payload, first, layout.atom_bits, first_atom, box);
   for (vr_uint b = 0, e = 0; b < blocks; ++b) {
     if (!vr_block_in_box(box, n, b)) continue;
     const vr_uint s = vr_entry_sparsity(layout.word, vr_block_entry(payload, layout.word, e++));
@@ -416,7 +457,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
     if (s == 0) continue;
     const vr_uint gap_rice = vr_gap_rice(layout.word, s);
     stream.set_band_rice(band_rice.block(s));
-    vr_uint next_atom = first_atom, atom = 0;
+    vr_uint next_atom = first_atom, run = 0, atom = 0;
     if (run_inside(stream.bit(), s, stream_bits)) {
       // No code of the block can start past the stream: its codes read without the checks, then
       // checked once (run_good). Where that fails, the block is read again code by code, to name
@@ -426,14 +467,15 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
       vr_uint magnitudes = 0;
       for (vr_uint k = 0; k < s; ++k) {
         vr_uint magnitude = 0;
-        const int q =
-            stream.read(gap_rice, layout.atom_bits, layout.coef_bits, next_atom, atom, magnitude);
+        const int q = stream.read(gap_rice, layout.atom_bits, layout.coef_bits, next_atom, run,
+                                  atom, magnitude);
         magnitudes |= magnitude;
         if (codes) codes->push_back({atom, q});
       }
-      if (run_good(atom, magnitudes, atom_end, layout.coef_bits)) continue;
+      if (run_good(atom, magnitudes, atom_end, layout.coef_bits) && run_ended(run)) continue;
       stream = block_start;
       next_atom = first_atom;
+      run = 0;
       if (codes) codes->resize(codes_before);
     }
     for (vr_uint k = 0; k < s; ++k) {
@@ -441,7 +483,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
       if (stream.bit() >= stream_bits)
         fail(code_at, "codes inside the payload (block " + str(b) + ", code " + str(k) + ")",
              "the payload's end");
-      const int q = stream.read(gap_rice, layout.atom_bits, layout.coef_bits, next_atom, atom);
+      const int q = stream.read(gap_rice, layout.atom_bits, layout.coef_bits, next_atom, run, atom);
       if (atom >= atom_end)
         fail(code_at,
              "atom index < " + str(atom_end) + " (block " + str(b) + ", code " + str(k) + ")",
@@ -454,6 +496,10 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
              str(m));
       if (codes) codes->push_back({atom, q});
     }
+    if (!run_ended(run))
+      fail(4 * std::uint64_t{first} + stream.bit() / 8,
+           "runs of consecutive atoms that end with their block (block " + str(b) + ")",
+           "a run " + str(run / 2) + " codes longer than the block's " + str(s));
   }
   const std::uint64_t bit = stream.bit();
   layout.code_bits = bit;
@@ -551,7 +597,7 @@ class SteppedCodes {
         largest_(1u << layout.coef_bits),
         band_rice_(&band_rice),
         first_atom_(vr_block_first_atom(layout.word, layout.box_word)),
-        stream_(payload, first_, layout.atom_bits, first_atom_) {
+        stream_(payload, first_, layout.atom_bits, first_atom_, layout.box_word) {
     band_rice.reset(layout.word, layout.band_word, layout.box_word);
     for (vr_uint b = 0, e = 0; b < blocks_; ++b)
       if (vr_block_in_box(layout_.box_word, n_, b))
@@ -576,6 +622,7 @@ class SteppedCodes {
       gap_rice_ = vr_gap_rice(layout_.word, in_block_);
       stream_.set_band_rice(band_rice_->block(in_block_));
       next_atom_ = first_atom_;
+      run_ = 0;
     }
   }
 
@@ -584,7 +631,8 @@ class SteppedCodes {
   bool code(ParsedCode* out) {
     if (stream_.bit() >= stream_bits_) return false;
     vr_uint atom = 0;
-    const int q = stream_.read(gap_rice_, layout_.atom_bits, layout_.coef_bits, next_atom_, atom);
+    const int q =
+        stream_.read(gap_rice_, layout_.atom_bits, layout_.coef_bits, next_atom_, run_, atom);
     *out = {atom, q};
     const vr_uint m = static_cast<vr_uint>(q < 0 ? -static_cast<std::int64_t>(q) : q);
     return atom < atom_end_ && m <= largest_;
@@ -596,8 +644,8 @@ class SteppedCodes {
   /// block's codes are good's.
   void unchecked_code(ParsedCode* out, vr_uint& magnitudes) {
     vr_uint atom = 0, magnitude = 0;
-    const int q =
-        stream_.read(gap_rice_, layout_.atom_bits, layout_.coef_bits, next_atom_, atom, magnitude);
+    const int q = stream_.read(gap_rice_, layout_.atom_bits, layout_.coef_bits, next_atom_, run_,
+                               atom, magnitude);
     *out = {atom, q};
     magnitudes |= magnitude;
   }
@@ -606,17 +654,19 @@ class SteppedCodes {
     return run_good(last.atom, magnitudes, atom_end_, layout_.coef_bits);
   }
 
-  /// Counts `count` codes of the current block as read.
+  /// Counts `count` codes of the current block as read; at the block's end, its runs' check.
   void taken(vr_uint count) {
     in_block_ -= count;
     read_ += count;
+    runs_good_ = runs_good_ && (in_block_ != 0 || run_ended(run_));
   }
 
   /// Reads the next code into *out (left() > 0); false where parse_ksvd_payload would throw.
   bool step(ParsedCode* out) {
     begin_block();
-    taken(1);
-    return code(out);
+    const bool good = code(out);
+    taken(1);  // after the code: at the block's end, the runs' check takes its run state
+    return good;
   }
 
   /// After every code: the payload's length and the zero bits after the last code, as
@@ -624,6 +674,7 @@ class SteppedCodes {
   bool finish() {
     const std::uint64_t bit = stream_.bit();
     layout_.code_bits = bit;
+    if (!runs_good_) return false;
     if (word_count_ != std::uint64_t{first_} + (bit + 31) / 32) return false;
     return bit % 32 == 0 || (payload_[word_count_ - 1] >> (bit % 32)) == 0;
   }
@@ -637,8 +688,9 @@ class SteppedCodes {
   const BandRice* band_rice_;
   vr_uint first_atom_;
   CodeStream stream_;
-  vr_uint block_ = 0, entry_ = 0, in_block_ = 0, gap_rice_ = 0, next_atom_ = 0;
+  vr_uint block_ = 0, entry_ = 0, in_block_ = 0, gap_rice_ = 0, next_atom_ = 0, run_ = 0;
   std::uint32_t read_ = 0;
+  bool runs_good_ = true;  ///< every block read to its end ended its runs (run_ended)
 };
 
 /// Reads both payloads' codes into a and b, a code of each in turn while both have some: reading
@@ -763,12 +815,14 @@ void write_codes(const KsvdPayloadParts& parts, vr_uint layout, vr_uint payload_
     if (s == 0) continue;
     const vr_uint gap_rice = vr_gap_rice(layout, s);
     const vr_uint band_word = vr_block_band_word(payload_band_word, box, s);
-    vr_uint next_atom = vr_block_first_atom(layout, box);
+    BlockGaps gaps(parts.atoms.data() + k, s, vr_block_first_atom(layout, box),
+                   vr_box_run_limit(box));
     for (vr_uint j = 0; j < s; ++j, ++k) {
-      const vr_uint gap = parts.atoms[k] - next_atom;
-      next_atom = parts.atoms[k] + 1;
+      const BlockGaps::Codes codes = gaps.next();
+      if (codes.run >= 0)
+        out.rice(static_cast<vr_uint>(codes.run), vr_box_run_rice(box), VR_MAX_SPARSITY_BITS);
+      if (codes.gap >= 0) out.rice(static_cast<vr_uint>(codes.gap), gap_rice, parts.atom_bits);
       const vr_uint magnitude = static_cast<vr_uint>(std::abs(std::int64_t{parts.values[k]}) - 1);
-      out.rice(gap, gap_rice, parts.atom_bits);
       out.rice(magnitude, vr_band_rice(layout, band_word, parts.atoms[k]), parts.coef_bits);
       out.put(1, parts.values[k] < 0 ? 1u : 0u);
     }
@@ -806,26 +860,29 @@ class RiceTally {
 };
 
 /// The entropy coder's parameters with the fewest bits for `parts` (or those the parts fix:
-/// magnitude_model ≥ 0, a band_rice ≥ 0, gap_shift ≥ 0): the magnitude model (brick_decode.h,
-/// vr_magnitude_move) and band word, then the gap shift. The magnitudes are tallied by band and
-/// sparsity class floor(log2(s + 1)), each model adding up the bits of its moved parameters; the
-/// gaps by sparsity class, each shift taking its class's parameter (vr_gap_rice).
+/// magnitude_model ≥ 0, a band_rice ≥ 0, gap_shift ≥ 0, run_limit ≥ 0, run_rice ≥ 0): the
+/// magnitude model (brick_decode.h, vr_magnitude_move) and band word, then the gap shift, run
+/// limit and runs' parameter together. The magnitudes are tallied by band and sparsity class
+/// floor(log2(s + 1)), each model adding up the bits of its moved parameters; for each run limit
+/// of run_limit_candidates, the run lengths and the gaps by sparsity class (BlockGaps), each shift
+/// taking its class's parameter (vr_gap_rice).
 struct CoderChoice {
-  vr_uint magnitude_model, band_word, gap_shift;
+  vr_uint magnitude_model, band_word, gap_shift, run_limit, run_rice;
 };
+/// The run limits the packer tries: 0 (no runs) and limits spaced by about √2, up to every
+/// position an 8-bit index names.
+constexpr std::array<vr_uint, 17> run_limit_candidates{0,  1,  2,  3,  4,  6,   8,   12, 16,
+                                                       24, 32, 48, 64, 96, 128, 192, 255};
 CoderChoice choose_coder(const KsvdPayloadParts& parts, vr_uint first_atom,
                          const std::function<vr_uint(vr_uint)>& layout_of) {
   constexpr vr_uint classes = VR_MAX_SPARSITY_BITS + 1;  // floor(log2(s + 1)) ≤ 8
   static_assert(VR_MAX_MAGNITUDE_MODEL == classes);
   const vr_uint layout = layout_of(0);
-  std::vector<RiceTally> magnitudes(VR_ATOM_BANDS * classes), gaps(classes);
+  std::vector<RiceTally> magnitudes(VR_ATOM_BANDS * classes);
   std::size_t k = 0;
   for (std::size_t b = 0; b < parts.sparsity.size(); ++b) {
     const vr_uint s = parts.sparsity[b], c = vr_highest_bit(s + 1u);
-    vr_uint next_atom = first_atom;
     for (vr_uint j = 0; j < s; ++j, ++k) {
-      gaps[c].add(parts.atoms[k] - next_atom);
-      next_atom = parts.atoms[k] + 1;
       const vr_uint magnitude = static_cast<vr_uint>(std::abs(std::int64_t{parts.values[k]}) - 1);
       magnitudes[vr_atom_band(layout, parts.atoms[k]) * classes + c].add(magnitude);
     }
@@ -860,21 +917,52 @@ CoderChoice choose_coder(const KsvdPayloadParts& parts, vr_uint first_atom,
     }
     return std::pair{band_word, total};
   };
-  CoderChoice choice{0, 0, parts.gap_shift >= 0 ? static_cast<vr_uint>(parts.gap_shift) : 0};
+  CoderChoice choice{0, 0, 0, 0, 0};
   std::uint64_t fewest = ~std::uint64_t{0};
   for (vr_uint m = 0; m <= VR_MAX_MAGNITUDE_MODEL; ++m) {
     if (parts.magnitude_model >= 0 && m != static_cast<vr_uint>(parts.magnitude_model)) continue;
     const auto [band_word, total] = candidate(m);
     if (total < fewest) choice.magnitude_model = m, fewest = total, choice.band_word = band_word;
   }
-  if (parts.gap_shift < 0) {
-    fewest = ~std::uint64_t{0};
+  // The gaps: for each run limit, the run lengths' tally and the gaps' by sparsity class.
+  const vr_uint fixed_limit = static_cast<vr_uint>(std::max(parts.run_limit, 0));
+  fewest = ~std::uint64_t{0};
+  const std::span<const vr_uint> limits = parts.run_limit >= 0
+                                              ? std::span<const vr_uint>(&fixed_limit, 1)
+                                              : std::span<const vr_uint>(run_limit_candidates);
+  for (const vr_uint limit : limits) {
+    RiceTally runs;
+    std::array<RiceTally, classes> gaps;
+    k = 0;
+    for (std::size_t b = 0; b < parts.sparsity.size(); ++b) {
+      const vr_uint s = parts.sparsity[b], c = vr_highest_bit(s + 1u);
+      BlockGaps block(parts.atoms.data() + k, s, first_atom, limit);
+      for (vr_uint j = 0; j < s; ++j) {
+        const BlockGaps::Codes codes = block.next();
+        if (codes.run >= 0) runs.add(static_cast<vr_uint>(codes.run));
+        if (codes.gap >= 0) gaps[c].add(static_cast<vr_uint>(codes.gap));
+      }
+      k += s;
+    }
+    // Run lengths: the parameter of the fewest bits (0 when there are none).
+    std::uint64_t run_bits = 0;
+    vr_uint run_rice = parts.run_rice >= 0 ? static_cast<vr_uint>(parts.run_rice) : 0;
+    if (!runs.empty()) {
+      run_bits = ~std::uint64_t{0};
+      for (vr_uint r = 0; r <= VR_MAX_RUN_RICE; ++r) {
+        if (parts.run_rice >= 0 && r != static_cast<vr_uint>(parts.run_rice)) continue;
+        const std::uint64_t bits_r = runs.bits(r, VR_MAX_SPARSITY_BITS);
+        if (bits_r < run_bits) run_bits = bits_r, run_rice = r;
+      }
+    }
     for (vr_uint g = 0; g <= VR_MAX_GAP_SHIFT; ++g) {
-      std::uint64_t total = 0;
+      if (parts.gap_shift >= 0 && g != static_cast<vr_uint>(parts.gap_shift)) continue;
+      std::uint64_t total = run_bits;
       for (vr_uint c = 0; c < classes; ++c)
         if (!gaps[c].empty())
           total += gaps[c].bits(vr_gap_rice(layout_of(g), (1u << c) - 1u), parts.atom_bits);
-      if (total < fewest) fewest = total, choice.gap_shift = g;
+      if (total < fewest)
+        fewest = total, choice.gap_shift = g, choice.run_limit = limit, choice.run_rice = run_rice;
     }
   }
   return choice;
@@ -909,13 +997,16 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
       parts.atom_bits > VR_MAX_ATOM_BITS || parts.gap_shift > int{VR_MAX_GAP_SHIFT} ||
       parts.band_split > VR_MAX_BAND_SPLIT ||
       parts.magnitude_model > static_cast<int>(VR_MAX_MAGNITUDE_MODEL) ||
+      parts.run_limit > static_cast<int>(VR_MAX_RUN_LIMIT) ||
+      parts.run_rice > static_cast<int>(VR_MAX_RUN_RICE) ||
       std::any_of(parts.band_rice.begin(), parts.band_rice.end(), [](int k) { return k > 15; }))
-    throw std::invalid_argument("payload widths out of range: mean " + str(parts.mean_bits) +
-                                ", sparsity " + str(parts.sparsity_bits) + ", magnitude " +
-                                str(parts.coef_bits) + ", atom " + str(parts.atom_bits) +
-                                " bits, gap shift " + std::to_string(parts.gap_shift) +
-                                ", magnitude model " + std::to_string(parts.magnitude_model) +
-                                " or a band's Rice parameter over 15");
+    throw std::invalid_argument(
+        "payload widths out of range: mean " + str(parts.mean_bits) + ", sparsity " +
+        str(parts.sparsity_bits) + ", magnitude " + str(parts.coef_bits) + ", atom " +
+        str(parts.atom_bits) + " bits, gap shift " + std::to_string(parts.gap_shift) +
+        ", magnitude model " + std::to_string(parts.magnitude_model) + ", run limit " +
+        std::to_string(parts.run_limit) + ", run parameter " + std::to_string(parts.run_rice) +
+        " or a band's Rice parameter over 15");
   const std::size_t blocks = parts.sparsity.size();
   bool brick_blocks = false;  // n³ for a brick size 6n
   for (std::uint32_t size = min_brick_size; size <= max_brick_size; size += brick_block_size)
@@ -969,9 +1060,12 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
     return vr_make_layout(parts.mean_bits, parts.sparsity_bits, parts.coef_bits, parts.atom_bits,
                           gap_shift, parts.band_split);
   };
-  const auto [magnitude_model, band_word, gap_shift] = choose_coder(parts, first_atom, layout_of);
-  const vr_uint box = vr_box_with_split_flag(
-      vr_box_with_magnitude_model(blocks_box, magnitude_model), parts.from_split ? 1u : 0u);
+  const auto [magnitude_model, band_word, gap_shift, run_limit, run_rice] =
+      choose_coder(parts, first_atom, layout_of);
+  const vr_uint box = vr_box_with_runs(
+      vr_box_with_split_flag(vr_box_with_magnitude_model(blocks_box, magnitude_model),
+                             parts.from_split ? 1u : 0u),
+      run_limit, run_rice);
   const vr_uint layout = layout_of(gap_shift);
 
   BitWriter entries, stream;
@@ -1016,6 +1110,8 @@ KsvdPayloadParts unpack_ksvd_payload(std::span<const std::byte> bytes, std::uint
     parts.band_rice[band] = static_cast<int>((layout.band_word >> (4 * band)) & 0xF);
   parts.gap_shift = static_cast<int>(vr_layout_gap_shift(layout.word));
   parts.magnitude_model = static_cast<int>(vr_box_magnitude_model(layout.box_word));
+  parts.run_limit = static_cast<int>(vr_box_run_limit(layout.box_word));
+  parts.run_rice = static_cast<int>(vr_box_run_rice(layout.box_word));
   parts.from_split = vr_box_from_split(layout.box_word) != 0;
   parts.band_split = vr_layout_band_split(layout.word);
   const vr_uint n = shape.blocks_per_axis();

@@ -58,7 +58,9 @@ format::KsvdPayloadParts known_parts() {
 }
 
 TEST(CodeStatistics, SplitsTheCodeBitsIntoGapsMagnitudesAndSigns) {
-  const std::vector<std::byte> payload = format::pack_ksvd_payload(known_parts());
+  format::KsvdPayloadParts parts = known_parts();
+  parts.run_limit = 0;  // every gap a Rice code of its own
+  const std::vector<std::byte> payload = format::pack_ksvd_payload(parts);
   const format::BrickShape shape{12};
   const format::KsvdPayloadLayout layout =
       format::check_ksvd_payload(payload, 216, shape, "known", 0);
@@ -93,6 +95,19 @@ TEST(CodeStatistics, SplitsTheCodeBitsIntoGapsMagnitudesAndSigns) {
   EXPECT_EQ(merged.codes, 70u);
   EXPECT_EQ(merged.escapes, 4u);
   EXPECT_DOUBLE_EQ(merged.gaps.entropy_bits(), 2 * s.gaps.entropy_bits());
+
+  // The packer's own choice codes the runs of consecutive atoms (0, 1, 2 and 100..129) by their
+  // lengths: the gaps take fewer bits, and the parts still add up to the stream.
+  const std::vector<std::byte> with_runs = format::pack_ksvd_payload(known_parts());
+  const format::KsvdPayloadLayout runs_layout =
+      format::check_ksvd_payload(with_runs, 216, shape, "runs", 0);
+  ASSERT_GT(vr_box_run_limit(runs_layout.box_word), 0u);
+  format::CodeStatistics r;
+  r.add(with_runs, 216, shape, "runs", 0);
+  EXPECT_EQ(r.gap_bits + r.magnitude_bits + r.sign_bits, runs_layout.code_bits);
+  EXPECT_LT(r.gap_bits, s.gap_bits);
+  EXPECT_EQ(r.magnitude_bits, s.magnitude_bits);
+  EXPECT_EQ(format::unpack_ksvd_payload(with_runs, 216, shape, "", 0).atoms, parts.atoms);
 }
 
 TEST(CodeStatistics, ADamagedPayloadIsAnErrorNamingIt) {

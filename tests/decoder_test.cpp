@@ -179,6 +179,19 @@ std::vector<std::byte> random_payload(format::BrickShape shape, std::uint32_t co
     std::shuffle(all.begin(), all.end(), rng);
     std::vector<std::uint32_t> atoms(all.begin(), all.begin() + p.sparsity[b]);
     std::sort(atoms.begin(), atoms.end());
+    // A third of the blocks name consecutive atoms from a random start, now and then one left out
+    // (runs, brick_decode.h's vr_read_gap), as dense blocks of low frequencies do.
+    if (pick(3) == 0 && !atoms.empty()) {
+      std::uint32_t spare = count - first_atom - p.sparsity[b];
+      std::uint32_t atom = first_atom + pick(spare / 2 + 1);
+      spare -= atom - first_atom;
+      for (std::uint32_t& a : atoms) {
+        a = atom;
+        const std::uint32_t skip = pick(5) == 0 ? std::min(spare, pick(3)) : 0;
+        atom += 1 + skip;
+        spare -= skip;
+      }
+    }
     for (std::uint32_t a : atoms) {
       // Mostly small magnitudes, some at the largest (escapes where the Rice parameter is small).
       const int m = pick(8) == 0 ? largest : 1 + static_cast<int>(pick(largest < 4 ? 2 : 4));
@@ -187,6 +200,10 @@ std::vector<std::byte> random_payload(format::BrickShape shape, std::uint32_t co
     }
   }
   p.magnitude_model = static_cast<int>(pick(VR_MAX_MAGNITUDE_MODEL + 1));  // every model
+  if (pick(2) == 0) {  // any run limit and parameter, not only the packer's choice
+    p.run_limit = static_cast<int>(pick(VR_MAX_RUN_LIMIT + 1));
+    p.run_rice = static_cast<int>(pick(VR_MAX_RUN_RICE + 1));
+  }
   return format::pack_ksvd_payload(p);
 }
 
@@ -223,9 +240,10 @@ TEST(Decoder, TheLongestCodesReadBack) {
   vr_uint bit = 0;
   std::size_t code = 0;
   for (std::uint32_t b = 0; b < shape.blocks(); ++b) {
-    vr_uint next_atom = 0, atom = 0;
+    vr_uint next_atom = 0, run = 0, atom = 0;
     for (std::uint32_t k = 0; k < 3; ++k, ++code) {
-      const int q = vr_read_code(words.data(), first, layout, band_word, 3, bit, next_atom, atom);
+      const int q = vr_read_code(words.data(), first, layout, band_word, words[5], 3, bit,
+                                 next_atom, run, atom);
       EXPECT_EQ(atom, p.atoms[code]);
       EXPECT_EQ(q, p.values[code]);
     }
@@ -282,6 +300,54 @@ TEST(Decoder, PayloadsReadInStepDecodeAsOneAtATime) {
             << "brick " << shape.size << ", trial " << trial << ", job " << j;
     }
   }
+}
+
+TEST(Decoder, ARunPastItsBlocksLastCodeIsNamed) {
+  // Block 0 names atoms 0, 1 and 2: one run of 3 under the largest run limit. With its sparsity
+  // lowered to 2 in its entry, the run reaches past the block's last code: every reader refuses
+  // the payload by name, alone and in step, where a decoder without the check would carry the run
+  // into the next block.
+  const format::DictionaryFile d = learned_and_dct(40, 5);
+  const format::AtomTable atoms = format::atom_table(d.atoms, d.atom_count);
+  const format::BrickShape shape{12};
+  format::KsvdPayloadParts p;
+  p.sparsity.assign(shape.blocks(), 0);
+  p.mean.assign(shape.blocks(), 0);
+  p.dequantization[0] = 0.5f;
+  p.dequantization[1] = 0.01f;
+  p.dequantization[2] = 0.002f;
+  p.mean_bits = 0;
+  p.sparsity_bits = 4;  // entry e: bits 4e..4e+3 of word 6
+  p.coef_bits = 4;
+  p.atom_bits = format::bits_for_count(d.atom_count);
+  p.run_limit = VR_MAX_RUN_LIMIT;
+  p.run_rice = 0;
+  p.sparsity[0] = 3;
+  p.sparsity[1] = 2;
+  p.atoms = {0, 1, 2, 7, 30};
+  p.values = {3, -2, 1, 5, -1};
+  std::vector<std::byte> payload = format::pack_ksvd_payload(p);
+  ASSERT_NO_THROW(format::check_ksvd_payload(payload, d.atom_count, shape, "good", 0));
+  std::byte& entry = payload[4 * VR_HEADER_WORDS];
+  ASSERT_EQ(std::to_integer<int>(entry) & 0xF, 3);
+  entry = static_cast<std::byte>((std::to_integer<int>(entry) & ~0xF) | 2);
+  try {
+    format::check_ksvd_payload(payload, d.atom_count, shape, "run.vrf", 100);
+    ADD_FAILURE() << "a run past its block accepted";
+  } catch (const format::FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("runs of consecutive atoms that end with their block "
+                                         "(block 0)"),
+              std::string::npos)
+        << e.what();
+  }
+  std::vector<float> out(shape.voxels()), other(shape.voxels());
+  const std::vector<std::byte> good = format::pack_ksvd_payload(p);
+  const format::PayloadJob alone[1] = {{payload, out, "run.vrf", 100}};
+  const format::PayloadJob pair[2] = {{good, other, "good.vrf", 0}, {payload, out, "run.vrf", 100}};
+  const std::string error = decode_error(alone, atoms, shape);
+  EXPECT_NE(error.find("run.vrf"), std::string::npos) << error;
+  EXPECT_NE(error.find("runs of consecutive atoms"), std::string::npos) << error;
+  EXPECT_EQ(decode_error(pair, atoms, shape), error);
 }
 
 TEST(Decoder, TheFirstCodePastTheDictionaryOrItsMagnitudeIsNamed) {

@@ -242,7 +242,7 @@ grep -q "miss the pointwise bound 1e-07 even at the finest steps a payload holds
 "$volreel" encode "$work/s" --dictionary "$work/dict.bin" --out "$work/p.vreel" --psnr 58 > "$work/psnr.txt" 2>&1
 grep -q "target PSNR 58.00 dB met by every frame" "$work/psnr.txt" || fail "--psnr 58: $(cat "$work/psnr.txt")"
 "$volreel" compare "$work/s" "$work/p.vreel" --no-ssim --min-psnr 58 > /dev/null 2>&1 || fail "--psnr 58 not delivered"
-sed -i 's/"format_version": 9/"format_version": 8/' "$work/m.vreel/manifest.json"
+sed -i 's/"format_version": 10/"format_version": 9/' "$work/m.vreel/manifest.json"
 expect_error "encode the series again" "$volreel" info "$work/m.vreel"
 
 # Frames larger than --memory: read and coded piecewise (a row of bricks at a time), giving the

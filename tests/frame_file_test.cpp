@@ -95,7 +95,7 @@ TEST(FrameLayout, OffsetsAndGeometry) {
   const auto d = small_dictionary();
   const auto bytes = small_frame(format::Codec::ksvd, d);
   EXPECT_EQ(std::memcmp(bytes.data(), "VREELFRM", 8), 0);
-  EXPECT_EQ(static_cast<int>(bytes[8]), 9);
+  EXPECT_EQ(static_cast<int>(bytes[8]), 10);
   EXPECT_EQ(static_cast<int>(bytes[9]), 0);
 }
 

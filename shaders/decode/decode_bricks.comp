@@ -100,9 +100,10 @@ void main() {
     const uint s = vr_entry_sparsity(layout_word, entry);
     vec4 value = vec4(mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry)));
     const uint block_band_word = vr_block_band_word(band_word, box_word, s);
-    uint next_atom = vr_block_first_atom(layout_word, box_word), atom = 0u;
+    uint next_atom = vr_block_first_atom(layout_word, box_word), run = 0u, atom = 0u;
     for (uint k = 0u; k < s; ++k) {
-      const int q = vr_read_code(first, layout_word, block_band_word, s, bit, next_atom, atom);
+      const int q = vr_read_code(first, layout_word, block_band_word, box_word, s, bit, next_atom,
+                                 run, atom);
       value += coef_scale * float(q) * atom_quads[atom * (VR_BLOCK_LENGTH / 4u) + t];
     }
     for (uint i = 0u; i < 4u; ++i)

@@ -135,11 +135,11 @@ void main() {
         low0 = low1 = low2 = low3 = low4 = vec4(mean);
         high0 = high1 = high2 = high3 = high4 = vec2(mean);
         const uint block_band_word = vr_block_band_word(band_word, box_word, s);
-        uint next_atom = first_atom, atom_index = 0u;
+        uint next_atom = first_atom, run = 0u, atom_index = 0u;
         for (uint k = 0u; k < s; ++k) {
           const float coefficient =
-              coef_scale * float(vr_read_code(first, layout_word, block_band_word, s, bit,
-                                               next_atom, atom_index));
+              coef_scale * float(vr_read_code(first, layout_word, block_band_word, box_word, s, bit,
+                                               next_atom, run, atom_index));
           const int atom = int(atom_index * VR_ATOM_TEXELS);
 #define VR_ACCUMULATE(r)                                                         \
   low##r += coefficient * texelFetch(atom_texels, atom + int(texel##r));         \

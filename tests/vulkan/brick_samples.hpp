@@ -34,7 +34,9 @@ inline std::vector<float> random_atoms(SplitMix64& rng, std::uint32_t count) {
 /// half of the payloads code a random box of blocks (1..n on each axis; brick_decode.h,
 /// vr_box_word), the others every block; style 3 codes all but the last layer of blocks in z.
 /// Styles 0 and 4 take a random magnitude model 0..9, style 3 model 1; a third of styles 0 and 4
-/// set the split flag (atoms from the band split on).
+/// set the split flag (atoms from the band split on). Half of styles 0 and 4 name atoms mostly one
+/// after another (runs, brick_decode.h's vr_read_gap) under a random run limit and parameter;
+/// style 3 runs up to 255 atoms long under the largest limit and parameter 0 (escaped lengths).
 inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t atom_count,
                                                   int style, format::BrickShape shape = {}) {
   const auto sign = [&] { return rng.below(2) ? 1.0f : -1.0f; };
@@ -76,6 +78,12 @@ inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t
       vr_make_box(parts.box[0] == 0 ? n : parts.box[0], parts.box[1] == 0 ? n : parts.box[1],
                   parts.box[2] == 0 ? n : parts.box[2]);
   std::vector<std::uint32_t> order(atom_count);
+  const bool runs = (style == 0 || style == 4) && rng.below(2) == 0;
+  if (runs) {
+    parts.run_limit = static_cast<int>(rng.below(VR_MAX_RUN_LIMIT + 1));
+    parts.run_rice = static_cast<int>(rng.below(VR_MAX_RUN_RICE + 1));
+  }
+  if (style == 3) parts.run_limit = VR_MAX_RUN_LIMIT, parts.run_rice = 0;
   for (std::uint32_t b = 0; b < shape.blocks(); ++b) {
     if (!vr_block_in_box(box, n, b)) continue;  // no entry, no codes
     std::uint32_t s = static_cast<std::uint32_t>(rng.below(std::uint64_t{std::min(most, 40u)} + 1));
@@ -95,6 +103,19 @@ inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t
     for (std::uint32_t k = 0; k < s; ++k) std::swap(order[k], order[k + rng.below(named - k)]);
     std::sort(order.begin(), order.begin() + s);
     if (style == 3 && s >= 2) order[0] = 0, order[s - 1] = atom_count - 1;
+    if (runs || (style == 3 && b % 20 == 0)) {
+      // Mostly consecutive atoms from a random start, a few left out.
+      std::uint32_t spare = named - s;
+      std::uint32_t atom = first_atom + static_cast<std::uint32_t>(rng.below(spare / 4 + 1));
+      spare -= atom - first_atom;
+      for (std::uint32_t k = 0; k < s; ++k) {
+        order[k] = atom;
+        const std::uint32_t skip =
+            rng.below(4) == 0 ? std::min(spare, static_cast<std::uint32_t>(rng.below(3))) : 0;
+        atom += 1 + skip;
+        spare -= skip;
+      }
+    }
     for (std::uint32_t k = 0; k < s; ++k) {
       std::int64_t value =
           rng.below(8) == 0

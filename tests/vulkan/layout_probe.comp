@@ -38,9 +38,10 @@ void main() {
     if (!vr_block_in_box(box_word, VR_BLOCKS_PER_AXIS, c)) continue;
     const uint s = vr_entry_sparsity(layout_word, vr_block_entry(layout_word, e++));
     const uint block_band_word = vr_block_band_word(band_word, box_word, s);
-    uint next_atom = vr_block_first_atom(layout_word, box_word), atom = 0u;
+    uint next_atom = vr_block_first_atom(layout_word, box_word), run = 0u, atom = 0u;
     for (uint k = 0u; k < s; ++k) {
-      const int q = vr_read_code(first, layout_word, block_band_word, s, bit, next_atom, atom);
+      const int q = vr_read_code(first, layout_word, block_band_word, box_word, s, bit, next_atom,
+                                 run, atom);
       if (c == b && k == v) code = atom | (uint(q) << 16u);
     }
   }

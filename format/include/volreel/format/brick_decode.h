@@ -12,15 +12,17 @@
 //                         bands, 4 bits each (vr_band_rice)
 //   word 5                the box word: the coded blocks nx·ny·nz of the brick's n³
 //                         (n = brick size / 6; vr_box_*), the magnitude model, how a
-//                         block's sparsity moves the band parameters (vr_block_band_word), and
-//                         whether the codes name atoms from the band split on (vr_block_first_atom)
+//                         block's sparsity moves the band parameters (vr_block_band_word),
+//                         whether the codes name atoms from the band split on
+//                         (vr_block_first_atom), and where runs of consecutive atoms are coded
+//                         as runs (vr_read_gap)
 //   entry[nx·ny·nz]       per coded block, t + b bits each, one bit stream from bit 0 of word 6
 //                         (low bit first): sparsity s in the low t bits, quantized mean q above;
 //                         zero bits up to the next word
 //   codes                 one bit stream from the next word, block after block, each block's
-//                         codes in increasing atom order: the gap to the atom and the magnitude
-//                         as Rice codes, then the sign (vr_read_code); zero bits up to the next
-//                         word
+//                         codes in increasing atom order: the gap to the atom (or a run of
+//                         consecutive atoms) and the magnitude as Rice codes, then the sign
+//                         (vr_read_code); zero bits up to the next word
 // Dequantization: mean = mean_bias + mean_scale·q, coefficient = coef_scale·q (q ≠ 0 signed).
 // The codes have variable length, so a decoder walks a brick's blocks in order, keeping the bit
 // position from block to block.
@@ -69,7 +71,7 @@ VR_INLINE float vr_as_float(vr_uint bits) {
 #define vr_as_float(bits) uintBitsToFloat(bits)
 #endif
 
-/* Constants of format version 9 (SPEC.md). A brick of a container is n·6 voxels a side (n
+/* Constants of format version 10 (SPEC.md). A brick of a container is n·6 voxels a side (n
  * blocks, 2 ≤ n ≤ 11: the manifest's brick_size), its blocks x fastest; the functions below take
  * the number of blocks of a brick, n³. A GLSL includer declares n as a specialization constant,
  * `layout(constant_id = ...) const uint VR_BLOCKS_PER_AXIS`, before including this file. */
@@ -146,7 +148,8 @@ VR_INLINE vr_uint vr_band_word(VR_PAYLOAD_PARAM_ONLY) {
 /* Word 5, the box word: the coded blocks of the brick are those with bx < nx, by < ny and
  * bz < nz (each 1..n), the blocks that hold a voxel of the brick's level or the voxel just past
  * its end; bits 0..3 nx, 4..7 ny, 8..11 nz, 12..15 the magnitude model m (0..9,
- * vr_block_band_word), bit 16 the split flag (vr_block_first_atom), 17..31 zero. Only coded blocks
+ * vr_block_band_word), bit 16 the split flag (vr_block_first_atom), bits 17..24 the run limit T
+ * (0..255) and 25..27 the runs' Rice parameter (0..7, vr_read_gap), 28..31 zero. Only coded blocks
  * have an entry (in block order) and codes; every value of a block outside the box is mean_bias. */
 VR_INLINE vr_uint vr_box_word(VR_PAYLOAD_PARAM_ONLY) {
   return VR_LOAD_WORD(5u);
@@ -179,6 +182,19 @@ VR_INLINE vr_uint vr_box_from_split(vr_uint box_word) {
 }
 VR_INLINE vr_uint vr_box_with_split_flag(vr_uint box_word, vr_uint from_split) {
   return (box_word & ~0x10000u) | (from_split << 16u);
+}
+/* Bits 17..24, the run limit T, and 25..27, the runs' Rice parameter (vr_read_gap): a block's
+ * atoms up to T past its first atom may be coded as runs of consecutive atoms; T = 0: never. */
+#define VR_MAX_RUN_LIMIT 255u
+#define VR_MAX_RUN_RICE 7u
+VR_INLINE vr_uint vr_box_run_limit(vr_uint box_word) {
+  return (box_word >> 17u) & 0xFFu;
+}
+VR_INLINE vr_uint vr_box_run_rice(vr_uint box_word) {
+  return (box_word >> 25u) & 0x7u;
+}
+VR_INLINE vr_uint vr_box_with_runs(vr_uint box_word, vr_uint limit, vr_uint rice) {
+  return (box_word & ~0xFFFE0000u) | (limit << 17u) | (rice << 25u);
 }
 /* Whether block b of a brick of n blocks a side is coded. */
 VR_INLINE bool vr_block_in_box(vr_uint box_word, vr_uint blocks_per_axis, vr_uint block) {
@@ -216,12 +232,13 @@ VR_INLINE vr_uint vr_code_first_word(vr_uint layout_word, vr_uint entries) {
 
 /* The codes: one bit stream from word vr_code_first_word, the coded blocks' codes in block order,
  * each block's in increasing atom order. A code is the gap to its atom (atom − previous atom of the
- * block − 1; the first code of a block: its atom − vr_block_first_atom), then the value's magnitude
- * |q| − 1 (q ≠ 0), both as Rice codes (the gap's parameter from the block's sparsity, the
- * magnitude's from the atom's band and, under the magnitude model, the block's sparsity), then the
- * sign of q (1: negative). A Rice code of x with parameter k is u = x >> k zero bits, a one, and
- * the low k bits of x; when u would be 16 or more it is 16 zero bits and x in `escape_bits` bits
- * instead (a bits for a gap, c bits for a magnitude). */
+ * block − 1; the first code of a block: its atom − vr_block_first_atom; below the run limit,
+ * runs of gaps 0 coded by their length, vr_read_gap), then the value's magnitude |q| − 1 (q ≠ 0),
+ * both as Rice codes (the gap's parameter from the block's sparsity, the magnitude's from the
+ * atom's band and, under the magnitude model, the block's sparsity), then the sign of q (1:
+ * negative). A Rice code of x with parameter k is u = x >> k zero bits, a one, and the low k bits
+ * of x; when u would be 16 or more it is 16 zero bits and x in `escape_bits` bits instead (a bits
+ * for a gap, 8 for a run, c bits for a magnitude). */
 
 /* Index of the lowest set bit of x ≠ 0. */
 #ifndef VR_GLSL
@@ -307,16 +324,55 @@ VR_INLINE vr_uint vr_block_band_word(vr_uint band_word, vr_uint box_word, vr_uin
   return vr_moved_band_word(band_word, vr_magnitude_move(box_word, s));
 }
 
+/* Reads the gap of a block's next code: atom − next_atom, next_atom the atom after the block's
+ * previous code (vr_block_first_atom before its first). `run` is the block's run state, 0 before
+ * its first code: 2·(zero gaps still to come) + 1 after a run, 0 otherwise.
+ *  - In a run (run ≥ 2): the gap is 0, no bits.
+ *  - Right after a run (run = 1): the gap is at least 1 (a run ends where an atom is left out);
+ *    gap − 1 is a Rice code with the gaps' parameter (vr_gap_rice).
+ *  - Where the code's position next_atom − vr_block_first_atom is below the box word's run limit
+ *    T: a run length z as a Rice code with the runs' parameter (escape: z in 8 bits). z ≥ 1: this
+ *    code and the next z − 1 have gap 0 (atoms next_atom, next_atom + 1, ...), and unless the block
+ *    ends with them the code after them is right after a run; z = 0: gap − 1 as after a run.
+ *  - Elsewhere: the gap as a Rice code with the gaps' parameter.
+ * A run never reaches past its block's codes (a checking reader requires run < 2 at a block's
+ * end). Dense blocks name their low-frequency atoms one after another: a run of z costs
+ * about log2(z) bits instead of z. */
+VR_INLINE vr_uint vr_read_gap(VR_PAYLOAD_PARAM vr_uint first, vr_uint layout_word, vr_uint box_word,
+                              vr_uint s, vr_uint position, VR_INOUT(vr_uint, bit),
+                              VR_INOUT(vr_uint, run)) {
+  if (run >= 2u) {
+    run -= 2u;
+    return 0u;
+  }
+  vr_uint gap_rice = vr_gap_rice(layout_word, s);
+  vr_uint atom_bits = vr_layout_atom_bits(layout_word);
+  if (run == 0u && position < vr_box_run_limit(box_word)) {
+    vr_uint z =
+        vr_read_rice(VR_PAYLOAD_ARG first, bit, vr_box_run_rice(box_word), VR_MAX_SPARSITY_BITS);
+    if (z != 0u) {
+      run = 2u * (z - 1u) + 1u;
+      return 0u;
+    }
+    run = 1u;
+  }
+  vr_uint after_run = run;
+  run = 0u;
+  return after_run + vr_read_rice(VR_PAYLOAD_ARG first, bit, gap_rice, atom_bits);
+}
+
 /* Reads the next code of a block of s codes, starting at bit `bit` of the code stream that
  * begins at word `first` (vr_code_first_word; the stream runs on over the whole brick); before a
- * block's first code next_atom = vr_block_first_atom; band_word is the block's
- * (vr_block_band_word). Sets atom;
+ * block's first code next_atom = vr_block_first_atom and run = 0 (vr_read_gap); band_word is the
+ * block's (vr_block_band_word). Sets atom;
  * returns the signed quantized coefficient q (coefficient = coef_scale·q). */
 VR_INLINE int vr_read_code(VR_PAYLOAD_PARAM vr_uint first, vr_uint layout_word, vr_uint band_word,
-                           vr_uint s, VR_INOUT(vr_uint, bit), VR_INOUT(vr_uint, next_atom),
+                           vr_uint box_word, vr_uint s, VR_INOUT(vr_uint, bit),
+                           VR_INOUT(vr_uint, next_atom), VR_INOUT(vr_uint, run),
                            VR_INOUT(vr_uint, atom)) {
-  atom = next_atom + vr_read_rice(VR_PAYLOAD_ARG first, bit, vr_gap_rice(layout_word, s),
-                                  vr_layout_atom_bits(layout_word));
+  vr_uint position = next_atom - vr_block_first_atom(layout_word, box_word);
+  atom =
+      next_atom + vr_read_gap(VR_PAYLOAD_ARG first, layout_word, box_word, s, position, bit, run);
   next_atom = atom + 1u;
   vr_uint magnitude =
       vr_read_rice(VR_PAYLOAD_ARG first, bit, vr_band_rice(layout_word, band_word, atom),
@@ -357,10 +413,10 @@ VR_INLINE float vr_decode_value(VR_PAYLOAD_PARAM VR_ATOMS_PARAM vr_uint blocks_p
     vr_uint s = vr_entry_sparsity(layout_word, entry);
     value = mean_bias + mean_scale * float(vr_entry_mean(layout_word, entry));
     vr_uint block_band_word = vr_block_band_word(band_word, box_word, s);
-    vr_uint next_atom = vr_block_first_atom(layout_word, box_word), atom = 0u;
+    vr_uint next_atom = vr_block_first_atom(layout_word, box_word), run = 0u, atom = 0u;
     for (vr_uint k = 0u; k < s; ++k) {
-      int q =
-          vr_read_code(VR_PAYLOAD_ARG first, layout_word, block_band_word, s, bit, next_atom, atom);
+      int q = vr_read_code(VR_PAYLOAD_ARG first, layout_word, block_band_word, box_word, s, bit,
+                           next_atom, run, atom);
       if (b == block) value += coef_scale * float(q) * VR_LOAD_ATOM(atom * VR_BLOCK_LENGTH + v);
     }
   }

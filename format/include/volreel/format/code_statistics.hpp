@@ -38,10 +38,10 @@ struct CodeStatistics {
   std::uint64_t header_bits = 0;     ///< the header words
   std::uint64_t entry_bits = 0;      ///< block entries, with their padding to a word
   std::uint64_t code_bits = 0;       ///< the code streams, without their padding
-  std::uint64_t gap_bits = 0;        ///< of code_bits: the atom gaps' Rice codes
+  std::uint64_t gap_bits = 0;        ///< of code_bits: the atom gaps' and runs' Rice codes
   std::uint64_t magnitude_bits = 0;  ///< of code_bits: the magnitudes' Rice codes
   std::uint64_t sign_bits = 0;       ///< of code_bits: one a code
-  std::uint64_t escapes = 0;         ///< Rice codes stored as escapes (gaps and magnitudes)
+  std::uint64_t escapes = 0;         ///< Rice codes stored as escapes (runs, gaps and magnitudes)
   /// Gaps in the context (floor(log2(s + 1)), floor(log2(previous atom + 2))): how many codes the
   /// block has and where in the dictionary the gap starts (s is in the block's entry; the
   /// previous atom is −1 before a block's first code).

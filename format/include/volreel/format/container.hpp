@@ -23,7 +23,7 @@
 namespace volreel::format {
 
 /// Version of the manifest's layout, independent of the program version.
-inline constexpr std::uint32_t container_format_version = 9;
+inline constexpr std::uint32_t container_format_version = 10;
 
 struct ManifestFrame {
   std::string file;  ///< "frames/000017.vrf", relative to the container

@@ -70,7 +70,7 @@ std::uint32_t ksvd_box_word(std::span<const std::byte> payload);
 
 /// The parts of a ksvd brick payload before packing: the three dequantization values (mean_bias,
 /// mean_scale, coef_scale), the field widths (mean bits b 0..15, sparsity bits t 0..8, magnitude
-/// bits c 1..16, atom bits a 1..16), the entropy coder's two parameters, per block of the brick
+/// bits c 1..16, atom bits a 1..16), the entropy coder's parameters, per block of the brick
 /// (n³ blocks for bricks of 6n voxels a side) its sparsity (< 2^t) and quantized mean (< 2^b),
 /// the coded blocks' box (brick_decode.h, vr_box_word: blocks outside it have sparsity 0 and are
 /// stored without an entry, decoding to mean_bias) and the codes of all blocks in block order,
@@ -86,6 +86,10 @@ struct KsvdPayloadParts {
   /// -1: the one giving the band the fewest bits.
   std::array<int, 8> band_rice{-1, -1, -1, -1, -1, -1, -1, -1};
   int gap_shift = -1;  ///< the gaps' Rice shift 0..3; -1: the one giving the fewest bits
+  /// The run limit T 0..255 and the runs' Rice parameter 0..7 (brick_decode.h, vr_read_gap); -1:
+  /// those giving the fewest bits, with the gap shift (both or neither -1).
+  int run_limit = -1;
+  int run_rice = -1;
   /// The magnitude model 0..9 (brick_decode.h, vr_magnitude_move: how a block's sparsity moves
   /// the band parameters); -1: the one giving the fewest bits, with the band parameters.
   int magnitude_model = -1;
@@ -100,6 +104,49 @@ struct KsvdPayloadParts {
   std::array<std::uint32_t, 3> box{0, 0, 0};
   std::vector<std::uint32_t> atoms;  ///< one per code
   std::vector<std::int32_t> values;  ///< one per code
+};
+
+/// The Rice codes of one block's gaps (brick_decode.h, vr_read_gap), code by code: the packer's
+/// writing and its choice of parameters, and the code statistics, all take them from here.
+class BlockGaps {
+ public:
+  /// A block's s atoms (increasing, from first_atom on) under run limit `run_limit`.
+  BlockGaps(const std::uint32_t* atoms, std::uint32_t s, std::uint32_t first_atom,
+            std::uint32_t run_limit)
+      : atoms_(atoms), s_(s), next_atom_(first_atom), run_end_(first_atom + run_limit) {}
+  /// The codes of code j's gap (j = 0, 1, ... in turn): a run length before it, when `run` ≥ 0,
+  /// then a Rice value with the gaps' parameter, when `gap` ≥ 0.
+  struct Codes {
+    std::int64_t run = -1, gap = -1;
+  };
+  Codes next() {
+    Codes c;
+    const std::uint32_t atom = atoms_[j_];
+    if (zeros_left_ > 0) {
+      --zeros_left_;
+    } else if (after_run_) {
+      c.gap = atom - next_atom_ - 1;
+      after_run_ = false;
+    } else if (next_atom_ < run_end_) {
+      std::uint32_t z = 0;
+      while (j_ + z < s_ && atoms_[j_ + z] == next_atom_ + z) ++z;
+      c.run = z;
+      if (z > 0)
+        zeros_left_ = z - 1, after_run_ = true;
+      else
+        c.gap = atom - next_atom_ - 1;
+    } else {
+      c.gap = atom - next_atom_;
+    }
+    next_atom_ = atom + 1;
+    ++j_;
+    return c;
+  }
+
+ private:
+  const std::uint32_t* atoms_;
+  std::uint32_t s_, next_atom_, run_end_, j_ = 0, zeros_left_ = 0;
+  bool after_run_ = false;
 };
 
 /// Bits of a Rice code of x with parameter k whose escape holds `escape_bits` bits (format/SPEC.md,

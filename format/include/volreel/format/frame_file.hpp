@@ -20,7 +20,7 @@ static_assert(std::endian::native == std::endian::little, "volreel's files are l
 
 inline constexpr std::array<char, 8> frame_magic = {'V', 'R', 'E', 'E', 'L', 'F', 'R', 'M'};
 /// Version of the frame file layout, independent of the program version.
-inline constexpr std::uint32_t frame_format_version = 9;
+inline constexpr std::uint32_t frame_format_version = 10;
 
 inline constexpr std::uint32_t brick_apron = 1;       ///< voxels copied from each neighbour
 inline constexpr std::uint32_t brick_block_size = 6;  ///< voxels per block axis (VR_BLOCK_SIZE)
