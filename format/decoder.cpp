@@ -151,16 +151,6 @@ class CodeStream {
     buffer_ >>= bits;
     count_ -= bits;
   }
-  /// The Rice code at the start of the bits w (vr_read_rice) and its length in bits.
-  static vr_uint peek_rice(std::uint64_t w, vr_uint k, vr_uint escape_bits, vr_uint& length) {
-    const vr_uint zeros = vr_lowest_bit(static_cast<vr_uint>(w) | (1u << VR_ESCAPE_ZEROS));
-    if (zeros == VR_ESCAPE_ZEROS) {
-      length = VR_ESCAPE_ZEROS + escape_bits;
-      return static_cast<vr_uint>(w >> VR_ESCAPE_ZEROS) & ((1u << escape_bits) - 1u);
-    }
-    length = zeros + 1 + k;
-    return (zeros << k) | (static_cast<vr_uint>(w >> (zeros + 1)) & ((1u << k) - 1u));
-  }
   /// The Rice code at the start of the bits w (vr_read_rice): w moves past it, `used` counts its
   /// bits.
   static vr_uint rice(std::uint64_t& w, vr_uint& used, vr_uint k, vr_uint escape_bits) {
@@ -408,17 +398,18 @@ vr_uint codes_atom_end(std::uint32_t atom_count, vr_uint first_atom, vr_uint ato
 }
 
 /// The most bits one code takes (a 24-bit run length, a 32-bit gap, a 32-bit magnitude and the
-/// sign): a run of `count` codes from bit `bit` cannot start a code past a stream of `stream_bits`
-/// when this holds.
+/// sign): a stretch of `count` codes from bit `bit` cannot start a code past a stream of
+/// `stream_bits` when this holds.
 constexpr std::uint64_t max_code_bits = 89;
-bool run_inside(std::uint64_t bit, vr_uint count, std::uint64_t stream_bits) {
+bool stretch_inside(std::uint64_t bit, vr_uint count, std::uint64_t stream_bits) {
   return bit + max_code_bits * count <= stream_bits;
 }
 
-/// The per-code checks (atom < atom_end, |q| ≤ 2^c) of a run of one block's codes read without
-/// them: a block's atoms increase, so the run's last atom is its largest; |q| ≤ 2^c is a Rice
-/// value |q| − 1 < 2^c, so the OR of the run's values `magnitudes` is below 2^c when each is.
-bool run_good(vr_uint last_atom, vr_uint magnitudes, vr_uint atom_end, vr_uint coef_bits) {
+/// The per-code checks (atom < atom_end, |q| ≤ 2^c) of a stretch of one block's codes read
+/// without them: a block's atoms increase, so the stretch's last atom is its largest; |q| ≤ 2^c
+/// is a Rice value |q| − 1 < 2^c, so the OR of the stretch's values `magnitudes` is below 2^c when
+/// each is.
+bool stretch_good(vr_uint last_atom, vr_uint magnitudes, vr_uint atom_end, vr_uint coef_bits) {
   return last_atom < atom_end && (magnitudes >> coef_bits) == 0;
 }
 
@@ -458,10 +449,10 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
     const vr_uint gap_rice = vr_gap_rice(layout.word, s);
     stream.set_band_rice(band_rice.block(s));
     vr_uint next_atom = first_atom, run = 0, atom = 0;
-    if (run_inside(stream.bit(), s, stream_bits)) {
+    if (stretch_inside(stream.bit(), s, stream_bits)) {
       // No code of the block can start past the stream: its codes read without the checks, then
-      // checked once (run_good). Where that fails, the block is read again code by code, to name
-      // the code.
+      // checked once (stretch_good). Where that fails, the block is read again code by code, to
+      // name the code.
       const CodeStream block_start = stream;
       const std::size_t codes_before = codes ? codes->size() : 0;
       vr_uint magnitudes = 0;
@@ -472,7 +463,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
         magnitudes |= magnitude;
         if (codes) codes->push_back({atom, q});
       }
-      if (run_good(atom, magnitudes, atom_end, layout.coef_bits) && run_ended(run)) continue;
+      if (stretch_good(atom, magnitudes, atom_end, layout.coef_bits) && run_ended(run)) continue;
       stream = block_start;
       next_atom = first_atom;
       run = 0;
@@ -499,7 +490,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
     if (!run_ended(run))
       fail(4 * std::uint64_t{first} + stream.bit() / 8,
            "runs of consecutive atoms that end with their block (block " + str(b) + ")",
-           "a run " + str(run / 2) + " codes longer than the block's " + str(s));
+           "a run reaching " + str(run / 2) + " code(s) past the block's " + str(s) + " codes");
   }
   const std::uint64_t bit = stream.bit();
   layout.code_bits = bit;
@@ -638,9 +629,10 @@ class SteppedCodes {
     return atom < atom_end_ && m <= largest_;
   }
 
-  /// Whether the current block's next `count` codes can be read with unchecked_code (run_inside).
-  bool fits(vr_uint count) const { return run_inside(stream_.bit(), count, stream_bits_); }
-  /// The current block's next code (fits), without the checks of code: those of a run of the
+  /// Whether the current block's next `count` codes can be read with unchecked_code
+  /// (stretch_inside).
+  bool fits(vr_uint count) const { return stretch_inside(stream_.bit(), count, stream_bits_); }
+  /// The current block's next code (fits), without the checks of code: those of a stretch of the
   /// block's codes are good's.
   void unchecked_code(ParsedCode* out, vr_uint& magnitudes) {
     vr_uint atom = 0, magnitude = 0;
@@ -649,9 +641,10 @@ class SteppedCodes {
     *out = {atom, q};
     magnitudes |= magnitude;
   }
-  /// code's checks over a run of unchecked codes of one block, the last of them `last` (run_good).
+  /// code's checks over a stretch of unchecked codes of one block, the last of them `last`
+  /// (stretch_good).
   bool good(const ParsedCode& last, vr_uint magnitudes) const {
-    return run_good(last.atom, magnitudes, atom_end_, layout_.coef_bits);
+    return stretch_good(last.atom, magnitudes, atom_end_, layout_.coef_bits);
   }
 
   /// Counts `count` codes of the current block as read; at the block's end, its runs' check.
@@ -710,7 +703,7 @@ class SteppedCodes {
     second.begin_block();
     const vr_uint count = std::min(first.in_block(), second.in_block());
     if (first.fits(count) && second.fits(count)) {
-      // Far enough from both streams' ends: the checks once for the run.
+      // Far enough from both streams' ends: the checks once for the stretch.
       vr_uint magnitudes_a = 0, magnitudes_b = 0;
       for (vr_uint k = 0; k < count; ++k) {
         first.unchecked_code(a++, magnitudes_a);
@@ -1055,7 +1048,8 @@ std::vector<std::byte> pack_ksvd_payload(const KsvdPayloadParts& parts) {
                                     "the band split under the split flag");
     }
   // The entropy coder's parameters: the magnitude model and each band's parameter with the
-  // fewest bits for the magnitudes, then the gap shift with the fewest bits for the gaps.
+  // fewest bits for the magnitudes, then the gap shift, run limit and runs' parameter with the
+  // fewest bits for the gaps and runs.
   const auto layout_of = [&](vr_uint gap_shift) {
     return vr_make_layout(parts.mean_bits, parts.sparsity_bits, parts.coef_bits, parts.atom_bits,
                           gap_shift, parts.band_split);

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <numeric>
 #include <random>
 #include <string>
@@ -207,6 +208,41 @@ std::vector<std::byte> random_payload(format::BrickShape shape, std::uint32_t co
   return format::pack_ksvd_payload(p);
 }
 
+/// Packs `p`, requires the CPU decoder's reader to give its codes back, and reads them again with
+/// the shared text the GPU decoders run (vr_read_code), requiring the same codes and every block's
+/// runs to end with it; calls each(block, code of the block, bits the code took). Returns the bits
+/// of the code stream.
+std::uint64_t read_back(const format::KsvdPayloadParts& p, std::uint32_t atom_count,
+                        format::BrickShape shape,
+                        const std::function<void(std::uint32_t, std::uint32_t, vr_uint)>& each) {
+  const std::vector<std::byte> payload = format::pack_ksvd_payload(p);
+  const format::KsvdPayloadParts back =
+      format::unpack_ksvd_payload(payload, atom_count, shape, "read back", 0);
+  EXPECT_EQ(back.atoms, p.atoms);
+  EXPECT_EQ(back.values, p.values);
+  std::vector<vr_uint> words(payload.size() / 4 + 1, 0u);
+  std::memcpy(words.data(), payload.data(), payload.size());
+  const vr_uint layout = words[3];
+  const vr_uint first = vr_code_first_word(layout, shape.blocks());
+  vr_uint bit = 0;
+  std::size_t code = 0;
+  for (std::uint32_t b = 0; b < shape.blocks(); ++b) {
+    const vr_uint s = p.sparsity[b];
+    const vr_uint band_word = vr_block_band_word(words[4], words[5], s);
+    vr_uint next_atom = 0, run = 0, atom = 0;
+    for (std::uint32_t k = 0; k < s; ++k, ++code) {
+      const vr_uint start = bit;
+      const int q = vr_read_code(words.data(), first, layout, band_word, words[5], s, bit,
+                                 next_atom, run, atom);
+      EXPECT_EQ(atom, p.atoms[code]) << "block " << b << ", code " << k;
+      EXPECT_EQ(q, p.values[code]) << "block " << b << ", code " << k;
+      each(b, k, bit - start);
+    }
+    EXPECT_LT(run, 2u) << "block " << b;
+  }
+  return bit;
+}
+
 TEST(Decoder, TheLongestCodesReadBack) {
   // Codes of 65 bits, every gap and magnitude an escape (16 zeros, then 16 bits) and a sign: a
   // code longer than a 64-bit window, at every bit alignment (65 bits move the next code's start
@@ -228,27 +264,47 @@ TEST(Decoder, TheLongestCodesReadBack) {
       p.atoms.push_back(20000 * (k + 1) + b);
       p.values.push_back((b + k) % 2 ? 65536 - static_cast<int>(b) : -40000 - static_cast<int>(k));
     }
-  const std::vector<std::byte> payload = format::pack_ksvd_payload(p);
-  const format::KsvdPayloadParts back =
-      format::unpack_ksvd_payload(payload, 1u << 16, shape, "long", 0);
-  EXPECT_EQ(back.atoms, p.atoms);
-  EXPECT_EQ(back.values, p.values);
-  std::vector<vr_uint> words(payload.size() / 4 + 1, 0u);
-  std::memcpy(words.data(), payload.data(), payload.size());
-  const vr_uint layout = words[3], band_word = vr_block_band_word(words[4], words[5], 3);
-  const vr_uint first = vr_code_first_word(layout, shape.blocks());
-  vr_uint bit = 0;
-  std::size_t code = 0;
-  for (std::uint32_t b = 0; b < shape.blocks(); ++b) {
-    vr_uint next_atom = 0, run = 0, atom = 0;
-    for (std::uint32_t k = 0; k < 3; ++k, ++code) {
-      const int q = vr_read_code(words.data(), first, layout, band_word, words[5], 3, bit,
-                                 next_atom, run, atom);
-      EXPECT_EQ(atom, p.atoms[code]);
-      EXPECT_EQ(q, p.values[code]);
-    }
+  EXPECT_EQ(read_back(p, 1u << 16, shape,
+                      [](std::uint32_t, std::uint32_t, vr_uint bits) { EXPECT_EQ(bits, 65u); }),
+            65u * p.atoms.size());
+
+  // Under a run limit of 1 each block's first code (position 0) takes a run length first: 0, with
+  // parameter 7 (8 bits), then the escaped gap less one: 73 bits, the longest a valid code takes.
+  p.run_limit = 1;
+  p.run_rice = VR_MAX_RUN_RICE;
+  read_back(p, 1u << 16, shape, [](std::uint32_t b, std::uint32_t k, vr_uint bits) {
+    EXPECT_EQ(bits, k == 0 ? 73u : 65u) << "block " << b << ", code " << k;
+  });
+
+  // A run of 255 consecutive atoms, its length escaped (parameter 0: 16 zeros, then 255 in 8
+  // bits, every bit set), in a block of 8-bit sparsities: the first code takes the 24 bits of the
+  // run length, the other 254 no gap bits; magnitudes |q| − 1 of 0..3 with parameter 2 take 3
+  // bits, and the sign 1.
+  format::KsvdPayloadParts r;
+  r.sparsity.assign(shape.blocks(), 0);
+  r.mean.assign(shape.blocks(), 0);
+  r.dequantization[2] = 0.001f;
+  r.sparsity_bits = 8;
+  r.coef_bits = 4;
+  r.atom_bits = 8;
+  r.run_limit = VR_MAX_RUN_LIMIT;
+  r.run_rice = 0;
+  r.band_rice.fill(2);
+  r.magnitude_model = 0;
+  r.sparsity[3] = 255;
+  for (std::uint32_t k = 0; k < 255; ++k) {
+    r.atoms.push_back(k);
+    r.values.push_back(k % 2 ? 1 + static_cast<int>(k % 4) : -2);
   }
-  EXPECT_EQ(bit, 65u * p.atoms.size());
+  read_back(r, 256, shape, [](std::uint32_t, std::uint32_t k, vr_uint bits) {
+    EXPECT_EQ(bits, (k == 0 ? 24u : 0u) + 3u + 1u) << "code " << k;
+  });
+  const std::vector<std::byte> long_run = format::pack_ksvd_payload(r);
+  vr_uint layout_word = 0, first_code_word = 0;  // the code stream starts with the escape
+  std::memcpy(&layout_word, long_run.data() + 12, 4);
+  std::memcpy(&first_code_word,
+              long_run.data() + 4 * vr_code_first_word(layout_word, shape.blocks()), 4);
+  EXPECT_EQ(first_code_word & 0xFFFFFFu, 255u << 16);
 }
 
 /// decode_payload's error on one payload ("" when it decodes).
@@ -303,13 +359,16 @@ TEST(Decoder, PayloadsReadInStepDecodeAsOneAtATime) {
 }
 
 TEST(Decoder, ARunPastItsBlocksLastCodeIsNamed) {
-  // Block 0 names atoms 0, 1 and 2: one run of 3 under the largest run limit. With its sparsity
-  // lowered to 2 in its entry, the run reaches past the block's last code: every reader refuses
-  // the payload by name, alone and in step, where a decoder without the check would carry the run
-  // into the next block.
+  // Block 0 names atoms 0 and 1: one run of 2, its length a Rice code with parameter 1 (bits 0, 1,
+  // 0 of the code stream). Setting bit 2 makes the length 3, a run past the block's 2 codes, and
+  // changes nothing else: the code has the same length and the 63 blocks after it read as before.
+  // Every reader refuses the payload by name (the block is far from the stream's end, so the fast
+  // paths read it: one at a time and in step, first or second of a pair), where a decoder without
+  // the check would decode it.
   const format::DictionaryFile d = learned_and_dct(40, 5);
   const format::AtomTable atoms = format::atom_table(d.atoms, d.atom_count);
-  const format::BrickShape shape{12};
+  const format::BrickShape shape{24};
+  std::mt19937 rng(3);
   format::KsvdPayloadParts p;
   p.sparsity.assign(shape.blocks(), 0);
   p.mean.assign(shape.blocks(), 0);
@@ -317,37 +376,56 @@ TEST(Decoder, ARunPastItsBlocksLastCodeIsNamed) {
   p.dequantization[1] = 0.01f;
   p.dequantization[2] = 0.002f;
   p.mean_bits = 0;
-  p.sparsity_bits = 4;  // entry e: bits 4e..4e+3 of word 6
+  p.sparsity_bits = 5;
   p.coef_bits = 4;
   p.atom_bits = format::bits_for_count(d.atom_count);
   p.run_limit = VR_MAX_RUN_LIMIT;
-  p.run_rice = 0;
-  p.sparsity[0] = 3;
-  p.sparsity[1] = 2;
-  p.atoms = {0, 1, 2, 7, 30};
-  p.values = {3, -2, 1, 5, -1};
-  std::vector<std::byte> payload = format::pack_ksvd_payload(p);
-  ASSERT_NO_THROW(format::check_ksvd_payload(payload, d.atom_count, shape, "good", 0));
-  std::byte& entry = payload[4 * VR_HEADER_WORDS];
-  ASSERT_EQ(std::to_integer<int>(entry) & 0xF, 3);
-  entry = static_cast<std::byte>((std::to_integer<int>(entry) & ~0xF) | 2);
+  p.run_rice = 1;
+  p.sparsity[0] = 2;
+  p.atoms = {0, 1};
+  p.values = {3, -2};
+  std::vector<std::uint32_t> all(d.atom_count);
+  std::iota(all.begin(), all.end(), 0u);
+  for (std::uint32_t b = 1; b < shape.blocks(); ++b) {
+    p.sparsity[b] = 20;
+    std::shuffle(all.begin(), all.end(), rng);
+    std::vector<std::uint32_t> block(all.begin(), all.begin() + 20);
+    std::sort(block.begin(), block.end());
+    for (const std::uint32_t a : block) {
+      p.atoms.push_back(a);
+      p.values.push_back(static_cast<int>(rng() % 16) - 8 >= 0 ? 1 + static_cast<int>(rng() % 7)
+                                                               : -1 - static_cast<int>(rng() % 7));
+    }
+  }
+  const std::vector<std::byte> good = format::pack_ksvd_payload(p);
+  const format::KsvdPayloadLayout layout =
+      format::check_ksvd_payload(good, d.atom_count, shape, "good", 0);
+  ASSERT_GT(layout.code_bits, 2000u);
+  std::vector<std::byte> bad = good;
+  std::byte& first_code = bad[4 * vr_code_first_word(layout.word, shape.blocks())];
+  ASSERT_EQ(std::to_integer<int>(first_code) & 7, 2);  // 0, then 1, then the low bit 0
+  first_code |= std::byte{4};
   try {
-    format::check_ksvd_payload(payload, d.atom_count, shape, "run.vrf", 100);
+    format::check_ksvd_payload(bad, d.atom_count, shape, "run.vrf", 100);
     ADD_FAILURE() << "a run past its block accepted";
   } catch (const format::FormatError& e) {
     EXPECT_NE(std::string(e.what()).find("runs of consecutive atoms that end with their block "
                                          "(block 0)"),
               std::string::npos)
         << e.what();
+    EXPECT_NE(std::string(e.what()).find("a run reaching 1 code(s) past the block's 2 codes"),
+              std::string::npos)
+        << e.what();
   }
   std::vector<float> out(shape.voxels()), other(shape.voxels());
-  const std::vector<std::byte> good = format::pack_ksvd_payload(p);
-  const format::PayloadJob alone[1] = {{payload, out, "run.vrf", 100}};
-  const format::PayloadJob pair[2] = {{good, other, "good.vrf", 0}, {payload, out, "run.vrf", 100}};
+  const format::PayloadJob alone[1] = {{bad, out, "run.vrf", 100}};
   const std::string error = decode_error(alone, atoms, shape);
   EXPECT_NE(error.find("run.vrf"), std::string::npos) << error;
   EXPECT_NE(error.find("runs of consecutive atoms"), std::string::npos) << error;
-  EXPECT_EQ(decode_error(pair, atoms, shape), error);
+  const format::PayloadJob second[2] = {{good, other, "good.vrf", 0}, {bad, out, "run.vrf", 100}};
+  EXPECT_EQ(decode_error(second, atoms, shape), error);
+  const format::PayloadJob first[2] = {{bad, out, "run.vrf", 100}, {good, other, "good.vrf", 0}};
+  EXPECT_EQ(decode_error(first, atoms, shape), error);
 }
 
 TEST(Decoder, TheFirstCodePastTheDictionaryOrItsMagnitudeIsNamed) {

@@ -36,7 +36,8 @@ inline std::vector<float> random_atoms(SplitMix64& rng, std::uint32_t count) {
 /// Styles 0 and 4 take a random magnitude model 0..9, style 3 model 1; a third of styles 0 and 4
 /// set the split flag (atoms from the band split on). Half of styles 0 and 4 name atoms mostly one
 /// after another (runs, brick_decode.h's vr_read_gap) under a random run limit and parameter;
-/// style 3 runs up to 255 atoms long under the largest limit and parameter 0 (escaped lengths).
+/// style 3 names mostly consecutive atoms in its blocks of 255 codes, under the largest limit and
+/// parameter 0 (escaped run lengths).
 inline std::vector<std::byte> random_ksvd_payload(SplitMix64& rng, std::uint32_t atom_count,
                                                   int style, format::BrickShape shape = {}) {
   const auto sign = [&] { return rng.below(2) ? 1.0f : -1.0f; };

@@ -39,8 +39,9 @@ TEST_P(LayoutTest, GlslAndCppAgree) {
   std::vector<std::byte> bytes;
   do {
     bytes = test::random_ksvd_payload(rng, atom_count, 0, shape);
-  } while (coded_blocks(bytes) == blocks || bytes.size() < 4 * 34);  // the probe reads 34 words
-  std::vector<vr_uint> payload(bytes.size() / 4 + 1, 0u);            // + the look-ahead word
+  } while (coded_blocks(bytes) == blocks || bytes.size() < 4 * 34 ||  // the probe reads 34 words
+           vr_box_run_limit(format::ksvd_box_word(bytes)) == 0);      // and codes runs
+  std::vector<vr_uint> payload(bytes.size() / 4 + 1, 0u);             // + the look-ahead word
   std::memcpy(payload.data(), bytes.data(), bytes.size());
   const format::KsvdPayloadParts parts =
       format::unpack_ksvd_payload(bytes, atom_count, shape, "<memory>", 0);

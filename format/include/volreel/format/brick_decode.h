@@ -183,8 +183,9 @@ VR_INLINE vr_uint vr_box_from_split(vr_uint box_word) {
 VR_INLINE vr_uint vr_box_with_split_flag(vr_uint box_word, vr_uint from_split) {
   return (box_word & ~0x10000u) | (from_split << 16u);
 }
-/* Bits 17..24, the run limit T, and 25..27, the runs' Rice parameter (vr_read_gap): a block's
- * atoms up to T past its first atom may be coded as runs of consecutive atoms; T = 0: never. */
+/* Bits 17..24, the run limit T, and 25..27, the runs' Rice parameter (vr_read_gap): a run of
+ * consecutive atoms may start at a position (next atom − the block's first atom) below T and reach
+ * past it; T = 0: no runs. */
 #define VR_MAX_RUN_LIMIT 255u
 #define VR_MAX_RUN_RICE 7u
 VR_INLINE vr_uint vr_box_run_limit(vr_uint box_word) {

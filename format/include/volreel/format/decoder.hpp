@@ -87,7 +87,7 @@ struct KsvdPayloadParts {
   std::array<int, 8> band_rice{-1, -1, -1, -1, -1, -1, -1, -1};
   int gap_shift = -1;  ///< the gaps' Rice shift 0..3; -1: the one giving the fewest bits
   /// The run limit T 0..255 and the runs' Rice parameter 0..7 (brick_decode.h, vr_read_gap); -1:
-  /// those giving the fewest bits, with the gap shift (both or neither -1).
+  /// the one giving the fewest bits with the other parameters (each fixed or chosen alone).
   int run_limit = -1;
   int run_rice = -1;
   /// The magnitude model 0..9 (brick_decode.h, vr_magnitude_move: how a block's sparsity moves
