@@ -208,6 +208,24 @@ std::vector<std::byte> random_payload(format::BrickShape shape, std::uint32_t co
   return format::pack_ksvd_payload(p);
 }
 
+/// The parts of a brick of `shape` without codes: every block's sparsity and mean 0, means of 0
+/// bits, the given widths and coefficient scale (the codes and sparsities to be added).
+format::KsvdPayloadParts parts_without_codes(format::BrickShape shape, std::uint32_t sparsity_bits,
+                                             std::uint32_t coef_bits, std::uint32_t atom_bits,
+                                             float coef_scale) {
+  format::KsvdPayloadParts p;
+  p.sparsity.assign(shape.blocks(), 0);
+  p.mean.assign(shape.blocks(), 0);
+  p.dequantization[0] = 0.5f;
+  p.dequantization[1] = 0.01f;
+  p.dequantization[2] = coef_scale;
+  p.mean_bits = 0;
+  p.sparsity_bits = sparsity_bits;
+  p.coef_bits = coef_bits;
+  p.atom_bits = atom_bits;
+  return p;
+}
+
 /// Packs `p`, requires the CPU decoder's reader to give its codes back, and reads them again with
 /// the shared text the GPU decoders run (vr_read_code), requiring the same codes and every block's
 /// runs to end with it; calls each(block, code of the block, bits the code took). Returns the bits
@@ -280,13 +298,7 @@ TEST(Decoder, TheLongestCodesReadBack) {
   // bits, every bit set), in a block of 8-bit sparsities: the first code takes the 24 bits of the
   // run length, the other 254 no gap bits; magnitudes |q| − 1 of 0..3 with parameter 2 take 3
   // bits, and the sign 1.
-  format::KsvdPayloadParts r;
-  r.sparsity.assign(shape.blocks(), 0);
-  r.mean.assign(shape.blocks(), 0);
-  r.dequantization[2] = 0.001f;
-  r.sparsity_bits = 8;
-  r.coef_bits = 4;
-  r.atom_bits = 8;
+  format::KsvdPayloadParts r = parts_without_codes(shape, 8, 4, 8, 0.001f);
   r.run_limit = VR_MAX_RUN_LIMIT;
   r.run_rice = 0;
   r.band_rice.fill(2);
@@ -369,16 +381,8 @@ TEST(Decoder, ARunPastItsBlocksLastCodeIsNamed) {
   const format::AtomTable atoms = format::atom_table(d.atoms, d.atom_count);
   const format::BrickShape shape{24};
   std::mt19937 rng(3);
-  format::KsvdPayloadParts p;
-  p.sparsity.assign(shape.blocks(), 0);
-  p.mean.assign(shape.blocks(), 0);
-  p.dequantization[0] = 0.5f;
-  p.dequantization[1] = 0.01f;
-  p.dequantization[2] = 0.002f;
-  p.mean_bits = 0;
-  p.sparsity_bits = 5;
-  p.coef_bits = 4;
-  p.atom_bits = format::bits_for_count(d.atom_count);
+  format::KsvdPayloadParts p =
+      parts_without_codes(shape, 5, 4, format::bits_for_count(d.atom_count), 0.002f);
   p.run_limit = VR_MAX_RUN_LIMIT;
   p.run_rice = 1;
   p.sparsity[0] = 2;
