@@ -654,12 +654,32 @@ class SteppedCodes {
     runs_good_ = runs_good_ && (in_block_ != 0 || run_ended(run_));
   }
 
-  /// Reads the next code into *out (left() > 0); false where parse_ksvd_payload would throw.
-  bool step(ParsedCode* out) {
-    begin_block();
-    const bool good = code(out);
-    taken(1);  // after the code: at the block's end, the runs' check takes its run state
-    return good;
+  /// Reads the current block's next `count` codes (at most in_block()) into out: unchecked and
+  /// then checked once where they fit, code by code otherwise; false where parse_ksvd_payload
+  /// would throw.
+  bool codes(vr_uint count, ParsedCode* out) {
+    if (fits(count)) {
+      vr_uint magnitudes = 0;
+      for (vr_uint k = 0; k < count; ++k) unchecked_code(out + k, magnitudes);
+      if (!good(out[count - 1], magnitudes)) return false;
+    } else {
+      for (vr_uint k = 0; k < count; ++k)
+        if (!code(out + k)) return false;
+    }
+    taken(count);  // after the codes: at the block's end, the runs' check takes its run state
+    return true;
+  }
+
+  /// Reads every code left into out, a block at a time; false where parse_ksvd_payload would
+  /// throw.
+  bool rest(ParsedCode* out) {
+    while (left() > 0) {
+      begin_block();
+      const vr_uint count = in_block_;
+      if (!codes(count, out)) return false;
+      out += count;
+    }
+    return true;
   }
 
   /// After every code: the payload's length and the zero bits after the last code, as
@@ -696,7 +716,6 @@ class SteppedCodes {
                                                        ParsedCode* __restrict b) {
   // Copies the stores to a and b cannot alias: their state stays in registers.
   SteppedCodes first = first_reader, second = second_reader;
-  bool good = true;
   while (first.left() > 0 && second.left() > 0) {
     // A block of each at a time, as far as the shorter one goes: no block bookkeeping inside.
     first.begin_block();
@@ -720,9 +739,8 @@ class SteppedCodes {
     first.taken(count);
     second.taken(count);
   }
-  while (good && first.left() > 0) good = first.step(a++);
-  while (good && second.left() > 0) good = second.step(b++);
-  good = good && first.finish() && second.finish();
+  // The longer one's codes left, as one reader alone reads them.
+  const bool good = first.rest(a) && second.rest(b) && first.finish() && second.finish();
   first_reader = first;
   second_reader = second;
   return good;

@@ -226,6 +226,13 @@ format::KsvdPayloadParts parts_without_codes(format::BrickShape shape, std::uint
   return p;
 }
 
+/// A payload of `shape` without codes: paired with another payload, every code of the other is
+/// read after this one's end, as the longer one of a pair is read on alone.
+std::vector<std::byte> payload_without_codes(format::BrickShape shape, std::uint32_t atom_count) {
+  return format::pack_ksvd_payload(
+      parts_without_codes(shape, 4, 4, format::bits_for_count(atom_count), 0.001f));
+}
+
 /// Packs `p`, requires the CPU decoder's reader to give its codes back, and reads them again with
 /// the shared text the GPU decoders run (vr_read_code), requiring the same codes and every block's
 /// runs to end with it; calls each(block, code of the block, bits the code took). Returns the bits
@@ -430,6 +437,12 @@ TEST(Decoder, ARunPastItsBlocksLastCodeIsNamed) {
   EXPECT_EQ(decode_error(second, atoms, shape), error);
   const format::PayloadJob first[2] = {{bad, out, "run.vrf", 100}, {good, other, "good.vrf", 0}};
   EXPECT_EQ(decode_error(first, atoms, shape), error);
+  // Beside a payload without codes, every block of the bad one is read after the other's end.
+  const std::vector<std::byte> empty = payload_without_codes(shape, d.atom_count);
+  const format::PayloadJob after[2] = {{empty, other, "empty.vrf", 0}, {bad, out, "run.vrf", 100}};
+  EXPECT_EQ(decode_error(after, atoms, shape), error);
+  const format::PayloadJob before[2] = {{bad, out, "run.vrf", 100}, {empty, other, "empty.vrf", 0}};
+  EXPECT_EQ(decode_error(before, atoms, shape), error);
 }
 
 TEST(Decoder, TheFirstCodePastTheDictionaryOrItsMagnitudeIsNamed) {
@@ -466,6 +479,11 @@ TEST(Decoder, TheFirstCodePastTheDictionaryOrItsMagnitudeIsNamed) {
     const format::PayloadJob pair[2] = {{good, other, "frame.vrf", 100},
                                         {bad, out, "frame.vrf", 100}};
     EXPECT_EQ(decode_error(pair, atoms, shape), alone) << "trial " << trial;
+    // Read on alone after a payload without codes: the same checks, the same error.
+    const std::vector<std::byte> empty = payload_without_codes(shape, d.atom_count);
+    const format::PayloadJob after[2] = {{empty, other, "empty.vrf", 0},
+                                         {bad, out, "frame.vrf", 100}};
+    EXPECT_EQ(decode_error(after, atoms, shape), alone) << "trial " << trial;
   }
   EXPECT_GT(named, 40);
   // 2. A magnitude past 2^c: a payload packed with c = 8 and no escapes (every band's Rice
@@ -494,6 +512,11 @@ TEST(Decoder, TheFirstCodePastTheDictionaryOrItsMagnitudeIsNamed) {
   std::memcpy(payload.data() + 12, &layout, 4);
   const std::string error = alone_error(payload, atoms, shape, out, "frame.vrf", 100);
   EXPECT_NE(error.find("magnitude ≤ 2^7 (block 9, code 2)"), std::string::npos) << error;
+  std::vector<float> other(shape.voxels());
+  const std::vector<std::byte> empty = payload_without_codes(shape, d.atom_count);
+  const format::PayloadJob after[2] = {{empty, other, "empty.vrf", 0},
+                                       {payload, out, "frame.vrf", 100}};
+  EXPECT_EQ(decode_error(after, atoms, shape), error);
 }
 
 TEST(Decoder, AtomsPastTheIndexWidthAreRefused) {
