@@ -52,10 +52,11 @@ int coef_bits_from_text(const std::string& text) {
 }
 
 std::uint32_t brick_size_from_text(const std::string& text) {
-  const int size =
-      bits_from_text(text, "--brick-size", format::min_brick_size, format::max_brick_size);
-  if (size < 0) return 0;
-  if (!format::valid_brick_size(static_cast<std::uint64_t>(size)))
+  if (text == "auto") return 0;
+  char* end = nullptr;
+  const long size = std::strtol(text.c_str(), &end, 10);
+  if (text.empty() || *end != '\0' || size < 0 ||
+      !format::valid_brick_size(static_cast<std::uint64_t>(size)))
     throw InputError(
         "--brick-size must be auto or a multiple of 6 in 12..66 (stored voxels per "
         "brick axis, the interior 2 fewer), not '" +

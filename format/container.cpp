@@ -40,6 +40,10 @@ std::string id_text(std::uint64_t id) {
   return text;
 }
 
+std::string dims_text(const std::array<std::uint32_t, 3>& dims) {
+  return std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]);
+}
+
 /// The manifest's checksum: CRC-32C of its compact serialization without "manifest_crc32c" (the
 /// parser gives back the same numbers and strings, so the reader recomputes it exactly).
 std::uint32_t manifest_checksum(const json& j) {
@@ -445,7 +449,9 @@ void Container::check_frame(std::size_t t, const FrameView& view) const {
                       std::to_string(h.frame_index));
   if (h.dims[0] != manifest_.dims[0] || h.dims[1] != manifest_.dims[1] ||
       h.dims[2] != manifest_.dims[2])
-    throw FormatError(path, offsetof(FrameHeader, dims), "the manifest's dims", "other dims");
+    throw FormatError(path, offsetof(FrameHeader, dims),
+                      "dims " + dims_text(manifest_.dims) + " (manifest.json)",
+                      dims_text({h.dims[0], h.dims[1], h.dims[2]}));
   if (static_cast<Codec>(h.codec) != manifest_.codec)
     throw FormatError(path, offsetof(FrameHeader, codec), "the manifest's codec", "another");
   if (h.value_min != static_cast<float>(manifest_.value_min) ||

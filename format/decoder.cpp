@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <exception>
 #include <functional>
@@ -21,6 +22,13 @@
 namespace volreel::format {
 
 namespace {
+
+/// A value for a message, in 6 significant digits ("1e+38", "7.88091e+43").
+std::string shortest(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.6g", v);
+  return text;
+}
 
 std::string str(std::uint64_t v) {
   return std::to_string(v);
@@ -365,8 +373,8 @@ KsvdPayloadLayout parse_ksvd_header(const vr_uint* payload, std::size_t word_cou
   if (!(bound <= max_decoded_magnitude))
     fail(0,
          "dequantization values whose decoded values stay below " +
-             std::to_string(max_decoded_magnitude) + " in magnitude",
-         "values that reach " + std::to_string(bound));
+             shortest(max_decoded_magnitude) + " in magnitude",
+         "values that reach " + shortest(bound));
   // 2. The box of coded blocks and their entries.
   const vr_uint n = shape.blocks_per_axis(), box = layout.box_word;
   if ((box >> 28) != 0 || vr_box_magnitude_model(box) > VR_MAX_MAGNITUDE_MODEL ||
@@ -470,7 +478,9 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
       if (codes) codes->resize(codes_before);
     }
     for (vr_uint k = 0; k < s; ++k) {
-      const std::uint64_t code_at = 4 * std::uint64_t{first} + stream.bit() / 8;
+      // A code's byte; a stream that ran past its end (a damaged one) is named at that end.
+      const std::uint64_t code_at =
+          std::min<std::uint64_t>(4 * std::uint64_t{first} + stream.bit() / 8, bytes);
       if (stream.bit() >= stream_bits)
         fail(code_at, "codes inside the payload (block " + str(b) + ", code " + str(k) + ")",
              "the payload's end");
@@ -488,7 +498,7 @@ KsvdPayloadLayout parse_ksvd_payload(const vr_uint* payload, std::size_t word_co
       if (codes) codes->push_back({atom, q});
     }
     if (!run_ended(run))
-      fail(4 * std::uint64_t{first} + stream.bit() / 8,
+      fail(std::min<std::uint64_t>(4 * std::uint64_t{first} + stream.bit() / 8, bytes),
            "runs of consecutive atoms that end with their block (block " + str(b) + ")",
            "a run reaching " + str(run / 2) + " code(s) past the block's " + str(s) + " codes");
   }

@@ -235,7 +235,9 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name, std::uint6
          "[" + std::to_string(h.value_min) + ", " + std::to_string(h.value_max) + "]");
   const auto geometry = level_geometry({h.dims[0], h.dims[1], h.dims[2]}, {h.brick_size});
   if (h.level_count != geometry.size())
-    fail(offsetof(FrameHeader, level_count), str(geometry.size()) + " levels for these dims",
+    fail(offsetof(FrameHeader, level_count),
+         str(geometry.size()) + " levels for dims " + str(h.dims[0]) + "x" + str(h.dims[1]) + "x" +
+             str(h.dims[2]) + " in bricks of " + str(h.brick_size),
          str(h.level_count));
   std::uint64_t max_nodes = 0;
   for (const auto& g : geometry) max_nodes += std::uint64_t{g.grid[0]} * g.grid[1] * g.grid[2];
@@ -288,12 +290,17 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name, std::uint6
     const std::uint64_t at = levels_at + sizeof(LevelEntry) * l;
     const LevelEntry e = load<LevelEntry>(bytes, at);
     const auto& g = geometry[l];
-    for (std::size_t a = 0; a < 3; ++a) {
-      if (e.dims[a] != g.dims[a])
-        fail(at + 8 + 4 * a, "level " + str(l) + " size " + str(g.dims[a]), str(e.dims[a]));
-      if (e.grid[a] != g.grid[a])
-        fail(at + 20 + 4 * a, "level " + str(l) + " grid " + str(g.grid[a]), str(e.grid[a]));
-    }
+    // The index CRC above holds the level table as written: where it disagrees with the
+    // geometry of the header's dims and brick size, the header is what changed.
+    for (std::size_t a = 0; a < 3; ++a)
+      if (e.dims[a] != g.dims[a] || e.grid[a] != g.grid[a])
+        fail(offsetof(FrameHeader, dims),
+             "header dims and brick size that give level " + str(l) + " the size " +
+                 str(e.dims[a]) + " and grid " + str(e.grid[a]) + " along " + "xyz"[a] +
+                 " that the level table records (offset " + str(at) + ", under a good index CRC)",
+             "dims " + str(h.dims[0]) + "x" + str(h.dims[1]) + "x" + str(h.dims[2]) +
+                 ", brick size " + str(h.brick_size) + " (size " + str(g.dims[a]) + ", grid " +
+                 str(g.grid[a]) + ")");
     if (e.first_node != next_node)
       fail(at, "level " + str(l) + " first node " + str(next_node), str(e.first_node));
     const std::uint64_t cells = std::uint64_t{g.grid[0]} * g.grid[1] * g.grid[2];

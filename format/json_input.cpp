@@ -1,6 +1,8 @@
 // json_input.cpp: JSON documents with a nesting limit and short descriptions of values.
 #include "volreel/format/json_input.hpp"
 
+#include <algorithm>
+
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
 
@@ -48,9 +50,15 @@ std::string describe_json(const nlohmann::json& value) {
   switch (value.type()) {
     case json::value_t::null:
       return "null";
-    case json::value_t::array:
-      return "an array of " + std::to_string(value.size()) +
-             (value.size() == 1 ? " value" : " values");
+    case json::value_t::array: {
+      std::string text = "an array of " + std::to_string(value.size()) +
+                         (value.size() == 1 ? " value" : " values");
+      // A short array of numbers is shown whole: which value was wrong.
+      const bool numbers =
+          std::all_of(value.begin(), value.end(), [](const json& v) { return v.is_number(); });
+      if (numbers && value.size() <= 8) text += ", " + value.dump();
+      return text;
+    }
     case json::value_t::object:
       return "an object of " + std::to_string(value.size()) +
              (value.size() == 1 ? " field" : " fields");

@@ -152,9 +152,27 @@ out=$("$volreel" compare "$work/all.raw" "$work/a" --dims 24x20x16 --frames 4 --
 [ "$(echo "$out" | json 'd["sequence"]["psnr"]')" = None ] || fail "raw file against its series: $out"
 "$volreel" encode "$work/a" --dictionary dct --out "$work/ab.vreel" > /dev/null 2>&1
 expect_error "is a volreel container: compare takes the original as A" "$volreel" compare "$work/ab.vreel" "$work/a"
-# Volumes smaller than SSIM's window: the message says how to compare them.
+# info on a container with a damaged frame: the figures of the frames it can read, then the
+# error (exit 1).
+cp -r "$work/ab.vreel" "$work/abd.vreel"
+truncate -s 100 "$work/abd.vreel/frames/000001.vrf"
+if "$volreel" info "$work/abd.vreel" > "$work/info.txt" 2> "$work/info.err"; then
+  fail "info of a container with a truncated frame exited 0"
+fi
+grep -q "^volume   24x20x16" "$work/info.txt" || fail "info printed nothing before its error: $(cat "$work/info.txt")"
+grep -q "error: 1 of the [0-9]* frames written could not be read.*000001.vrf: offset 0" "$work/info.err" \
+  || fail "info's error: $(cat "$work/info.err")"
+# Volumes smaller than SSIM's window: the other metrics, and a note that says why SSIM is not
+# among them (null in JSON).
 "$volreel" gen analytic --dims 4x4x4 --frames 2 --out "$work/tiny" > /dev/null 2>&1
-expect_error "fewer than the 11-voxel window: give --no-ssim" "$volreel" compare "$work/tiny" "$work/tiny"
+"$volreel" encode "$work/tiny" --dictionary dct --out "$work/tiny.vreel" > /dev/null 2>&1 \
+  || fail "encode of a 4x4x4 series"
+out=$("$volreel" compare "$work/tiny" "$work/tiny.vreel" --json 2> "$work/tiny.err") \
+  || fail "compare of a 4x4x4 series with its container: $(cat "$work/tiny.err")"
+grep -q "SSIM not computed: axis x has 4 voxels, fewer than the 11-voxel window" "$work/tiny.err" \
+  || fail "compare of tiny volumes: no note on SSIM: $(cat "$work/tiny.err")"
+[ "$(echo "$out" | json 'd["sequence"]["ssim"]')" = None ] || fail "tiny volumes' SSIM: $out"
+[ "$(echo "$out" | json 'd["sequence"]["psnr"] > 20')" = True ] || fail "tiny volumes' PSNR: $out"
 "$volreel" compare "$work/tiny" "$work/tiny" --no-ssim > /dev/null 2>&1 || fail "compare --no-ssim of tiny volumes"
 # SIGTERM (or Ctrl-C's SIGINT, which a background job ignores) in gen: it stops at the next
 # step, removes the frames it wrote and ends by the signal, as a shell expects.

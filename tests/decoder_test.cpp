@@ -519,6 +519,29 @@ TEST(Decoder, TheFirstCodePastTheDictionaryOrItsMagnitudeIsNamed) {
   EXPECT_EQ(decode_error(after, atoms, shape), error);
 }
 
+TEST(Decoder, AStreamRunningPastItsEndIsNamedInsideThePayload) {
+  // A code stream of zeros (escapes of value 0: every code 49 to 65 bits) runs past its end; the
+  // error names an offset inside the payload, its end at most.
+  const format::DictionaryFile d = learned_and_dct(40, 6);
+  const format::AtomTable atoms = format::atom_table(d.atoms, d.atom_count);
+  const format::BrickShape shape{18};
+  std::mt19937 rng(17);
+  for (int trial = 0; trial < 20; ++trial) {
+    std::vector<std::byte> bad = random_payload(shape, d.atom_count, 40, rng);
+    const format::KsvdPayloadLayout layout =
+        format::check_ksvd_payload(bad, d.atom_count, shape, "good", 0);
+    if (layout.codes < 8) continue;
+    const std::size_t first = 4 * vr_code_first_word(layout.word, vr_box_entries(layout.box_word));
+    std::fill(bad.begin() + static_cast<std::ptrdiff_t>(first), bad.end(), std::byte{0});
+    std::vector<float> out(shape.voxels());
+    const std::string error = alone_error(bad, atoms, shape, out, "frame.vrf", 100);
+    const std::size_t at = error.find("offset ");
+    ASSERT_NE(at, std::string::npos) << error;
+    EXPECT_LE(std::stoull(error.substr(at + 7)), 100 + bad.size()) << error;
+    EXPECT_GE(std::stoull(error.substr(at + 7)), 100 + first) << error;
+  }
+}
+
 TEST(Decoder, AtomsPastTheIndexWidthAreRefused) {
   // Blocks of atoms 0, 2, .., 18 packed with a = 5 and gap shift 1 (every gap's Rice parameter
   // 0, no escape), then a lowered to 4 in the layout word: the codes read the same, but atoms

@@ -147,7 +147,7 @@ done
 [ "$(stat -c %s "$work/b12l0.f32")" = $((10 * 9 * 8 * 4)) ] || fail "bricks of 12^3: decode at level 0"
 expect_error "brick-size must be auto or a multiple of 6 in 12..66" \
   "$volreel" encode "$work/s" --dictionary dct --brick-size 40 --out "$work/x.vreel"
-expect_error "brick-size must be auto or a whole number 12..66" \
+expect_error "brick-size must be auto or a multiple of 6 in 12..66" \
   "$volreel" encode "$work/s" --dictionary dct --brick-size 72 --out "$work/x.vreel"
 
 # Damage: a flipped byte in a frame, a truncated frame, a broken manifest.

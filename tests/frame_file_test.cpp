@@ -215,6 +215,28 @@ TEST(DamagedFrame, AZfpHeaderNamesNoAtomsOrBlocks) {
   expect_refused(offsetof(format::FrameHeader, block_size), 6, "block size 0 (zfp)");
 }
 
+TEST(DamagedFrame, HeaderDimsThatDisagreeWithTheLevelTableAreNamed) {
+  // The level table lies under the index CRC and the header's dims do not: where they disagree,
+  // the error names the header's dims (offset and value), not the intact level table.
+  const auto d = small_dictionary();
+  const std::vector<std::byte> good = small_frame(format::Codec::ksvd, d);
+  const format::FrameView view(good, "x");
+  const std::uint32_t x = view.header().dims[0];
+  std::vector<std::byte> bad = good;
+  const std::uint32_t wider = x + 1;
+  std::memcpy(bad.data() + offsetof(format::FrameHeader, dims), &wider, 4);
+  try {
+    const format::FrameView f(bad, "frames/000000.vrf");
+    ADD_FAILURE() << "dims " << wider << " accepted beside the level table of " << x;
+  } catch (const format::FormatError& e) {
+    const std::string what = e.what();
+    EXPECT_EQ(e.offset(), offsetof(format::FrameHeader, dims)) << what;
+    EXPECT_NE(what.find("header dims and brick size that give level"), std::string::npos) << what;
+    EXPECT_NE(what.find("under a good index CRC"), std::string::npos) << what;
+    EXPECT_NE(what.find("found dims " + std::to_string(wider) + "x"), std::string::npos) << what;
+  }
+}
+
 TEST(DamagedFrame, BricksDecodedTogetherFailAsOneAtATime) {
   // decode_bricks (two payloads' codes read in step) against decode_brick: the same values, and
   // the error of the first bad brick in the order given, whether its CRC or its payload is bad.
@@ -371,6 +393,13 @@ TEST(Manifest, ForbiddenValuesAndEditsAreRefused) {
   j = good;
   j["value_range"] = {-1e39, 1e39};
   refused(j, "\"value_range\"");
+  // A short array of numbers is shown: which value was wrong.
+  j = good;
+  j["dims"] = {0, 64, 40};
+  refused(j, "\"dims\": three integers in 1..16777216, found an array of 3 values, [0,64,40]");
+  j = good;
+  j["value_range"] = {1, 0};
+  refused(j, "found an array of 2 values, [1,0]");
   j = good;
   j["timestamps"] = {1.0, 0.5};
   refused(j, "\"timestamps\": increasing numbers");

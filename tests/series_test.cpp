@@ -250,7 +250,8 @@ TEST(RawSeries, MalformedManifestsAreRejected) {
   expect_error([&] { vd::open_series(path); }, {"series.json", "not valid JSON"});
   const std::string head = R"({"format":"volreel-raw-series","version":1,"dtype":"f32",)";
   put(head + R"("dims":[2,2],"frames":["000000.f32"],"timestamps":[0]})");
-  expect_error([&] { vd::open_series(path); }, {"\"dims\"", "[x, y, z]", "an array of 2 values"});
+  expect_error([&] { vd::open_series(path); },
+               {"\"dims\"", "[x, y, z]", "an array of 2 values, [2,2]"});
   put(head + R"("dims":[2,2,2],"frames":["000000.f32","000001.f32"],"timestamps":[0]})");
   expect_error([&] { vd::open_series(path); },
                {"\"timestamps\"", "an array of 2 numbers", "found an array of 1 value"});

@@ -96,6 +96,10 @@ if "$volreel" render "$dir/damaged.vreel" --tour "$dir/tour.json" --out "$dir/da
 fi
 grep -q "^volreel: error: 1 bricks or frames could not be read" "$dir/bad.log" || { cat "$dir/bad.log"; exit 1; }
 [ "$(grep -c "warning: .*000001.vrf" "$dir/bad.log")" -eq 1 ] || { echo "the failure was not named once"; cat "$dir/bad.log"; exit 1; }
+# metrics.csv counts it in the row of the frame during which it came (while waiting for the
+# frame's bricks, or drawing it).
+errors=$(awk -F, 'NR == 1 { for (i = 1; i <= NF; ++i) if ($i == "errors") c = i; next } { s += $c } END { print s + 0 }' "$dir/damaged/metrics.csv")
+[ "$errors" -eq 1 ] || { echo "metrics.csv counts $errors read errors, not 1"; cat "$dir/damaged/metrics.csv"; exit 1; }
 if "$volreel" bench play "$dir/damaged.vreel" --cpu --size 32x32 --frames-per-phase 2 --seeks 1 > "$dir/bad.log" 2>&1; then
   echo "bench play of a damaged container exited 0"; exit 1
 fi

@@ -89,7 +89,9 @@ std::vector<RdPoint> run_rate_distortion(const datasets::SeriesReader& series,
                                          const RdOptions& options, const Progress& progress) {
   const Dims dims = series.info().dims;
   const std::size_t frames = frames_used(series, options);
-  const std::vector<std::size_t> ssim_picks = spread(frames, options.ssim_frames);
+  // SSIM's window does not fit an axis of 2 to 10 voxels: no frame takes it there.
+  const std::vector<std::size_t> ssim_picks =
+      spread(frames, ssim_unfit(dims).empty() ? options.ssim_frames : 0);
 
   struct State {
     ErrorAccumulator errors;

@@ -60,7 +60,25 @@ std::size_t to_size(std::int64_t v) {
   return static_cast<std::size_t>(v);
 }
 
+/// The Gaussian window's radius: int(truncate·sigma + 0.5) (options checked by the caller).
+std::int64_t window_radius(const SsimOptions& options) {
+  return static_cast<std::int64_t>(options.truncate * options.sigma + 0.5);
+}
+
 }  // namespace
+
+std::string ssim_unfit(Dims dims, const SsimOptions& options) {
+  if (!(options.sigma > 0) || !(options.truncate >= 0) ||
+      !std::isfinite(options.sigma * options.truncate))
+    return "";  // ssim refuses the options themselves
+  const std::int64_t window = 2 * window_radius(options) + 1;
+  const std::int64_t extent[3] = {dims.x, dims.y, dims.z};
+  for (int a = 0; a < 3; ++a)
+    if (extent[a] > 1 && extent[a] < window)
+      return std::string("axis ") + "xyz"[a] + " has " + std::to_string(extent[a]) +
+             " voxels, fewer than the " + std::to_string(window) + "-voxel window";
+  return "";
+}
 
 double ssim(Dims dims, std::span<const float> original, std::span<const float> decoded,
             const SsimOptions& options) {
@@ -85,17 +103,12 @@ double ssim(Dims dims, std::span<const float> original, std::span<const float> d
     throw InputError("SSIM: data range " + std::to_string(options.data_range) +
                      " is not a finite value >= 0");
   }
-  const auto radius = static_cast<std::int64_t>(options.truncate * options.sigma + 0.5);
-  const std::int64_t window = 2 * radius + 1;
+  const auto radius = window_radius(options);
   const std::int64_t extent[3] = {dims.x, dims.y, dims.z};
+  if (const std::string unfit = ssim_unfit(dims, options); !unfit.empty())
+    throw InputError("SSIM: " + unfit);
   std::int64_t r[3];
-  for (int a = 0; a < 3; ++a) {
-    r[a] = extent[a] > 1 ? radius : 0;
-    if (extent[a] > 1 && extent[a] < window) {
-      throw InputError(std::string("SSIM: axis ") + "xyz"[a] + " has " + std::to_string(extent[a]) +
-                       " voxels, fewer than the " + std::to_string(window) + "-voxel window");
-    }
-  }
+  for (int a = 0; a < 3; ++a) r[a] = extent[a] > 1 ? radius : 0;
   const std::int64_t nx = dims.x, ny = dims.y, nz = dims.z;
   const std::int64_t cx = nx - 2 * r[0], cy = ny - 2 * r[1], cz = nz - 2 * r[2];  // cropped extents
 

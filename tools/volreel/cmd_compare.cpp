@@ -28,7 +28,8 @@ bool is_png(const std::string& path) {
   return path.size() > 4 && (path.ends_with(".png") || path.ends_with(".PNG"));
 }
 
-/// SSIM for the table: "-" when it was not computed (--no-ssim).
+/// SSIM for the table: "-" when it was not computed (--no-ssim, or an axis shorter than its
+/// window).
 std::string ssim_text(double ssim) {
   if (std::isnan(ssim)) return "-";
   char text[16];
@@ -125,6 +126,12 @@ void compare_series(const CompareOptions& o) {
     psnr::ErrorStats e;
     double ssim;
   };
+  // SSIM's window does not fit an axis of 2 to 10 voxels: the other metrics without it.
+  const std::string ssim_unfit = o.no_ssim ? "" : psnr::ssim_unfit(ia.dims);
+  const bool with_ssim = !o.no_ssim && ssim_unfit.empty();
+  if (!ssim_unfit.empty())
+    std::fprintf(stderr, "note: SSIM not computed: %s (the other metrics are)\n",
+                 ssim_unfit.c_str());
   std::vector<Row> rows;
   psnr::ErrorAccumulator sequence;
   double ssim_sum = 0;
@@ -135,12 +142,8 @@ void compare_series(const CompareOptions& o) {
     b->read_frame(t, vb.data);
     sequence.add(va.data, vb.data);
     Row row{psnr::compare(va.data, vb.data), std::nan("")};
-    if (!o.no_ssim) {
-      try {
-        row.ssim = psnr::ssim(ia.dims, va.data, vb.data);
-      } catch (const InputError& e) {
-        throw InputError(std::string(e.what()) + ": give --no-ssim to compare without SSIM");
-      }
+    if (with_ssim) {
+      row.ssim = psnr::ssim(ia.dims, va.data, vb.data);
       ssim_sum += row.ssim;
     }
     rows.push_back(row);
@@ -151,7 +154,7 @@ void compare_series(const CompareOptions& o) {
   // Every frame rated against the sequence's value range, as the 'all' row, encode's --psnr and
   // the container's value range are.
   for (Row& row : rows) row.e = psnr::against_range(row.e, total.original_min, total.original_max);
-  const double mean_ssim = o.no_ssim ? std::nan("") : ssim_sum / static_cast<double>(frames);
+  const double mean_ssim = with_ssim ? ssim_sum / static_cast<double>(frames) : std::nan("");
   // After the tables: the bounds asked for, as an error naming the worst frame.
   const auto enforce_bounds = [&] {
     std::size_t worst = 0;

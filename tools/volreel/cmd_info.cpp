@@ -1,7 +1,7 @@
 // cmd_info.cpp: `volreel info` — describe a NAME.vreel container: the volume, the codec and its
 // parameters, the share of node-steps that store a brick (keyframes), the levels of frame 0, the
 // size and bps; or all of it as JSON.
-#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <iostream>
@@ -12,6 +12,7 @@
 
 #include "commands.hpp"
 #include "remote_options.hpp"
+#include "volreel/datasets/volume.hpp"
 #include "volreel/format/container.hpp"
 
 namespace volreel::cli {
@@ -25,39 +26,55 @@ void run_info(const std::string& dir, bool json, const RemoteCli& remote) {
   std::size_t written = 0;
   for (const auto& f : m.frames) written += f ? 1u : 0u;
   const std::uint64_t bytes = c.total_bytes();
-  const double bps = 8.0 * static_cast<double>(bytes) /
-                     (voxels * static_cast<double>(std::max<std::size_t>(written, 1)));
-  nlohmann::json levels = nlohmann::json::array();
-  if (written > 0 && m.frames[0]) {
-    const auto f = c.open_frame_index(0);
-    for (std::uint32_t l = 0; l < f.view().level_count(); ++l) {
-      const auto& e = f.view().level(l);
-      levels.push_back({{"level", l},
-                        {"dims", e.dims},
-                        {"grid", e.grid},
-                        {"nodes", e.node_count},
-                        {"payload_bytes", f.view().payload_end_for_depth(l + 1) -
-                                              f.view().payload_end_for_depth(l)}});
-    }
-  }
-  // Keyframes: the nodes of the frames' trees that store a brick at their step.
+  // bps over the frames written; none written yet (an interrupted encode's start): no figure.
+  const double bps =
+      written > 0 ? 8.0 * static_cast<double>(bytes) / (voxels * static_cast<double>(written))
+                  : std::nan("");
+  // Keyframes: the nodes of the frames' trees that store a brick at their step. A frame whose
+  // index cannot be read is left out of the figures; the first such error ends the command after
+  // they are printed (volreel verify lists them all).
   std::uint64_t nodes = 0, bricks = 0;
+  std::size_t unreadable = 0;
+  std::string first_error;
+  nlohmann::json levels = nlohmann::json::array();
   for (std::size_t t = 0; t < m.frames.size(); ++t) {
     if (!m.frames[t]) continue;
-    const auto f = c.open_frame_index(t);
-    nodes += f.view().node_count();
-    bricks += f.view().brick_count();
+    try {
+      const auto f = c.open_frame_index(t);
+      nodes += f.view().node_count();
+      bricks += f.view().brick_count();
+      for (std::uint32_t l = 0; t == 0 && l < f.view().level_count(); ++l) {
+        const auto& e = f.view().level(l);
+        levels.push_back({{"level", l},
+                          {"dims", e.dims},
+                          {"grid", e.grid},
+                          {"nodes", e.node_count},
+                          {"payload_bytes", f.view().payload_end_for_depth(l + 1) -
+                                                f.view().payload_end_for_depth(l)}});
+      }
+    } catch (const format::FormatError& e) {
+      if (unreadable++ == 0) first_error = e.what();
+    }
   }
+  const auto end_with_unreadable = [&] {
+    if (unreadable > 0)
+      throw InputError(std::to_string(unreadable) + " of the " + std::to_string(written) +
+                       " frames written could not be read, left out of the figures above (volreel "
+                       "verify lists every problem); the first: " +
+                       first_error);
+  };
   const double kept = nodes > 0 ? static_cast<double>(bricks) / static_cast<double>(nodes) : 1.0;
   if (json) {
     nlohmann::json j = format::manifest_to_json(m);
     j["node_steps"] = nodes;
     j["bricks_stored"] = bricks;
     j["total_bytes"] = bytes;
-    j["bps"] = bps;
+    j["bps"] = std::isfinite(bps) ? nlohmann::json(bps) : nlohmann::json(nullptr);
+    j["frames_unreadable"] = unreadable;
     j["frames_written"] = written;
     j["frame0_levels"] = levels;
     std::cout << j.dump(2) << '\n';
+    end_with_unreadable();
     return;
   }
   std::printf("%s: volreel container, format version %u, written by volreel %s%s\n", dir.c_str(),
@@ -84,13 +101,17 @@ void run_info(const std::string& dir, bool json, const RemoteCli& remote) {
               m.max_keyframe_gap, static_cast<std::uintmax_t>(bricks),
               static_cast<std::uintmax_t>(nodes), 100.0 * kept,
               bricks < nodes ? ", the rest are interpolated" : "");
-  std::printf("size     %ju bytes, %.4f bps (all files, over the %zu frames written)\n",
-              static_cast<std::uintmax_t>(bytes), bps, written);
+  if (written > 0)
+    std::printf("size     %ju bytes, %.4f bps (all files, over the %zu frames written)\n",
+                static_cast<std::uintmax_t>(bytes), bps, written);
+  else
+    std::printf("size     %ju bytes (no frame written yet)\n", static_cast<std::uintmax_t>(bytes));
   for (const auto& l : levels)
     std::printf("frame 0 level %d: %s voxels, %d nodes, %ju payload bytes\n", l["level"].get<int>(),
                 l["dims"].dump().c_str(), l["nodes"].get<int>(),
                 static_cast<std::uintmax_t>(l["payload_bytes"].get<std::uint64_t>()));
   print_remote_summary(c.source(), "info");
+  end_with_unreadable();
 }
 
 }  // namespace

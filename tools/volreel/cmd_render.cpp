@@ -193,12 +193,14 @@ void run_render(const RenderCommandOptions& o) {
       // Without --realtime a frame is drawn once what it needs has arrived (or nothing more
       // can), so that a movie never shows a frame still streaming in.
       double wait_ms = 0;
+      std::size_t new_errors = 0;  // bricks and frames that failed while this frame waited or drew
       if (!o.realtime) {
         loop::ViewWait wait =
             loop::wait_for_view(*renderer, tf.camera, tf.playhead, o.wait_timeout);
         wait_ms = 1000 * wait.seconds;
         waited_s += wait.seconds;
         failures.add(wait.new_errors, "\n");
+        new_errors += wait.new_errors.size();
         if (wait.timed_out) {
           ++timeouts;
           std::fprintf(stderr,
@@ -215,6 +217,7 @@ void run_render(const RenderCommandOptions& o) {
       const double readback_ms =
           std::chrono::duration<double, std::milli>(Clock::now() - read_start).count();
       failures.add(report.new_errors, "\n");
+      new_errors += report.new_errors.size();
       std::optional<psnr::ImageComparison> quality;
       if (truth) {
         const auto reference = truth->render(tf.playhead, container.frame_count(), tf.camera,
@@ -245,8 +248,7 @@ void run_render(const RenderCommandOptions& o) {
                     s.atlas_capacity ? double(s.atlas_occupied) / double(s.atlas_capacity) : 0.0,
                     s.requests_in_flight, s.requests_sent, s.uploads,
                     double(s.bytes_uploaded) * 1e-6, double(s.bytes_loaded) * 1e-6,
-                    s.fraction_at_target, s.holes, s.svo_nodes, s.svo_leaves,
-                    report.new_errors.size(), wait_ms);
+                    s.fraction_at_target, s.holes, s.svo_nodes, s.svo_leaves, new_errors, wait_ms);
       csv << row;
       if (quality) csv << ',' << quality->psnr << ',' << quality->ssim;
       csv << '\n' << std::flush;  // every frame's row, also when the run is interrupted
@@ -288,8 +290,11 @@ void run_render(const RenderCommandOptions& o) {
         "PSNR %.2f dB "
         "(10*log10(255^2/MSE), 8-bit RGB), mean SSIM %.4f over %zu frames\n",
         sum_psnr / double(compared), sum_ssim / double(compared), compared);
-  std::printf("wrote %s/frame_00000.png .. frame_%05zu.png and %s\n", out.c_str(),
-              frames ? frames - 1 : 0, (out / "metrics.csv").c_str());
+  if (frames > 1)
+    std::printf("wrote %s/frame_00000.png .. frame_%05zu.png and %s\n", out.c_str(), frames - 1,
+                (out / "metrics.csv").c_str());
+  else
+    std::printf("wrote %s/frame_00000.png and %s\n", out.c_str(), (out / "metrics.csv").c_str());
   if (const std::size_t stale = remove_later_frames(out, frames, earlier))
     std::printf(
         "removed %zu frame_NNNNN.png past frame_%05zu.png, left by an earlier, longer "

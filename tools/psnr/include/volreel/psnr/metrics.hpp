@@ -12,6 +12,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "volreel/datasets/volume.hpp"
@@ -53,6 +54,10 @@ struct SsimOptions {
   double k1 = 0.01, k2 = 0.03;
   double data_range = 0;  ///< L in C1 = (K1·L)²; 0 means max − min of the original (1 if 0)
 };
+
+/// Why SSIM cannot be computed on arrays of shape dims: "axis x has 7 voxels, fewer than the
+/// 11-voxel window" where an axis of extent > 1 is shorter than the window; empty where it can.
+std::string ssim_unfit(Dims dims, const SsimOptions& options = {});
 
 /// SSIM of two arrays of shape dims (x fastest). Axes of extent 1 are neither filtered nor
 /// cropped, so a Dims{w, h, 1} is a 2D image. Throws InputError if an axis of extent > 1 is
