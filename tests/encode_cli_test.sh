@@ -264,4 +264,27 @@ expect_error "expected a size such as 2G" "$volreel" encode "$work/tall" --dicti
 expect_error "--atoms: expected a number in \\[0, 65536\\]" "$volreel" encode "$work/tall" --atoms -5 --out "$work/x.vreel"
 [ ! -e "$work/x.vreel" ] || fail "a refused encode left a container behind"
 
+# SIGTERM (as Ctrl-C's SIGINT, which a background job ignores) stops an encode between frames: the
+# frames written stay complete, the message says how to go on, and --resume finishes the container.
+# The process is stopped (SIGSTOP) as soon as its first frame is there, so that the signal comes
+# before it has coded the rest; it handles the signal when it goes on.
+"$volreel" gen analytic --field noise --dims 128x128x128 --frames 8 --out "$work/long" > /dev/null 2>&1
+"$volreel" encode "$work/long" --dictionary dct --max-keyframe-gap 1 --out "$work/long.vreel" > /dev/null 2> "$work/long.err" &
+pid=$!
+for _ in $(seq 6000); do [ -e "$work/long.vreel/frames/000000.vrf" ] && break; sleep 0.01; done
+kill -STOP "$pid"; kill -TERM "$pid"; kill -CONT "$pid"
+status=0
+wait "$pid" || status=$?
+[ "$status" = 143 ] || fail "an interrupted encode: exit status $status, expected 143: $(cat "$work/long.err")"
+grep -q "interrupted: the frames written to .*long.vreel are kept; the same command with --resume continues it" \
+  "$work/long.err" || fail "an interrupted encode's message: $(cat "$work/long.err")"
+kept=$(ls "$work/long.vreel/frames" | grep -c '\.vrf$')
+[ "$kept" -ge 1 ] && [ "$kept" -lt 8 ] || fail "an interrupted encode kept $kept frames"
+[ -z "$(find "$work/long.vreel" -name '*.tmp-*')" ] || fail "an interrupted encode left a temporary file"
+"$volreel" encode "$work/long" --dictionary dct --max-keyframe-gap 1 --out "$work/long.vreel" --resume > "$work/long.txt" 2>&1 \
+  || fail "--resume after an interrupt: $(cat "$work/long.txt")"
+grep -q "8 frames ($((8 - kept)) encoded, $kept already there)" "$work/long.txt" || fail "--resume after an interrupt: $(cat "$work/long.txt")"
+"$volreel" verify "$work/long.vreel" > /dev/null 2>&1 || fail "the container resumed after an interrupt does not verify"
+rm -rf "$work/long" "$work/long.vreel"
+
 echo "encode_cli_end_to_end: all checks passed"

@@ -200,7 +200,24 @@ void run_encode(const EncodeOptions& o) {
     print_tolerance_choice(eps, c, o.bps, encoder::tolerance_range(c.value_min, c.value_max),
                            atoms);
   };
-  const encoder::EncodeSummary s = encoder::encode(*series, o.out, r, events);
+  // One process: Ctrl-C or SIGTERM stops at the next progress update, between frames, so that
+  // the frames written so far stay complete for --resume (under mpirun the ranks would not stop
+  // together: the signal ends them at once, and --resume removes what they left half-written).
+  std::optional<StopOnSignal> stop;
+  if (!ranks) stop.emplace();
+  const encoder::EncodeSummary s = [&] {
+    try {
+      return encoder::encode(*series, o.out, r, events);
+    } catch (const Interrupted&) {
+      if (bar) bar.reset();
+      std::fprintf(stderr,
+                   "\nvolreel encode: interrupted: the frames written to %s are kept; the same "
+                   "command with --resume continues it\n",
+                   o.out.c_str());
+      throw;
+    }
+  }();
+  stop.reset();
   const bool missed = print_encode_summary(s, s.coding, o.out, r.tolerance.psnr.value_or(0),
                                            r.tolerance.bps.value_or(0));
   const std::uint64_t rss = peak_resident_bytes();
