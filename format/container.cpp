@@ -619,6 +619,10 @@ std::vector<std::string> verify_container(std::shared_ptr<const ContainerSource>
   const Manifest& m = container->manifest();
   if (!m.complete)
     problems.push_back(source->name("manifest.json").string() + ": the encode is not complete");
+  // The container identifier is the hash of the settings and the dictionary (SPEC.md): a setting
+  // edited after encoding, with the manifest's checksum made again, changes it.
+  std::optional<std::vector<std::byte>> dictionary_without_id;
+  if (!m.dictionary) dictionary_without_id.emplace();
   if (m.dictionary) {
     const fs::path p = source->name(m.dictionary->file);
     try {
@@ -630,8 +634,39 @@ std::vector<std::string> verify_container(std::shared_ptr<const ContainerSource>
         problems.push_back(p.string() + ": expected CRC-32C " +
                            std::to_string(m.dictionary->crc32c) + " (manifest.json), found " +
                            std::to_string(manifest_crc(bytes)));
+      DictionaryFile file = parse_dictionary_file(bytes, p);
+      file.container_id = 0;
+      dictionary_without_id = serialize_dictionary_file(file);
     } catch (const FormatError& e) {
       problems.push_back(e.what());
+    }
+  }
+  if (dictionary_without_id) {
+    Manifest settings = m;
+    settings.dictionary.reset();
+    const std::uint64_t id = container_identifier(settings, *dictionary_without_id);
+    if (id != m.container_id)
+      problems.push_back(source->name("manifest.json").string() + ": expected \"container_id\" " +
+                         id_text(id) + " (the hash of the settings and the dictionary), found " +
+                         id_text(m.container_id) + ": a setting changed after encoding");
+  }
+  // Files in frames/ that the manifest does not list: left by an encode of more frames, or by an
+  // interrupted one (a temporary file; encode --resume removes it).
+  if (const auto dir = source->local_directory()) {
+    std::error_code ec;
+    for (const auto& entry : fs::directory_iterator(*dir / "frames", ec)) {
+      const std::string name = entry.path().filename().string();
+      bool listed = false;
+      for (const auto& f : m.frames) listed = listed || (f && "frames/" + name == f->file);
+      for (std::size_t t = 0; !listed && t < m.frames.size(); ++t)
+        listed = !m.frames[t] && "frames/" + name == frame_file_name(t);  // not written yet
+      if (!listed)
+        problems.push_back(entry.path().string() +
+                           (name.find(".tmp-") != std::string::npos
+                                ? ": a temporary file an interrupted encode left (encode --resume "
+                                  "removes it)"
+                                : ": a file the manifest does not list (frame_count " +
+                                      std::to_string(m.frames.size()) + ")"));
     }
   }
   TimeStepDecoder steps(*container);

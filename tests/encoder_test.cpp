@@ -1220,18 +1220,24 @@ void write_ramp(const std::filesystem::path& path, const Dims& dims) {
   w.finish();
 }
 
-TEST(Container, VerifyChecksHistogramsAgainstTheDecodedBricks) {
-  test::TempDir dir("container-histograms");
-  // A ramp along x over three bricks: each leaf holds about a third of the value range.
-  const Dims dims{90, 20, 20};
+/// A ramp of `dims` in dir/ramp, coded against the DCT basis at ε = 1e-4 (bricks of `size`, 0: the
+/// default) into dir/NAME; returns the container's path.
+std::filesystem::path encode_ramp(const std::filesystem::path& dir, const Dims& dims,
+                                  const std::string& name, std::uint32_t size = 0) {
   write_ramp(dir / "ramp", dims);
-  const auto series = datasets::open_series(dir / "ramp");
   format::write_dictionary_file(dir / "dct.bin", format::dct_dictionary(6, "test"));
   encoder::EncodeJob job;
   job.coding.tolerance = 1e-4;
+  if (size != 0) job.coding.brick_size = size;
   job.dictionary_file = dir / "dct.bin";
-  const auto good = dir / "good.vreel";
-  encoder::encode_series(*series, good, job);
+  encoder::encode_series(*datasets::open_series(dir / "ramp"), dir / name, job);
+  return dir / name;
+}
+
+TEST(Container, VerifyChecksHistogramsAgainstTheDecodedBricks) {
+  test::TempDir dir("container-histograms");
+  // A ramp along x over three bricks: each leaf holds about a third of the value range.
+  const auto good = encode_ramp(dir.path(), Dims{90, 20, 20}, "good.vreel");
   ASSERT_TRUE(format::verify_container(good).empty());
   EXPECT_TRUE(format::Container(good).atoms().dct_basis);  // its decoder sums them separably
   const auto edited = [&](const std::string& name, std::uint64_t leaf_histogram,
@@ -1271,19 +1277,36 @@ TEST(Container, VerifyChecksHistogramsAgainstTheDecodedBricks) {
   EXPECT_NE(none.find("leaves some of them out"), std::string::npos) << none;
 }
 
+TEST(Container, VerifyNamesAnEditedSettingAndFilesTheManifestDoesNotList) {
+  test::TempDir dir("container-edited");
+  const auto out = encode_ramp(dir.path(), Dims{30, 20, 20}, "edited.vreel");
+  ASSERT_TRUE(format::verify_container(out).empty());
+  // The tolerance edited, the manifest's checksum made again: it reads, but its identifier is no
+  // longer the hash of its settings.
+  auto manifest = format::manifest_to_json(format::Container(out).manifest());
+  manifest["tolerance"] = 1.0;
+  std::ofstream(out / "manifest.json") << format::manifest_text(manifest);
+  EXPECT_EQ(format::Container(out).manifest().tolerance, 1.0);
+  // A frame file past the manifest's frames, and a temporary file of an interrupted encode.
+  std::ofstream(out / "frames/000007.vrf") << "x";
+  std::ofstream(out / "frames/000000.vrf.tmp-12") << "x";
+  const auto problems = format::verify_container(out);
+  ASSERT_EQ(problems.size(), 3u);
+  const auto named = [&](const std::string& text) {
+    return std::count_if(problems.begin(), problems.end(),
+                         [&](const std::string& p) { return p.find(text) != std::string::npos; });
+  };
+  EXPECT_EQ(named("manifest.json: expected \"container_id\" "), 1);
+  EXPECT_EQ(named("a setting changed after encoding"), 1);
+  EXPECT_EQ(named("000007.vrf: a file the manifest does not list"), 1);
+  EXPECT_EQ(named("000000.vrf.tmp-12: a temporary file an interrupted encode left"), 1);
+}
+
 TEST(Container, VerifyRefusesABrickCodingFewerBlocksThanItsPositionNeeds) {
   test::TempDir dir("container-box");
   // 90 × 20 × 20 in bricks of 36³: each brick codes 4 blocks in y and z (the volume and the voxel
   // past its end), the first brick 6 in x.
-  const Dims dims{90, 20, 20};
-  write_ramp(dir / "ramp", dims);
-  format::write_dictionary_file(dir / "dct.bin", format::dct_dictionary(6, "test"));
-  encoder::EncodeJob job;
-  job.coding.tolerance = 1e-4;
-  job.coding.brick_size = 36;
-  job.dictionary_file = dir / "dct.bin";
-  const auto out = dir / "box.vreel";
-  encoder::encode_series(*datasets::open_series(dir / "ramp"), out, job);
+  const auto out = encode_ramp(dir.path(), Dims{90, 20, 20}, "box.vreel", 36);
   ASSERT_TRUE(format::verify_container(out).empty());
   // The first finest brick written again with one x layer of blocks fewer: a valid payload, but
   // its position needs that layer.
