@@ -324,6 +324,15 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes,
 
 void write_dictionary_file(const std::filesystem::path& path, const DictionaryFile& dictionary) {
   const auto bytes = serialize_dictionary_file(dictionary);
+  // Folders that do not exist yet are made, as for a container (detail::check_writable found
+  // that they can be).
+  if (path.has_parent_path()) {
+    std::error_code ec;
+    std::filesystem::create_directories(path.parent_path(), ec);
+    if (ec)
+      throw FormatError(
+          path, "cannot create its folder '" + path.parent_path().string() + "': " + ec.message());
+  }
   detail::write_file_atomically(path, bytes);
 }
 

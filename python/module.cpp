@@ -24,6 +24,7 @@
 #include "volreel/dictionary/training.hpp"
 #include "volreel/encoder/encode.hpp"
 #include "volreel/format/container.hpp"
+#include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
 #include "volreel/format/time_step.hpp"
@@ -318,6 +319,32 @@ py::dict encode(const py::object& frames, const fs::path& out, std::optional<dou
           int(max_error.has_value()) >
       1)
     throw py::value_error("give at most one of psnr, bps, tolerance and max_error");
+  // What `volreel encode` refuses on its command line, refused here alike.
+  for (const auto& [name, value] :
+       {std::pair{"psnr", psnr}, std::pair{"bps", bps}, std::pair{"tolerance", tolerance},
+        std::pair{"max_error", max_error}, std::pair{"zfp_accuracy", zfp_accuracy}})
+    if (value && !(std::isfinite(*value) && *value > 0))
+      throw py::value_error(std::string(name) + " must be a finite number > 0, not " +
+                            py::repr(py::float_(*value)).cast<std::string>());
+  if (overwrite && resume)
+    throw py::value_error("overwrite and resume exclude each other: give one");
+  if (atoms < 0 || atoms > static_cast<int>(format::dictionary_max_atoms))
+    throw py::value_error("atoms must be 0 (try the sizes and keep the best) or 1.." +
+                          std::to_string(format::dictionary_max_atoms) + ", not " +
+                          std::to_string(atoms));
+  if (codec == "zfp") {
+    const std::pair<const char*, bool> ksvd_only[] = {
+        {"psnr", psnr.has_value()},           {"bps", bps.has_value()},
+        {"tolerance", tolerance.has_value()}, {"max_error", max_error.has_value()},
+        {"dictionary", !dictionary.empty()},  {"atoms", atoms != 0}};
+    for (const auto& [name, given] : ksvd_only)
+      if (given)
+        throw py::value_error(std::string(name) +
+                              " applies to the ksvd codec: codec=\"zfp\" codes every brick to one "
+                              "absolute accuracy, zfp_accuracy (default range*1e-3)");
+  } else if (zfp_accuracy) {
+    throw py::value_error("zfp_accuracy applies to codec=\"zfp\" only");
+  }
   if (max_keyframe_gap && (*max_keyframe_gap < 1 || *max_keyframe_gap > 65535))
     throw py::value_error("max_keyframe_gap must be in 1..65535 (1: every frame a keyframe), not " +
                           std::to_string(*max_keyframe_gap));
@@ -397,7 +424,13 @@ py::dict train(const py::object& frames, const fs::path& out, int atoms, std::op
                std::optional<double> tolerance, const std::optional<std::vector<double>>& times,
                bool overwrite) {
   if (psnr && tolerance) throw py::value_error("give psnr or tolerance, not both");
-  if (atoms < 1) throw py::value_error("atoms must be at least 1");
+  for (const auto& [name, value] : {std::pair{"psnr", psnr}, std::pair{"tolerance", tolerance}})
+    if (value && !(std::isfinite(*value) && *value > 0))
+      throw py::value_error(std::string(name) + " must be a finite number > 0, not " +
+                            py::repr(py::float_(*value)).cast<std::string>());
+  if (atoms < 1 || atoms > static_cast<int>(format::dictionary_max_atoms))
+    throw py::value_error("atoms must be in 1.." + std::to_string(format::dictionary_max_atoms) +
+                          ", not " + std::to_string(atoms));
   if (fs::is_directory(out))
     throw InputError("'" + out.string() + "' is a directory: out names the dictionary file");
   if (!overwrite && fs::exists(fs::symlink_status(out)))

@@ -30,9 +30,10 @@ grep -q "PSNR >= 50.00 dB" "$work/train.txt" || fail "default --psnr 50 not repo
 grep -q "^level 1/1 iteration  8/8" "$work/flat.txt" || fail "flat training should run 8 iterations on one level"
 grep -q "tolerance eps = 0.01 " "$work/flat.txt" || fail "--tolerance not used"
 
-# Same seed, same bytes.
-"$volreel" train "$work/a" --out "$work/d2.bin" --atoms 256 --coreset 400k --levels 3 --iterations 2 > /dev/null 2>&1
-cmp -s "$work/d.bin" "$work/d2.bin" || fail "training is not deterministic for a seed"
+# Same seed, same bytes; folders of --out that do not exist yet are made.
+"$volreel" train "$work/a" --out "$work/new/sub/d2.bin" --atoms 256 --coreset 400k --levels 3 --iterations 2 > /dev/null 2>&1 \
+  || fail "train into folders that do not exist yet"
+cmp -s "$work/d.bin" "$work/new/sub/d2.bin" || fail "training is not deterministic for a seed"
 
 # Bad input: clear messages, non-zero exit.
 expect_error() {  # expect_error "message fragment" volreel-args...

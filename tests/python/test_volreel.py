@@ -145,6 +145,25 @@ def test_bad_input_raises_with_the_library_message(container, tmp_path):
         volreel.encode(np.zeros((0, 8, 8, 8), np.float32), tmp_path / "empty.vreel", codec="zfp")
     with pytest.raises(ValueError, match="max_keyframe_gap must be in 1..65535"):
         volreel.encode(np.zeros((2, 8, 8, 8)), tmp_path / "x.vreel", max_keyframe_gap=0)
+    # What `volreel encode` refuses on its command line, refused alike, before anything is written.
+    zeros = np.zeros((2, 8, 8, 8), np.float32)
+    for kwargs, message in [
+        ({"psnr": -5}, "psnr must be a finite number > 0"),
+        ({"psnr": 0}, "psnr must be a finite number > 0"),
+        ({"psnr": float("inf")}, "psnr must be a finite number > 0"),
+        ({"bps": -1}, "bps must be a finite number > 0"),
+        ({"codec": "zfp", "psnr": 40}, "psnr applies to the ksvd codec"),
+        ({"codec": "zfp", "bps": 2}, "bps applies to the ksvd codec"),
+        ({"codec": "zfp", "dictionary": "dct"}, "dictionary applies to the ksvd codec"),
+        ({"codec": "zfp", "atoms": 128}, "atoms applies to the ksvd codec"),
+        ({"zfp_accuracy": 0.01}, 'zfp_accuracy applies to codec="zfp" only'),
+        ({"codec": "zfp", "zfp_accuracy": 0}, "zfp_accuracy must be a finite number > 0"),
+        ({"atoms": -1}, r"atoms must be 0 \(try the sizes and keep the best\) or 1..65536, not -1"),
+        ({"overwrite": True, "resume": True}, "overwrite and resume exclude each other"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            volreel.encode(zeros, tmp_path / "x.vreel", **kwargs)
+    assert not (tmp_path / "x.vreel").exists()
     # Levels count from the finest when negative, in frame() and level_dims() alike.
     assert c.level_dims(-1) == c.dims and c.level_dims(-c.levels) == c.level_dims(0)
     with pytest.raises(IndexError, match=r"level -5 is out of range"):
@@ -229,6 +248,11 @@ def test_train_then_encode_with_the_dictionary(series, tmp_path):
     volreel.train(frames, tmp_path / "d.bin", atoms=32, psnr=45, overwrite=True)
     with pytest.raises(volreel.InputError, match="is a directory"):
         volreel.train(frames, tmp_path, atoms=16)
+    with pytest.raises(ValueError, match="psnr must be a finite number > 0"):
+        volreel.train(frames, tmp_path / "p.bin", atoms=16, psnr=0)
+    # Folders that do not exist yet are made, as encode makes them for a container.
+    volreel.train(frames, tmp_path / "new" / "sub" / "d.bin", atoms=16)
+    assert (tmp_path / "new" / "sub" / "d.bin").stat().st_size > 0
     s = volreel.encode(frames, tmp_path / "t.vreel", dictionary=str(tmp_path / "d.bin"), psnr=45)
     assert s["psnr"] >= 45 - 0.05
 
