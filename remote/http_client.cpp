@@ -109,9 +109,15 @@ HttpResponse finish(Transfer& t, CURLcode code, const HttpOptions& o) {
   const std::string what = t.what();
   const std::string expected_size = t.bytes > 0 ? std::to_string(t.bytes) + " bytes"
                                                 : "at most " + std::to_string(t.limit) + " bytes";
+  // A range answered with the whole file (HTTP 200): the body runs past the range first.
+  const std::string no_ranges = what +
+                                ": expected HTTP 206 (a byte range), found HTTP 200 (the server "
+                                "does not serve byte ranges)";
   if (code != CURLE_OK) {
     if (t.over_limit) {
-      r.error = what + ": expected " + expected_size + ", found more";
+      r.error = t.bytes > 0 && status == 200
+                    ? no_ranges
+                    : what + ": expected " + expected_size + ", found more";
     } else {
       if (code == CURLE_OPERATION_TIMEDOUT) {
         r.error = what + ": " + timeout_error(t.easy, t, o);
@@ -126,8 +132,7 @@ HttpResponse finish(Transfer& t, CURLcode code, const HttpOptions& o) {
   const long wanted = t.bytes > 0 ? 206 : 200;
   if (status != wanted) {
     if (t.bytes > 0 && status == 200)
-      r.error = what + ": expected HTTP 206 (a byte range), found HTTP 200 (the server does not " +
-                "serve byte ranges)";
+      r.error = no_ranges;
     else
       r.error = what + ": expected HTTP " + std::to_string(wanted) + ", found HTTP " +
                 std::to_string(status) +

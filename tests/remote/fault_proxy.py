@@ -14,6 +14,8 @@ MODE_FILE (missing or empty: "pass"):
     truncate    half of the body, then the connection closed (Content-Length promises all of it)
     stall       one byte of the body, then nothing for 60 seconds
     status N    HTTP status N with an empty body, the upstream not asked
+    whole       the request passed without its Range header: the whole file, HTTP 200 (a server
+                that does not serve byte ranges)
 """
 import http.client
 import http.server
@@ -63,7 +65,7 @@ class Handler(http.server.BaseHTTPRequestHandler):
             self.end_headers()
             return
         upstream = http.client.HTTPConnection("127.0.0.1", UPSTREAM, timeout=30)
-        headers = {k: v for k, v in self.headers.items() if k.lower() == "range"}
+        headers = {k: v for k, v in self.headers.items() if k.lower() == "range" and m != "whole"}
         upstream.request("GET", self.path, headers=headers)
         answer = upstream.getresponse()
         body = bytearray(answer.read())

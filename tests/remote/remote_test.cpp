@@ -356,6 +356,7 @@ TEST_F(RemoteContainer, ErrorStatusesTruncationAndStallsAreClearErrors) {
        std::vector<std::pair<std::string, std::string>>{{"status 404", "found HTTP 404"},
                                                         {"status 503", "found HTTP 503"},
                                                         {"status 200", "found HTTP 200"},
+                                                        {"whole", "does not serve byte ranges"},
                                                         {"truncate", "bytes"},
                                                         {"stall", "no byte arrived for 1 s"},
                                                         {"flip", "payload corrupt"}}) {
