@@ -179,7 +179,6 @@ std::string settings_difference(const format::Manifest& old, const format::Manif
                ? nlohmann::json{{"crc32c", m.dictionary->crc32c}, {"bytes", m.dictionary->bytes}}
                : nlohmann::json(nullptr);
   };
-  differ("dictionary", dictionary(old), dictionary(now));
   // The coding choices recorded in the provenance (pursuit, mean bits, rate rule and its
   // parameters).
   const nlohmann::json a = coding_choices_of(old), b = coding_choices_of(now);
@@ -189,6 +188,10 @@ std::string settings_difference(const format::Manifest& old, const format::Manif
   for (const auto& key : keys)
     differ(key, a.contains(key) ? a[key] : nlohmann::json(nullptr),
            b.contains(key) ? b[key] : nlohmann::json(nullptr));
+  // The stored dictionary carries the container identifier, a hash of the settings: where one
+  // of them differs, so does the dictionary's checksum, and naming it would blame a dictionary
+  // the user did not change.
+  if (out.empty()) differ("dictionary", dictionary(old), dictionary(now));
   std::string joined;
   for (const auto& d : out) joined += (joined.empty() ? "" : "; ") + d;
   return joined;
@@ -284,7 +287,8 @@ bool prepare_container(const fs::path& out, const EncodeJob& job, format::Manife
       const format::Container old(out, true);
       if (const std::string d = settings_difference(old.manifest(), m); !d.empty())
         throw InputError("'" + out.string() + "' was encoded with other settings: " + d +
-                         "; cannot --resume it: give the same options (pursuit: --pursuit, "
+                         "; cannot --resume it: give the same options (tolerance: "
+                         "--tolerance, --psnr or --bps as before; pursuit: --pursuit, "
                          "level_tolerance_factor: --level-factor, level_detail_ratio: "
                          "--level-detail, mean_bits: --mean-bits, "
                          "rate_rule: --rate-rule, brick size: --brick-size) or --overwrite to "
