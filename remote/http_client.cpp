@@ -4,6 +4,8 @@
 #include <curl/curl.h>
 
 #include <algorithm>
+#include <chrono>
+#include <cmath>
 #include <deque>
 #include <mutex>
 #include <stdexcept>
@@ -27,6 +29,11 @@ struct Transfer {
   std::vector<std::byte> body;
   std::string content_range;
   bool over_limit = false;
+  /// The last time a body byte arrived, and whether the transfer was stopped for no byte since
+  /// for the stall timeout (on_progress).
+  std::chrono::steady_clock::time_point last_byte{};
+  double stall_timeout_s = 0;
+  bool stalled = false;
   char error[CURL_ERROR_SIZE] = {};
   std::atomic<std::uint64_t>* received = nullptr;
   CURL* easy = nullptr;
@@ -48,7 +55,22 @@ std::size_t on_body(char* data, std::size_t size, std::size_t count, void* user)
   const auto* p = reinterpret_cast<const std::byte*>(data);
   t->body.insert(t->body.end(), p, p + n);
   *t->received += n;
+  t->last_byte = std::chrono::steady_clock::now();
   return n;
+}
+
+/// libcurl's progress callback, called about once a second while nothing arrives: stops a
+/// transfer whose body began and then got no byte for the stall timeout. (LOW_SPEED_TIME, which
+/// covers the wait before the first byte, follows an average speed over the last seconds, so
+/// after a burst it notices a stall seconds late.)
+int on_progress(void* user, curl_off_t, curl_off_t, curl_off_t, curl_off_t) {
+  auto* t = static_cast<Transfer*>(user);
+  if (t->body.empty()) return 0;
+  const double idle =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t->last_byte).count();
+  if (idle < t->stall_timeout_s) return 0;
+  t->stalled = true;
+  return 1;  // aborts the transfer (CURLE_ABORTED_BY_CALLBACK)
 }
 
 std::size_t on_header(char* data, std::size_t size, std::size_t count, void* user) {
@@ -119,7 +141,7 @@ HttpResponse finish(Transfer& t, CURLcode code, const HttpOptions& o) {
                     ? no_ranges
                     : what + ": expected " + expected_size + ", found more";
     } else {
-      if (code == CURLE_OPERATION_TIMEDOUT) {
+      if (code == CURLE_OPERATION_TIMEDOUT || (code == CURLE_ABORTED_BY_CALLBACK && t.stalled)) {
         r.error = what + ": " + timeout_error(t.easy, t, o);
       } else {
         r.error = what + ": " + curl_easy_strerror(code);
@@ -200,6 +222,10 @@ struct HttpClient::Impl {
     curl_easy_setopt(e, CURLOPT_LOW_SPEED_LIMIT, 1L);
     curl_easy_setopt(e, CURLOPT_LOW_SPEED_TIME,
                      std::max(1L, static_cast<long>(o.stall_timeout_s + 0.5)));
+    t.stall_timeout_s = std::max(1.0, std::round(o.stall_timeout_s));
+    curl_easy_setopt(e, CURLOPT_XFERINFOFUNCTION, on_progress);
+    curl_easy_setopt(e, CURLOPT_XFERINFODATA, &t);
+    curl_easy_setopt(e, CURLOPT_NOPROGRESS, 0L);
     curl_easy_setopt(e, CURLOPT_HTTP_VERSION, static_cast<long>(CURL_HTTP_VERSION_2TLS));
     curl_easy_setopt(e, CURLOPT_PIPEWAIT, 1L);
     curl_easy_setopt(e, CURLOPT_TCP_KEEPALIVE, 1L);

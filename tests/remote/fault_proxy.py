@@ -13,6 +13,7 @@ MODE_FILE (missing or empty: "pass"):
     flip        byte ranges (HTTP 206) with one byte of the body changed
     truncate    half of the body, then the connection closed (Content-Length promises all of it)
     stall       one byte of the body, then nothing for 60 seconds
+    stall half  half of the body at once, then nothing for 60 seconds
     status N    HTTP status N with an empty body, the upstream not asked
     whole       the request passed without its Range header: the whole file, HTTP 200 (a server
                 that does not serve byte ranges)
@@ -83,8 +84,8 @@ class Handler(http.server.BaseHTTPRequestHandler):
             self.wfile.flush()
             self.close_connection = True
             self.connection.shutdown(socket.SHUT_RDWR)
-        elif m == "stall":
-            self.wfile.write(body[:1])
+        elif m in ("stall", "stall half"):
+            self.wfile.write(body[: 1 if m == "stall" else len(body) // 2])
             self.wfile.flush()
             time.sleep(60)
             self.close_connection = True

@@ -388,6 +388,20 @@ TEST_F(RemoteContainer, ErrorStatusesTruncationAndStallsAreClearErrors) {
     EXPECT_NE(what.find("then stopped sending"), std::string::npos) << what;
     EXPECT_NE(what.find("the last of 2 tries over "), std::string::npos) << what;
   }
+  // Half the body at once, then nothing: each try ends about a second after its last byte (the
+  // progress callback), where libcurl's average speed over its last seconds (LOW_SPEED_TIME
+  // alone) took 6 s a try after such a burst: 2 tries well under 8 s.
+  proxy.set_mode("stall half");
+  try {
+    format::Container again(std::make_shared<HttpSource>(proxy.url("test.vreel"), o));
+    ADD_FAILURE() << "opened";
+  } catch (const NetworkError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("no byte arrived for 1 s after "), std::string::npos) << what;
+    const std::size_t over = what.find("the last of 2 tries over ");
+    ASSERT_NE(over, std::string::npos) << what;
+    EXPECT_LT(std::stod(what.substr(over + 25)), 8.0) << what;
+  }
 }
 
 TEST_F(RemoteContainer, CancelEndsWhatRunsAndNotWhatComesAfter) {
