@@ -332,6 +332,10 @@ py::dict encode(const py::object& frames, const fs::path& out, std::optional<dou
     throw py::value_error("atoms must be 0 (try the sizes and keep the best) or 1.." +
                           std::to_string(format::dictionary_max_atoms) + ", not " +
                           std::to_string(atoms));
+  if (!dictionary.empty() && atoms != 0)
+    throw py::value_error(
+        "atoms sizes the dictionary trained when none is given: give dictionary or atoms, not "
+        "both");
   if (codec == "zfp") {
     const std::pair<const char*, bool> ksvd_only[] = {
         {"psnr", psnr.has_value()},           {"bps", bps.has_value()},

@@ -249,6 +249,9 @@ expect_error "encode the series again" "$volreel" info "$work/m.vreel"
 # container a whole-frame encode writes; --psnr holds; what piecewise coding cannot do is refused.
 "$volreel" gen analytic --field blobs --dims 40x36x120 --frames 3 --out "$work/tall" 2>/dev/null
 "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --max-keyframe-gap 1 --out "$work/whole.vreel" > /dev/null 2>&1
+# info tells the learned atoms from the DCT basis's 215, which the container's dictionary carries.
+"$volreel" info "$work/whole.vreel" | grep -q "^dictionary dictionary.bin: [0-9]* atoms ([0-9]* learned and the 215 of the DCT basis)" \
+  || fail "info's dictionary line: $("$volreel" info "$work/whole.vreel" | grep dictionary)"
 "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1200K --out "$work/pieces.vreel" > "$work/pieces.txt" 2>&1 ||
   fail "encode --memory 1200K: $(cat "$work/pieces.txt")"
 grep -q "do not fit --memory (1.17 MiB) whole: each is coded piecewise" "$work/pieces.txt" || fail "--memory report: $(cat "$work/pieces.txt")"
@@ -262,6 +265,8 @@ expect_error "bps codes sample frames whole" "$volreel" encode "$work/tall" --di
 expect_error "holds about 1.09 MiB of planes: give at least that --memory" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 100k --out "$work/x.vreel"
 expect_error "expected a size such as 2G" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory lots --out "$work/x.vreel"
 expect_error "--atoms: expected a number in \\[0, 65536\\]" "$volreel" encode "$work/tall" --atoms -5 --out "$work/x.vreel"
+expect_error "\\(--atoms excludes --dictionary\\|--dictionary excludes --atoms\\)" "$volreel" encode "$work/tall" --atoms 128 --dictionary dct --out "$work/x.vreel"
+expect_error "\\(--dims excludes --size\\|--size excludes --dims\\)" "$volreel" gen analytic --size 16 --dims 8x8x8 --out "$work/x.vreel"
 [ ! -e "$work/x.vreel" ] || fail "a refused encode left a container behind"
 
 # SIGTERM (as Ctrl-C's SIGINT, which a background job ignores) stops an encode between frames: the

@@ -160,6 +160,7 @@ def test_bad_input_raises_with_the_library_message(container, tmp_path):
         ({"codec": "zfp", "zfp_accuracy": 0}, "zfp_accuracy must be a finite number > 0"),
         ({"atoms": -1}, r"atoms must be 0 \(try the sizes and keep the best\) or 1..65536, not -1"),
         ({"overwrite": True, "resume": True}, "overwrite and resume exclude each other"),
+        ({"dictionary": "dct", "atoms": 128}, "give dictionary or atoms, not both"),
     ]:
         with pytest.raises(ValueError, match=message):
             volreel.encode(zeros, tmp_path / "x.vreel", **kwargs)

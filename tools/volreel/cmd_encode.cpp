@@ -257,7 +257,7 @@ void add_encode_command(CLI::App& app) {
          "Raw series directory, HDF5 file, raw file or quoted pattern of raw files (see below)")
       ->required();
   cmd->add_option("--out", o->out, "The container directory to write, e.g. turb.vreel")->required();
-  cmd->add_option(
+  CLI::Option* dictionary_opt = cmd->add_option(
       "--dictionary", o->dictionary,
       "Dictionary from volreel train, or 'dct' for the DCT basis alone (no learned "
       "atoms: nothing to\ntrain or store; for series too small to pay for a "
@@ -269,7 +269,8 @@ void add_encode_command(CLI::App& app) {
                   "the smallest container, dictionary included;\na K whose dictionary alone is "
                   "at least the smallest container estimated so far is not trained, nor\nthe sizes "
                   "after two in a row whose estimate rose)")
-      ->check(in_range(0, 65536));
+      ->check(in_range(0, 65536))
+      ->excludes(dictionary_opt);
   o->tolerance_opt = cmd->add_option(
       "--tolerance", o->tolerance,
       "eps, data units: an atom is kept if it lowers its block's squared error by at least\n"

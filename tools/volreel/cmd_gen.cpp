@@ -195,10 +195,11 @@ void add_gen_command(CLI::App& app) {
       ->add_option("--field", a->field,
                    "blobs, rotating, noise or plume (a plume rising into a still box)")
       ->capture_default_str();
-  analytic->add_option("--size", a->size, "Voxels per side of a cube")
-      ->check(CLI::Range(1, 1 << 20))
-      ->capture_default_str();
-  analytic->add_option("--dims", a->dims, "XxYxZ instead of a cube, e.g. 96x64x48");
+  CLI::Option* analytic_size = analytic->add_option("--size", a->size, "Voxels per side of a cube")
+                                   ->check(CLI::Range(1, 1 << 20))
+                                   ->capture_default_str();
+  analytic->add_option("--dims", a->dims, "XxYxZ instead of a cube, e.g. 96x64x48")
+      ->excludes(analytic_size);
   analytic->add_option("--frames", a->frames, "Frames")
       ->check(in_range(1, 1e8))
       ->capture_default_str();

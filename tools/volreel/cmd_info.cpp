@@ -91,8 +91,21 @@ void run_info(const std::string& dir, bool json, const RemoteCli& remote) {
       std::printf("fixed rate S = %u\n", m.fixed_sparsity);
     else
       std::printf("variable rate, eps = %.6g\n", m.tolerance);
-    std::printf("dictionary %s: %u atoms, %ju bytes\n", m.dictionary->file.c_str(),
-                m.dictionary->atom_count, static_cast<std::uintmax_t>(m.dictionary->bytes));
+    // The DCT basis's M³ − 1 atoms follow the learned ones where the dictionary has them.
+    const std::uint32_t dct =
+        c.atoms().dct_basis ? m.block_size * m.block_size * m.block_size - 1 : 0;
+    if (dct > 0 && m.dictionary->atom_count > dct)
+      std::printf("dictionary %s: %u atoms (%u learned and the %u of the DCT basis), %ju bytes\n",
+                  m.dictionary->file.c_str(), m.dictionary->atom_count,
+                  m.dictionary->atom_count - dct, dct,
+                  static_cast<std::uintmax_t>(m.dictionary->bytes));
+    else if (dct > 0)
+      std::printf("dictionary %s: the DCT basis alone (%u atoms), %ju bytes\n",
+                  m.dictionary->file.c_str(), m.dictionary->atom_count,
+                  static_cast<std::uintmax_t>(m.dictionary->bytes));
+    else
+      std::printf("dictionary %s: %u atoms, %ju bytes\n", m.dictionary->file.c_str(),
+                  m.dictionary->atom_count, static_cast<std::uintmax_t>(m.dictionary->bytes));
   } else {
     std::printf("codec    zfp fixed accuracy %.6g\n", m.zfp_accuracy);
   }

@@ -85,6 +85,10 @@ void print_breakdown(const encoder::EncodeSummary& s) {
     std::printf(
         "\ncoded with the DCT basis alone (the learned atoms did not pay): %zu of %zu bricks",
         s.split_bricks, bricks);
+  if (s.split_bricks > 0 && s.split_bricks == bricks)
+    std::printf(
+        "\nnote: no brick used the dictionary's learned atoms, which the container stores all the "
+        "same: --dictionary dct leaves them out");
   std::printf("\n");
 }
 
