@@ -310,11 +310,15 @@ encoder::EncodeEvents interruptible_events(SignalCheck& check) {
 
 py::dict encode(const py::object& frames, const fs::path& out, std::optional<double> psnr,
                 std::optional<double> bps, std::optional<double> tolerance,
-                std::optional<double> max_error, const std::string& dictionary,
+                std::optional<double> max_error, const py::object& dictionary_arg,
                 const std::string& codec, std::optional<double> zfp_accuracy, int atoms,
                 std::optional<std::uint32_t> max_keyframe_gap, bool overwrite, bool resume,
                 const std::optional<std::vector<double>>& times, const std::string& variable,
-                const std::string& brick_size) {
+                const py::object& brick_size_arg) {
+  // dictionary: a str or a path (os.PathLike); brick_size: "auto" or a number, as text or int.
+  const std::string dictionary =
+      py::str(py::module_::import("os").attr("fspath")(dictionary_arg)).cast<std::string>();
+  const std::string brick_size = py::str(brick_size_arg).cast<std::string>();
   if (int(psnr.has_value()) + int(bps.has_value()) + int(tolerance.has_value()) +
           int(max_error.has_value()) >
       1)

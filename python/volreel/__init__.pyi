@@ -57,7 +57,7 @@ def encode(
     bps: Optional[float] = None,
     tolerance: Optional[float] = None,
     max_error: Optional[float] = None,
-    dictionary: str = "",
+    dictionary: Union[str, os.PathLike[str]] = "",
     codec: str = "ksvd",
     zfp_accuracy: Optional[float] = None,
     atoms: int = 0,
@@ -66,7 +66,7 @@ def encode(
     resume: bool = False,
     times: Optional[Sequence[float]] = None,
     variable: str = "",
-    brick_size: str = "auto",
+    brick_size: Union[str, int] = "auto",
 ) -> dict[str, Any]: ...
 def train(
     frames: Frames,

@@ -11,6 +11,8 @@ import threading
 import time
 from pathlib import Path
 
+import pathlib
+
 import numpy as np
 import pytest
 
@@ -165,6 +167,11 @@ def test_bad_input_raises_with_the_library_message(container, tmp_path):
         with pytest.raises(ValueError, match=message):
             volreel.encode(zeros, tmp_path / "x.vreel", **kwargs)
     assert not (tmp_path / "x.vreel").exists()
+    # A brick size as a number and a dictionary as a path, as `out` may be one.
+    small = np.random.default_rng(1).random((2, 20, 20, 20), dtype=np.float32)
+    s = volreel.encode(small, tmp_path / "b.vreel", dictionary=Path("dct"), brick_size=12)
+    assert s["frames"] == 2 and volreel.open(tmp_path / "b.vreel").info()["brick_size"] == 12
+    shutil.rmtree(tmp_path / "b.vreel")
     # Levels count from the finest when negative, in frame() and level_dims() alike.
     assert c.level_dims(-1) == c.dims and c.level_dims(-c.levels) == c.level_dims(0)
     with pytest.raises(IndexError, match=r"level -5 is out of range"):
