@@ -256,8 +256,12 @@ TEST(DictionaryFile, BadFieldsNameTheirOffset) {
 TEST(DictionaryFile, MissingFileAndBadWritesAreErrors) {
   volreel::test::TempDir dir("dictfile-missing");
   EXPECT_THROW(read_dictionary_file(dir / "nope.bin"), FormatError);
-  EXPECT_THROW(write_dictionary_file(dir / "no-such-dir" / "d.bin", small_dictionary()),
-               FormatError);
+  // Folders that do not exist yet are made, as for a container; under a file nothing can be.
+  write_dictionary_file(dir / "no-such-dir" / "d.bin", small_dictionary());
+  EXPECT_EQ(read_dictionary_file(dir / "no-such-dir" / "d.bin").atom_count,
+            small_dictionary().atom_count);
+  std::ofstream(dir / "file") << "x";
+  EXPECT_THROW(write_dictionary_file(dir / "file" / "d.bin", small_dictionary()), FormatError);
   DictionaryFile inconsistent = small_dictionary();
   inconsistent.atoms.pop_back();
   EXPECT_THROW(serialize_dictionary_file(inconsistent), FormatError);
