@@ -8,6 +8,7 @@
 #include <cstring>
 #include <limits>
 #include <string>
+#include <unordered_set>
 
 #include "volreel/format/brick_decode.h"
 #include "volreel/format/crc32c.hpp"
@@ -653,14 +654,13 @@ std::vector<std::string> verify_container(std::shared_ptr<const ContainerSource>
   // Files in frames/ that the manifest does not list: left by an encode of more frames, or by an
   // interrupted one (a temporary file; encode --resume removes it).
   if (const auto dir = source->local_directory()) {
+    std::unordered_set<std::string> listed;  // written frames' files, and the names of the rest
+    for (std::size_t t = 0; t < m.frames.size(); ++t)
+      listed.insert(m.frames[t] ? m.frames[t]->file : frame_file_name(t));
     std::error_code ec;
     for (const auto& entry : fs::directory_iterator(*dir / "frames", ec)) {
       const std::string name = entry.path().filename().string();
-      bool listed = false;
-      for (const auto& f : m.frames) listed = listed || (f && "frames/" + name == f->file);
-      for (std::size_t t = 0; !listed && t < m.frames.size(); ++t)
-        listed = !m.frames[t] && "frames/" + name == frame_file_name(t);  // not written yet
-      if (!listed)
+      if (!listed.contains("frames/" + name))
         problems.push_back(entry.path().string() +
                            (name.find(".tmp-") != std::string::npos
                                 ? ": a temporary file an interrupted encode left (encode --resume "
