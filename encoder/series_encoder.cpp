@@ -287,7 +287,7 @@ bool prepare_container(const fs::path& out, const EncodeJob& job, format::Manife
       const format::Container old(out, true);
       if (const std::string d = settings_difference(old.manifest(), m); !d.empty())
         throw InputError("'" + out.string() + "' was encoded with other settings: " + d +
-                         "; cannot --resume it: give the same options (tolerance: "
+                         "; to continue it with --resume give the same options (tolerance: "
                          "--tolerance, --psnr or --bps as before; pursuit: --pursuit, "
                          "level_tolerance_factor: --level-factor, level_detail_ratio: "
                          "--level-detail, mean_bits: --mean-bits, "

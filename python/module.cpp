@@ -10,6 +10,7 @@
 #include <omp.h>
 #include <unistd.h>
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -19,6 +20,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <string_view>
 
 #include "volreel/datasets/series.hpp"
 #include "volreel/dictionary/training.hpp"
@@ -41,11 +43,68 @@ namespace {
 
 using FloatArray = py::array_t<float, py::array::c_style | py::array::forcecast>;
 
+/// Set while a thread runs a call from Python that may wait for the network: the only threads
+/// on which remote reads look for Python's pending signals. A thread the library starts while the
+/// caller holds the GIL must not wait for it.
+thread_local bool python_caller = false;
+
+struct PythonCall {
+  PythonCall() { python_caller = true; }
+  ~PythonCall() { python_caller = false; }
+  PythonCall(const PythonCall&) = delete;
+  PythonCall& operator=(const PythonCall&) = delete;
+};
+
+/// How a URL is read (volreel.open's keywords, the command line's --tries, --stall-timeout,
+/// --connections, --cache, --cache-size and --ca-file); a signal handler's exception
+/// (KeyboardInterrupt on Ctrl-C) ends a wait for the server.
+struct UrlOptions {
+  unsigned tries = remote::RemoteOptions{}.attempts;
+  double stall_timeout = remote::HttpOptions{}.stall_timeout_s;
+  unsigned connections = remote::HttpOptions{}.max_connections;
+  std::optional<fs::path> cache;
+  std::string cache_size = "2G";
+  std::optional<fs::path> ca_file;
+
+  remote::RemoteOptions checked() const {
+    const auto bad = [](const std::string& what) { throw InputError(what); };
+    if (tries < 1 || tries > 20)
+      bad("tries: expected 1..20 tries of a read, found " + std::to_string(tries));
+    if (!(stall_timeout >= 1 && stall_timeout <= 3600))
+      bad("stall_timeout: expected 1..3600 seconds, found " + std::to_string(stall_timeout));
+    if (connections < 1 || connections > 64)
+      bad("connections: expected 1..64 connections, found " + std::to_string(connections));
+    if (ca_file && !fs::is_regular_file(*ca_file))
+      bad("ca_file: '" + ca_file->string() +
+          "' is not a file (expected a PEM file of "
+          "certificate authorities)");
+    remote::RemoteOptions o;
+    o.attempts = tries;
+    o.http.stall_timeout_s = stall_timeout;
+    o.http.max_connections = connections;
+    if (ca_file) o.http.ca_file = ca_file->string();
+    if (cache) {
+      o.cache_dir = *cache;
+      try {
+        o.cache_bytes = format::detail::parse_byte_size(cache_size, "cache_size");
+      } catch (const std::invalid_argument& e) {
+        bad(e.what());
+      }
+    }
+    o.while_waiting = [] {
+      if (!python_caller || omp_in_parallel()) return;
+      py::gil_scoped_acquire gil;
+      if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+    };
+    return o;
+  }
+};
+
 /// An open container: its frames decoded as the player draws them (format::TimeStepDecoder).
 class PyContainer {
  public:
-  explicit PyContainer(const std::string& location)
-      : container_(remote::open_source(location)), steps_(container_) {}
+  explicit PyContainer(const std::string& location, const UrlOptions& url = {})
+      : container_(open(location, url)), steps_(container_) {}
 
   const format::Manifest& manifest() const { return container_.manifest(); }
   std::size_t frames() const { return container_.frame_count(); }
@@ -87,6 +146,7 @@ class PyContainer {
     const std::size_t count = static_cast<std::size_t>(out.size());
     {
       py::gil_scoped_release release;
+      const PythonCall call;
       std::lock_guard lock(mutex_);
       steps_.decode(static_cast<std::size_t>(t), static_cast<std::uint32_t>(l), {data, count});
     }
@@ -111,6 +171,14 @@ class PyContainer {
     const auto geometry = format::level_geometry(manifest().dims, manifest().shape());
     if (l >= geometry.size()) throw py::index_error("level " + std::to_string(l));
     return geometry[l].dims;
+  }
+
+  /// The container at `location`, its reads waited for without the GIL.
+  static format::Container open(const std::string& location, const UrlOptions& url) {
+    remote::RemoteOptions options = url.checked();
+    py::gil_scoped_release release;
+    const PythonCall call;
+    return format::Container(remote::open_source(location, options));
   }
 
   py::dict info() const {
@@ -503,6 +571,68 @@ py::tuple as_tuple(const std::array<T, 3>& v) {
   return py::make_tuple(v[0], v[1], v[2]);
 }
 
+/// A message of the library's with the command line's options that volreel.encode, train and open
+/// take as keywords written as those keywords: "--brick-size" as brick_size, "--resume" as
+/// resume=True, "--bps 0.5" as bps=0.5. A flag after "volreel COMMAND " names that command's
+/// own option and stays.
+std::string python_words(const std::string& message) {
+  struct Keyword {
+    std::string_view flag, name;
+    bool flag_only;  ///< a switch: written as name=True
+  };
+  static constexpr Keyword keywords[] = {{"--brick-size", "brick_size", false},
+                                         {"--max-keyframe-gap", "max_keyframe_gap", false},
+                                         {"--zfp-accuracy", "zfp_accuracy", false},
+                                         {"--max-error", "max_error", false},
+                                         {"--tolerance", "tolerance", false},
+                                         {"--dictionary", "dictionary", false},
+                                         {"--overwrite", "overwrite", true},
+                                         {"--variable", "variable", false},
+                                         {"--resume", "resume", true},
+                                         {"--atoms", "atoms", false},
+                                         {"--codec", "codec", false},
+                                         {"--psnr", "psnr", false},
+                                         {"--bps", "bps", false},
+                                         {"--out", "out", false},
+                                         {"--tries", "tries", false},
+                                         {"--stall-timeout", "stall_timeout", false}};
+  const auto word_char = [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) || c == '-';
+  };
+  std::string out;
+  std::size_t i = 0;
+  while (i < message.size()) {
+    const Keyword* hit = nullptr;
+    if (message.compare(i, 2, "--") == 0 && (i == 0 || !word_char(message[i - 1])))
+      for (const Keyword& k : keywords)
+        if (message.compare(i, k.flag.size(), k.flag) == 0 &&
+            (i + k.flag.size() == message.size() || !word_char(message[i + k.flag.size()]))) {
+          hit = &k;
+          break;
+        }
+    // "volreel train --atoms": the command's option.
+    const std::size_t command = out.rfind("volreel ");
+    const bool after_command = command != std::string::npos &&
+                               out.find(' ', command + 8) == out.size() - 1 &&
+                               out.size() > command + 9;
+    if (!hit || after_command) {
+      out += message[i++];
+      continue;
+    }
+    i += hit->flag.size();
+    out += hit->name;
+    if (hit->flag_only) {
+      out += "=True";
+    } else if (i + 1 < message.size() && message[i] == ' ' &&
+               (std::isdigit(static_cast<unsigned char>(message[i + 1])) ||
+                message.compare(i + 1, 3, "dct") == 0)) {
+      out += '=';  // the value that follows
+      ++i;
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 }  // namespace volreel::python
@@ -536,13 +666,27 @@ PYBIND11_MODULE(_volreel, m) {
     } catch (const format::FormatError& e) {
       format_error(e.what());
     } catch (const InputError& e) {
-      input_error(e.what());
+      input_error(python_words(e.what()).c_str());
     }
   });
 
   py::class_<PyContainer>(m, "Container", "A NAME.vreel container opened for reading")
-      .def(py::init<const std::string&>(), py::arg("location"),
-           "Opens a NAME.vreel folder or an http(s):// URL of one")
+      .def(py::init([](const std::string& location, unsigned tries, double stall_timeout,
+                       unsigned connections, std::optional<fs::path> cache,
+                       const std::string& cache_size, std::optional<fs::path> ca_file) {
+             return std::make_unique<PyContainer>(
+                 location, UrlOptions{tries, stall_timeout, connections, std::move(cache),
+                                      cache_size, std::move(ca_file)});
+           }),
+           py::arg("location"), py::kw_only(), py::arg("tries") = UrlOptions{}.tries,
+           py::arg("stall_timeout") = UrlOptions{}.stall_timeout,
+           py::arg("connections") = UrlOptions{}.connections, py::arg("cache") = py::none(),
+           py::arg("cache_size") = UrlOptions{}.cache_size, py::arg("ca_file") = py::none(),
+           "Opens a NAME.vreel folder or an http(s):// URL of one. For a URL: tries of a read "
+           "that fails in a way that may pass (1..20), seconds without a byte before a request "
+           "is given up (stall_timeout), HTTP connections at most, a cache folder kept between "
+           "runs and its size limit (e.g. \"2G\"), and a PEM file of certificate authorities "
+           "to trust instead of the system's (ca_file)")
       .def_property_readonly(
           "dims", [](const PyContainer& c) { return as_tuple(c.manifest().dims); },
           "The finest level's size (x, y, z); frames are arrays [z, y, x]")

@@ -84,6 +84,17 @@ std::uint64_t HttpSource::cache_bytes_served() const {
   return cache_served_;
 }
 
+namespace {
+constexpr std::chrono::milliseconds waiting_call_interval{100};
+}  // namespace
+
+HttpResponse HttpSource::answer(std::future<HttpResponse> response) const {
+  if (options_.while_waiting)
+    while (response.wait_for(waiting_call_interval) != std::future_status::ready)
+      options_.while_waiting();
+  return response.get();
+}
+
 std::vector<std::byte> HttpSource::fetch(const std::string& relative, std::uint64_t offset,
                                          std::uint64_t bytes) const {
   double wait = options_.retry_initial_s;
@@ -91,10 +102,18 @@ std::vector<std::byte> HttpSource::fetch(const std::string& relative, std::uint6
   HttpResponse r;
   unsigned attempt = 1;
   for (;; ++attempt) {
-    r = client_->get(url_ + "/" + relative, offset, bytes).get();
+    r = answer(client_->get(url_ + "/" + relative, offset, bytes));
     if (r.ok()) return std::move(r.body);
     if (!r.transient || attempt >= std::max(1u, options_.attempts)) break;
-    std::this_thread::sleep_for(std::chrono::duration<double>(wait));
+    const auto until = std::chrono::steady_clock::now() +
+                       std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                           std::chrono::duration<double>(wait));
+    for (auto now = std::chrono::steady_clock::now(); now < until;
+         now = std::chrono::steady_clock::now()) {
+      std::this_thread::sleep_for(
+          std::min<std::chrono::steady_clock::duration>(waiting_call_interval, until - now));
+      if (options_.while_waiting) options_.while_waiting();
+    }
     wait = std::min(2 * wait, options_.retry_max_s);
   }
   // The message already names the URL and the range.
@@ -179,7 +198,7 @@ std::string HttpSource::read(const fs::path& file, std::span<const format::ByteR
              ": expected ranges back to back from offset " + std::to_string(begin);
     end += r.bytes;
   }
-  HttpResponse response = client_->get(file.string(), begin, end - begin).get();
+  HttpResponse response = answer(client_->get(file.string(), begin, end - begin));
   if (!response.ok()) return response.error;
   out.reserve(ranges.size());
   for (const format::ByteRange& r : ranges) {

@@ -162,6 +162,10 @@ fi
 grep -q "^volume   24x20x16" "$work/info.txt" || fail "info printed nothing before its error: $(cat "$work/info.txt")"
 grep -q "error: 1 of the [0-9]* frames written could not be read.*000001.vrf: offset 0" "$work/info.err" \
   || fail "info's error: $(cat "$work/info.err")"
+# Into one pipe (a log of 2>&1) the report's lines come before the error that follows them.
+("$volreel" info "$work/abd.vreel" 2>&1 || true) | cat > "$work/info.log"
+tail -n 1 "$work/info.log" | grep -q "error: 1 of the" \
+  || fail "info 2>&1 into a pipe: the error is not the last line: $(cat "$work/info.log")"
 # Volumes smaller than SSIM's window: the other metrics, and a note that says why SSIM is not
 # among them (null in JSON).
 "$volreel" gen analytic --dims 4x4x4 --frames 2 --out "$work/tiny" > /dev/null 2>&1

@@ -85,6 +85,28 @@ class Container(_Container):
                 f"{self.levels} levels, {self.bps:.3f} bps)")
 
 
-def open(location: Union[str, os.PathLike]) -> Container:  # noqa: A001  (volreel.open)
-    """Opens a NAME.vreel folder or an http(s):// URL of one."""
-    return Container(os.fspath(location))
+def open(  # noqa: A001  (volreel.open)
+    location: Union[str, os.PathLike],
+    *,
+    tries: int = 4,
+    stall_timeout: float = 20.0,
+    connections: int = 4,
+    cache: Optional[Union[str, os.PathLike]] = None,
+    cache_size: str = "2G",
+    ca_file: Optional[Union[str, os.PathLike]] = None,
+) -> Container:
+    """Opens a NAME.vreel folder or an http(s):// URL of one.
+
+    The keywords apply to a URL (as `volreel play URL`'s options of the same names):
+    tries: how many times a read of the manifest, dictionary or a frame index is tried when it
+        fails in a way that may pass (timeout, refused or reset connection, HTTP 5xx), 1..20;
+    stall_timeout: seconds without a byte before a request is given up;
+    connections: HTTP connections to the server at most;
+    cache: a folder that keeps what arrives, so that the next run starts warm, of at most
+        cache_size (e.g. "2G", "500M");
+    ca_file: a PEM file of certificate authorities to trust instead of the system's.
+    Ctrl-C (KeyboardInterrupt) ends a wait for the server.
+    """
+    return Container(os.fspath(location), tries=tries, stall_timeout=stall_timeout,
+                     connections=connections, cache=cache, cache_size=cache_size,
+                     ca_file=ca_file)

@@ -13,7 +13,17 @@ class NetworkError(FormatError, ConnectionError): ...
 Frames = Union[npt.ArrayLike, Iterable[npt.ArrayLike]]
 
 class Container:
-    def __init__(self, location: str) -> None: ...
+    def __init__(
+        self,
+        location: str,
+        *,
+        tries: int = 4,
+        stall_timeout: float = 20.0,
+        connections: int = 4,
+        cache: Optional[Union[str, os.PathLike[str]]] = None,
+        cache_size: str = "2G",
+        ca_file: Optional[Union[str, os.PathLike[str]]] = None,
+    ) -> None: ...
     @property
     def dims(self) -> Tuple[int, int, int]: ...
     @property
@@ -48,7 +58,16 @@ class Container:
     def __enter__(self) -> Container: ...
     def __exit__(self, *exc: object) -> None: ...
 
-def open(location: Union[str, os.PathLike[str]]) -> Container: ...
+def open(
+    location: Union[str, os.PathLike[str]],
+    *,
+    tries: int = 4,
+    stall_timeout: float = 20.0,
+    connections: int = 4,
+    cache: Optional[Union[str, os.PathLike[str]]] = None,
+    cache_size: str = "2G",
+    ca_file: Optional[Union[str, os.PathLike[str]]] = None,
+) -> Container: ...
 def encode(
     frames: Frames,
     out: Union[str, os.PathLike[str]],

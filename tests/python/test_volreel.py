@@ -225,8 +225,13 @@ def test_encode_from_an_array_is_the_command_line_encode(series, tmp_path):
     for t in range(6):
         assert np.array_equal(py[t], cli[t])
     # An existing container is kept unless asked.
-    with pytest.raises(volreel.InputError, match="overwrite"):
+    # The library's messages name the keywords, not the command line's options.
+    with pytest.raises(volreel.InputError,
+                       match="give resume=True to continue it or overwrite=True to replace it"):
         volreel.encode(frames, tmp_path / "py.vreel", dictionary="dct", psnr=40)
+    with pytest.raises(volreel.InputError, match="brick_size must be auto or a multiple of 6") as e:
+        volreel.encode(frames, tmp_path / "b.vreel", dictionary="dct", brick_size=7)
+    assert "--" not in str(e.value)
     volreel.encode(frames, tmp_path / "py.vreel", codec="zfp", overwrite=True)
     assert volreel.open(tmp_path / "py.vreel").info()["codec"] == "zfp"
 
@@ -374,3 +379,95 @@ def test_a_container_on_a_web_server_reads_as_the_folder(container, tmp_path):
     finally:
         server.terminate()
         server.wait(timeout=10)
+
+
+class SilentServer:
+    """A server on 127.0.0.1 that accepts connections and never answers: a stalled request."""
+
+    def __init__(self):
+        import socket
+
+        self.socket = socket.socket()
+        self.socket.bind(("127.0.0.1", 0))
+        self.socket.listen(16)
+        self.port = self.socket.getsockname()[1]
+        self.held = []
+        self.thread = threading.Thread(target=self._accept, daemon=True)
+        self.thread.start()
+
+    def _accept(self):
+        while True:
+            try:
+                connection, _ = self.socket.accept()
+            except OSError:
+                return
+            self.held.append(connection)
+
+    def close(self):
+        import socket
+
+        self.socket.shutdown(socket.SHUT_RDWR)
+        self.socket.close()
+        for c in self.held:
+            c.close()
+
+
+def test_open_takes_the_url_options_and_checks_them(container):
+    url = "http://127.0.0.1:9/x.vreel"
+    with pytest.raises(volreel.InputError, match="tries: expected 1..20"):
+        volreel.open(url, tries=0)
+    with pytest.raises(volreel.InputError, match="stall_timeout: expected 1..3600 seconds"):
+        volreel.open(url, stall_timeout=0.5)
+    with pytest.raises(volreel.InputError, match="connections: expected 1..64"):
+        volreel.open(url, connections=65)
+    with pytest.raises(volreel.InputError, match="ca_file: '/nonexistent.pem' is not a file"):
+        volreel.open(url, ca_file="/nonexistent.pem")
+    with pytest.raises(volreel.InputError, match="cache_size"):
+        volreel.open(url, cache="/tmp", cache_size="lots")
+    # A folder takes the keywords too (they apply to URLs only).
+    assert volreel.open(container, tries=1, stall_timeout=2).frames == volreel.open(container).frames
+
+
+def test_a_stalled_server_is_given_up_after_stall_timeout_and_tries():
+    server = SilentServer()
+    try:
+        url = f"http://127.0.0.1:{server.port}/run.vreel"
+        start = time.monotonic()
+        with pytest.raises(volreel.NetworkError, match="manifest.json"):
+            volreel.open(url, tries=1, stall_timeout=1)
+        one = time.monotonic() - start
+        start = time.monotonic()
+        with pytest.raises(volreel.NetworkError, match="the last of 2 tries"):
+            volreel.open(url, tries=2, stall_timeout=1)
+        two = time.monotonic() - start
+        # The default, 20 s and 4 tries, would take over a minute.
+        assert one < 5 and two < 8, (one, two)
+        assert two > one
+    finally:
+        server.close()
+
+
+def test_ctrl_c_ends_a_wait_for_the_server():
+    """A signal handler's exception (KeyboardInterrupt on Ctrl-C) comes out of volreel.open while it
+    waits for a server that does not answer, not after the stall timeout."""
+    import signal
+
+    class Interrupted(Exception):
+        pass
+
+    def handler(signum, frame):
+        raise Interrupted()
+
+    server = SilentServer()
+    previous = signal.signal(signal.SIGINT, handler)
+    timer = threading.Timer(0.5, lambda: os.kill(os.getpid(), signal.SIGINT))
+    try:
+        start = time.monotonic()
+        timer.start()
+        with pytest.raises(Interrupted):
+            volreel.open(f"http://127.0.0.1:{server.port}/run.vreel", stall_timeout=30)
+        assert time.monotonic() - start < 5
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)
+        server.close()

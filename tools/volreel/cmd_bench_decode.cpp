@@ -228,9 +228,12 @@ void run_bench_decode(const BenchDecodeOptions& o) {
   std::printf("%7s | %12s %15s | %12s %15s %15s\n", "batch", "MVoxel/s", "bricks/s", "MVoxel/s",
               "bricks/s", "upload MB/s");
   std::vector<std::size_t> measured;  // batches larger than the bricks (or slots) are one row
+  std::vector<std::string> clamped;   // what each such batch became, said after the table
   for (std::size_t requested : o.batches) {
     const std::size_t batch = std::clamp<std::size_t>(
         requested, 1, std::min<std::size_t>(bricks.size(), atlas.slot_count()));
+    if (batch != requested)
+      clamped.push_back(std::to_string(requested) + " as " + std::to_string(batch));
     if (std::find(measured.begin(), measured.end(), batch) != measured.end()) continue;
     measured.push_back(batch);
     // CPU, all threads, a batch at a time (the threads meet at the end of each batch).
@@ -287,6 +290,14 @@ void run_bench_decode(const BenchDecodeOptions& o) {
       "bytes "
       "written to\n"
       "the staging buffers (records + payloads) per second of the whole upload + decode.\n");
+  if (!clamped.empty()) {
+    std::string list;
+    for (const std::string& c : clamped) list += (list.empty() ? "" : ", ") + c;
+    std::printf(
+        "batch %s: a batch holds at most the %zu bricks measured (--frames) and the atlas's %u "
+        "slots (--atlas-mib)\n",
+        list.c_str(), bricks.size(), atlas.slot_count());
+  }
   for (const vulkan::ValidationMessage& message : context.validation_messages())
     std::fprintf(stderr, "volreel: Vulkan validation: %s\n", message.text.c_str());
 }
@@ -320,8 +331,8 @@ void add_bench_decode_command(CLI::App& bench) {
       ->check(in_range(1, 1048576))
       ->capture_default_str();
   cmd->add_option("--upload-mib", o->upload_mib,
-                  "Upload budget per staging buffer (per frame), MiB")
-      ->check(in_range(1.0 / 1024, 65536))
+                  "Upload budget per staging buffer (per frame), MiB, at least 1")
+      ->check(in_range(1, 65536))
       ->capture_default_str();
   cmd->add_option("--ring", o->ring, "Staging buffers in the ring")
       ->check(CLI::Range(1, 64))

@@ -252,7 +252,8 @@ void add_bench_index_command(CLI::App& bench) {
       ->capture_default_str();
   cmd->add_option("--index-memory", o->index_memory,
                   "Keyframe nodes the index may hold (e.g. 128M, 1G); a container that needs "
-                  "more is indexed as a time window around the playhead")
+                  "more is indexed as a time window around the playhead, of at least 2 * the "
+                  "max keyframe gap + 4 frames (0: that smallest window)")
       ->capture_default_str();
   cmd->add_option("--atlas-mb", o->atlas_mb,
                   "Brick atlas memory budget, MiB, as the player's: its slots")

@@ -153,12 +153,15 @@ bool print_encode_summary(const encoder::EncodeSummary& s, const encoder::Coding
       s.seconds_bricks, s.seconds_omp, s.seconds_quantize,
       s.frames_at_once > 1 ? ", idle threads included" : "",
       std::max(0.0, s.process_seconds * static_cast<double>(s.frames_at_once) - parts));
+  // A loss below 0: the quantized codes lie closer to the data than the approximation they were
+  // quantized from (the refit, or bricks coded again with a finer step under --max-error).
   if (s.unquantized_squared_error > 0)
     std::printf(
-        "quantization: %.3f dB lost against the unquantized sparse approximation (squared error "
-        "over all coded blocks, "
-        "every level; refit %s, pursuit extension %s)\n",
-        s.quantization_loss_db(), c.refit_quantization ? "on" : "off",
+        "quantization: %.3f dB %s the unquantized sparse approximation (squared error over all "
+        "coded blocks, every level; refit %s, pursuit extension %s)\n",
+        std::abs(s.quantization_loss_db()),
+        s.quantization_loss_db() >= 0 ? "lost against" : "gained over",
+        c.refit_quantization ? "on" : "off",
         c.extend_pursuit && c.fixed_sparsity == 0 && c.rule == encoder::VariableRateRule::tolerance
             ? "on"
             : "off");

@@ -11,6 +11,9 @@
 #include "progress.hpp"
 
 int main(int argc, char** argv) {
+  // Line by line also into a pipe or file, so that a log of `2>&1` keeps the report's lines and
+  // the notes and errors on stderr in the order they were written.
+  std::setvbuf(stdout, nullptr, _IOLBF, BUFSIZ);
   // Under mpirun, MPI for `encode`'s ranks (mpi_ranks.hpp); otherwise nothing.
   volreel::cli::MpiSession mpi(argc, argv);
   CLI::App app{"volreel " VOLREEL_VERSION

@@ -15,6 +15,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -44,6 +45,10 @@ struct RemoteOptions {
   std::uint64_t coalesce_bytes = std::uint64_t{1} << 20;  ///< the largest range of several bricks
   std::filesystem::path cache_dir;                        ///< empty: no cache
   std::uint64_t cache_bytes = std::uint64_t{2} << 30;
+  /// Called about every 0.1 s on a thread that waits for an answer or for the back-off before a
+  /// retry (an embedding's check for an interrupt, such as Python's for Ctrl-C); what it throws
+  /// ends the read. Empty: none.
+  std::function<void()> while_waiting;
 };
 
 class HttpSource final : public format::ContainerSource,
@@ -109,6 +114,8 @@ class HttpSource final : public format::ContainerSource,
                         const std::string& bytes) const;
   std::optional<std::vector<std::byte>> cached(const std::string& relative, std::uint64_t offset,
                                                std::uint64_t bytes) const;
+  /// The answer of a GET, calling options_.while_waiting while it has not come.
+  HttpResponse answer(std::future<HttpResponse> response) const;
   /// GET with retries of transient failures; throws NetworkError with the last error.
   std::vector<std::byte> fetch(const std::string& relative, std::uint64_t offset,
                                std::uint64_t bytes) const;
