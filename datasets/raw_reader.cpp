@@ -238,7 +238,19 @@ class RawFileReader final : public SeriesReader {
   }
 };
 
-/// Natural order: runs of digits compare as numbers ("p_2" before "p_10"), the rest bytewise.
+/// The end of the fraction digits after a run of digits ending at `i` ("2.5": the '5'), or `i`
+/// when no '.' and digit follow.
+std::size_t fraction_end(const std::string& s, std::size_t i) {
+  if (i + 1 >= s.size() || s[i] != '.' || !std::isdigit(static_cast<unsigned char>(s[i + 1])))
+    return i;
+  ++i;
+  while (i < s.size() && std::isdigit(static_cast<unsigned char>(s[i]))) ++i;
+  return i;
+}
+
+/// Natural order: numbers compare by value ("p_2" before "p_10"), decimal fractions included
+/// ("t_0.125" before "t_0.25" before "t_0.5" before "t_1": simulation times in file names), the
+/// rest bytewise.
 bool natural_less(const std::string& a, const std::string& b) {
   std::size_t i = 0, j = 0;
   while (i < a.size() && j < b.size()) {
@@ -255,9 +267,17 @@ bool natural_less(const std::string& a, const std::string& b) {
       if (ie - is != je - js) return ie - is < je - js;
       const int c = a.compare(is, ie - is, b, js, je - js);
       if (c != 0) return c < 0;
+      // The same whole number: the fractions digit by digit, a missing digit being 0.
+      const std::size_t fa = fraction_end(a, ie), fb = fraction_end(b, je);
+      const std::size_t la = fa > ie ? fa - ie - 1 : 0, lb = fb > je ? fb - je - 1 : 0;
+      for (std::size_t k = 0; k < std::max(la, lb); ++k) {
+        const char x = k < la ? a[ie + 1 + k] : '0', y = k < lb ? b[je + 1 + k] : '0';
+        if (x != y) return x < y;
+      }
       if (ie - i != je - j) return ie - i < je - j;  // "07" after "7"
-      i = ie;
-      j = je;
+      if (la != lb) return la < lb;                  // "0.5" before "0.50"
+      i = fa;
+      j = fb;
       continue;
     }
     if (a[i] != b[j]) return static_cast<unsigned char>(a[i]) < static_cast<unsigned char>(b[j]);

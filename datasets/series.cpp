@@ -199,6 +199,29 @@ std::unique_ptr<SeriesReader> open_any(const fs::path& path, const OpenOptions& 
 
 }  // namespace
 
+bool input_includes(const fs::path& path, const fs::path& file) {
+  std::error_code ec;
+  if (!fs::exists(file, ec)) return false;
+  if (detail::is_glob(path.string()) && !fs::exists(path, ec)) {
+    try {
+      for (const fs::path& matched : detail::expand_glob(path.string()))
+        if (fs::equivalent(matched, file, ec)) return true;
+    } catch (const InputError&) {  // no match: nothing of the input to replace
+    }
+    return false;
+  }
+  // A series directory named by its series.json: the directory.
+  const fs::path whole = path.filename() == "series.json" ? path.parent_path() : path;
+  if (fs::is_directory(whole, ec)) {
+    const fs::path dir = fs::canonical(whole, ec), target = fs::canonical(file, ec);
+    if (ec) return false;
+    for (fs::path p = target; !p.empty() && p != p.parent_path(); p = p.parent_path())
+      if (p == dir) return true;
+    return false;
+  }
+  return fs::equivalent(path, file, ec);
+}
+
 std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOptions& options) {
   auto reader = open_any(path, options);
   // A reader hands out frames of voxels: a dataset or variable of none is refused here, once.
@@ -241,8 +264,12 @@ void check_finite(std::span<float> values, Dims dims, const std::string& what,
       continue;
     }
     throw InputError(what + ": value " + std::to_string(values[i]) + " at voxel " +
-                     voxel_name(i, dims, z_begin) +
-                     " is not finite; use --replace-nan V to substitute a value");
+                     voxel_name(i, dims, z_begin) + " is not finite" +
+                     (std::isinf(values[i])
+                          ? " (or, in data of a wider type, beyond float32's range of 3.4e38: "
+                            "scale the data)"
+                          : std::string()) +
+                     "; use --replace-nan V to substitute a value");
   }
 }
 

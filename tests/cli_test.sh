@@ -86,7 +86,8 @@ expect_error "--power: expected a number > 0" "$volreel" gen turbulence --size 1
 "$volreel" gen analytic --size 16 --frames 2 --out "$work/shrink" --overwrite > /dev/null 2>&1
 [ "$(ls "$work/shrink" | tr '\n' ' ')" = "000000.f32 000001.f32 series.json " ] || fail "gen --overwrite left old frames: $(ls "$work/shrink")"
 expect_error "--resume excludes --overwrite" "$volreel" encode "$work/shrink" --resume --overwrite --out "$work/x.vreel"
-expect_error "--replace-nan: expected a finite number, found 'nan'" "$volreel" encode "$work/shrink" --replace-nan nan --out "$work/x.vreel"
+expect_error "--replace-nan: expected a finite number of magnitude at most 1e33.*found 'nan'" "$volreel" encode "$work/shrink" --replace-nan nan --out "$work/x.vreel"
+expect_error "--replace-nan: expected a finite number of magnitude at most 1e33.*found '1e39'" "$volreel" encode "$work/shrink" --replace-nan 1e39 --out "$work/x.vreel"
 expect_error "--sparsities: Value 0 not in range 1 to 216" "$volreel" bench rd "$work/shrink" --sparsities 0
 # A word that is no command is named, with the commands there are.
 expect_error "'encod' is not a command of volreel (its commands: gen" "$volreel" encod "$work/a"
@@ -162,6 +163,19 @@ fi
 grep -q "^volume   24x20x16" "$work/info.txt" || fail "info printed nothing before its error: $(cat "$work/info.txt")"
 grep -q "error: 1 of the [0-9]* frames written could not be read.*000001.vrf: offset 0" "$work/info.err" \
   || fail "info's error: $(cat "$work/info.err")"
+# An output that is part of the input is refused, --overwrite or not: train would write its
+# dictionary over a frame of the series, decode its volume over a frame of the container.
+cp "$work/a/000001.f32" "$work/a1.copy"
+expect_error "is part of the input.*written over the data" \
+  "$volreel" train "$work/a" --atoms 8 --out "$work/a/000001.f32" --overwrite
+expect_error "is part of the input" \
+  "$volreel" train "$work/a/000001.f32" --dims 24x20x16 --atoms 8 --out "$work/a/000001.f32" --overwrite
+expect_error "is part of the input" \
+  "$volreel" train "$work/a/0*.f32" --dims 24x20x16 --atoms 8 --out "$work/a/000001.f32" --overwrite
+cmp -s "$work/a/000001.f32" "$work/a1.copy" || fail "train changed its input frame"
+expect_error "is a file of the container.*choose another --out" \
+  "$volreel" decode "$work/ab.vreel" --out "$work/ab.vreel/frames/000000.vrf"
+"$volreel" verify "$work/ab.vreel" > /dev/null 2>&1 || fail "decode --out into its container damaged it"
 # Into one pipe (a log of 2>&1) the report's lines come before the error that follows them.
 ("$volreel" info "$work/abd.vreel" 2>&1 || true) | cat > "$work/info.log"
 tail -n 1 "$work/info.log" | grep -q "error: 1 of the" \

@@ -354,7 +354,7 @@ TEST(RawFile, AllDtypesConvert) {
     write_bytes(dir / "f64.raw", v.data(), v.size() * 8);
     o.dtype = vd::Dtype::f64;
     expect_error([&] { vd::open_series(dir / "f64.raw", o)->read_frame(0); },
-                 {"f64.raw", "not finite"});
+                 {"f64.raw", "not finite", "beyond float32's range"});
   }
   vd::OpenOptions no_dims;
   expect_error([&] { vd::open_series(dir / "u8.raw", no_dims); }, {"--dims"});
@@ -392,6 +392,31 @@ TEST(RawFile, APatternReadsOneFramePerFileInNaturalOrder) {
   fs::remove(dir / "p_11.f32");
   fs::create_directory(dir / "p_12.f32");
   expect_error([&] { vd::open_series(pattern, o); }, {"p_12.f32", "directory"});
+}
+
+TEST(RawFile, SimulationTimesInNamesSortByValue) {
+  TempDir dir("rawtimes");
+  const Dims d{2, 2, 1};
+  // Written in another order; frame k must hold the k-th time. "frame.3.f32" and "frame.12.f32":
+  // a '.' before a number is not a decimal point.
+  const std::vector<std::string> times = {"0.125", "0.25", "0.5", "1", "1.5", "2.0", "10"};
+  for (std::size_t k : {4u, 6u, 0u, 2u, 5u, 1u, 3u}) {
+    std::vector<float> v(d.voxels(), static_cast<float>(k));
+    write_bytes(dir / ("p_t" + times[k] + ".f32"), v.data(), v.size() * 4);
+  }
+  vd::OpenOptions o;
+  o.dims = d;
+  const auto s = vd::open_series((dir / "p_t*.f32").string(), o);
+  ASSERT_EQ(s->info().frames, times.size());
+  for (std::size_t k = 0; k < times.size(); ++k)
+    EXPECT_EQ(s->read_frame(k).data[0], static_cast<float>(k)) << "frame " << k;
+  for (int t : {12, 3}) {
+    std::vector<float> v(d.voxels(), static_cast<float>(t));
+    write_bytes(dir / ("frame." + std::to_string(t) + ".f32"), v.data(), v.size() * 4);
+  }
+  const auto f = vd::open_series((dir / "frame.*.f32").string(), o);
+  EXPECT_EQ(f->read_frame(0).data[0], 3.0f);
+  EXPECT_EQ(f->read_frame(1).data[0], 12.0f);
 }
 
 namespace {

@@ -12,6 +12,7 @@
 #include <string>
 
 #include "commands.hpp"
+#include "volreel/datasets/series.hpp"
 #include "volreel/format/container.hpp"
 #include "volreel/format/decoder.hpp"
 #include "volreel/format/file_io.hpp"
@@ -43,6 +44,9 @@ void run_decode(const DecodeOptions& o) {
                      ": expected a regular file, a new name or a character device");
   const fs::path out = fs::exists(status) ? fs::canonical(o.out, ec) : fs::path(o.out);
   if (!device) format::detail::check_writable(out, "--out");
+  if (datasets::input_includes(o.dir, out))
+    throw InputError("--out '" + o.out + "' is a file of the container '" + o.dir +
+                     "': decoding would write over it; choose another --out");
   const format::Container c(o.dir);
   format::TimeStepDecoder steps(c);
   if (o.frame >= c.frame_count())

@@ -8,6 +8,7 @@
 
 #include "commands.hpp"
 #include "training_options.hpp"
+#include "volreel/datasets/series.hpp"
 #include "volreel/dictionary/dictionary.hpp"
 #include "volreel/dictionary/training.hpp"
 #include "volreel/format/file_io.hpp"
@@ -34,6 +35,10 @@ void run_train(const TrainCommandOptions& o) {
   if (std::filesystem::is_directory(out_status))
     throw InputError("--out '" + o.out + "' is a directory: expected the dictionary file to write");
   format::detail::check_writable(o.out, "--out");  // a device or FIFO is refused
+  if (datasets::input_includes(o.training.series, o.out))
+    throw InputError("--out '" + o.out + "' is part of the input '" + o.training.series +
+                     "': the dictionary would be written over the data it is trained on; choose "
+                     "another --out");
   if (std::filesystem::exists(out_status) && !o.overwrite)
     throw InputError("'" + o.out +
                      "' already exists: give --overwrite to replace it, or choose another --out");

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "volreel/encoder/series_encoder.hpp"
 
 namespace volreel::cli {
 
@@ -135,8 +136,12 @@ void ReaderOptions::add_to(CLI::App& command) {
                   "Substitute NaN/Inf values with this value instead of refusing the input")
       ->check(CLI::Validator(
           [](const std::string& text) {
-            return finite_number(text) ? std::string()
-                                       : "expected a finite number, found '" + text + "'";
+            const std::optional<double> v = finite_number(text);
+            return v && std::abs(*v) <= encoder::max_input_magnitude
+                       ? std::string()
+                       : "expected a finite number of magnitude at most 1e33 (the largest "
+                         "volreel encodes), found '" +
+                             text + "'";
           },
           "FINITE"))
       ->each([this](const std::string&) { replace_nan_set = true; });

@@ -95,6 +95,11 @@ bool describes_itself(const std::filesystem::path& path);
 OpenOptions options_for(const std::filesystem::path& path, const OpenOptions& options,
                         const std::filesystem::path* other);
 
+/// Whether writing `file` would replace part of the input `path`: `path` itself (a file), a file
+/// its pattern matches, or an existing file inside it (a series directory, a container). False
+/// when `file` does not exist.
+bool input_includes(const std::filesystem::path& path, const std::filesystem::path& file);
+
 /// Open a series: a raw series directory (or its series.json), an HDF5 file (.h5, .hdf5, .hdf),
 /// a NetCDF file (.nc, .nc4, .cdf),
 /// a single raw file, or a glob pattern (*, ?, [...]) of raw files with one frame each in
