@@ -212,14 +212,21 @@ bool input_includes(const fs::path& path, const fs::path& file) {
   }
   // A series directory named by its series.json: the directory.
   const fs::path whole = path.filename() == "series.json" ? path.parent_path() : path;
-  if (fs::is_directory(whole, ec)) {
-    const fs::path dir = fs::canonical(whole, ec), target = fs::canonical(file, ec);
-    if (ec) return false;
-    for (fs::path p = target; !p.empty() && p != p.parent_path(); p = p.parent_path())
-      if (p == dir) return true;
-    return false;
-  }
+  if (fs::is_directory(whole, ec)) return path_within(whole, file);
   return fs::equivalent(path, file, ec);
+}
+
+bool path_within(const fs::path& dir, const fs::path& path) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) return false;
+  const fs::path d = fs::canonical(dir, ec);
+  const fs::path target = fs::weakly_canonical(fs::absolute(path, ec), ec);
+  if (ec) return false;
+  for (fs::path p = target; !p.empty(); p = p.parent_path()) {
+    if (p == d) return true;
+    if (p == p.parent_path()) break;
+  }
+  return false;
 }
 
 std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOptions& options) {

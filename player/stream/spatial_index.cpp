@@ -493,8 +493,22 @@ bool SpatialIndex::failed_around(double playhead) const {
   const double p = std::clamp(playhead, 0.0, last);
   const auto lo = static_cast<std::uint32_t>(std::max(0.0, std::floor(p) - max_gap_));
   const auto hi = static_cast<std::uint32_t>(std::min(last, std::ceil(p) + max_gap_));
-  for (std::uint32_t t = std::max(lo, held_begin_); t <= hi && t < held_end_; ++t)
-    if (!held_[t % ring_].error.empty()) return true;
+  const auto before = static_cast<std::uint32_t>(std::floor(p));
+  const auto after = static_cast<std::uint32_t>(std::ceil(p));
+  // Frame u read, with a brick of every node.
+  const auto stores_all = [&](std::uint32_t u) {
+    if (u < held_begin_ || u >= held_end_) return false;
+    const HeldFrame& f = held_[u % ring_];
+    return f.error.empty() && f.whole && f.keyframes.size() == nodes_.size();
+  };
+  for (std::uint32_t t = std::max(lo, held_begin_); t <= hi && t < held_end_; ++t) {
+    if (held_[t % ring_].error.empty()) continue;
+    bool shielded = false;
+    for (std::uint32_t u = after; t > after && u < t && !shielded; ++u) shielded = stores_all(u);
+    for (std::uint32_t u = t + 1; t < before && u <= before && !shielded; ++u)
+      shielded = stores_all(u);
+    if (!shielded) return true;
+  }
   return false;
 }
 

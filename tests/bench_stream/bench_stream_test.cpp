@@ -103,6 +103,18 @@ TEST(StreamBenchSettings, Checks) {
               s.tour = "t.json";
             }),
             "--seeds 3: several seeds vary the built-in tour; drop --tour or --seeds");
+  EXPECT_EQ(check([](BenchStreamSettings& s) {
+              s.duration = 5;
+              s.tour = "t.json";
+            }),
+            "--duration with --tour t.json: the length of the built-in tour; a tour file gives "
+            "its own \"duration\"");
+  EXPECT_EQ(check([](BenchStreamSettings& s) {
+              s.seed = 7;
+              s.tour = "t.json";
+            }),
+            "--seed with --tour t.json: the seed of the built-in tour's seeks; a tour file gives "
+            "its own seeks");
   EXPECT_EQ(check([](BenchStreamSettings& s) { s.seeds = 101; }),
             "--seeds: expected 1..100 tours, found '101'");
   EXPECT_EQ(check([](BenchStreamSettings& s) { s.size = "48"; }),

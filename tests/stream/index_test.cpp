@@ -144,8 +144,13 @@ TEST(StreamIndex, ABadFrameBecomesAnErrorAndIsLeftOut) {
   EXPECT_EQ(index.times(0).size(), 2u);
   EXPECT_EQ(index.find_keyframe(0, 1), no_keyframe);
   EXPECT_NE(index.find_keyframe(0, 2), no_keyframe);
-  EXPECT_TRUE(index.failed_around(0));  // frame 1 is within max_keyframe_gap (1)
-  EXPECT_TRUE(index.failed_around(2));
+  // Every frame stores a brick of every node (max_keyframe_gap 1): frame 1 is needed from 0 to
+  // 2, not at 0 or 2, whose own frames hold every node's state.
+  EXPECT_TRUE(index.failed_around(0.5));
+  EXPECT_TRUE(index.failed_around(1));
+  EXPECT_TRUE(index.failed_around(1.5));
+  EXPECT_FALSE(index.failed_around(0));
+  EXPECT_FALSE(index.failed_around(2));
 }
 
 /// Follows the playhead until the index holds the frames around it (the reader runs on its own
@@ -267,8 +272,8 @@ TEST(StreamIndex, AWindowReportsABadFrameOnceAndHoldsTheRest) {
   std::vector<std::string> errors;
   for (double p = 0; p <= 11; p += 0.5) {
     ASSERT_TRUE(follow_until_held(index, p, 2, &errors));
-    // Frame 5 is within max_keyframe_gap (1) of the playhead from 3.5 to 6.5.
-    EXPECT_EQ(index.failed_around(p), p > 3 && p < 7) << p;
+    // Frame 5 is needed between frames 4 and 6 (each frame stores every node).
+    EXPECT_EQ(index.failed_around(p), p > 4 && p < 6) << p;
   }
   ASSERT_EQ(errors.size(), 1u);
   EXPECT_NE(errors[0].find("000005.vrf"), std::string::npos) << errors[0];

@@ -797,7 +797,7 @@ TEST(StreamScheduler, ABadFrameAtIndexTimeIsReportedNotThrown) {
   // seek timed to full quality, must not count it complete).
   EXPECT_TRUE(u.stats.index_failed);
   EXPECT_EQ(u.stats.fraction_at_target, 0.0);
-  // Farther than max_keyframe_gap (1) from the bad frame, the view completes.
+  // Where a frame between the playhead and the bad frame stores every node, the view completes.
   const FrameUpdate away = run_until(s, cam, 1.0, frame, [](const FrameUpdate& f) {
     return f.stats.fraction_at_target == 1.0 && f.stats.requests_in_flight == 0;
   });

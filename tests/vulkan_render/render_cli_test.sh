@@ -132,4 +132,37 @@ for bad in "--frames-per-phase 0" "--speed nan" "--speed 0" "--timeout -1"; do
   if "$volreel" bench play "$dir/test.vreel" --cpu $bad > "$dir/bad.log" 2>&1; then echo "bench play accepted $bad"; exit 1; fi
   grep -q -- "${bad%% *}" "$dir/bad.log" || { cat "$dir/bad.log"; exit 1; }
 done
+# Refused before anything is drawn: --out inside the container, the --compare series' options
+# without --compare, and the CPU ray caster with --decode or --renderer vulkan.
+expect_refused() {  # PATTERN ARGS...: render exits 1 naming PATTERN
+  local pattern=$1; shift
+  if "$volreel" render "$dir/test.vreel" "$@" > "$dir/bad.log" 2>&1; then echo "render accepted $*"; exit 1; fi
+  grep -q -e "$pattern" "$dir/bad.log" || { echo "render $*: no '$pattern' in:"; cat "$dir/bad.log"; exit 1; }
+}
+expect_refused "is inside the container" --out "$dir/test.vreel/frames" --max-frames 1
+expect_refused "is inside the container" --out "$dir/test.vreel/renders" --max-frames 1
+[ ! -e "$dir/test.vreel/renders" ] || { echo "a refused render made its folder in the container"; exit 1; }
+expect_refused "--frames: options of the --compare series" --out "$dir/x" --frames 3
+expect_refused "--decode gpu with the CPU ray caster" --out "$dir/x" --cpu --decode gpu
+expect_refused "--cpu with --renderer vulkan" --out "$dir/x" --cpu --renderer vulkan
+"$volreel" verify "$dir/test.vreel" > /dev/null 2>&1 || { echo "refused renders changed the container"; exit 1; }
+# A constant sequence (an empty value range) renders with the default tour, as play does.
+mkdir -p "$dir/const"
+/usr/bin/python3 -c "import struct,sys; open(sys.argv[1],'wb').write(struct.pack('<1728f', *[2.5]*1728))" "$dir/const/c.f32"
+"$volreel" encode "$dir/const/c.f32" --dims 12x12x12 --frames 1 --codec zfp --out "$dir/const.vreel" > /dev/null 2>&1
+"$volreel" render "$dir/const.vreel" --out "$dir/const_r" --size 32x32 --max-frames 1 --cpu > "$dir/const.log" 2>&1 \
+  || { cat "$dir/const.log"; echo "render of a constant container failed"; exit 1; }
+# SIGTERM (as Ctrl-C): it stops between frames, says what it left, and every PNG has its row.
+"$volreel" render "$dir/test.vreel" --out "$dir/int" --size 64x64 --cpu --realtime > /dev/null 2> "$dir/int.log" &
+pid=$!
+for _ in $(seq 600); do [ -e "$dir/int/frame_00002.png" ] && break; sleep 0.1; done
+kill -TERM "$pid"
+status=0
+wait "$pid" || status=$?
+[ "$status" = 143 ] || { cat "$dir/int.log"; echo "an interrupted render: exit status $status, expected 143"; exit 1; }
+grep -q "interrupted after [0-9]* of [0-9]* frames: .* and their rows of metrics.csv" "$dir/int.log" \
+  || { cat "$dir/int.log"; echo "an interrupted render said nothing"; exit 1; }
+pngs=$(ls "$dir/int"/frame_*.png | wc -l)
+rows=$(($(wc -l < "$dir/int/metrics.csv") - 1))
+[ "$pngs" = "$rows" ] || { echo "an interrupted render left $pngs frames and $rows rows"; exit 1; }
 echo "render CLI: OK"

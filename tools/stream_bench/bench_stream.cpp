@@ -285,6 +285,14 @@ void BenchStreamSettings::check() const {
   if (o.seeds > 1 && !o.tour.empty())
     throw InputError("--seeds " + std::to_string(o.seeds) +
                      ": several seeds vary the built-in tour; drop --tour or --seeds");
+  // The built-in tour's length and seeks; a tour file has its own (a value other than the
+  // default is what tells that one was given).
+  if (!o.tour.empty() && o.duration != BenchStreamSettings{}.duration)
+    throw InputError("--duration with --tour " + o.tour +
+                     ": the length of the built-in tour; a tour file gives its own \"duration\"");
+  if (!o.tour.empty() && o.seed != BenchStreamSettings{}.seed)
+    throw InputError("--seed with --tour " + o.tour +
+                     ": the seed of the built-in tour's seeks; a tour file gives its own seeks");
   policies();
 }
 

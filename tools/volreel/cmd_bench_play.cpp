@@ -78,6 +78,7 @@ struct PhaseStats {
 };
 
 void run_bench_play(const BenchPlayOptions& o) {
+  check_renderer_options(o.renderer, o.cpu, o.loop.decode);
   // 1. Container, device, loop.
   const format::Container container(o.container);
   const format::Manifest& m = container.manifest();

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "commands.hpp"
+#include "loop_options.hpp"
 #include "remote_options.hpp"
 #include "volreel/app/player.hpp"
 #include "volreel/format/error.hpp"
@@ -31,6 +32,7 @@ struct PlayCommandOptions {
 };
 
 void run_play(PlayCommandOptions& o) {
+  check_renderer_options(o.renderer, false, o.decode);
   app::PlayerOptions& p = o.player;
   {
     const auto [w, h] = loop::parse_size(o.size);

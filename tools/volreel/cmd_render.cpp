@@ -67,14 +67,20 @@ std::size_t earlier_render_frames(const fs::path& dir) {
   return rows;
 }
 
+/// "frame_00042.png": the name of frame i.
+std::string frame_png(std::size_t i) {
+  char name[32];
+  std::snprintf(name, sizeof name, "frame_%05zu.png", i);
+  return name;
+}
+
 /// Removes frame_NNNNN.png of `dir` for N in [frames, earlier): those of an earlier, longer render
 /// into the same folder (earlier_render_frames), which would otherwise pass for this one's.
 /// Returns how many it removed.
 std::size_t remove_later_frames(const fs::path& dir, std::size_t frames, std::size_t earlier) {
   std::size_t removed = 0;
   for (std::size_t i = frames; i < earlier; ++i) {
-    char name[32];
-    std::snprintf(name, sizeof name, "frame_%05zu.png", i);
+    const std::string name = frame_png(i);
     std::error_code ec;
     if (fs::is_regular_file(fs::symlink_status(dir / name, ec)) && fs::remove(dir / name, ec))
       ++removed;
@@ -83,13 +89,17 @@ std::size_t remove_later_frames(const fs::path& dir, std::size_t frames, std::si
 }
 
 void run_render(const RenderCommandOptions& o) {
+  check_renderer_options(o.renderer, o.cpu, o.loop.decode);
   // 1. Input, tour, output folder; ffmpeg is checked before any work.
+  if (const std::string given = o.reader.given(); !given.empty() && o.compare.empty())
+    throw InputError(given + ": options of the --compare series, which is not given; give " +
+                     "--compare SERIES, or leave them out (--max-frames limits the frames " +
+                     "rendered)");
   const format::Container container(open_container_source(o.container, o.remote));
   const format::Manifest& m = container.manifest();
-  const cpu_render::TourContext tour_context{
-      m.dims,
-      container.frame_count(),
-      {static_cast<float>(m.value_min), static_cast<float>(m.value_max)}};
+  // The manifest's (a constant sequence's empty value range widened), over the frames written.
+  cpu_render::TourContext tour_context = cpu_render::TourContext::of(m);
+  tour_context.keyframes = container.frame_count();
   const cpu_render::Tour tour = o.tour.empty() ? cpu_render::Tour::default_for(tour_context)
                                                : cpu_render::Tour::load(o.tour, tour_context);
   std::string ffmpeg;
@@ -104,10 +114,23 @@ void run_render(const RenderCommandOptions& o) {
   const fs::path out = o.out;
   if (fs::exists(out) && !fs::is_directory(out))
     throw InputError("--out " + o.out + ": exists and is not a directory");
+  if (datasets::path_within(o.container, out))
+    throw InputError("--out " + o.out + ": is inside the container " + o.container +
+                     ", whose files would mix with the frames; choose a folder outside it");
   format::detail::check_writable(out, "--out");
   if (!o.video.empty()) {
     if (fs::is_directory(o.video))
       throw InputError("--video " + o.video + ": is a directory; give the video file's name");
+    // Not one of the files this render writes into --out.
+    const fs::path video = o.video,
+                   folder = video.parent_path().empty() ? "." : video.parent_path();
+    const std::string name = video.filename().string();
+    const bool frame_name = name.rfind("frame_", 0) == 0 && name.size() > 4 &&
+                            name.compare(name.size() - 4, 4, ".png") == 0;
+    if (fs::weakly_canonical(folder) == fs::weakly_canonical(out) &&
+        (name == "metrics.csv" || frame_name))
+      throw InputError("--video " + o.video + ": is the name of one of the frames or of " +
+                       "metrics.csv in --out; give the video another name (e.g. tour.mp4)");
     // ffmpeg writes the video in place: into a FIFO or a device too.
     const fs::file_type type = fs::status(o.video).type();
     if (type != fs::file_type::fifo && type != fs::file_type::character)
@@ -179,9 +202,14 @@ void run_render(const RenderCommandOptions& o) {
   double waited_s = 0;
   loop::FrameReport last;
   const auto start = Clock::now();
-  {
+  // Ctrl-C or SIGTERM stops between frames (or while a frame waits for its bricks): the frames
+  // drawn so far and their rows of metrics.csv are complete.
+  std::size_t drawn = 0;
+  const StopOnSignal stop;
+  try {
     ProgressBar bar("rendering", "frames");
     for (std::size_t i = 0; i < frames; ++i) {
+      stop_if_interrupted();
       const double time = tour.frame_time(i);
       if (o.realtime)
         std::this_thread::sleep_until(start + std::chrono::duration_cast<Clock::duration>(
@@ -195,8 +223,8 @@ void run_render(const RenderCommandOptions& o) {
       double wait_ms = 0;
       std::size_t new_errors = 0;  // bricks and frames that failed while this frame waited or drew
       if (!o.realtime) {
-        loop::ViewWait wait =
-            loop::wait_for_view(*renderer, tf.camera, tf.playhead, o.wait_timeout);
+        loop::ViewWait wait = loop::wait_for_view(*renderer, tf.camera, tf.playhead, o.wait_timeout,
+                                                  stop_if_interrupted);
         wait_ms = 1000 * wait.seconds;
         waited_s += wait.seconds;
         failures.add(wait.new_errors, "\n");
@@ -229,9 +257,7 @@ void run_render(const RenderCommandOptions& o) {
         ++compared;
       }
       if (writing.valid()) writing.get();
-      char name[32];
-      std::snprintf(name, sizeof name, "frame_%05zu.png", i);
-      writing = std::async(std::launch::async, [path = out / name, img = std::move(image)] {
+      writing = std::async(std::launch::async, [path = out / frame_png(i), img = std::move(image)] {
         cpu_render::write_png(path, img);
       });
       const auto& s = report.stats;
@@ -255,11 +281,23 @@ void run_render(const RenderCommandOptions& o) {
       char status[96];
       std::snprintf(status, sizeof status, "%.1f fps, %.0f%% at target LOD", 1000.0 / frame_ms,
                     100 * s.fraction_at_target);
-      bar.update({static_cast<double>(i + 1), static_cast<double>(frames), status});
+      drawn = i + 1;  // its PNG on its way, its row written (the update may stop the run)
       last = report;
+      bar.update({static_cast<double>(i + 1), static_cast<double>(frames), status});
     }
     if (writing.valid()) writing.get();
     bar.finish();
+  } catch (const Interrupted&) {
+    if (writing.valid()) writing.get();
+    csv.close();
+    std::fprintf(stderr,
+                 "\nvolreel render: interrupted after %zu of %zu frames: %s holds %s and their "
+                 "rows of metrics.csv\n",
+                 drawn, frames, out.c_str(),
+                 drawn == 0   ? "no frame"
+                 : drawn == 1 ? "frame_00000.png"
+                              : ("frame_00000.png .. " + frame_png(drawn - 1)).c_str());
+    throw;
   }
   csv.close();
   if (!csv) throw InputError("writing " + (out / "metrics.csv").string() + " failed");
@@ -308,17 +346,29 @@ void run_render(const RenderCommandOptions& o) {
     for (const char c : (out / "frame_").string())
       pattern += c == '%' ? std::string("%%") : std::string(1, c);
     pattern += "%05d.png";
-    if (const fs::path parent = fs::path(o.video).parent_path(); !parent.empty())
+    const fs::path video = o.video;
+    if (const fs::path parent = video.parent_path(); !parent.empty())
       fs::create_directories(parent);
+    // A file is written under a temporary name (the same extension, for ffmpeg's choice of
+    // container) and renamed once complete: a failed encode leaves no half-written video, nor
+    // replaces an earlier one. A FIFO or a device is written in place.
+    const fs::file_type type = fs::status(video).type();
+    const bool in_place = type == fs::file_type::fifo || type == fs::file_type::character;
+    const fs::path target = in_place ? video
+                                     : video.parent_path() / (video.stem().string() + ".partial" +
+                                                              video.extension().string());
     const int status =
         run_program(ffmpeg, {"-nostdin", "-y", "-loglevel", "error", "-framerate",
                              std::to_string(tour.fps()), "-start_number", "0", "-i", pattern,
                              "-frames:v", std::to_string(frames), "-c:v", "libx264", "-pix_fmt",
-                             "yuv420p", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", o.video});
+                             "yuv420p", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", target.string()});
+    std::error_code ec;
+    if (status != 0 && !in_place) fs::remove(target, ec);
     if (status < 0) throw InputError("could not run " + ffmpeg + " to encode " + o.video);
     if (status != 0)
       throw InputError("ffmpeg failed (exit status " + std::to_string(status) + ") encoding " +
-                       o.video);
+                       o.video + " (its messages above); the frames are in " + out.string());
+    if (!in_place) fs::rename(target, video);
     std::printf("wrote %s (%zu frames, H.264)\n", o.video.c_str(), frames);
   }
   // The frames are written (drawn without what failed); the exit status still says it failed.

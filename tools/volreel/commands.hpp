@@ -78,6 +78,8 @@ struct ReaderOptions {
   bool replace_nan_set = false;
   void add_to(CLI::App& command);
   datasets::OpenOptions to_open_options() const;
+  /// The options given, as "--dims, --frames" (empty: none).
+  std::string given() const;
 };
 
 /// "CPU model, N cores; build type; volreel version" for benchmark headers.

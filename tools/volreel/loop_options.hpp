@@ -6,6 +6,7 @@
 
 #include <string>
 
+#include "volreel/datasets/volume.hpp"
 #include "volreel/loop/loop_settings.hpp"
 
 namespace volreel::cli {
@@ -79,6 +80,21 @@ inline void add_renderer_options(CLI::App& cmd, std::string& renderer, bool& cpu
       ->check(CLI::IsMember({"auto", "vulkan", "cpu"}))
       ->capture_default_str();
   cmd.add_flag("--cpu", cpu, "The same as --renderer cpu");
+}
+
+/// Refuses --cpu with --renderer vulkan, and --decode gpu|cpu with the CPU ray caster named (it
+/// decodes its bricks on the CPU itself; --decode places the Vulkan ray caster's decoding).
+inline void check_renderer_options(const std::string& renderer, bool cpu,
+                                   const std::string& decode) {
+  if (cpu && renderer == "vulkan")
+    throw InputError(
+        "--cpu with --renderer vulkan: --cpu is the same as --renderer cpu; give "
+        "one of them");
+  if ((cpu || renderer == "cpu") && decode != "auto")
+    throw InputError("--decode " + decode + " with the CPU ray caster (" +
+                     (cpu ? "--cpu" : "--renderer cpu") +
+                     "), which decodes its bricks on the CPU itself: --decode places the Vulkan "
+                     "ray caster's decoding; leave it out, or give --renderer vulkan");
 }
 
 }  // namespace volreel::cli

@@ -147,6 +147,21 @@ void ReaderOptions::add_to(CLI::App& command) {
       ->each([this](const std::string&) { replace_nan_set = true; });
 }
 
+std::string ReaderOptions::given() const {
+  std::string names;
+  const auto add = [&](bool set, const char* name) {
+    if (set) names += (names.empty() ? "" : ", ") + std::string(name);
+  };
+  add(!dims.empty(), "--dims");
+  add(!dtype.empty(), "--dtype");
+  add(frames != 0, "--frames");
+  add(!dataset.empty(), "--dataset");
+  add(!variable.empty(), "--variable");
+  add(!time_dimension.empty(), "--time-dim");
+  add(replace_nan_set, "--replace-nan");
+  return names;
+}
+
 datasets::OpenOptions ReaderOptions::to_open_options() const {
   datasets::OpenOptions o;
   if (!dims.empty()) o.dims = parse_dims(dims);

@@ -7,7 +7,7 @@
 namespace volreel::loop {
 
 ViewWait wait_for_view(FrameLoop& loop, const player::OrbitCamera& camera, double playhead,
-                       double timeout_s) {
+                       double timeout_s, const std::function<void()>& between_steps) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
   const auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
@@ -33,6 +33,7 @@ ViewWait wait_for_view(FrameLoop& loop, const player::OrbitCamera& camera, doubl
     }
     if (s.uploads == 0 && s.arrivals_waiting == 0)
       std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    if (between_steps) between_steps();
   }
   wait.seconds = elapsed();
   return wait;

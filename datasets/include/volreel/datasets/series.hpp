@@ -95,6 +95,10 @@ bool describes_itself(const std::filesystem::path& path);
 OpenOptions options_for(const std::filesystem::path& path, const OpenOptions& options,
                         const std::filesystem::path* other);
 
+/// Whether `path` (existing or not) is the directory `dir` or lies inside it, links resolved.
+/// False when `dir` is not a directory.
+bool path_within(const std::filesystem::path& dir, const std::filesystem::path& path);
+
 /// Whether writing `file` would replace part of the input `path`: `path` itself (a file), a file
 /// its pattern matches, or an existing file inside it (a series directory, a container). False
 /// when `file` does not exist.

@@ -11,6 +11,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -115,8 +116,9 @@ struct ViewWait {
 /// LOD, nothing more can come (the frame indexes around the playhead read or failed, no request
 /// in flight and nothing waiting to be uploaded, as after read errors or with an atlas too small
 /// for the view) or `timeout_s` passed. Sleeps briefly
-/// while requests are in flight and nothing arrived.
+/// while requests are in flight and nothing arrived. `between_steps`, when given, is called after
+/// each step (a command's check for Ctrl-C: what it throws ends the wait).
 ViewWait wait_for_view(FrameLoop& loop, const player::OrbitCamera& camera, double playhead,
-                       double timeout_s);
+                       double timeout_s, const std::function<void()>& between_steps = {});
 
 }  // namespace volreel::loop

@@ -285,8 +285,10 @@ class SpatialIndex {
   /// Whether every frame within max_keyframe_gap of the playhead is held: the frames the
   /// selection and the scheduler need there.
   bool holds_around(double playhead) const;
-  /// Whether a held frame within max_keyframe_gap of the playhead failed to read: the view
-  /// there cannot be drawn as encoded.
+  /// Whether a held frame within max_keyframe_gap of the playhead that the view may need failed
+  /// to read: the view there cannot be drawn as encoded. A failed frame is not needed when a frame
+  /// between it and the playhead stores a brick of every node (a node's drawing takes its stored
+  /// states nearest the playhead on either side).
   bool failed_around(double playhead) const;
   /// Moves the window with the playhead (keyframe units; velocity in keyframes per second, for
   /// the direction of travel): adds the frames the reader has that extend the held range (within
