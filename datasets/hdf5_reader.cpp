@@ -119,8 +119,10 @@ class Hdf5Reader final : public SeriesReader {
       Handle space(H5Dget_space(ds.get()), H5Sclose);
       const int rank = H5Sget_simple_extent_ndims(space.get());
       if (rank < 3 || rank > 4)
-        throw InputError(where(name) + "has rank " + std::to_string(rank) +
-                         ", expected 3 ([z][y][x]) or 4");
+        throw InputError(
+            where(name) +
+            (rank == 0 ? std::string("is a scalar") : "has rank " + std::to_string(rank)) +
+            ", expected 3 ([z][y][x]) or 4");
       hsize_t shape[4] = {0, 0, 0, 1};
       H5Sget_simple_extent_dims(space.get(), shape, nullptr);
       Handle type(H5Dget_type(ds.get()), H5Tclose);
@@ -134,6 +136,15 @@ class Hdf5Reader final : public SeriesReader {
                     : Dims{static_cast<std::int64_t>(shape[2]), static_cast<std::int64_t>(shape[1]),
                            static_cast<std::int64_t>(shape[0])};
       if (dims.voxels() == 0) throw InputError(where(name) + "is empty");
+      // Storage never allocated: nothing was written, and HDF5 would hand out its fill value
+      // (zeros by default) as data.
+      H5D_space_status_t allocated = H5D_SPACE_STATUS_ERROR;
+      if (H5Sget_simple_extent_npoints(space.get()) > 0 &&
+          H5Dget_space_status(ds.get(), &allocated) >= 0 &&
+          allocated == H5D_SPACE_STATUS_NOT_ALLOCATED)
+        throw InputError(where(name) +
+                         "was never written (HDF5 allocated no storage for it): its values "
+                         "would all be the fill value; write the data, or name another dataset");
       if (frames_.empty()) {
         info_.dims = dims;
       } else if (dims != info_.dims) {

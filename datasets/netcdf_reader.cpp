@@ -8,6 +8,8 @@
 //
 // The Debian NetCDF library is not thread-safe, so every call holds one global mutex.
 #include <netcdf.h>
+#include <array>
+#include <cctype>
 
 #include <algorithm>
 #include <cmath>
@@ -192,7 +194,25 @@ class NetcdfReader final : public SeriesReader {
     count[z + 1] = static_cast<std::size_t>(info_.dims.y);
     count[z + 2] = static_cast<std::size_t>(info_.dims.x);
     if (rank_ == 4) start[0] = t;
-    {
+    if (mapped_) {
+      // The file's spatial dimensions in another order than (z, y, x): each one's start, count
+      // and stride in memory ([z][y][x]) by the axis it names.
+      const std::ptrdiff_t strides[3] = {1, static_cast<std::ptrdiff_t>(info_.dims.x),
+                                         static_cast<std::ptrdiff_t>(info_.dims.plane())};
+      const std::size_t sizes[3] = {static_cast<std::size_t>(info_.dims.x),
+                                    static_cast<std::size_t>(info_.dims.y), z_end - z_begin};
+      std::vector<std::ptrdiff_t> map(static_cast<std::size_t>(rank_), 0);
+      for (int d = rank_ - 3; d < rank_; ++d) {
+        const int axis = axis_of_dim_[static_cast<std::size_t>(d - (rank_ - 3))];
+        start[static_cast<std::size_t>(d)] = axis == 2 ? z_begin : 0;
+        count[static_cast<std::size_t>(d)] = sizes[axis];
+        map[static_cast<std::size_t>(d)] = strides[axis];
+      }
+      std::lock_guard lock(netcdf_mutex());
+      check(nc_get_varm_float(ncid_, varid_, start.data(), count.data(), nullptr, map.data(),
+                              out.data()),
+            "variable '" + variable_ + "' frame " + std::to_string(t));
+    } else {
       std::lock_guard lock(netcdf_mutex());
       check(nc_get_vara_float(ncid_, varid_, start.data(), count.data(), out.data()),
             "variable '" + variable_ + "' frame " + std::to_string(t));
@@ -201,14 +221,16 @@ class NetcdfReader final : public SeriesReader {
     // unpacked.
     for (std::size_t i = 0; i < out.size(); ++i) {
       float& v = out[i];
-      if ((fill_ && v == *fill_) || (missing_ && v == *missing_)) {
+      const bool invalid = (valid_min_ && v < *valid_min_) || (valid_max_ && v > *valid_max_);
+      if ((fill_ && v == *fill_) || (missing_ && v == *missing_) || invalid) {
         if (!replace_nan_) {
           char value[32];
           std::snprintf(value, sizeof value, "%.9g", static_cast<double>(v));
-          const char* what = fill_ && v == *fill_
-                                 ? (fill_default_ ? "NetCDF's default fill value (never written)"
-                                                  : "the variable's _FillValue")
-                                 : "the variable's missing_value";
+          const std::string what =
+              fill_ && v == *fill_ ? (fill_default_ ? "NetCDF's default fill value (never written)"
+                                                    : "the variable's _FillValue")
+              : missing_ && v == *missing_ ? "the variable's missing_value"
+                                           : "outside the variable's " + valid_text_;
           fail("variable '" + variable_ + "' frame " + std::to_string(t) + ": voxel " +
                voxel_name(i, info_.dims, z_begin) + " holds " + value + ", " + what +
                ": a missing value; use --replace-nan V to substitute a value");
@@ -230,6 +252,11 @@ class NetcdfReader final : public SeriesReader {
   int ncid_ = -1, varid_ = -1, rank_ = 0;
   std::string variable_;
   std::optional<float> fill_, missing_;
+  std::optional<float> valid_min_, valid_max_;  ///< CF valid_range, valid_min, valid_max
+  std::string valid_text_;                      ///< "valid_range [a, b]", for messages
+  /// The spatial dimensions named x, y and z in another order than (z, y, x): read by name.
+  bool mapped_ = false;
+  std::array<int, 3> axis_of_dim_{2, 1, 0};  ///< per spatial dimension in file order: 0 x .. 2 z
   bool fill_default_ = false;  ///< fill_ is NetCDF's default for the type, not an attribute
   double scale_ = 1, offset_ = 0;
 
@@ -319,6 +346,19 @@ class NetcdfReader final : public SeriesReader {
       return std::nullopt;
     double v = 0;
     check(nc_get_att_double(ncid_, varid, name, &v),
+          "attribute '" + std::string(name) + "' of '" + variable_name(varid) + "'");
+    return v;
+  }
+  /// A numeric attribute of exactly `n` values; none when absent or of another length or type.
+  std::optional<std::vector<double>> numbers_attribute(int varid, const char* name,
+                                                       std::size_t n) const {
+    nc_type type = 0;
+    std::size_t length = 0;
+    if (nc_inq_att(ncid_, varid, name, &type, &length) != NC_NOERR || length != n ||
+        type == NC_CHAR || type == NC_STRING)
+      return std::nullopt;
+    std::vector<double> v(n);
+    check(nc_get_att_double(ncid_, varid, name, v.data()),
           "attribute '" + std::string(name) + "' of '" + variable_name(varid) + "'");
     return v;
   }
@@ -421,15 +461,36 @@ class NetcdfReader final : public SeriesReader {
         fail("variable '" + variable_ + "' (" + shape + "): expected sizes in 1..16777216");
       return static_cast<std::int64_t>(n);
     };
-    info_.dims = Dims{length(rank_ - 1), length(rank_ - 2), length(rank_ - 3)};
+    // Spatial dimensions named x, y and z (any case) are read by their names in any order;
+    // otherwise the last is x and the first y then z before it.
+    std::array<int, 3> by_name{-1, -1, -1};  // per axis x, y, z: its position among the three
+    for (int d = 0; d < 3; ++d) {
+      std::string name = dimension_name(dims[static_cast<std::size_t>(rank_ - 3 + d)]);
+      for (char& c : name) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+      const int axis = name == "x" ? 0 : name == "y" ? 1 : name == "z" ? 2 : -1;
+      if (axis >= 0 && by_name[static_cast<std::size_t>(axis)] < 0)
+        by_name[static_cast<std::size_t>(axis)] = d;
+    }
+    std::string notes;
+    if (by_name[0] >= 0 && by_name[1] >= 0 && by_name[2] >= 0 &&
+        (by_name[0] != 2 || by_name[1] != 1 || by_name[2] != 0)) {
+      mapped_ = true;
+      for (int a = 0; a < 3; ++a)
+        axis_of_dim_[static_cast<std::size_t>(by_name[static_cast<std::size_t>(a)])] = a;
+      notes += ", its x, y and z read by their names";
+    }
+    const auto axis_length = [&](int axis) {
+      return length(rank_ - 3 + (mapped_ ? by_name[static_cast<std::size_t>(axis)] : 2 - axis));
+    };
+    info_.dims = Dims{axis_length(0), axis_length(1), axis_length(2)};
     info_.frames = rank_ == 4 ? dimension_length(dims[0]) : 1;
     if (info_.frames == 0) fail("variable '" + variable_ + "' has no time steps");
     info_.variable = variable_;
     // CF: spacing from the coordinate variables (uniform, or their mean step), times from the
     // time coordinate.
-    std::string notes;
     for (int a = 0; a < 3; ++a) {
-      const int dim = dims[static_cast<std::size_t>(rank_ - 1 - a)];
+      const int dim = dims[static_cast<std::size_t>(
+          rank_ - 3 + (mapped_ ? by_name[static_cast<std::size_t>(a)] : 2 - a))];
       const auto values = coordinate(dim);
       if (!values || values->size() < 2) continue;
       const double step =
@@ -462,6 +523,25 @@ class NetcdfReader final : public SeriesReader {
       fill_default_ = true;
     }
     if (const auto v = number_attribute(varid_, "missing_value")) missing_ = static_cast<float>(*v);
+    // CF: values outside valid_range (or below valid_min, above valid_max) are missing; like the
+    // fill value, in the stored (packed) values.
+    char text[96];
+    if (const auto r = numbers_attribute(varid_, "valid_range", 2)) {
+      valid_min_ = static_cast<float>((*r)[0]);
+      valid_max_ = static_cast<float>((*r)[1]);
+      std::snprintf(text, sizeof text, "valid_range [%.9g, %.9g]", (*r)[0], (*r)[1]);
+      valid_text_ = text;
+    } else {
+      const auto lo = number_attribute(varid_, "valid_min");
+      const auto hi = number_attribute(varid_, "valid_max");
+      if (lo) valid_min_ = static_cast<float>(*lo);
+      if (hi) valid_max_ = static_cast<float>(*hi);
+      if (lo && hi)
+        std::snprintf(text, sizeof text, "valid_min %.9g and valid_max %.9g", *lo, *hi);
+      else if (lo || hi)
+        std::snprintf(text, sizeof text, "%s %.9g", lo ? "valid_min" : "valid_max", lo ? *lo : *hi);
+      if (lo || hi) valid_text_ = text;
+    }
     scale_ = number_attribute(varid_, "scale_factor").value_or(1.0);
     offset_ = number_attribute(varid_, "add_offset").value_or(0.0);
     info_.source =

@@ -184,7 +184,7 @@ std::unique_ptr<SeriesReader> open_any(const fs::path& path, const OpenOptions& 
   const fs::file_type type = fs::status(path, ec).type();
   if (type != fs::file_type::regular)
     throw InputError("'" + path.string() + "' is " + format::detail::file_kind(type) +
-                     ", expected a regular file (raw or HDF5) or a series directory");
+                     ", expected a regular file (raw, HDF5 or NetCDF) or a series directory");
   if (is_hdf5_name(path.extension().string())) {
     refuse_other_options(path, options, InputKind::hdf5, "an HDF5 file");
     return detail::open_hdf5(path, options);

@@ -153,6 +153,11 @@ out=$("$volreel" compare "$work/all.raw" "$work/a" --dims 24x20x16 --frames 4 --
 [ "$(echo "$out" | json 'd["sequence"]["psnr"]')" = None ] || fail "raw file against its series: $out"
 "$volreel" encode "$work/a" --dictionary dct --out "$work/ab.vreel" > /dev/null 2>&1
 expect_error "is a volreel container: compare takes the original as A" "$volreel" compare "$work/ab.vreel" "$work/a"
+# A container of the first frames of A: compared over those, with a note naming the rest.
+"$volreel" encode "$work/a" --dictionary dct --max-frames 2 --out "$work/a2.vreel" > /dev/null 2>&1
+"$volreel" compare "$work/a" "$work/a2.vreel" --no-ssim > /dev/null 2> "$work/a2.err" || fail "compare with a 2-frame container"
+grep -q "the container holds 2 of the 4 frames.*frames 2..3 of A are not compared" "$work/a2.err" \
+  || fail "compare of fewer frames: no note: $(cat "$work/a2.err")"
 # info on a container with a damaged frame: the figures of the frames it can read, then the
 # error (exit 1).
 cp -r "$work/ab.vreel" "$work/abd.vreel"

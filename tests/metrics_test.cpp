@@ -157,7 +157,7 @@ TEST(ErrorMetrics, RejectsBadInput) {
     try {
       psnr::compare(values, broken);
     } catch (const InputError& error) {
-      EXPECT_NE(std::string(error.what()).find("decoded value 42"), std::string::npos)
+      EXPECT_NE(std::string(error.what()).find("decoded value at index 42"), std::string::npos)
           << error.what();
     }
   }

@@ -468,6 +468,20 @@ TEST(Hdf5, PatternOfThreeDimensionalDatasets) {
   expect_error([&] { vd::open_series(path, o); }, {"holds 4 datasets", "--dataset"});
   o.dataset = "xcoor";
   expect_error([&] { vd::open_series(path, o); }, {"rank 1"});
+  // A dataset created and never written (chunked: HDF5 allocates its storage on the first
+  // write) would read as its fill value, zeros.
+  const fs::path unwritten = dir / "unwritten.h5";
+  const hid_t u = H5Fcreate(unwritten.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  const hsize_t shape[3] = {4, 5, 6}, chunk[3] = {2, 5, 6};
+  const hid_t space = H5Screate_simple(3, shape, nullptr);
+  const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+  H5Pset_chunk(dcpl, 3, chunk);
+  H5Dclose(H5Dcreate2(u, "p", H5T_IEEE_F32LE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT));
+  H5Pclose(dcpl);
+  H5Sclose(space);
+  H5Fclose(u);
+  o.dataset = "p";
+  expect_error([&] { vd::open_series(unwritten, o); }, {"unwritten.h5", "was never written"});
 }
 
 TEST(Hdf5, FourDimensionalDatasetAndMismatches) {
@@ -698,6 +712,59 @@ TEST(NetCdf, MissingValuesAndWrongChoicesAreClearErrors) {
   const fs::path bad = dir.path() / "bad.nc";
   std::ofstream(bad) << "not netcdf";
   expect_error([&] { datasets::open_series(bad, o); }, {"bad.nc", "NetCDF"});
+}
+
+TEST(NetCdf, AxesNamedXYZAreReadByNameAndValidRangeMarksMissingValues) {
+  test::TempDir dir("netcdf-axes");
+  const fs::path file = dir.path() / "xyz.nc";
+  // p(time, x, y, z): z varies fastest in the file; value = 100·x + 10·y + z + 1000·t.
+  constexpr int nt = 2, nx = 5, ny = 4, nz = 3;
+  int nc = 0, dt = 0, dx = 0, dy = 0, dz = 0, vp = 0, vq = 0;
+  ASSERT_EQ(nc_create(file.c_str(), NC_CLOBBER | NC_NETCDF4, &nc), NC_NOERR);
+  nc_def_dim(nc, "time", nt, &dt);
+  nc_def_dim(nc, "X", nx, &dx);
+  nc_def_dim(nc, "y", ny, &dy);
+  nc_def_dim(nc, "z", nz, &dz);
+  const int d4[4] = {dt, dx, dy, dz};
+  nc_def_var(nc, "p", NC_FLOAT, 4, d4, &vp);
+  nc_def_var(nc, "q", NC_FLOAT, 4, d4, &vq);
+  const float range[2] = {0, 1200};
+  nc_put_att_float(nc, vq, "valid_range", NC_FLOAT, 2, range);
+  nc_enddef(nc);
+  const auto value = [](int t, int x, int y, int z) {
+    return static_cast<float>(1000 * t + 100 * x + 10 * y + z);
+  };
+  std::vector<float> values;
+  for (int t = 0; t < nt; ++t)
+    for (int x = 0; x < nx; ++x)
+      for (int y = 0; y < ny; ++y)
+        for (int z = 0; z < nz; ++z) values.push_back(value(t, x, y, z));
+  nc_put_var_float(nc, vp, values.data());
+  nc_put_var_float(nc, vq, values.data());
+  nc_close(nc);
+
+  datasets::OpenOptions o;
+  o.variable = "p";
+  const auto s = datasets::open_series(file, o);
+  EXPECT_EQ(s->info().dims, (Dims{nx, ny, nz}));
+  EXPECT_NE(s->info().source.find("read by their names"), std::string::npos) << s->info().source;
+  const Volume v = s->read_frame(1);
+  for (int z = 0; z < nz; ++z)
+    for (int y = 0; y < ny; ++y)
+      for (int x = 0; x < nx; ++x)
+        ASSERT_EQ(v.at(x, y, z), value(1, x, y, z)) << x << " " << y << " " << z;
+  // Piecewise reading takes the same values: planes 1..2 of frame 0.
+  std::vector<float> slab(static_cast<std::size_t>(nx * ny * 2));
+  s->read_slab(0, 1, 3, slab);
+  EXPECT_EQ(slab[0], 1.0f);                                             // (0, 0, 1)
+  EXPECT_EQ(slab[static_cast<std::size_t>(nx * ny + nx + 2)], 212.0f);  // (2, 1, 2)
+  // Frame 1 of q holds values above its valid_range's 1200: missing.
+  o.variable = "q";
+  const auto q = datasets::open_series(file, o);
+  EXPECT_NO_THROW(q->read_frame(0));
+  expect_error([&] { q->read_frame(1); },
+               {"xyz.nc", "variable 'q' frame 1", "outside the variable's valid_range [0, 1200]",
+                "--replace-nan"});
 }
 
 }  // namespace

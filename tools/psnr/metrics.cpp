@@ -49,8 +49,9 @@ BlockSums sum_block(const float* original, const float* decoded, std::size_t n) 
     for (const auto& [name, values] :
          {std::pair{"original", original}, std::pair{"decoded", decoded}}) {
       if (!std::isfinite(values[i])) {
-        throw InputError(std::string("error metrics: ") + name + " value " + std::to_string(i) +
-                         " is " + (std::isnan(values[i]) ? "NaN" : "infinite") +
+        throw InputError(std::string("error metrics: the ") + name + " value at index " +
+                         std::to_string(i) + " (in order, x fastest) is " +
+                         (std::isnan(values[i]) ? "NaN" : "infinite") +
                          "; metrics need finite values");
       }
     }

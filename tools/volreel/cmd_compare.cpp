@@ -121,6 +121,11 @@ void compare_series(const CompareOptions& o) {
   if (!container && ia.frames != ib.frames)
     throw InputError("'" + o.a + "' has " + std::to_string(ia.frames) + " frames but '" + o.b +
                      "' has " + std::to_string(ib.frames));
+  if (frames < ia.frames)
+    std::fprintf(stderr,
+                 "volreel compare: note: the container holds %zu of the %zu frames of '%s': "
+                 "frames %zu..%zu of A are not compared\n",
+                 frames, ia.frames, o.a.c_str(), frames, ia.frames - 1);
 
   struct Row {
     psnr::ErrorStats e;

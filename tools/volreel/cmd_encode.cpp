@@ -19,6 +19,7 @@
 #include "progress.hpp"
 #include "volreel/dictionary/training.hpp"
 #include "volreel/encoder/encoder.hpp"
+#include "volreel/format/container.hpp"
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/file_io.hpp"
 #include "volreel/format/frame_file.hpp"
@@ -205,15 +206,29 @@ void run_encode(const EncodeOptions& o) {
   // together: the signal ends them at once, and --resume removes what they left half-written).
   std::optional<StopOnSignal> stop;
   if (!ranks) stop.emplace();
+  const bool out_existed = std::filesystem::exists(o.out);
   const encoder::EncodeSummary s = [&] {
     try {
       return encoder::encode(*series, o.out, r, events);
     } catch (const Interrupted&) {
       if (bar) bar.reset();
-      std::fprintf(stderr,
-                   "\nvolreel encode: interrupted: the frames written to %s are kept; the same "
-                   "command with --resume continues it\n",
-                   o.out.c_str());
+      // Stopped before its first frame (while the value range or the dictionary was found): a
+      // container this run made holds nothing to continue, and goes.
+      std::size_t written = 0;
+      try {
+        const format::Container kept(o.out, true);
+        for (const auto& frame : kept.manifest().frames) written += frame.has_value();
+      } catch (const std::exception&) {  // no manifest yet
+      }
+      std::error_code ec;
+      if (written == 0 && !out_existed) std::filesystem::remove_all(o.out, ec);
+      if (written == 0)
+        std::fprintf(stderr, "\nvolreel encode: interrupted before its first frame was written\n");
+      else
+        std::fprintf(stderr,
+                     "\nvolreel encode: interrupted: the %zu frames written to %s are kept; the "
+                     "same command with --resume continues it\n",
+                     written, o.out.c_str());
       throw;
     }
   }();
@@ -254,7 +269,8 @@ void add_encode_command(CLI::App& app) {
       "status is an error (130:\ninterrupted), after which nothing half-written is left.");
   cmd->add_option(
          "SERIES", o->series,
-         "Raw series directory, HDF5 file, raw file or quoted pattern of raw files (see below)")
+         "Raw series directory, HDF5 or NetCDF file, raw file or quoted pattern of raw files (see "
+         "below)")
       ->required();
   cmd->add_option("--out", o->out, "The container directory to write, e.g. turb.vreel")->required();
   CLI::Option* dictionary_opt = cmd->add_option(

@@ -62,6 +62,7 @@ void run_analytic(const AnalyticOptions& o) {
   datasets::AnalyticParams params;
   params.field = datasets::parse_analytic_field(o.field);
   params.dims = o.dims.empty() ? Dims{o.size, o.size, o.size} : parse_dims(o.dims);
+  check_frame_voxels(params.dims, "--size " + std::to_string(o.size));
   params.frames = o.frames;
   params.seed = o.seed;
   datasets::RawSeriesWriter writer(o.out, params.dims, "analytic-" + o.field, o.overwrite);

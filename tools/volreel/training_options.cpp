@@ -47,7 +47,8 @@ std::string mvoxels(double voxels) {
 void TrainingCli::add_to(CLI::App& c) {
   c.add_option(
        "SERIES", series,
-       "Raw series directory, HDF5 file, raw file or quoted pattern of raw files (see below)")
+       "Raw series directory, HDF5 or NetCDF file, raw file or quoted pattern of raw files (see "
+       "below)")
       ->required();
   tolerance_option = c.add_option(
       "--tolerance", tolerance,
