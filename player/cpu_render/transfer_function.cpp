@@ -63,6 +63,12 @@ void check_entries(int entries, const std::string& where) {
                      std::to_string(entries));
 }
 
+/// A number that a float holds (values and ranges are floats, as the volume's values are).
+double float_number(const nlohmann::json& value, const std::string& where) {
+  constexpr double largest = std::numeric_limits<float>::max();
+  return detail::number_in(value, -largest, largest, where);
+}
+
 void check_range(float lo, float hi, const std::string& where) {
   if (!(std::isfinite(lo) && std::isfinite(hi) && lo < hi))
     throw InputError(where + ": expected a finite range lo < hi, found [" + std::to_string(lo) +
@@ -226,8 +232,8 @@ TransferFunction TransferFunction::from_json(const nlohmann::json& json,
   if (has_range) {
     const auto& r = json["range"];
     if (!r.is_array() || r.size() != 2) fail(where + ".range", "[lo, hi]", r);
-    range = {static_cast<float>(number(r[0], where + ".range[0]")),
-             static_cast<float>(number(r[1], where + ".range[1]"))};
+    range = {static_cast<float>(float_number(r[0], where + ".range[0]")),
+             static_cast<float>(float_number(r[1], where + ".range[1]"))};
     if (!(range[0] < range[1])) fail(where + ".range", "lo < hi", r);
   }
   if (has_preset) {
@@ -256,7 +262,7 @@ TransferFunction TransferFunction::from_json(const nlohmann::json& json,
     const auto& p = pts[i];
     if (!p.is_array() || p.size() != 5) fail(at, "[value, r, g, b, a]", p);
     ControlPoint c;
-    c.value = static_cast<float>(number(p[0], at + "[0] (value)"));
+    c.value = static_cast<float>(float_number(p[0], at + "[0] (value)"));
     c.r = static_cast<float>(number_in(p[1], 0, 1, at + "[1] (r)"));
     c.g = static_cast<float>(number_in(p[2], 0, 1, at + "[2] (g)"));
     c.b = static_cast<float>(number_in(p[3], 0, 1, at + "[3] (b)"));

@@ -112,6 +112,10 @@ TEST(CpuRenderTransferFunction, JsonErrorsNameTheField) {
   expect(R"({"points": [[1, 0, 0, 0, 0], [0, 0, 0, 0, 0]]})",
          "tf.json.points[1][0] (value): expected values in increasing order");
   expect(R"({"points": [[0, 0, 0, 0, 0]], "opacity": 2})", "presets only");
+  // Beyond a float's range: named where it was written, not as an infinite range.
+  expect(R"({"points": [[-1e40, 0, 0, 0, 0], [1e40, 0, 0, 0, 0]]})",
+         "tf.json.points[0][0] (value): expected a number in [");
+  expect(R"({"preset": "fire", "range": [-1, 1e39]})", "tf.json.range[1]: expected a number in [");
   EXPECT_EQ(json_error(R"({"preset": "fire"})"), "");
 }
 

@@ -146,6 +146,18 @@ expect_refused "--frames: options of the --compare series" --out "$dir/x" --fram
 expect_refused "--decode gpu with the CPU ray caster" --out "$dir/x" --cpu --decode gpu
 expect_refused "--cpu with --renderer vulkan" --out "$dir/x" --cpu --renderer vulkan
 "$volreel" verify "$dir/test.vreel" > /dev/null 2>&1 || { echo "refused renders changed the container"; exit 1; }
+# An atlas too small for the view: the frames are drawn coarser, and the summary says why.
+"$volreel" render "$dir/test.vreel" --out "$dir/small_atlas" --size 64x64 --max-frames 2 --cpu --atlas-mb 0.02 \
+  > "$dir/atlas.log" 2>&1 || { cat "$dir/atlas.log"; echo "render with a small atlas failed"; exit 1; }
+grep -q "the view wants more bricks than the atlas's [0-9]* slots hold; give a larger --atlas-mb" "$dir/atlas.log" \
+  || { cat "$dir/atlas.log"; echo "render with a small atlas: no warning"; exit 1; }
+# play's --screenshot-on-exit is checked before the window opens (no display needed for this).
+for bad in "$dir/shot.jpg:give a name ending in .png" "$dir:is a folder" "$dir/nowhere/shot.png:does not exist"; do
+  if "$volreel" play "$dir/test.vreel" --screenshot-on-exit "${bad%%:*}" > "$dir/bad.log" 2>&1; then
+    echo "play accepted --screenshot-on-exit ${bad%%:*}"; exit 1
+  fi
+  grep -q -e "${bad#*:}" "$dir/bad.log" || { echo "play --screenshot-on-exit ${bad%%:*}:"; cat "$dir/bad.log"; exit 1; }
+done
 # A constant sequence (an empty value range) renders with the default tour, as play does.
 mkdir -p "$dir/const"
 /usr/bin/python3 -c "import struct,sys; open(sys.argv[1],'wb').write(struct.pack('<1728f', *[2.5]*1728))" "$dir/const/c.f32"

@@ -165,7 +165,8 @@ void run_bench_play(const BenchPlayOptions& o) {
     return r;
   };
   /// Frames at a still view until one at full resolution shows every visible node at its target
-  /// LOD (busy, so reduced, while bricks stream in); false on the timeout.
+  /// LOD (busy, so reduced, while bricks stream in); false on the timeout, or once nothing more
+  /// can come (quiet frames at full resolution: an atlas too small for the view, read errors).
   const auto until_full_quality = [&](double at, std::size_t& frames, loop::FrameReport& r,
                                       Clock::time_point start) {
     // The stream step first: a view whose bricks are all there is drawn at full resolution at
@@ -173,13 +174,23 @@ void run_bench_play(const BenchPlayOptions& o) {
     const loop::FrameReport probe = loop->stream(camera, at);
     failures.add(probe.new_errors);
     bool complete = probe.stats.fraction_at_target >= 1.0;
+    int quiet = 0;
     do {
       r = draw(camera, at, !complete);
       ++frames;
       complete = r.stats.fraction_at_target >= 1.0;
       if (complete && scale == 1.0) return true;
+      quiet = r.stats.quiet() && scale == 1.0 ? quiet + 1 : 0;
+      if (quiet >= 3) return false;
     } while (seconds_since(start) < o.timeout);
     return false;
+  };
+  /// Why a view did not reach full quality, for the report.
+  const auto short_of_full = [&](const loop::FrameReport& r) -> std::string {
+    if (r.stats.atlas_capacity > 0 && r.stats.atlas_occupied >= r.stats.atlas_capacity)
+      return " (incomplete: the view wants more bricks than the atlas's " +
+             std::to_string(r.stats.atlas_capacity) + " slots; give a larger --atlas-mb)";
+    return r.stats.quiet() ? " (incomplete: nothing more could be read)" : " (timed out)";
   };
 
   // 2. Cold start: playhead 0, fixed camera, until everything visible is at its target LOD.
@@ -188,11 +199,11 @@ void run_bench_play(const BenchPlayOptions& o) {
     const auto start = Clock::now();
     std::size_t frames = 0;
     loop::FrameReport r;
-    until_full_quality(playhead, frames, r, start);
+    const bool reached = until_full_quality(playhead, frames, r, start);
     std::printf(
-        "cold start to full quality: %.2f s, %zu frames (%.0f%% at target, %.1f MB loaded)\n\n",
+        "cold start to full quality: %.2f s, %zu frames (%.0f%% at target, %.1f MB loaded)%s\n\n",
         seconds_since(start), frames, 100 * r.stats.fraction_at_target,
-        double(r.stats.bytes_loaded) * 1e-6);
+        double(r.stats.bytes_loaded) * 1e-6, reached ? "" : short_of_full(r).c_str());
   }
 
   // 3. Phases along the script (the camera orbits: busy); serial frames give the exact time
@@ -275,17 +286,21 @@ void run_bench_play(const BenchPlayOptions& o) {
     loop::FrameReport r;
     const bool reached = until_full_quality(playhead, frames, r, start);
     const double t = seconds_since(start);
-    times.push_back(t);
+    if (reached) times.push_back(t);
     std::printf("  seek to keyframe %7.2f: %.3f s, %4zu frames, %.1f MB read%s\n", playhead, t,
                 frames, double(r.stats.bytes_loaded - before) * 1e-6,
-                reached ? "" : " (timed out)");
+                reached ? "" : short_of_full(r).c_str());
   }
   if (!times.empty()) {
     double sum = 0;
     for (double t : times) sum += t;
-    std::printf("  mean %.3f s, worst %.3f s\n", sum / double(times.size()),
+    std::printf("  mean %.3f s, worst %.3f s", sum / double(times.size()),
                 *std::max_element(times.begin(), times.end()));
   }
+  if (times.size() < o.seeks)
+    std::printf("%s%zu of the %zu seeks did not reach full quality (above)",
+                times.empty() ? "  " : "; ", o.seeks - times.size(), o.seeks);
+  if (o.seeks > 0) std::printf("\n");
   loop->finish();
   failures.fail_if_any("the figures above are of frames drawn without them");
 }

@@ -6,10 +6,12 @@
 // frame is drawn once the bricks it needs have arrived (loop::wait_for_view, within
 // --wait-timeout), so a movie never starts black or shows data still streaming in; with it, frames
 // keep the tour's pace and show what has arrived, as the player does.
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <future>
@@ -187,7 +189,9 @@ void run_render(const RenderCommandOptions& o) {
   // 3. Frames: render, write the PNG on a worker thread while the next frame renders.
   const std::size_t earlier = earlier_render_frames(out);
   std::ofstream csv(out / "metrics.csv");
-  if (!csv) throw InputError("cannot write " + (out / "metrics.csv").string());
+  if (!csv)
+    throw InputError("cannot write " + (out / "metrics.csv").string() + ": " +
+                     std::strerror(errno));
   csv << "frame,time_s,playhead,frame_ms,fps,schedule_ms,upload_ms,decode_ms,render_ms,readback_ms,"
          "atlas_occupied,"
          "atlas_capacity,atlas_occupancy,requests_in_flight,requests_sent,uploads,mb_uploaded,mb_"
@@ -198,6 +202,7 @@ void run_render(const RenderCommandOptions& o) {
   double sum_ms[5] = {0, 0, 0, 0, 0};
   double sum_psnr = 0, sum_ssim = 0;
   std::size_t compared = 0, timeouts = 0;
+  std::size_t atlas_short = 0;  // frames drawn coarser than their target: the atlas was full
   ReadFailures failures;
   double waited_s = 0;
   loop::FrameReport last;
@@ -229,6 +234,9 @@ void run_render(const RenderCommandOptions& o) {
         waited_s += wait.seconds;
         failures.add(wait.new_errors, "\n");
         new_errors += wait.new_errors.size();
+        if (!wait.complete && !wait.timed_out && wait.stats.atlas_capacity > 0 &&
+            wait.stats.atlas_occupied >= wait.stats.atlas_capacity)
+          ++atlas_short;
         if (wait.timed_out) {
           ++timeouts;
           std::fprintf(stderr,
@@ -321,6 +329,12 @@ void run_render(const RenderCommandOptions& o) {
                             " frames drawn incomplete after --wait-timeout")
                                .c_str()
                          : "");
+  if (atlas_short > 0)
+    std::fprintf(stderr,
+                 "volreel render: warning: %zu frames drawn with part of the view coarser than "
+                 "its target level of detail: the view wants more bricks than the atlas's %u "
+                 "slots hold; give a larger --atlas-mb\n",
+                 atlas_short, renderer->slot_count());
   print_remote_summary(container.source(), "render");
   if (compared)
     std::printf(
