@@ -9,6 +9,7 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <optional>
 
 #include <unistd.h>
 
@@ -141,13 +142,40 @@ bool is_netcdf_name(std::string ext) {
   return ext == ".nc" || ext == ".nc4" || ext == ".cdf" || ext == ".netcdf";
 }
 
+/// What a regular file's first bytes say it is: HDF5 (its signature at byte 0, or after a user
+/// block at 512·2^k), which NetCDF-4 files are too, or classic NetCDF ("CDF" and version 1, 2
+/// or 5); nothing for anything else, for what cannot be read, and for what is not a regular file
+/// (a FIFO is never opened).
+std::optional<InputKind> signature_kind(const fs::path& path) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) return std::nullopt;
+  std::ifstream in(path, std::ios::binary);
+  const std::uint64_t size = fs::file_size(path, ec);
+  if (!in || ec) return std::nullopt;
+  char head[8] = {};
+  static constexpr char hdf5[8] = {'\x89', 'H', 'D', 'F', '\r', '\n', '\x1a', '\n'};
+  for (std::uint64_t at = 0; at + 8 <= size && at <= (std::uint64_t{1} << 16);
+       at = at == 0 ? 512 : 2 * at) {
+    in.seekg(static_cast<std::streamoff>(at));
+    if (!in.read(head, 8)) return std::nullopt;
+    if (std::memcmp(head, hdf5, 8) == 0) return InputKind::hdf5;
+    if (at == 0 && head[0] == 'C' && head[1] == 'D' && head[2] == 'F' &&
+        (head[3] == 1 || head[3] == 2 || head[3] == 5))
+      return InputKind::netcdf;
+  }
+  return std::nullopt;
+}
+
 }  // namespace
 
 InputKind input_kind(const fs::path& path) {
   std::error_code ec;
   if (fs::is_directory(path, ec) || path.filename() == "series.json") return InputKind::raw_series;
-  if (is_hdf5_name(path.extension().string())) return InputKind::hdf5;
+  // The name first for NetCDF, whose version 4 files are HDF5 files; then what the bytes say,
+  // then the name.
   if (is_netcdf_name(path.extension().string())) return InputKind::netcdf;
+  if (const auto kind = signature_kind(path)) return *kind;
+  if (is_hdf5_name(path.extension().string())) return InputKind::hdf5;
   return InputKind::raw;
 }
 
@@ -177,7 +205,10 @@ std::unique_ptr<SeriesReader> open_any(const fs::path& path, const OpenOptions& 
   }
   if (!fs::exists(path, ec)) throw InputError("'" + path.string() + "' does not exist");
   if (fs::is_directory(path, ec) || path.filename() == "series.json") {
-    refuse_other_options(path, options, InputKind::raw_series, "a series directory (series.json)");
+    // A folder without series.json: the reader says what it lacks.
+    if (fs::exists(fs::is_directory(path, ec) ? path / "series.json" : path, ec))
+      refuse_other_options(path, options, InputKind::raw_series,
+                           "a series directory (series.json)");
     return detail::open_raw_series(fs::is_directory(path, ec) ? path : path.parent_path(), options);
   }
   // Never hand a FIFO or a device to a reader that would block on it or read it forever.
@@ -185,11 +216,17 @@ std::unique_ptr<SeriesReader> open_any(const fs::path& path, const OpenOptions& 
   if (type != fs::file_type::regular)
     throw InputError("'" + path.string() + "' is " + format::detail::file_kind(type) +
                      ", expected a regular file (raw, HDF5 or NetCDF) or a series directory");
-  if (is_hdf5_name(path.extension().string())) {
+  const InputKind kind = input_kind(path);
+  if (kind == InputKind::hdf5) {
+    // Named as one, but without HDF5's signature: not taken for HDF5 (nor for raw data).
+    if (!signature_kind(path))
+      throw InputError("'" + path.string() + "' is named as an HDF5 file but is not one (it " +
+                       "lacks HDF5's signature): a raw file named so needs another name, and " +
+                       "an HDF5 file may be damaged");
     refuse_other_options(path, options, InputKind::hdf5, "an HDF5 file");
     return detail::open_hdf5(path, options);
   }
-  if (is_netcdf_name(path.extension().string())) {
+  if (kind == InputKind::netcdf) {
     refuse_other_options(path, options, InputKind::netcdf, "a NetCDF file");
     return detail::open_netcdf(path, options);
   }

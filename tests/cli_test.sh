@@ -45,6 +45,11 @@ expect_error() {
   if msg=$("$@" 2>&1 >/dev/null); then fail "expected failure: $*"; fi
   grep -q -e "$pattern" <<< "$msg" || fail "message for '$*' lacks '$pattern': $msg"
 }
+# A mistake on the command line: exit status 2, the message as every error's.
+status=0
+"$volreel" gen analytic --size 16 --size 17 --out "$work/x" > /dev/null 2> "$work/usage.err" || status=$?
+[ "$status" = 2 ] || fail "a repeated option: exit status $status, expected 2"
+grep -q "^volreel: error: --size" "$work/usage.err" || fail "a repeated option's message: $(cat "$work/usage.err")"
 # A seed is a whole number written in digits: "-1" was taken as 2^64 - 1.
 for seed in -1 1.5 abc; do
   expect_error "expected a seed, a whole number" "$volreel" gen turbulence --size 16 --frames 1 --seed "$seed" --out "$work/x"

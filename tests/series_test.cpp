@@ -515,7 +515,19 @@ TEST(Hdf5, CorruptFilesAreRejected) {
   const fs::path path = dir / "bad.h5";
   const std::string junk = "this is not an HDF5 file at all";
   write_bytes(path, junk.data(), junk.size());
-  expect_error([&] { vd::open_series(path); }, {"bad.h5", "cannot be opened as an HDF5 file"});
+  expect_error([&] { vd::open_series(path); },
+               {"bad.h5", "is named as an HDF5 file but is not one", "signature"});
+  // Not the name but the bytes: an HDF5 file named .dat is read as HDF5.
+  const fs::path named = dir / "cutout.dat";
+  {
+    const hid_t h = H5Fcreate(named.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    h5_write(h, "p", {2, 3, 4}, counting(24, 0));
+    H5Fclose(h);
+  }
+  EXPECT_EQ(vd::input_kind(named), vd::InputKind::hdf5);
+  vd::OpenOptions p;
+  p.dataset = "p";
+  EXPECT_EQ(vd::open_series(named, p)->info().dims, (Dims{4, 3, 2}));
 
   // A real file cut in half.
   const fs::path good = dir / "good.h5";

@@ -220,8 +220,8 @@ void add_bench_stream_command(CLI::App& bench) {
                   "16-bit GPU atlas holds\nin bricks of 36^3 (in bricks of 66^3 it holds 466)")
       ->capture_default_str();
   cmd->add_option("--max-in-flight", o->s.max_in_flight,
-                  "Requests in flight at most (default: what the link delivers in latency + 0.5 s, "
-                  "at least 32)");
+                  "Requests in flight at most (default, or 0: what the link delivers in latency + "
+                  "0.5 s, 32 to 4096)");
   cmd->add_option("--io-threads", o->s.io_threads, "Loader threads")->capture_default_str();
   cmd->add_option("--policy", o->s.policy, "both, patent or nearest (nearest-keyframe-first)")
       ->capture_default_str();
@@ -314,9 +314,8 @@ void add_bench_stream_command(CLI::App& bench) {
                   "Compressed bytes uploaded per frame at most, MB")
       ->capture_default_str();
   cmd->add_option("--png-every", o->s.png_every,
-                  "Write every Nth frame as a PNG (default: the frames just after each seek, half "
-                  "a second later, and "
-                  "the last)");
+                  "Write every Nth frame as a PNG (default, or 0: the frames just after each "
+                  "seek, half a second later, and the last)");
   cmd->add_option("--out", o->out,
                   "Output folder (default: a new folder in /tmp, printed at the end)");
   o->reader.add_to(*cmd);

@@ -38,7 +38,14 @@ int main(int argc, char** argv) {
     volreel::cli::refuse_unknown_command(app, argc, argv);
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version as CLI11 prints them; a mistake on the command line as every other
+    // error, with exit status 2 (a usage error, as for most Unix tools).
+    if (e.get_exit_code() == 0) return app.exit(e);
+    std::fprintf(stderr,
+                 "volreel: error: %s\nRun `volreel --help` or `volreel COMMAND --help` "
+                 "for the options.\n",
+                 e.what());
+    return 2;
   } catch (const volreel::cli::Interrupted&) {
     std::fprintf(stderr, "volreel: interrupted; nothing half-written was left\n");
     volreel::cli::end_by_stop_signal();
