@@ -37,6 +37,8 @@ int main(int argc, char** argv) {
   try {
     volreel::cli::refuse_unknown_command(app, argc, argv);
     app.parse(argc, argv);
+  } catch (const CLI::RuntimeError& e) {  // a command's own exit status, its message printed
+    return e.get_exit_code();
   } catch (const CLI::ParseError& e) {
     // --help and --version as CLI11 prints them; a mistake on the command line as every other
     // error, with exit status 2 (a usage error, as for most Unix tools).
