@@ -138,8 +138,10 @@ class Hdf5Reader final : public SeriesReader {
       if (dims.voxels() == 0) throw InputError(where(name) + "is empty");
       // Storage never allocated: nothing was written, and HDF5 would hand out its fill value
       // (zeros by default) as data.
+      // (Storage in external files, H5Pset_external's raw data, is never allocated in the file.)
       H5D_space_status_t allocated = H5D_SPACE_STATUS_ERROR;
-      if (H5Sget_simple_extent_npoints(space.get()) > 0 &&
+      Handle dcpl(H5Dget_create_plist(ds.get()), H5Pclose);
+      if (H5Sget_simple_extent_npoints(space.get()) > 0 && H5Pget_external_count(dcpl.get()) == 0 &&
           H5Dget_space_status(ds.get(), &allocated) >= 0 &&
           allocated == H5D_SPACE_STATUS_NOT_ALLOCATED)
         throw InputError(where(name) +

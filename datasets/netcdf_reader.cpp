@@ -195,23 +195,31 @@ class NetcdfReader final : public SeriesReader {
     count[z + 2] = static_cast<std::size_t>(info_.dims.x);
     if (rank_ == 4) start[0] = t;
     if (mapped_) {
-      // The file's spatial dimensions in another order than (z, y, x): each one's start, count
-      // and stride in memory ([z][y][x]) by the axis it names.
-      const std::ptrdiff_t strides[3] = {1, static_cast<std::ptrdiff_t>(info_.dims.x),
-                                         static_cast<std::ptrdiff_t>(info_.dims.plane())};
+      // The file's spatial dimensions in another order than (z, y, x): the slab read in the
+      // file's order (one call: a mapped read goes value by value), then placed in [z][y][x].
+      const std::size_t strides[3] = {1, static_cast<std::size_t>(info_.dims.x),
+                                      static_cast<std::size_t>(info_.dims.plane())};
       const std::size_t sizes[3] = {static_cast<std::size_t>(info_.dims.x),
                                     static_cast<std::size_t>(info_.dims.y), z_end - z_begin};
-      std::vector<std::ptrdiff_t> map(static_cast<std::size_t>(rank_), 0);
-      for (int d = rank_ - 3; d < rank_; ++d) {
-        const int axis = axis_of_dim_[static_cast<std::size_t>(d - (rank_ - 3))];
-        start[static_cast<std::size_t>(d)] = axis == 2 ? z_begin : 0;
-        count[static_cast<std::size_t>(d)] = sizes[axis];
-        map[static_cast<std::size_t>(d)] = strides[axis];
+      std::size_t n[3], stride[3];  // per spatial dimension in file order
+      for (int d = 0; d < 3; ++d) {
+        const int axis = axis_of_dim_[static_cast<std::size_t>(d)];
+        const auto at = static_cast<std::size_t>(rank_ - 3 + d);
+        start[at] = axis == 2 ? z_begin : 0;
+        count[at] = n[d] = sizes[axis];
+        stride[d] = strides[axis];
       }
-      std::lock_guard lock(netcdf_mutex());
-      check(nc_get_varm_float(ncid_, varid_, start.data(), count.data(), nullptr, map.data(),
-                              out.data()),
-            "variable '" + variable_ + "' frame " + std::to_string(t));
+      std::vector<float> file_order(out.size());
+      {
+        std::lock_guard lock(netcdf_mutex());
+        check(nc_get_vara_float(ncid_, varid_, start.data(), count.data(), file_order.data()),
+              "variable '" + variable_ + "' frame " + std::to_string(t));
+      }
+      std::size_t k = 0;
+      for (std::size_t i = 0; i < n[0]; ++i)
+        for (std::size_t j = 0; j < n[1]; ++j)
+          for (std::size_t l = 0; l < n[2]; ++l)
+            out[i * stride[0] + j * stride[1] + l * stride[2]] = file_order[k++];
     } else {
       std::lock_guard lock(netcdf_mutex());
       check(nc_get_vara_float(ncid_, varid_, start.data(), count.data(), out.data()),

@@ -18,6 +18,7 @@
 #include "detail.hpp"
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
+#include "volreel/format/json_input.hpp"
 
 namespace volreel::datasets {
 
@@ -154,8 +155,7 @@ std::optional<InputKind> signature_kind(const fs::path& path) {
   if (!in || ec) return std::nullopt;
   char head[8] = {};
   static constexpr char hdf5[8] = {'\x89', 'H', 'D', 'F', '\r', '\n', '\x1a', '\n'};
-  for (std::uint64_t at = 0; at + 8 <= size && at <= (std::uint64_t{1} << 16);
-       at = at == 0 ? 512 : 2 * at) {
+  for (std::uint64_t at = 0; at + 8 <= size; at = at == 0 ? 512 : 2 * at) {
     in.seekg(static_cast<std::streamoff>(at));
     if (!in.read(head, 8)) return std::nullopt;
     if (std::memcmp(head, hdf5, 8) == 0) return InputKind::hdf5;
@@ -221,8 +221,9 @@ std::unique_ptr<SeriesReader> open_any(const fs::path& path, const OpenOptions& 
     // Named as one, but without HDF5's signature: not taken for HDF5 (nor for raw data).
     if (!signature_kind(path))
       throw InputError("'" + path.string() + "' is named as an HDF5 file but is not one (it " +
-                       "lacks HDF5's signature): a raw file named so needs another name, and " +
-                       "an HDF5 file may be damaged");
+                       "lacks HDF5's signature): a raw file named so needs another name, an " +
+                       "HDF5 file may be damaged, and a .hdf file may be HDF4, which volreel " +
+                       "does not read");
     refuse_other_options(path, options, InputKind::hdf5, "an HDF5 file");
     return detail::open_hdf5(path, options);
   }
@@ -247,9 +248,23 @@ bool input_includes(const fs::path& path, const fs::path& file) {
     }
     return false;
   }
-  // A series directory named by its series.json: the directory.
-  const fs::path whole = path.filename() == "series.json" ? path.parent_path() : path;
-  if (fs::is_directory(whole, ec)) return path_within(whole, file);
+  // A series directory named by its series.json: the directory, and the frames its series.json
+  // lists (which may lie elsewhere, "../frame.f32").
+  const fs::path whole = path.filename() == "series.json"
+                             ? (path.has_parent_path() ? path.parent_path() : fs::path("."))
+                             : path;
+  if (fs::is_directory(whole, ec)) {
+    if (path_within(whole, file)) return true;
+    try {
+      const auto json = format::read_json_file(whole / "series.json");
+      if (json.contains("frames") && json["frames"].is_array())
+        for (const auto& name : json["frames"])
+          if (name.is_string() && fs::equivalent(whole / name.get<std::string>(), file, ec))
+            return true;
+    } catch (const std::exception&) {  // no series.json, or not one: the reader will say
+    }
+    return false;
+  }
   return fs::equivalent(path, file, ec);
 }
 

@@ -50,6 +50,9 @@ status=0
 "$volreel" gen analytic --size 16 --size 17 --out "$work/x" > /dev/null 2> "$work/usage.err" || status=$?
 [ "$status" = 2 ] || fail "a repeated option: exit status $status, expected 2"
 grep -q "^volreel: error: --size" "$work/usage.err" || fail "a repeated option's message: $(cat "$work/usage.err")"
+status=0
+"$volreel" encod "$work/a" > /dev/null 2>&1 || status=$?
+[ "$status" = 2 ] || fail "an unknown command: exit status $status, expected 2"
 # A seed is a whole number written in digits: "-1" was taken as 2^64 - 1.
 for seed in -1 1.5 abc; do
   expect_error "expected a seed, a whole number" "$volreel" gen turbulence --size 16 --frames 1 --seed "$seed" --out "$work/x"
@@ -182,6 +185,8 @@ expect_error "is part of the input" \
   "$volreel" train "$work/a/000001.f32" --dims 24x20x16 --atoms 8 --out "$work/a/000001.f32" --overwrite
 expect_error "is part of the input" \
   "$volreel" train "$work/a/0*.f32" --dims 24x20x16 --atoms 8 --out "$work/a/000001.f32" --overwrite
+(cd "$work/a" && expect_error "is part of the input" \
+  "$volreel" train series.json --atoms 8 --out 000001.f32 --overwrite)
 cmp -s "$work/a/000001.f32" "$work/a1.copy" || fail "train changed its input frame"
 expect_error "is a file of the container.*choose another --out" \
   "$volreel" decode "$work/ab.vreel" --out "$work/ab.vreel/frames/000000.vrf"

@@ -482,6 +482,25 @@ TEST(Hdf5, PatternOfThreeDimensionalDatasets) {
   H5Fclose(u);
   o.dataset = "p";
   expect_error([&] { vd::open_series(unwritten, o); }, {"unwritten.h5", "was never written"});
+  // A dataset whose values lie in an external raw file (H5Pset_external): no storage in the
+  // file, and written all the same.
+  const fs::path external = dir / "external.h5";
+  const std::vector<float> raw = [] {
+    std::vector<float> counted(4 * 5 * 6);
+    for (std::size_t i = 0; i < counted.size(); ++i) counted[i] = static_cast<float>(i);
+    return counted;
+  }();
+  write_bytes(dir / "external.f32", raw.data(), raw.size() * 4);
+  const hid_t x = H5Fcreate(external.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  const hid_t xspace = H5Screate_simple(3, shape, nullptr);
+  const hid_t xdcpl = H5Pcreate(H5P_DATASET_CREATE);
+  H5Pset_external(xdcpl, (dir / "external.f32").c_str(), 0, raw.size() * 4);
+  H5Dclose(H5Dcreate2(x, "p", H5T_IEEE_F32LE, xspace, H5P_DEFAULT, xdcpl, H5P_DEFAULT));
+  H5Pclose(xdcpl);
+  H5Sclose(xspace);
+  H5Fclose(x);
+  const auto e = vd::open_series(external, o);
+  EXPECT_EQ(e->read_frame(0).data[7], 7.0f);
 }
 
 TEST(Hdf5, FourDimensionalDatasetAndMismatches) {

@@ -164,7 +164,10 @@ mkdir -p "$dir/const"
 "$volreel" encode "$dir/const/c.f32" --dims 12x12x12 --frames 1 --codec zfp --out "$dir/const.vreel" > /dev/null 2>&1
 "$volreel" render "$dir/const.vreel" --out "$dir/const_r" --size 32x32 --max-frames 1 --cpu > "$dir/const.log" 2>&1 \
   || { cat "$dir/const.log"; echo "render of a constant container failed"; exit 1; }
-# SIGTERM (as Ctrl-C): it stops between frames, says what it left, and every PNG has its row.
+# SIGTERM (as Ctrl-C): it stops between frames, says what it left, and every PNG has its row
+# (the frames of an earlier, longer render into the folder removed too).
+"$volreel" render "$dir/test.vreel" --tour "$dir/tour.json" --out "$dir/int" --cpu > /dev/null 2>&1
+rm "$dir/int"/frame_0000[0-3].png
 "$volreel" render "$dir/test.vreel" --out "$dir/int" --size 64x64 --cpu --realtime > /dev/null 2> "$dir/int.log" &
 pid=$!
 for _ in $(seq 600); do [ -e "$dir/int/frame_00002.png" ] && break; sleep 0.1; done

@@ -129,8 +129,11 @@ void run_render(const RenderCommandOptions& o) {
     const std::string name = video.filename().string();
     const bool frame_name = name.rfind("frame_", 0) == 0 && name.size() > 4 &&
                             name.compare(name.size() - 4, 4, ".png") == 0;
-    if (fs::weakly_canonical(folder) == fs::weakly_canonical(out) &&
-        (name == "metrics.csv" || frame_name))
+    const auto folder_of = [](const fs::path& p) {  // "frames/" and "frames" alike
+      const fs::path c = fs::weakly_canonical(p);
+      return c.has_filename() ? c : c.parent_path();
+    };
+    if (folder_of(folder) == folder_of(out) && (name == "metrics.csv" || frame_name))
       throw InputError("--video " + o.video + ": is the name of one of the frames or of " +
                        "metrics.csv in --out; give the video another name (e.g. tour.mp4)");
     // ffmpeg writes the video in place: into a FIFO or a device too.
@@ -210,7 +213,8 @@ void run_render(const RenderCommandOptions& o) {
   // Ctrl-C or SIGTERM stops between frames (or while a frame waits for its bricks): the frames
   // drawn so far and their rows of metrics.csv are complete.
   std::size_t drawn = 0;
-  const StopOnSignal stop;
+  std::optional<StopOnSignal> stop;  // for the frames only: ffmpeg after them takes Ctrl-C itself
+  stop.emplace();
   try {
     ProgressBar bar("rendering", "frames");
     for (std::size_t i = 0; i < frames; ++i) {
@@ -298,6 +302,7 @@ void run_render(const RenderCommandOptions& o) {
   } catch (const Interrupted&) {
     if (writing.valid()) writing.get();
     csv.close();
+    remove_later_frames(out, drawn, earlier);  // an earlier, longer render's: not this one's
     std::fprintf(stderr,
                  "\nvolreel render: interrupted after %zu of %zu frames: %s holds %s and their "
                  "rows of metrics.csv\n",
@@ -307,6 +312,7 @@ void run_render(const RenderCommandOptions& o) {
                               : ("frame_00000.png .. " + frame_png(drawn - 1)).c_str());
     throw;
   }
+  stop.reset();
   csv.close();
   if (!csv) throw InputError("writing " + (out / "metrics.csv").string() + " failed");
 
@@ -367,7 +373,9 @@ void run_render(const RenderCommandOptions& o) {
     // container) and renamed once complete: a failed encode leaves no half-written video, nor
     // replaces an earlier one. A FIFO or a device is written in place.
     const fs::file_type type = fs::status(video).type();
-    const bool in_place = type == fs::file_type::fifo || type == fs::file_type::character;
+    // (A link is written through, as ffmpeg does, not replaced by the renamed file.)
+    const bool in_place = type == fs::file_type::fifo || type == fs::file_type::character ||
+                          fs::is_symlink(fs::symlink_status(video));
     const fs::path target = in_place ? video
                                      : video.parent_path() / (video.stem().string() + ".partial" +
                                                               video.extension().string());

@@ -35,7 +35,12 @@ int main(int argc, char** argv) {
   volreel::cli::add_render_command(app);
 #endif
   try {
-    volreel::cli::refuse_unknown_command(app, argc, argv);
+    try {
+      volreel::cli::refuse_unknown_command(app, argc, argv);
+    } catch (const std::exception& e) {  // a mistake on the command line: status 2
+      std::fprintf(stderr, "volreel: error: %s\n", e.what());
+      return 2;
+    }
     app.parse(argc, argv);
   } catch (const CLI::RuntimeError& e) {  // a command's own exit status, its message printed
     return e.get_exit_code();
