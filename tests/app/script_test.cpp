@@ -78,6 +78,10 @@ TEST(Script, ErrorsNameTheEntry) {
     return std::string("no error");
   };
   EXPECT_NE(message("1 jump").find("'1 jump': unknown action 'jump'"), std::string::npos);
+  EXPECT_NE(message("1 speed 100").find("expected a speed in 0.25..8"), std::string::npos);
+  EXPECT_NE(message("1 seek -5").find("expected a playhead >= 0"), std::string::npos);
+  EXPECT_NE(message("0.1 transfer nope").find("unknown transfer-function preset 'nope' (presets: "),
+            std::string::npos);
   EXPECT_NE(message("x key space").find("expected when, a time"), std::string::npos);
   EXPECT_NE(message("1 key nosuchkey").find("unknown key"), std::string::npos);
   EXPECT_NE(message("1 seek").find("takes 1 argument"), std::string::npos);

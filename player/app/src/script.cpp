@@ -3,13 +3,16 @@
 
 #include <GLFW/glfw3.h>
 
+#include <algorithm>
 #include <cctype>
 #include <charconv>
 #include <cmath>
 #include <map>
 #include <sstream>
 
+#include "volreel/cpu_render/transfer_function.hpp"
 #include "volreel/datasets/volume.hpp"
+#include "volreel/stream/playhead.hpp"
 
 namespace volreel::app {
 
@@ -118,7 +121,16 @@ std::vector<ScriptAction> parse_script(const std::string& text) {
         a.text = w[2];
         if (key_code(a.text) < 0) fail("unknown key '" + a.text + "'");
         break;
-      case Kind::transfer:
+      case Kind::transfer: {
+        a.text = w[2];
+        const auto& names = cpu_render::TransferFunction::preset_names();
+        if (std::find(names.begin(), names.end(), a.text) == names.end()) {
+          std::string list;
+          for (const std::string& n : names) list += (list.empty() ? "" : ", ") + n;
+          fail("unknown transfer-function preset '" + a.text + "' (presets: " + list + ")");
+        }
+        break;
+      }
       case Kind::screenshot:
         a.text = w[2];
         break;
@@ -141,8 +153,13 @@ std::vector<ScriptAction> parse_script(const std::string& text) {
       case Kind::zoom:
       case Kind::sse:
         if (!parse_double(w[2], a.x)) fail("expected a finite number, found '" + w[2] + "'");
-        if ((a.kind == Kind::zoom || a.kind == Kind::sse || a.kind == Kind::speed) && a.x <= 0)
+        if ((a.kind == Kind::zoom || a.kind == Kind::sse) && a.x <= 0)
           fail("expected a positive number");
+        if (a.kind == Kind::seek && a.x < 0)
+          fail("expected a playhead >= 0 (keyframe units; past the last it stops at the last)");
+        if (a.kind == Kind::speed &&
+            !(a.x >= stream::Playhead::min_speed && a.x <= stream::Playhead::max_speed))
+          fail("expected a speed in 0.25..8 (keyframes a second), found '" + w[2] + "'");
         break;
       default:
         break;
