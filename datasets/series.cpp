@@ -166,17 +166,22 @@ std::optional<InputKind> signature_kind(const fs::path& path) {
   return std::nullopt;
 }
 
-}  // namespace
-
-InputKind input_kind(const fs::path& path) {
+/// input_kind with the file's signature_kind already read.
+InputKind kind_of(const fs::path& path, std::optional<InputKind> signature) {
   std::error_code ec;
   if (fs::is_directory(path, ec) || path.filename() == "series.json") return InputKind::raw_series;
   // The name first for NetCDF, whose version 4 files are HDF5 files; then what the bytes say,
   // then the name.
   if (is_netcdf_name(path.extension().string())) return InputKind::netcdf;
-  if (const auto kind = signature_kind(path)) return *kind;
+  if (signature) return *signature;
   if (is_hdf5_name(path.extension().string())) return InputKind::hdf5;
   return InputKind::raw;
+}
+
+}  // namespace
+
+InputKind input_kind(const fs::path& path) {
+  return kind_of(path, signature_kind(path));
 }
 
 bool describes_itself(const fs::path& path) {
@@ -216,10 +221,11 @@ std::unique_ptr<SeriesReader> open_any(const fs::path& path, const OpenOptions& 
   if (type != fs::file_type::regular)
     throw InputError("'" + path.string() + "' is " + format::detail::file_kind(type) +
                      ", expected a regular file (raw, HDF5 or NetCDF) or a series directory");
-  const InputKind kind = input_kind(path);
+  const std::optional<InputKind> signature = signature_kind(path);
+  const InputKind kind = kind_of(path, signature);
   if (kind == InputKind::hdf5) {
     // Named as one, but without HDF5's signature: not taken for HDF5 (nor for raw data).
-    if (!signature_kind(path))
+    if (!signature)
       throw InputError("'" + path.string() + "' is named as an HDF5 file but is not one (it " +
                        "lacks HDF5's signature): a raw file named so needs another name, an " +
                        "HDF5 file may be damaged, and a .hdf file may be HDF4, which volreel " +

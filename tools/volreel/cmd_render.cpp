@@ -76,6 +76,13 @@ std::string frame_png(std::size_t i) {
   return name;
 }
 
+/// The PNGs of the first n frames: "frame_00000.png .. frame_00041.png", "frame_00000.png" or
+/// "no frame".
+std::string frames_text(std::size_t n) {
+  if (n == 0) return "no frame";
+  return n == 1 ? frame_png(0) : frame_png(0) + " .. " + frame_png(n - 1);
+}
+
 /// Removes frame_NNNNN.png of `dir` for N in [frames, earlier): those of an earlier, longer render
 /// into the same folder (earlier_render_frames), which would otherwise pass for this one's.
 /// Returns how many it removed.
@@ -306,10 +313,7 @@ void run_render(const RenderCommandOptions& o) {
     std::fprintf(stderr,
                  "\nvolreel render: interrupted after %zu of %zu frames: %s holds %s and their "
                  "rows of metrics.csv\n",
-                 drawn, frames, out.c_str(),
-                 drawn == 0   ? "no frame"
-                 : drawn == 1 ? "frame_00000.png"
-                              : ("frame_00000.png .. " + frame_png(drawn - 1)).c_str());
+                 drawn, frames, out.c_str(), frames_text(drawn).c_str());
     throw;
   }
   stop.reset();
@@ -348,11 +352,8 @@ void run_render(const RenderCommandOptions& o) {
         "PSNR %.2f dB "
         "(10*log10(255^2/MSE), 8-bit RGB), mean SSIM %.4f over %zu frames\n",
         sum_psnr / double(compared), sum_ssim / double(compared), compared);
-  if (frames > 1)
-    std::printf("wrote %s/frame_00000.png .. frame_%05zu.png and %s\n", out.c_str(), frames - 1,
-                (out / "metrics.csv").c_str());
-  else
-    std::printf("wrote %s/frame_00000.png and %s\n", out.c_str(), (out / "metrics.csv").c_str());
+  std::printf("wrote %s/%s and %s\n", out.c_str(), frames_text(frames).c_str(),
+              (out / "metrics.csv").c_str());
   if (const std::size_t stale = remove_later_frames(out, frames, earlier))
     std::printf(
         "removed %zu frame_NNNNN.png past frame_%05zu.png, left by an earlier, longer "
