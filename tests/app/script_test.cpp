@@ -88,6 +88,17 @@ TEST(Script, ErrorsNameTheEntry) {
   EXPECT_NE(message("1 zoom -2").find("positive"), std::string::npos);
   EXPECT_NE(message("1 resize 0 10").find("width and a height"), std::string::npos);
   EXPECT_NE(message("quit").find("expected WHEN ACTION"), std::string::npos);
+  // A screenshot is a PNG file in a folder that exists, refused when the script is read rather
+  // than when the entry runs.
+  EXPECT_NE(message("1 screenshot a.jpg")
+                .find("'1 screenshot a.jpg': a.jpg: the screenshot is a "
+                      "PNG image; give a name ending in .png"),
+            std::string::npos);
+  EXPECT_NE(message("1 screenshot no-such-folder/a.png")
+                .find("the folder no-such-folder does not exist; make it first"),
+            std::string::npos);
+  EXPECT_NE(message("1 screenshot .").find("'1 screenshot .': .: is a folder"), std::string::npos);
+  EXPECT_EQ(message("1 screenshot A.PNG"), "no error");
   // Not-a-number and infinity are no time, frame or argument (a NaN time never came, a NaN zoom
   // drew nothing); nor is a frame number past what a count holds.
   for (const std::string when : {"nan", "inf", "-inf", "nanf", "inff", "+nan", "1e300f"})

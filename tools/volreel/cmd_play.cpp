@@ -2,7 +2,6 @@
 // beyond the usual: 3 when there is no display, 4 when there is no Vulkan device that can present
 // to a window (scripts and tests skip on them).
 #include <algorithm>
-#include <cctype>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +13,7 @@
 #include "loop_options.hpp"
 #include "remote_options.hpp"
 #include "volreel/app/player.hpp"
+#include "volreel/app/script.hpp"
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
 #include "volreel/loop/loop_settings.hpp"
@@ -71,20 +71,9 @@ void run_play(PlayCommandOptions& o) {
   if (!o.script_inline.empty()) p.script += "\n" + o.script_inline;
   if (!o.screenshot_on_exit.empty()) {
     // Checked now, not when the session ends: a PNG file in a folder that exists.
-    const std::filesystem::path shot = o.screenshot_on_exit;
-    std::string extension = shot.extension().string();
-    for (char& c : extension) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    if (std::filesystem::is_directory(shot))
-      throw InputError("--screenshot-on-exit " + o.screenshot_on_exit +
-                       ": is a folder; give the PNG file's name (e.g. " +
-                       (shot / "shot.png").string() + ")");
-    if (extension != ".png")
-      throw InputError("--screenshot-on-exit " + o.screenshot_on_exit +
-                       ": the screenshot is a PNG image; give a name ending in .png");
-    const std::filesystem::path folder = shot.has_parent_path() ? shot.parent_path() : ".";
-    if (!std::filesystem::is_directory(folder))
-      throw InputError("--screenshot-on-exit " + o.screenshot_on_exit + ": the folder " +
-                       folder.string() + " does not exist; make it first");
+    if (const std::string problem = app::screenshot_path_problem(o.screenshot_on_exit);
+        !problem.empty())
+      throw InputError("--screenshot-on-exit " + o.screenshot_on_exit + ": " + problem);
     format::detail::check_writable(o.screenshot_on_exit, "--screenshot-on-exit");
     p.screenshot_on_exit = o.screenshot_on_exit;
   }

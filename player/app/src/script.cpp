@@ -7,6 +7,7 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <filesystem>
 #include <map>
 #include <sstream>
 
@@ -36,6 +37,20 @@ bool parse_double(const std::string& s, double& out) {
 constexpr double max_script_frame = 1e12;
 
 }  // namespace
+
+std::string screenshot_path_problem(const std::string& path) {
+  const std::filesystem::path shot = path;
+  std::string extension = shot.extension().string();
+  for (char& c : extension) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  std::error_code ec;
+  if (std::filesystem::is_directory(shot, ec))
+    return "is a folder; give the PNG file's name (e.g. " + (shot / "shot.png").string() + ")";
+  if (extension != ".png") return "the screenshot is a PNG image; give a name ending in .png";
+  const std::filesystem::path folder = shot.has_parent_path() ? shot.parent_path() : ".";
+  if (!std::filesystem::is_directory(folder, ec))
+    return "the folder " + folder.string() + " does not exist; make it first";
+  return "";
+}
 
 int key_code(const std::string& name) {
   static const std::map<std::string, int> named = {
@@ -133,6 +148,8 @@ std::vector<ScriptAction> parse_script(const std::string& text) {
       }
       case Kind::screenshot:
         a.text = w[2];
+        if (const std::string problem = screenshot_path_problem(a.text); !problem.empty())
+          fail(a.text + ": " + problem);
         break;
       case Kind::orbit:
         if (!parse_double(w[2], a.x) || !parse_double(w[3], a.y))

@@ -21,8 +21,9 @@
 //                             around the playhead and nothing in flight, waiting or uploaded
 //                             (what is missing cannot be read: said on stderr), or the timeout
 //                             (default 20 s) passes
-//           screenshot PATH   write this frame, as presented, to PATH (PNG); later entries
-//                             run from the next frame on
+//           screenshot PATH   write this frame, as presented, to PATH (PNG: a name ending in
+//                             .png, in a folder that exists when the script is read); later
+//                             entries run from the next frame on
 //           camera            print the camera ("camera (script): azimuth A deg elevation E deg
 //                             distance D target X Y Z") on stdout
 //           layout            print the screen rectangles of the HUD, timeline and side panel as
@@ -69,6 +70,10 @@ struct ScriptAction {
 /// Parses a script; throws InputError naming the entry on a syntax error or an unknown action or
 /// key.
 std::vector<ScriptAction> parse_script(const std::string& text);
+
+/// Why `path` cannot take a screenshot, or "" when it can: the name must end in .png (any case),
+/// must not be a folder, and its folder must exist.
+std::string screenshot_path_problem(const std::string& path);
 
 /// The GLFW key code of a key name ("space", "left", "a", "[", "home", ...), or -1.
 int key_code(const std::string& name);
