@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "detail.hpp"
+#include "volreel/format/error.hpp"
 
 namespace volreel::datasets::detail {
 
@@ -517,8 +518,8 @@ class NetcdfReader final : public SeriesReader {
       for (std::size_t i = 1; i < times->size(); ++i)
         if (!((*times)[i] > (*times)[i - 1]) || !std::isfinite((*times)[i]))
           fail("time coordinate '" + dimension_name(dims[0]) + "': expected increasing numbers, " +
-               "found " + std::to_string((*times)[i]) + " after " +
-               std::to_string((*times)[i - 1]));
+               "found " + format::number_text((*times)[i]) + " after " +
+               format::number_text((*times)[i - 1]));
       info_.timestamps = *times;
     } else {
       for (std::size_t t = 0; t < info_.frames; ++t)

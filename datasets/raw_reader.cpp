@@ -87,7 +87,7 @@ class RawSeriesReader final : public SeriesReader {
         wrong("timestamps", "finite numbers", t);
       if (!info_.timestamps.empty() && !(t.get<double>() > info_.timestamps.back()))
         wrong("timestamps",
-              "increasing numbers (after " + std::to_string(info_.timestamps.back()) + ")", t);
+              "increasing numbers (after " + format::number_text(info_.timestamps.back()) + ")", t);
       info_.timestamps.push_back(t.get<double>());
     }
     if (const json* spacing = field("spacing", false)) {

@@ -328,7 +328,7 @@ void check_finite(std::span<float> values, Dims dims, const std::string& what,
       values[i] = *replacement;
       continue;
     }
-    throw InputError(what + ": value " + std::to_string(values[i]) + " at voxel " +
+    throw InputError(what + ": value " + format::number_text(values[i]) + " at voxel " +
                      voxel_name(i, dims, z_begin) + " is not finite" +
                      (std::isinf(values[i])
                           ? " (or, in data of a wider type, beyond float32's range of 3.4e38: "

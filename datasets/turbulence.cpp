@@ -39,6 +39,7 @@
 
 #include "volreel/datasets/prng.hpp"
 #include "volreel/datasets/series.hpp"
+#include "volreel/format/error.hpp"
 
 namespace volreel::datasets {
 
@@ -391,8 +392,9 @@ float TurbulenceSimulation::Impl::nonlinear_term() {
     }
   }
   if (nonfinite > 0) {
-    throw std::runtime_error("turbulence: velocity became non-finite at t=" + std::to_string(time) +
-                             " (unstable time step? cfl=" + std::to_string(params.cfl) + ")");
+    throw std::runtime_error(
+        "turbulence: velocity became non-finite at t=" + format::number_text(time) +
+        " (unstable time step? cfl=" + format::number_text(params.cfl) + ")");
   }
   // 4. Three forward transforms back to spectral space.
   for (std::size_t f = 3; f < 6; ++f) to_spectral(f);
@@ -870,7 +872,7 @@ TurbulenceReport generate_turbulence(const TurbulenceRun& run, RawSeriesWriter& 
       {"spinup_time", spinup_time},
       {"frame_interval_time", interval},
       {"dt_policy",
-       "min(cfl*dx/max|u_i|, " + std::to_string(viscous_stability) + "/(nu*|k|^2_max))"},
+       "min(cfl*dx/max|u_i|, " + format::number_text(viscous_stability) + "/(nu*|k|^2_max))"},
       {"cfl", p.cfl},
       {"initial_spectrum",
        run.decaying ? "Taylor-Green vortex, decaying (no forcing)" : "E(k) ~ k^4 exp(-2 (k/3)^2)"},

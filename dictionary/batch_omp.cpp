@@ -16,6 +16,7 @@
 #include <Eigen/QR>
 
 #include "volreel/dictionary/omp.hpp"
+#include "volreel/format/error.hpp"
 
 namespace volreel::dictionary {
 
@@ -51,13 +52,13 @@ namespace {
 void check_options(const SparseCodingOptions& options, Eigen::Index block_length) {
   if (!(options.tolerance >= 0) || !std::isfinite(options.tolerance))
     throw std::invalid_argument("sparse coding tolerance must be a finite value >= 0, not " +
-                                std::to_string(options.tolerance));
+                                format::number_text(options.tolerance));
   if (!(options.min_atom_gain >= 0) || !std::isfinite(options.min_atom_gain))
     throw std::invalid_argument("the minimum atom gain must be a finite value >= 0, not " +
-                                std::to_string(options.min_atom_gain));
+                                format::number_text(options.min_atom_gain));
   if (!(options.max_error >= 0) || !std::isfinite(options.max_error))
     throw std::invalid_argument("the maximum block error must be a finite value >= 0, not " +
-                                std::to_string(options.max_error));
+                                format::number_text(options.max_error));
   if (options.max_atoms < 1 || options.max_atoms > 255 || options.max_atoms > block_length)
     throw std::invalid_argument("maximum atoms per block must be in 1.." +
                                 std::to_string(std::min<Eigen::Index>(255, block_length)) +

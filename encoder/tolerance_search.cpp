@@ -16,6 +16,7 @@
 
 #include "detail.hpp"
 #include "volreel/encoder/frame_encoder.hpp"
+#include "volreel/format/error.hpp"
 
 namespace volreel::encoder {
 
@@ -135,9 +136,9 @@ RateSearch search_tolerance(const datasets::SeriesReader& series,
   const double voxels = static_cast<double>(info.dims.voxels()) * static_cast<double>(frames);
   const double floor_bps = 8 * static_cast<double>(fixed_bytes) / voxels;
   if (!(target_bps > floor_bps))
-    throw InputError("--bps " + std::to_string(target_bps) +
+    throw InputError("--bps " + format::number_text(target_bps) +
                      " is below what the dictionary and manifest alone take (" +
-                     std::to_string(floor_bps) +
+                     format::number_text(floor_bps) +
                      " bps): use a smaller dictionary (volreel train --atoms) or more frames");
   // 1. Sample frames, evenly spaced; a trial reads and encodes them one at a time.
   std::vector<std::size_t> sample = detail::evenly_spaced_indices(frames, sample_frames);

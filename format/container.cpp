@@ -458,9 +458,9 @@ void Container::check_frame(std::size_t t, const FrameView& view) const {
   if (h.value_min != static_cast<float>(manifest_.value_min) ||
       h.value_max != static_cast<float>(manifest_.value_max))
     throw FormatError(path, offsetof(FrameHeader, value_min),
-                      "the manifest's value range [" + std::to_string(manifest_.value_min) + ", " +
-                          std::to_string(manifest_.value_max) + "]",
-                      "[" + std::to_string(h.value_min) + ", " + std::to_string(h.value_max) + "]");
+                      "the manifest's value range [" + number_text(manifest_.value_min) + ", " +
+                          number_text(manifest_.value_max) + "]",
+                      "[" + number_text(h.value_min) + ", " + number_text(h.value_max) + "]");
   if (h.fixed_sparsity != manifest_.fixed_sparsity)
     throw FormatError(
         path, offsetof(FrameHeader, fixed_sparsity),
@@ -484,11 +484,11 @@ void Container::check_frame(std::size_t t, const FrameView& view) const {
     throw FormatError(
         path, offsetof(FrameHeader, codec_parameter),
         manifest_.codec == Codec::zfp
-            ? "zfp accuracy " + std::to_string(manifest_.zfp_accuracy) + " (manifest.json)"
+            ? "zfp accuracy " + number_text(manifest_.zfp_accuracy) + " (manifest.json)"
         : manifest_.fixed_sparsity > 0
             ? std::string("0 (fixed rate)")
-            : "a tolerance in (0, " + std::to_string(manifest_.tolerance) + "] (manifest.json)",
-        std::to_string(parameter));
+            : "a tolerance in (0, " + number_text(manifest_.tolerance) + "] (manifest.json)",
+        number_text(parameter));
   // The first and last steps store every node; so does every step without keyframe gaps.
   if (h.brick_count != h.node_count &&
       (t == 0 || t + 1 == manifest_.frames.size() || manifest_.max_keyframe_gap == 1))

@@ -23,13 +23,6 @@ namespace volreel::format {
 
 namespace {
 
-/// A value for a message, in 6 significant digits ("1e+38", "7.88091e+43").
-std::string shortest(double v) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%.6g", v);
-  return text;
-}
-
 std::string str(std::uint64_t v) {
   return std::to_string(v);
 }
@@ -373,8 +366,8 @@ KsvdPayloadLayout parse_ksvd_header(const vr_uint* payload, std::size_t word_cou
   if (!(bound <= max_decoded_magnitude))
     fail(0,
          "dequantization values whose decoded values stay below " +
-             shortest(max_decoded_magnitude) + " in magnitude",
-         "values that reach " + shortest(bound));
+             number_text(max_decoded_magnitude) + " in magnitude",
+         "values that reach " + number_text(bound));
   // 2. The box of coded blocks and their entries.
   const vr_uint n = shape.blocks_per_axis(), box = layout.box_word;
   if ((box >> 28) != 0 || vr_box_magnitude_model(box) > VR_MAX_MAGNITUDE_MODEL ||

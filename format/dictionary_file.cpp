@@ -287,7 +287,7 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes,
       throw FormatError(name, sizeof h + i * value_bytes,
                         std::string("a finite ") + value_type + " (atom " + std::to_string(i / m) +
                             ", value " + std::to_string(i % m) + ")",
-                        std::to_string(d.atoms[i]));
+                        number_text(d.atoms[i]));
 
   // 7. Every stored atom of unit norm (binary16 rounding moves a norm by less than 1e-3).
   for (std::size_t a = 0; a < h.atom_count; ++a) {
@@ -300,7 +300,7 @@ DictionaryFile parse_dictionary_file(std::span<const std::byte> bytes,
     if (!(std::abs(norm - 1) <= 1e-2))
       throw FormatError(name, sizeof h + a * m * value_bytes,
                         "atom " + std::to_string(a) + " of unit L2 norm (within 0.01)",
-                        "norm " + std::to_string(norm));
+                        "norm " + number_text(norm));
   }
 
   if ((h.flags & dictionary_flag_dct) != 0) d = with_dct_atoms(std::move(d));

@@ -1,6 +1,8 @@
 // error.cpp: FormatError messages.
 #include "volreel/format/error.hpp"
 
+#include <cstdio>
+
 namespace volreel::format {
 
 FormatError::FormatError(const std::filesystem::path& file, std::uint64_t offset,
@@ -14,5 +16,11 @@ FormatError::FormatError(const std::filesystem::path& file, std::uint64_t offset
 
 FormatError::FormatError(const std::filesystem::path& file, const std::string& what)
     : std::runtime_error(file.string() + ": " + what), file_(file) {}
+
+std::string number_text(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.6g", v);
+  return text;
+}
 
 }  // namespace volreel::format

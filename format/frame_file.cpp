@@ -232,7 +232,7 @@ FrameView::FrameView(std::span<const std::byte> bytes, fs::path name, std::uint6
     fail(offsetof(FrameHeader, fixed_sparsity), "fixed sparsity 0..216", str(h.fixed_sparsity));
   if (!std::isfinite(h.value_min) || !std::isfinite(h.value_max) || h.value_min > h.value_max)
     fail(offsetof(FrameHeader, value_min), "a finite value range min <= max",
-         "[" + std::to_string(h.value_min) + ", " + std::to_string(h.value_max) + "]");
+         "[" + number_text(h.value_min) + ", " + number_text(h.value_max) + "]");
   const auto geometry = level_geometry({h.dims[0], h.dims[1], h.dims[2]}, {h.brick_size});
   if (h.level_count != geometry.size())
     fail(offsetof(FrameHeader, level_count),

@@ -63,17 +63,23 @@ struct UrlOptions {
   double stall_timeout = remote::HttpOptions{}.stall_timeout_s;
   unsigned connections = remote::HttpOptions{}.max_connections;
   std::optional<fs::path> cache;
-  std::string cache_size = "2G";
+  std::string cache_size = remote::RemoteOptions::default_cache_size;
   std::optional<fs::path> ca_file;
 
   remote::RemoteOptions checked() const {
+    using Limits = remote::RemoteOptions;
     const auto bad = [](const std::string& what) { throw InputError(what); };
-    if (tries < 1 || tries > 20)
-      bad("tries: expected 1..20 tries of a read, found " + std::to_string(tries));
-    if (!(stall_timeout >= 1 && stall_timeout <= 3600))
-      bad("stall_timeout: expected 1..3600 seconds, found " + std::to_string(stall_timeout));
-    if (connections < 1 || connections > 64)
-      bad("connections: expected 1..64 connections, found " + std::to_string(connections));
+    if (tries < 1 || tries > Limits::max_attempts)
+      bad("tries: expected 1.." + std::to_string(Limits::max_attempts) +
+          " tries of a read, found " + std::to_string(tries));
+    if (!(stall_timeout >= Limits::min_stall_timeout_s &&
+          stall_timeout <= Limits::max_stall_timeout_s))
+      bad("stall_timeout: expected " + format::number_text(Limits::min_stall_timeout_s) + ".." +
+          format::number_text(Limits::max_stall_timeout_s) + " seconds, found " +
+          format::number_text(stall_timeout));
+    if (connections < 1 || connections > Limits::max_connections)
+      bad("connections: expected 1.." + std::to_string(Limits::max_connections) +
+          " connections, found " + std::to_string(connections));
     if (ca_file && !fs::is_regular_file(*ca_file))
       bad("ca_file: '" + ca_file->string() +
           "' is not a file (expected a PEM file of "
@@ -201,7 +207,7 @@ void check_finite(std::span<const float> frame, const Dims& d, std::size_t t) {
   for (std::size_t i = 0; i < frame.size(); ++i) {
     if (std::isfinite(frame[i])) continue;
     const auto v = static_cast<std::int64_t>(i);
-    throw InputError("frames[" + std::to_string(t) + "]: value " + std::to_string(frame[i]) +
+    throw InputError("frames[" + std::to_string(t) + "]: value " + format::number_text(frame[i]) +
                      " at [z, y, x] = [" + std::to_string(v / d.x / d.y) + ", " +
                      std::to_string(v / d.x % d.y) + ", " + std::to_string(v % d.x) +
                      "] is not finite");
@@ -252,8 +258,8 @@ std::vector<double> timestamps_for(std::optional<std::vector<double>> given, std
   for (std::size_t i = 1; i < given->size(); ++i)
     if (!((*given)[i] > (*given)[i - 1]))
       throw py::value_error("times: expected increasing numbers, found " +
-                            std::to_string((*given)[i]) + " after " +
-                            std::to_string((*given)[i - 1]));
+                            format::number_text((*given)[i]) + " after " +
+                            format::number_text((*given)[i - 1]));
   return *given;
 }
 

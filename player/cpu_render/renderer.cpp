@@ -11,6 +11,7 @@
 #include <string>
 
 #include "trilinear.hpp"
+#include "volreel/format/error.hpp"
 #include "volreel/format/frame_file.hpp"
 
 namespace volreel::cpu_render {
@@ -76,10 +77,11 @@ void check_geometry(const VolumeGeometry& g) {
 
 void check_options(const RenderOptions& o, const player::OrbitCamera& camera) {
   if (!(o.step > 0 && std::isfinite(o.step)))
-    throw std::invalid_argument("render: expected a step > 0, found " + std::to_string(o.step));
+    throw std::invalid_argument("render: expected a step > 0, found " +
+                                format::number_text(o.step));
   if (!(o.reference_step > 0 && std::isfinite(o.reference_step)))
     throw std::invalid_argument("render: expected a reference step > 0, found " +
-                                std::to_string(o.reference_step));
+                                format::number_text(o.reference_step));
   if (o.max_step_doublings > max_doublings_allowed)
     throw std::invalid_argument("render: expected max_step_doublings ≤ " +
                                 std::to_string(max_doublings_allowed) + ", found " +
@@ -404,7 +406,7 @@ void validate_svo(const SvoView& svo, std::uint32_t slot_count, const VolumeGeom
       const float f = std::bit_cast<float>(r[fw]);
       if (!(f >= 0 && f <= 1))
         bad(at() + " word " + std::to_string(fw) + ": expected a factor in [0, 1], found " +
-            std::to_string(f));
+            format::number_text(f));
       const float weight[2] = {1 - f, f};
       const vr_uint d[2] = {d0, d1};
       for (vr_uint k = 0; k < 2; ++k) {
@@ -500,7 +502,7 @@ RgbaImage render_reference(const DenseLevel& a, const DenseLevel& b, float facto
   }
   if (!(factor >= 0 && factor <= 1))
     throw std::invalid_argument("render_reference: expected a factor in [0, 1], found " +
-                                std::to_string(factor));
+                                format::number_text(factor));
   RenderOptions dense = options;
   dense.level_map = false;  // one level everywhere: no map
   return cast_rays(geometry, camera, transfer, dense, DenseSampler(a, b, factor, geometry));

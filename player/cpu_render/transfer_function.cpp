@@ -8,6 +8,7 @@
 #include <limits>
 
 #include "json_fields.hpp"
+#include "volreel/format/error.hpp"
 
 namespace volreel::cpu_render {
 namespace {
@@ -71,8 +72,8 @@ double float_number(const nlohmann::json& value, const std::string& where) {
 
 void check_range(float lo, float hi, const std::string& where) {
   if (!(std::isfinite(lo) && std::isfinite(hi) && lo < hi))
-    throw InputError(where + ": expected a finite range lo < hi, found [" + std::to_string(lo) +
-                     ", " + std::to_string(hi) + "]");
+    throw InputError(where + ": expected a finite range lo < hi, found [" +
+                     format::number_text(lo) + ", " + format::number_text(hi) + "]");
 }
 
 }  // namespace
@@ -93,11 +94,11 @@ TransferFunction::TransferFunction(std::vector<ControlPoint> points, float lo, f
     for (float c : {p.r, p.g, p.b, p.a})
       if (!(c >= 0 && c <= 1))
         throw InputError(where + ": point " + std::to_string(i) +
-                         ": expected r, g, b, a in [0, 1], found " + std::to_string(c));
+                         ": expected r, g, b, a in [0, 1], found " + format::number_text(c));
     if (i > 0 && p.value < points_[i - 1].value)
-      throw InputError(where + ": point " + std::to_string(i) +
-                       ": expected values in increasing order, found " + std::to_string(p.value) +
-                       " after " + std::to_string(points_[i - 1].value));
+      throw InputError(
+          where + ": point " + std::to_string(i) + ": expected values in increasing order, found " +
+          format::number_text(p.value) + " after " + format::number_text(points_[i - 1].value));
   }
   table_.resize(static_cast<std::size_t>(entries));
   for (int i = 0; i < entries; ++i) {
@@ -194,7 +195,7 @@ TransferFunction TransferFunction::preset(const std::string& name, float lo, flo
   }
   if (!(opacity >= 0 && std::isfinite(opacity)))
     throw InputError("transfer function: expected an opacity scale ≥ 0, found " +
-                     std::to_string(opacity));
+                     format::number_text(opacity));
   check_range(lo, hi, "transfer function preset \"" + name + "\"");
   std::vector<ControlPoint> points;
   for (const PresetPoint& p : it->points)

@@ -91,7 +91,7 @@ TEST(StreamBenchSettings, Checks) {
     return error_of([&] { s.check(); });
   };
   EXPECT_EQ(check([](BenchStreamSettings& s) { s.duration = 0; }),
-            "--duration: expected seconds in (0, 3600], found '0.000000'");
+            "--duration: expected seconds in (0, 3600], found '0'");
   EXPECT_EQ(check([](BenchStreamSettings& s) { s.clock = "fast"; }),
             "--clock: expected simulated or wall, found 'fast'");
   EXPECT_EQ(check([](BenchStreamSettings& s) { s.atlas_slots = 0; }),

@@ -21,6 +21,7 @@
 #include <omp.h>
 #endif
 
+#include "volreel/format/error.hpp"
 #include "volreel/psnr/metrics.hpp"
 
 namespace volreel::psnr {
@@ -96,11 +97,11 @@ double ssim(Dims dims, std::span<const float> original, std::span<const float> d
   if (!(options.sigma > 0) || !(options.truncate >= 0) ||
       !std::isfinite(options.sigma * options.truncate)) {
     throw InputError("SSIM: sigma must be positive and truncate non-negative (got sigma " +
-                     std::to_string(options.sigma) + ", truncate " +
-                     std::to_string(options.truncate) + ")");
+                     format::number_text(options.sigma) + ", truncate " +
+                     format::number_text(options.truncate) + ")");
   }
   if (!(options.data_range >= 0) || !std::isfinite(options.data_range)) {
-    throw InputError("SSIM: data range " + std::to_string(options.data_range) +
+    throw InputError("SSIM: data range " + format::number_text(options.data_range) +
                      " is not a finite value >= 0");
   }
   const auto radius = window_radius(options);

@@ -15,6 +15,7 @@
 
 #include "volreel/datasets/prng.hpp"
 #include "volreel/datasets/volume.hpp"
+#include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
 #include "volreel/loop/auto_transfer.hpp"
 #include "volreel/loop/loop_settings.hpp"
@@ -251,34 +252,34 @@ void BenchStreamSettings::check() const {
     bench_bandwidth(o.bandwidth, 0);  // a malformed rate is reported before any work
   loop::parse_latency(o.latency);
   if (!(o.duration > 0) || o.duration > 3600)
-    bad("--duration", "seconds in (0, 3600]", std::to_string(o.duration));
+    bad("--duration", "seconds in (0, 3600]", format::number_text(o.duration));
   if (o.clock != "simulated" && o.clock != "wall") bad("--clock", "simulated or wall", o.clock);
   if (!(o.fps > 0) || o.fps > 240)
-    bad("--fps", "frames per second in (0, 240]", std::to_string(o.fps));
+    bad("--fps", "frames per second in (0, 240]", format::number_text(o.fps));
   if (!(o.sse_target > 0) || !std::isfinite(o.sse_target))
-    bad("--sse-target", "pixels per voxel > 0", std::to_string(o.sse_target));
+    bad("--sse-target", "pixels per voxel > 0", format::number_text(o.sse_target));
   if (!(o.sse_weight >= 0) || !std::isfinite(o.sse_weight))
-    bad("--sse-weight", "a weight >= 0", std::to_string(o.sse_weight));
+    bad("--sse-weight", "a weight >= 0", format::number_text(o.sse_weight));
   if (!(o.temporal_exponent > 0) || o.temporal_exponent > 64)
-    bad("--temporal-exponent", "an exponent in (0, 64]", std::to_string(o.temporal_exponent));
+    bad("--temporal-exponent", "an exponent in (0, 64]", format::number_text(o.temporal_exponent));
   if (!(o.temporal_lerp_min >= 0 && o.temporal_lerp_min <= 1))
-    bad("--temporal-lerp-min", "a weight in [0, 1]", std::to_string(o.temporal_lerp_min));
+    bad("--temporal-lerp-min", "a weight in [0, 1]", format::number_text(o.temporal_lerp_min));
   if (!(o.ancestor_handicap >= 0) || o.ancestor_handicap > 64)
-    bad("--ancestor-handicap", "an exponent in [0, 64]", std::to_string(o.ancestor_handicap));
+    bad("--ancestor-handicap", "an exponent in [0, 64]", format::number_text(o.ancestor_handicap));
   if (!(o.speculative_link >= 0) || o.speculative_link > 60)
-    bad("--speculative-link", "seconds in [0, 60]", std::to_string(o.speculative_link));
+    bad("--speculative-link", "seconds in [0, 60]", format::number_text(o.speculative_link));
   if (!(o.lod_fade >= 0) || o.lod_fade > 60)
-    bad("--lod-fade", "seconds in [0, 60]", std::to_string(o.lod_fade));
+    bad("--lod-fade", "seconds in [0, 60]", format::number_text(o.lod_fade));
   if (!(o.lod_fade_out >= 0) || o.lod_fade_out > 60)
-    bad("--lod-fade-out", "seconds in [0, 60]", std::to_string(o.lod_fade_out));
+    bad("--lod-fade-out", "seconds in [0, 60]", format::number_text(o.lod_fade_out));
   if (!(o.lookahead >= 0) || o.lookahead > 60)
-    bad("--lookahead", "seconds in [0, 60]", std::to_string(o.lookahead));
+    bad("--lookahead", "seconds in [0, 60]", format::number_text(o.lookahead));
   if (!(o.step > 0) || !std::isfinite(o.step))
-    bad("--step", "a ray step in voxels > 0", std::to_string(o.step));
+    bad("--step", "a ray step in voxels > 0", format::number_text(o.step));
   if (o.atlas_slots < 1 || o.atlas_slots > (1u << 16))
     bad("--atlas-slots", "1..65536 slots", std::to_string(o.atlas_slots));
   if (!(o.upload_budget_mb > 0))
-    bad("--upload-budget", "MB per frame > 0", std::to_string(o.upload_budget_mb));
+    bad("--upload-budget", "MB per frame > 0", format::number_text(o.upload_budget_mb));
   if (o.io_threads < 1 || o.io_threads > 64)
     bad("--io-threads", "1..64", std::to_string(o.io_threads));
   if (o.seeds < 1 || o.seeds > 100) bad("--seeds", "1..100 tours", std::to_string(o.seeds));

@@ -12,6 +12,7 @@
 #include "volreel/encoder/encode.hpp"
 #include "volreel/encoder/series_encoder.hpp"
 #include "volreel/format/dictionary_file.hpp"
+#include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
 #include "volreel/psnr/rate_distortion.hpp"
 #include "volreel_codecs.hpp"
@@ -113,7 +114,7 @@ std::vector<psnr::RdPoint> keyframe_points(const datasets::SeriesReader& series,
         const encoder::EncodeSummary summary = encoder::encode(series, container, request);
         psnr::RdPoint p;
         p.family = "volreel keyframes G=" + std::to_string(gap);
-        if (o.lagrangian_factors.size() > 1) p.family += " k=" + std::to_string(factor);
+        if (o.lagrangian_factors.size() > 1) p.family += " k=" + format::number_text(factor);
         char setting[48];
         std::snprintf(setting, sizeof setting, "eps=%.2e", relative * range);
         p.setting = setting;

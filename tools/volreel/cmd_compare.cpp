@@ -11,6 +11,7 @@
 #include "commands.hpp"
 #include "container_series.hpp"
 #include "progress.hpp"
+#include "volreel/format/error.hpp"
 #include "volreel/psnr/metrics.hpp"
 
 namespace volreel::cli {
@@ -72,8 +73,8 @@ void compare_images(const CompareOptions& o) {
         c.psnr, c.ssim, c.mse);
   }
   if (o.min_psnr > 0 && !(c.psnr >= o.min_psnr))
-    throw InputError("the images' PSNR " + std::to_string(c.psnr) + " dB is below --min-psnr " +
-                     std::to_string(o.min_psnr));
+    throw InputError("the images' PSNR " + format::number_text(c.psnr) +
+                     " dB is below --min-psnr " + format::number_text(o.min_psnr));
 }
 
 void compare_series(const CompareOptions& o) {
@@ -166,12 +167,12 @@ void compare_series(const CompareOptions& o) {
     for (std::size_t t = 1; t < rows.size(); ++t)
       if (rows[t].e.max_abs_error > rows[worst].e.max_abs_error) worst = t;
     if (o.max_error > 0 && total.max_abs_error > o.max_error)
-      throw InputError("the largest error " + std::to_string(total.max_abs_error) + " (frame " +
-                       std::to_string(worst) + ") exceeds --max-error " +
-                       std::to_string(o.max_error));
+      throw InputError("the largest error " + format::number_text(total.max_abs_error) +
+                       " (frame " + std::to_string(worst) + ") exceeds --max-error " +
+                       format::number_text(o.max_error));
     if (o.min_psnr > 0 && !(total.psnr >= o.min_psnr))
-      throw InputError("the sequence PSNR " + std::to_string(total.psnr) +
-                       " dB is below --min-psnr " + std::to_string(o.min_psnr));
+      throw InputError("the sequence PSNR " + format::number_text(total.psnr) +
+                       " dB is below --min-psnr " + format::number_text(o.min_psnr));
   };
 
   if (o.json) {

@@ -52,10 +52,10 @@ void run_play(PlayCommandOptions& o) {
   p.decode = loop::parse_decode(o.decode);
   if (!(p.lod_blend.fade_out_s >= 0) || p.lod_blend.fade_out_s > 60)
     throw InputError("--lod-fade-out: expected seconds in [0, 60], found '" +
-                     std::to_string(p.lod_blend.fade_out_s) + "'");
+                     format::number_text(p.lod_blend.fade_out_s) + "'");
   if (!(p.lod_blend.fade_s >= 0) || p.lod_blend.fade_s > 60)
     throw InputError("--lod-fade: expected seconds in [0, 60], found '" +
-                     std::to_string(p.lod_blend.fade_s) + "'");
+                     format::number_text(p.lod_blend.fade_s) + "'");
   p.renderer = o.renderer == "cpu"      ? app::RendererKind::cpu
                : o.renderer == "vulkan" ? app::RendererKind::vulkan
                                         : app::RendererKind::automatic;

@@ -33,6 +33,7 @@
 #include "volreel/cpu_render/tour.hpp"
 #include "volreel/datasets/series.hpp"
 #include "volreel/format/container.hpp"
+#include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
 #include "volreel/loop/auto_transfer.hpp"
 #include "volreel/loop/frame_loop.hpp"
@@ -382,7 +383,7 @@ void run_render(const RenderCommandOptions& o) {
                                                               video.extension().string());
     const int status =
         run_program(ffmpeg, {"-nostdin", "-y", "-loglevel", "error", "-framerate",
-                             std::to_string(tour.fps()), "-start_number", "0", "-i", pattern,
+                             format::number_text(tour.fps()), "-start_number", "0", "-i", pattern,
                              "-frames:v", std::to_string(frames), "-c:v", "libx264", "-pix_fmt",
                              "yuv420p", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", target.string()});
     std::error_code ec;

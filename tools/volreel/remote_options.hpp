@@ -20,8 +20,8 @@ namespace volreel::cli {
 
 struct RemoteCli {
   std::string cache;  ///< folder; empty: no cache
-  std::string cache_size = "2G";
-  unsigned connections = 4;
+  std::string cache_size = remote::RemoteOptions::default_cache_size;
+  unsigned connections = remote::HttpOptions{}.max_connections;
   std::string ca_file;
   double stall_timeout = remote::HttpOptions{}.stall_timeout_s;
   unsigned tries = remote::RemoteOptions{}.attempts;
@@ -42,7 +42,7 @@ inline void add_remote_options(CLI::App& cmd, RemoteCli& o) {
       ->capture_default_str();
   cmd.add_option("--connections", o.connections,
                  "For a URL: HTTP connections to the server at most")
-      ->check(CLI::Range(1u, 64u))
+      ->check(CLI::Range(1u, remote::RemoteOptions::max_connections))
       ->capture_default_str();
   cmd.add_option("--ca-file", o.ca_file,
                  "For an https URL: trust the certificate authorities in this PEM file (a "
@@ -51,14 +51,15 @@ inline void add_remote_options(CLI::App& cmd, RemoteCli& o) {
   cmd.add_option("--stall-timeout", o.stall_timeout,
                  "For a URL: give a request up when no byte has arrived for this many seconds "
                  "(the server accepted it, then stopped sending)")
-      ->check(in_range(1, 3600))
+      ->check(in_range(remote::RemoteOptions::min_stall_timeout_s,
+                       remote::RemoteOptions::max_stall_timeout_s))
       ->capture_default_str();
   cmd.add_option(
          "--tries", o.tries,
          "For a URL: how many times a read of the manifest, dictionary or a frame index "
          "is tried when it fails in a way that may pass (timeout, refused or reset "
          "connection, HTTP 5xx), waiting 0.25 s, then twice as long each time (at most 8 s)")
-      ->check(in_range(1, 20))
+      ->check(in_range(1, remote::RemoteOptions::max_attempts))
       ->capture_default_str();
 }
 

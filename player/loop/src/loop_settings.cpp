@@ -1,5 +1,6 @@
 // loop_settings.cpp: parsing of the frame loop's user settings (see loop_settings.hpp).
 #include "volreel/loop/loop_settings.hpp"
+#include "volreel/format/error.hpp"
 
 #include <cctype>
 #include <cmath>
@@ -93,18 +94,18 @@ void apply(const LoopSettings& s, FrameLoopOptions& o) {
     o.height = h;
   }
   if (!(s.atlas_mb > 0) || s.atlas_mb > 1e6)
-    bad("--atlas-mb", "a size in MiB in (0, 1e6]", std::to_string(s.atlas_mb));
+    bad("--atlas-mb", "a size in MiB in (0, 1e6]", format::number_text(s.atlas_mb));
   o.atlas_bytes = static_cast<std::uint64_t>(s.atlas_mb * 1048576.0);
   o.scheduler.loader.bandwidth_bytes_per_s = parse_bandwidth(s.bandwidth);
   o.scheduler.loader.latency_s = parse_latency(s.latency);
   if (!(s.sse_target > 0) || !std::isfinite(s.sse_target))
-    bad("--sse-target", "pixels per voxel > 0", std::to_string(s.sse_target));
+    bad("--sse-target", "pixels per voxel > 0", format::number_text(s.sse_target));
   o.scheduler.priority.sse_target = s.sse_target;
   if (!(s.upload_budget_mb > 0) || s.upload_budget_mb > 1e6)
-    bad("--upload-budget", "a size in MiB in (0, 1e6]", std::to_string(s.upload_budget_mb));
+    bad("--upload-budget", "a size in MiB in (0, 1e6]", format::number_text(s.upload_budget_mb));
   o.scheduler.upload_budget_bytes = static_cast<std::uint64_t>(s.upload_budget_mb * 1048576.0);
   if (!(s.step > 0) || !std::isfinite(s.step))
-    bad("--step", "a ray step in voxels > 0", std::to_string(s.step));
+    bad("--step", "a ray step in voxels > 0", format::number_text(s.step));
   o.render.step = s.step;
   if (s.max_step_doublings > 16)
     bad("--max-step-doublings", "0..16", std::to_string(s.max_step_doublings));
@@ -112,10 +113,10 @@ void apply(const LoopSettings& s, FrameLoopOptions& o) {
   o.transfer_culling = !s.no_culling;
   o.gpu.decode = parse_decode(s.decode);
   if (!(s.lod_fade >= 0) || s.lod_fade > 60)
-    bad("--lod-fade", "seconds in [0, 60]", std::to_string(s.lod_fade));
+    bad("--lod-fade", "seconds in [0, 60]", format::number_text(s.lod_fade));
   o.scheduler.lod_blend.fade_s = s.lod_fade;
   if (!(s.lod_fade_out >= 0) || s.lod_fade_out > 60)
-    bad("--lod-fade-out", "seconds in [0, 60]", std::to_string(s.lod_fade_out));
+    bad("--lod-fade-out", "seconds in [0, 60]", format::number_text(s.lod_fade_out));
   o.scheduler.lod_blend.fade_out_s = s.lod_fade_out;
   o.scheduler.lod_blend.spatial = s.spatial_blend;
   o.scheduler.priority.restricted = s.restricted;

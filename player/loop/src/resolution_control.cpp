@@ -1,5 +1,6 @@
 // resolution_control.cpp: frame-time control (see resolution_control.hpp).
 #include "volreel/loop/resolution_control.hpp"
+#include "volreel/format/error.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -17,10 +18,10 @@ constexpr std::size_t kept_samples = 12;
 ResolutionControl::ResolutionControl(ResolutionSettings settings) : settings_(settings) {
   if (!(settings_.frame_ms > 0) || !std::isfinite(settings_.frame_ms))
     throw std::invalid_argument("frame-time target: expected milliseconds > 0, found " +
-                                std::to_string(settings_.frame_ms));
+                                format::number_text(settings_.frame_ms));
   if (!(settings_.min_scale > 0) || settings_.min_scale > 1)
     throw std::invalid_argument("smallest resolution scale: expected a value in (0, 1], found " +
-                                std::to_string(settings_.min_scale));
+                                format::number_text(settings_.min_scale));
   // Until a frame is measured, half the side: a quarter of the pixels.
   busy_scale_ = std::max(0.5, settings_.min_scale);
 }

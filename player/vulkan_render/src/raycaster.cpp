@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "volreel/format/error.hpp"
 #include "volreel/format/frame_file.hpp"
 #include "volreel/player/svo_layout.h"
 #include "volreel_block_ranges_spv.h"
@@ -250,8 +251,8 @@ Raycaster::Entry& Raycaster::prepare(const FrameInput& input) {
   if (!(o.step > 0 && std::isfinite(o.step)) ||
       !(o.reference_step > 0 && std::isfinite(o.reference_step)))
     throw std::invalid_argument("Raycaster: expected step and reference step > 0, found " +
-                                std::to_string(o.step) + " and " +
-                                std::to_string(o.reference_step));
+                                format::number_text(o.step) + " and " +
+                                format::number_text(o.reference_step));
   if (o.max_step_doublings > max_step_doublings)
     throw std::invalid_argument("Raycaster: expected max_step_doublings ≤ " +
                                 std::to_string(max_step_doublings) + ", found " +

@@ -1,4 +1,5 @@
-// error.hpp: the error every volreel format reader throws on a bad file.
+// error.hpp: the error every volreel format reader throws on a bad file, and how its messages
+// (and every volreel message) write a number.
 #pragma once
 
 #include <cstdint>
@@ -28,5 +29,9 @@ class FormatError : public std::runtime_error {
   std::filesystem::path file_;
   std::uint64_t offset_ = no_offset;
 };
+
+/// A number for a message, in 6 significant digits: "45.1235", "1e-07", "3", "inf" (where
+/// std::to_string's six decimals would write 1e-07 as "0.000000").
+std::string number_text(double v);
 
 }  // namespace volreel::format

@@ -38,6 +38,13 @@ class NetworkError : public format::FormatError {
 };
 
 struct RemoteOptions {
+  /// What a user may ask for (the command line's options, the Python module's keywords).
+  static constexpr unsigned max_attempts = 20;
+  static constexpr unsigned max_connections = 64;
+  static constexpr double min_stall_timeout_s = 1, max_stall_timeout_s = 3600;
+  /// cache_bytes as a user writes it by default.
+  static constexpr const char* default_cache_size = "2G";
+
   HttpOptions http;
   unsigned attempts = 4;          ///< tries of a container read (manifest, dictionary, index)
   double retry_initial_s = 0.25;  ///< back-off before the second try, doubling after
