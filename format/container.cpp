@@ -377,16 +377,17 @@ constexpr std::uint64_t first_index_read = 4096;
 FrameFile Container::open_frame(std::size_t t) const {
   const ManifestFrame& entry = manifest_frame(manifest_, *source_, t);
   const fs::path path = source_->name(entry.file);
-  const auto local = source_->local_directory();
-  FrameFile file = local
-                       ? FrameFile(path)
-                       : FrameFile(source_->read_file(entry.file, entry.bytes), path, entry.bytes);
+  // Read, not memory-mapped: a mapped file that shrinks (cut short, or rewritten in place) under
+  // a reader ends it with SIGBUS, and a reader may be a Python or ParaView session that holds a
+  // frame for as long as it likes.
+  std::vector<std::byte> bytes = source_->read_file(entry.file, entry.bytes);
+  const std::uint64_t size = bytes.size();  // a file cut short is named by check_frame
+  FrameFile file(std::move(bytes), path, size);
   check_frame(t, file.view());
   return file;
 }
 
 FrameFile Container::open_frame_index(std::size_t t) const {
-  if (source_->local_directory()) return open_frame(t);
   const ManifestFrame& entry = manifest_frame(manifest_, *source_, t);
   const fs::path path = source_->name(entry.file);
   if (auto kept = source_->kept(entry.file, 0)) {

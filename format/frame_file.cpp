@@ -1,15 +1,11 @@
 // frame_file.cpp: writing and validating frame files, and the memory map behind the reader.
 #include "volreel/format/frame_file.hpp"
 
-#include <fcntl.h>
-#include <sys/mman.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <string>
 #include <utility>
 
@@ -505,40 +501,8 @@ void FrameView::check_payload_crc() const {
     throw FormatError(name_, end, "file CRC-32C " + str(want), str(found) + " (file corrupt)");
 }
 
-MappedFile::MappedFile(const fs::path& path) {
-  std::uint64_t size = 0;
-  const int fd = detail::open_regular_file(path, size);
-  size_ = static_cast<std::size_t>(size);
-  if (size_ > 0) {
-    void* p = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd, 0);
-    if (p == MAP_FAILED) {
-      const int e = errno;
-      ::close(fd);
-      throw FormatError(path, std::string("cannot map: ") + std::strerror(e));
-    }
-    data_ = static_cast<const std::byte*>(p);
-  }
-  ::close(fd);
-}
-
-MappedFile::~MappedFile() {
-  if (data_) ::munmap(const_cast<std::byte*>(data_), size_);
-}
-
-MappedFile::MappedFile(MappedFile&& other) noexcept : data_(other.data_), size_(other.size_) {
-  other.data_ = nullptr;
-  other.size_ = 0;
-}
-
-MappedFile& MappedFile::operator=(MappedFile&& other) noexcept {
-  if (this != &other) {
-    if (data_) ::munmap(const_cast<std::byte*>(data_), size_);
-    data_ = other.data_;
-    size_ = other.size_;
-    other.data_ = nullptr;
-    other.size_ = 0;
-  }
-  return *this;
-}
+FrameFile::FrameFile(const fs::path& path)
+    : held_(detail::read_whole_file(path, std::numeric_limits<std::uint64_t>::max())),
+      view_(held_, path) {}
 
 }  // namespace volreel::format

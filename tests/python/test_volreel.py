@@ -97,6 +97,21 @@ def test_frames_are_those_of_volreel_decode(container, tmp_path):
     assert np.array_equal(c.frame(5), c.frame(-1, level=c.levels - 1))
 
 
+def test_a_frame_file_cut_short_while_open_is_an_error_not_a_crash(container, tmp_path):
+    """Frame files are read, not memory-mapped: a file cut short under an open container (a
+    re-encode in place, a full disk) gave SIGBUS to a mapped reader, killing Python."""
+    copy = tmp_path / "c.vreel"
+    shutil.copytree(container, copy)
+    c = volreel.open(copy)
+    before = c.frame(1)
+    frame = sorted((copy / "frames").iterdir())[1]
+    os.truncate(frame, 0)
+    # The frame read before is held; read again, it is named as cut short.
+    np.testing.assert_array_equal(c.frame(1), before)
+    with pytest.raises(volreel.FormatError, match=frame.name):
+        volreel.open(copy).frame(1)
+
+
 def test_iteration_and_indexing(series, container):
     _, _, frames = series
     c = volreel.open(container)

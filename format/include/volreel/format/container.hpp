@@ -96,8 +96,8 @@ void write_manifest(const std::filesystem::path& dir, const Manifest& manifest);
 void write_container_file(const std::filesystem::path& dir, const std::string& relative,
                           std::span<const std::byte> bytes);
 
-/// A container opened for reading: manifest parsed, dictionary loaded (ksvd), frame files mapped
-/// (local) or fetched (remote) on demand.
+/// A container opened for reading: manifest parsed, dictionary loaded (ksvd), frame files read
+/// (whole, or their index alone) on demand.
 class Container {
  public:
   /// Throws FormatError if the manifest or dictionary is bad, or the encode is not complete
@@ -114,12 +114,12 @@ class Container {
   std::size_t frame_count() const { return manifest_.frames.size(); }
   /// The dictionary's atoms (empty for zfp).
   AtomTable atoms() const { return {atoms_, atom_count_, dct_atoms_}; }
-  /// Maps (local) or fetches (remote) frame t whole and validates its index (header, levels,
-  /// nodes, offsets); checks that it matches the manifest (size, frame index, dims, codec). Throws
-  /// FormatError.
+  /// Reads frame t whole (into memory, from a folder or a server) and validates its index (header,
+  /// levels, nodes, offsets); checks that it matches the manifest (size, frame index, dims, codec).
+  /// Throws FormatError.
   FrameFile open_frame(std::size_t t) const;
-  /// Frame t's index, validated as open_frame does, without its payloads where they would have to
-  /// be fetched (a remote source reads the index by range); a local frame is mapped whole.
+  /// Frame t's index, validated as open_frame does, without its payloads: the index is read by
+  /// range (a remote source may hand out the whole file where its cache holds it).
   FrameFile open_frame_index(std::size_t t) const;
   /// Brick b's payload of a frame opened by open_frame or open_frame_index, checked against its
   /// CRC-32C (read by range where the view holds the index alone). Throws FormatError.

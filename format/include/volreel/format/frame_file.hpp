@@ -236,29 +236,11 @@ class FrameView {
   std::vector<std::uint32_t> level_first_brick_;  ///< per level, then the brick count
 };
 
-/// A read-only memory map of a whole file (POSIX mmap), movable.
-class MappedFile {
- public:
-  MappedFile() = default;
-  /// Throws FormatError naming the file if it cannot be opened or mapped.
-  explicit MappedFile(const std::filesystem::path& path);
-  ~MappedFile();
-  MappedFile(MappedFile&& other) noexcept;
-  MappedFile& operator=(MappedFile&& other) noexcept;
-  MappedFile(const MappedFile&) = delete;
-  MappedFile& operator=(const MappedFile&) = delete;
-  std::span<const std::byte> bytes() const { return {data_, size_}; }
-
- private:
-  const std::byte* data_ = nullptr;
-  std::size_t size_ = 0;
-};
-
-/// A validated frame file: memory-mapped, or bytes held in memory (a whole remote file, or its
-/// index alone).
+/// A validated frame file: its bytes held in memory (the whole file, or its index alone).
 class FrameFile {
  public:
-  explicit FrameFile(const std::filesystem::path& path) : map_(path), view_(map_.bytes(), path) {}
+  /// The file at `path`, read whole (detail::read_whole_file). Throws FormatError.
+  explicit FrameFile(const std::filesystem::path& path);
   /// The whole file's bytes, or (file_size larger) its index alone; `name` names it in messages.
   FrameFile(std::vector<std::byte> bytes, std::filesystem::path name, std::uint64_t file_size)
       : held_(std::move(bytes)), view_(held_, std::move(name), file_size) {}
@@ -269,7 +251,6 @@ class FrameFile {
   const FrameView& view() const { return view_; }
 
  private:
-  MappedFile map_;
   std::vector<std::byte> held_;
   FrameView view_;
 };

@@ -61,7 +61,7 @@ class ContainerSource {
   /// How messages name one of its files ("out/run.vreel/frames/000003.vrf" or the file's URL);
   /// `relative` is a name the manifest allows ("manifest.json", "frames/000003.vrf").
   virtual std::filesystem::path name(const std::string& relative) const = 0;
-  /// The directory when the files are local (they are then memory-mapped and read with pread);
+  /// The directory when the files are local (they are then read with pread);
   /// empty for a remote source.
   virtual std::optional<std::filesystem::path> local_directory() const = 0;
   /// The whole file. Throws FormatError naming the file if it cannot be read or is larger than
@@ -73,7 +73,7 @@ class ContainerSource {
   virtual std::vector<std::byte> read_range(const std::string& relative, std::uint64_t offset,
                                             std::uint64_t bytes) const = 0;
   /// Bytes received from the source so far (a remote source's transfer; a local one counts what
-  /// it read through this interface, not memory-mapped reads).
+  /// it read through this interface).
   virtual std::uint64_t bytes_received() const = 0;
   /// Requests made of a remote source so far (0 for a local one).
   virtual std::uint64_t requests() const { return 0; }
