@@ -8,6 +8,7 @@
 #include <pybind11/stl/filesystem.h>
 
 #include <omp.h>
+#include <pthread.h>
 #include <unistd.h>
 #include <atomic>
 #include <cctype>
@@ -580,7 +581,8 @@ py::tuple as_tuple(const std::array<T, 3>& v) {
 /// A message of the library's with the command line's options that volreel.encode, train and open
 /// take as keywords written as those keywords: "--brick-size" as brick_size, "--resume" as
 /// resume=True, "--bps 0.5" as bps=0.5. A flag after "volreel COMMAND " names that command's
-/// own option and stays.
+/// own option and stays; one that no keyword takes (--pursuit) stays too, and a note at the end
+/// says that it is the command line's.
 std::string python_words(const std::string& message) {
   struct Keyword {
     std::string_view flag, name;
@@ -605,7 +607,7 @@ std::string python_words(const std::string& message) {
   const auto word_char = [](char c) {
     return std::isalnum(static_cast<unsigned char>(c)) || c == '-';
   };
-  std::string out;
+  std::string out, foreign;  // foreign: the flags no keyword takes, as written
   std::size_t i = 0;
   while (i < message.size()) {
     const Keyword* hit = nullptr;
@@ -622,6 +624,15 @@ std::string python_words(const std::string& message) {
                                out.find(' ', command + 8) == out.size() - 1 &&
                                out.size() > command + 9;
     if (!hit || after_command) {
+      const bool flag = message.compare(i, 2, "--") == 0 && i + 2 < message.size() &&
+                        std::isalpha(static_cast<unsigned char>(message[i + 2])) &&
+                        (i == 0 || !word_char(message[i - 1]));
+      if (flag && !after_command) {
+        std::size_t end = i + 2;
+        while (end < message.size() && word_char(message[end])) ++end;
+        const std::string name = message.substr(i, end - i);
+        if (foreign.find(name + ",") == std::string::npos) foreign += name + ",";
+      }
       out += message[i++];
       continue;
     }
@@ -636,6 +647,15 @@ std::string python_words(const std::string& message) {
       ++i;
     }
   }
+  if (!foreign.empty()) {
+    foreign.pop_back();
+    const bool one = foreign.find(',') == std::string::npos;
+    std::string list;
+    for (char c : foreign) list += c == ',' ? std::string(", ") : std::string(1, c);
+    out += " (" + list + (one ? " is an option" : " are options") +
+           " of the volreel command line, which this module does not take: use the command for "
+           "that)";
+  }
   return out;
 }
 
@@ -648,6 +668,11 @@ PYBIND11_MODULE(_volreel, m) {
   using namespace volreel::python;
   m.doc() = "volreel's library: containers as numpy arrays, encoding, training and metrics";
   m.attr("__version__") = VOLREEL_VERSION;
+  // GNU OpenMP's threads do not survive fork(): a child (multiprocessing's default start on
+  // Linux) that enters a parallel region after its parent did waits for ever for threads it does
+  // not have. A forked child runs volreel on its one thread.
+  pthread_atfork(
+      nullptr, nullptr, +[] { omp_set_num_threads(1); });
 
   static py::exception<format::FormatError> format_error(m, "FormatError", PyExc_ValueError);
   static py::exception<InputError> input_error(m, "InputError", PyExc_ValueError);

@@ -80,6 +80,10 @@ expect_error "level-factor: expected a number in \[1, 16\], found 'nan'" "$volre
 expect_error "--zfp-accuracy applies to --codec zfp only" "$volreel" encode "$work/s" --dictionary dct --zfp-accuracy 0.1 --out "$work/x.vreel"
 expect_error "--tolerance: expected a number > 0, found '0'" "$volreel" encode "$work/s" --tolerance 0 --out "$work/x.vreel"
 expect_error "--psnr: expected a number > 0, found '-5'" "$volreel" encode "$work/s" --psnr -5 --out "$work/x.vreel"
+for option in "--psnr 60" "--tolerance 0.01" "--bps 1" "--max-atoms 4" "--coef-step 4"; do
+  expect_error "${option% *} applies to variable rate: --fixed-sparsity S codes every block with S atoms" \
+    "$volreel" encode "$work/s" --dictionary dct --fixed-sparsity 3 $option --out "$work/x.vreel"
+done
 expect_error "--fixed-sparsity: Value 300 not in range 1 to 216" "$volreel" encode "$work/s" --fixed-sparsity 300 --out "$work/x.vreel"
 # A size target at which the rate search finds the learned atoms kept in no brick of its sample
 # (blobs' atoms on the rotating field at 3 bps): the whole dictionary's pursuit is skipped, and

@@ -1,8 +1,10 @@
 """A ParaView reader for volreel containers (NAME.vreel folders).
 
-Load it as a plugin — `paraview --plugin /path/to/volreel/paraview_reader.py`, Tools > Manage
-Plugins, or `LoadPlugin(path, ns=globals())` in pvpython — with the volreel Python package on
-PYTHONPATH. Then `VolreelReader(FileName="turbulence.vreel")` gives the container as image data
+Load it with the volreel Python package on PYTHONPATH: in pvpython `from volreel import pvplugin;
+pvplugin.load(globals())`, in the GUI `paraview --script .../volreel/paraview_startup.py`. (ParaView's
+own plugin loader — `--plugin`, Tools > Manage Plugins, `LoadPlugin` — works where ParaView's Python
+has `inspect.getargspec`; Debian 12's ParaView 5.11 on Python 3.11 does not, which pvplugin works
+around.) Then `VolreelReader(FileName="turbulence.vreel")` gives the container as image data
 with its time steps (the animation toolbar plays them) and a Level property: -1 (the default) is
 full resolution, 0 the root brick, each level doubling the resolution of the one before.
 """

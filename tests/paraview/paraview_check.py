@@ -6,6 +6,7 @@ with `volreel decode`, switch the level of detail, save a screenshot.
 with the volreel package on PYTHONPATH.
 """
 
+import os
 import sys
 
 import numpy as np
@@ -14,11 +15,16 @@ from paraview.simple import (GetActiveViewOrCreate, GetAnimationScene, Render, R
                              SaveScreenshot, Show)
 from vtkmodules.numpy_interface import dataset_adapter as dsa
 
-from volreel import pvplugin
+import volreel
 
 container, decoded_file, screenshot = sys.argv[1:4]
-pvplugin.load(globals())
-reader = VolreelReader(FileName=container)  # noqa: F821  (defined by the plugin)
+# The reader loaded as the README's GUI command loads it: the startup script run the way ParaView's
+# GUI runs a --script, in the shell's namespace, which has no __file__.
+startup = os.path.join(os.path.dirname(volreel.__file__), "paraview_startup.py")
+shell = {"__name__": "__main__", "__builtins__": __builtins__}
+with open(startup) as f:
+    exec(compile(f.read(), startup, "exec"), shell)  # noqa: S102
+reader = shell["VolreelReader"](FileName=container)
 times = list(reader.TimestepValues)
 assert len(times) == 6, times
 

@@ -112,6 +112,31 @@ def test_a_frame_file_cut_short_while_open_is_an_error_not_a_crash(container, tm
         volreel.open(copy).frame(1)
 
 
+def test_a_forked_child_decodes_after_its_parent_did(container):
+    """GNU OpenMP's threads do not survive fork(): a child that entered a parallel region after
+    its parent had waited for ever (multiprocessing's workers on Linux)."""
+    c = volreel.open(container)
+    expected = c.frame(1)
+    pid = os.fork()
+    if pid == 0:
+        ok = False
+        try:
+            ok = np.array_equal(volreel.open(container).frame(1), expected)
+        finally:
+            os._exit(0 if ok else 1)
+    deadline = time.monotonic() + 60
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        if time.monotonic() > deadline:
+            os.kill(pid, 9)
+            os.waitpid(pid, 0)
+            pytest.fail("the forked child's decode did not finish in 60 s")
+        time.sleep(0.05)
+    assert os.waitstatus_to_exitcode(status) == 0
+
+
 def test_iteration_and_indexing(series, container):
     _, _, frames = series
     c = volreel.open(container)
@@ -247,6 +272,13 @@ def test_encode_from_an_array_is_the_command_line_encode(series, tmp_path):
     with pytest.raises(volreel.InputError, match="brick_size must be auto or a multiple of 6") as e:
         volreel.encode(frames, tmp_path / "b.vreel", dictionary="dct", brick_size=7)
     assert "--" not in str(e.value)
+    # Options only the command line has are said to be its own.
+    with pytest.raises(volreel.InputError, match=r"encoded with other settings") as e:
+        volreel.encode(frames, tmp_path / "cli.vreel", dictionary="dct", psnr=45, resume=True)
+    assert "give the same options (tolerance: tolerance, psnr or bps as before" in str(e.value)
+    assert str(e.value).endswith("(--pursuit, --level-factor, --level-detail, --mean-bits, "
+                                 "--rate-rule are options of the volreel command line, which "
+                                 "this module does not take: use the command for that)")
     volreel.encode(frames, tmp_path / "py.vreel", codec="zfp", overwrite=True)
     assert volreel.open(tmp_path / "py.vreel").info()["codec"] == "zfp"
 

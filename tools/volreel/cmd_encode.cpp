@@ -74,6 +74,17 @@ encoder::CodingSettings coding_settings(const EncodeOptions& o) {
   }
   c.max_atoms = o.max_atoms;
   c.fixed_sparsity = o.fixed_sparsity;
+  if (c.fixed_sparsity > 0) {
+    // Fixed rate takes S atoms a block whatever the error: a target or a variable-rate setting
+    // beside it would be ignored.
+    for (const char* name : {"--tolerance", "--psnr", "--bps", "--max-error", "--max-atoms",
+                             "--rate-rule", "--coef-step", "--level-factor", "--level-detail",
+                             "--rate-sample-frames", "--extend-pursuit"})
+      if (o.command->count(name) > 0)
+        throw InputError(std::string(name) +
+                         " applies to variable rate: --fixed-sparsity S codes every block with S "
+                         "atoms whatever its error (leave out one of the two)");
+  }
   c.rule = encoder::rate_rule_from_name(o.rate_rule);
   if (o.extend && c.fixed_sparsity == 0 && c.rule != encoder::VariableRateRule::tolerance)
     throw InputError("--extend-pursuit needs --rate-rule tolerance");
