@@ -135,11 +135,26 @@ HttpResponse finish(Transfer& t, CURLcode code, const HttpOptions& o) {
   const std::string no_ranges = what +
                                 ": expected HTTP 206 (a byte range), found HTTP 200 (the server "
                                 "does not serve byte ranges)";
+  const long wanted = t.bytes > 0 ? 206 : 200;
+  const auto status_error = [&] {
+    if (t.bytes > 0 && status == 200)
+      r.error = no_ranges;
+    else
+      r.error = what + ": expected HTTP " + std::to_string(wanted) + ", found HTTP " +
+                std::to_string(status) +
+                (status == 404   ? " (no such file on the server: check the URL)"
+                 : status == 403 ? " (the server refuses to serve it)"
+                                 : "");
+    r.transient = status == 408 || status == 429 || status >= 500;
+  };
   if (code != CURLE_OK) {
     if (t.over_limit) {
-      r.error = t.bytes > 0 && status == 200
-                    ? no_ranges
-                    : what + ": expected " + expected_size + ", found more";
+      // An error page longer than the bytes asked for ends the transfer too: its status is what
+      // went wrong.
+      if (status != wanted)
+        status_error();
+      else
+        r.error = what + ": expected " + expected_size + ", found more";
     } else {
       if (code == CURLE_OPERATION_TIMEDOUT || (code == CURLE_ABORTED_BY_CALLBACK && t.stalled)) {
         r.error = what + ": " + timeout_error(t.easy, t, o);
@@ -151,17 +166,8 @@ HttpResponse finish(Transfer& t, CURLcode code, const HttpOptions& o) {
     }
     return r;
   }
-  const long wanted = t.bytes > 0 ? 206 : 200;
   if (status != wanted) {
-    if (t.bytes > 0 && status == 200)
-      r.error = no_ranges;
-    else
-      r.error = what + ": expected HTTP " + std::to_string(wanted) + ", found HTTP " +
-                std::to_string(status) +
-                (status == 404   ? " (no such file on the server: check the URL)"
-                 : status == 403 ? " (the server refuses to serve it)"
-                                 : "");
-    r.transient = status == 408 || status == 429 || status >= 500;
+    status_error();
     return r;
   }
   if (t.bytes > 0) {

@@ -15,6 +15,7 @@ MODE_FILE (missing or empty: "pass"):
     stall       one byte of the body, then nothing for 60 seconds
     stall half  half of the body at once, then nothing for 60 seconds
     status N    HTTP status N with an empty body, the upstream not asked
+    page N      HTTP status N with a 10 kB HTML page (longer than a brick), the upstream not asked
     whole       the request passed without its Range header: the whole file, HTTP 200 (a server
                 that does not serve byte ranges)
 """
@@ -60,10 +61,14 @@ class Handler(http.server.BaseHTTPRequestHandler):
 
     def do_GET(self):
         m = mode()
-        if m.startswith("status "):
+        if m.startswith("status ") or m.startswith("page "):
+            page = b"" if m.startswith("status ") else b"<html>" + b"busy " * 2048 + b"</html>"
             self.send_response(int(m.split()[1]))
-            self.send_header("Content-Length", "0")
+            self.send_header("Content-Length", str(len(page)))
+            if page:
+                self.send_header("Content-Type", "text/html")
             self.end_headers()
+            self.wfile.write(page)
             return
         upstream = http.client.HTTPConnection("127.0.0.1", UPSTREAM, timeout=30)
         headers = {k: v for k, v in self.headers.items() if k.lower() == "range" and m != "whole"}

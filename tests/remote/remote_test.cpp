@@ -364,6 +364,20 @@ TEST_F(RemoteContainer, ErrorStatusesTruncationAndStallsAreClearErrors) {
     EXPECT_EQ(e.rfind(name, 0), 0u) << mode << ": " << e;
     EXPECT_NE(e.find(expected), std::string::npos) << mode << ": " << e;
   }
+  // An error page longer than the range asked for is named by its status (not as "found more"),
+  // and a 5xx is tried again.
+  for (const std::string status : {"503", "404"}) {
+    proxy.set_mode("page " + status);
+    try {
+      source->read_range("frames/000001.vrf", 0, 16);
+      ADD_FAILURE() << "read";
+    } catch (const format::FormatError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("bytes 0-15: expected HTTP 206, found HTTP " + status), std::string::npos)
+          << what;
+      EXPECT_EQ(what.find("the last of 2 tries") != std::string::npos, status == "503") << what;
+    }
+  }
   proxy.set_mode("pass");
   EXPECT_NO_THROW(remote.read_brick(frame.view(), 0));
   // A manifest that cannot be had is an error naming it.
