@@ -16,6 +16,7 @@
 #include "volreel/format/crc32c.hpp"
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
+#include "volreel/loop/auto_transfer.hpp"
 #include "volreel/loop/cpu_frame_loop.hpp"
 #include "volreel/player/camera.hpp"
 #include "volreel/remote/disk_cache.hpp"
@@ -331,6 +332,29 @@ TEST_F(RemoteContainer, ACorruptedByteIsRequestedAgainAndNeverHandedOut) {
   const stream::BrickArrival good = wait_one();
   ASSERT_TRUE(good.ok()) << good.error;
   EXPECT_EQ(format::crc32c(good.bytes), *r.crc32c);
+}
+
+TEST_F(RemoteContainer, TheAutomaticTransferFunctionTriesOneFrameOfAFailingServer) {
+  // Over HTTP the automatic transfer function samples the middle frame alone: a server that fails
+  // its reads fails every frame's (the view waited for 6 frames' tries, minutes with the default
+  // stall timeout and tries, with nothing on the screen).
+  test::FaultProxy proxy(proxy_script, nginx_->port(), dir_->path());
+  RemoteOptions o;
+  o.attempts = 2;
+  o.retry_initial_s = 0.01;
+  const auto source = std::make_shared<HttpSource>(proxy.url("test.vreel"), o);
+  const format::Container remote(source);
+  ASSERT_EQ(remote.frame_count(), 6u);
+  proxy.set_mode("status 503");
+  const std::uint64_t before = source->requests();
+  const cpu_render::TransferFunction tf = loop::quantile_transfer(remote);
+  EXPECT_EQ(source->requests() - before, 2u);  // the middle frame's index, tried twice
+  // The fallback: the preset over the manifest's value range.
+  const auto& m = remote.manifest();
+  const auto preset = cpu_render::TransferFunction::preset(
+      "cool-warm", static_cast<float>(m.value_min), static_cast<float>(m.value_max));
+  EXPECT_EQ(tf.lookup(static_cast<float>(m.value_max)),
+            preset.lookup(static_cast<float>(m.value_max)));
 }
 
 TEST_F(RemoteContainer, ErrorStatusesTruncationAndStallsAreClearErrors) {

@@ -19,6 +19,10 @@ namespace volreel::loop {
 
 namespace {
 
+/// The frames quantile_transfer tries, from the middle one outwards, before it falls back to the
+/// value range alone.
+constexpr std::size_t max_frames_sampled = 3;
+
 /// Values of up to `max_bricks` finest-level bricks of frame t, evenly spread.
 std::vector<float> finest_brick_values(const format::Container& container, std::size_t t,
                                        std::size_t max_bricks) {
@@ -52,10 +56,14 @@ cpu_render::TransferFunction quantile_transfer(const format::Container& containe
   const auto lo = static_cast<float>(m.value_min), hi = static_cast<float>(m.value_max);
   if (!(hi > lo)) return cpu_render::TransferFunction::preset("cool-warm", lo, lo + 1);
   // 1. Values of the finest bricks of the middle frame (a sample of them on big volumes); if that
-  //    frame is damaged, the nearest readable one (the player reports damaged frames itself).
+  //    frame is damaged, the nearest readable one of two more (the player reports damaged frames
+  //    itself). Over HTTP the middle frame alone: a server that fails its reads (each after its
+  //    tries) would fail the next frame's too, and the view waits for this.
   const std::size_t frames = container.frame_count(), middle = frames / 2;
+  const std::size_t candidates =
+      std::min<std::size_t>(frames, container.source().local_directory() ? max_frames_sampled : 1);
   std::vector<float> values;
-  for (std::size_t k = 0; k < frames && values.empty(); ++k) {
+  for (std::size_t k = 0; k < candidates && values.empty(); ++k) {
     const std::size_t t = k % 2 == 0 ? middle + k / 2 : middle - (k + 1) / 2;
     if (t >= frames) continue;
     try {

@@ -16,8 +16,9 @@
 namespace volreel::loop {
 
 /// Quantiles of the values of up to `max_bricks` finest-level bricks (evenly spread) of the
-/// middle frame (or the nearest readable frame when that one is damaged), decoded on the CPU;
-/// the transfer function spans the manifest's value range. "cool-warm" when no frame is readable.
+/// middle frame (on a local disk, where that one is damaged, the first readable of the two beside
+/// it; over HTTP, whose failures would repeat, the middle frame alone), decoded on the CPU; the
+/// transfer function spans the manifest's value range. "cool-warm" when none of them is readable.
 cpu_render::TransferFunction quantile_transfer(const format::Container& container,
                                                std::size_t max_bricks = 64);
 
