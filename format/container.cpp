@@ -91,10 +91,12 @@ json manifest_to_json(const Manifest& m) {
 }
 
 std::uint64_t container_identifier(const Manifest& manifest,
-                                   std::span<const std::byte> dictionary_bytes_without_id) {
+                                   std::span<const std::byte> dictionary_bytes_without_id,
+                                   bool with_source) {
   json j = manifest_to_json(manifest);
   for (const char* field : {"frames", "complete", "container_id", "encoder", "program_version"})
     j.erase(field);
+  if (!with_source) j.erase("source");
   const std::string text = j.dump(-1, ' ', false, json::error_handler_t::replace);
   std::uint64_t h = 0xCBF29CE484222325u;  // FNV-1a, 64-bit
   const auto mix = [&](std::span<const std::byte> bytes) {
@@ -647,7 +649,8 @@ std::vector<std::string> verify_container(std::shared_ptr<const ContainerSource>
     Manifest settings = m;
     settings.dictionary.reset();
     const std::uint64_t id = container_identifier(settings, *dictionary_without_id);
-    if (id != m.container_id)
+    if (id != m.container_id &&
+        container_identifier(settings, *dictionary_without_id, true) != m.container_id)
       problems.push_back(source->name("manifest.json").string() + ": expected \"container_id\" " +
                          id_text(id) + " (the hash of the settings and the dictionary), found " +
                          id_text(m.container_id) + ": a setting changed after encoding");

@@ -80,6 +80,15 @@ expect_error "level-factor: expected a number in \[1, 16\], found 'nan'" "$volre
 expect_error "--zfp-accuracy applies to --codec zfp only" "$volreel" encode "$work/s" --dictionary dct --zfp-accuracy 0.1 --out "$work/x.vreel"
 expect_error "--tolerance: expected a number > 0, found '0'" "$volreel" encode "$work/s" --tolerance 0 --out "$work/x.vreel"
 expect_error "--psnr: expected a number > 0, found '-5'" "$volreel" encode "$work/s" --psnr -5 --out "$work/x.vreel"
+# The input's path spelled another way (relative with ./, absolute) makes the same frames, and a
+# container (here a complete one: nothing to do) is resumed from another working folder.
+"$volreel" encode "$work/s" --dictionary dct --out "$work/path1.vreel" > /dev/null 2>&1
+(cd "$work" && "$volreel" encode ./s --dictionary dct --out path2.vreel > /dev/null 2>&1)
+cmp -s "$work/path1.vreel/frames/000001.vrf" "$work/path2.vreel/frames/000001.vrf" \
+  || fail "the frames depend on how the input's path is written"
+(cd "$work" && "$volreel" encode ./s/../s --dictionary dct --out path1.vreel --resume > /dev/null 2>&1) \
+  || fail "a resume with the input's path spelled another way was refused"
+"$volreel" verify "$work/path1.vreel" > /dev/null || fail "the resumed container does not verify"
 for option in "--psnr 60" "--tolerance 0.01" "--bps 1" "--max-atoms 4" "--coef-step 4"; do
   expect_error "${option% *} applies to variable rate: --fixed-sparsity S codes every block with S atoms" \
     "$volreel" encode "$work/s" --dictionary dct --fixed-sparsity 3 $option --out "$work/x.vreel"

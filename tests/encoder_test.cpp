@@ -1302,6 +1302,52 @@ TEST(Container, VerifyNamesAnEditedSettingAndFilesTheManifestDoesNotList) {
   EXPECT_EQ(named("000000.vrf.tmp-12: a temporary file an interrupted encode left"), 1);
 }
 
+TEST(Container, TheIdentifierLeavesOutTheSourceAndVerifyTakesTheOlderOne) {
+  test::TempDir dir("container-source");
+  const auto out = encode_ramp(dir.path(), Dims{30, 20, 20}, "source.vreel");
+  // The input named another way (a relative path, another working folder): the same identifier.
+  auto manifest = format::manifest_to_json(format::Container(out).manifest());
+  manifest["source"] = "./elsewhere/../ramp";
+  std::ofstream(out / "manifest.json") << format::manifest_text(manifest);
+  EXPECT_TRUE(format::verify_container(out).empty());
+  // A container whose identifier hashed its source too (as volreel wrote them before): its
+  // frames and dictionary carry that identifier, which verify accepts.
+  const format::Container c(out);
+  const auto write = [](const std::filesystem::path& path, const std::vector<std::byte>& bytes) {
+    std::ofstream(path, std::ios::binary)
+        .write(reinterpret_cast<const char*>(bytes.data()),
+               static_cast<std::streamsize>(bytes.size()));
+  };
+  format::DictionaryFile dictionary =
+      format::parse_dictionary_file(test::read_bytes(out / "dictionary.bin"), "dictionary.bin");
+  dictionary.container_id = 0;
+  format::Manifest settings = c.manifest();
+  settings.dictionary.reset();
+  const std::uint64_t older =
+      format::container_identifier(settings, format::serialize_dictionary_file(dictionary), true);
+  ASSERT_NE(older, c.manifest().container_id);
+  dictionary.container_id = older;
+  const std::vector<std::byte> dictionary_bytes = format::serialize_dictionary_file(dictionary);
+  write(out / "dictionary.bin", dictionary_bytes);
+  char id[17];
+  std::snprintf(id, sizeof id, "%016llx", static_cast<unsigned long long>(older));
+  manifest["container_id"] = id;
+  manifest["dictionary"]["crc32c"] = format::manifest_crc(dictionary_bytes);
+  for (std::size_t t = 0; t < c.frame_count(); ++t) {
+    const std::filesystem::path frame = out / c.manifest().frames[t]->file;
+    std::vector<std::byte> bytes = test::read_bytes(frame);
+    std::memcpy(bytes.data() + offsetof(format::FrameHeader, container_id), &older, 8);
+    test::reseal_frame(bytes);
+    write(frame, bytes);
+    manifest["frames"][t]["crc32c"] = format::manifest_crc(bytes);
+  }
+  std::ofstream(out / "manifest.json") << format::manifest_text(manifest);
+  EXPECT_TRUE(format::verify_container(out).empty());
+  manifest["tolerance"] = 1.0;  // and a setting edited is still found
+  std::ofstream(out / "manifest.json") << format::manifest_text(manifest);
+  EXPECT_EQ(format::verify_container(out).size(), 1u);
+}
+
 TEST(Container, VerifyRefusesABrickCodingFewerBlocksThanItsPositionNeeds) {
   test::TempDir dir("container-box");
   // 90 × 20 × 20 in bricks of 36³: each brick codes 4 blocks in y and z (the volume and the voxel

@@ -251,6 +251,10 @@ def test_encode_from_a_generator(series, tmp_path):
     # A name ending in a separator names the same folder; the temporary series goes beside it.
     volreel.encode(iter(frames[:2]), str(tmp_path / "slash.vreel") + "/", dictionary="dct")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["gen.vreel", "slash.vreel"]
+    # A generator's container resumes from a generator (the temporary series' name, which differs
+    # from run to run, is not one of its settings).
+    again = volreel.encode(iter(frames[:2]), tmp_path / "slash.vreel", dictionary="dct", resume=True)
+    assert again["frames"] == 2
 
 
 def test_encode_from_an_array_is_the_command_line_encode(series, tmp_path):

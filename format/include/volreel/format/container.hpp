@@ -68,11 +68,14 @@ struct Manifest {
 };
 
 /// A container's identifier: FNV-1a (64-bit) of the manifest's settings (manifest_to_json without
-/// "frames", "complete", "container_id", "encoder" and "program_version") and of the dictionary's
-/// bytes as stored with identifier 0 — the same for the same input and settings (so that --resume
-/// and regression checksums hold), different for containers whose files must not be mixed. Never 0.
+/// "frames", "complete", "container_id", "encoder", "program_version" and "source") and of the
+/// dictionary's bytes as stored with identifier 0 — the same for the same input and settings,
+/// however the input's path is spelled (so that --resume and regression checksums hold),
+/// different for containers whose files must not be mixed. Never 0. `with_source`: the
+/// identifier as volreel 0.1.0 wrote it before, with "source" (which verify also accepts).
 std::uint64_t container_identifier(const Manifest& manifest,
-                                   std::span<const std::byte> dictionary_bytes_without_id);
+                                   std::span<const std::byte> dictionary_bytes_without_id,
+                                   bool with_source = false);
 
 nlohmann::json manifest_to_json(const Manifest& manifest);
 /// The text of manifest.json for `j` (manifest_to_json's object, possibly edited): `j` with its
