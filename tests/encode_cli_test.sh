@@ -89,6 +89,13 @@ cmp -s "$work/path1.vreel/frames/000001.vrf" "$work/path2.vreel/frames/000001.vr
 (cd "$work" && "$volreel" encode ./s/../s --dictionary dct --out path1.vreel --resume > /dev/null 2>&1) \
   || fail "a resume with the input's path spelled another way was refused"
 "$volreel" verify "$work/path1.vreel" > /dev/null || fail "the resumed container does not verify"
+# Options that do not go together or cannot be read are mistakes on the command line: status 2,
+# as CLI11's own, before the input is read.
+for options in "--brick-size 13" "--codec foo" "--memory 5X" "--fixed-sparsity 3 --max-error 1"; do
+  status=0
+  "$volreel" encode "$work/no-such-series" $options --out "$work/x.vreel" > /dev/null 2>&1 || status=$?
+  [ "$status" = 2 ] || fail "encode $options: exit status $status, expected 2"
+done
 for option in "--psnr 60" "--tolerance 0.01" "--bps 1" "--max-atoms 4" "--coef-step 4"; do
   expect_error "${option% *} applies to variable rate: --fixed-sparsity S codes every block with S atoms" \
     "$volreel" encode "$work/s" --dictionary dct --fixed-sparsity 3 $option --out "$work/x.vreel"

@@ -154,6 +154,13 @@ encoder::EncodeRequest encode_request(const EncodeOptions& o, std::size_t frames
 }
 
 void run_encode(const EncodeOptions& o) {
+  // The options checked together before any input is read: a mistake there is one on the command
+  // line (exit status 2), not an error of the run.
+  try {
+    encode_request(o, 0);
+  } catch (const InputError& e) {
+    throw CLI::ValidationError(e.what());
+  }
   // Under mpirun every rank runs this with the same options; rank 0 alone prints.
   const encoder::Ranks* ranks = mpi_ranks();
   const auto series = datasets::open_series(o.series, o.reader.to_open_options());

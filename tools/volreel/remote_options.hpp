@@ -63,9 +63,9 @@ inline void add_remote_options(CLI::App& cmd, RemoteCli& o) {
       ->capture_default_str();
 }
 
-/// The source of the container at `location` (a folder or a URL). Throws InputError for a bad URL
-/// or option, format::FormatError for a folder that is not a container or a cache folder that
-/// cannot be used.
+/// The source of the container at `location` (a folder or a URL). Throws CLI::ValidationError (a
+/// mistake on the command line, exit status 2) for a bad URL or option, format::FormatError for a
+/// folder that is not a container or a cache folder that cannot be used.
 inline std::shared_ptr<const format::ContainerSource> open_container_source(
     const std::string& location, const RemoteCli& o) {
   remote::RemoteOptions options;
@@ -80,7 +80,7 @@ inline std::shared_ptr<const format::ContainerSource> open_container_source(
     }
     return remote::open_source(location, options);
   } catch (const std::invalid_argument& e) {
-    throw InputError(e.what());
+    throw CLI::ValidationError(e.what());
   }
 }
 
