@@ -383,7 +383,15 @@ FrameFile Container::open_frame(std::size_t t) const {
   // a reader ends it with SIGBUS, and a reader may be a Python or ParaView session that holds a
   // frame for as long as it likes.
   std::vector<std::byte> bytes = source_->read_file(entry.file, entry.bytes);
-  const std::uint64_t size = bytes.size();  // a file cut short is named by check_frame
+  if (bytes.size() != entry.bytes)  // before the header's checks, which would blame the format
+    throw FormatError(path, FormatError::no_offset,
+                      std::to_string(entry.bytes) + " bytes (its size in manifest.json)",
+                      std::to_string(bytes.size()) +
+                          (source_->local_directory()
+                               ? " (the file was cut short after the container was written)"
+                               : " (the server's answer was cut short, or the file changed on "
+                                 "the server after the container was written)"));
+  const std::uint64_t size = bytes.size();
   FrameFile file(std::move(bytes), path, size);
   check_frame(t, file.view());
   return file;

@@ -175,7 +175,7 @@ cp -r "$work/a.vreel" "$work/b.vreel"
 printf '\x13' | dd of="$work/b.vreel/frames/000001.vrf" bs=1 seek=200 conv=notrunc 2>/dev/null
 expect_error "000001.vrf: offset" "$volreel" verify "$work/b.vreel"
 truncate -s 100 "$work/b.vreel/frames/000002.vrf"
-expect_error "000002.vrf: offset 0: expected a frame file of at least 144 bytes" "$volreel" decode "$work/b.vreel" --frame 2 --out "$work/x.f32"
+expect_error "000002.vrf: expected [0-9]* bytes (its size in manifest.json), found 100 (the file was cut short after the container was written)" "$volreel" decode "$work/b.vreel" --frame 2 --out "$work/x.f32"
 # Resume repairs both and leaves frame 0 alone.
 "$volreel" encode "$work/s" --out "$work/b.vreel" --resume --tolerance "$("$volreel" info "$work/a.vreel" --json | json 'd["tolerance"]')" \
   > "$work/resume.txt" 2>/dev/null
