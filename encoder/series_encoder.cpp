@@ -822,6 +822,35 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
                                        memory ? memory : std::numeric_limits<std::uint64_t>::max());
   const bool side_by_side = batch > 0;
   if (side_by_side) summary.frames_at_once = std::min(batch, detail::side_by_side_frames());
+  // Whether a frame of the stretch from s whose keep flags interpolate a node misses psnr_target,
+  // decoded as a reader does.
+  const auto interpolation_misses_psnr = [&](const std::vector<Step>& steps,
+                                             const std::vector<std::vector<char>>& keep,
+                                             std::size_t s) {
+    std::vector<std::vector<std::byte>> trial(steps.size());
+    for (std::size_t i = 0; i < steps.size(); ++i)
+      trial[i] = encoder->write(steps[i].coded, keep[i]);
+    format::TimeStepDecoder decoder(
+        frames, static_cast<std::uint32_t>(gap), atoms, [&](std::size_t t) {
+          if (t < s || t - s >= trial.size())
+            throw std::logic_error("a stretch's step refers to a frame not coded with it");
+          return format::FrameFile(trial[t - s], format::frame_file_name(t), trial[t - s].size());
+        });
+    std::vector<float> decoded(info.dims.voxels());
+    const auto finest = static_cast<std::uint32_t>(steps.back().coded.geometry.size() - 1);
+    for (std::size_t i = 0; i < steps.size(); ++i) {
+      if (std::all_of(keep[i].begin(), keep[i].end(), [](char k) { return k != 0; })) continue;
+      decoder.decode(s + i, finest, decoded);
+      double squared = 0;
+      for (std::size_t v = 0; v < decoded.size(); ++v) {
+        const double d =
+            static_cast<double>(decoded[v]) - static_cast<double>(steps[i].volume.data[v]);
+        squared += d * d;
+      }
+      if (frame_psnr(squared) < job.psnr_target) return true;
+    }
+    return false;
+  };
   std::optional<Step> carried;  // the last frame of the previous stretch
   std::vector<Step> pool;       // the other frames of the previous stretch: their buffers reused
   std::size_t coded_frames = 0;
@@ -920,6 +949,14 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       KeyframeRule rule;
       rule.within_coded_error = holds_psnr;
       keep = choose_keyframes(coded, atoms, rule);
+      // The rule lets an interpolated brick err up to brick_factor times the coded one, so that
+      // fewer are stored; a frame coded just above a PSNR target then falls below it by up to
+      // 10·log10(brick_factor) dB. Where one does, the stretch's choice is made again with no
+      // interpolation worse than its coding.
+      if (holds_psnr && writer && !job.piecewise && interpolation_misses_psnr(steps, keep, s)) {
+        rule.brick_factor = 1.0;
+        keep = choose_keyframes(coded, atoms, rule);
+      }
     }
     summary.seconds += seconds_since(start);
     // The stretch's last frame starts the next one; the others' buffers are reused.
