@@ -239,6 +239,14 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
     chosen_brick_size = true;
     request.coding.brick_size = format::choose_brick_shape(dims).size;
   }
+  if (request.tolerance.bps && request.max_keyframe_gap && *request.max_keyframe_gap > 1)
+    throw InputError(
+        "--bps searches eps on sample frames coded whole, every node stored, and "
+        "--max-keyframe-gap " +
+        std::to_string(*request.max_keyframe_gap) +
+        " would leave nodes to interpolation: the container would land below the target. Leave "
+        "--max-keyframe-gap out with --bps (every frame is then "
+        "a keyframe), or ask for --psnr or --tolerance");
   const format::BrickShape shape{request.coding.brick_size};
   if (!format::valid_brick_size(shape.size))
     throw InputError("--brick-size must be auto or a multiple of 6 in 12..66, not " +
@@ -266,7 +274,8 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   if (job.piecewise) {
     const std::string frame_size = "frames of " +
                                    mebibytes(4.0 * static_cast<double>(info.dims.voxels())) +
-                                   " do not fit " + memory_text + " whole";
+                                   " (coded whole, " + mebibytes(whole_frame_bytes(info.dims)) +
+                                   " with their decoding) do not fit " + memory_text + " whole";
     if (request.max_keyframe_gap && *request.max_keyframe_gap > 1)
       throw InputError(frame_size +
                        ", so they are coded piecewise, which needs --max-keyframe-gap 1 (a "
@@ -275,7 +284,8 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
       throw InputError(frame_size +
                        ", and --bps codes sample frames whole: ask for --psnr or --tolerance, or "
                        "give more --memory");
-    if (request.dictionary.empty() && !(request.resume && fs::exists(out / "dictionary.bin")))
+    if (request.coding.codec == format::Codec::ksvd && request.dictionary.empty() &&
+        !(request.resume && fs::exists(out / "dictionary.bin")))
       throw InputError(frame_size +
                        ", and training a dictionary reads frames whole: give one (--dictionary "
                        "FILE from volreel train on a smaller series, or --dictionary dct), or "

@@ -287,6 +287,16 @@ grep -q "target PSNR 60.00 dB met by every frame" "$work/pp.txt" || fail "piecew
 "$volreel" compare "$work/tall" "$work/pp.vreel" --no-ssim --min-psnr 60 > /dev/null 2>&1 || fail "piecewise --psnr 60 not delivered"
 expect_error "needs --max-keyframe-gap 1" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1200K --max-keyframe-gap 4 --out "$work/x.vreel"
 expect_error "training a dictionary reads frames whole" "$volreel" encode "$work/tall" --memory 1200K --out "$work/x.vreel"
+# zfp needs no dictionary: coded piecewise, the same bricks as whole frames.
+"$volreel" encode "$work/tall" --codec zfp --memory 1200K --out "$work/zp.vreel" > "$work/zp.txt" 2>&1 ||
+  fail "zfp with --memory 1200K: $(cat "$work/zp.txt")"
+"$volreel" encode "$work/tall" --codec zfp --max-keyframe-gap 1 --out "$work/zw.vreel" > /dev/null 2>&1
+for t in 0 2; do
+  f=$(printf 'frames/%06d.vrf' $t)
+  cmp -s "$work/zp.vreel/$f" "$work/zw.vreel/$f" || fail "zfp piecewise frame $t differs from the whole frame's"
+done
+expect_error "bps searches eps on sample frames coded whole.*--max-keyframe-gap 4 would leave nodes to interpolation" \
+  "$volreel" encode "$work/tall" --dictionary dct --bps 1 --max-keyframe-gap 4 --out "$work/x.vreel"
 expect_error "bps codes sample frames whole" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1200K --bps 1 --out "$work/x.vreel"
 expect_error "holds about 1.09 MiB of planes: give at least that --memory" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 100k --out "$work/x.vreel"
 expect_error "expected a size such as 2G" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory lots --out "$work/x.vreel"
