@@ -54,6 +54,16 @@ awk -v p="$psnr" 'BEGIN { exit !(p == "inf" || p >= 40) }' \
 awk -F, 'NR == 2 { if ($19 >= 1) { print "realtime frame 0 complete on a 200 kB/s link: " $0; exit 1 } }' \
   "$dir/rt/metrics.csv"
 
+# Without --realtime, frames still incomplete after --wait-timeout are drawn and written, and the
+# exit status (3) says so.
+status=0
+"$volreel" render "$dir/test.vreel" --tour "$dir/tour.json" --out "$dir/late" --cpu \
+  --bandwidth 20kB/s --wait-timeout 0.05 --max-frames 2 > "$dir/late.log" 2>&1 || status=$?
+[ "$status" = 3 ] || { echo "incomplete frames: exit status $status, expected 3"; cat "$dir/late.log"; exit 1; }
+grep -q "frames were drawn incomplete after waiting --wait-timeout 0.05 s" "$dir/late.log" \
+  || { cat "$dir/late.log"; exit 1; }
+[ "$(ls "$dir/late"/frame_*.png | wc -l)" -eq 2 ] || { echo "the incomplete frames were not written"; exit 1; }
+
 # Helpful errors.
 if "$volreel" render "$dir/test.vreel" --out "$dir/bad" --size 12 > "$dir/bad.log" 2>&1; then
   echo "accepted --size 12"; exit 1

@@ -397,6 +397,13 @@ void run_render(const RenderCommandOptions& o) {
   }
   // The frames are written (drawn without what failed); the exit status still says it failed.
   failures.fail_if_any("the frames were drawn without them");
+  // Written and complete, but not what was asked: frames drawn before their bricks arrived.
+  if (timeouts > 0)
+    throw TargetMissed(std::to_string(timeouts) + " of " + std::to_string(frames) +
+                       " frames were drawn incomplete after waiting --wait-timeout " +
+                       format::number_text(o.wait_timeout) +
+                       " s for their bricks (the warnings above); the frames and metrics.csv are "
+                       "written");
 }
 
 }  // namespace
@@ -434,7 +441,7 @@ void add_render_command(CLI::App& app) {
                 "needs have arrived (see --wait-timeout)");
   cmd->add_option("--wait-timeout", o->wait_timeout,
                   "Without --realtime: seconds a frame waits for its bricks before it is drawn "
-                  "with what it has (reported)")
+                  "with what it has (reported; the exit status is then 3)")
       ->check(non_negative())
       ->capture_default_str();
   cmd->add_option("--max-frames", o->max_frames,
