@@ -92,4 +92,30 @@ std::string check_url(std::string url) {
   return scheme + url.substr(colon);
 }
 
+std::string take_credentials(std::string& url) {
+  const std::size_t authority = url.find("://") + 3;
+  const std::size_t end = std::min(url.find('/', authority), url.size());
+  const std::size_t at = url.rfind('@', end - 1);
+  if (at == std::string::npos || at < authority) return "";
+  const std::string encoded = url.substr(authority, at - authority);
+  url.erase(authority, at + 1 - authority);
+  std::string decoded;
+  for (std::size_t i = 0; i < encoded.size(); ++i) {
+    const auto hex = [](char c) {
+      return std::isdigit(static_cast<unsigned char>(c))
+                 ? c - '0'
+                 : std::tolower(static_cast<unsigned char>(c)) - 'a' + 10;
+    };
+    if (encoded[i] == '%' && i + 2 < encoded.size() &&
+        std::isxdigit(static_cast<unsigned char>(encoded[i + 1])) &&
+        std::isxdigit(static_cast<unsigned char>(encoded[i + 2]))) {
+      decoded += static_cast<char>(16 * hex(encoded[i + 1]) + hex(encoded[i + 2]));
+      i += 2;
+    } else {
+      decoded += encoded[i];
+    }
+  }
+  return decoded;
+}
+
 }  // namespace volreel::remote

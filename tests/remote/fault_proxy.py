@@ -16,6 +16,7 @@ MODE_FILE (missing or empty: "pass"):
     stall half  half of the body at once, then nothing for 60 seconds
     status N    HTTP status N with an empty body, the upstream not asked
     page N      HTTP status N with a 10 kB HTML page (longer than a brick), the upstream not asked
+    auth T      HTTP 401 unless the request has "Authorization: Basic T", else as pass
     whole       the request passed without its Range header: the whole file, HTTP 200 (a server
                 that does not serve byte ranges)
 """
@@ -61,6 +62,14 @@ class Handler(http.server.BaseHTTPRequestHandler):
 
     def do_GET(self):
         m = mode()
+        if m.startswith("auth "):
+            if self.headers.get("Authorization") != "Basic " + m.split()[1]:
+                self.send_response(401)
+                self.send_header("WWW-Authenticate", 'Basic realm="test"')
+                self.send_header("Content-Length", "0")
+                self.end_headers()
+                return
+            m = "pass"
         if m.startswith("status ") or m.startswith("page "):
             page = b"" if m.startswith("status ") else b"<html>" + b"busy " * 2048 + b"</html>"
             self.send_response(int(m.split()[1]))

@@ -334,6 +334,44 @@ TEST_F(RemoteContainer, ACorruptedByteIsRequestedAgainAndNeverHandedOut) {
   EXPECT_EQ(format::crc32c(good.bytes), *r.crc32c);
 }
 
+TEST_F(RemoteContainer, APasswordInTheUrlIsSentButNeverShownNorCached) {
+  test::FaultProxy proxy(proxy_script, nginx_->port(), dir_->path());
+  proxy.set_mode("auth YWxpY2U6czNjcmV0IQ==");  // "alice:s3cret!" in base64
+  test::TempDir cache("remote-cache-password");
+  RemoteOptions o;
+  o.attempts = 1;
+  o.cache_dir = cache.path();
+  std::string url = proxy.url("test.vreel");
+  url.insert(url.find("://") + 3, "alice:s3cret%21@");  // '!' percent-encoded, as URLs write it
+  const auto source = std::make_shared<HttpSource>(url, o);
+  EXPECT_EQ(source->location(), proxy.url("test.vreel"));
+  const format::Container remote(source);  // the manifest and the dictionary: authenticated
+  EXPECT_NO_THROW(remote.open_frame(1));
+  try {  // a message names the URL without the password
+    source->read_file("frames/no-such-file.vrf", 100);
+    ADD_FAILURE() << "read";
+  } catch (const format::FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find(proxy.url("test.vreel/frames/no-such-file.vrf")),
+              std::string::npos)
+        << e.what();
+    EXPECT_EQ(std::string(e.what()).find("s3cret"), std::string::npos) << e.what();
+  }
+  for (const auto& entry : fs::recursive_directory_iterator(cache.path())) {
+    EXPECT_EQ(entry.path().string().find("s3cret"), std::string::npos) << entry.path();
+    if (!entry.is_regular_file()) continue;
+    const std::vector<std::byte> bytes = format::detail::read_whole_file(entry.path(), 1 << 30);
+    const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+    EXPECT_EQ(text.find("s3cret"), std::string_view::npos) << entry.path();
+  }
+  // Without the password the server refuses.
+  try {
+    format::Container again(std::make_shared<HttpSource>(proxy.url("test.vreel"), RemoteOptions{}));
+    ADD_FAILURE() << "opened without the password";
+  } catch (const format::FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("HTTP 401"), std::string::npos) << e.what();
+  }
+}
+
 TEST_F(RemoteContainer, TheAutomaticTransferFunctionTriesOneFrameOfAFailingServer) {
   // Over HTTP the automatic transfer function samples the middle frame alone: a server that fails
   // its reads fails every frame's (the view waited for 6 frames' tries, minutes with the default

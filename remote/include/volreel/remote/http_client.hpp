@@ -31,6 +31,9 @@ struct HttpOptions {
   /// PEM file of the certificate authorities to trust for https (a centre's own CA); empty: the
   /// system's.
   std::string ca_file;
+  /// "user:password" sent with every request (HTTP authentication, libcurl's choice of scheme);
+  /// empty: none. HttpSource takes it from a URL's user information (take_credentials).
+  std::string credentials;
 };
 
 struct HttpResponse {
@@ -52,6 +55,10 @@ std::optional<ContentRange> parse_content_range(std::string_view value);
 /// std::invalid_argument saying what is wrong (another scheme, no host, spaces or control
 /// characters).
 std::string check_url(std::string url);
+/// The user information of a URL checked by check_url ("user:password" of
+/// "https://user:password@host/..."), percent-decoded, taken out of `url`: what is printed,
+/// logged and cached then holds no password. "" where there is none.
+std::string take_credentials(std::string& url);
 /// Whether `location` names a URL (has a "scheme://" prefix) rather than a path.
 bool is_url(std::string_view location);
 
