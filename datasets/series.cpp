@@ -19,6 +19,7 @@
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
 #include "volreel/format/json_input.hpp"
+#include "volreel/format/source.hpp"
 
 namespace volreel::datasets {
 
@@ -208,6 +209,9 @@ std::unique_ptr<SeriesReader> open_any(const fs::path& path, const OpenOptions& 
     refuse_other_options(path, options, InputKind::raw, "a pattern of raw files");
     return detail::open_raw_glob(path.string(), options);
   }
+  if (const std::string s = path.string(); s.starts_with("http://") || s.starts_with("https://"))
+    throw InputError(s + ": a URL, where this reads series and containers on this machine (" +
+                     format::url_readers + ")");
   if (!fs::exists(path, ec)) throw InputError("'" + path.string() + "' does not exist");
   if (fs::is_directory(path, ec) || path.filename() == "series.json") {
     // A folder without series.json: the reader says what it lacks.

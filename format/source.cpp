@@ -63,10 +63,9 @@ std::string LocalRangeReader::read(const std::filesystem::path& file,
 
 LocalSource::LocalSource(fs::path dir) : dir_(std::move(dir)), location_(dir_.string()) {
   if (location_.starts_with("http://") || location_.starts_with("https://"))
-    throw FormatError(dir_,
-                      "a URL, where this reads a container folder on this machine (info, "
-                      "verify, render, play, bench stream and the Python module's "
-                      "volreel.open read URLs too)");
+    throw FormatError(dir_, std::string("a URL, where this reads a container folder on this "
+                                        "machine (") +
+                                url_readers + ")");
   std::error_code ec;
   const fs::file_status status = fs::status(dir_, ec);
   if (ec && ec != std::errc::no_such_file_or_directory)

@@ -715,7 +715,8 @@ PYBIND11_MODULE(_volreel, m) {
            py::arg("cache_size") = UrlOptions{}.cache_size, py::arg("ca_file") = py::none(),
            "Opens a NAME.vreel folder or an http(s):// URL of one. For a URL: tries of a read "
            "that fails in a way that may pass (1..20), seconds without a byte before a request "
-           "is given up (stall_timeout), HTTP connections at most, a cache folder kept between "
+           "is given up (stall_timeout, whole seconds: a fraction is rounded up), HTTP connections "
+           "at most, a cache folder kept between "
            "runs and its size limit (e.g. \"2G\"), and a PEM file of certificate authorities "
            "to trust instead of the system's (ca_file)")
       .def_property_readonly(

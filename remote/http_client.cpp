@@ -103,6 +103,12 @@ bool transient_failure(CURLcode code) {
   }
 }
 
+/// The stall timeout in whole seconds, rounded up: libcurl's LOW_SPEED_TIME counts seconds, and
+/// the progress callback that watches a stalled body runs about once a second.
+long stall_seconds(const HttpOptions& o) {
+  return std::max(1L, static_cast<long>(std::ceil(o.stall_timeout_s)));
+}
+
 /// What a timeout means, from whether this transfer's request went out (on a new or a reused
 /// connection): the server never answered the connection (or its TLS handshake), or it stopped
 /// sending.
@@ -119,7 +125,7 @@ std::string timeout_error(CURL* e, const Transfer& t, const HttpOptions& o) {
     std::snprintf(text, sizeof text,
                   "no byte arrived for %ld s after %zu bytes of the body (stall timeout: the "
                   "server accepted the request, then stopped sending)",
-                  std::max(1L, static_cast<long>(o.stall_timeout_s + 0.5)), t.body.size());
+                  stall_seconds(o), t.body.size());
   return text;
 }
 
@@ -227,9 +233,8 @@ struct HttpClient::Impl {
     curl_easy_setopt(e, CURLOPT_NOSIGNAL, 1L);
     curl_easy_setopt(e, CURLOPT_CONNECTTIMEOUT_MS, static_cast<long>(o.connect_timeout_s * 1e3));
     curl_easy_setopt(e, CURLOPT_LOW_SPEED_LIMIT, 1L);
-    curl_easy_setopt(e, CURLOPT_LOW_SPEED_TIME,
-                     std::max(1L, static_cast<long>(o.stall_timeout_s + 0.5)));
-    t.stall_timeout_s = std::max(1.0, std::round(o.stall_timeout_s));
+    curl_easy_setopt(e, CURLOPT_LOW_SPEED_TIME, stall_seconds(o));
+    t.stall_timeout_s = static_cast<double>(stall_seconds(o));
     curl_easy_setopt(e, CURLOPT_XFERINFOFUNCTION, on_progress);
     curl_easy_setopt(e, CURLOPT_XFERINFODATA, &t);
     curl_easy_setopt(e, CURLOPT_NOPROGRESS, 0L);

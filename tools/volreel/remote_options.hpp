@@ -50,7 +50,8 @@ inline void add_remote_options(CLI::App& cmd, RemoteCli& o) {
       ->check(CLI::ExistingFile);
   cmd.add_option("--stall-timeout", o.stall_timeout,
                  "For a URL: give a request up when no byte has arrived for this many seconds "
-                 "(the server accepted it, then stopped sending)")
+                 "(the server accepted it, then stopped sending; whole seconds, a fraction "
+                 "rounded up)")
       ->check(in_range(remote::RemoteOptions::min_stall_timeout_s,
                        remote::RemoteOptions::max_stall_timeout_s))
       ->capture_default_str();

@@ -45,6 +45,11 @@ class RangeReader {
   virtual void cancel() {}
 };
 
+/// What a message about a URL given where a local path belongs says reads URLs.
+inline constexpr const char* url_readers =
+    "info, verify, render, play, bench stream and the Python module's volreel.open read a "
+    "container's URL";
+
 /// Local files, with pread.
 class LocalRangeReader final : public RangeReader {
  public:
