@@ -167,6 +167,10 @@ HttpResponse finish(Transfer& t, CURLcode code, const HttpOptions& o) {
       } else {
         r.error = what + ": " + curl_easy_strerror(code);
         if (t.error[0] != '\0') r.error += std::string(" (") + t.error + ")";
+        if (code == CURLE_PEER_FAILED_VERIFICATION && o.ca_file.empty())
+          r.error +=
+              "; a server whose certificate a centre's own authority signed is trusted with that "
+              "authority's PEM file (--ca-file, or ca_file= in Python)";
       }
       r.transient = transient_failure(code);
     }

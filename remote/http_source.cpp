@@ -227,8 +227,18 @@ void HttpSource::keep(const fs::path& file, std::uint64_t offset,
 
 std::shared_ptr<const format::ContainerSource> open_source(const std::string& location,
                                                            const RemoteOptions& options) {
-  if (is_url(location)) return std::make_shared<HttpSource>(location, options);
-  return std::make_shared<format::LocalSource>(location);
+  // A container's manifest named in place of its folder (a link copied from a listing): the folder.
+  const auto folder = [](std::string s) {
+    while (s.size() > 1 && s.back() == '/') s.pop_back();
+    constexpr std::string_view manifest = "/manifest.json";
+    if (s.size() > manifest.size() && s.ends_with(manifest))
+      s.resize(s.size() - manifest.size());
+    else if (s == "manifest.json")
+      s = ".";
+    return s;
+  };
+  if (is_url(location)) return std::make_shared<HttpSource>(folder(location), options);
+  return std::make_shared<format::LocalSource>(folder(location));
 }
 
 }  // namespace volreel::remote

@@ -207,6 +207,14 @@ grep -q "SSIM not computed: axis x has 4 voxels, fewer than the 11-voxel window"
 [ "$(echo "$out" | json 'd["sequence"]["ssim"]')" = None ] || fail "tiny volumes' SSIM: $out"
 [ "$(echo "$out" | json 'd["sequence"]["psnr"] > 20')" = True ] || fail "tiny volumes' PSNR: $out"
 "$volreel" compare "$work/tiny" "$work/tiny" --no-ssim > /dev/null 2>&1 || fail "compare --no-ssim of tiny volumes"
+# A container's manifest named for its folder; a URL where a path belongs; remote options on a
+# folder, said to be ignored.
+"$volreel" info "$work/tiny.vreel/manifest.json" > /dev/null || fail "info of a container's manifest.json"
+expect_error "http://127.0.0.1:9/c.vreel: a URL, where this reads series and containers on this machine" \
+  "$volreel" compare "$work/tiny" http://127.0.0.1:9/c.vreel
+"$volreel" info "$work/tiny.vreel" --tries 3 --cache "$work/cache" > /dev/null 2> "$work/ignored.err"
+grep -q "tiny.vreel is a folder on this machine, and --cache, --tries apply to a URL only: ignored" \
+  "$work/ignored.err" || fail "remote options on a folder: $(cat "$work/ignored.err")"
 # SIGTERM (or Ctrl-C's SIGINT, which a background job ignores) in gen: it stops at the next
 # step, removes the frames it wrote and ends by the signal, as a shell expects.
 # shellcheck source=interrupt_lib.sh

@@ -69,6 +69,28 @@ inline void add_remote_options(CLI::App& cmd, RemoteCli& o) {
 /// folder that is not a container or a cache folder that cannot be used.
 inline std::shared_ptr<const format::ContainerSource> open_container_source(
     const std::string& location, const RemoteCli& o) {
+  // Options given where they do nothing are said to be ignored, not dropped without a word.
+  const RemoteCli defaults;
+  std::string ignored;
+  const auto given = [&](bool differs, const char* name) {
+    if (differs) ignored += (ignored.empty() ? "" : ", ") + std::string(name);
+  };
+  if (!remote::is_url(location)) {
+    given(!o.cache.empty(), "--cache");
+    given(o.cache_size != defaults.cache_size, "--cache-size");
+    given(o.connections != defaults.connections, "--connections");
+    given(!o.ca_file.empty(), "--ca-file");
+    given(o.stall_timeout != defaults.stall_timeout, "--stall-timeout");
+    given(o.tries != defaults.tries, "--tries");
+    if (!ignored.empty())
+      std::fprintf(stderr,
+                   "volreel: warning: %s is a folder on this machine, and %s appl%s to a URL "
+                   "only: ignored\n",
+                   location.c_str(), ignored.c_str(),
+                   ignored.find(',') == std::string::npos ? "ies" : "y");
+  } else if (o.cache.empty() && o.cache_size != defaults.cache_size) {
+    std::fprintf(stderr, "volreel: warning: --cache-size without --cache: ignored (no cache)\n");
+  }
   remote::RemoteOptions options;
   options.http.max_connections = o.connections;
   options.http.ca_file = o.ca_file;
