@@ -8,6 +8,7 @@
 #include <cstring>
 #include <limits>
 #include <string>
+#include <thread>
 #include <unordered_set>
 
 #include "volreel/format/brick_decode.h"
@@ -424,6 +425,36 @@ FrameFile Container::open_frame_index(std::size_t t) const {
   check_frame(t, file.view());
   source_->keep(entry.file, 0, file.view().bytes());
   return file;
+}
+
+void for_each_frame_index(const Container& container, std::span<const std::size_t> frames,
+                          const std::function<void(std::size_t t, const FrameFile* file,
+                                                   const std::string& error)>& use) {
+  const std::size_t batch = container.source().local_directory() ? 1 : 16;
+  std::vector<std::optional<FrameFile>> files(batch);
+  std::vector<std::string> errors(batch);
+  for (std::size_t first = 0; first < frames.size(); first += batch) {
+    const std::size_t end = std::min(frames.size(), first + batch);
+    const auto open = [&](std::size_t i) {
+      try {
+        files[i - first].emplace(container.open_frame_index(frames[i]));
+      } catch (const std::exception& e) {
+        errors[i - first] = e.what();
+      }
+    };
+    if (batch == 1) {
+      open(first);
+    } else {
+      std::vector<std::thread> threads;
+      for (std::size_t i = first; i < end; ++i) threads.emplace_back(open, i);
+      for (std::thread& th : threads) th.join();
+    }
+    for (std::size_t i = first; i < end; ++i) {
+      use(frames[i], files[i - first] ? &*files[i - first] : nullptr, errors[i - first]);
+      files[i - first].reset();
+      errors[i - first].clear();
+    }
+  }
 }
 
 std::vector<std::byte> Container::read_brick(const FrameView& view, std::uint32_t b) const {

@@ -187,18 +187,30 @@ HeldFrame failed_frame(std::uint32_t t, std::string error) {
   return f;
 }
 
-/// Frame t of a container as a HeldFrame; a frame not written or failing validation holds its
-/// error.
-HeldFrame read_container_frame(const format::Container& container, const IndexGeometry& g,
-                               std::uint32_t t) {
+/// Frame t of a container as a HeldFrame from its index as opened (`file`), or from the error
+/// that opening it gave; a frame not written or failing validation holds its error.
+HeldFrame held_frame(const format::Container& container, const IndexGeometry& g, std::uint32_t t,
+                     const format::FrameFile* file, const std::string& error) {
   const auto& m = container.manifest();
   if (!m.frames[t])
     return failed_frame(t, format::frame_file_name(t) + ": frame not written (incomplete encode)");
+  if (!file) return failed_frame(t, error);
   try {
-    const format::FrameFile f = container.open_frame_index(t);
-    return read_frame(g, t, f.view(), container.source().name(m.frames[t]->file));
+    return read_frame(g, t, file->view(), container.source().name(m.frames[t]->file));
   } catch (const std::exception& e) {
     return failed_frame(t, e.what());
+  }
+}
+
+/// Frame t of a container, opened here, as a HeldFrame.
+HeldFrame read_container_frame(const format::Container& container, const IndexGeometry& g,
+                               std::uint32_t t) {
+  if (!container.manifest().frames[t]) return held_frame(container, g, t, nullptr, "");
+  try {
+    const format::FrameFile f = container.open_frame_index(t);
+    return held_frame(container, g, t, &f, "");
+  } catch (const std::exception& e) {
+    return held_frame(container, g, t, nullptr, e.what());
   }
 }
 
@@ -688,30 +700,16 @@ SpatialIndex build_spatial_index(const format::Container& container,
     index.start_reader();
     return index;
   }
-  // A remote container's indexes are fetched a window at a time by several threads (each one a
-  // round trip or two); local ones are mapped in order.
-  const std::size_t batch = container.source().local_directory() ? 1 : 16;
-  std::vector<HeldFrame> read(batch);
-  for (std::size_t first = 0; first < frames; first += batch) {
-    const std::size_t end = std::min(frames, first + batch);
-    const auto open = [&](std::size_t t) {
-      read[t - first] =
-          read_container_frame(container, *index.geometry_, static_cast<std::uint32_t>(t));
-    };
-    if (batch == 1) {
-      open(first);
-    } else {
-      std::vector<std::thread> threads;
-      for (std::size_t t = first; t < end; ++t) threads.emplace_back(open, t);
-      for (std::thread& th : threads) th.join();
-    }
-    for (std::size_t t = first; t < end; ++t) {
-      HeldFrame& f = read[t - first];
-      if (!f.error.empty() && errors) errors->push_back(f.error);
-      index.hold(std::move(f), false);
-      f = HeldFrame{};
-    }
-  }
+  // A remote container's indexes are fetched a batch at a time by several threads.
+  std::vector<std::size_t> all(frames);
+  for (std::size_t t = 0; t < frames; ++t) all[t] = t;
+  format::for_each_frame_index(
+      container, all, [&](std::size_t t, const format::FrameFile* file, const std::string& error) {
+        HeldFrame f =
+            held_frame(container, *index.geometry_, static_cast<std::uint32_t>(t), file, error);
+        if (!f.error.empty() && errors) errors->push_back(f.error);
+        index.hold(std::move(f), false);
+      });
   return index;
 }
 

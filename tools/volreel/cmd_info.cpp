@@ -37,25 +37,27 @@ void run_info(const std::string& dir, bool json, const RemoteCli& remote) {
   std::size_t unreadable = 0;
   std::string first_error;
   nlohmann::json levels = nlohmann::json::array();
-  for (std::size_t t = 0; t < m.frames.size(); ++t) {
-    if (!m.frames[t]) continue;
-    try {
-      const auto f = c.open_frame_index(t);
-      nodes += f.view().node_count();
-      bricks += f.view().brick_count();
-      for (std::uint32_t l = 0; t == 0 && l < f.view().level_count(); ++l) {
-        const auto& e = f.view().level(l);
-        levels.push_back({{"level", l},
-                          {"dims", e.dims},
-                          {"grid", e.grid},
-                          {"nodes", e.node_count},
-                          {"payload_bytes", f.view().payload_end_for_depth(l + 1) -
-                                                f.view().payload_end_for_depth(l)}});
-      }
-    } catch (const format::FormatError& e) {
-      if (unreadable++ == 0) first_error = e.what();
-    }
-  }
+  std::vector<std::size_t> written_frames;
+  for (std::size_t t = 0; t < m.frames.size(); ++t)
+    if (m.frames[t]) written_frames.push_back(t);
+  format::for_each_frame_index(
+      c, written_frames, [&](std::size_t t, const format::FrameFile* f, const std::string& error) {
+        if (!f) {
+          if (unreadable++ == 0) first_error = error;
+          return;
+        }
+        nodes += f->view().node_count();
+        bricks += f->view().brick_count();
+        for (std::uint32_t l = 0; t == 0 && l < f->view().level_count(); ++l) {
+          const auto& e = f->view().level(l);
+          levels.push_back({{"level", l},
+                            {"dims", e.dims},
+                            {"grid", e.grid},
+                            {"nodes", e.node_count},
+                            {"payload_bytes", f->view().payload_end_for_depth(l + 1) -
+                                                  f->view().payload_end_for_depth(l)}});
+        }
+      });
   const auto end_with_unreadable = [&] {
     if (unreadable > 0)
       throw InputError(std::to_string(unreadable) + " of the " + std::to_string(written) +
@@ -110,10 +112,13 @@ void run_info(const std::string& dir, bool json, const RemoteCli& remote) {
     std::printf("codec    zfp fixed accuracy %.6g\n", m.zfp_accuracy);
   }
   std::printf("values   [%.6g, %.6g]\n", m.value_min, m.value_max);
-  std::printf("keyframes max gap %u time steps; %ju of %ju node-steps store a brick (%.1f %%)%s\n",
-              m.max_keyframe_gap, static_cast<std::uintmax_t>(bricks),
-              static_cast<std::uintmax_t>(nodes), 100.0 * kept,
-              bricks < nodes ? ", the rest are interpolated" : "");
+  if (nodes > 0)
+    std::printf(
+        "keyframes max gap %u time steps; %ju of %ju node-steps store a brick (%.1f %%)%s\n",
+        m.max_keyframe_gap, static_cast<std::uintmax_t>(bricks), static_cast<std::uintmax_t>(nodes),
+        100.0 * kept, bricks < nodes ? ", the rest are interpolated" : "");
+  else
+    std::printf("keyframes max gap %u time steps (no frame index read)\n", m.max_keyframe_gap);
   if (written > 0)
     std::printf("size     %ju bytes, %.4f bps (all files, over the %zu frames written)\n",
                 static_cast<std::uintmax_t>(bytes), bps, written);

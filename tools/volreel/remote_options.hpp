@@ -30,7 +30,8 @@ struct RemoteCli {
 /// The CONTAINER argument's help: a folder or a URL.
 inline constexpr const char* container_argument_help =
     "Container: a NAME.vreel folder, or its http:// or https:// URL (any static web server or "
-    "object store)";
+    "object store; a user and password in the URL are sent, never printed), or its "
+    "manifest.json";
 
 inline void add_remote_options(CLI::App& cmd, RemoteCli& o) {
   cmd.add_option("--cache", o.cache,

@@ -7,6 +7,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <span>
@@ -142,6 +143,13 @@ class Container {
   /// The checks of open_frame on a validated view of frame t.
   void check_frame(std::size_t t, const FrameView& view) const;
 };
+
+/// Opens the indexes of `frames` (open_frame_index) and hands each, or the message of what failed,
+/// to `use` in the order given, on the calling thread: a remote container's a batch of 16 at a
+/// time, each read on its own thread (each index is a round trip or two), a local one's in turn.
+void for_each_frame_index(
+    const Container& container, std::span<const std::size_t> frames,
+    const std::function<void(std::size_t t, const FrameFile* file, const std::string& error)>& use);
 
 /// `volreel verify`: every CRC and structure. Returns the problems found (empty: valid); calls
 /// progress(done, total) after each frame if given.
