@@ -545,6 +545,25 @@ py::dict train(const py::object& frames, const fs::path& out, int atoms, std::op
   return d;
 }
 
+/// An argument of psnr or ssim as float32, as volreel reads data: other types are converted, with a
+/// RuntimeWarning where float32 does not hold their values exactly (float64 data that differ by
+/// less than float32's precision would otherwise measure as equal, silently).
+FloatArray metric_input(const py::object& given, const char* function, const char* name) {
+  const py::array x = py::array::ensure(given);
+  FloatArray f = x ? FloatArray::ensure(x) : FloatArray();
+  if (!x || !f)
+    throw py::value_error(std::string(function) + ": " + name + " is not an array of numbers");
+  if (!x.dtype().is(py::dtype::of<float>()) &&
+      !py::module_::import("numpy").attr("array_equal")(x, f).cast<bool>()) {
+    const std::string warning = std::string(function) + ": " + name + "'s " +
+                                py::str(x.dtype()).cast<std::string>() +
+                                " values rounded to float32, as volreel reads data; the metric "
+                                "is that of the rounded values";
+    if (PyErr_WarnEx(PyExc_RuntimeWarning, warning.c_str(), 1) != 0) throw py::error_already_set();
+  }
+  return f;
+}
+
 /// The two arrays as spans of equal shape.
 void check_pair(const FloatArray& a, const FloatArray& b) {
   if (a.ndim() != b.ndim() || !std::equal(a.shape(), a.shape() + a.ndim(), b.shape()))
@@ -552,7 +571,8 @@ void check_pair(const FloatArray& a, const FloatArray& b) {
   if (a.size() == 0) throw py::value_error("a and b are empty");
 }
 
-double psnr_of(const FloatArray& a, const FloatArray& b) {
+double psnr_of(const py::object& a_given, const py::object& b_given) {
+  const FloatArray a = metric_input(a_given, "psnr", "a"), b = metric_input(b_given, "psnr", "b");
   check_pair(a, b);
   const std::span<const float> sa(a.data(), static_cast<std::size_t>(a.size())),
       sb(b.data(), static_cast<std::size_t>(b.size()));
@@ -560,7 +580,8 @@ double psnr_of(const FloatArray& a, const FloatArray& b) {
   return psnr::compare(sa, sb).psnr;
 }
 
-double ssim_of(const FloatArray& a, const FloatArray& b) {
+double ssim_of(const py::object& a_given, const py::object& b_given) {
+  const FloatArray a = metric_input(a_given, "ssim", "a"), b = metric_input(b_given, "ssim", "b");
   check_pair(a, b);
   if (a.ndim() < 1 || a.ndim() > 3)
     throw py::value_error("ssim: expected arrays of 1, 2 or 3 dimensions, found " +
