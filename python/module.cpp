@@ -531,7 +531,12 @@ py::dict train(const py::object& frames, const fs::path& out, int atoms, std::op
     options.convergence = 0.01;  // volreel train's default
     options.coding.tolerance = dictionary::training_tolerance(
         tolerance, psnr.value_or(dictionary::default_training_psnr), hierarchy);
-    result = dictionary::train_dictionary(hierarchy, options);
+    // Ctrl-C ends the training after the K-SVD iteration in progress (KeyboardInterrupt; no file
+    // is written).
+    SignalCheck check;
+    result = dictionary::train_dictionary(
+        hierarchy, options,
+        [&check](const dictionary::TrainingProgress&) { raise_pending_signal({}, &check); });
     dictionary::save_dictionary(
         out, result.dictionary,
         dictionary::training_provenance(coreset, options, hierarchy, result));
