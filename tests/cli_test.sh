@@ -207,6 +207,13 @@ grep -q "SSIM not computed: axis x has 4 voxels, fewer than the 11-voxel window"
 [ "$(echo "$out" | json 'd["sequence"]["ssim"]')" = None ] || fail "tiny volumes' SSIM: $out"
 [ "$(echo "$out" | json 'd["sequence"]["psnr"] > 20')" = True ] || fail "tiny volumes' PSNR: $out"
 "$volreel" compare "$work/tiny" "$work/tiny" --no-ssim > /dev/null 2>&1 || fail "compare --no-ssim of tiny volumes"
+# bench rd on a volume thinner than SSIM's window: every family measured (keyframe gaps too, which
+# stopped at the SSIM), and the table says why SSIM is nan.
+"$volreel" gen analytic --field noise --dims 8x40x40 --frames 2 --out "$work/thin" > /dev/null 2>&1
+"$volreel" bench rd "$work/thin" --out "$work/rd-thin" --dictionary dct --no-plot --keyframe-gaps 2 \
+  > "$work/rd-thin.txt" 2>&1 || fail "bench rd of a thin volume: $(tail -3 "$work/rd-thin.txt")"
+grep -q "SSIM = nan: not computed (an axis shorter than its 11-voxel window" "$work/rd-thin.txt" \
+  || fail "bench rd's note on SSIM: $(grep "SSIM =" "$work/rd-thin.txt")"
 # A container's manifest named for its folder; a URL where a path belongs; remote options on a
 # folder, said to be ignored.
 "$volreel" info "$work/tiny.vreel/manifest.json" > /dev/null || fail "info of a container's manifest.json"

@@ -158,7 +158,9 @@ void measure_decoded_series(const datasets::SeriesReader& original,
     throw InputError("the decoded series '" + decoded.info().source + "' has " +
                      std::to_string(decoded.info().frames) + " frames; expected " +
                      std::to_string(frames));
-  const std::vector<std::size_t> ssim_picks = spread(frames, options.ssim_frames);
+  // SSIM's window does not fit an axis of 2 to 10 voxels: no frame takes it there.
+  const std::vector<std::size_t> ssim_picks =
+      spread(frames, ssim_unfit(dims).empty() ? options.ssim_frames : 0);
   ErrorAccumulator errors;
   double ssim_sum = 0, decompress_s = 0;
   std::vector<float> frame(dims.voxels()), out(dims.voxels());
@@ -192,8 +194,13 @@ void print_rd_table(std::ostream& out, std::span<const RdPoint> points) {
   if (!points.empty())
     out << "PSNR = 10·log10(range²/MSE) over all " << points.front().frames
         << " frames (MTV-Player); PSNRzfp = 20·log10(range/(2·RMSE)) (zfp's, 6.02 dB lower); SSIM "
-           "= mean 3D SSIM of "
-        << points.front().ssim_frames << " evenly spaced frames; MV/s = MVoxel/s on one core.\n";
+           "= "
+        << (points.front().ssim_frames > 0
+                ? "mean 3D SSIM of " + std::to_string(points.front().ssim_frames) +
+                      " evenly spaced frames"
+                : std::string("nan: not computed (an axis shorter than its 11-voxel window, or "
+                              "--ssim-frames 0)"))
+        << "; MV/s = MVoxel/s on one core.\n";
 }
 
 void write_rd_csv(const fs::path& path, std::span<const RdPoint> points) {
