@@ -170,9 +170,14 @@ void compare_series(const CompareOptions& o) {
       throw InputError("the largest error " + format::number_text(total.max_abs_error) +
                        " (frame " + std::to_string(worst) + ") exceeds --max-error " +
                        format::number_text(o.max_error));
+    std::size_t lowest = 0;  // the frame of the lowest PSNR
+    for (std::size_t t = 1; t < rows.size(); ++t)
+      if (rows[t].e.psnr < rows[lowest].e.psnr) lowest = t;
     if (o.min_psnr > 0 && !(total.psnr >= o.min_psnr))
       throw InputError("the sequence PSNR " + format::number_text(total.psnr) +
-                       " dB is below --min-psnr " + format::number_text(o.min_psnr));
+                       " dB is below --min-psnr " + format::number_text(o.min_psnr) +
+                       " (the worst frame: " + std::to_string(lowest) + " at " +
+                       format::number_text(rows[lowest].e.psnr) + " dB)");
   };
 
   if (o.json) {

@@ -42,9 +42,13 @@ void run_turbulence(const TurbulenceOptions& o) {
   std::printf(
       "viscosity %.4g, k_max*eta %.3f, Taylor Reynolds number %.1f, eddy-turnover time %.3f\n",
       r.viscosity, r.kmax_eta, r.taylor_reynolds, r.eddy_turnover_time);
-  std::printf(
-      "energy balance over the recording: injected power %.5g, dissipation %.5g (ratio %.3f)\n",
-      r.injected_power, r.mean_dissipation, r.mean_dissipation / r.injected_power);
+  if (r.injected_power > 0)
+    std::printf(
+        "energy balance over the recording: injected power %.5g, dissipation %.5g (ratio %.3f)\n",
+        r.injected_power, r.mean_dissipation, r.mean_dissipation / r.injected_power);
+  else  // decaying: nothing forces the flow
+    std::printf("energy over the recording: no forcing (decaying), dissipation %.5g\n",
+                r.mean_dissipation);
   std::printf("%ld time steps in %.1f s; wrote %s/series.json\n", r.steps, r.seconds,
               o.out.c_str());
 }
