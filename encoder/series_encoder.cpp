@@ -800,9 +800,11 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       if (retry == 0 && !done[t] && writer) ++summary.delivered.frames_coded_again;
       // 0.1 dB more than the shortfall, so that the next try lands above the target; after a try
       // that gained nothing, half its ε.
-      scale = std::max(
-          stalls > 0 ? scale / 2 : scale * std::pow(10.0, -(job.psnr_target - psnr + 0.1) / 20),
-          smallest_scale);
+      // On a grid of 2^-20 octaves: the PSNR of a frame measured brick by brick (piecewise) or
+      // whole differs in its last bits, and the next ε must not, so that both write the same bytes.
+      const double next =
+          stalls > 0 ? scale / 2 : scale * std::pow(10.0, -(job.psnr_target - psnr + 0.1) / 20);
+      scale = std::max(std::exp2(std::floor(std::log2(next) * 0x1p20) / 0x1p20), smallest_scale);
       use_scale(scale);
       code(t, step);
     }

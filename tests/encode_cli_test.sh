@@ -284,6 +284,8 @@ grep -q "do not fit --memory (1.17 MiB) whole: each is coded piecewise" "$work/p
 diff -r "$work/whole.vreel" "$work/pieces.vreel" > /dev/null || fail "a piecewise encode differs from a whole-frame one"
 "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1200K --psnr 60 --out "$work/pp.vreel" > "$work/pp.txt" 2>&1
 grep -q "target PSNR 60.00 dB met by every frame" "$work/pp.txt" || fail "piecewise --psnr 60: $(cat "$work/pp.txt")"
+"$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --max-keyframe-gap 1 --psnr 60 --out "$work/pw.vreel" > /dev/null 2>&1
+diff -r "$work/pw.vreel" "$work/pp.vreel" > /dev/null || fail "a piecewise encode at --psnr 60 differs from a whole-frame one"
 "$volreel" compare "$work/tall" "$work/pp.vreel" --no-ssim --min-psnr 60 > /dev/null 2>&1 || fail "piecewise --psnr 60 not delivered"
 expect_error "needs --max-keyframe-gap 1" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 1200K --max-keyframe-gap 4 --out "$work/x.vreel"
 expect_error "training a dictionary reads frames whole" "$volreel" encode "$work/tall" --memory 1200K --out "$work/x.vreel"
