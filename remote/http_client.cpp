@@ -229,7 +229,10 @@ struct HttpClient::Impl {
     }
     t.easy = e;
     curl_easy_setopt(e, CURLOPT_URL, t.url.c_str());
-    if (!o.credentials.empty()) curl_easy_setopt(e, CURLOPT_USERPWD, o.credentials.c_str());
+    if (!o.user.empty()) {
+      curl_easy_setopt(e, CURLOPT_USERNAME, o.user.c_str());
+      curl_easy_setopt(e, CURLOPT_PASSWORD, o.password.c_str());
+    }
     curl_easy_setopt(e, CURLOPT_PROTOCOLS_STR, "http,https");
     curl_easy_setopt(e, CURLOPT_REDIR_PROTOCOLS_STR, "http,https");
     curl_easy_setopt(e, CURLOPT_FOLLOWLOCATION, 1L);

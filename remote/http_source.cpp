@@ -19,8 +19,10 @@ HttpSource::HttpSource(std::string url, RemoteOptions options)
     : url_(check_url(std::move(url))), options_(std::move(options)) {
   // A password in the URL goes to the server with each request, never into a message or the
   // cache's keys.
-  if (std::string credentials = take_credentials(url_); !credentials.empty())
-    options_.http.credentials = std::move(credentials);
+  if (auto [user, password] = take_credentials(url_); !user.empty()) {
+    options_.http.user = std::move(user);
+    options_.http.password = std::move(password);
+  }
   client_ = std::make_unique<HttpClient>(options_.http);
   if (!options_.cache_dir.empty())
     cache_ = std::make_unique<DiskCache>(options_.cache_dir, options_.cache_bytes);

@@ -70,52 +70,67 @@ bool is_url(std::string_view location) {
 }
 
 std::string check_url(std::string url) {
+  // Messages name the URL without a password it may hold.
+  const std::string shown = without_credentials(url);
   const std::size_t colon = url.find("://");
-  if (!is_url(url)) throw std::invalid_argument(url + ": not a URL (expected http:// or https://)");
+  if (!is_url(url))
+    throw std::invalid_argument(shown + ": not a URL (expected http:// or https://)");
   std::string scheme = url.substr(0, colon);
   std::transform(scheme.begin(), scheme.end(), scheme.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   if (scheme != "http" && scheme != "https")
-    throw std::invalid_argument(url + ": unsupported scheme \"" + scheme +
+    throw std::invalid_argument(shown + ": unsupported scheme \"" + scheme +
                                 "://\" (volreel reads http:// and https:// URLs, or local paths)");
   for (const char c : url)
     if (static_cast<unsigned char>(c) <= 0x20 || c == 0x7f)
-      throw std::invalid_argument(url + ": a URL may not hold spaces or control characters " +
+      throw std::invalid_argument(shown + ": a URL may not hold spaces or control characters " +
                                   "(percent-encode them)");
   if (url.find_first_of("?#") != std::string::npos)
-    throw std::invalid_argument(url + ": a container URL names its folder; query strings and " +
+    throw std::invalid_argument(shown + ": a container URL names its folder; query strings and " +
                                 "fragments are not supported");
   while (url.size() > colon + 3 && url.back() == '/') url.pop_back();
   const std::size_t host_end = url.find('/', colon + 3);
   if (url.substr(colon + 3, host_end - colon - 3).empty())
-    throw std::invalid_argument(url + ": no host");
+    throw std::invalid_argument(shown + ": no host");
   return scheme + url.substr(colon);
 }
 
-std::string take_credentials(std::string& url) {
+std::string without_credentials(std::string location) {
+  if (is_url(location)) take_credentials(location);
+  return location;
+}
+
+std::pair<std::string, std::string> take_credentials(std::string& url) {
+  if (url.find("://") == std::string::npos) return {};
   const std::size_t authority = url.find("://") + 3;
   const std::size_t end = std::min(url.find('/', authority), url.size());
   const std::size_t at = url.rfind('@', end - 1);
-  if (at == std::string::npos || at < authority) return "";
-  const std::string encoded = url.substr(authority, at - authority);
+  if (at == std::string::npos || at < authority) return {};
+  const std::string info = url.substr(authority, at - authority);
   url.erase(authority, at + 1 - authority);
-  std::string decoded;
-  for (std::size_t i = 0; i < encoded.size(); ++i) {
+  const auto decode = [](std::string_view encoded) {
     const auto hex = [](char c) {
       return std::isdigit(static_cast<unsigned char>(c))
                  ? c - '0'
                  : std::tolower(static_cast<unsigned char>(c)) - 'a' + 10;
     };
-    if (encoded[i] == '%' && i + 2 < encoded.size() &&
-        std::isxdigit(static_cast<unsigned char>(encoded[i + 1])) &&
-        std::isxdigit(static_cast<unsigned char>(encoded[i + 2]))) {
-      decoded += static_cast<char>(16 * hex(encoded[i + 1]) + hex(encoded[i + 2]));
-      i += 2;
-    } else {
-      decoded += encoded[i];
+    std::string decoded;
+    for (std::size_t i = 0; i < encoded.size(); ++i) {
+      if (encoded[i] == '%' && i + 2 < encoded.size() &&
+          std::isxdigit(static_cast<unsigned char>(encoded[i + 1])) &&
+          std::isxdigit(static_cast<unsigned char>(encoded[i + 2]))) {
+        decoded += static_cast<char>(16 * hex(encoded[i + 1]) + hex(encoded[i + 2]));
+        i += 2;
+      } else {
+        decoded += encoded[i];
+      }
     }
-  }
-  return decoded;
+    return decoded;
+  };
+  // The user ends at the first ':' as written (one in a name is percent-encoded).
+  const std::size_t colon = info.find(':');
+  return {decode(std::string_view(info).substr(0, colon)),
+          colon == std::string::npos ? std::string() : decode(info.substr(colon + 1))};
 }
 
 }  // namespace volreel::remote

@@ -609,6 +609,15 @@ TEST_F(RemoteContainer, TheCommandsReadAUrl) {
   EXPECT_TRUE(fs::exists(out / "frames" / "frame_00003.png"));
   EXPECT_NE(text("render.txt").find("HTTP requests"), std::string::npos) << text("render.txt");
   EXPECT_EQ(text("render.txt").find("error"), std::string::npos) << text("render.txt");
+  // A password in the URL is printed by no command (nginx here asks for none).
+  std::string with_password = url();
+  with_password.insert(with_password.find("://") + 3, "alice:s3cret@");
+  for (const std::string command : {"info", "verify"}) {
+    ASSERT_EQ(run(command + " " + with_password, "password.txt"), 0) << text("password.txt");
+    EXPECT_EQ(text("password.txt").find("s3cret"), std::string::npos) << text("password.txt");
+  }
+  EXPECT_NE(run("info ftp://alice:s3cret@127.0.0.1/x.vreel", "password.txt"), 0);
+  EXPECT_EQ(text("password.txt").find("s3cret"), std::string::npos) << text("password.txt");
   // Only http and https; a server that answers 404 names the URL.
   EXPECT_NE(run("info ftp://127.0.0.1/x.vreel", "ftp.txt"), 0);
   EXPECT_NE(text("ftp.txt").find("unsupported scheme"), std::string::npos) << text("ftp.txt");

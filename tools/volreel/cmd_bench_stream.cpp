@@ -68,7 +68,8 @@ std::size_t run_bench_stream_into(const BenchStreamOptions& o, const std::string
   if (folder.empty()) *made = plan.out;
   const sb::RunSetup& setup = plan.setup;
   const sb::GroundTruth& truth = *plan.truth;
-  sb::print_bench_header(plan, s, o.container, describe_machine());
+  const std::string shown = remote::without_credentials(o.container);  // no password printed
+  sb::print_bench_header(plan, s, shown, describe_machine());
   std::fflush(stdout);
   // 2. The runs (timed), then the ground truth of each; with --seeds, once per tour, each tour's
   //    files in OUT/seed_S.
@@ -87,7 +88,7 @@ std::size_t run_bench_stream_into(const BenchStreamOptions& o, const std::string
       sb::psnr_cap_db);
   if (s.seeds == 1) sb::print_side_by_side(tours.front().runs);
   nlohmann::json summary =
-      sb::bench_summary_json(s, o.container, setup, plan.link, truth.original(), tours);
+      sb::bench_summary_json(s, shown, setup, plan.link, truth.original(), tours);
   const auto patent = sb::policy_totals(tours, "patent");
   const auto nearest = sb::policy_totals(tours, "nearest");
   if (s.seeds > 1) sb::print_tour_table(tours, patent, nearest);

@@ -79,8 +79,8 @@ void run_info(const std::string& dir, bool json, const RemoteCli& remote) {
     end_with_unreadable();
     return;
   }
-  std::printf("%s: volreel container, format version %u, written by volreel %s%s\n", dir.c_str(),
-              m.format_version, m.program_version.c_str(),
+  std::printf("%s: volreel container, format version %u, written by volreel %s%s\n",
+              remote::without_credentials(dir).c_str(), m.format_version, m.program_version.c_str(),
               m.complete ? "" : " (INCOMPLETE: resume with volreel encode --resume)");
   std::printf("volume   %ux%ux%u, spacing %g %g %g, variable '%s', %zu frames (%zu written)\n",
               m.dims[0], m.dims[1], m.dims[2], m.spacing[0], m.spacing[1], m.spacing[2],

@@ -176,9 +176,9 @@ void run_render(const RenderCommandOptions& o) {
   const std::size_t frames =
       o.max_frames ? std::min(o.max_frames, tour.frame_count()) : tour.frame_count();
   std::printf("volreel render\nmachine: %s\ndevice:  %s\ninput:   %s: %ux%ux%u, %zu frames, %s\n",
-              describe_machine().c_str(), renderer->describe().c_str(), o.container.c_str(),
-              m.dims[0], m.dims[1], m.dims[2], container.frame_count(),
-              m.codec == format::Codec::ksvd ? "ksvd" : "zfp");
+              describe_machine().c_str(), renderer->describe().c_str(),
+              remote::without_credentials(o.container).c_str(), m.dims[0], m.dims[1], m.dims[2],
+              container.frame_count(), m.codec == format::Codec::ksvd ? "ksvd" : "zfp");
   std::printf("transfer function: %s\n",
               transfer_spec.empty() ? "the tour's" : transfer_spec.c_str());
   std::printf(

@@ -14,10 +14,11 @@ namespace volreel::cli {
 
 namespace {
 
-void run_verify(const std::string& dir, const RemoteCli& remote) {
+void run_verify(const std::string& location, const RemoteCli& remote) {
+  const std::string dir = remote::without_credentials(location);  // as messages show it
   std::shared_ptr<const format::ContainerSource> source;
   try {
-    source = open_container_source(dir, remote);
+    source = open_container_source(location, remote);
   } catch (const format::FormatError& e) {
     throw InputError(std::string(e.what()) + " (1 problem found)");
   }

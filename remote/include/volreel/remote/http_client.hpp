@@ -19,6 +19,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace volreel::remote {
@@ -31,9 +32,9 @@ struct HttpOptions {
   /// PEM file of the certificate authorities to trust for https (a centre's own CA); empty: the
   /// system's.
   std::string ca_file;
-  /// "user:password" sent with every request (HTTP authentication, libcurl's choice of scheme);
-  /// empty: none. HttpSource takes it from a URL's user information (take_credentials).
-  std::string credentials;
+  /// User and password sent with every request (HTTP Basic authentication); an empty user: none.
+  /// HttpSource takes them from a URL's user information (take_credentials).
+  std::string user, password;
 };
 
 struct HttpResponse {
@@ -55,10 +56,12 @@ std::optional<ContentRange> parse_content_range(std::string_view value);
 /// std::invalid_argument saying what is wrong (another scheme, no host, spaces or control
 /// characters).
 std::string check_url(std::string url);
-/// The user information of a URL checked by check_url ("user:password" of
-/// "https://user:password@host/..."), percent-decoded, taken out of `url`: what is printed,
-/// logged and cached then holds no password. "" where there is none.
-std::string take_credentials(std::string& url);
+/// The user information of a URL checked by check_url (user and password of
+/// "https://user:password@host/...", each percent-decoded), taken out of `url`: what is printed,
+/// logged and cached then holds no password. Empty where there is none.
+std::pair<std::string, std::string> take_credentials(std::string& url);
+/// `location` as messages and files show it: a URL without its user information; a path as is.
+std::string without_credentials(std::string location);
 /// Whether `location` names a URL (has a "scheme://" prefix) rather than a path.
 bool is_url(std::string_view location);
 
