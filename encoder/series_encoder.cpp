@@ -611,8 +611,20 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     dict = stored_dictionary(job);
   }
   // The identifier that binds the frames and the dictionary to this container.
-  m.container_id = format::container_identifier(
-      m, dict ? std::span<const std::byte>(dict->bytes) : std::span<const std::byte>());
+  const std::span<const std::byte> dictionary_bytes =
+      dict ? std::span<const std::byte>(dict->bytes) : std::span<const std::byte>();
+  m.container_id = format::container_identifier(m, dictionary_bytes);
+  // A container begun before the identifier left out the input's path carries the older one:
+  // resumed with the same settings (and the input named as before), it keeps it, so that its
+  // frames and dictionary still belong to it.
+  if (job.resume && fs::exists(out / "manifest.json")) {
+    try {
+      const std::uint64_t older = format::container_identifier(m, dictionary_bytes, true);
+      if (format::Container(out, true).manifest().container_id == older) m.container_id = older;
+    } catch (const format::FormatError&) {
+      // prepare_container says what is wrong with it
+    }
+  }
   coding.container_id = m.container_id;
   if (dict) {
     dict->file.container_id = m.container_id;

@@ -1307,11 +1307,14 @@ TEST(Container, TheIdentifierLeavesOutTheSourceAndVerifyTakesTheOlderOne) {
   const auto out = encode_ramp(dir.path(), Dims{30, 20, 20}, "source.vreel");
   // The input named another way (a relative path, another working folder): the same identifier.
   auto manifest = format::manifest_to_json(format::Container(out).manifest());
+  const nlohmann::json source = manifest["source"];
   manifest["source"] = "./elsewhere/../ramp";
   std::ofstream(out / "manifest.json") << format::manifest_text(manifest);
   EXPECT_TRUE(format::verify_container(out).empty());
+  manifest["source"] = source;
+  std::ofstream(out / "manifest.json") << format::manifest_text(manifest);
   // A container whose identifier hashed its source too (as volreel wrote them before): its
-  // frames and dictionary carry that identifier, which verify accepts.
+  // frames and dictionary carry that identifier, which verify accepts, and an encode resumes it.
   const format::Container c(out);
   const auto write = [](const std::filesystem::path& path, const std::vector<std::byte>& bytes) {
     std::ofstream(path, std::ios::binary)
@@ -1343,6 +1346,16 @@ TEST(Container, TheIdentifierLeavesOutTheSourceAndVerifyTakesTheOlderOne) {
   }
   std::ofstream(out / "manifest.json") << format::manifest_text(manifest);
   EXPECT_TRUE(format::verify_container(out).empty());
+  const std::vector<std::byte> frame_before = test::read_bytes(out / "frames/000000.vrf");
+  encoder::EncodeJob job;
+  job.coding.tolerance = 1e-4;
+  job.dictionary_file = dir.path() / "dct.bin";
+  job.resume = true;
+  encoder::encode_series(*datasets::open_series(dir.path() / "ramp"), out, job);
+  EXPECT_EQ(format::Container(out).manifest().container_id, older);
+  EXPECT_EQ(test::read_bytes(out / "frames/000000.vrf"), frame_before);
+  EXPECT_TRUE(format::verify_container(out).empty());
+  manifest = format::manifest_to_json(format::Container(out).manifest());
   manifest["tolerance"] = 1.0;  // and a setting edited is still found
   std::ofstream(out / "manifest.json") << format::manifest_text(manifest);
   EXPECT_EQ(format::verify_container(out).size(), 1u);
