@@ -377,21 +377,31 @@ constexpr std::uint64_t first_index_read = 4096;
 
 }  // namespace
 
+void Container::check_file_size(const ManifestFrame& entry, std::uint64_t found) const {
+  if (found == entry.bytes) return;
+  const bool local = source_->local_directory().has_value();
+  throw FormatError(
+      source_->name(entry.file), FormatError::no_offset,
+      std::to_string(entry.bytes) + " bytes (its size in manifest.json)",
+      std::to_string(found) +
+          (found > entry.bytes ? " (the file was replaced after the container was written)"
+           : local             ? " (the file was cut short after the container was written)"
+                               : " (the server's answer was cut short, or the file changed on "
+                                 "the server after the container was written)"));
+}
+
 FrameFile Container::open_frame(std::size_t t) const {
   const ManifestFrame& entry = manifest_frame(manifest_, *source_, t);
   const fs::path path = source_->name(entry.file);
   // Read, not memory-mapped: a mapped file that shrinks (cut short, or rewritten in place) under
   // a reader ends it with SIGBUS, and a reader may be a Python or ParaView session that holds a
-  // frame for as long as it likes.
+  // frame for as long as it likes. A local file's size is checked before it is read.
+  if (source_->local_directory()) {
+    std::error_code ec;
+    if (const std::uintmax_t size = fs::file_size(path, ec); !ec) check_file_size(entry, size);
+  }
   std::vector<std::byte> bytes = source_->read_file(entry.file, entry.bytes);
-  if (bytes.size() != entry.bytes)  // before the header's checks, which would blame the format
-    throw FormatError(path, FormatError::no_offset,
-                      std::to_string(entry.bytes) + " bytes (its size in manifest.json)",
-                      std::to_string(bytes.size()) +
-                          (source_->local_directory()
-                               ? " (the file was cut short after the container was written)"
-                               : " (the server's answer was cut short, or the file changed on "
-                                 "the server after the container was written)"));
+  check_file_size(entry, bytes.size());  // before the header's checks, which would blame the format
   const std::uint64_t size = bytes.size();
   FrameFile file(std::move(bytes), path, size);
   check_frame(t, file.view());
@@ -401,6 +411,10 @@ FrameFile Container::open_frame(std::size_t t) const {
 FrameFile Container::open_frame_index(std::size_t t) const {
   const ManifestFrame& entry = manifest_frame(manifest_, *source_, t);
   const fs::path path = source_->name(entry.file);
+  if (source_->local_directory()) {  // a file cut short past its index is found here too
+    std::error_code ec;
+    if (const std::uintmax_t size = fs::file_size(path, ec); !ec) check_file_size(entry, size);
+  }
   if (auto kept = source_->kept(entry.file, 0)) {
     FrameFile file(std::move(*kept), path, entry.bytes);
     check_frame(t, file.view());

@@ -75,6 +75,8 @@ expect_error "1 problem found: .*000002.vrf" "$volreel" verify "$work/b.vreel"
 "$volreel" encode "$work/slow" --dictionary dct --brick-size 18 --max-keyframe-gap 4 --out "$work/gaps.vreel" > /dev/null 2>&1
 truncate -s 3000 "$work/gaps.vreel/frames/000002.vrf"
 expect_error ": 1 problem found: .*000002.vrf: expected [0-9]* bytes (its size in manifest.json), found 3000" "$volreel" verify "$work/gaps.vreel"
+# info reads indexes alone: a frame cut short past its index is found by its size.
+expect_error "000002.vrf: expected [0-9]* bytes (its size in manifest.json), found 3000 (the file was cut short" "$volreel" info "$work/gaps.vreel"
 
 # Values too large for float32 sums: refused before anything is written.
 python3 -c "

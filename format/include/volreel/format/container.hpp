@@ -142,6 +142,8 @@ class Container {
 
   /// The checks of open_frame on a validated view of frame t.
   void check_frame(std::size_t t, const FrameView& view) const;
+  /// Throws FormatError unless `found` bytes are the frame's size in the manifest.
+  void check_file_size(const ManifestFrame& entry, std::uint64_t found) const;
 };
 
 /// Opens the indexes of `frames` (open_frame_index) and hands each, or the message of what failed,
