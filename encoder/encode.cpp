@@ -202,6 +202,17 @@ std::uint32_t default_keyframe_gap(const Dims& dims, format::BrickShape shape, b
   return gap;
 }
 
+void check_request(const EncodeRequest& request) {
+  if (request.tolerance.bps && request.max_keyframe_gap && *request.max_keyframe_gap > 1)
+    throw InputError(
+        "--bps searches eps on sample frames coded whole, every node stored, and "
+        "--max-keyframe-gap " +
+        std::to_string(*request.max_keyframe_gap) +
+        " would leave nodes to interpolation: the container would land below the "
+        "target. Leave --max-keyframe-gap out with --bps (every frame is then a "
+        "keyframe), or ask for --psnr or --tolerance");
+}
+
 MissedTargets missed_targets(const EncodeSummary& s, double psnr_target, double bps_target) {
   const CodingSettings& c = s.coding;
   MissedTargets m;
@@ -221,6 +232,7 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   const std::size_t frames =
       request.max_frames ? std::min(request.max_frames, info.frames) : info.frames;
   const Ranks& ranks = request.ranks ? *request.ranks : single_process();
+  check_request(request);
   refuse_existing_output(out, request.resume, request.overwrite);
   // A dictionary given is read (and checked) now, not after the value range and rate control.
   // (Rank 0 alone reads it, here and below; its error aborts the job.)
@@ -239,14 +251,6 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
     chosen_brick_size = true;
     request.coding.brick_size = format::choose_brick_shape(dims).size;
   }
-  if (request.tolerance.bps && request.max_keyframe_gap && *request.max_keyframe_gap > 1)
-    throw InputError(
-        "--bps searches eps on sample frames coded whole, every node stored, and "
-        "--max-keyframe-gap " +
-        std::to_string(*request.max_keyframe_gap) +
-        " would leave nodes to interpolation: the container would land below the target. Leave "
-        "--max-keyframe-gap out with --bps (every frame is then "
-        "a keyframe), or ask for --psnr or --tolerance");
   const format::BrickShape shape{request.coding.brick_size};
   if (!format::valid_brick_size(shape.size))
     throw InputError("--brick-size must be auto or a multiple of 6 in 12..66, not " +

@@ -725,6 +725,8 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     Volume volume;
     CodedFrame coded;
     double scale = 1;  ///< the ε it was coded at, against the job's
+    /// With a PSNR target: the PSNR of the frame as coded (every node stored).
+    double psnr = std::numeric_limits<double>::infinity();
   };
   // Codes frame t (read into step.volume) from ε·scale, again at a smaller ε while it misses
   // psnr_target.
@@ -780,6 +782,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     double best = -std::numeric_limits<double>::infinity(), best_scale = scale;
     int stalls = 0;
     const auto keep_best = [&] {
+      step.psnr = best;
       if (scale == best_scale) return;
       scale = best_scale;  // the frame keeps the best try (coded again: the same bytes)
       use_scale(scale);
@@ -790,7 +793,10 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
           job.piecewise
               ? step.coded.stats.finest_squared_error
               : finest_level_error(encoder->write(step.coded), atoms, step.volume, t).first;
-      const double psnr = frame_psnr(squared);
+      // To 1e-9 dB: summed brick by brick (piecewise) or over the whole frame, the error differs
+      // in its last bits, and the decisions below must not.
+      const double psnr = std::round(frame_psnr(squared) * 1e9) / 1e9;
+      step.psnr = psnr;
       if (psnr >= job.psnr_target) break;
       if (psnr >= best + min_retry_gain_db) {
         best = psnr;
@@ -812,8 +818,9 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
       if (retry == 0 && !done[t] && writer) ++summary.delivered.frames_coded_again;
       // 0.1 dB more than the shortfall, so that the next try lands above the target; after a try
       // that gained nothing, half its ε.
-      // On a grid of 2^-20 octaves: the PSNR of a frame measured brick by brick (piecewise) or
-      // whole differs in its last bits, and the next ε must not, so that both write the same bytes.
+      // On a grid of 2^-20 octaves, for the same reason: the next ε of a frame coded piecewise is
+      // that of the frame coded whole, so that both write the same bytes (but where a PSNR or ε
+      // falls within rounding of a grid line).
       const double next =
           stalls > 0 ? scale / 2 : scale * std::pow(10.0, -(job.psnr_target - psnr + 0.1) / 20);
       scale = std::max(std::exp2(std::floor(std::log2(next) * 0x1p20) / 0x1p20), smallest_scale);
@@ -836,8 +843,8 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
                                        memory ? memory : std::numeric_limits<std::uint64_t>::max());
   const bool side_by_side = batch > 0;
   if (side_by_side) summary.frames_at_once = std::min(batch, detail::side_by_side_frames());
-  // Whether a frame of the stretch from s whose keep flags interpolate a node misses psnr_target,
-  // decoded as a reader does.
+  // Whether a frame of the stretch from s whose keep flags interpolate a node misses psnr_target
+  // (or, where its coding missed it too, decodes worse than coded), decoded as a reader does.
   const auto interpolation_misses_psnr = [&](const std::vector<Step>& steps,
                                              const std::vector<std::vector<char>>& keep,
                                              std::size_t s) {
@@ -861,7 +868,8 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
             static_cast<double>(decoded[v]) - static_cast<double>(steps[i].volume.data[v]);
         squared += d * d;
       }
-      if (frame_psnr(squared) < job.psnr_target) return true;
+      // Below the target, or below the frame's own coding where that missed it already.
+      if (frame_psnr(squared) < std::min(job.psnr_target, steps[i].psnr)) return true;
     }
     return false;
   };

@@ -1,4 +1,4 @@
-// frame_file.cpp: writing and validating frame files, and the memory map behind the reader.
+// frame_file.cpp: writing and validating frame files, and reading one whole.
 #include "volreel/format/frame_file.hpp"
 
 #include <algorithm>

@@ -559,7 +559,9 @@ FloatArray metric_input(const py::object& given, const char* function, const cha
   if (!x || !f)
     throw py::value_error(std::string(function) + ": " + name + " is not an array of numbers");
   if (!x.dtype().is(py::dtype::of<float>()) &&
-      !py::module_::import("numpy").attr("array_equal")(x, f).cast<bool>()) {
+      !py::module_::import("numpy")
+           .attr("array_equal")(x, f, py::arg("equal_nan") = true)
+           .cast<bool>()) {
     const std::string warning = std::string(function) + ": " + name + "'s " +
                                 py::str(x.dtype()).cast<std::string>() +
                                 " values rounded to float32, as volreel reads data; the metric "

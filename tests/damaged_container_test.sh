@@ -21,7 +21,6 @@ expect_error() {
 
 "$volreel" gen analytic --field blobs --dims 40x36x30 --frames 3 --out "$work/s" > /dev/null 2>&1
 "$volreel" encode "$work/s" --dictionary dct --out "$work/a.vreel" > /dev/null 2>&1
-# The same series under another name: the same bytes but for the container identifier.
 # The same data under another name: another container (the identifier hashes the settings, the
 # variable's name among them, not the input's path) whose frames have the same sizes.
 cp -r "$work/s" "$work/s2"

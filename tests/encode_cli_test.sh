@@ -96,7 +96,8 @@ cmp -s "$work/path1.vreel/frames/000001.vrf" "$work/path2.vreel/frames/000001.vr
   || fail "an interpolated frame missed --psnr 45: $(grep -e warning -e delivered "$work/t32.txt")"
 # Options that do not go together or cannot be read are mistakes on the command line: status 2,
 # as CLI11's own, before the input is read.
-for options in "--brick-size 13" "--codec foo" "--memory 5X" "--fixed-sparsity 3 --max-error 1"; do
+for options in "--brick-size 13" "--codec foo" "--memory 5X" "--fixed-sparsity 3 --max-error 1" \
+  "--bps 1 --max-keyframe-gap 4"; do
   status=0
   "$volreel" encode "$work/no-such-series" $options --out "$work/x.vreel" > /dev/null 2>&1 || status=$?
   [ "$status" = 2 ] || fail "encode $options: exit status $status, expected 2"

@@ -157,7 +157,7 @@ void run_encode(const EncodeOptions& o) {
   // The options checked together before any input is read: a mistake there is one on the command
   // line (exit status 2), not an error of the run.
   try {
-    encode_request(o, 0);
+    encoder::check_request(encode_request(o, 0));
   } catch (const InputError& e) {
     throw CLI::ValidationError(e.what());
   }

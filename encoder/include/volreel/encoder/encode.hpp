@@ -96,6 +96,10 @@ struct MissedTargets {
 /// misses.
 MissedTargets missed_targets(const EncodeSummary& summary, double psnr_target, double bps_target);
 
+/// Throws InputError where the request's options do not go together (checked by encode before
+/// it reads anything; the command line checks them before it opens the input).
+void check_request(const EncodeRequest& request);
+
 /// Encodes `series` into the container `out` as asked. With several ranks, only rank 0 should be
 /// given events (one progress bar, one report). Temporary dictionary files are removed
 /// whatever happens. Throws InputError/FormatError with what was wrong.

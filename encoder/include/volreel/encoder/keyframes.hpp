@@ -24,9 +24,9 @@ namespace volreel::encoder {
 /// - fixed rate (no ε): the same with ε = 0;
 /// - a pointwise bound (--max-error with ksvd, in addition; zfp's accuracy, alone): every value
 ///   within it.
-/// - within_coded_error (for a PSNR target): the same without the tolerance (ε_l = 0); where a
-/// frame
-///   so interpolated misses the target, the encoder chooses its stretch again at brick_factor 1.
+/// - within_coded_error (for a PSNR target): the same without the tolerance (ε_l = 0). Where a
+///   frame so interpolated misses the target, the encoder chooses its stretch again at
+///   brick_factor 1.
 struct KeyframeRule {
   double brick_factor = 1.25;
   double block_factor = 4.0;
