@@ -843,6 +843,30 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
                                        memory ? memory : std::numeric_limits<std::uint64_t>::max());
   const bool side_by_side = batch > 0;
   if (side_by_side) summary.frames_at_once = std::min(batch, detail::side_by_side_frames());
+  // A decoder of the frames of a stretch from s, as bytes (frame s not among them where
+  // `without_first`).
+  const auto stretch_decoder = [&](const std::vector<std::vector<std::byte>>& bytes, std::size_t s,
+                                   bool without_first) {
+    return format::TimeStepDecoder(
+        frames, static_cast<std::uint32_t>(gap), atoms, [&bytes, s, without_first](std::size_t t) {
+          if (t < s || t - s >= bytes.size() || (t == s && without_first))
+            throw std::logic_error("a stretch's step refers to a frame not coded with it");
+          return format::FrameFile(bytes[t - s], format::frame_file_name(t), bytes[t - s].size());
+        });
+  };
+  // Frame t's finest level decoded (into `decoded`) against step's original: the squared error
+  // and the largest.
+  const auto decoded_error = [&](format::TimeStepDecoder& decoder, std::size_t t, const Step& step,
+                                 std::vector<float>& decoded) {
+    decoder.decode(t, static_cast<std::uint32_t>(step.coded.geometry.size() - 1), decoded);
+    double squared = 0, worst = 0;
+    for (std::size_t i = 0; i < decoded.size(); ++i) {
+      const double d = static_cast<double>(decoded[i]) - static_cast<double>(step.volume.data[i]);
+      squared += d * d;
+      worst = std::max(worst, std::abs(d));
+    }
+    return std::pair{squared, worst};
+  };
   // Whether a frame of the stretch from s whose keep flags interpolate a node misses psnr_target
   // (or, where its coding missed it too, decodes worse than coded), decoded as a reader does.
   const auto interpolation_misses_psnr = [&](const std::vector<Step>& steps,
@@ -851,23 +875,11 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     std::vector<std::vector<std::byte>> trial(steps.size());
     for (std::size_t i = 0; i < steps.size(); ++i)
       trial[i] = encoder->write(steps[i].coded, keep[i]);
-    format::TimeStepDecoder decoder(
-        frames, static_cast<std::uint32_t>(gap), atoms, [&](std::size_t t) {
-          if (t < s || t - s >= trial.size())
-            throw std::logic_error("a stretch's step refers to a frame not coded with it");
-          return format::FrameFile(trial[t - s], format::frame_file_name(t), trial[t - s].size());
-        });
+    format::TimeStepDecoder decoder = stretch_decoder(trial, s, false);
     std::vector<float> decoded(info.dims.voxels());
-    const auto finest = static_cast<std::uint32_t>(steps.back().coded.geometry.size() - 1);
     for (std::size_t i = 0; i < steps.size(); ++i) {
       if (std::all_of(keep[i].begin(), keep[i].end(), [](char k) { return k != 0; })) continue;
-      decoder.decode(s + i, finest, decoded);
-      double squared = 0;
-      for (std::size_t v = 0; v < decoded.size(); ++v) {
-        const double d =
-            static_cast<double>(decoded[v]) - static_cast<double>(steps[i].volume.data[v]);
-        squared += d * d;
-      }
+      const double squared = decoded_error(decoder, s + i, steps[i], decoded).first;
       // Below the target, or below the frame's own coding where that missed it already.
       if (frame_psnr(squared) < std::min(job.psnr_target, steps[i].psnr)) return true;
     }
@@ -1024,14 +1036,8 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
     }
     // The delivered error of every step this process wrote, decoded as a reader does
     // (interpolated nodes included).
-    const auto opener = [&](std::size_t t) {
-      if (t < s || t > e || (t == s && skip_first))
-        throw std::logic_error("a stretch's step refers to a frame not coded with it");
-      return format::FrameFile(bytes[t - s], format::frame_file_name(t), bytes[t - s].size());
-    };
-    format::TimeStepDecoder decoder(frames, static_cast<std::uint32_t>(gap), atoms, opener);
+    format::TimeStepDecoder decoder = stretch_decoder(bytes, s, skip_first);
     std::vector<float> decoded(job.piecewise ? 0 : info.dims.voxels());
-    const std::uint32_t finest = static_cast<std::uint32_t>(steps.back().coded.geometry.size() - 1);
     for (std::size_t t = s; t <= e; ++t) {
       if (!wrote[t - s]) continue;
       const Step& step = steps[t - s];
@@ -1040,13 +1046,7 @@ EncodeSummary encode_series(const datasets::SeriesReader& series, const fs::path
         squared = step.coded.stats.finest_squared_error;
         worst = step.coded.stats.finest_max_error;
       } else {
-        decoder.decode(t, finest, decoded);
-        for (std::size_t i = 0; i < decoded.size(); ++i) {
-          const double d =
-              static_cast<double>(decoded[i]) - static_cast<double>(step.volume.data[i]);
-          squared += d * d;
-          worst = std::max(worst, std::abs(d));
-        }
+        std::tie(squared, worst) = decoded_error(decoder, t, step, decoded);
       }
       DeliveredQuality& q = summary.delivered;
       ++q.frames;

@@ -390,16 +390,20 @@ void Container::check_file_size(const ManifestFrame& entry, std::uint64_t found)
                                  "the server after the container was written)"));
 }
 
+void Container::check_local_file_size(const ManifestFrame& entry) const {
+  if (!source_->local_directory()) return;
+  std::error_code ec;
+  const std::uintmax_t size = fs::file_size(source_->name(entry.file), ec);
+  if (!ec) check_file_size(entry, size);  // one that cannot be read is named by the read
+}
+
 FrameFile Container::open_frame(std::size_t t) const {
   const ManifestFrame& entry = manifest_frame(manifest_, *source_, t);
   const fs::path path = source_->name(entry.file);
   // Read, not memory-mapped: a mapped file that shrinks (cut short, or rewritten in place) under
   // a reader ends it with SIGBUS, and a reader may be a Python or ParaView session that holds a
   // frame for as long as it likes. A local file's size is checked before it is read.
-  if (source_->local_directory()) {
-    std::error_code ec;
-    if (const std::uintmax_t size = fs::file_size(path, ec); !ec) check_file_size(entry, size);
-  }
+  check_local_file_size(entry);
   std::vector<std::byte> bytes = source_->read_file(entry.file, entry.bytes);
   check_file_size(entry, bytes.size());  // before the header's checks, which would blame the format
   const std::uint64_t size = bytes.size();
@@ -411,10 +415,7 @@ FrameFile Container::open_frame(std::size_t t) const {
 FrameFile Container::open_frame_index(std::size_t t) const {
   const ManifestFrame& entry = manifest_frame(manifest_, *source_, t);
   const fs::path path = source_->name(entry.file);
-  if (source_->local_directory()) {  // a file cut short past its index is found here too
-    std::error_code ec;
-    if (const std::uintmax_t size = fs::file_size(path, ec); !ec) check_file_size(entry, size);
-  }
+  check_local_file_size(entry);  // a file cut short past its index is found here too
   if (auto kept = source_->kept(entry.file, 0)) {
     FrameFile file(std::move(*kept), path, entry.bytes);
     check_frame(t, file.view());

@@ -144,6 +144,8 @@ class Container {
   void check_frame(std::size_t t, const FrameView& view) const;
   /// Throws FormatError unless `found` bytes are the frame's size in the manifest.
   void check_file_size(const ManifestFrame& entry, std::uint64_t found) const;
+  /// check_file_size of a local frame file's size on disk (nothing for a remote one).
+  void check_local_file_size(const ManifestFrame& entry) const;
 };
 
 /// Opens the indexes of `frames` (open_frame_index) and hands each, or the message of what failed,
