@@ -440,6 +440,13 @@ RawSeriesWriter::RawSeriesWriter(fs::path dir, Dims dims, std::string variable, 
   fs::create_directories(dir_, ec);
   if (ec) throw InputError("cannot create directory '" + dir_.string() + "': " + ec.message());
   if (overwrite && fs::exists(manifest, ec)) {
+    // The new frames go to a folder of their own until finish() moves them in, so that a run
+    // that fails or is stopped leaves the old series whole.
+    staging_ = dir_ / ".volreel-new";
+    fs::remove_all(staging_, ec);  // what an interrupted replacement left
+    fs::create_directory(staging_, ec);
+    if (ec)
+      throw InputError("cannot create directory '" + staging_.string() + "': " + ec.message());
     // A series this writer's kind wrote (it has a generator): its frames that the new one does
     // not write are removed by finish(), so that a shorter series leaves none behind. Files of a
     // series written by other means are never touched.
@@ -452,13 +459,16 @@ RawSeriesWriter::RawSeriesWriter(fs::path dir, Dims dims, std::string variable, 
           if (old["frames"][t] == raw_frame_name(t)) stale_frames_ = t + 1;
     } catch (const std::exception&) {
     }
-    fs::remove(manifest, ec);
   }
 }
 
 RawSeriesWriter::~RawSeriesWriter() {
   if (finished_) return;
   std::error_code ec;
+  if (!staging_.empty()) {
+    fs::remove_all(staging_, ec);
+    return;
+  }
   for (std::size_t t = 0; t < timestamps_.size(); ++t)
     if (timestamps_[t]) fs::remove(dir_ / raw_frame_name(t), ec);
   for (const fs::path& d : created_) fs::remove(d, ec);  // only if empty
@@ -476,7 +486,8 @@ void RawSeriesWriter::write_frame(std::size_t t, double timestamp, std::span<con
   if (data.size() != dims_.voxels())
     throw InputError("frame " + std::to_string(t) + " has " + std::to_string(data.size()) +
                      " values, expected " + std::to_string(dims_.voxels()));
-  write_atomically(dir_ / raw_frame_name(t), data.data(), data.size_bytes());
+  write_atomically((staging_.empty() ? dir_ : staging_) / raw_frame_name(t), data.data(),
+                   data.size_bytes());
   if (timestamps_.size() <= t) timestamps_.resize(t + 1);
   timestamps_[t] = timestamp;
 }
@@ -503,9 +514,16 @@ void RawSeriesWriter::finish() {
   j["frames"] = names;
   if (!generator_.is_null()) j["generator"] = generator_;
   const std::string text = j.dump(2) + "\n";
+  std::error_code ec;
+  if (!staging_.empty()) {
+    // The old series' manifest goes first, so that no series.json names a mix of frames.
+    fs::remove(dir_ / "series.json");
+    for (std::size_t t = 0; t < timestamps_.size(); ++t)
+      fs::rename(staging_ / raw_frame_name(t), dir_ / raw_frame_name(t));
+  }
   write_atomically(dir_ / "series.json", text.data(), text.size());
   finished_ = true;
-  std::error_code ec;
+  if (!staging_.empty()) fs::remove_all(staging_, ec);
   for (std::size_t t = timestamps_.size(); t < stale_frames_; ++t)
     fs::remove(dir_ / raw_frame_name(t), ec);
 }

@@ -234,6 +234,27 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   const Ranks& ranks = request.ranks ? *request.ranks : single_process();
   check_request(request);
   refuse_existing_output(out, request.resume, request.overwrite);
+  // Over a container, --overwrite writes the new one beside it and swaps it in once complete, so
+  // that a failed or interrupted run leaves the old one whole; --resume continues such a
+  // replacement. Rank 0 decides (the others could see its first files).
+  const fs::path next = replacement_folder(out);
+  const bool replaces = ranks.broadcast_value([&] {
+    if (!ranks.root()) return 0.0;
+    std::error_code ec;
+    const bool old = fs::exists(out / "manifest.json", ec);
+    const bool interrupted = fs::exists(next / "manifest.json", ec);
+    if (!old && !interrupted && !request.resume) fs::remove_all(next, ec);  // an orphan
+    return old && (request.overwrite || (request.resume && interrupted)) ? 1.0 : 0.0;
+  }()) != 0;
+  const fs::path target = replaces ? next : out;
+  if (replaces) {
+    if (!request.resume) refuse_existing_output(next, false, true);
+    say(request.resume
+            ? "continuing the interrupted replacement of " + out.string() + " in " + next.string() +
+                  "; it replaces the old container once complete"
+            : out.string() + " holds a container: the new one is written to " + next.string() +
+                  " and replaces it once complete (the old one stays whole until then)");
+  }
   // A dictionary given is read (and checked) now, not after the value range and rate control.
   // (Rank 0 alone reads it, here and below; its error aborts the job.)
   if (ranks.root() && !request.dictionary.empty() && request.dictionary != "dct") {
@@ -245,8 +266,8 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
                                           static_cast<std::uint32_t>(info.dims.y),
                                           static_cast<std::uint32_t>(info.dims.z)};
   bool chosen_brick_size = false;
-  if (request.coding.brick_size == 0 && request.resume && fs::exists(out / "manifest.json"))
-    request.coding.brick_size = format::Container(out, true).manifest().brick_size;
+  if (request.coding.brick_size == 0 && request.resume && fs::exists(target / "manifest.json"))
+    request.coding.brick_size = format::Container(target, true).manifest().brick_size;
   if (request.coding.brick_size == 0) {
     chosen_brick_size = true;
     request.coding.brick_size = format::choose_brick_shape(dims).size;
@@ -289,7 +310,7 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
                        ", and --bps codes sample frames whole: ask for --psnr or --tolerance, or "
                        "give more --memory");
     if (request.coding.codec == format::Codec::ksvd && request.dictionary.empty() &&
-        !(request.resume && fs::exists(out / "dictionary.bin")))
+        !(request.resume && fs::exists(target / "dictionary.bin")))
       throw InputError(frame_size +
                        ", and training a dictionary reads frames whole: give one (--dictionary "
                        "FILE from volreel train on a smaller series, or --dictionary dct), or "
@@ -342,7 +363,7 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
     // Training (no dictionary given, none to resume with, values not constant): every process
     // draws its share of the coreset first.
     const bool trains = request.dictionary.empty() &&
-                        !(request.resume && fs::exists(out / "dictionary.bin")) &&
+                        !(request.resume && fs::exists(target / "dictionary.bin")) &&
                         c.value_max > c.value_min;
     std::optional<dictionary::CoresetHierarchy> coreset;
     const double train_eps = tolerance_to_train_at(request.tolerance, range);
@@ -357,8 +378,8 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
       try {
         fs::path dict_path = request.dictionary;
         std::optional<TemporaryFile> trained;
-        if (dict_path.empty() && request.resume && fs::exists(out / "dictionary.bin"))
-          dict_path = out / "dictionary.bin";
+        if (dict_path.empty() && request.resume && fs::exists(target / "dictionary.bin"))
+          dict_path = target / "dictionary.bin";
         if (dict_path.empty() && !(c.value_max > c.value_min))
           dict_path = "dct";  // nothing to learn
         if (trains) {
@@ -426,7 +447,12 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
   }
   job.provenance = job_provenance(std::move(request.provenance), c);
   Stage stage(events, "encoding", "frames");
-  return encode_series(series, out, job, stage.progress());
+  EncodeSummary summary = encode_series(series, target, job, stage.progress());
+  if (replaces) {
+    ranks.barrier();  // every rank has read the new container
+    if (ranks.root()) commit_replacement(out);
+  }
+  return summary;
 }
 
 }  // namespace volreel::encoder

@@ -467,6 +467,26 @@ void check_value_range(double value_min, double value_max, const std::string& so
   throw InputError(source + text);
 }
 
+fs::path replacement_folder(const fs::path& out) {
+  return out / ".volreel-new";
+}
+
+void commit_replacement(const fs::path& out) {
+  const fs::path next = replacement_folder(out);
+  const fs::path old_frames = next / "replaced-frames";
+  std::error_code ec;
+  fs::remove_all(old_frames, ec);
+  fs::remove(out / "manifest.json");
+  if (fs::exists(fs::symlink_status(out / "frames"))) fs::rename(out / "frames", old_frames);
+  fs::rename(next / "frames", out / "frames");
+  if (fs::exists(next / "dictionary.bin"))
+    fs::rename(next / "dictionary.bin", out / "dictionary.bin");
+  else
+    fs::remove(out / "dictionary.bin");
+  fs::rename(next / "manifest.json", out / "manifest.json");
+  fs::remove_all(next, ec);
+}
+
 namespace {
 
 /// Runs f on rank 0 alone; an exception there is thrown on every rank, with its message, so that

@@ -93,6 +93,11 @@ expect_error "--power: expected a number > 0" "$volreel" gen turbulence --size 1
 "$volreel" gen analytic --size 16 --frames 4 --out "$work/shrink" > /dev/null 2>&1
 "$volreel" gen analytic --size 16 --frames 2 --out "$work/shrink" --overwrite > /dev/null 2>&1
 [ "$(ls "$work/shrink" | tr '\n' ' ')" = "000000.f32 000001.f32 series.json " ] || fail "gen --overwrite left old frames: $(ls "$work/shrink")"
+# --overwrite that fails leaves the old series whole (the new frames went to a folder of their own).
+cp "$work/shrink/series.json" "$work/shrink.json"
+expect_error "CFL number must be in (0, 2]" "$volreel" gen turbulence --size 16 --frames 1 --cfl 3 --out "$work/shrink" --overwrite
+[ "$(ls -A "$work/shrink" | tr '\n' ' ')" = "000000.f32 000001.f32 series.json " ] || fail "a failed gen --overwrite left: $(ls -A "$work/shrink")"
+cmp -s "$work/shrink/series.json" "$work/shrink.json" || fail "a failed gen --overwrite changed the old series.json"
 expect_error "--resume excludes --overwrite" "$volreel" encode "$work/shrink" --resume --overwrite --out "$work/x.vreel"
 expect_error "--replace-nan: expected a finite number of magnitude at most 1e33.*found 'nan'" "$volreel" encode "$work/shrink" --replace-nan nan --out "$work/x.vreel"
 expect_error "--replace-nan: expected a finite number of magnitude at most 1e33.*found '1e39'" "$volreel" encode "$work/shrink" --replace-nan 1e39 --out "$work/x.vreel"

@@ -313,12 +313,16 @@ expect_error "\\(--dims excludes --size\\|--size excludes --dims\\)" "$volreel" 
 # The process is stopped (SIGSTOP) as soon as its first frame is there, so that the signal comes
 # before it has coded the rest; it handles the signal when it goes on.
 "$volreel" gen analytic --field noise --dims 128x128x128 --frames 8 --out "$work/long" > /dev/null 2>&1
+# Interrupts the background job PID once FILE is there; sets status to its exit status.
+interrupt_at() {
+  local file=$1 pid=$2
+  for _ in $(seq 6000); do [ -e "$file" ] && break; sleep 0.01; done
+  kill -STOP "$pid"; kill -TERM "$pid"; kill -CONT "$pid"
+  status=0
+  wait "$pid" || status=$?
+}
 "$volreel" encode "$work/long" --dictionary dct --max-keyframe-gap 1 --out "$work/long.vreel" > /dev/null 2> "$work/long.err" &
-pid=$!
-for _ in $(seq 6000); do [ -e "$work/long.vreel/frames/000000.vrf" ] && break; sleep 0.01; done
-kill -STOP "$pid"; kill -TERM "$pid"; kill -CONT "$pid"
-status=0
-wait "$pid" || status=$?
+interrupt_at "$work/long.vreel/frames/000000.vrf" $!
 [ "$status" = 143 ] || fail "an interrupted encode: exit status $status, expected 143: $(cat "$work/long.err")"
 grep -q "interrupted: the [0-9]* frames written to .*long.vreel are kept; the same command with --resume continues it" \
   "$work/long.err" || fail "an interrupted encode's message: $(cat "$work/long.err")"
@@ -329,6 +333,32 @@ kept=$(ls "$work/long.vreel/frames" | grep -c '\.vrf$')
   || fail "--resume after an interrupt: $(cat "$work/long.txt")"
 grep -q "8 frames ($((8 - kept)) encoded, $kept already there)" "$work/long.txt" || fail "--resume after an interrupt: $(cat "$work/long.txt")"
 "$volreel" verify "$work/long.vreel" > /dev/null 2>&1 || fail "the container resumed after an interrupt does not verify"
+
+# --overwrite over a container writes the new one beside it: interrupted, the old one stays whole
+# (its manifest and frames as they were) and --resume continues the replacement, which then takes
+# the old one's place. A file of the user's in the container folder stays.
+cp "$work/long.vreel/manifest.json" "$work/long-manifest.json"
+cp "$work/long.vreel/frames/000003.vrf" "$work/long-frame3.vrf"
+echo notes > "$work/long.vreel/notes.txt"
+"$volreel" encode "$work/long" --dictionary dct --max-keyframe-gap 1 --psnr 40 --overwrite --out "$work/long.vreel" > "$work/long.txt" 2> "$work/long.err" &
+interrupt_at "$work/long.vreel/.volreel-new/frames/000000.vrf" $!
+[ "$status" = 143 ] || fail "an interrupted --overwrite: exit status $status, expected 143: $(cat "$work/long.err")"
+grep -q "holds a container: the new one is written to .*long.vreel/.volreel-new and replaces it once complete" "$work/long.txt" \
+  || fail "--overwrite over a container does not say where it writes: $(cat "$work/long.txt")"
+grep -q "interrupted: the [0-9]* frames written to .*long.vreel/.volreel-new are kept; .*long.vreel still holds the container it would replace; the same command with --resume instead of --overwrite continues it" \
+  "$work/long.err" || fail "an interrupted --overwrite's message: $(cat "$work/long.err")"
+cmp -s "$work/long.vreel/manifest.json" "$work/long-manifest.json" || fail "an interrupted --overwrite changed the old manifest"
+cmp -s "$work/long.vreel/frames/000003.vrf" "$work/long-frame3.vrf" || fail "an interrupted --overwrite changed an old frame"
+"$volreel" verify "$work/long.vreel" > /dev/null 2>&1 || fail "the old container does not verify after an interrupted --overwrite"
+"$volreel" encode "$work/long" --dictionary dct --max-keyframe-gap 1 --psnr 40 --resume --out "$work/long.vreel" > "$work/long.txt" 2>&1 \
+  || fail "--resume of an interrupted --overwrite: $(cat "$work/long.txt")"
+grep -q "continuing the interrupted replacement of .*long.vreel" "$work/long.txt" || fail "--resume of an interrupted --overwrite: $(cat "$work/long.txt")"
+grep -q "already there)" "$work/long.txt" || fail "--resume of an interrupted --overwrite coded every frame again: $(cat "$work/long.txt")"
+[ ! -e "$work/long.vreel/.volreel-new" ] || fail "the replacement folder is left after the replacement"
+[ "$(cat "$work/long.vreel/notes.txt")" = notes ] || fail "--overwrite lost a file of the user's in the container folder"
+! cmp -s "$work/long.vreel/manifest.json" "$work/long-manifest.json" || fail "the replacement did not replace the manifest"
+"$volreel" verify "$work/long.vreel" > /dev/null 2>&1 || fail "the replaced container does not verify"
+"$volreel" info "$work/long.vreel" > "$work/long.txt" 2>&1 || fail "info of the replaced container: $(cat "$work/long.txt")"
 rm -rf "$work/long" "$work/long.vreel"
 
 # --psnr on a volume 3 voxels thick: a slightly smaller eps gave a lower PSNR there, which was

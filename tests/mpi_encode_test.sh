@@ -38,6 +38,10 @@ done
 mpi 3 "$volreel" encode "$work/s" --out "$work/g1-3.vreel" --dictionary dct --max-keyframe-gap 1 \
   > /dev/null 2>&1
 same "$work/g1.vreel" "$work/g1-3.vreel" "-n 3 without keyframe gaps differs"
+# --overwrite over a container (written beside it, moved in once complete): the same container.
+mpi 3 "$volreel" encode "$work/s" --out "$work/g1-3.vreel" --dictionary dct --max-keyframe-gap 3 \
+  --overwrite > "$work/over3.txt" 2>&1 || fail "mpirun --overwrite: $(tail -5 "$work/over3.txt")"
+same "$work/serial.vreel" "$work/g1-3.vreel" "-n 3 --overwrite over a container differs"
 grep -q "2 MPI processes" "$work/mpi2.txt" || fail "rank 0 does not say it runs with 2 processes"
 [ "$(grep -c '^wrote' "$work/mpi2.txt")" = 1 ] || fail "the report should be printed once"
 grep -q "on 2 processes" "$work/mpi2.txt" || fail "the report does not count the processes"

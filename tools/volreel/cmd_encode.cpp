@@ -232,21 +232,30 @@ void run_encode(const EncodeOptions& o) {
       if (bar) bar.reset();
       // Stopped before its first frame (while the value range or the dictionary was found): a
       // container this run made holds nothing to continue, and goes.
+      // A replacement of a container (--overwrite over one) was written beside it.
+      const std::filesystem::path next = encoder::replacement_folder(o.out);
+      std::error_code ec;
+      const bool replacing = std::filesystem::exists(next / "manifest.json", ec);
+      const std::filesystem::path where = replacing ? next : std::filesystem::path(o.out);
       std::size_t written = 0;
       try {
-        const format::Container kept(o.out, true);
+        const format::Container kept(where, true);
         for (const auto& frame : kept.manifest().frames) written += frame.has_value();
       } catch (const std::exception&) {  // no manifest yet
       }
-      std::error_code ec;
+      if (written == 0 && replacing) std::filesystem::remove_all(next, ec);
       if (written == 0 && !out_existed) std::filesystem::remove_all(o.out, ec);
+      const std::string old =
+          replacing ? "; " + o.out + " still holds the container it would replace" : "";
       if (written == 0)
-        std::fprintf(stderr, "\nvolreel encode: interrupted before its first frame was written\n");
+        std::fprintf(stderr, "\nvolreel encode: interrupted before its first frame was written%s\n",
+                     old.c_str());
       else
         std::fprintf(stderr,
-                     "\nvolreel encode: interrupted: the %zu frames written to %s are kept; the "
-                     "same command with --resume continues it\n",
-                     written, o.out.c_str());
+                     "\nvolreel encode: interrupted: the %zu frames written to %s are kept%s; the "
+                     "same command with --resume%s continues it\n",
+                     written, where.c_str(), old.c_str(),
+                     o.overwrite ? " instead of --overwrite" : "");
       throw;
     }
   }();
@@ -428,8 +437,13 @@ void add_encode_command(CLI::App& app) {
       ->capture_default_str();
   CLI::Option* resume_opt =
       cmd->add_flag("--resume", o->resume,
-                    "Continue an interrupted encode: keep frames already written and valid");
-  cmd->add_flag("--overwrite", o->overwrite, "Replace an existing container")->excludes(resume_opt);
+                    "Continue an interrupted encode (or an interrupted --overwrite of a\n"
+                    "container): keep frames already written and valid");
+  cmd->add_flag("--overwrite", o->overwrite,
+                "Replace an existing container: the new one is written beside it (in\n"
+                "OUT/.volreel-new) and takes its place once complete, so a failed or\n"
+                "interrupted run leaves the old one whole (room for both is needed)")
+      ->excludes(resume_opt);
   cmd->add_flag(
       "--no-refit", o->no_refit,
       "Quantize coefficients independently (no least-squares refit; for comparison; with the DCT "

@@ -117,12 +117,15 @@ std::unique_ptr<SeriesReader> open_series(const std::filesystem::path& path,
 class RawSeriesWriter {
  public:
   /// Creates dir (and parents). Throws InputError if dir exists and holds a series.json unless
-  /// overwrite is set; with overwrite the old series.json goes, and finish() removes the frames
-  /// 000000.f32 … of an old series a generator wrote that the new one does not replace.
+  /// overwrite is set. With overwrite the new frames are written to dir/.volreel-new, and
+  /// finish() moves them over the old ones, writes the new series.json and removes the frames
+  /// 000000.f32 … of an old series a generator wrote that the new one does not replace; until
+  /// then the old series stays whole.
   RawSeriesWriter(std::filesystem::path dir, Dims dims, std::string variable,
                   bool overwrite = false);
-  /// Without finish (an error on the way): removes the frames written and the directory if this
-  /// writer created it, so that a failed run leaves nothing half-written.
+  /// Without finish (an error on the way): removes the frames written (with overwrite, the
+  /// folder they went to) and the directory if this writer created it, so that a failed run
+  /// leaves nothing half-written and an old series as it was.
   ~RawSeriesWriter();
   RawSeriesWriter(const RawSeriesWriter&) = delete;
   RawSeriesWriter& operator=(const RawSeriesWriter&) = delete;
@@ -146,7 +149,8 @@ class RawSeriesWriter {
   std::vector<std::optional<double>> timestamps_;
   nlohmann::json generator_;
   std::vector<std::filesystem::path> created_;  ///< what to remove without finish: dirs last
-  std::size_t stale_frames_ = 0;  ///< overwrite: the frame count of the old generated series
+  std::filesystem::path staging_;  ///< overwrite of a series: where the new frames go first
+  std::size_t stale_frames_ = 0;   ///< overwrite: the frame count of the old generated series
   bool finished_ = false;
 };
 

@@ -150,6 +150,18 @@ std::uint64_t estimated_manifest_bytes(const datasets::SeriesInfo& info, std::si
 /// training and rate control, so that a name already taken is refused before the long work.
 void refuse_existing_output(const std::filesystem::path& out, bool resume, bool overwrite);
 
+/// Where encode() writes a container that replaces the one at `out` (--overwrite over a
+/// container, or --resume of such a replacement interrupted): OUT/.volreel-new, a container of its
+/// own, moved over OUT's manifest, dictionary and frames by commit_replacement once it is
+/// complete. Until then the old container stays whole and readable.
+std::filesystem::path replacement_folder(const std::filesystem::path& out);
+
+/// Moves the complete container in replacement_folder(out) over out's (its frames/,
+/// dictionary.bin and manifest.json; the manifest last, so that out holds no manifest while the
+/// frames are swapped) and removes the replacement folder with the old frames. Other files in
+/// out are left alone.
+void commit_replacement(const std::filesystem::path& out);
+
 /// Throws InputError naming `source` (the series) when a value of [value_min, value_max] is beyond
 /// max_input_magnitude.
 void check_value_range(double value_min, double value_max, const std::string& source);
