@@ -175,19 +175,26 @@ grep -q "screenshot: $work/still.png (volume image 320x240)" "$work/out_res.txt"
   || fail "the still view is not at full size: $(grep "screenshot:" "$work/out_res.txt")"
 echo "frame-time control: busy 40x30, still 320x240"
 
-# A truncated frame file: reported (HUD and stderr), playback continues to the last keyframe.
+# A truncated frame file: reported (HUD and stderr), playback continues to the last keyframe, and
+# the session ends with status 1 and the count of what could not be read.
 cp -r "$work/a.vreel" "$work/b.vreel"
 truncate -s 100 "$work/b.vreel/frames/000002.vrf"
+status=0
 timeout 60 xvfb-run -a -s "-screen 0 1280x800x24" "$volreel" play "$work/b.vreel" --size 200x150 \
   --fixed-frame-time 0.05 --script-inline "0 key space; 20f quit" ${VOLREEL_PLAY_TEST_ARGS:-} \
-  > "$work/out_b.txt" 2> "$work/err_b.txt" || fail "play with a damaged frame exited with $?: $(cat "$work/err_b.txt")"
+  > "$work/out_b.txt" 2> "$work/err_b.txt" || status=$?
+[ "$status" = 1 ] || fail "play with a damaged frame exited with $status, expected 1: $(cat "$work/err_b.txt")"
 grep -q "000002.vrf" "$work/err_b.txt" || fail "the truncated frame was not reported: $(cat "$work/err_b.txt")"
+grep -q "[1-9][0-9]* bricks or frames could not be read (the messages above name them)" "$work/err_b.txt" \
+  || fail "no count of what could not be read: $(tail -2 "$work/err_b.txt")"
 tail -1 "$work/out_b.txt" | grep -q "keyframe 3.00" || fail "playback stopped early: $(tail -1 "$work/out_b.txt")"
 tail -1 "$work/out_b.txt" | grep -Eq "errors [1-9]" || fail "no error counted: $(tail -1 "$work/out_b.txt")"
 # A settle at the damaged keyframe ends once nothing more can be loaded, not at its timeout.
+status=0
 timeout 60 xvfb-run -a -s "-screen 0 1280x800x24" "$volreel" play "$work/b.vreel" --size 200x150 \
   --fixed-frame-time 0.05 --script-inline "0 seek 2; 0 settle 40; 0 quit" ${VOLREEL_PLAY_TEST_ARGS:-} \
-  > "$work/out_c.txt" 2> "$work/err_c.txt" || fail "settle at a damaged frame exited with $?: $(cat "$work/err_c.txt")"
+  > "$work/out_c.txt" 2> "$work/err_c.txt" || status=$?
+[ "$status" = 1 ] || fail "settle at a damaged frame exited with $status, expected 1: $(cat "$work/err_c.txt")"
 grep -q "settle ended after .* nothing more to load (read errors: [1-9]" "$work/err_c.txt" ||
   fail "settle at a damaged frame: $(cat "$work/err_c.txt")"
 grep -q "settle timed out" "$work/err_c.txt" && fail "settle at a damaged frame timed out: $(cat "$work/err_c.txt")"

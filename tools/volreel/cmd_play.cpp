@@ -79,9 +79,14 @@ void run_play(PlayCommandOptions& o) {
   }
   p.source = open_container_source(p.container.string(), o.remote);
   try {
-    if (const int failed = app::run_player(p); failed > 0)
-      throw InputError(std::to_string(failed) +
+    const app::PlayerResult result = app::run_player(p);
+    if (result.failed_screenshots > 0)
+      throw InputError(std::to_string(result.failed_screenshots) +
                        " screenshot(s) could not be written (see the messages above)");
+    if (result.read_failures > 0)
+      throw InputError(std::to_string(result.read_failures) +
+                       " bricks or frames could not be read (the messages above name them): the "
+                       "session showed the container without them");
   } catch (const app::NoDisplayError& e) {
     std::fprintf(stderr, "volreel play: %s\n", e.what());
     throw CLI::RuntimeError(3);

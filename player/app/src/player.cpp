@@ -163,11 +163,16 @@ Player::~Player() {
   if (context_) context_->wait_idle();
 }
 
+void Player::report(std::string message) {
+  own_messages_.insert(message);
+  renderer_->scheduler().report_error(std::move(message));
+}
+
 void Player::apply_preset(const std::string& name) {
   const auto& names = cpu_render::TransferFunction::preset_names();
   const auto it = std::find(names.begin(), names.end(), name);
   if (it == names.end()) {
-    renderer_->scheduler().report_error("unknown transfer-function preset '" + name + "'");
+    report("unknown transfer-function preset '" + name + "'");
     return;
   }
   preset_ = static_cast<int>(it - names.begin());
@@ -182,7 +187,7 @@ void Player::rebuild_transfer() {
   try {
     transfer_ = cpu_render::TransferFunction(sorted, range_lo_, range_hi_);
   } catch (const std::exception& e) {
-    renderer_->scheduler().report_error(std::string("transfer function: ") + e.what());
+    report(std::string("transfer function: ") + e.what());
   }
 }
 
@@ -322,7 +327,7 @@ void Player::finish_screenshots(FrameSlot& slot) {
       }
     } catch (const std::exception& e) {
       ++failed_screenshots_;
-      renderer_->scheduler().report_error(std::string("screenshot: ") + e.what());
+      report(std::string("screenshot: ") + e.what());
       std::fprintf(stderr, "volreel play: screenshot: %s\n", e.what());
     }
   }
@@ -361,8 +366,10 @@ FrameOutput Player::render_volume(std::uint32_t slot_index) {
   inputs.transfer = &transfer_;
   FrameOutput output = renderer_->frame(inputs);
   stats_ = output.stats;
-  for (const std::string& e : output.new_errors)
+  for (const std::string& e : output.new_errors) {
     std::fprintf(stderr, "volreel play: %s\n", e.c_str());
+    if (!own_messages_.contains(e)) read_failures_.insert(e);
+  }
   return output;
 }
 
@@ -443,7 +450,7 @@ void Player::update_figures(double dt, double waited, const FrameOutput& output)
   }
 }
 
-int Player::run() {
+PlayerResult Player::run() {
   const auto dims = container_.manifest().dims;
   const VkExtent2D first = swapchain_->extent();
   home_camera_ =
@@ -539,12 +546,12 @@ int Player::run() {
     for (std::size_t i = 0; i < std::min<std::size_t>(messages.size(), 20); ++i)
       std::fprintf(stderr, "  %s\n", messages[i].text.c_str());
   }
-  return static_cast<int>(std::min<std::size_t>(failed_screenshots_, 1000));
+  return PlayerResult{failed_screenshots_, read_failures_.size()};
 }
 
 }  // namespace detail
 
-int run_player(const PlayerOptions& options) {
+PlayerResult run_player(const PlayerOptions& options) {
   detail::Player player(options);
   return player.run();
 }

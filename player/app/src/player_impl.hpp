@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -75,7 +76,9 @@ class Player {
   ~Player();
   Player(const Player&) = delete;
   Player& operator=(const Player&) = delete;
-  int run();
+  PlayerResult run();
+  /// An error of the player's own (not a read failure), for the HUD and stderr's list.
+  void report(std::string message);
 
  private:
   PlayerOptions options_;
@@ -114,6 +117,9 @@ class Player {
   bool recreate_ = false, quit_ = false;
   std::vector<std::filesystem::path> pending_screenshots_;
   std::size_t failed_screenshots_ = 0;  ///< screenshots that could not be written
+  /// Messages the player itself gave (screenshots, transfer functions), and the others' distinct
+  /// messages: bricks and frames that could not be read or decoded.
+  std::set<std::string> own_messages_, read_failures_;
   std::size_t next_action_ = 0;
   double script_clock_ = 0;
   std::uint64_t previous_action_frame_ = 0;  ///< when the last script entry ran

@@ -83,11 +83,17 @@ class NoDisplayError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// What went wrong in a session that ran to its end.
+struct PlayerResult {
+  std::size_t failed_screenshots = 0;  ///< screenshots that could not be written
+  std::size_t read_failures = 0;       ///< distinct bricks or frames that could not be read
+};
+
 /// Runs the player until the window is closed, the script quits or max_frames is reached.
-/// Returns the number of screenshots that could not be written (0: all were). Throws NoDisplayError
-/// without a display, vulkan::NoDeviceError without a Vulkan device with presentation support, and
-/// format::FormatError / InputError for a container or option that cannot be used. Bad frame files
-/// found while playing are HUD messages, not errors.
-int run_player(const PlayerOptions& options);
+/// Throws NoDisplayError without a display, vulkan::NoDeviceError without a Vulkan device with
+/// presentation support, and format::FormatError / InputError for a container or option that
+/// cannot be used. Bad frame files found while playing are HUD and stderr messages, counted in the
+/// result; the session goes on without them.
+PlayerResult run_player(const PlayerOptions& options);
 
 }  // namespace volreel::app
