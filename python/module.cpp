@@ -17,6 +17,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -107,33 +108,60 @@ struct UrlOptions {
   }
 };
 
+/// An integer argument (a Python int, or anything with __index__, as numpy's integers) as an
+/// int64, a value beyond that range as the nearest int64, which every range check below refuses;
+/// the TypeError of Python's own where it is no integer.
+std::int64_t integer_argument(const py::handle& value) {
+  const auto index = py::reinterpret_steal<py::object>(PyNumber_Index(value.ptr()));
+  if (!index) throw py::error_already_set();
+  int overflow = 0;
+  const long long v = PyLong_AsLongLongAndOverflow(index.ptr(), &overflow);
+  if (overflow != 0)
+    return overflow > 0 ? std::numeric_limits<std::int64_t>::max()
+                        : std::numeric_limits<std::int64_t>::min();
+  return static_cast<std::int64_t>(v);
+}
+
 /// An open container: its frames decoded as the player draws them (format::TimeStepDecoder).
+/// close() lets go of its frames and its connection or files; what the manifest says stays.
 class PyContainer {
  public:
   explicit PyContainer(const std::string& location, const UrlOptions& url = {})
-      : container_(open(location, url)), steps_(container_) {}
+      : container_(open(location, url)),
+        manifest_(container_->manifest()),
+        location_(container_->directory().string()),
+        total_bytes_(container_->total_bytes()),
+        steps_(std::in_place, *container_) {}
 
-  const format::Manifest& manifest() const { return container_.manifest(); }
-  std::size_t frames() const { return container_.frame_count(); }
-  std::string location() const { return container_.directory().string(); }
-  std::uint64_t total_bytes() const { return container_.total_bytes(); }
+  const format::Manifest& manifest() const { return manifest_; }
+  std::size_t frames() const { return manifest_.frames.size(); }
+  const std::string& location() const { return location_; }
+  std::uint64_t total_bytes() const { return total_bytes_; }
   double bps() const {
     const auto& d = manifest().dims;
     const double voxels = double(d[0]) * d[1] * d[2] * static_cast<double>(frames());
     return voxels > 0 ? 8.0 * static_cast<double>(total_bytes()) / voxels : 0;
   }
+  bool closed() const { return !steps_; }
+  void close() {
+    py::gil_scoped_release release;
+    std::lock_guard lock(mutex_);
+    steps_.reset();
+    container_.reset();
+  }
 
   /// Time step t (negative: from the end) at `level` (None: the finest) as a [z, y, x] array.
   /// `out`: an array to decode into (float32, C order, the level's shape), or None for a new one.
-  py::array frame(std::int64_t t, std::optional<std::int64_t> level,
+  py::array frame(const py::object& t_given, const py::object& level,
                   std::optional<py::array> out_given) {
     const auto n = static_cast<std::int64_t>(frames());
-    if (t < 0) t += n;
+    std::int64_t t = integer_argument(t_given);
+    if (t < 0 && t >= -n) t += n;
     if (t < 0 || t >= n)
-      throw py::index_error("frame " + std::to_string(t < 0 ? t - n : t) +
+      throw py::index_error("frame " + std::string(py::str(t_given)) +
                             " is out of range: the container has frames 0.." +
-                            std::to_string(n - 1));
-    const std::uint32_t l = level_index(level.value_or(-1));
+                            std::to_string(n - 1) + " (negative frames count from the end, -1)");
+    const std::uint32_t l = level_index(level.is_none() ? py::int_(-1) : level);
     const auto dims = level_dims(l);
     const std::vector<py::ssize_t> shape = {dims[2], dims[1], dims[0]};
     py::array out;
@@ -151,22 +179,30 @@ class PyContainer {
     }
     float* data = static_cast<float*>(out.mutable_data());
     const std::size_t count = static_cast<std::size_t>(out.size());
+    bool was_closed = false;
     {
       py::gil_scoped_release release;
       const PythonCall call;
       std::lock_guard lock(mutex_);
-      steps_.decode(static_cast<std::size_t>(t), static_cast<std::uint32_t>(l), {data, count});
+      if (steps_)
+        steps_->decode(static_cast<std::size_t>(t), static_cast<std::uint32_t>(l), {data, count});
+      else
+        was_closed = true;
     }
+    if (was_closed)
+      throw py::value_error("frame: the container " + location_ +
+                            " is closed (open it again with volreel.open)");
     return out;
   }
 
   /// Level `level` (negative: from the finest, -1 being it) as an index 0..levels - 1; an
   /// IndexError naming the range where there is no such level.
-  std::uint32_t level_index(std::int64_t level) const {
+  std::uint32_t level_index(const py::handle& level_given) const {
     const auto levels = static_cast<std::int64_t>(manifest().levels);
-    const std::int64_t l = level < 0 ? level + levels : level;
+    const std::int64_t level = integer_argument(level_given);
+    const std::int64_t l = level < 0 && level >= -levels ? level + levels : level;
     if (l < 0 || l >= levels)
-      throw py::index_error("level " + std::to_string(level) +
+      throw py::index_error("level " + std::string(py::str(level_given)) +
                             " is out of range: the container has levels 0.." +
                             std::to_string(levels - 1) +
                             " (0 is the root brick; negative levels count from the finest, -1)");
@@ -198,9 +234,12 @@ class PyContainer {
   }
 
  private:
-  format::Container container_;
+  std::optional<format::Container> container_;
+  format::Manifest manifest_;
+  std::string location_;
+  std::uint64_t total_bytes_;
   std::mutex mutex_;  ///< the decoder keeps frames open between steps
-  format::TimeStepDecoder steps_;
+  std::optional<format::TimeStepDecoder> steps_;
 };
 
 /// InputError naming frames[t] and the [z, y, x] index of its first value that is not finite.
@@ -730,12 +769,20 @@ PYBIND11_MODULE(_volreel, m) {
   });
 
   py::class_<PyContainer>(m, "Container", "A NAME.vreel container opened for reading")
-      .def(py::init([](const std::string& location, unsigned tries, double stall_timeout,
+      .def(py::init([](const py::object& location, unsigned tries, double stall_timeout,
                        unsigned connections, std::optional<fs::path> cache,
                        const std::string& cache_size, std::optional<fs::path> ca_file) {
+             // A str, or a path object (pathlib.Path) as os.fspath gives it.
+             const py::object text = py::module_::import("os").attr("fspath")(location);
+             if (!py::isinstance<py::str>(text))
+               throw py::type_error(
+                   "location: expected a folder's path or a URL as str or "
+                   "os.PathLike, found " +
+                   std::string(py::str(py::type::of(text))));
              return std::make_unique<PyContainer>(
-                 location, UrlOptions{tries, stall_timeout, connections, std::move(cache),
-                                      cache_size, std::move(ca_file)});
+                 text.cast<std::string>(),
+                 UrlOptions{tries, stall_timeout, connections, std::move(cache), cache_size,
+                            std::move(ca_file)});
            }),
            py::arg("location"), py::kw_only(), py::arg("tries") = UrlOptions{}.tries,
            py::arg("stall_timeout") = UrlOptions{}.stall_timeout,
@@ -773,7 +820,7 @@ PYBIND11_MODULE(_volreel, m) {
       .def_property_readonly("location", &PyContainer::location, "The folder or URL")
       .def(
           "level_dims",
-          [](const PyContainer& c, std::int64_t l) {
+          [](const PyContainer& c, const py::object& l) {
             return as_tuple(c.level_dims(c.level_index(l)));
           },
           py::arg("level"), "The size (x, y, z) of a level (negative: from the finest, -1)")
@@ -782,7 +829,11 @@ PYBIND11_MODULE(_volreel, m) {
            "Time step t (negative: from the end) at a level (default the finest) as a float32 "
            "array [z, y, x], decoded as the player draws it (steps without a stored brick "
            "interpolated); into `out` when given (float32, C order, the level's shape)")
-      .def("info", &PyContainer::info, "The manifest as a dict, with location, total_bytes, bps");
+      .def("info", &PyContainer::info, "The manifest as a dict, with location, total_bytes, bps")
+      .def("close", &PyContainer::close,
+           "Lets go of the frames kept decoded and of the files or HTTP connections; frame() "
+           "then raises ValueError, the manifest's properties stay. A `with` block closes it")
+      .def_property_readonly("closed", &PyContainer::closed, "Whether close() was called");
 
   m.def("encode", &encode, py::arg("frames"), py::arg("out"), py::kw_only(),
         py::arg("psnr") = py::none(), py::arg("bps") = py::none(),

@@ -52,7 +52,8 @@ class Container(_Container):
     """A NAME.vreel container: its time steps as numpy arrays [z, y, x].
 
     c[t] is c.frame(t) (negative t counts from the end); len(c) is the number of time steps;
-    iterating gives every time step in order, decoded one at a time.
+    iterating gives every time step in order, decoded one at a time. close(), or the end of a
+    `with` block, lets go of its files or connections.
     """
 
     def __len__(self) -> int:
@@ -77,7 +78,7 @@ class Container(_Container):
         return self
 
     def __exit__(self, *exc) -> None:
-        return None
+        self.close()
 
     def __repr__(self) -> str:
         x, y, z = self.dims
@@ -107,6 +108,6 @@ def open(  # noqa: A001  (volreel.open)
     ca_file: a PEM file of certificate authorities to trust instead of the system's.
     Ctrl-C (KeyboardInterrupt) ends a wait for the server.
     """
-    return Container(os.fspath(location), tries=tries, stall_timeout=stall_timeout,
+    return Container(location, tries=tries, stall_timeout=stall_timeout,
                      connections=connections, cache=cache, cache_size=cache_size,
                      ca_file=ca_file)

@@ -149,6 +149,33 @@ def test_iteration_and_indexing(series, container):
     assert sequence_psnr(frames, decoded) >= 45 - 0.05
 
 
+def test_a_path_object_huge_indices_and_close(container):
+    # pathlib.Path opens as str does (volreel.open and Container alike).
+    c = volreel.Container(Path(container))
+    assert c.location == volreel.open(str(container)).location
+    # An index beyond int64 is out of range, as any other (not a TypeError about the signature);
+    # numpy's integers are indices.
+    for t in (2**70, -(2**70)):
+        with pytest.raises(IndexError, match=f"frame {t} is out of range"):
+            c.frame(t)
+    with pytest.raises(IndexError, match=f"level {2**80} is out of range"):
+        c.frame(0, level=2**80)
+    with pytest.raises(IndexError, match=f"level {-(2**80)} is out of range"):
+        c.level_dims(-(2**80))
+    assert np.array_equal(c.frame(np.int64(1)), c.frame(1))
+    with pytest.raises(TypeError):
+        c.frame(1.5)
+    with pytest.raises(TypeError, match="location: expected"):
+        volreel.Container(b"c.vreel")
+    # close() lets go of the frames and files; the manifest's properties stay; `with` closes.
+    with volreel.open(container) as d:
+        assert not d.closed and d.frame(0).shape == c.frame(0).shape
+    assert d.closed and d.dims == c.dims and d.frames == c.frames and d.bps == c.bps
+    with pytest.raises(ValueError, match="is closed"):
+        d.frame(0)
+    d.close()  # again: nothing to do
+
+
 def test_bad_input_raises_with_the_library_message(container, tmp_path):
     with pytest.raises(volreel.FormatError, match="nothing.vreel"):
         volreel.open(tmp_path / "nothing.vreel")
