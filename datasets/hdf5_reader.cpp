@@ -113,6 +113,24 @@ class Hdf5Reader final : public SeriesReader {
     if (matched.empty())
       throw InputError("'" + file_.string() + "': no dataset matches '" + pattern + "'");
     std::sort(matched.begin(), matched.end());
+    // Frames are ordered by their numbers: a name the pattern matched without one (a
+    // "Pressure_mean" beside "Pressure_0001"), or two names of one number, would be a frame in
+    // no defined place.
+    const bool numbered = matched.back().first >= 0;
+    for (std::size_t i = 0; i < matched.size(); ++i) {
+      if (numbered && matched[i].first < 0)
+        throw InputError("'" + file_.string() + "': the pattern '" + pattern + "' matches '" +
+                         matched[i].second + "', which has no frame number, besides '" +
+                         matched.back().second +
+                         "', which has one: write the pattern so that it matches the frames "
+                         "alone ('#' for each digit, e.g. Pressure_####)");
+      if (i > 0 && matched[i].first >= 0 && matched[i].first == matched[i - 1].first)
+        throw InputError("'" + file_.string() + "': the pattern '" + pattern + "' matches '" +
+                         matched[i - 1].second + "' and '" + matched[i].second +
+                         "', of the same frame number " + std::to_string(matched[i].first) +
+                         ": write the pattern so that it matches one of them ('#' for each "
+                         "digit)");
+    }
 
     for (const auto& [number, name] : matched) {
       Handle ds(H5Dopen2(f.get(), name.c_str(), H5P_DEFAULT), H5Dclose);

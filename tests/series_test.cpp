@@ -464,6 +464,21 @@ TEST(Hdf5, PatternOfThreeDimensionalDatasets) {
   EXPECT_EQ(vd::open_series(path, o)->info().frames, 3u);
   o.dataset = "Velocity_####";
   expect_error([&] { vd::open_series(path, o); }, {"no dataset matches 'Velocity_####'"});
+  // A dataset the '*' matches without a frame number (a mean beside the frames), or two of one
+  // number, has no place among the frames: refused, naming them.
+  const fs::path mixed = dir / "mixed.h5";
+  const hid_t m = H5Fcreate(mixed.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  for (const char* name : {"Pressure_0001", "Pressure_0002", "Pressure_mean", "Pressure_02"})
+    h5_write(m, name, {2, 3, 4, 1}, counting(24, 0));
+  H5Fclose(m);
+  o.dataset = "Pressure_*";
+  expect_error([&] { vd::open_series(mixed, o); },
+               {"mixed.h5", "'Pressure_mean', which has no frame number", "Pressure_####"});
+  o.dataset = "Pressure_0*";
+  expect_error([&] { vd::open_series(mixed, o); },
+               {"'Pressure_0002' and 'Pressure_02'", "same frame number 2"});
+  o.dataset = "Pressure_####";
+  EXPECT_EQ(vd::open_series(mixed, o)->info().frames, 2u);
   o.dataset.clear();
   expect_error([&] { vd::open_series(path, o); }, {"holds 4 datasets", "--dataset"});
   o.dataset = "xcoor";
