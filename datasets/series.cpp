@@ -291,8 +291,22 @@ bool path_within(const fs::path& dir, const fs::path& path) {
   return false;
 }
 
+void check_spacing(const std::array<double, 3>& spacing) {
+  for (const double s : spacing)
+    if (!(std::isfinite(s) && s > 0))
+      throw InputError("spacing: expected three positive finite numbers (x, y, z), found " +
+                       format::number_text(spacing[0]) + ", " + format::number_text(spacing[1]) +
+                       ", " + format::number_text(spacing[2]));
+}
+
+void SeriesReader::set_spacing(const std::array<double, 3>& spacing) {
+  check_spacing(spacing);
+  info_.spacing = spacing;
+}
+
 std::unique_ptr<SeriesReader> open_series(const fs::path& path, const OpenOptions& options) {
   auto reader = open_any(path, options);
+  if (options.spacing) reader->set_spacing(*options.spacing);
   // A reader hands out frames of voxels: a dataset or variable of none is refused here, once.
   const SeriesInfo& info = reader->info();
   check_frame_voxels(info.dims, info.source);

@@ -428,7 +428,9 @@ py::dict encode(const py::object& frames, const fs::path& out, std::optional<dou
                 const std::string& codec, std::optional<double> zfp_accuracy, int atoms,
                 std::optional<std::uint32_t> max_keyframe_gap, bool overwrite, bool resume,
                 const std::optional<std::vector<double>>& times, const std::string& variable,
-                const py::object& brick_size_arg) {
+                const py::object& brick_size_arg,
+                const std::optional<std::array<double, 3>>& spacing) {
+  if (spacing) datasets::check_spacing(*spacing);
   // dictionary: a str or a path (os.PathLike); brick_size: "auto" or a number, as text or int.
   const std::string dictionary =
       py::str(py::module_::import("os").attr("fspath")(dictionary_arg)).cast<std::string>();
@@ -473,6 +475,7 @@ py::dict encode(const py::object& frames, const fs::path& out, std::optional<dou
   // Where the container goes, before an iterable is copied to a temporary series.
   encoder::refuse_existing_output(out, resume, overwrite);
   SeriesInput in = series_input(frames, out, times, variable);
+  if (spacing) in.reader->set_spacing(*spacing);
   encoder::EncodeRequest r;
   r.coding.codec = encoder::codec_from_name(codec);
   r.coding.brick_size = encoder::brick_size_from_text(brick_size);
@@ -841,9 +844,10 @@ PYBIND11_MODULE(_volreel, m) {
         py::arg("dictionary") = "", py::arg("codec") = "ksvd", py::arg("zfp_accuracy") = py::none(),
         py::arg("atoms") = 0, py::arg("max_keyframe_gap") = py::none(),
         py::arg("overwrite") = false, py::arg("resume") = false, py::arg("times") = py::none(),
-        py::arg("variable") = "", py::arg("brick_size") = "auto",
+        py::arg("variable") = "", py::arg("brick_size") = "auto", py::arg("spacing") = py::none(),
         "Encodes frames into the container `out` as `volreel encode` does (brick_size: \"auto\" "
-        "or stored voxels per brick axis, a multiple of 6 in 12..66, as --brick-size); returns a "
+        "or stored voxels per brick axis, a multiple of 6 in 12..66, as --brick-size; spacing: "
+        "the voxel spacing (x, y, z) stored for readers such as ParaView, as --spacing); returns a "
         "dict of what it wrote and delivered. A psnr, bps or max_error target the container "
         "misses: a RuntimeWarning saying by how much, and \"targets_met\" false");
   m.def("train", &train, py::arg("frames"), py::arg("out"), py::kw_only(), py::arg("atoms") = 256,

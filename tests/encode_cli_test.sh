@@ -304,6 +304,14 @@ expect_error "bps codes sample frames whole" "$volreel" encode "$work/tall" --di
 expect_error "holds about 1.09 MiB of planes: give at least that --memory" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 100k --out "$work/x.vreel"
 expect_error "expected a size such as 2G" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory lots --out "$work/x.vreel"
 expect_error "--atoms: expected a number in \\[0, 65536\\]" "$volreel" encode "$work/tall" --atoms -5 --out "$work/x.vreel"
+expect_error "--spacing: expected three positive numbers SX,SY,SZ, found '1,0,4'" "$volreel" encode "$work/tall" --dictionary dct --spacing 1,0,4 --out "$work/x.vreel"
+expect_error "--spacing: expected three positive numbers SX,SY,SZ, found '1,2'" "$volreel" encode "$work/tall" --dictionary dct --spacing 1,2 --out "$work/x.vreel"
+# --spacing goes into the container (a raw series' own is 1, 1, 1).
+"$volreel" encode "$work/tall" --dictionary dct --max-frames 1 --spacing 0.5,0.5,2 --out "$work/spaced.vreel" > /dev/null 2>&1 \
+  || fail "encode --spacing"
+"$volreel" info "$work/spaced.vreel" > "$work/spaced.txt" 2>&1
+grep -q "spacing 0.5 0.5 2," "$work/spaced.txt" || fail "--spacing not in the container: $(head -3 "$work/spaced.txt")"
+rm -rf "$work/spaced.vreel"
 expect_error "\\(--atoms excludes --dictionary\\|--dictionary excludes --atoms\\)" "$volreel" encode "$work/tall" --atoms 128 --dictionary dct --out "$work/x.vreel"
 expect_error "\\(--dims excludes --size\\|--size excludes --dims\\)" "$volreel" gen analytic --size 16 --dims 8x8x8 --out "$work/x.vreel"
 [ ! -e "$work/x.vreel" ] || fail "a refused encode left a container behind"

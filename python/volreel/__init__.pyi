@@ -89,6 +89,7 @@ def encode(
     times: Optional[Sequence[float]] = None,
     variable: str = "",
     brick_size: Union[str, int] = "auto",
+    spacing: Optional[Tuple[float, float, float]] = None,
 ) -> dict[str, Any]: ...
 def train(
     frames: Frames,

@@ -236,8 +236,13 @@ def test_bad_input_raises_with_the_library_message(container, tmp_path):
     assert not (tmp_path / "x.vreel").exists()
     # A brick size as a number and a dictionary as a path, as `out` may be one.
     small = np.random.default_rng(1).random((2, 20, 20, 20), dtype=np.float32)
-    s = volreel.encode(small, tmp_path / "b.vreel", dictionary=Path("dct"), brick_size=12)
+    s = volreel.encode(small, tmp_path / "b.vreel", dictionary=Path("dct"), brick_size=12,
+                       spacing=(0.5, 1, 4))
     assert s["frames"] == 2 and volreel.open(tmp_path / "b.vreel").info()["brick_size"] == 12
+    assert volreel.open(tmp_path / "b.vreel").spacing == (0.5, 1.0, 4.0)
+    with pytest.raises(volreel.InputError, match="spacing: expected three positive finite"):
+        volreel.encode(small, tmp_path / "x.vreel", dictionary="dct", spacing=(1, 0, 1))
+    assert not (tmp_path / "x.vreel").exists()
     shutil.rmtree(tmp_path / "b.vreel")
     # Levels count from the finest when negative, in frame() and level_dims() alike.
     assert c.level_dims(-1) == c.dims and c.level_dims(-c.levels) == c.level_dims(0)

@@ -453,6 +453,7 @@ void add_encode_command(CLI::App& app) {
                 "(quantization inside the\n"
                 "pursuit): meets eps after quantization, at more bytes and half the speed");
   o->reader.add_to(*cmd);
+  o->reader.add_spacing_to(*cmd);
   o->command = cmd;
   cmd->callback([o] { run_encode(*o); });
 }

@@ -72,11 +72,13 @@ void refuse_unknown_command(const CLI::App& app, int argc, const char* const* ar
 /// Options that say how to read a series whose file does not describe itself; shared by every
 /// command that reads one.
 struct ReaderOptions {
-  std::string dims, dtype, dataset, variable, time_dimension;
+  std::string dims, dtype, dataset, variable, time_dimension, spacing;
   std::size_t frames = 0;
   double replace_nan = 0;
   bool replace_nan_set = false;
   void add_to(CLI::App& command);
+  /// --spacing SX,SY,SZ, for a command that writes what it reads (encode).
+  void add_spacing_to(CLI::App& command);
   datasets::OpenOptions to_open_options() const;
   /// The options given, as "--dims, --frames" (empty: none).
   std::string given() const;

@@ -1,6 +1,7 @@
 // reader_options.cpp: the command-line options that describe how to read a series, and the
 // parsing of option values shared by several commands.
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -147,6 +148,40 @@ void ReaderOptions::add_to(CLI::App& command) {
       ->each([this](const std::string&) { replace_nan_set = true; });
 }
 
+namespace {
+
+/// "SX,SY,SZ" as three positive finite numbers, or std::nullopt.
+std::optional<std::array<double, 3>> parse_spacing(const std::string& text) {
+  std::array<double, 3> spacing{};
+  std::size_t start = 0;
+  for (std::size_t a = 0; a < 3; ++a) {
+    const std::size_t comma = a < 2 ? text.find(',', start) : text.size();
+    if (comma == std::string::npos) return std::nullopt;
+    const std::optional<double> v = positive_number(text.substr(start, comma - start));
+    if (!v) return std::nullopt;
+    spacing[a] = *v;
+    start = comma + 1;
+  }
+  return spacing;
+}
+
+}  // namespace
+
+void ReaderOptions::add_spacing_to(CLI::App& command) {
+  command
+      .add_option("--spacing", spacing,
+                  "Voxel spacing SX,SY,SZ (e.g. 1,1,4 for planes four times as far apart as "
+                  "voxels along x), stored in the container\nfor readers such as ParaView; "
+                  "replaces series.json's or NetCDF's (default: theirs, else 1,1,1)")
+      ->check(CLI::Validator(
+          [](const std::string& text) {
+            return parse_spacing(text)
+                       ? std::string()
+                       : "expected three positive numbers SX,SY,SZ, found '" + text + "'";
+          },
+          "SX,SY,SZ"));
+}
+
 std::string ReaderOptions::given() const {
   std::string names;
   const auto add = [&](bool set, const char* name) {
@@ -171,6 +206,7 @@ datasets::OpenOptions ReaderOptions::to_open_options() const {
   o.variable = variable;
   o.time_dimension = time_dimension;
   if (replace_nan_set) o.replace_nan = static_cast<float>(replace_nan);
+  if (!spacing.empty()) o.spacing = parse_spacing(spacing);
   return o;
 }
 

@@ -51,6 +51,9 @@ struct OpenOptions {
   std::string time_dimension;        ///< NetCDF: the time dimension (default: the unlimited one,
                                      ///< or one named time or t)
   std::optional<float> replace_nan;  ///< substitute NaN/Inf with this value instead of failing
+  /// Voxel spacing (x, y, z), three positive finite numbers: replaces what the input says
+  /// (series.json's, NetCDF's coordinates) or the default 1, 1, 1 (raw files, HDF5).
+  std::optional<std::array<double, 3>> spacing;
 };
 
 /// Reads frames of a series. Implementations are safe to call from several threads at once.
@@ -58,6 +61,8 @@ class SeriesReader {
  public:
   virtual ~SeriesReader() = default;
   const SeriesInfo& info() const { return info_; }
+  /// Replaces the spacing the input gave; InputError unless three positive finite numbers.
+  void set_spacing(const std::array<double, 3>& spacing);
 
   /// Read frame t (0-based) into out (size dims.voxels()), converting to float32.
   /// Throws InputError naming the file on a missing frame, a short file, an I/O error, or a
@@ -153,6 +158,9 @@ class RawSeriesWriter {
   std::size_t stale_frames_ = 0;   ///< overwrite: the frame count of the old generated series
   bool finished_ = false;
 };
+
+/// Throws InputError unless `spacing` is three positive finite numbers.
+void check_spacing(const std::array<double, 3>& spacing);
 
 /// Name of frame t's file inside a raw series directory: "000017.f32".
 std::string raw_frame_name(std::size_t t);
