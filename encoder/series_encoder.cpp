@@ -158,9 +158,29 @@ nlohmann::json coding_choices_of(const format::Manifest& m) {
 /// "name old (this run: new)" joined by "; " (empty: the same, so --resume may continue it).
 std::string settings_difference(const format::Manifest& old, const format::Manifest& now) {
   std::vector<std::string> out;
+  // What sets each: the options, or the input.
+  static const std::map<std::string, std::string> set_by = {
+      {"dims", "the series"},
+      {"brick size", "--brick-size"},
+      {"codec", "--codec"},
+      {"tolerance", "--tolerance, --psnr, --bps or --max-error"},
+      {"fixed sparsity", "--fixed-sparsity"},
+      {"zfp accuracy", "--zfp-accuracy"},
+      {"value range", "the series and --max-frames"},
+      {"frames", "--max-frames"},
+      {"max keyframe gap", "--max-keyframe-gap"},
+      {"pursuit", "--pursuit"},
+      {"mean_bits", "--mean-bits"},
+      {"rate_rule", "--rate-rule"},
+      {"level_tolerance_factor", "--level-factor"},
+      {"level_detail_ratio", "--level-detail"},
+      {"dictionary", "--dictionary"}};
   const auto differ = [&](const std::string& name, const nlohmann::json& a,
                           const nlohmann::json& b) {
-    if (a != b) out.push_back(name + " " + a.dump() + " (this run: " + b.dump() + ")");
+    if (a == b) return;
+    const auto by = set_by.find(name);
+    out.push_back(name + " " + a.dump() + " (this run: " + b.dump() +
+                  (by == set_by.end() ? std::string() : "; set by " + by->second) + ")");
   };
   const auto text = [](const auto& v) { return nlohmann::json(v); };
   const auto codec = [](format::Codec c) { return nlohmann::json(codec_name(c)); };
@@ -287,12 +307,8 @@ bool prepare_container(const fs::path& out, const EncodeJob& job, format::Manife
       const format::Container old(out, true);
       if (const std::string d = settings_difference(old.manifest(), m); !d.empty())
         throw InputError("'" + out.string() + "' was encoded with other settings: " + d +
-                         "; to continue it with --resume give the same options (tolerance: "
-                         "--tolerance, --psnr or --bps as before; pursuit: --pursuit, "
-                         "level_tolerance_factor: --level-factor, level_detail_ratio: "
-                         "--level-detail, mean_bits: --mean-bits, "
-                         "rate_rule: --rate-rule, brick size: --brick-size) or --overwrite to "
-                         "start again");
+                         "; to continue it with --resume give the options it was encoded with, "
+                         "or --overwrite to start again");
       m.frames = old.manifest().frames;
       resuming = true;
     }
