@@ -339,4 +339,18 @@ CoresetHierarchy build_coreset_hierarchy(const std::vector<Volume>& frames,
   return h;
 }
 
+std::string too_few_blocks_warning(const CoresetHierarchy& hierarchy, int atoms) {
+  const auto blocks = hierarchy.levels.empty()
+                          ? std::size_t{0}
+                          : static_cast<std::size_t>(hierarchy.largest().blocks.cols());
+  if (blocks == 0 || 2 * static_cast<std::size_t>(atoms) <= blocks) return {};
+  std::size_t fewer = 1;
+  while (4 * fewer <= blocks) fewer *= 2;  // a power of two, at most half the blocks
+  return "K = " + std::to_string(atoms) + " atoms from " + std::to_string(blocks) +
+         " distinct training blocks: K-SVD fits an atom to the blocks that use it, so most atoms "
+         "keep their start and still cost their bytes in every container; train fewer (e.g. "
+         "--atoms " +
+         std::to_string(fewer) + ") or on more or larger frames";
+}
+
 }  // namespace volreel::dictionary

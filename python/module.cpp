@@ -545,6 +545,8 @@ py::dict encode(const py::object& frames, const fs::path& out, std::optional<dou
   return d;
 }
 
+std::string python_words(const std::string& message);
+
 py::dict train(const py::object& frames, const fs::path& out, int atoms, std::optional<double> psnr,
                std::optional<double> tolerance, const std::optional<std::vector<double>>& times,
                bool overwrite) {
@@ -568,6 +570,12 @@ py::dict train(const py::object& frames, const fs::path& out, int atoms, std::op
     py::gil_scoped_release release;
     dictionary::CoresetOptions coreset;
     const auto hierarchy = dictionary::build_coreset_hierarchy(*in.reader, coreset);
+    if (const std::string warning = dictionary::too_few_blocks_warning(hierarchy, atoms);
+        !warning.empty()) {
+      py::gil_scoped_acquire gil;
+      const std::string text = "volreel.train: " + python_words(warning);
+      if (PyErr_WarnEx(PyExc_RuntimeWarning, text.c_str(), 1) != 0) throw py::error_already_set();
+    }
     dictionary::TrainingOptions options;
     options.atom_count = atoms;
     options.convergence = 0.01;  // volreel train's default

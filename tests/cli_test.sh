@@ -193,6 +193,12 @@ expect_error "is part of the input" \
 (cd "$work/a" && expect_error "is part of the input" \
   "$volreel" train series.json --atoms 8 --out 000001.f32 --overwrite)
 cmp -s "$work/a/000001.f32" "$work/a1.copy" || fail "train changed its input frame"
+# Many more atoms than distinct training blocks: trained, with a warning that says how many fit.
+"$volreel" train "$work/a" --atoms 1024 --out "$work/many.bin" > /dev/null 2> "$work/many.err" || fail "train --atoms 1024: $(cat "$work/many.err")"
+grep -q "warning: K = 1024 atoms from [0-9]* distinct training blocks.*train fewer (e.g. --atoms [0-9]*)" "$work/many.err" \
+  || fail "no warning for 1024 atoms from a few blocks: $(cat "$work/many.err")"
+"$volreel" train "$work/a" --atoms 8 --out "$work/many.bin" --overwrite > /dev/null 2> "$work/many.err" || fail "train --atoms 8"
+! grep -q "warning" "$work/many.err" || fail "a warning for 8 atoms: $(cat "$work/many.err")"
 expect_error "is a file of the container.*choose another --out" \
   "$volreel" decode "$work/ab.vreel" --out "$work/ab.vreel/frames/000000.vrf"
 "$volreel" verify "$work/ab.vreel" > /dev/null 2>&1 || fail "decode --out into its container damaged it"

@@ -339,6 +339,9 @@ def test_train_then_encode_with_the_dictionary(series, tmp_path):
         volreel.train(frames, tmp_path / "d.bin", atoms=16)
     assert (tmp_path / "d.bin").read_bytes() == before
     assert volreel.train(frames, tmp_path / "d.bin", atoms=16, overwrite=True)["atoms"] == 16
+    with pytest.warns(RuntimeWarning, match=r"K = 4096 atoms from \d+ distinct training blocks.*"
+                                            r"train fewer \(e.g. atoms=\d+\)"):
+        volreel.train(frames[:1, :12, :12, :12], tmp_path / "many.bin", atoms=4096)
     volreel.train(frames, tmp_path / "d.bin", atoms=32, psnr=45, overwrite=True)
     with pytest.raises(volreel.InputError, match="is a directory"):
         volreel.train(frames, tmp_path, atoms=16)

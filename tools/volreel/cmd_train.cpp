@@ -50,6 +50,9 @@ void run_train(const TrainCommandOptions& o) {
   const auto coreset_start = Clock::now();
   const auto h = build_coresets(*series, co);
   print_coresets(h, info, seconds_since(coreset_start));
+  if (const std::string warning = dictionary::too_few_blocks_warning(h, o.training.atoms);
+      !warning.empty())
+    std::fprintf(stderr, "volreel train: warning: %s\n", warning.c_str());
   const double eps = o.training.tolerance_for(h);
   const double range = h.value_max - h.value_min;
   std::printf(

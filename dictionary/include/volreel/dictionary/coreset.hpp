@@ -30,6 +30,7 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -111,5 +112,10 @@ CoresetHierarchy build_coreset_hierarchy(const datasets::SeriesReader& series,
 /// The same from volumes already in memory (all of them are used; no frame selection).
 CoresetHierarchy build_coreset_hierarchy(const std::vector<Volume>& frames,
                                          const CoresetOptions& options);
+
+/// A warning (empty: none) where the hierarchy's largest level holds too few distinct blocks for
+/// `atoms` atoms: fewer than two a atom. K-SVD fits an atom to the blocks that use it, so most
+/// atoms would keep their start and still cost their bytes in every container.
+std::string too_few_blocks_warning(const CoresetHierarchy& hierarchy, int atoms);
 
 }  // namespace volreel::dictionary
