@@ -60,6 +60,17 @@ std::string DiskCache::file_name(const std::string& key) {
   return std::string(name) + std::string(entry_suffix);
 }
 
+namespace {
+
+/// The disk space of the file at `path` of `bytes` bytes: its blocks, at least its size.
+std::uint64_t disk_bytes(const fs::path& path, std::uint64_t bytes) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return bytes;
+  return std::max<std::uint64_t>(bytes, static_cast<std::uint64_t>(st.st_blocks) * 512);
+}
+
+}  // namespace
+
 DiskCache::DiskCache(fs::path dir, std::uint64_t max_bytes)
     : dir_(std::move(dir)), max_bytes_(max_bytes) {
   std::error_code ec;
@@ -83,7 +94,8 @@ DiskCache::DiskCache(fs::path dir, std::uint64_t max_bytes)
   for (const auto& [time, entry] : found) {
     Entry& e = entries_[entry.first];
     e.bytes = entry.second;
-    total_ += e.bytes;
+    e.disk = disk_bytes(dir_ / entry.first, e.bytes);
+    total_ += e.disk;
     e.used = ++clock_;
     by_use_[e.used] = entry.first;
   }
@@ -104,7 +116,7 @@ void DiskCache::forget(const std::string& name) {
   const auto it = entries_.find(name);
   if (it == entries_.end()) return;
   by_use_.erase(it->second.used);
-  total_ -= it->second.bytes;
+  total_ -= it->second.disk;
   entries_.erase(it);
   std::error_code ec;
   fs::remove(dir_ / name, ec);
@@ -169,7 +181,8 @@ void DiskCache::put(const std::string& key, std::span<const std::byte> data) {
   }
   Entry& e = entries_[name];
   e.bytes = file.size();
-  total_ += e.bytes;
+  e.disk = disk_bytes(dir_ / name, e.bytes);
+  total_ += e.disk;
   e.used = ++clock_;
   by_use_[e.used] = name;
   evict();

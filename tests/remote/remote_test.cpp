@@ -3,6 +3,8 @@
 // (a corrupted byte, error statuses, truncated and stalled answers, a server that stops and comes
 // back) that give clear errors and never hand out bad bytes; plus the pieces alone (Content-Range,
 // URL checks, the cache folder).
+#include <sys/stat.h>
+
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -78,7 +80,7 @@ TEST(RemoteCache, KeepsEntriesAndEvictsTheLeastRecentlyUsed) {
   test::TempDir dir("remote-cache");
   const std::vector<std::byte> a(3000, std::byte{1}), b(3000, std::byte{2}), c(3000, std::byte{3});
   {
-    DiskCache cache(dir / "cache", 8000);  // room for two entries of ~3 KB
+    DiskCache cache(dir / "cache", 9000);  // room for two entries of ~3 KB (4 KiB on the disk)
     cache.put("a", a);
     cache.put("b", b);
     EXPECT_EQ(cache.get("a"), a);  // a is now the most recent
@@ -86,10 +88,10 @@ TEST(RemoteCache, KeepsEntriesAndEvictsTheLeastRecentlyUsed) {
     EXPECT_FALSE(cache.get("b"));
     EXPECT_EQ(cache.get("a"), a);
     EXPECT_EQ(cache.get("c"), c);
-    EXPECT_LE(cache.bytes(), 8000u);
+    EXPECT_LE(cache.bytes(), 9000u);
   }
   // A new instance finds them, oldest use first out.
-  DiskCache again(dir / "cache", 8000);
+  DiskCache again(dir / "cache", 9000);
   EXPECT_EQ(again.entries(), 2u);
   EXPECT_EQ(again.get("c"), c);
   // A damaged entry is removed and counts as a miss.
@@ -100,6 +102,22 @@ TEST(RemoteCache, KeepsEntriesAndEvictsTheLeastRecentlyUsed) {
   }
   EXPECT_FALSE(again.get("a"));
   EXPECT_EQ(again.entries(), 1u);
+  // The size limit counts the disk's blocks: many small entries (bricks of a few hundred bytes)
+  // take a block each, and the folder stays within the limit on the disk.
+  {
+    DiskCache small(dir / "small", 3 * 4096);
+    for (int i = 0; i < 12; ++i)
+      small.put("brick " + std::to_string(i), std::vector<std::byte>(200));
+    std::uint64_t on_disk = 0;
+    for (const auto& e : fs::directory_iterator(dir / "small")) {
+      struct stat st {};
+      ASSERT_EQ(::stat(e.path().c_str(), &st), 0);
+      on_disk += std::max<std::uint64_t>(fs::file_size(e.path()),
+                                         static_cast<std::uint64_t>(st.st_blocks) * 512);
+    }
+    EXPECT_EQ(small.bytes(), on_disk);
+    EXPECT_LE(on_disk, 3u * 4096u);
+  }
   EXPECT_EQ(format::detail::parse_byte_size("2G", "--cache-size"), std::uint64_t{2} << 30);
   EXPECT_EQ(format::detail::parse_byte_size("500MiB", "--cache-size"), std::uint64_t{500} << 20);
   EXPECT_EQ(format::detail::parse_byte_size("4096", "--cache-size"), 4096u);

@@ -33,12 +33,14 @@ class DiskCache {
   /// Whether an entry for key exists (not read, not checked).
   bool contains(const std::string& key) const;
   /// Stores data under key (replacing it), then evicts least recently used entries while the
-  /// folder holds more than max_bytes. Data larger than max_bytes is not stored. I/O failures are
+  /// folder takes more than max_bytes of the disk (whole blocks of the file system: a brick of
+  /// 300 bytes takes 4 KiB on most). Data larger than max_bytes is not stored. I/O failures are
   /// counted (write_failures) and otherwise ignored: a cache that cannot write is only slower.
   void put(const std::string& key, std::span<const std::byte> data);
 
   const std::filesystem::path& directory() const { return dir_; }
   std::uint64_t max_bytes() const { return max_bytes_; }
+  /// The disk space the entries take (what max_bytes bounds).
   std::uint64_t bytes() const;
   std::size_t entries() const;
   std::uint64_t hits() const;
@@ -48,6 +50,7 @@ class DiskCache {
  private:
   struct Entry {
     std::uint64_t bytes = 0;  ///< the file's size
+    std::uint64_t disk = 0;   ///< the disk space it takes: total_ sums these
     std::uint64_t used = 0;   ///< use order
   };
   std::filesystem::path dir_;
