@@ -145,11 +145,21 @@ std::vector<std::byte> HttpSource::read_file(const std::string& relative,
   if (size && *size > max_bytes)
     throw format::FormatError(name(relative), "larger than " + std::to_string(max_bytes) +
                                                   " bytes (" + std::to_string(*size) + ")");
+  // A file the manifest lists (a frame, the dictionary) read whole is kept as such, under its
+  // checksum's tag; the manifest itself is always read fresh.
+  const std::string key = cache_key(relative, 0, "whole");
+  if (!key.empty())
+    if (auto data = cache_->get(key); data && data->size() <= max_bytes) {
+      std::lock_guard lock(mutex_);
+      cache_served_ += data->size();
+      return std::move(*data);
+    }
   std::vector<std::byte> data = fetch(relative, 0, 0);
   if (data.size() > max_bytes)
     throw format::FormatError(name(relative), "larger than " + std::to_string(max_bytes) +
                                                   " bytes (" + std::to_string(data.size()) + ")");
   if (relative == "manifest.json") learn_manifest(data);
+  if (!key.empty() && size && data.size() == *size) cache_->put(key, data);
   return data;
 }
 

@@ -317,6 +317,29 @@ TEST_F(RemoteContainer, ASecondRunWithTheCacheTransfersOnlyTheManifest) {
   }
 }
 
+TEST_F(RemoteContainer, FramesReadWholeComeFromTheCacheOnASecondRun) {
+  // What Python's Container.frame and `volreel decode URL` read: whole frame files.
+  test::TempDir cache("remote-cache-whole");
+  RemoteOptions o;
+  o.cache_dir = cache.path();
+  std::vector<std::byte> first;
+  for (int run = 0; run < 2; ++run) {
+    const auto source = std::make_shared<HttpSource>(url(), o);
+    const format::Container remote(source);
+    const std::uint64_t before = source->bytes_received();
+    const format::FrameFile frame = remote.open_frame(2);
+    const auto bytes = frame.view().bytes();
+    if (run == 0) {
+      first.assign(bytes.begin(), bytes.end());
+      EXPECT_GE(source->bytes_received() - before, first.size());
+    } else {
+      EXPECT_TRUE(std::equal(bytes.begin(), bytes.end(), first.begin(), first.end()));
+      EXPECT_EQ(source->bytes_received(), before);  // nothing more than the manifest
+      EXPECT_GE(source->cache_bytes_served(), first.size());
+    }
+  }
+}
+
 TEST_F(RemoteContainer, ACorruptedByteIsRequestedAgainAndNeverHandedOut) {
   test::Nginx& nginx = *nginx_;
   test::FaultProxy proxy(proxy_script, nginx.port(), dir_->path());
