@@ -624,10 +624,16 @@ void print_checks(nlohmann::json& summary, const std::optional<PolicyTotals>& pa
   }
   if (patent) {
     const bool no_holes = patent->holes == 0 && patent->roots;
-    std::printf(
-        "  patent: no frame with a hole after the first root brick arrived: %s (%zu of %zu frames "
-        "have holes)\n",
-        no_holes ? "yes" : "NO", patent->holes, patent->frames);
+    if (patent->roots)
+      std::printf(
+          "  patent: no frame with a hole after the first root brick arrived: %s (%zu of %zu "
+          "frames have holes)\n",
+          no_holes ? "yes" : "NO", patent->holes, patent->frames);
+    else
+      std::printf(
+          "  patent: no frame with a hole after the first root brick arrived: NO (the root brick "
+          "never arrived%s: nothing was drawn)\n",
+          several ? " in a tour" : "");
     summary["target_no_holes"] = no_holes;
   }
   if (!original_truth)
