@@ -135,11 +135,17 @@ RateSearch search_tolerance(const datasets::SeriesReader& series,
   if (frames == 0) frames = info.frames;
   const double voxels = static_cast<double>(info.dims.voxels()) * static_cast<double>(frames);
   const double floor_bps = 8 * static_cast<double>(fixed_bytes) / voxels;
-  if (!(target_bps > floor_bps))
+  if (!(target_bps > floor_bps)) {
+    // The basis alone (K = M³ − 1 atoms) is a few hundred bytes: then the manifest is the most.
+    const bool learned = dictionary.atom_count() > dictionary.block_length() - 1;
     throw InputError("--bps " + format::number_text(target_bps) +
-                     " is below what the dictionary and manifest alone take (" +
-                     format::number_text(floor_bps) +
-                     " bps): use a smaller dictionary (volreel train --atoms) or more frames");
+                     " is below what the container's files besides its frames take (" +
+                     std::to_string(fixed_bytes) + " bytes, the manifest and the dictionary: " +
+                     format::number_text(floor_bps) + " bps over these " + std::to_string(frames) +
+                     " frames): ask for more than that" +
+                     (learned ? ", use a smaller dictionary (volreel train --atoms)" : "") +
+                     " or encode more frames at a time");
+  }
   // 1. Sample frames, evenly spaced; a trial reads and encodes them one at a time.
   std::vector<std::size_t> sample = detail::evenly_spaced_indices(frames, sample_frames);
   const double range = tolerance_range(settings.value_min, settings.value_max);

@@ -304,6 +304,8 @@ expect_error "bps codes sample frames whole" "$volreel" encode "$work/tall" --di
 expect_error "holds about 1.09 MiB of planes: give at least that --memory" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory 100k --out "$work/x.vreel"
 expect_error "expected a size such as 2G" "$volreel" encode "$work/tall" --dictionary "$work/dict.bin" --memory lots --out "$work/x.vreel"
 expect_error "--atoms: expected a number in \\[0, 65536\\]" "$volreel" encode "$work/tall" --atoms -5 --out "$work/x.vreel"
+expect_error "--bps 0.01 is below what the container's files besides its frames take ([0-9]* bytes, the manifest and the dictionary: [0-9.]* bps over these 1 frames): ask for more than that or encode more frames" \
+  "$volreel" encode "$work/tall" --dictionary dct --bps 0.01 --max-frames 1 --out "$work/x.vreel"
 expect_error "--spacing: expected three positive numbers SX,SY,SZ, found '1,0,4'" "$volreel" encode "$work/tall" --dictionary dct --spacing 1,0,4 --out "$work/x.vreel"
 expect_error "--spacing: expected three positive numbers SX,SY,SZ, found '1,2'" "$volreel" encode "$work/tall" --dictionary dct --spacing 1,2 --out "$work/x.vreel"
 # --spacing goes into the container (a raw series' own is 1, 1, 1).
