@@ -370,11 +370,15 @@ std::vector<std::byte> quantize_brick(format::BrickShape shape, const float* col
       parts.mean[b] = qmean;
     };
     // A brick's blocks are independent: with options.parallel_blocks (the caller codes fewer
-    // bricks at once than there are threads) they are shared among the threads.
-#pragma omp parallel if (options.parallel_blocks)
+    // bricks at once than there are threads) they are shared among the threads, in runs of
+    // `share` blocks; a brick of no more than one run (12³: 8 blocks) is coded on this thread,
+    // since a parallel region would hand the other threads nothing but its wake-up and barrier,
+    // for every brick of a column of them (a volume long along z).
+    constexpr std::uint32_t share = 8;
+#pragma omp parallel if (options.parallel_blocks && blocks > share)
     {
       Scratch scratch(slots);
-#pragma omp for schedule(dynamic, 8)
+#pragma omp for schedule(dynamic, share)
       for (std::ptrdiff_t bi = 0; bi < static_cast<std::ptrdiff_t>(blocks); ++bi) {
         const auto b = static_cast<std::uint32_t>(bi);
         if (coded(b)) code_block(b, scratch);  // others: sparsity and mean 0, no entry

@@ -67,15 +67,40 @@ std::array<std::uint32_t, 3> coded_box(BrickShape shape, std::array<std::uint32_
   return box;
 }
 
+double stored_brick_share(std::array<std::uint32_t, 3> dims, BrickShape shape) {
+  double bricks = 0;
+  for (const LevelGeometry& g : level_geometry(dims, shape))
+    bricks += static_cast<double>(g.grid[0]) * g.grid[1] * g.grid[2];
+  const double side = shape.size;
+  return bricks * side * side * side / (static_cast<double>(dims[0]) * dims[1] * dims[2]);
+}
+
 BrickShape choose_brick_shape(std::array<std::uint32_t, 3> dims) {
-  std::vector<std::pair<std::uint32_t, double>> shares;  // every size, smallest first
+  struct Candidate {
+    std::uint32_t size;
+    double coded, stored;
+  };
+  std::vector<Candidate> all;  // every size, smallest first
   for (std::uint32_t size = min_brick_size; size <= max_brick_size; size += brick_block_size)
-    shares.emplace_back(size, coded_block_share(dims, {size}));
-  double least = shares.front().second;
-  for (const auto& [size, share] : shares) least = std::min(least, share);
-  for (const auto& [size, share] : shares)
-    if (share <= least * 1.01) return {size};
-  return {max_brick_size};  // not reached: the least is one of them
+    all.push_back({size, coded_block_share(dims, {size}), stored_brick_share(dims, {size})});
+  // The least coded share among `candidates`, the smaller size on a tie within 1 %.
+  const auto least_coded = [](const std::vector<Candidate>& candidates) {
+    double least = std::numeric_limits<double>::infinity();
+    for (const Candidate& c : candidates) least = std::min(least, c.coded);
+    for (const Candidate& c : candidates)
+      if (c.coded <= least * 1.01) return c;
+    return Candidate{max_brick_size, least, 0};  // not reached: the least is one of them
+  };
+  const Candidate best = least_coded(all);
+  double fewest = std::numeric_limits<double>::infinity();
+  for (const Candidate& c : all) fewest = std::min(fewest, c.stored);
+  const double voxels = static_cast<double>(dims[0]) * dims[1] * dims[2];
+  if (4 * best.stored * voxels <= max_stored_brick_bytes || best.stored <= 2 * fewest)
+    return {best.size};
+  std::vector<Candidate> lean;
+  for (const Candidate& c : all)
+    if (c.stored <= 2 * fewest) lean.push_back(c);
+  return {least_coded(lean).size};
 }
 
 std::uint64_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z) {

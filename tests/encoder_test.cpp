@@ -377,6 +377,33 @@ TEST(Encoder, TheBrickSizeChooserCountsTheBlocksTheEncoderStores) {
   EXPECT_EQ(format::choose_brick_shape(dims).size, 30u);
 }
 
+TEST(Encoder, TheBrickSizeChooserKeepsThinVolumesInMemory) {
+  // A plane of 4096² or a line of 100,000 voxels in the bricks of least coded share (66³, 54³)
+  // would hold 93 and about 6,000 values per voxel, over 1 GiB a frame (the encoder's frame,
+  // the player's atlas): the chooser takes the least coded share among the sizes within twice
+  // the leanest.
+  for (const std::array<std::uint32_t, 3> dims : {std::array<std::uint32_t, 3>{4096, 4096, 1},
+                                                  {100000, 1, 1},
+                                                  {1, 1, 100000},
+                                                  {1, 100000, 1},
+                                                  {20000, 30, 50}}) {
+    double fewest = 1e300;
+    for (std::uint32_t size = format::min_brick_size; size <= format::max_brick_size; size += 6)
+      fewest = std::min(fewest, format::stored_brick_share(dims, {size}));
+    const format::BrickShape chosen = format::choose_brick_shape(dims);
+    EXPECT_LE(format::stored_brick_share(dims, chosen), 2 * fewest)
+        << dims[0] << "x" << dims[1] << "x" << dims[2] << ": bricks of " << chosen.size;
+  }
+  EXPECT_EQ(format::choose_brick_shape({1, 1, 100000}).size, 12u);
+  // Smaller thin volumes, and volumes of some thickness, keep the least coded share: their
+  // bricks take less memory, and fewer bytes are worth more there.
+  EXPECT_EQ(format::choose_brick_shape({512, 512, 1}).size, 66u);
+  EXPECT_EQ(format::choose_brick_shape({1, 1, 20000}).size, 54u);
+  EXPECT_EQ(format::choose_brick_shape({64, 64, 64}).size, 66u);
+  EXPECT_EQ(format::choose_brick_shape({96, 64, 40}).size, 66u);
+  EXPECT_EQ(format::choose_brick_shape({2048, 2048, 256}).size, 66u);
+}
+
 TEST(Encoder, PaddingBlocksOutsideTheBoxAreNotStored) {
   // 40 voxels in x: the second brick column holds interior voxels 34..39 (stored indices 1..6)
   // and the voxel past the end (stored 7), so its blocks with x index ≥ 2 (stored 12..35) are

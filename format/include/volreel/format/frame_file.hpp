@@ -138,9 +138,18 @@ double coded_block_share(std::array<std::uint32_t, 3> dims, BrickShape shape);
 /// its end, which a renderer's linear filter reads at the volume's far face (1..n each).
 std::array<std::uint32_t, 3> coded_box(BrickShape shape, std::array<std::uint32_t, 3> position,
                                        std::array<std::uint32_t, 3> dims);
+/// Per voxel of a volume of `dims`, the values of the whole bricks of `shape` over all levels:
+/// what the encoder's frames, a decoded level and the player's atlas hold in memory.
+double stored_brick_share(std::array<std::uint32_t, 3> dims, BrickShape shape);
 /// The brick shape whose coded_block_share is the least for `dims` (the smaller size on a tie
-/// within 1 %: finer units to stream).
+/// within 1 %: finer units to stream). Where a frame's bricks of that shape would take more than
+/// max_stored_brick_bytes as float32 and hold more than twice the values per voxel the leanest
+/// shape's do (a volume thin along an axis: a plane of 4096² in bricks of 66³ holds 93 values per
+/// voxel, 6 GB), the least coded share among the shapes within twice the leanest.
 BrickShape choose_brick_shape(std::array<std::uint32_t, 3> dims);
+/// A frame's whole bricks (float32, all levels) above which choose_brick_shape weighs memory:
+/// what the encoder holds of a frame, and a player's atlas of all of it.
+inline constexpr double max_stored_brick_bytes = 1024.0 * 1024 * 1024;
 
 /// Morton code of brick coordinates (x in the lowest bit of each triple), up to 21 bits per axis.
 std::uint64_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z);
