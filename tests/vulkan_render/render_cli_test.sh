@@ -174,20 +174,32 @@ mkdir -p "$dir/const"
 "$volreel" encode "$dir/const/c.f32" --dims 12x12x12 --frames 1 --codec zfp --out "$dir/const.vreel" > /dev/null 2>&1
 "$volreel" render "$dir/const.vreel" --out "$dir/const_r" --size 32x32 --max-frames 1 --cpu > "$dir/const.log" 2>&1 \
   || { cat "$dir/const.log"; echo "render of a constant container failed"; exit 1; }
-# SIGTERM (as Ctrl-C): it stops between frames, says what it left, and every PNG has its row
-# (the frames of an earlier, longer render into the folder removed too).
-"$volreel" render "$dir/test.vreel" --tour "$dir/tour.json" --out "$dir/int" --cpu > /dev/null 2>&1
-rm "$dir/int"/frame_0000[0-3].png
-"$volreel" render "$dir/test.vreel" --out "$dir/int" --size 64x64 --cpu --realtime > /dev/null 2> "$dir/int.log" &
-pid=$!
-for _ in $(seq 600); do [ -e "$dir/int/frame_00002.png" ] && break; sleep 0.1; done
-kill -TERM "$pid"
-status=0
-wait "$pid" || status=$?
-[ "$status" = 143 ] || { cat "$dir/int.log"; echo "an interrupted render: exit status $status, expected 143"; exit 1; }
-grep -q "interrupted after [0-9]* of [0-9]* frames: .* and their rows of metrics.csv" "$dir/int.log" \
+# SIGTERM (as Ctrl-C): it stops between frames and says what it left. Into a folder of its own
+# every PNG it kept has its row; over an earlier render, which it would replace, the earlier one
+# stays as it was (the new frames were drawn aside) and nothing of the new one is left.
+interrupt_render() {  # OUT: render into OUT in real time, stopped once FILE is there
+  local out=$1 file=$2
+  "$volreel" render "$dir/test.vreel" --out "$out" --size 64x64 --cpu --realtime > /dev/null 2> "$dir/int.log" &
+  local pid=$!
+  for _ in $(seq 600); do [ -e "$file" ] && break; sleep 0.1; done
+  kill -TERM "$pid"
+  status=0
+  wait "$pid" || status=$?
+  [ "$status" = 143 ] || { cat "$dir/int.log"; echo "an interrupted render: exit status $status, expected 143"; exit 1; }
+}
+interrupt_render "$dir/int" "$dir/int/frame_00002.png"
+grep -q "interrupted after [0-9]* of [0-9]* frames: .* holds frame_00000.png .. frame_000[0-9]*.png, each with its row of metrics.csv" "$dir/int.log" \
   || { cat "$dir/int.log"; echo "an interrupted render said nothing"; exit 1; }
 pngs=$(ls "$dir/int"/frame_*.png | wc -l)
 rows=$(($(wc -l < "$dir/int/metrics.csv") - 1))
 [ "$pngs" = "$rows" ] || { echo "an interrupted render left $pngs frames and $rows rows"; exit 1; }
+"$volreel" render "$dir/test.vreel" --tour "$dir/tour.json" --out "$dir/int2" --cpu > /dev/null 2>&1
+cp "$dir/int2/metrics.csv" "$dir/int2.csv"
+cp "$dir/int2/frame_00001.png" "$dir/int2-1.png"
+interrupt_render "$dir/int2" "$dir/int2/.volreel-new/frame_00002.png"
+grep -q "interrupted after [0-9]* of [0-9]* frames, which are not kept: .*int2 holds the earlier render's frame_00000.png .. frame_[0-9]*.png and metrics.csv as they were" "$dir/int.log" \
+  || { cat "$dir/int.log"; echo "an interrupted render over an earlier one said nothing"; exit 1; }
+cmp -s "$dir/int2/metrics.csv" "$dir/int2.csv" || { echo "an interrupted render changed the earlier metrics.csv"; exit 1; }
+cmp -s "$dir/int2/frame_00001.png" "$dir/int2-1.png" || { echo "an interrupted render changed an earlier frame"; exit 1; }
+[ ! -e "$dir/int2/.volreel-new" ] || { echo "an interrupted render left its frames aside"; exit 1; }
 echo "render CLI: OK"

@@ -131,19 +131,7 @@ void run_render(const RenderCommandOptions& o) {
   if (!o.video.empty()) {
     if (fs::is_directory(o.video))
       throw InputError("--video " + o.video + ": is a directory; give the video file's name");
-    // Not one of the files this render writes into --out.
-    const fs::path video = o.video,
-                   folder = video.parent_path().empty() ? "." : video.parent_path();
-    const std::string name = video.filename().string();
-    const bool frame_name = name.rfind("frame_", 0) == 0 && name.size() > 4 &&
-                            name.compare(name.size() - 4, 4, ".png") == 0;
-    const auto folder_of = [](const fs::path& p) {  // "frames/" and "frames" alike
-      const fs::path c = fs::weakly_canonical(p);
-      return c.has_filename() ? c : c.parent_path();
-    };
-    if (folder_of(folder) == folder_of(out) && (name == "metrics.csv" || frame_name))
-      throw InputError("--video " + o.video + ": is the name of one of the frames or of " +
-                       "metrics.csv in --out; give the video another name (e.g. tour.mp4)");
+    // (Its name, a video's, is none of the files this render writes into --out.)
     // ffmpeg writes the video in place: into a FIFO or a device too.
     const fs::file_type type = fs::status(o.video).type();
     if (type != fs::file_type::fifo && type != fs::file_type::character)
@@ -199,9 +187,26 @@ void run_render(const RenderCommandOptions& o) {
 
   // 3. Frames: render, write the PNG on a worker thread while the next frame renders.
   const std::size_t earlier = earlier_render_frames(out);
-  std::ofstream csv(out / "metrics.csv");
+  // Over an earlier render the frames go to a folder of their own and are moved in once all are
+  // drawn, so that a run that fails or is interrupted leaves the earlier one whole.
+  const fs::path written = earlier > 0 ? out / ".volreel-new" : out;
+  struct Aside {
+    fs::path dir;
+    ~Aside() {
+      std::error_code ec;
+      if (!dir.empty()) fs::remove_all(dir, ec);
+    }
+  } aside;
+  if (earlier > 0) {
+    std::error_code ec;
+    fs::remove_all(written, ec);  // what an interrupted run left
+    if (!fs::create_directory(written, ec) || ec)
+      throw InputError("cannot create " + written.string() + ": " + ec.message());
+    aside.dir = written;
+  }
+  std::ofstream csv(written / "metrics.csv");
   if (!csv)
-    throw InputError("cannot write " + (out / "metrics.csv").string() + ": " +
+    throw InputError("cannot write " + (written / "metrics.csv").string() + ": " +
                      std::strerror(errno));
   csv << "frame,time_s,playhead,frame_ms,fps,schedule_ms,upload_ms,decode_ms,render_ms,readback_ms,"
          "atlas_occupied,"
@@ -277,9 +282,10 @@ void run_render(const RenderCommandOptions& o) {
         ++compared;
       }
       if (writing.valid()) writing.get();
-      writing = std::async(std::launch::async, [path = out / frame_png(i), img = std::move(image)] {
-        cpu_render::write_png(path, img);
-      });
+      writing =
+          std::async(std::launch::async, [path = written / frame_png(i), img = std::move(image)] {
+            cpu_render::write_png(path, img);
+          });
       const auto& s = report.stats;
       const auto& t = report.timings;
       const double frame_ms = t.frame_ms + readback_ms;
@@ -310,16 +316,27 @@ void run_render(const RenderCommandOptions& o) {
   } catch (const Interrupted&) {
     if (writing.valid()) writing.get();
     csv.close();
-    remove_later_frames(out, drawn, earlier);  // an earlier, longer render's: not this one's
-    std::fprintf(stderr,
-                 "\nvolreel render: interrupted after %zu of %zu frames: %s holds %s and their "
-                 "rows of metrics.csv\n",
-                 drawn, frames, out.c_str(), frames_text(drawn).c_str());
+    if (earlier > 0)
+      std::fprintf(stderr,
+                   "\nvolreel render: interrupted after %zu of %zu frames, which are not kept: "
+                   "%s holds the earlier render's %s and metrics.csv as they were\n",
+                   drawn, frames, out.c_str(), frames_text(earlier).c_str());
+    else
+      std::fprintf(stderr,
+                   "\nvolreel render: interrupted after %zu of %zu frames: %s holds %s, each with "
+                   "its row of metrics.csv\n",
+                   drawn, frames, out.c_str(), frames_text(drawn).c_str());
     throw;
   }
   stop.reset();
   csv.close();
-  if (!csv) throw InputError("writing " + (out / "metrics.csv").string() + " failed");
+  if (!csv) throw InputError("writing " + (written / "metrics.csv").string() + " failed");
+  if (earlier > 0) {
+    // The earlier render's metrics.csv goes first, so that none lists a mix of frames.
+    fs::remove(out / "metrics.csv");
+    for (std::size_t i = 0; i < frames; ++i) fs::rename(written / frame_png(i), out / frame_png(i));
+    fs::rename(written / "metrics.csv", out / "metrics.csv");
+  }
 
   // 4. Summary, video.
   const double n = static_cast<double>(std::max<std::size_t>(frames, 1));
@@ -432,7 +449,18 @@ void add_render_command(CLI::App& app) {
       "cool-warm, fire, turbulence, transparent) or a JSON file; default: the tour's, or auto "
       "without --tour");
   cmd->add_option("--video", o->video,
-                  "Also encode the frames into this video with ffmpeg (H.264)");
+                  "Also encode the frames into this video with ffmpeg (H.264), an .mp4, .mkv or "
+                  ".mov file")
+      ->check(CLI::Validator(
+          [](const std::string& text) {
+            const std::string ext = fs::path(text).extension().string();
+            return ext == ".mp4" || ext == ".mkv" || ext == ".mov"
+                       ? std::string()
+                       : "expected a video file named .mp4, .mkv or .mov (ffmpeg chooses the "
+                         "container by it), found '" +
+                             text + "'";
+          },
+          "VIDEO"));
   add_renderer_options(*cmd, o->renderer, o->cpu);
   add_loop_options(*cmd, o->loop);
   cmd->add_flag("--realtime", o->realtime,
@@ -446,6 +474,7 @@ void add_render_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--max-frames", o->max_frames,
                   "Render only the first N frames of the tour (0: all of them)")
+      ->check(in_range(0, 1e8))
       ->capture_default_str();
   cmd->add_option(
       "--compare", o->compare,
