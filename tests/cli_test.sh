@@ -53,6 +53,14 @@ grep -q "^volreel: error: --size" "$work/usage.err" || fail "a repeated option's
 status=0
 "$volreel" encod "$work/a" > /dev/null 2>&1 || status=$?
 [ "$status" = 2 ] || fail "an unknown command: exit status $status, expected 2"
+# Values the player's options refuse are command-line mistakes too, before anything is read.
+for args in "render $work/none.vreel --out $work/r --size 0x0" "render $work/none.vreel --out $work/r --max-frames -1" \
+            "play $work/none.vreel --latency 3parsecs" "bench play $work/none.vreel --bandwidth 5xb"; do
+  status=0
+  # shellcheck disable=SC2086
+  "$volreel" $args > /dev/null 2>&1 || status=$?
+  [ "$status" = 2 ] || fail "volreel $args: exit status $status, expected 2"
+done
 # A seed is a whole number written in digits: "-1" was taken as 2^64 - 1.
 for seed in -1 1.5 abc; do
   expect_error "expected a seed, a whole number" "$volreel" gen turbulence --size 16 --frames 1 --seed "$seed" --out "$work/x"

@@ -317,7 +317,9 @@ void add_bench_play_command(CLI::App& bench) {
                            "caster)");
   o->loop.size = "512x512";
   cmd->add_option("CONTAINER", o->container, "The container directory NAME.vreel")->required();
-  cmd->add_option("--size", o->loop.size, "Image size WxH")->capture_default_str();
+  cmd->add_option("--size", o->loop.size, "Image size WxH")
+      ->check(image_size())
+      ->capture_default_str();
   cmd->add_option("--frames-per-phase", o->frames_per_phase, "Frames measured per phase")
       ->check(in_range(1, 1 << 20))
       ->capture_default_str();

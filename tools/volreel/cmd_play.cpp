@@ -117,15 +117,19 @@ void add_play_command(CLI::App& app) {
                                      "player/app/include/volreel/app/script.hpp).");
   cmd->add_option("CONTAINER", o->player.container, container_argument_help)->required();
   add_remote_options(*cmd, o->remote);
-  cmd->add_option("--size", o->size, "Window size WxH, pixels")->capture_default_str();
+  cmd->add_option("--size", o->size, "Window size WxH, pixels")
+      ->check(image_size())
+      ->capture_default_str();
   cmd->add_option("--atlas-mb", o->atlas_mb, "Brick atlas memory budget, MiB")
       ->capture_default_str();
   cmd->add_option("--bandwidth", o->bandwidth,
                   "Limit brick reads to this rate, e.g. 20MB/s, 500kB/s or 1GB/s (a bare number: "
                   "MB/s; 0: unlimited)")
+      ->check(parsed_by([](const std::string& text) { loop::parse_bandwidth(text); }))
       ->capture_default_str();
   cmd->add_option("--latency", o->latency,
                   "Add this latency to every brick read, e.g. 50ms or 0.2s (a bare number: ms)")
+      ->check(parsed_by([](const std::string& text) { loop::parse_latency(text); }))
       ->capture_default_str();
   cmd->add_option("--upload-mb", o->upload_mb,
                   "Compressed brick data decoded per frame at most, MiB")

@@ -442,7 +442,8 @@ void add_render_command(CLI::App& app) {
                   "render's there are replaced, and its frames past this run's last removed at "
                   "the end")
       ->required();
-  cmd->add_option("--size", o->loop.size, "Image size WxH (default: the tour's, 512x512)");
+  cmd->add_option("--size", o->loop.size, "Image size WxH (default: the tour's, 512x512)")
+      ->check(image_size());
   cmd->add_option(
       "--transfer", o->transfer,
       "Transfer function for every frame: auto (from the data's quantiles), a preset (grayscale, "

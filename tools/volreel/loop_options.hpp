@@ -4,12 +4,38 @@
 
 #include <CLI/CLI.hpp>
 
+#include <functional>
+#include <stdexcept>
 #include <string>
 
 #include "volreel/datasets/volume.hpp"
 #include "volreel/loop/loop_settings.hpp"
 
 namespace volreel::cli {
+
+/// A check that runs `parse` (loop::parse_size, parse_bandwidth, ...) on an option's text when
+/// the command line is read, so that a value it refuses is a command-line mistake (status 2),
+/// with its message.
+inline CLI::Validator parsed_by(std::function<void(const std::string&)> parse) {
+  return CLI::Validator(
+      [parse = std::move(parse)](std::string& text) {
+        try {
+          parse(text);
+          return std::string();
+        } catch (const std::invalid_argument& e) {
+          const std::string message = e.what();
+          const std::size_t colon = message.find(": ");  // "--size: expected ...": CLI11 names it
+          return message.starts_with("--") && colon != std::string::npos ? message.substr(colon + 2)
+                                                                         : message;
+        }
+      },
+      "");
+}
+
+/// --size WIDTHxHEIGHT, checked by loop::parse_size.
+inline CLI::Validator image_size() {
+  return parsed_by([](const std::string& text) { loop::parse_size(text); });
+}
 
 /// --atlas-mb, --bandwidth, --latency, --sse-target, --upload-budget, --step,
 /// --max-step-doublings, --no-culling, --decode, --lod-fade, --lod-fade-out, --spatial-blend,
@@ -22,8 +48,10 @@ inline void add_loop_options(CLI::App& cmd, loop::LoopSettings& loop) {
       ->capture_default_str();
   cmd.add_option("--bandwidth", loop.bandwidth,
                  "Simulated read bandwidth, e.g. 20MB/s (0: unlimited)")
+      ->check(parsed_by([](const std::string& text) { loop::parse_bandwidth(text); }))
       ->capture_default_str();
   cmd.add_option("--latency", loop.latency, "Simulated latency per request, e.g. 50ms")
+      ->check(parsed_by([](const std::string& text) { loop::parse_latency(text); }))
       ->capture_default_str();
   cmd.add_option("--sse-target", loop.sse_target, "Screen-space error target, pixels per voxel")
       ->capture_default_str();
