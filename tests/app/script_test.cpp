@@ -98,6 +98,9 @@ TEST(Script, ErrorsNameTheEntry) {
                 .find("the folder no-such-folder does not exist; make it first"),
             std::string::npos);
   EXPECT_NE(message("1 screenshot .").find("'1 screenshot .': .: is a folder"), std::string::npos);
+  EXPECT_NE(message("1 screenshot /dev/null/a.png")
+                .find("/dev/null is not a folder; give the PNG a name in a folder"),
+            std::string::npos);
   EXPECT_EQ(message("1 screenshot A.PNG"), "no error");
   // Not-a-number and infinity are no time, frame or argument (a NaN time never came, a NaN zoom
   // drew nothing); nor is a frame number past what a count holds.

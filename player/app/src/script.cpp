@@ -48,7 +48,9 @@ std::string screenshot_path_problem(const std::string& path) {
   if (extension != ".png") return "the screenshot is a PNG image; give a name ending in .png";
   const std::filesystem::path folder = shot.has_parent_path() ? shot.parent_path() : ".";
   if (!std::filesystem::is_directory(folder, ec))
-    return "the folder " + folder.string() + " does not exist; make it first";
+    return std::filesystem::exists(folder, ec)
+               ? folder.string() + " is not a folder; give the PNG a name in a folder"
+               : "the folder " + folder.string() + " does not exist; make it first";
   return "";
 }
 
