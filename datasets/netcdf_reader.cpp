@@ -168,7 +168,8 @@ class NetcdfReader final : public SeriesReader {
   NetcdfReader(fs::path file, const OpenOptions& options)
       : file_(std::move(file)), replace_nan_(options.replace_nan) {
     std::lock_guard lock(netcdf_mutex());
-    check(nc_open(file_.c_str(), NC_NOWRITE, &ncid_), "cannot open it as NetCDF");
+    check(nc_open(file_.c_str(), NC_NOWRITE, &ncid_),
+          "cannot open it as NetCDF (its header may be damaged or cut short)");
     try {
       check_classic_size();
       open(options);
@@ -421,9 +422,26 @@ class NetcdfReader final : public SeriesReader {
     const std::vector<std::string> found = candidates();
     std::string listed;
     for (const auto& c : found) listed += (listed.empty() ? "" : ", ") + c;
-    if (listed.empty()) listed = "none";
+    int variables = 0;
+    check(nc_inq_nvars(ncid_, &variables), "variables");
+    if (listed.empty())
+      listed =
+          variables == 0 ? "none: the file holds no variable at all (a damaged header?)" : "none";
     variable_ = options.variable;
     if (variable_.empty()) {
+      if (found.empty()) {
+        // Every variable with its dimensions: what the file holds instead.
+        std::string all;
+        for (int v = 0; v < variables; ++v) {
+          std::string dims;
+          for (const int d : variable_dimensions(v))
+            dims += (dims.empty() ? "" : ", ") + dimension_name(d);
+          all += (all.empty() ? "" : "; ") + variable_name(v) + " (" + dims + ")";
+        }
+        fail("holds no variable of 3 or 4 dimensions ((time,) z, y, x), which volreel reads" +
+             (all.empty() ? std::string(", and no variable at all (a damaged header?)")
+                          : ": its variables are " + all));
+      }
       if (found.size() != 1)
         fail("say which variable to read with --variable NAME (variables of 3 or 4 dimensions: " +
              listed + ")");

@@ -238,6 +238,11 @@ std::unique_ptr<SeriesReader> open_any(const fs::path& path, const OpenOptions& 
     return detail::open_hdf5(path, options);
   }
   if (kind == InputKind::netcdf) {
+    // Named as one, but with neither classic NetCDF's nor NetCDF-4's (HDF5's) signature.
+    if (!signature)
+      throw InputError("'" + path.string() + "' is named as a NetCDF file but is not one (it " +
+                       "lacks the signature of classic NetCDF, \"CDF\", and of NetCDF-4): a raw " +
+                       "file named so needs another name, and a NetCDF file may be damaged");
     refuse_other_options(path, options, InputKind::netcdf, "a NetCDF file");
     return detail::open_netcdf(path, options);
   }

@@ -551,6 +551,15 @@ TEST(Hdf5, CorruptFilesAreRejected) {
   write_bytes(path, junk.data(), junk.size());
   expect_error([&] { vd::open_series(path); },
                {"bad.h5", "is named as an HDF5 file but is not one", "signature"});
+  // The same for NetCDF: a raw file named .nc is not taken for NetCDF (whose reader then said
+  // "Unknown file format", after the options had been refused as a raw file's).
+  const fs::path nc = dir / "raw.nc";
+  write_bytes(nc, junk.data(), junk.size());
+  vd::OpenOptions raw_options;
+  raw_options.dims = Dims{2, 2, 2};
+  for (const auto& options : {vd::OpenOptions{}, raw_options})
+    expect_error([&] { vd::open_series(nc, options); },
+                 {"raw.nc", "is named as a NetCDF file but is not one", "signature"});
   // Not the name but the bytes: an HDF5 file named .dat is read as HDF5.
   const fs::path named = dir / "cutout.dat";
   {
@@ -758,6 +767,24 @@ TEST(NetCdf, MissingValuesAndWrongChoicesAreClearErrors) {
   const fs::path bad = dir.path() / "bad.nc";
   std::ofstream(bad) << "not netcdf";
   expect_error([&] { datasets::open_series(bad, o); }, {"bad.nc", "NetCDF"});
+  // A header cut short, which the library reads as a file of no variables.
+  write_netcdf(classic, false, 0);
+  fs::resize_file(classic, 60);
+  expect_error(
+      [&] { datasets::open_series(classic, o); },
+      {"classic.nc", "no variable 'salt'", "holds no variable at all (a damaged header?)"});
+  // No variable of 3 or 4 dimensions: said so with what there is, not "say which variable".
+  const fs::path five = dir.path() / "five.nc";
+  int nc = 0, dims[5] = {}, var = 0;
+  ASSERT_EQ(nc_create(five.c_str(), NC_CLOBBER, &nc), NC_NOERR);
+  const char* names[5] = {"time", "e", "z", "y", "x"};
+  for (int d = 0; d < 5; ++d) nc_def_dim(nc, names[d], 2, &dims[d]);
+  nc_def_var(nc, "p", NC_FLOAT, 5, dims, &var);
+  nc_enddef(nc);
+  nc_close(nc);
+  expect_error([&] { datasets::open_series(five, datasets::OpenOptions{}); },
+               {"five.nc", "holds no variable of 3 or 4 dimensions",
+                "its variables are p (time, e, z, y, x)"});
 }
 
 TEST(NetCdf, AxesNamedXYZAreReadByNameAndValidRangeMarksMissingValues) {
