@@ -32,6 +32,10 @@ echo "$out" | json '1 if all(abs(f["psnr"] - 20 * math.log10(d["sequence"]["rang
   || fail "a frame's PSNR is not against the sequence's range: $out"
 grep -q '^all,' <<< "$("$volreel" compare "$work/a" "$work/b" --csv 2>/dev/null)" || fail "CSV lacks the sequence row"
 grep -q 'PSNR' <<< "$("$volreel" compare "$work/a" "$work/b" 2>/dev/null)" || fail "table lacks PSNR"
+# A constant original: PSNR undefined, and the table says so.
+/usr/bin/python3 -c "import struct,sys; open(sys.argv[1],'wb').write(struct.pack('<7680f', *[2.0]*7680))" "$work/const.raw"
+"$volreel" compare "$work/const.raw" "$work/a/000000.f32" --dims 24x20x16 --no-ssim > "$work/const.txt" 2>&1 || fail "compare with a constant original"
+grep -q "A is constant (its range is 0): PSNR is not defined for it" "$work/const.txt" || fail "compare with a constant original: $(cat "$work/const.txt")"
 
 # A raw file read with --dims compares equal to the series frame it was copied from.
 cp "$work/a/000002.f32" "$work/frame.raw"

@@ -244,6 +244,10 @@ void compare_series(const CompareOptions& o) {
       "as encode's --psnr).\n"
       "PSNRzfp = 20*log10(range/(2*RMSE)), zfp's definition (6.02 dB lower). SSIM: 3D, Gaussian "
       "window sigma 1.5.\n");
+  if (!(total.original_max > total.original_min) && total.rmse > 0)
+    std::printf(
+        "A is constant (its range is 0): PSNR is not defined for it (-inf above, null in "
+        "--json); RMSE and the max error measure B.\n");
   enforce_bounds();
 }
 
