@@ -80,7 +80,7 @@ grep -q "missing.vreel" "$dir/bad.log" || { cat "$dir/bad.log"; exit 1; }
 [ "$(wc -l < "$dir/cpu/metrics.csv")" -eq 4 ] || { echo "metrics.csv of 3 frames expected"; exit 1; }
 grep -q "removed 17 frame_NNNNN.png past frame_00002.png" "$dir/again.log" || { cat "$dir/again.log"; exit 1; }
 # --video is checked before the frames are rendered; an option found bad leaves no --out folder.
-for video in /proc/x.mp4 "$dir/series" "$dir/series/000000.f32/x.mp4"; do
+for video in /proc/x.mp4 "$dir/series" "$dir/series/000000.f32/x.mp4" "$dir/test.vreel/x.mp4"; do
   if "$volreel" render "$dir/test.vreel" --tour "$dir/tour.json" --out "$dir/novideo" --cpu \
     --video "$video" > "$dir/bad.log" 2>&1; then
     echo "accepted --video $video"; exit 1

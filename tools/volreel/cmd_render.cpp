@@ -131,6 +131,9 @@ void run_render(const RenderCommandOptions& o) {
   if (!o.video.empty()) {
     if (fs::is_directory(o.video))
       throw InputError("--video " + o.video + ": is a directory; give the video file's name");
+    if (datasets::path_within(o.container, o.video))
+      throw InputError("--video " + o.video + ": is inside the container " + o.container +
+                       "; choose a place outside it");
     // (Its name, a video's, is none of the files this render writes into --out.)
     // ffmpeg writes the video in place: into a FIFO or a device too.
     const fs::file_type type = fs::status(o.video).type();

@@ -21,7 +21,7 @@ namespace volreel::cli {
 class GroundTruth {
  public:
   GroundTruth(const std::string& path, const ReaderOptions& reader, const format::Manifest& m)
-      : series_(datasets::open_series(path, reader.to_open_options())) {
+      : series_(open(path, reader)) {
     const auto& info = series_->info();
     if (info.dims.x != m.dims[0] || info.dims.y != m.dims[1] || info.dims.z != m.dims[2])
       throw InputError("--compare " + path + ": the series is " + to_string(info.dims) +
@@ -52,6 +52,16 @@ class GroundTruth {
   }
 
  private:
+  /// The series, its errors named as --compare's.
+  static std::unique_ptr<datasets::SeriesReader> open(const std::string& path,
+                                                      const ReaderOptions& reader) {
+    try {
+      return datasets::open_series(path, reader.to_open_options());
+    } catch (const InputError& e) {
+      throw InputError("--compare: " + std::string(e.what()));
+    }
+  }
+
   const Volume& frame(std::size_t t) {
     auto it = cache_.find(t);
     if (it != cache_.end()) return it->second;
