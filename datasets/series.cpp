@@ -535,10 +535,20 @@ void RawSeriesWriter::finish() {
   const std::string text = j.dump(2) + "\n";
   std::error_code ec;
   if (!staging_.empty()) {
-    // The old series' manifest goes first, so that no series.json names a mix of frames.
-    fs::remove(dir_ / "series.json");
-    for (std::size_t t = 0; t < timestamps_.size(); ++t)
-      fs::rename(staging_ / raw_frame_name(t), dir_ / raw_frame_name(t));
+    // The old series' manifest goes first, so that no series.json names a mix of frames. Should
+    // a move fail, the frames not moved yet stay where they are (not removed by the destructor),
+    // and the message says where.
+    try {
+      fs::remove(dir_ / "series.json");
+      for (std::size_t t = 0; t < timestamps_.size(); ++t)
+        fs::rename(staging_ / raw_frame_name(t), dir_ / raw_frame_name(t));
+    } catch (const fs::filesystem_error& e) {
+      finished_ = true;
+      throw InputError("moving the frames written to " + staging_.string() + " into " +
+                       dir_.string() + " failed (" + e.code().message() +
+                       "): the frames not moved are still there, and " + dir_.string() +
+                       " holds no series.json");
+    }
   }
   write_atomically(dir_ / "series.json", text.data(), text.size());
   finished_ = true;

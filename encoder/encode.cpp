@@ -233,19 +233,34 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
       request.max_frames ? std::min(request.max_frames, info.frames) : info.frames;
   const Ranks& ranks = request.ranks ? *request.ranks : single_process();
   check_request(request);
-  refuse_existing_output(out, request.resume, request.overwrite);
   // Over a container, --overwrite writes the new one beside it and swaps it in once complete, so
   // that a failed or interrupted run leaves the old one whole; --resume continues such a
-  // replacement. Rank 0 decides (the others could see its first files).
+  // replacement, and a swap an earlier run left halfway is finished first. Rank 0 decides (the
+  // others could see its first files): 1 replaces, 0 not, -1 rank 0 failed.
   const fs::path next = replacement_folder(out);
-  const bool replaces = ranks.broadcast_value([&] {
+  std::string prepare_failure;
+  const double decision = ranks.broadcast_value([&] {
     if (!ranks.root()) return 0.0;
-    std::error_code ec;
-    const bool old = fs::exists(out / "manifest.json", ec);
-    const bool interrupted = fs::exists(next / "manifest.json", ec);
-    if (!old && !interrupted && !request.resume) fs::remove_all(next, ec);  // an orphan
-    return old && (request.overwrite || (request.resume && interrupted)) ? 1.0 : 0.0;
-  }()) != 0;
+    try {
+      std::error_code ec;
+      if (!fs::exists(out / "manifest.json", ec) && complete_replacement(out)) {
+        commit_replacement(out);
+        say("finished moving the complete container in " + next.string() + " over " + out.string() +
+            " (an earlier run stopped while moving it)");
+      }
+      const bool old = fs::exists(out / "manifest.json", ec);
+      const bool interrupted = fs::exists(next / "manifest.json", ec);
+      if (!old && !interrupted && !request.resume) fs::remove_all(next, ec);  // an orphan
+      return old && (request.overwrite || (request.resume && interrupted)) ? 1.0 : 0.0;
+    } catch (const std::exception& e) {
+      prepare_failure = e.what();
+      return -1.0;
+    }
+  }());
+  if (decision < 0)
+    throw InputError(ranks.root() ? prepare_failure : "rank 0 could not prepare " + out.string());
+  const bool replaces = decision > 0;
+  refuse_existing_output(out, request.resume, request.overwrite);
   const fs::path target = replaces ? next : out;
   if (replaces) {
     if (!request.resume) refuse_existing_output(next, false, true);

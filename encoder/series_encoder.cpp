@@ -167,7 +167,8 @@ std::string settings_difference(const format::Manifest& old, const format::Manif
       {"fixed sparsity", "--fixed-sparsity"},
       {"zfp accuracy", "--zfp-accuracy"},
       {"value range", "the series and --max-frames"},
-      {"frames", "--max-frames"},
+      {"frames", "the series or --max-frames"},
+      {"spacing", "--spacing or the series"},
       {"max keyframe gap", "--max-keyframe-gap"},
       {"pursuit", "--pursuit"},
       {"mean_bits", "--mean-bits"},
@@ -193,6 +194,7 @@ std::string settings_difference(const format::Manifest& old, const format::Manif
   differ("value range", text(std::vector<double>{old.value_min, old.value_max}),
          text(std::vector<double>{now.value_min, now.value_max}));
   differ("frames", text(old.frames.size()), text(now.frames.size()));
+  differ("spacing", text(old.spacing), text(now.spacing));
   differ("max keyframe gap", text(old.max_keyframe_gap), text(now.max_keyframe_gap));
   const auto dictionary = [](const format::Manifest& m) {
     return m.dictionary
@@ -487,19 +489,48 @@ fs::path replacement_folder(const fs::path& out) {
   return out / ".volreel-new";
 }
 
+bool complete_replacement(const fs::path& out) {
+  try {
+    const auto bytes = format::detail::read_whole_file(replacement_folder(out) / "manifest.json",
+                                                       format::detail::max_json_bytes);
+    const auto doc = nlohmann::json::parse(bytes.begin(), bytes.end(), nullptr, false);
+    return doc.is_object() && doc.contains("complete") && doc["complete"] == true;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
 void commit_replacement(const fs::path& out) {
   const fs::path next = replacement_folder(out);
   const fs::path old_frames = next / "replaced-frames";
   std::error_code ec;
-  fs::remove_all(old_frames, ec);
-  fs::remove(out / "manifest.json");
-  if (fs::exists(fs::symlink_status(out / "frames"))) fs::rename(out / "frames", old_frames);
-  fs::rename(next / "frames", out / "frames");
-  if (fs::exists(next / "dictionary.bin"))
-    fs::rename(next / "dictionary.bin", out / "dictionary.bin");
-  else
-    fs::remove(out / "dictionary.bin");
-  fs::rename(next / "manifest.json", out / "manifest.json");
+  // Whether the new container has a dictionary: its manifest says (a move stopped halfway may
+  // have moved the file already).
+  bool dictionary = true;
+  try {
+    const auto bytes =
+        format::detail::read_whole_file(next / "manifest.json", format::detail::max_json_bytes);
+    const auto doc = nlohmann::json::parse(bytes.begin(), bytes.end(), nullptr, false);
+    dictionary = !(doc.is_object() && doc.contains("dictionary") && doc["dictionary"].is_null());
+  } catch (const std::exception&) {
+  }
+  try {
+    fs::remove(out / "manifest.json");
+    if (fs::exists(next / "frames")) {  // not yet moved
+      fs::remove_all(old_frames, ec);
+      if (fs::exists(fs::symlink_status(out / "frames"))) fs::rename(out / "frames", old_frames);
+      fs::rename(next / "frames", out / "frames");
+    }
+    if (fs::exists(next / "dictionary.bin"))
+      fs::rename(next / "dictionary.bin", out / "dictionary.bin");
+    else if (!dictionary)
+      fs::remove(out / "dictionary.bin");
+    fs::rename(next / "manifest.json", out / "manifest.json");
+  } catch (const fs::filesystem_error& e) {
+    throw InputError("moving the complete container in " + next.string() + " over " + out.string() +
+                     " failed (" + e.code().message() + "): the next volreel encode with --out " +
+                     out.string() + " finishes the move");
+  }
   fs::remove_all(next, ec);
 }
 

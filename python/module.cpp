@@ -142,10 +142,11 @@ class PyContainer {
     const double voxels = double(d[0]) * d[1] * d[2] * static_cast<double>(frames());
     return voxels > 0 ? 8.0 * static_cast<double>(total_bytes()) / voxels : 0;
   }
-  bool closed() const { return !steps_; }
+  bool closed() const { return closed_.load(); }
   void close() {
     py::gil_scoped_release release;
     std::lock_guard lock(mutex_);
+    closed_ = true;
     steps_.reset();
     container_.reset();
   }
@@ -240,6 +241,8 @@ class PyContainer {
   std::uint64_t total_bytes_;
   std::mutex mutex_;  ///< the decoder keeps frames open between steps
   std::optional<format::TimeStepDecoder> steps_;
+  /// Read without the mutex (a decode may hold it while it waits for the GIL).
+  std::atomic<bool> closed_{false};
 };
 
 /// InputError naming frames[t] and the [z, y, x] index of its first value that is not finite.

@@ -169,7 +169,9 @@ void DiskCache::put(const std::string& key, std::span<const std::byte> data) {
   format::detail::append_value(file, static_cast<std::uint64_t>(data.size()));
   file.insert(file.end(), data.begin(), data.end());
   format::detail::append_value(file, format::crc32c(file));
-  if (file.size() > max_bytes_) return;
+  // Larger than the whole cache on the disk (its size in blocks of 4 KiB, as most file systems
+  // take it): not written, so that it does not evict everything and then itself.
+  if ((file.size() + 4095) / 4096 * 4096 > max_bytes_) return;
   const std::string name = file_name(key);
   std::lock_guard lock(mutex_);
   forget(name);

@@ -9,6 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "volreel/format/container.hpp"
 #include "volreel/format/error.hpp"
 
 namespace volreel::remote {
@@ -50,9 +51,10 @@ void HttpSource::learn_manifest(std::span<const std::byte> bytes) const {
   const std::string id = j["container_id"].dump();
   const auto add = [&](const nlohmann::json& f) {
     if (f.is_object() && f.contains("file") && f["file"].is_string() && f.contains("crc32c") &&
-        f.contains("bytes") && f["bytes"].is_number_unsigned())
+        f["crc32c"].is_number_unsigned() && f.contains("bytes") && f["bytes"].is_number_unsigned())
       tags[f["file"].get<std::string>()] = {id + "/" + f["crc32c"].dump(),
-                                            f["bytes"].get<std::uint64_t>()};
+                                            f["bytes"].get<std::uint64_t>(),
+                                            f["crc32c"].get<std::uint32_t>()};
   };
   if (j.contains("dictionary")) add(j["dictionary"]);
   if (j.contains("frames") && j["frames"].is_array())
@@ -138,9 +140,11 @@ std::vector<std::byte> HttpSource::fetch(const std::string& relative, std::uint6
 std::vector<std::byte> HttpSource::read_file(const std::string& relative,
                                              std::uint64_t max_bytes) const {
   std::optional<std::uint64_t> size;
+  std::uint32_t crc = 0;
   {
     std::lock_guard lock(mutex_);
-    if (const auto it = tags_.find(relative); it != tags_.end()) size = it->second.bytes;
+    if (const auto it = tags_.find(relative); it != tags_.end())
+      size = it->second.bytes, crc = it->second.crc32c;
   }
   if (size && *size > max_bytes)
     throw format::FormatError(name(relative), "larger than " + std::to_string(max_bytes) +
@@ -159,7 +163,10 @@ std::vector<std::byte> HttpSource::read_file(const std::string& relative,
     throw format::FormatError(name(relative), "larger than " + std::to_string(max_bytes) +
                                                   " bytes (" + std::to_string(data.size()) + ")");
   if (relative == "manifest.json") learn_manifest(data);
-  if (!key.empty() && size && data.size() == *size) cache_->put(key, data);
+  // Kept only as the manifest lists it: a transfer damaged at the right length is not served
+  // again from the cache (the reader finds the damage and names it).
+  if (!key.empty() && size && data.size() == *size && format::manifest_crc(data) == crc)
+    cache_->put(key, data);
   return data;
 }
 

@@ -369,7 +369,21 @@ grep -q "already there)" "$work/long.txt" || fail "--resume of an interrupted --
 ! cmp -s "$work/long.vreel/manifest.json" "$work/long-manifest.json" || fail "the replacement did not replace the manifest"
 "$volreel" verify "$work/long.vreel" > /dev/null 2>&1 || fail "the replaced container does not verify"
 "$volreel" info "$work/long.vreel" > "$work/long.txt" 2>&1 || fail "info of the replaced container: $(cat "$work/long.txt")"
-rm -rf "$work/long" "$work/long.vreel"
+# A move of the new container stopped halfway (the old manifest gone, the frames moved, the
+# dictionary and manifest not): the next encode finishes it first.
+"$volreel" encode "$work/long" --dictionary dct --max-keyframe-gap 1 --max-frames 2 --psnr 35 --out "$work/other.vreel" > /dev/null 2>&1 \
+  || fail "encode of a second container"
+cp -r "$work/other.vreel" "$work/long.vreel/.volreel-new"
+rm "$work/long.vreel/manifest.json"
+mv "$work/long.vreel/frames" "$work/long.vreel/.volreel-new/replaced-frames"
+mv "$work/long.vreel/.volreel-new/frames" "$work/long.vreel/frames"
+"$volreel" encode "$work/long" --dictionary dct --max-keyframe-gap 1 --max-frames 2 --psnr 35 --resume --out "$work/long.vreel" > "$work/long.txt" 2>&1 \
+  || fail "an encode after a move stopped halfway: $(cat "$work/long.txt")"
+grep -q "finished moving the complete container in .*long.vreel/.volreel-new over .*long.vreel" "$work/long.txt" \
+  || fail "a move stopped halfway was not finished: $(cat "$work/long.txt")"
+grep -q "(0 encoded, 2 already there)" "$work/long.txt" || fail "the finished move's frames were coded again: $(cat "$work/long.txt")"
+diff -r -x notes.txt "$work/long.vreel" "$work/other.vreel" > /dev/null || fail "the container after a finished move differs: $(diff -r -x notes.txt "$work/long.vreel" "$work/other.vreel" | head -3)"
+rm -rf "$work/long" "$work/long.vreel" "$work/other.vreel"
 
 # --psnr on a volume 3 voxels thick: a slightly smaller eps gave a lower PSNR there, which was
 # taken for the format's limit ("no smaller eps could raise the PSNR") and the target missed.

@@ -11,6 +11,7 @@ second's worth of bytes). Before every request it reads
 MODE_FILE (missing or empty: "pass"):
     pass        the upstream's answer as it is
     flip        byte ranges (HTTP 206) with one byte of the body changed
+    flip frames every answer for a file under frames/ with one byte of the body changed
     truncate    half of the body, then the connection closed (Content-Length promises all of it)
     stall       one byte of the body, then nothing for 60 seconds
     stall half  half of the body at once, then nothing for 60 seconds
@@ -86,6 +87,8 @@ class Handler(http.server.BaseHTTPRequestHandler):
         body = bytearray(answer.read())
         upstream.close()
         if m == "flip" and answer.status == 206 and body:
+            body[len(body) // 2] ^= 0x40
+        if m == "flip frames" and "/frames/" in self.path and body:
             body[len(body) // 2] ^= 0x40
         self.send_response(answer.status)
         for k, v in answer.getheaders():

@@ -340,6 +340,30 @@ TEST_F(RemoteContainer, FramesReadWholeComeFromTheCacheOnASecondRun) {
   }
 }
 
+TEST_F(RemoteContainer, AWholeFileDamagedOnTheWayIsNotKeptInTheCache) {
+  test::FaultProxy proxy(proxy_script, nginx_->port(), dir_->path());
+  test::TempDir cache("remote-cache-damaged");
+  RemoteOptions o;
+  o.attempts = 1;
+  o.cache_dir = cache.path();
+  proxy.set_mode("flip frames");
+  {
+    const format::Container remote(std::make_shared<HttpSource>(proxy.url("test.vreel"), o));
+    try {  // the index may be intact: a payload's damage shows when it is decoded
+      remote.open_frame(2);
+    } catch (const format::FormatError&) {
+    }
+  }
+  // The server's bytes intact again: read from it, not the damaged copy from the cache.
+  proxy.set_mode("pass");
+  const format::Container remote(std::make_shared<HttpSource>(proxy.url("test.vreel"), o));
+  const format::FrameFile frame = remote.open_frame(2);
+  const auto on_disk = format::detail::read_whole_file(*container_ / format::frame_file_name(2),
+                                                       std::uint64_t{1} << 30);
+  const auto bytes = frame.view().bytes();
+  EXPECT_TRUE(std::equal(bytes.begin(), bytes.end(), on_disk.begin(), on_disk.end()));
+}
+
 TEST_F(RemoteContainer, ACorruptedByteIsRequestedAgainAndNeverHandedOut) {
   test::Nginx& nginx = *nginx_;
   test::FaultProxy proxy(proxy_script, nginx.port(), dir_->path());

@@ -225,6 +225,12 @@ void run_encode(const EncodeOptions& o) {
   std::optional<StopOnSignal> stop;
   if (!ranks) stop.emplace();
   const bool out_existed = std::filesystem::exists(o.out);
+  // Whether this run replaces a container (encode writes the new one beside it, in
+  // replacement_folder): --overwrite over one, or --resume of a replacement.
+  const std::filesystem::path next = encoder::replacement_folder(o.out);
+  const bool replacing =
+      std::filesystem::exists(std::filesystem::path(o.out) / "manifest.json") &&
+      (o.overwrite || (o.resume && std::filesystem::exists(next / "manifest.json")));
   const encoder::EncodeSummary s = [&] {
     try {
       return encoder::encode(*series, o.out, r, events);
@@ -232,10 +238,7 @@ void run_encode(const EncodeOptions& o) {
       if (bar) bar.reset();
       // Stopped before its first frame (while the value range or the dictionary was found): a
       // container this run made holds nothing to continue, and goes.
-      // A replacement of a container (--overwrite over one) was written beside it.
-      const std::filesystem::path next = encoder::replacement_folder(o.out);
       std::error_code ec;
-      const bool replacing = std::filesystem::exists(next / "manifest.json", ec);
       const std::filesystem::path where = replacing ? next : std::filesystem::path(o.out);
       std::size_t written = 0;
       try {

@@ -6,6 +6,7 @@
 // frame is drawn once the bricks it needs have arrived (loop::wait_for_view, within
 // --wait-timeout), so a movie never starts black or shows data still streaming in; with it, frames
 // keep the tour's pace and show what has arrived, as the player does.
+#include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -335,10 +336,20 @@ void run_render(const RenderCommandOptions& o) {
   csv.close();
   if (!csv) throw InputError("writing " + (written / "metrics.csv").string() + " failed");
   if (earlier > 0) {
-    // The earlier render's metrics.csv goes first, so that none lists a mix of frames.
-    fs::remove(out / "metrics.csv");
-    for (std::size_t i = 0; i < frames; ++i) fs::rename(written / frame_png(i), out / frame_png(i));
-    fs::rename(written / "metrics.csv", out / "metrics.csv");
+    // The earlier render's metrics.csv goes first, so that none lists a mix of frames. Should a
+    // move fail, what is not moved yet stays where it is, and the message says where.
+    aside.dir.clear();
+    try {
+      fs::remove(out / "metrics.csv");
+      for (std::size_t i = 0; i < frames; ++i)
+        fs::rename(written / frame_png(i), out / frame_png(i));
+      fs::rename(written / "metrics.csv", out / "metrics.csv");
+    } catch (const fs::filesystem_error& e) {
+      throw InputError("moving the frames drawn in " + written.string() + " into " + out.string() +
+                       " failed (" + e.code().message() +
+                       "): the frames not moved and metrics.csv are still there");
+    }
+    aside.dir = written;  // empty now: removed on the way out
   }
 
   // 4. Summary, video.
@@ -457,7 +468,8 @@ void add_render_command(CLI::App& app) {
                   ".mov file")
       ->check(CLI::Validator(
           [](const std::string& text) {
-            const std::string ext = fs::path(text).extension().string();
+            std::string ext = fs::path(text).extension().string();
+            for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
             return ext == ".mp4" || ext == ".mkv" || ext == ".mov"
                        ? std::string()
                        : "expected a video file named .mp4, .mkv or .mov (ffmpeg chooses the "

@@ -156,10 +156,14 @@ void refuse_existing_output(const std::filesystem::path& out, bool resume, bool 
 /// complete. Until then the old container stays whole and readable.
 std::filesystem::path replacement_folder(const std::filesystem::path& out);
 
+/// Whether replacement_folder(out) holds a complete container (its manifest says so).
+bool complete_replacement(const std::filesystem::path& out);
+
 /// Moves the complete container in replacement_folder(out) over out's (its frames/,
 /// dictionary.bin and manifest.json; the manifest last, so that out holds no manifest while the
 /// frames are swapped) and removes the replacement folder with the old frames. Other files in
-/// out are left alone.
+/// out are left alone. A move that stopped halfway (out without a manifest) is finished by
+/// calling it again. Throws InputError naming both folders when a move fails.
 void commit_replacement(const std::filesystem::path& out);
 
 /// Throws InputError naming `source` (the series) when a value of [value_min, value_max] is beyond

@@ -34,8 +34,9 @@ class DiskCache {
   bool contains(const std::string& key) const;
   /// Stores data under key (replacing it), then evicts least recently used entries while the
   /// folder takes more than max_bytes of the disk (whole blocks of the file system: a brick of
-  /// 300 bytes takes 4 KiB on most). Data larger than max_bytes is not stored. I/O failures are
-  /// counted (write_failures) and otherwise ignored: a cache that cannot write is only slower.
+  /// 300 bytes takes 4 KiB on most). Data larger than max_bytes (in blocks of 4 KiB) is not stored.
+  /// I/O failures are counted (write_failures) and otherwise ignored: a cache that cannot write is
+  /// only slower.
   void put(const std::string& key, std::span<const std::byte> data);
 
   const std::filesystem::path& directory() const { return dir_; }

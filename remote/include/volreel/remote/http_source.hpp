@@ -108,6 +108,7 @@ class HttpSource final : public format::ContainerSource,
   struct FileTag {
     std::string tag;  ///< "CONTAINER_ID/CRC32C"
     std::uint64_t bytes = 0;
+    std::uint32_t crc32c = 0;  ///< the manifest's, checked before a whole file is cached
   };
   /// Per file of the manifest (set when the manifest is read).
   mutable std::map<std::string, FileTag> tags_;
