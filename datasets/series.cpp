@@ -461,7 +461,7 @@ RawSeriesWriter::RawSeriesWriter(fs::path dir, Dims dims, std::string variable, 
   if (overwrite && fs::exists(manifest, ec)) {
     // The new frames go to a folder of their own until finish() moves them in, so that a run
     // that fails or is stopped leaves the old series whole.
-    staging_ = dir_ / ".volreel-new";
+    staging_ = dir_ / format::detail::replacement_folder_name;
     fs::remove_all(staging_, ec);  // what an interrupted replacement left
     fs::create_directory(staging_, ec);
     if (ec)
@@ -470,8 +470,7 @@ RawSeriesWriter::RawSeriesWriter(fs::path dir, Dims dims, std::string variable, 
     // not write are removed by finish(), so that a shorter series leaves none behind. Files of a
     // series written by other means are never touched.
     try {
-      const auto bytes = format::detail::read_whole_file(manifest, format::detail::max_json_bytes);
-      const auto old = nlohmann::json::parse(bytes.begin(), bytes.end(), nullptr, false);
+      const auto old = format::read_json_file(manifest);
       if (old.is_object() && old.contains("generator") && old.contains("frames") &&
           old["frames"].is_array())
         for (std::size_t t = 0; t < old["frames"].size(); ++t)

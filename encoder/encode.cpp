@@ -248,10 +248,10 @@ EncodeSummary encode(const datasets::SeriesReader& series, const fs::path& out,
         say("finished moving the complete container in " + next.string() + " over " + out.string() +
             " (an earlier run stopped while moving it)");
       }
-      const bool old = fs::exists(out / "manifest.json", ec);
-      const bool interrupted = fs::exists(next / "manifest.json", ec);
-      if (!old && !interrupted && !request.resume) fs::remove_all(next, ec);  // an orphan
-      return old && (request.overwrite || (request.resume && interrupted)) ? 1.0 : 0.0;
+      if (!fs::exists(out / "manifest.json", ec) && !fs::exists(next / "manifest.json", ec) &&
+          !request.resume)
+        fs::remove_all(next, ec);  // an orphan
+      return replaces_container(out, request.overwrite, request.resume) ? 1.0 : 0.0;
     } catch (const std::exception& e) {
       prepare_failure = e.what();
       return -1.0;

@@ -29,6 +29,7 @@
 #include "volreel/format/dictionary_file.hpp"
 #include "volreel/format/error.hpp"
 #include "volreel/format/file_io.hpp"
+#include "volreel/format/json_input.hpp"
 #include "volreel/format/time_step.hpp"
 
 namespace volreel::encoder {
@@ -36,6 +37,20 @@ namespace volreel::encoder {
 namespace fs = std::filesystem;
 using detail::Clock;
 using detail::seconds_since;
+
+namespace {
+
+/// The JSON document of `path` (format::read_json_file), or null where it cannot be read or
+/// parsed: for the checks that only ask whether a file is a container's manifest and what it says.
+nlohmann::json json_file_or_null(const fs::path& path) {
+  try {
+    return format::read_json_file(path);
+  } catch (const std::exception&) {
+    return nullptr;
+  }
+}
+
+}  // namespace
 
 void refuse_existing_output(const fs::path& out, bool resume, bool overwrite) {
   std::error_code ec;
@@ -52,13 +67,8 @@ void refuse_existing_output(const fs::path& out, bool resume, bool overwrite) {
   // What a container holds is replaced; nothing else is touched, so a directory that holds files
   // volreel did not write where its frames or manifest go is refused, with or without --overwrite.
   if (fs::exists(fs::symlink_status(manifest, ec))) {
-    bool ours = false;
-    try {
-      const auto bytes = format::detail::read_whole_file(manifest, format::detail::max_json_bytes);
-      const auto doc = nlohmann::json::parse(bytes.begin(), bytes.end(), nullptr, false);
-      ours = doc.is_object() && doc.contains("container_id") && doc.contains("frames");
-    } catch (const std::exception&) {
-    }
+    const nlohmann::json doc = json_file_or_null(manifest);
+    const bool ours = doc.is_object() && doc.contains("container_id") && doc.contains("frames");
     if (!ours)
       throw InputError("'" + manifest.string() +
                        "' is not a volreel container's manifest: volreel replaces only its own "
@@ -486,18 +496,18 @@ void check_value_range(double value_min, double value_max, const std::string& so
 }
 
 fs::path replacement_folder(const fs::path& out) {
-  return out / ".volreel-new";
+  return out / format::detail::replacement_folder_name;
 }
 
 bool complete_replacement(const fs::path& out) {
-  try {
-    const auto bytes = format::detail::read_whole_file(replacement_folder(out) / "manifest.json",
-                                                       format::detail::max_json_bytes);
-    const auto doc = nlohmann::json::parse(bytes.begin(), bytes.end(), nullptr, false);
-    return doc.is_object() && doc.contains("complete") && doc["complete"] == true;
-  } catch (const std::exception&) {
-    return false;
-  }
+  const nlohmann::json doc = json_file_or_null(replacement_folder(out) / "manifest.json");
+  return doc.is_object() && doc.contains("complete") && doc["complete"] == true;
+}
+
+bool replaces_container(const fs::path& out, bool overwrite, bool resume) {
+  std::error_code ec;
+  return fs::exists(out / "manifest.json", ec) &&
+         (overwrite || (resume && fs::exists(replacement_folder(out) / "manifest.json", ec)));
 }
 
 void commit_replacement(const fs::path& out) {
@@ -506,14 +516,9 @@ void commit_replacement(const fs::path& out) {
   std::error_code ec;
   // Whether the new container has a dictionary: its manifest says (a move stopped halfway may
   // have moved the file already).
-  bool dictionary = true;
-  try {
-    const auto bytes =
-        format::detail::read_whole_file(next / "manifest.json", format::detail::max_json_bytes);
-    const auto doc = nlohmann::json::parse(bytes.begin(), bytes.end(), nullptr, false);
-    dictionary = !(doc.is_object() && doc.contains("dictionary") && doc["dictionary"].is_null());
-  } catch (const std::exception&) {
-  }
+  const nlohmann::json doc = json_file_or_null(next / "manifest.json");
+  const bool dictionary =
+      !(doc.is_object() && doc.contains("dictionary") && doc["dictionary"].is_null());
   try {
     fs::remove(out / "manifest.json");
     if (fs::exists(next / "frames")) {  // not yet moved

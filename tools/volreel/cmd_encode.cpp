@@ -225,12 +225,8 @@ void run_encode(const EncodeOptions& o) {
   std::optional<StopOnSignal> stop;
   if (!ranks) stop.emplace();
   const bool out_existed = std::filesystem::exists(o.out);
-  // Whether this run replaces a container (encode writes the new one beside it, in
-  // replacement_folder): --overwrite over one, or --resume of a replacement.
   const std::filesystem::path next = encoder::replacement_folder(o.out);
-  const bool replacing =
-      std::filesystem::exists(std::filesystem::path(o.out) / "manifest.json") &&
-      (o.overwrite || (o.resume && std::filesystem::exists(next / "manifest.json")));
+  const bool replacing = encoder::replaces_container(o.out, o.overwrite, o.resume);
   const encoder::EncodeSummary s = [&] {
     try {
       return encoder::encode(*series, o.out, r, events);

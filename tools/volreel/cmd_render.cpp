@@ -193,7 +193,7 @@ void run_render(const RenderCommandOptions& o) {
   const std::size_t earlier = earlier_render_frames(out);
   // Over an earlier render the frames go to a folder of their own and are moved in once all are
   // drawn, so that a run that fails or is interrupted leaves the earlier one whole.
-  const fs::path written = earlier > 0 ? out / ".volreel-new" : out;
+  const fs::path written = earlier > 0 ? out / format::detail::replacement_folder_name : out;
   struct Aside {
     fs::path dir;
     ~Aside() {

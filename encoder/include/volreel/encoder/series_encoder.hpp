@@ -156,6 +156,10 @@ void refuse_existing_output(const std::filesystem::path& out, bool resume, bool 
 /// complete. Until then the old container stays whole and readable.
 std::filesystem::path replacement_folder(const std::filesystem::path& out);
 
+/// Whether an encode into `out` replaces the container there, writing the new one in
+/// replacement_folder(out): --overwrite over a container, or --resume of such a replacement.
+bool replaces_container(const std::filesystem::path& out, bool overwrite, bool resume);
+
 /// Whether replacement_folder(out) holds a complete container (its manifest says so).
 bool complete_replacement(const std::filesystem::path& out);
 

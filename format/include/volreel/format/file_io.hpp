@@ -34,6 +34,10 @@ std::vector<std::byte> read_whole_file(const std::filesystem::path& path, std::u
 constexpr std::uint64_t max_json_bytes = std::uint64_t{256} << 20;
 constexpr std::uint64_t max_dictionary_bytes = std::uint64_t{1} << 30;
 
+/// The folder inside an output folder (a container, a series, a render) where a run that
+/// replaces what is there writes, to move it in once complete.
+inline constexpr const char* replacement_folder_name = ".volreel-new";
+
 /// Writes bytes to "PATH.tmp-PID" and renames it to PATH, so that a reader never sees a half
 /// written file; throws FormatError (and removes the temporary) on failure.
 void write_file_atomically(const std::filesystem::path& path, std::span<const std::byte> bytes);
